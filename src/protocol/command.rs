@@ -1,0 +1,672 @@
+//! Typed host→device commands (SPEC §3.2, §4) and their frames.
+//!
+//! Every command encodes to exactly one frame and decodes back from it; the
+//! raw integers are what the wire carries, [`super::units`] converts them.
+
+use super::error::ProtocolError;
+use super::frame::{BroadcastFrame, BroadcastKind, Frame, FrameBytes, StandardFrame};
+use super::{is_address, is_device_id};
+
+/// can_id of a jog command.
+pub const CAN_ID_JOG: u32 = 0xF0;
+/// can_id of a config/read command.
+pub const CAN_ID_CONFIG: u32 = 0xA0;
+/// The key a WRITE_FLASH must carry.
+pub const WRITE_FLASH_KEY: u8 = 0xA5;
+
+/// A host→device command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Command {
+    Control(Control),
+    Jog(Jog),
+    Config(Config),
+    BroadcastPos(BroadcastPos),
+    BroadcastSpd(BroadcastSpd),
+    /// Unverified layout (SPEC errata 3); offered for completeness, never sent by the daemon.
+    BroadcastEnableUnverified(BroadcastEnable),
+}
+
+/// `EN` of a control frame. 0 is never sent (SPEC errata 10).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum ControlOp {
+    Enable = 1,
+    Disable = 2,
+    SetRef = 3,
+}
+
+/// SPEC §4.1. `cur_ref` is reserved since firmware 1.2.0 and always sent as 0.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Control {
+    pub dev_id: u8,
+    pub op: ControlOp,
+    /// Q7 degrees.
+    pub pos_ref: i16,
+    /// Q15 of the base rotor speed; the speed limit in position mode.
+    pub spd_ref: i16,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum JogDir {
+    None = 0,
+    /// +5°.
+    Cw = 1,
+    /// −3°.
+    Ccw = 2,
+}
+
+/// SPEC §4.2.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Jog {
+    pub dev_id: u8,
+    pub dir: JogDir,
+}
+
+/// SPEC §4.3: a read or a write of one parameter of one device (or all).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Config {
+    pub dev_id: u8,
+    pub param: ConfigParam,
+}
+
+/// The INFO blocks a read asks for, by the index of the read command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum InfoBlock {
+    Info01 = 1,
+    Info02 = 2,
+    Info03 = 12,
+    Info04 = 17,
+    Info05 = 24,
+    Info06 = 25,
+    /// Serial number bytes (rev 2.0.8).
+    Info07 = 32,
+}
+
+impl InfoBlock {
+    pub const ALL: [InfoBlock; 7] = [
+        Self::Info01,
+        Self::Info02,
+        Self::Info03,
+        Self::Info04,
+        Self::Info05,
+        Self::Info06,
+        Self::Info07,
+    ];
+
+    pub fn index(self) -> u8 {
+        self as u8
+    }
+
+    pub fn from_index(index: u8) -> Option<Self> {
+        Self::ALL.into_iter().find(|b| b.index() == index)
+    }
+}
+
+/// Control mode (index 7). Not saved: every power-up starts in position mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum CtrlMode {
+    None = 0,
+    Speed = 1,
+    Position = 2,
+    /// rev 2.0.8 only.
+    Current = 3,
+}
+
+impl CtrlMode {
+    pub fn from_raw(raw: u8) -> Option<Self> {
+        [Self::None, Self::Speed, Self::Position, Self::Current]
+            .into_iter()
+            .find(|m| *m as u8 == raw)
+    }
+}
+
+/// Baud levels of index 15 (SPEC §1; errata 4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum BaudLevel {
+    B500000 = 0,
+    B230400 = 1,
+    B115200 = 2,
+    B38400 = 3,
+    B19200 = 4,
+}
+
+impl BaudLevel {
+    pub const ALL: [BaudLevel; 5] = [
+        Self::B500000,
+        Self::B230400,
+        Self::B115200,
+        Self::B38400,
+        Self::B19200,
+    ];
+
+    pub fn baud(self) -> u32 {
+        match self {
+            Self::B500000 => 500_000,
+            Self::B230400 => 230_400,
+            Self::B115200 => 115_200,
+            Self::B38400 => 38_400,
+            Self::B19200 => 19_200,
+        }
+    }
+
+    pub fn from_raw(raw: u8) -> Option<Self> {
+        Self::ALL.into_iter().find(|l| *l as u8 == raw)
+    }
+
+    pub fn from_baud(baud: u32) -> Option<Self> {
+        Self::ALL.into_iter().find(|l| l.baud() == baud)
+    }
+}
+
+/// Index constants of SPEC §4.3, named as the vendor names them.
+pub mod index {
+    pub const REBOOT: u8 = 0;
+    pub const INFO_01_R: u8 = 1;
+    pub const INFO_02_R: u8 = 2;
+    pub const UPDATE_FIN_ZERO: u8 = 3;
+    pub const SET_ID: u8 = 4;
+    pub const UPDATE_ENC_ZERO: u8 = 5;
+    pub const COMM_SILENT: u8 = 6;
+    pub const CTRL_MODE_SW: u8 = 7;
+    pub const SET_POS_KP: u8 = 8;
+    pub const SET_POS_KD: u8 = 9;
+    pub const SET_SPD_KP: u8 = 10;
+    pub const SET_SPD_KI: u8 = 11;
+    pub const INFO_03_R: u8 = 12;
+    pub const WRITE_FLASH: u8 = 13;
+    pub const READ_FLASH: u8 = 14;
+    pub const BAUD_RATE: u8 = 15;
+    pub const POS_LPF_LV: u8 = 16;
+    pub const INFO_04_R: u8 = 17;
+    pub const MAX_CUR: u8 = 18;
+    pub const PROTECT_CUR_LIMIT: u8 = 19;
+    pub const PROTECT_CUR_LV1: u8 = 20;
+    pub const CUR_LV1_DELAY: u8 = 21;
+    pub const RECV_CUR: u8 = 22;
+    pub const CUR_RECV_WIN: u8 = 23;
+    pub const INFO_05_R: u8 = 24;
+    pub const INFO_06_R: u8 = 25;
+    pub const COLD_TIME: u8 = 26;
+    pub const PLUS_TIME: u8 = 27;
+    pub const DRV_OT: u8 = 28;
+    pub const SPD_LIMIT: u8 = 30;
+    pub const SN: u8 = 31;
+    pub const INFO_07_R: u8 = 32;
+}
+
+/// One parameter of SPEC §4.3 with its raw value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ConfigParam {
+    /// Reset request; the value is sent as given (the vendor documents none).
+    Reboot(u16),
+    ReadInfo(InfoBlock),
+    UpdateFinZero,
+    /// Stored to flash at once; the reply comes from the new id.
+    SetId {
+        new_id: u8,
+    },
+    /// Rotor encoder zero calibration: dangerous.
+    UpdateEncZero,
+    /// The device stops answering: dangerous.
+    CommSilent(u16),
+    CtrlMode(CtrlMode),
+    PosKp(u16),
+    PosKd(u16),
+    SpdKp(u16),
+    SpdKi(u16),
+    /// Persist RAM parameters; the key must be [`WRITE_FLASH_KEY`] to take effect.
+    WriteFlash {
+        key: u8,
+    },
+    ReadFlash,
+    BaudRate(BaudLevel),
+    PosLpf(u8),
+    MaxCur(u16),
+    ProtectCurLimit(u16),
+    ProtectCurLv1(u16),
+    CurLv1DelayMs(u16),
+    RecvCur(u16),
+    CurRecvWinMs(u16),
+    ColdTime(u8),
+    PlusTime(u8),
+    DrvOtC(u8),
+    SpdLimit(u16),
+    Sn(u16),
+    /// An index this codec does not know; kept as it came.
+    Other {
+        index: u8,
+        value: u16,
+    },
+}
+
+impl ConfigParam {
+    /// Which index and raw value go on the wire.
+    pub fn index_value(&self) -> (u8, u16) {
+        use index::*;
+        match *self {
+            Self::Reboot(v) => (REBOOT, v),
+            Self::ReadInfo(b) => (b.index(), 0),
+            Self::UpdateFinZero => (UPDATE_FIN_ZERO, 0),
+            Self::SetId { new_id } => (SET_ID, u16::from(new_id) << 7),
+            Self::UpdateEncZero => (UPDATE_ENC_ZERO, 0),
+            Self::CommSilent(v) => (COMM_SILENT, v),
+            Self::CtrlMode(m) => (CTRL_MODE_SW, m as u16),
+            Self::PosKp(v) => (SET_POS_KP, v),
+            Self::PosKd(v) => (SET_POS_KD, v),
+            Self::SpdKp(v) => (SET_SPD_KP, v),
+            Self::SpdKi(v) => (SET_SPD_KI, v),
+            Self::WriteFlash { key } => (WRITE_FLASH, u16::from(key)),
+            Self::ReadFlash => (READ_FLASH, 0),
+            Self::BaudRate(l) => (BAUD_RATE, l as u16),
+            Self::PosLpf(v) => (POS_LPF_LV, u16::from(v)),
+            Self::MaxCur(v) => (MAX_CUR, v),
+            Self::ProtectCurLimit(v) => (PROTECT_CUR_LIMIT, v),
+            Self::ProtectCurLv1(v) => (PROTECT_CUR_LV1, v),
+            Self::CurLv1DelayMs(v) => (CUR_LV1_DELAY, v),
+            Self::RecvCur(v) => (RECV_CUR, v),
+            Self::CurRecvWinMs(v) => (CUR_RECV_WIN, v),
+            Self::ColdTime(v) => (COLD_TIME, u16::from(v)),
+            Self::PlusTime(v) => (PLUS_TIME, u16::from(v)),
+            Self::DrvOtC(v) => (DRV_OT, u16::from(v)),
+            Self::SpdLimit(v) => (SPD_LIMIT, v),
+            Self::Sn(v) => (SN, v),
+            Self::Other { index, value } => (index, value),
+        }
+    }
+
+    /// The typed parameter for an index and raw value. Values that cannot be
+    /// what the index carries (a 9-bit LPF level, an id not shifted by 7) are errors.
+    pub fn from_index_value(idx: u8, value: u16) -> Result<Self, ProtocolError> {
+        use index::*;
+        if let Some(block) = InfoBlock::from_index(idx) {
+            return Ok(Self::ReadInfo(block));
+        }
+        let param = match idx {
+            REBOOT => Self::Reboot(value),
+            UPDATE_FIN_ZERO => Self::UpdateFinZero,
+            SET_ID => Self::SetId {
+                new_id: decode_set_id(value)?,
+            },
+            UPDATE_ENC_ZERO => Self::UpdateEncZero,
+            COMM_SILENT => Self::CommSilent(value),
+            CTRL_MODE_SW => Self::CtrlMode(
+                CtrlMode::from_raw(byte_value("mode", value)?)
+                    .ok_or_else(|| bad("mode", value, "0 none, 1 speed, 2 position, 3 current"))?,
+            ),
+            SET_POS_KP => Self::PosKp(value),
+            SET_POS_KD => Self::PosKd(value),
+            SET_SPD_KP => Self::SpdKp(value),
+            SET_SPD_KI => Self::SpdKi(value),
+            WRITE_FLASH => Self::WriteFlash {
+                key: byte_value("flash key", value)?,
+            },
+            READ_FLASH => Self::ReadFlash,
+            BAUD_RATE => Self::BaudRate(
+                BaudLevel::from_raw(byte_value("baud level", value)?)
+                    .ok_or_else(|| bad("baud level", value, "levels are 0..=4"))?,
+            ),
+            POS_LPF_LV => Self::PosLpf(lpf_level(value)?),
+            MAX_CUR => Self::MaxCur(value),
+            PROTECT_CUR_LIMIT => Self::ProtectCurLimit(value),
+            PROTECT_CUR_LV1 => Self::ProtectCurLv1(value),
+            CUR_LV1_DELAY => Self::CurLv1DelayMs(value),
+            RECV_CUR => Self::RecvCur(value),
+            CUR_RECV_WIN => Self::CurRecvWinMs(value),
+            COLD_TIME => Self::ColdTime(byte_value("cold time", value)?),
+            PLUS_TIME => Self::PlusTime(byte_value("plus time", value)?),
+            DRV_OT => Self::DrvOtC(byte_value("driver over-temperature", value)?),
+            SPD_LIMIT => Self::SpdLimit(value),
+            SN => Self::Sn(value),
+            _ => Self::Other { index: idx, value },
+        };
+        Ok(param)
+    }
+
+    /// True for the reads (the device answers with an INFO block).
+    pub fn is_read(&self) -> bool {
+        matches!(self, Self::ReadInfo(_))
+    }
+}
+
+/// The largest position smoothing level (index 16).
+pub const MAX_LPF_LEVEL: u8 = 5;
+
+fn lpf_level(value: u16) -> Result<u8, ProtocolError> {
+    let level = byte_value("lpf level", value)?;
+    if level > MAX_LPF_LEVEL {
+        return Err(bad("lpf level", value, "levels are 0..=5"));
+    }
+    Ok(level)
+}
+
+fn decode_set_id(value: u16) -> Result<u8, ProtocolError> {
+    if value & 0x7F != 0 {
+        return Err(bad("set_id value", value, "must be new_id << 7 (Q7)"));
+    }
+    let id = value >> 7;
+    match u8::try_from(id) {
+        Ok(id) if is_device_id(id) => Ok(id),
+        _ => Err(bad("new_id", id, "device ids are 1..=159")),
+    }
+}
+
+fn byte_value(field: &'static str, value: u16) -> Result<u8, ProtocolError> {
+    u8::try_from(value).map_err(|_| bad(field, value, "an 8-bit field (0..=255)"))
+}
+
+fn bad(field: &'static str, value: impl Into<i64>, why: &'static str) -> ProtocolError {
+    ProtocolError::BadField {
+        field,
+        value: value.into(),
+        why,
+    }
+}
+
+/// A broadcast group: which eight devices a broadcast addresses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Group {
+    /// Devices 1–8.
+    Low,
+    /// Devices 9–16.
+    High,
+}
+
+impl Group {
+    /// Id of the device in slot 0.
+    pub fn first_id(self) -> u8 {
+        match self {
+            Group::Low => 1,
+            Group::High => 9,
+        }
+    }
+
+    /// The group and slot a device id occupies, if it is in one (ids 1..=16).
+    pub fn slot_of(id: u8) -> Option<(Group, usize)> {
+        match id {
+            1..=8 => Some((Group::Low, usize::from(id - 1))),
+            9..=16 => Some((Group::High, usize::from(id - 9))),
+            _ => None,
+        }
+    }
+}
+
+/// `0xAB55` / `0xAC55`: eight target angles (Q7 degrees).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BroadcastPos {
+    pub group: Group,
+    pub pos_ref: [i16; 8],
+}
+
+/// `0xAD55` / `0xAE55`: eight speed references (Q15).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BroadcastSpd {
+    pub group: Group,
+    pub spd_ref: [i16; 8],
+}
+
+/// `0xB155` in the table layout: one u8 per device 1..16 (1 enable, 2 disable).
+/// **Unverified** (SPEC errata 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BroadcastEnable {
+    pub ops: [u8; 16],
+}
+
+impl Command {
+    pub fn to_frame(&self) -> Frame {
+        match self {
+            Command::Control(c) => Frame::Standard(c.to_frame()),
+            Command::Jog(j) => Frame::Standard(j.to_frame()),
+            Command::Config(c) => Frame::Standard(c.to_frame()),
+            Command::BroadcastPos(b) => Frame::Broadcast(b.to_frame()),
+            Command::BroadcastSpd(b) => Frame::Broadcast(b.to_frame()),
+            Command::BroadcastEnableUnverified(b) => Frame::Broadcast(BroadcastFrame {
+                kind: BroadcastKind::Enable,
+                values: b.ops,
+            }),
+        }
+    }
+
+    pub fn encode(&self) -> FrameBytes {
+        self.to_frame().encode()
+    }
+
+    /// The command a frame carries. A standard frame whose can_id is a reply's
+    /// (low byte 0) is not a command.
+    pub fn from_frame(frame: &Frame) -> Result<Command, ProtocolError> {
+        match frame {
+            Frame::Standard(f) => Self::from_standard(f),
+            Frame::Broadcast(b) => Ok(Self::from_broadcast(b)),
+        }
+    }
+
+    fn from_standard(f: &StandardFrame) -> Result<Command, ProtocolError> {
+        match f.can_id {
+            CAN_ID_JOG => Jog::from_data(&f.data).map(Command::Jog),
+            CAN_ID_CONFIG => Config::from_data(&f.data).map(Command::Config),
+            id => match u8::try_from(id) {
+                Ok(id8) if is_address(id8) => {
+                    Control::from_data(id8, &f.data).map(Command::Control)
+                }
+                _ => Err(ProtocolError::UnknownCanId(id)),
+            },
+        }
+    }
+
+    fn from_broadcast(b: &BroadcastFrame) -> Command {
+        let words = i16_words(&b.values);
+        match b.kind {
+            BroadcastKind::PosLow => Command::BroadcastPos(BroadcastPos {
+                group: Group::Low,
+                pos_ref: words,
+            }),
+            BroadcastKind::PosHigh => Command::BroadcastPos(BroadcastPos {
+                group: Group::High,
+                pos_ref: words,
+            }),
+            BroadcastKind::SpdLow => Command::BroadcastSpd(BroadcastSpd {
+                group: Group::Low,
+                spd_ref: words,
+            }),
+            BroadcastKind::SpdHigh => Command::BroadcastSpd(BroadcastSpd {
+                group: Group::High,
+                spd_ref: words,
+            }),
+            BroadcastKind::Enable => {
+                Command::BroadcastEnableUnverified(BroadcastEnable { ops: b.values })
+            }
+        }
+    }
+}
+
+fn i16_words(values: &[u8; 16]) -> [i16; 8] {
+    std::array::from_fn(|i| i16::from_le_bytes([values[2 * i], values[2 * i + 1]]))
+}
+
+fn words_to_bytes(words: &[i16; 8]) -> [u8; 16] {
+    let mut out = [0u8; 16];
+    for (chunk, w) in out.chunks_exact_mut(2).zip(words) {
+        chunk.copy_from_slice(&w.to_le_bytes());
+    }
+    out
+}
+
+impl Control {
+    pub fn enable(dev_id: u8) -> Self {
+        Self {
+            dev_id,
+            op: ControlOp::Enable,
+            pos_ref: 0,
+            spd_ref: 0,
+        }
+    }
+
+    pub fn disable(dev_id: u8) -> Self {
+        Self {
+            dev_id,
+            op: ControlOp::Disable,
+            pos_ref: 0,
+            spd_ref: 0,
+        }
+    }
+
+    pub fn set_ref(dev_id: u8, pos_ref: i16, spd_ref: i16) -> Self {
+        Self {
+            dev_id,
+            op: ControlOp::SetRef,
+            pos_ref,
+            spd_ref,
+        }
+    }
+
+    fn to_frame(self) -> StandardFrame {
+        let mut data = [0u8; 8];
+        data[0..2].copy_from_slice(&self.pos_ref.to_le_bytes());
+        data[2..4].copy_from_slice(&self.spd_ref.to_le_bytes());
+        data[6] = self.op as u8;
+        StandardFrame {
+            can_id: u32::from(self.dev_id),
+            data,
+        }
+    }
+
+    fn from_data(dev_id: u8, data: &[u8; 8]) -> Result<Self, ProtocolError> {
+        let op = match data[6] {
+            1 => ControlOp::Enable,
+            2 => ControlOp::Disable,
+            3 => ControlOp::SetRef,
+            other => {
+                return Err(bad(
+                    "en",
+                    other,
+                    "1 enable, 2 disable, 3 set_ref; anything else is a no-op",
+                ))
+            }
+        };
+        Ok(Self {
+            dev_id,
+            op,
+            pos_ref: i16::from_le_bytes([data[0], data[1]]),
+            spd_ref: i16::from_le_bytes([data[2], data[3]]),
+        })
+    }
+}
+
+impl Jog {
+    fn to_frame(self) -> StandardFrame {
+        let mut data = [0u8; 8];
+        data[0] = self.dev_id;
+        data[2] = self.dir as u8;
+        StandardFrame {
+            can_id: CAN_ID_JOG,
+            data,
+        }
+    }
+
+    fn from_data(data: &[u8; 8]) -> Result<Self, ProtocolError> {
+        let dev_id = checked_address(data[0])?;
+        let dir = match data[2] {
+            0 => JogDir::None,
+            1 => JogDir::Cw,
+            2 => JogDir::Ccw,
+            other => return Err(bad("dir", other, "0 none, 1 cw, 2 ccw")),
+        };
+        Ok(Self { dev_id, dir })
+    }
+}
+
+impl Config {
+    pub fn read(dev_id: u8, block: InfoBlock) -> Self {
+        Self {
+            dev_id,
+            param: ConfigParam::ReadInfo(block),
+        }
+    }
+
+    fn to_frame(self) -> StandardFrame {
+        let (idx, value) = self.param.index_value();
+        let mut data = [0u8; 8];
+        data[0] = self.dev_id;
+        data[1] = idx;
+        data[4..6].copy_from_slice(&value.to_le_bytes());
+        StandardFrame {
+            can_id: CAN_ID_CONFIG,
+            data,
+        }
+    }
+
+    fn from_data(data: &[u8; 8]) -> Result<Self, ProtocolError> {
+        let dev_id = checked_address(data[0])?;
+        let value = u16::from_le_bytes([data[4], data[5]]);
+        let param = ConfigParam::from_index_value(data[1], value)?;
+        Ok(Self { dev_id, param })
+    }
+}
+
+impl BroadcastPos {
+    fn to_frame(self) -> BroadcastFrame {
+        let kind = match self.group {
+            Group::Low => BroadcastKind::PosLow,
+            Group::High => BroadcastKind::PosHigh,
+        };
+        BroadcastFrame {
+            kind,
+            values: words_to_bytes(&self.pos_ref),
+        }
+    }
+}
+
+impl BroadcastSpd {
+    fn to_frame(self) -> BroadcastFrame {
+        let kind = match self.group {
+            Group::Low => BroadcastKind::SpdLow,
+            Group::High => BroadcastKind::SpdHigh,
+        };
+        BroadcastFrame {
+            kind,
+            values: words_to_bytes(&self.spd_ref),
+        }
+    }
+}
+
+fn checked_address(id: u8) -> Result<u8, ProtocolError> {
+    if is_address(id) {
+        Ok(id)
+    } else {
+        Err(ProtocolError::BadAddress(id))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn set_id_is_sent_as_q7() {
+        let c = Config {
+            dev_id: 1,
+            param: ConfigParam::SetId { new_id: 10 },
+        };
+        let bytes = c.to_frame().data;
+        assert_eq!(&bytes[4..6], &[0x00, 0x05]);
+        assert!(ConfigParam::from_index_value(index::SET_ID, 1281).is_err());
+        assert!(ConfigParam::from_index_value(index::SET_ID, 160 << 7).is_err());
+    }
+
+    #[test]
+    fn control_with_en_zero_is_rejected() {
+        let data = [0u8; 8];
+        assert!(Control::from_data(1, &data).is_err());
+    }
+
+    #[test]
+    fn groups_map_ids_to_slots() {
+        assert_eq!(Group::slot_of(1), Some((Group::Low, 0)));
+        assert_eq!(Group::slot_of(16), Some((Group::High, 7)));
+        assert_eq!(Group::slot_of(17), None);
+        assert_eq!(Group::slot_of(0), None);
+    }
+}

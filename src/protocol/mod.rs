@@ -1,0 +1,52 @@
+//! The joint-module wire protocol, as pure functions of bytes.
+//!
+//! This module is the one place that knows frame offsets, CRC rules and unit
+//! scaling (`../shared/protocol/SPEC.md`). It does no I/O and depends on no
+//! runtime, so the daemon and the simulator share it, and the tests prove it
+//! against `../shared/protocol/vectors.json`.
+//!
+//! # Layout
+//! - [`checksum`]: the CRC-16/IBM-3740 used by both frame kinds.
+//! - [`frame`]: 20-byte standard and broadcast frames, encode/decode with CRC check.
+//! - [`command`]: typed host→device commands (control, jog, config, broadcasts).
+//! - [`reply`]: typed device→host replies (INFO_01..07, RES), raw bytes always kept.
+//! - [`message`]: classifies a decoded standard frame as a command or a reply.
+//! - [`units`]: every raw ↔ physical conversion, range-checked.
+//! - [`stream`]: finds frames in a byte stream, resyncing past garbage.
+//! - [`error`]: the typed errors of this layer.
+
+pub mod checksum;
+pub mod command;
+pub mod error;
+pub mod frame;
+pub mod message;
+pub mod reply;
+pub mod stream;
+pub mod units;
+
+pub use command::{
+    BaudLevel, BroadcastEnable, BroadcastPos, BroadcastSpd, Command, Config, ConfigParam, Control,
+    ControlOp, CtrlMode, Group, InfoBlock, Jog, JogDir,
+};
+pub use error::ProtocolError;
+pub use frame::{BroadcastFrame, BroadcastKind, Frame, FrameBytes, StandardFrame, FRAME_LEN};
+pub use message::Message;
+pub use reply::{Gains, Info01, Info02, Info04, Info05, Info06, Reply, ReplyBody};
+pub use stream::{DecoderStats, StreamDecoder};
+pub use units::FirmwareVersion;
+
+/// Lowest and highest addressable device id (SPEC §8).
+pub const MIN_DEVICE_ID: u8 = 0x01;
+pub const MAX_DEVICE_ID: u8 = 0x9F;
+/// The address every device answers to (control, jog, config writes).
+pub const ALL_DEVICES: u8 = 0xFF;
+
+/// True for an id a single device can carry (1..=159).
+pub fn is_device_id(id: u8) -> bool {
+    (MIN_DEVICE_ID..=MAX_DEVICE_ID).contains(&id)
+}
+
+/// True for a host→device address: one device or all of them.
+pub fn is_address(id: u8) -> bool {
+    is_device_id(id) || id == ALL_DEVICES
+}
