@@ -1,0 +1,301 @@
+//! A tty opened raw (8N1, no flow control, no echo) at a given baud: a USB
+//! RS-485 adapter or the slave side of a pseudo-terminal, opened the same way.
+//!
+//! Reads wait with `ppoll(2)`, whose timeout has nanosecond resolution (plain
+//! `poll(2)` rounds to milliseconds, longer than two frames at 500000 baud).
+
+use std::fs::{File, OpenOptions};
+use std::io::{self, Read, Write};
+use std::os::fd::{AsFd, AsRawFd, BorrowedFd};
+use std::os::unix::fs::OpenOptionsExt;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use nix::sys::termios::{self, BaudRate, ControlFlags, FlushArg, SetArg, SpecialCharacterIndices};
+
+use super::Transport;
+
+/// The baud rates of SPEC §1 and their termios constants.
+const BAUDS: [(u32, BaudRate); 5] = [
+    (500_000, BaudRate::B500000),
+    (230_400, BaudRate::B230400),
+    (115_200, BaudRate::B115200),
+    (38_400, BaudRate::B38400),
+    (19_200, BaudRate::B19200),
+];
+
+fn to_termios_baud(baud: u32) -> io::Result<BaudRate> {
+    BAUDS
+        .iter()
+        .find(|(b, _)| *b == baud)
+        .map(|(_, r)| *r)
+        .ok_or_else(|| {
+            io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("baud {baud} is not one the modules speak (500000, 230400, 115200, 38400, 19200)"),
+            )
+        })
+}
+
+/// Puts a tty in raw 8N1 mode at `baud`, reads returning whatever is there.
+pub fn make_raw(fd: BorrowedFd<'_>, baud: u32) -> io::Result<()> {
+    let speed = to_termios_baud(baud)?;
+    let mut t = termios::tcgetattr(fd)?;
+    termios::cfmakeraw(&mut t);
+    t.control_flags |= ControlFlags::CLOCAL | ControlFlags::CREAD;
+    t.control_flags &= !(ControlFlags::CSTOPB | ControlFlags::PARENB | ControlFlags::CRTSCTS);
+    t.control_chars[SpecialCharacterIndices::VMIN as usize] = 0;
+    t.control_chars[SpecialCharacterIndices::VTIME as usize] = 0;
+    termios::cfsetspeed(&mut t, speed)?;
+    termios::tcsetattr(fd, SetArg::TCSANOW, &t)?;
+    Ok(())
+}
+
+/// The output baud a tty is set to, if it is one of SPEC §1's. On a pty
+/// master this reads the slave's setting (Linux routes termios ioctls of a
+/// master to its slave), which is how the simulator learns the host's baud.
+pub fn read_baud(fd: BorrowedFd<'_>) -> io::Result<Option<u32>> {
+    let t = termios::tcgetattr(fd)?;
+    let speed = termios::cfgetospeed(&t);
+    Ok(BAUDS.iter().find(|(_, r)| *r == speed).map(|(b, _)| *b))
+}
+
+/// Waits until `fd` is readable or `timeout` passes. `Ok(false)` on timeout;
+/// a hang-up with nothing left to read is an error.
+pub fn wait_readable(fd: BorrowedFd<'_>, timeout: Duration) -> io::Result<bool> {
+    let mut pfd = libc::pollfd {
+        fd: fd.as_raw_fd(),
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    let ts = libc::timespec {
+        tv_sec: timeout.as_secs() as libc::time_t,
+        tv_nsec: timeout.subsec_nanos() as libc::c_long,
+    };
+    // SAFETY: one valid pollfd, a valid timespec, no signal mask.
+    let n = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };
+    if n < 0 {
+        let e = io::Error::last_os_error();
+        return if e.kind() == io::ErrorKind::Interrupted {
+            Ok(false)
+        } else {
+            Err(e)
+        };
+    }
+    if n == 0 {
+        return Ok(false);
+    }
+    if pfd.revents & libc::POLLIN != 0 {
+        return Ok(true);
+    }
+    if pfd.revents & (libc::POLLHUP | libc::POLLERR | libc::POLLNVAL) != 0 {
+        return Err(io::Error::new(io::ErrorKind::BrokenPipe, "tty hung up"));
+    }
+    Ok(false)
+}
+
+/// A serial tty, raw, non-blocking underneath, with timed reads.
+pub struct TtyPort {
+    file: File,
+    path: PathBuf,
+    baud: u32,
+}
+
+/// Something worth telling the user about a freshly opened port.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PortNote {
+    /// `ASYNC_LOW_LATENCY` or RS-485 mode could not be set (normal on a pty).
+    IoctlUnsupported { what: &'static str, error: String },
+    /// An FTDI adapter whose latency timer delays every reply.
+    FtdiLatency { ms: u32, fix: String },
+}
+
+impl TtyPort {
+    /// Opens `path` (any tty, a pty slave or a `/dev/serial/by-id` link included).
+    pub fn open(path: &Path, baud: u32) -> io::Result<(TtyPort, Vec<PortNote>)> {
+        let file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .custom_flags(libc::O_NOCTTY | libc::O_NONBLOCK)
+            .open(path)?;
+        make_raw(file.as_fd(), baud)?;
+        let mut notes = Vec::new();
+        if let Err(e) = set_low_latency(&file) {
+            notes.push(PortNote::IoctlUnsupported {
+                what: "ASYNC_LOW_LATENCY",
+                error: e.to_string(),
+            });
+        }
+        notes.extend(ftdi_latency_note(path));
+        Ok((
+            TtyPort {
+                file,
+                path: path.to_path_buf(),
+                baud,
+            },
+            notes,
+        ))
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+/// Linux `struct serial_struct` prefix up to `flags`, for TIOCGSERIAL/TIOCSSERIAL.
+#[repr(C)]
+#[derive(Default)]
+struct SerialStruct {
+    kind: libc::c_int,
+    line: libc::c_int,
+    port: libc::c_uint,
+    irq: libc::c_int,
+    flags: libc::c_int,
+    rest: [u32; 32],
+}
+
+const ASYNC_LOW_LATENCY: libc::c_int = 1 << 13;
+
+fn set_low_latency(file: &File) -> io::Result<()> {
+    let mut ss = SerialStruct::default();
+    let fd = file.as_raw_fd();
+    // SAFETY: TIOCGSERIAL writes a serial_struct; ours is larger than the kernel's.
+    if unsafe { libc::ioctl(fd, libc::TIOCGSERIAL, &mut ss) } < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    ss.flags |= ASYNC_LOW_LATENCY;
+    // SAFETY: same struct back.
+    if unsafe { libc::ioctl(fd, libc::TIOCSSERIAL, &ss) } < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    Ok(())
+}
+
+/// FTDI adapters buffer replies for `latency_timer` ms (16 by default).
+fn ftdi_latency_note(path: &Path) -> Option<PortNote> {
+    let real = std::fs::canonicalize(path).ok()?;
+    let name = real.file_name()?.to_str()?;
+    let sys = format!("/sys/class/tty/{name}/device/latency_timer");
+    let ms: u32 = std::fs::read_to_string(&sys).ok()?.trim().parse().ok()?;
+    (ms > 1).then(|| PortNote::FtdiLatency {
+        ms,
+        fix: format!("echo 1 | sudo tee {sys}   (or a udev rule, see README)"),
+    })
+}
+
+impl Transport for TtyPort {
+    fn write_all(&mut self, mut bytes: &[u8]) -> io::Result<()> {
+        while !bytes.is_empty() {
+            match self.file.write(bytes) {
+                Ok(0) => {
+                    return Err(io::Error::new(
+                        io::ErrorKind::BrokenPipe,
+                        "tty accepted no bytes",
+                    ))
+                }
+                Ok(n) => bytes = &bytes[n..],
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => wait_writable(&self.file)?,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    fn read_timeout(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
+        if !wait_readable(self.file.as_fd(), timeout)? {
+            return Ok(0);
+        }
+        match self.file.read(buf) {
+            Ok(0) => Err(io::Error::new(io::ErrorKind::UnexpectedEof, "tty closed")),
+            Ok(n) => Ok(n),
+            Err(e)
+                if e.kind() == io::ErrorKind::WouldBlock
+                    || e.kind() == io::ErrorKind::Interrupted =>
+            {
+                Ok(0)
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    fn set_baud(&mut self, baud: u32) -> io::Result<()> {
+        make_raw(self.file.as_fd(), baud)?;
+        self.baud = baud;
+        Ok(())
+    }
+
+    fn baud(&self) -> u32 {
+        self.baud
+    }
+
+    fn discard_input(&mut self) -> io::Result<()> {
+        termios::tcflush(self.file.as_fd(), FlushArg::TCIFLUSH)?;
+        Ok(())
+    }
+}
+
+fn wait_writable(file: &File) -> io::Result<()> {
+    let mut pfd = libc::pollfd {
+        fd: file.as_raw_fd(),
+        events: libc::POLLOUT,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd.
+    let n = unsafe { libc::poll(&mut pfd, 1, 100) };
+    if n < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    if pfd.revents & (libc::POLLHUP | libc::POLLERR) != 0 {
+        return Err(io::Error::new(io::ErrorKind::BrokenPipe, "tty hung up"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nix::pty::openpty;
+
+    fn slave_path(slave: &std::os::fd::OwnedFd) -> PathBuf {
+        std::fs::read_link(format!("/proc/self/fd/{}", slave.as_raw_fd())).expect("pty slave path")
+    }
+
+    #[test]
+    fn pty_master_sees_the_baud_the_host_set() {
+        let pty = openpty(None, None).expect("openpty");
+        let path = slave_path(&pty.slave);
+        let (mut port, _notes) = TtyPort::open(&path, 230_400).expect("open pty slave");
+        assert_eq!(read_baud(pty.master.as_fd()).unwrap(), Some(230_400));
+        port.set_baud(500_000).unwrap();
+        assert_eq!(read_baud(pty.master.as_fd()).unwrap(), Some(500_000));
+    }
+
+    #[test]
+    fn bytes_cross_a_pty_and_reads_time_out() {
+        let pty = openpty(None, None).expect("openpty");
+        make_raw(pty.master.as_fd(), 500_000).unwrap();
+        let path = slave_path(&pty.slave);
+        let (mut port, _) = TtyPort::open(&path, 500_000).expect("open pty slave");
+        let mut master = File::from(pty.master);
+        master.write_all(&[0x55, 0xAA]).unwrap();
+        let mut buf = [0u8; 4];
+        assert_eq!(
+            port.read_timeout(&mut buf, Duration::from_millis(100))
+                .unwrap(),
+            2
+        );
+        assert_eq!(
+            port.read_timeout(&mut buf, Duration::from_micros(300))
+                .unwrap(),
+            0
+        );
+        port.write_all(&[1, 2, 3]).unwrap();
+        assert!(wait_readable(master.as_fd(), Duration::from_millis(100)).unwrap());
+    }
+
+    #[test]
+    fn unknown_baud_is_refused() {
+        assert!(to_termios_baud(9600).is_err());
+    }
+}
