@@ -4,9 +4,11 @@
 //! - [`protocol`]: pure wire protocol: frames, CRC, typed commands/replies, units, stream decoder.
 //! - [`frame_json`]: frames ↔ JSON with the field names of `vectors.json` (CLI, API, tests).
 //! - [`cli`]: the `jointd frame …` tools for reading a serial capture by hand.
+//! - [`api`]: the REST API (axum routers over the bus handles, OpenAPI, auth, soft limits).
 //! - [`bus`]: one owner thread per bus, its scheduler, and the handle the API uses.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty, in-memory pipe).
 
+pub mod api;
 pub mod bus;
 pub mod cli;
 pub mod frame_json;

@@ -1,0 +1,257 @@
+//! Buses: list, state (link, baud, stats), scan an id range, change baud,
+//! and the raw frame log (the vendor tool's RX/TX view).
+
+use std::time::UNIX_EPOCH;
+
+use axum::extract::State;
+use axum::Json;
+use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
+use utoipa_axum::{router::OpenApiRouter, routes};
+
+use super::error::{ApiError, ApiResult};
+use super::extract::{ApiJson, ApiPath, ApiQuery};
+use super::health::link_name;
+use super::openapi::{ErrorResponses, TAG_BUSES};
+use super::state::{device_id, AppState, BusPath};
+use crate::bus::handle::{LinkState, FRAME_LOG_LEN};
+use crate::bus::BusSnapshot;
+use crate::frame_json::frame_to_json;
+use crate::protocol::{BaudLevel, Frame, MAX_DEVICE_ID};
+
+/// Frames the log view returns when no `limit` is given.
+const DEFAULT_FRAME_LIMIT: i64 = 50;
+
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(list_buses))
+        .routes(routes!(get_bus))
+        .routes(routes!(scan))
+        .routes(routes!(set_baud))
+        .routes(routes!(frames))
+}
+
+/// A bus's state and stats.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct BusView {
+    #[schema(example = "sim0")]
+    pub name: String,
+    #[schema(example = "/dev/ttyUSB0")]
+    pub path: String,
+    #[schema(example = 500000)]
+    pub baud: u32,
+    /// `opening`, `up` or `down`.
+    #[schema(example = "up")]
+    pub link: &'static str,
+    /// Why the bus is down, when it is.
+    pub down_reason: Option<String>,
+    pub retry_in_ms: Option<u64>,
+    #[schema(example = 16)]
+    pub devices_known: usize,
+    #[schema(example = 16)]
+    pub devices_online: usize,
+    /// One-shot requests waiting for the bus.
+    #[schema(example = 0)]
+    pub queue_depth: usize,
+    /// Monotonic counters since start (frames by kind, CRC errors, timeouts, retries, ...).
+    #[schema(value_type = Object, example = json!({"frames_rx": 10432, "crc_errors": 0, "timeouts": 3}))]
+    pub counters: serde_json::Value,
+}
+
+impl BusView {
+    pub fn new(snap: &BusSnapshot) -> Self {
+        let (down_reason, retry_in_ms) = match &snap.link {
+            LinkState::Down {
+                reason,
+                retry_in_ms,
+            } => (Some(reason.clone()), Some(*retry_in_ms)),
+            _ => (None, None),
+        };
+        Self {
+            name: snap.name.clone(),
+            path: snap.path.clone(),
+            baud: snap.baud,
+            link: link_name(&snap.link),
+            down_reason,
+            retry_in_ms,
+            devices_known: snap.devices.len(),
+            devices_online: snap.devices.values().filter(|d| d.online).count(),
+            queue_depth: snap.queue_depth,
+            counters: serde_json::to_value(&snap.counters).unwrap_or_default(),
+        }
+    }
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct BusList {
+    pub buses: Vec<BusView>,
+}
+
+/// An id range to scan, inclusive.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ScanRequest {
+    #[schema(minimum = 1, maximum = 159, example = 1)]
+    pub first: i64,
+    #[schema(minimum = 1, maximum = 159, example = 16)]
+    pub last: i64,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ScanResult {
+    #[schema(example = "sim0")]
+    pub bus: String,
+    /// Ids that answered INFO_01.
+    #[schema(example = json!([1, 2, 3]))]
+    pub found: Vec<u8>,
+}
+
+#[derive(Debug, Deserialize, Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct BaudRequest {
+    /// One of 500000, 230400, 115200, 38400, 19200.
+    #[schema(example = 500000)]
+    pub baud: i64,
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct FramesQuery {
+    /// How many of the latest frames, 1..=512 (default 50).
+    #[param(minimum = 1, maximum = 512, example = 20)]
+    pub limit: Option<i64>,
+}
+
+/// One frame seen on the wire.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct FrameView {
+    /// Wall-clock time, seconds since the Unix epoch.
+    #[schema(example = 1732200000.123)]
+    pub at: f64,
+    /// `tx` (host to devices) or `rx`.
+    #[schema(example = "rx")]
+    pub direction: &'static str,
+    #[schema(example = "55 AA 00 14 00 01 01 00 07 00 80 51 C0 16 0D 06 4C 2B 00 00")]
+    pub hex: String,
+    /// The frame decoded (field names as in `jointd frame decode`).
+    #[schema(value_type = Object)]
+    pub decoded: serde_json::Value,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct FrameLog {
+    pub frames: Vec<FrameView>,
+}
+
+/// List every bus with its state and stats.
+#[utoipa::path(get, path = "/api/v1/buses", tag = TAG_BUSES,
+    responses((status = 200, description = "Every configured bus", body = BusList), ErrorResponses))]
+async fn list_buses(State(state): State<AppState>) -> Json<BusList> {
+    let buses = state.buses().map(|b| BusView::new(&b.snapshot())).collect();
+    Json(BusList { buses })
+}
+
+/// One bus's state: link, baud, stats.
+#[utoipa::path(get, path = "/api/v1/buses/{bus}", tag = TAG_BUSES, params(BusPath),
+    responses((status = 200, description = "The bus", body = BusView), ErrorResponses))]
+async fn get_bus(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<BusPath>,
+) -> ApiResult<Json<BusView>> {
+    Ok(Json(BusView::new(&state.bus(&p.bus)?.snapshot())))
+}
+
+/// Scan an id range: poll INFO_01 of each id; devices that answer join the bus.
+#[utoipa::path(post, path = "/api/v1/buses/{bus}/scan", tag = TAG_BUSES, params(BusPath),
+    request_body(content = ScanRequest, example = json!({"first": 1, "last": 16})),
+    responses((status = 200, description = "Ids that answered", body = ScanResult), ErrorResponses))]
+async fn scan(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<BusPath>,
+    ApiJson(req): ApiJson<ScanRequest>,
+) -> ApiResult<Json<ScanResult>> {
+    let bus = state.bus(&p.bus)?;
+    let first = device_id("first", req.first)?;
+    let last = device_id("last", req.last)?;
+    if first > last {
+        return Err(ApiError::out_of_range(
+            "last",
+            req.last as f64,
+            (f64::from(first), f64::from(MAX_DEVICE_ID)),
+            "",
+        ));
+    }
+    let found = bus.scan(first, last).await?;
+    Ok(Json(ScanResult { bus: p.bus, found }))
+}
+
+/// Change the baud of every device on the bus, then of the port.
+#[utoipa::path(put, path = "/api/v1/buses/{bus}/baud", tag = TAG_BUSES, params(BusPath),
+    request_body(content = BaudRequest, example = json!({"baud": 500000})),
+    responses((status = 200, description = "The bus now runs at this baud", body = BaudRequest),
+        ErrorResponses))]
+async fn set_baud(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<BusPath>,
+    ApiJson(req): ApiJson<BaudRequest>,
+) -> ApiResult<Json<BaudRequest>> {
+    let bus = state.bus(&p.bus)?;
+    let level = u32::try_from(req.baud)
+        .ok()
+        .and_then(BaudLevel::from_baud)
+        .ok_or_else(|| {
+            let allowed: Vec<String> = BaudLevel::ALL
+                .iter()
+                .map(|l| l.baud().to_string())
+                .collect();
+            ApiError::invalid(
+                "baud",
+                format!(
+                    "baud {} is not a device baud level; allowed: {}",
+                    req.baud,
+                    allowed.join(", ")
+                ),
+            )
+        })?;
+    bus.set_baud(level.baud()).await?;
+    Ok(Json(BaudRequest {
+        baud: i64::from(level.baud()),
+    }))
+}
+
+/// The latest frames seen on the wire, oldest first, decoded.
+#[utoipa::path(get, path = "/api/v1/buses/{bus}/frames", tag = TAG_BUSES,
+    params(BusPath, FramesQuery),
+    responses((status = 200, description = "Raw frame log", body = FrameLog), ErrorResponses))]
+async fn frames(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<BusPath>,
+    ApiQuery(q): ApiQuery<FramesQuery>,
+) -> ApiResult<Json<FrameLog>> {
+    let bus = state.bus(&p.bus)?;
+    let limit = q.limit.unwrap_or(DEFAULT_FRAME_LIMIT);
+    if !(1..=FRAME_LOG_LEN as i64).contains(&limit) {
+        return Err(ApiError::out_of_range(
+            "limit",
+            limit as f64,
+            (1.0, FRAME_LOG_LEN as f64),
+            "frames",
+        ));
+    }
+    let frames = bus
+        .recent_frames(limit as usize)
+        .into_iter()
+        .map(|f| FrameView {
+            at: f
+                .at
+                .duration_since(UNIX_EPOCH)
+                .map_or(0.0, |d| d.as_secs_f64()),
+            direction: if f.tx { "tx" } else { "rx" },
+            hex: super::telemetry::hex(&f.bytes),
+            decoded: Frame::decode(&f.bytes)
+                .map(|fr| frame_to_json(&fr))
+                .unwrap_or_else(|e| serde_json::json!({"kind": "garbage", "error": e.to_string()})),
+        })
+        .collect();
+    Ok(Json(FrameLog { frames }))
+}

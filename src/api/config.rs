@@ -1,0 +1,296 @@
+//! Configuration: read every parameter (INFO_03..06) in physical units with
+//! the raw values beside them, change any subset in one request (each write
+//! verified by the bus engine), persist to flash, change a device's id.
+
+use axum::extract::State;
+use axum::http::StatusCode;
+use axum::Json;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+use utoipa_axum::{router::OpenApiRouter, routes};
+
+use super::config_params::{Blocks, ConfigPatch, Param, ParamValue};
+use super::error::{ApiError, ApiResult};
+use super::extract::{ApiJson, ApiPath};
+use super::openapi::{ErrorResponses, TAG_CONFIG};
+use super::state::{device_id, known_device, AppState, DevicePath};
+use super::telemetry::hex;
+use crate::bus::handle::WriteOutcome;
+use crate::bus::BusHandle;
+use crate::protocol::{BaudLevel, InfoBlock, ReplyBody};
+
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(read_config, patch_config))
+        .routes(routes!(persist))
+        .routes(routes!(change_id))
+}
+
+/// Every parameter of a device, read from it now.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ConfigView {
+    #[schema(example = "sim0")]
+    pub bus: String,
+    #[schema(example = 1)]
+    pub id: u8,
+    pub pos_kp: ParamValue,
+    pub pos_kd: ParamValue,
+    pub spd_kp: ParamValue,
+    pub spd_ki: ParamValue,
+    pub lpf_level: ParamValue,
+    pub max_current_a: ParamValue,
+    pub protect_current_limit_a: ParamValue,
+    pub protect_current_lv1_a: ParamValue,
+    pub protect_delay_ms: ParamValue,
+    pub recover_current_a: ParamValue,
+    pub recover_window_ms: ParamValue,
+    pub burst_cold_ms: ParamValue,
+    pub burst_plus_ms: ParamValue,
+    /// The device's baud from INFO_04 (absent if its level is unknown); change it on the bus.
+    #[schema(example = 500000)]
+    pub baud: Option<u32>,
+    #[schema(example = 1)]
+    pub baud_level: u8,
+    #[schema(example = 3)]
+    pub param_ver: u8,
+    /// The raw data bytes of each block, hex (INFO_06 carries bytes whose
+    /// layout is unpublished).
+    #[schema(example = json!({"info03": "FF 0F 00 00 00 10 00 01", "info04": "02 01 03 00 10 11 69 03",
+        "info05": "60 0B 58 02 46 02 90 01", "info06": "04 02 00 00 00 00 00 00"}))]
+    pub raw: std::collections::BTreeMap<&'static str, String>,
+}
+
+/// One verified write.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct Written {
+    #[schema(example = "max_current_a")]
+    pub param: &'static str,
+    #[schema(example = 2.0)]
+    pub value: f64,
+    #[schema(example = 11651)]
+    pub raw: u16,
+    #[schema(example = 18)]
+    pub index: u8,
+    /// `res` (the device's RES reply) or `readback` (the INFO block read back).
+    #[schema(example = "readback")]
+    pub verified_by: &'static str,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct PatchResult {
+    #[schema(example = "sim0")]
+    pub bus: String,
+    #[schema(example = 1)]
+    pub id: u8,
+    /// In request order; RAM only until persisted.
+    pub written: Vec<Written>,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct PersistResult {
+    #[schema(example = "sim0")]
+    pub bus: String,
+    #[schema(example = 1)]
+    pub id: u8,
+    #[schema(example = true)]
+    pub persisted: bool,
+    #[schema(example = "res")]
+    pub verified_by: &'static str,
+}
+
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct IdRequest {
+    /// 1..=159, unused on this bus. Stored to flash by the device at once.
+    #[schema(minimum = 1, maximum = 159, example = 5)]
+    pub new_id: i64,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct IdResult {
+    #[schema(example = "sim0")]
+    pub bus: String,
+    #[schema(example = 1)]
+    pub old_id: u8,
+    #[schema(example = 5)]
+    pub new_id: u8,
+    #[schema(example = "res")]
+    pub verified_by: &'static str,
+}
+
+async fn read_blocks(bus: &BusHandle, id: u8) -> ApiResult<(Blocks, [[u8; 8]; 4])> {
+    let mut raw = [[0u8; 8]; 4];
+    let blocks = [
+        InfoBlock::Info03,
+        InfoBlock::Info04,
+        InfoBlock::Info05,
+        InfoBlock::Info06,
+    ];
+    let mut bodies = Vec::with_capacity(blocks.len());
+    for (i, block) in blocks.into_iter().enumerate() {
+        let reply = bus.read_info(id, block).await?;
+        raw[i] = reply.data;
+        bodies.push(reply.body());
+    }
+    match bodies[..] {
+        [ReplyBody::Info03(gains), ReplyBody::Info04(info04), ReplyBody::Info05(info05), ReplyBody::Info06(info06)] => {
+            Ok((
+                Blocks {
+                    gains,
+                    info04,
+                    info05,
+                    info06,
+                },
+                raw,
+            ))
+        }
+        _ => Err(ApiError::new(
+            StatusCode::BAD_GATEWAY,
+            "unexpected-reply",
+            "Unexpected reply",
+            format!("device {id} answered a parameter read with another block"),
+        )),
+    }
+}
+
+/// Read every parameter (INFO_03..06) in physical units, raw values beside them.
+#[utoipa::path(get, path = "/api/v1/buses/{bus}/devices/{id}/config", tag = TAG_CONFIG, params(DevicePath),
+    responses((status = 200, description = "Every parameter, read from the device now", body = ConfigView), ErrorResponses))]
+async fn read_config(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<DevicePath>,
+) -> ApiResult<Json<ConfigView>> {
+    let (bus, id) = p.resolve(&state)?;
+    known_device(&bus.snapshot(), id)?;
+    let (b, raw) = read_blocks(bus, id).await?;
+    let v = |p: Param| ParamValue::new(p, p.raw_in(&b));
+    let names = ["info03", "info04", "info05", "info06"];
+    Ok(Json(ConfigView {
+        bus: bus.name().to_owned(),
+        id,
+        pos_kp: v(Param::PosKp),
+        pos_kd: v(Param::PosKd),
+        spd_kp: v(Param::SpdKp),
+        spd_ki: v(Param::SpdKi),
+        lpf_level: v(Param::LpfLevel),
+        max_current_a: v(Param::MaxCurrent),
+        protect_current_limit_a: v(Param::ProtectCurrentLimit),
+        protect_current_lv1_a: v(Param::ProtectCurrentLv1),
+        protect_delay_ms: v(Param::ProtectDelay),
+        recover_current_a: v(Param::RecoverCurrent),
+        recover_window_ms: v(Param::RecoverWindow),
+        burst_cold_ms: v(Param::BurstCold),
+        burst_plus_ms: v(Param::BurstPlus),
+        baud: BaudLevel::from_raw(b.info04.baud_level).map(BaudLevel::baud),
+        baud_level: b.info04.baud_level,
+        param_ver: b.info04.param_ver,
+        raw: names.into_iter().zip(raw.iter().map(|d| hex(d))).collect(),
+    }))
+}
+
+/// Change any subset of parameters in one request. Every value is checked
+/// before anything is written; each write is verified by RES or read-back.
+/// On a failure the problem's `partial.written` lists what was already written.
+#[utoipa::path(patch, path = "/api/v1/buses/{bus}/devices/{id}/config", tag = TAG_CONFIG, params(DevicePath),
+    request_body(content = ConfigPatch, example = json!({"pos_kp": 1.25, "max_current_a": 2.0, "burst_plus_ms": 100.0})),
+    responses((status = 200, description = "Every parameter written and verified", body = PatchResult), ErrorResponses))]
+async fn patch_config(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<DevicePath>,
+    ApiJson(patch): ApiJson<ConfigPatch>,
+) -> ApiResult<Json<PatchResult>> {
+    let (bus, id) = p.resolve(&state)?;
+    known_device(&bus.snapshot(), id)?;
+    let mut writes = Vec::new();
+    for (param, value) in patch.entries() {
+        writes.push((param, value, param.to_config(value)?));
+    }
+    let mut written = Vec::with_capacity(writes.len());
+    for (param, value, config) in writes {
+        match bus.write_config(id, config).await {
+            Ok(outcome) => written.push(written_entry(param, value, &outcome)),
+            Err(e) => {
+                let done = serde_json::to_value(&written).unwrap_or_default();
+                let failed = ApiError::from(e);
+                let detail = format!("{}: {}", param.name(), failed.problem.detail);
+                let mut err = failed
+                    .with_field(param.name())
+                    .with_partial(serde_json::json!({"written": done}));
+                err.problem.detail = detail;
+                return Err(err);
+            }
+        }
+    }
+    Ok(Json(PatchResult {
+        bus: bus.name().to_owned(),
+        id,
+        written,
+    }))
+}
+
+fn written_entry(param: Param, value: f64, outcome: &WriteOutcome) -> Written {
+    Written {
+        param: param.name(),
+        value,
+        raw: outcome.value,
+        index: outcome.index,
+        verified_by: outcome.verified_by,
+    }
+}
+
+/// Persist the RAM parameters to flash (WRITE_FLASH, key 0xA5), confirmed by RES.
+#[utoipa::path(post, path = "/api/v1/buses/{bus}/devices/{id}/config/persist", tag = TAG_CONFIG, params(DevicePath),
+    responses((status = 200, description = "Parameters stored in flash", body = PersistResult), ErrorResponses))]
+async fn persist(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<DevicePath>,
+) -> ApiResult<Json<PersistResult>> {
+    let (bus, id) = p.resolve(&state)?;
+    known_device(&bus.snapshot(), id)?;
+    let outcome = bus.write_flash(id).await?;
+    Ok(Json(PersistResult {
+        bus: bus.name().to_owned(),
+        id,
+        persisted: true,
+        verified_by: outcome.verified_by,
+    }))
+}
+
+/// Change a device's id (stored to flash at once; the device answers from the new id).
+#[utoipa::path(put, path = "/api/v1/buses/{bus}/devices/{id}/id", tag = TAG_CONFIG, params(DevicePath),
+    request_body(content = IdRequest, example = json!({"new_id": 5})),
+    responses((status = 200, description = "Id changed, confirmed from the new id", body = IdResult), ErrorResponses))]
+async fn change_id(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<DevicePath>,
+    ApiJson(req): ApiJson<IdRequest>,
+) -> ApiResult<Json<IdResult>> {
+    let (bus, id) = p.resolve(&state)?;
+    let new_id = device_id("new_id", req.new_id)?;
+    let snap = bus.snapshot();
+    known_device(&snap, id)?;
+    if new_id == id {
+        return Err(ApiError::invalid(
+            "new_id",
+            format!("device already has id {id}"),
+        ));
+    }
+    if snap.devices.contains_key(&new_id) {
+        return Err(ApiError::conflict(
+            "id-in-use",
+            "Id already in use",
+            format!(
+                "id {new_id} is taken on bus {}: two devices with one id collide",
+                snap.name
+            ),
+        )
+        .with_field("new_id"));
+    }
+    let outcome = bus.set_id(id, new_id).await?;
+    Ok(Json(IdResult {
+        bus: bus.name().to_owned(),
+        old_id: id,
+        new_id,
+        verified_by: outcome.verified_by,
+    }))
+}

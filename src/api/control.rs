@@ -1,0 +1,393 @@
+//! Control: enable, disable, target, mode, jog, re-zero for one device, and
+//! enable, disable, targets, mode for a group of devices in one call.
+
+use axum::extract::State;
+use axum::http::StatusCode;
+use axum::Json;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+use utoipa_axum::{router::OpenApiRouter, routes};
+
+use super::error::{ApiError, ApiResult};
+use super::extract::{ApiJson, ApiPath};
+use super::openapi::{ErrorResponses, TAG_CONTROL};
+use super::state::{device_id, known_device, AppState, BusPath, DevicePath};
+use super::targets::{
+    ensure_enabled, setpoint, wait_on_wire, JointTarget, TargetAck, TargetRequest,
+};
+use super::telemetry::{firmware_of, mode_name, TargetView};
+use crate::bus::{BusHandle, BusSnapshot, Setpoint, Targets};
+use crate::protocol::{CtrlMode, JogDir};
+
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(enable_one))
+        .routes(routes!(disable_one))
+        .routes(routes!(target_one))
+        .routes(routes!(mode_one))
+        .routes(routes!(jog))
+        .routes(routes!(rezero))
+        .routes(routes!(enable_group))
+        .routes(routes!(disable_group))
+        .routes(routes!(target_group))
+        .routes(routes!(mode_group))
+}
+
+/// What a control action did.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ActionDone {
+    #[schema(example = "sim0")]
+    pub bus: String,
+    /// `enable`, `disable`, `mode`, `jog`, `rezero`.
+    #[schema(example = "enable")]
+    pub action: &'static str,
+    /// Devices addressed; absent = every device on the bus.
+    #[schema(example = json!([1]))]
+    pub ids: Option<Vec<u8>>,
+    /// Detail of the action, e.g. the mode set or the jog direction.
+    #[schema(example = "position")]
+    pub value: Option<&'static str>,
+}
+
+/// Devices of a group action; no `ids` = every device on the bus.
+#[derive(Debug, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GroupRequest {
+    #[schema(example = json!([1, 2, 3]))]
+    pub ids: Option<Vec<i64>>,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum ModeName {
+    Position,
+    Speed,
+}
+
+impl From<ModeName> for CtrlMode {
+    fn from(m: ModeName) -> Self {
+        match m {
+            ModeName::Position => CtrlMode::Position,
+            ModeName::Speed => CtrlMode::Speed,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ModeRequest {
+    pub mode: ModeName,
+}
+
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GroupModeRequest {
+    #[schema(example = json!([1, 2]))]
+    pub ids: Option<Vec<i64>>,
+    pub mode: ModeName,
+}
+
+/// `cw` = +5°, `ccw` = −3°; the device re-zeroes afterwards (SPEC §4.2).
+#[derive(Debug, Clone, Copy, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum JogDirection {
+    Cw,
+    Ccw,
+}
+
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct JogRequest {
+    pub direction: JogDirection,
+}
+
+/// One joint of a group target.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GroupTarget {
+    #[schema(example = 1)]
+    pub id: i64,
+    #[schema(example = 45.0)]
+    pub position_deg: Option<f64>,
+    #[schema(example = 3000.0)]
+    pub speed_rpm: Option<f64>,
+}
+
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GroupTargetRequest {
+    pub targets: Vec<GroupTarget>,
+}
+
+/// The ids of a group request, each known on the bus; `None` = all.
+fn group_ids(snap: &BusSnapshot, ids: Option<Vec<i64>>) -> ApiResult<Option<Vec<u8>>> {
+    let Some(ids) = ids else { return Ok(None) };
+    if ids.is_empty() {
+        return Err(ApiError::invalid(
+            "ids",
+            "ids is empty: omit it to address every device",
+        ));
+    }
+    let mut out = Vec::with_capacity(ids.len());
+    for (i, id) in ids.into_iter().enumerate() {
+        let id = device_id(&format!("ids[{i}]"), id)?;
+        known_device(snap, id)?;
+        if !out.contains(&id) {
+            out.push(id);
+        }
+    }
+    Ok(Some(out))
+}
+
+fn targets_of(ids: &Option<Vec<u8>>) -> Targets {
+    ids.clone().map_or(Targets::All, Targets::Ids)
+}
+
+fn done(
+    bus: &BusHandle,
+    action: &'static str,
+    ids: Option<Vec<u8>>,
+    value: Option<&'static str>,
+) -> Json<ActionDone> {
+    Json(ActionDone {
+        bus: bus.name().to_owned(),
+        action,
+        ids,
+        value,
+    })
+}
+
+/// Stores targets for several joints in one write (one coalesced frame where
+/// the bus can) and reports whether they reached the wire.
+async fn apply_targets(
+    bus: &BusHandle,
+    snap: &BusSnapshot,
+    targets: Vec<(u8, Setpoint)>,
+) -> (StatusCode, Json<TargetAck>) {
+    let seq = bus.set_targets(&targets);
+    let on_wire = wait_on_wire(bus, seq).await;
+    let views = targets
+        .into_iter()
+        .map(|(id, sp)| {
+            let fw = snap
+                .devices
+                .get(&id)
+                .map(firmware_of)
+                .unwrap_or(super::telemetry::ASSUMED_FIRMWARE);
+            JointTarget {
+                id,
+                target: TargetView::new(sp, fw),
+            }
+        })
+        .collect();
+    let status = if on_wire {
+        StatusCode::OK
+    } else {
+        StatusCode::ACCEPTED
+    };
+    (
+        status,
+        Json(TargetAck {
+            bus: bus.name().to_owned(),
+            seq,
+            on_wire,
+            targets: views,
+        }),
+    )
+}
+
+/// Enable one device (power up and hold; the first enable aligns for ~1 s).
+#[utoipa::path(post, path = "/api/v1/buses/{bus}/devices/{id}/enable", tag = TAG_CONTROL, params(DevicePath),
+    responses((status = 200, description = "Enable sent and confirmed by the bus", body = ActionDone), ErrorResponses))]
+async fn enable_one(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<DevicePath>,
+) -> ApiResult<Json<ActionDone>> {
+    let (bus, id) = p.resolve(&state)?;
+    known_device(&bus.snapshot(), id)?;
+    bus.enable(Targets::Ids(vec![id])).await?;
+    Ok(done(bus, "enable", Some(vec![id]), None))
+}
+
+/// Disable one device (release the motor).
+#[utoipa::path(post, path = "/api/v1/buses/{bus}/devices/{id}/disable", tag = TAG_CONTROL, params(DevicePath),
+    responses((status = 200, description = "Disable sent", body = ActionDone), ErrorResponses))]
+async fn disable_one(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<DevicePath>,
+) -> ApiResult<Json<ActionDone>> {
+    let (bus, id) = p.resolve(&state)?;
+    known_device(&bus.snapshot(), id)?;
+    bus.disable(Targets::Ids(vec![id])).await?;
+    Ok(done(bus, "disable", Some(vec![id]), None))
+}
+
+/// Set one joint's target (position in degrees with a speed limit in rpm,
+/// or a speed in speed mode). Outside the soft limits: 422, never clamped.
+#[utoipa::path(put, path = "/api/v1/buses/{bus}/devices/{id}/target", tag = TAG_CONTROL, params(DevicePath),
+    request_body(content = TargetRequest, example = json!({"position_deg": 45.0, "speed_rpm": 3000.0})),
+    responses((status = 200, description = "Target written to the wire", body = TargetAck),
+        (status = 202, description = "Target stored; not yet on the wire", body = TargetAck), ErrorResponses))]
+async fn target_one(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<DevicePath>,
+    ApiJson(req): ApiJson<TargetRequest>,
+) -> ApiResult<(StatusCode, Json<TargetAck>)> {
+    let (bus, id) = p.resolve(&state)?;
+    let snap = bus.snapshot();
+    let dev = known_device(&snap, id)?;
+    let sp = setpoint(dev, &state.limits(&snap.name, id), &req, "")?;
+    ensure_enabled(bus, dev, "a target").await?;
+    Ok(apply_targets(bus, &snap, vec![(id, sp)]).await)
+}
+
+/// Switch one device between position and speed mode (not saved by the device).
+#[utoipa::path(put, path = "/api/v1/buses/{bus}/devices/{id}/mode", tag = TAG_CONTROL, params(DevicePath),
+    request_body(content = ModeRequest, example = json!({"mode": "speed"})),
+    responses((status = 200, description = "Mode set and verified", body = ActionDone), ErrorResponses))]
+async fn mode_one(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<DevicePath>,
+    ApiJson(req): ApiJson<ModeRequest>,
+) -> ApiResult<Json<ActionDone>> {
+    let (bus, id) = p.resolve(&state)?;
+    known_device(&bus.snapshot(), id)?;
+    let mode = CtrlMode::from(req.mode);
+    bus.set_mode(id, mode).await?;
+    Ok(done(bus, "mode", Some(vec![id]), Some(mode_name(mode))))
+}
+
+/// Jog an enabled device: `cw` +5°, `ccw` −3°; it re-zeroes afterwards. 409 while disabled.
+#[utoipa::path(post, path = "/api/v1/buses/{bus}/devices/{id}/jog", tag = TAG_CONTROL, params(DevicePath),
+    request_body(content = JogRequest, example = json!({"direction": "cw"})),
+    responses((status = 200, description = "Jog sent", body = ActionDone), ErrorResponses))]
+async fn jog(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<DevicePath>,
+    ApiJson(req): ApiJson<JogRequest>,
+) -> ApiResult<Json<ActionDone>> {
+    let (bus, id) = p.resolve(&state)?;
+    let snap = bus.snapshot();
+    ensure_enabled(bus, known_device(&snap, id)?, "a jog").await?;
+    let (dir, name) = match req.direction {
+        JogDirection::Cw => (JogDir::Cw, "cw"),
+        JogDirection::Ccw => (JogDir::Ccw, "ccw"),
+    };
+    bus.jog(id, dir).await?;
+    Ok(done(bus, "jog", Some(vec![id]), Some(name)))
+}
+
+/// Make the current output position the new 0°.
+#[utoipa::path(post, path = "/api/v1/buses/{bus}/devices/{id}/rezero", tag = TAG_CONTROL, params(DevicePath),
+    responses((status = 200, description = "Zero set", body = ActionDone), ErrorResponses))]
+async fn rezero(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<DevicePath>,
+) -> ApiResult<Json<ActionDone>> {
+    let (bus, id) = p.resolve(&state)?;
+    known_device(&bus.snapshot(), id)?;
+    bus.rezero(id).await?;
+    Ok(done(bus, "rezero", Some(vec![id]), None))
+}
+
+/// Enable a group of devices (no `ids`: every device on the bus).
+#[utoipa::path(post, path = "/api/v1/buses/{bus}/control/enable", tag = TAG_CONTROL, params(BusPath),
+    request_body(content = GroupRequest, example = json!({"ids": [1, 2, 3]})),
+    responses((status = 200, description = "Enable sent", body = ActionDone), ErrorResponses))]
+async fn enable_group(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<BusPath>,
+    ApiJson(req): ApiJson<GroupRequest>,
+) -> ApiResult<Json<ActionDone>> {
+    let bus = state.bus(&p.bus)?;
+    let ids = group_ids(&bus.snapshot(), req.ids)?;
+    bus.enable(targets_of(&ids)).await?;
+    Ok(done(bus, "enable", ids, None))
+}
+
+/// Disable a group of devices (no `ids`: every device on the bus).
+#[utoipa::path(post, path = "/api/v1/buses/{bus}/control/disable", tag = TAG_CONTROL, params(BusPath),
+    request_body(content = GroupRequest, example = json!({"ids": [1, 2, 3]})),
+    responses((status = 200, description = "Disable sent", body = ActionDone), ErrorResponses))]
+async fn disable_group(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<BusPath>,
+    ApiJson(req): ApiJson<GroupRequest>,
+) -> ApiResult<Json<ActionDone>> {
+    let bus = state.bus(&p.bus)?;
+    let ids = group_ids(&bus.snapshot(), req.ids)?;
+    bus.disable(targets_of(&ids)).await?;
+    Ok(done(bus, "disable", ids, None))
+}
+
+/// Set several joints' targets in one call: all are checked first (one bad
+/// target rejects the whole request), then stored in one write.
+#[utoipa::path(put, path = "/api/v1/buses/{bus}/control/targets", tag = TAG_CONTROL, params(BusPath),
+    request_body(content = GroupTargetRequest, example = json!({"targets": [
+        {"id": 1, "position_deg": 30.0, "speed_rpm": 3000.0},
+        {"id": 2, "position_deg": -15.5}]})),
+    responses((status = 200, description = "Targets written to the wire", body = TargetAck),
+        (status = 202, description = "Targets stored; not yet on the wire", body = TargetAck), ErrorResponses))]
+async fn target_group(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<BusPath>,
+    ApiJson(req): ApiJson<GroupTargetRequest>,
+) -> ApiResult<(StatusCode, Json<TargetAck>)> {
+    let bus = state.bus(&p.bus)?;
+    if req.targets.is_empty() {
+        return Err(ApiError::invalid("targets", "targets is empty"));
+    }
+    let snap = bus.snapshot();
+    let mut out: Vec<(u8, Setpoint)> = Vec::with_capacity(req.targets.len());
+    for (i, t) in req.targets.iter().enumerate() {
+        let id = device_id(&format!("targets[{i}].id"), t.id)?;
+        if out.iter().any(|(seen, _)| *seen == id) {
+            return Err(ApiError::invalid(
+                &format!("targets[{i}].id"),
+                format!("joint {id} appears twice"),
+            ));
+        }
+        let dev = known_device(&snap, id)?;
+        let req = TargetRequest {
+            position_deg: t.position_deg,
+            speed_rpm: t.speed_rpm,
+        };
+        out.push((
+            id,
+            setpoint(
+                dev,
+                &state.limits(&snap.name, id),
+                &req,
+                &format!("targets[{i}]."),
+            )?,
+        ));
+    }
+    for (id, _) in &out {
+        if let Some(dev) = snap.devices.get(id) {
+            ensure_enabled(bus, dev, "a target").await?;
+        }
+    }
+    Ok(apply_targets(bus, &snap, out).await)
+}
+
+/// Switch a group of devices between position and speed mode.
+#[utoipa::path(put, path = "/api/v1/buses/{bus}/control/mode", tag = TAG_CONTROL, params(BusPath),
+    request_body(content = GroupModeRequest, example = json!({"ids": [1, 2], "mode": "position"})),
+    responses((status = 200, description = "Mode set on every device", body = ActionDone), ErrorResponses))]
+async fn mode_group(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<BusPath>,
+    ApiJson(req): ApiJson<GroupModeRequest>,
+) -> ApiResult<Json<ActionDone>> {
+    let bus = state.bus(&p.bus)?;
+    let snap = bus.snapshot();
+    let ids = group_ids(&snap, req.ids)?;
+    let mode = CtrlMode::from(req.mode);
+    let each: Vec<u8> = ids
+        .clone()
+        .unwrap_or_else(|| snap.devices.keys().copied().collect());
+    for id in each {
+        bus.set_mode(id, mode).await?;
+    }
+    Ok(done(bus, "mode", ids, Some(mode_name(mode))))
+}

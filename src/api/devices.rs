@@ -1,0 +1,217 @@
+//! Devices on a bus: the list with latest telemetry in physical units and
+//! its age, and one device's full state (INFO_01 and INFO_02 decoded).
+
+use std::time::Instant;
+
+use axum::extract::State;
+use axum::Json;
+use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
+use utoipa_axum::{router::OpenApiRouter, routes};
+
+use super::error::{ApiError, ApiResult};
+use super::extract::{ApiPath, ApiQuery};
+use super::limits::JointLimits;
+use super::openapi::{ErrorResponses, TAG_DEVICES};
+use super::state::{known_device, AppState, BusPath, DevicePath};
+use super::telemetry::{
+    firmware_of, mode_name, motion_view, status_view, FaultView, MotionView, StatusView, TargetView,
+};
+use crate::bus::handle::DeviceState;
+use crate::protocol::{InfoBlock, ReplyBody};
+
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(list_devices))
+        .routes(routes!(get_device))
+}
+
+/// One row of the device list.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct DeviceSummary {
+    #[schema(example = 1)]
+    pub id: u8,
+    #[schema(example = true)]
+    pub online: bool,
+    /// fsm state name from the latest INFO_01.
+    #[schema(example = "run")]
+    pub state: Option<&'static str>,
+    pub fault: Option<FaultView>,
+    /// Control mode the daemon last set (`position` at power-up).
+    #[schema(example = "position")]
+    pub mode: Option<&'static str>,
+    #[schema(example = 45.5)]
+    pub angle_deg: Option<f64>,
+    /// Rotor speed.
+    #[schema(example = 2000.0)]
+    pub speed_rpm: Option<f64>,
+    #[schema(example = 0.25)]
+    pub q_current_a: Option<f64>,
+    #[schema(example = 31.0)]
+    pub temp_c: Option<f64>,
+    #[schema(example = 12.1)]
+    pub vbus_v: Option<f64>,
+    /// Age of the freshest telemetry block, milliseconds.
+    #[schema(example = 8.2)]
+    pub telemetry_age_ms: Option<f64>,
+    pub target: Option<TargetView>,
+    #[schema(example = 450.0)]
+    pub control_hz: f64,
+    #[schema(example = 45.0)]
+    pub telemetry_hz: f64,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct DeviceList {
+    #[schema(example = "sim0")]
+    pub bus: String,
+    pub devices: Vec<DeviceSummary>,
+}
+
+/// One device's full state.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct DeviceDetail {
+    #[schema(example = "sim0")]
+    pub bus: String,
+    #[schema(example = 1)]
+    pub id: u8,
+    #[schema(example = true)]
+    pub online: bool,
+    #[schema(example = "1.2.8")]
+    pub firmware: Option<String>,
+    #[schema(example = "position")]
+    pub mode: Option<&'static str>,
+    /// INFO_01 decoded (absent until the device has answered one).
+    pub status: Option<StatusView>,
+    /// INFO_02 decoded.
+    pub motion: Option<MotionView>,
+    /// The target last put on the wire.
+    pub target: Option<TargetView>,
+    /// Soft limits that apply to targets of this joint.
+    pub limits: JointLimits,
+    #[schema(example = 0)]
+    pub missed_polls: u32,
+    #[schema(example = 450.0)]
+    pub control_hz: f64,
+    #[schema(example = 45.0)]
+    pub telemetry_hz: f64,
+}
+
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct FreshQuery {
+    /// Read INFO_01 and INFO_02 from the device now instead of answering
+    /// from the latest poll (504 if it does not answer).
+    #[serde(default)]
+    #[param(example = false)]
+    pub fresh: bool,
+}
+
+fn summary(dev: &DeviceState, now: Instant) -> DeviceSummary {
+    let fw = firmware_of(dev);
+    let status = dev.info01.as_ref().map(|(i, at)| status_view(i, *at, now));
+    let motion = dev
+        .info02
+        .as_ref()
+        .map(|(i, at)| motion_view(i, fw, *at, now));
+    let age = [
+        status.as_ref().map(|s| s.age_ms),
+        motion.as_ref().map(|m| m.age_ms),
+    ]
+    .into_iter()
+    .flatten()
+    .reduce(f64::min);
+    DeviceSummary {
+        id: dev.dev_id,
+        online: dev.online,
+        state: status.as_ref().map(|s| s.state),
+        fault: status.as_ref().map(|s| s.fault.clone()),
+        mode: dev.mode.map(mode_name),
+        angle_deg: motion
+            .as_ref()
+            .map(|m| m.angle_deg)
+            .or(status.as_ref().map(|s| s.angle_deg)),
+        speed_rpm: motion.as_ref().map(|m| m.speed_rpm),
+        q_current_a: motion.as_ref().map(|m| m.q_current_a),
+        temp_c: status.as_ref().map(|s| s.temp_c),
+        vbus_v: status.as_ref().map(|s| s.vbus_v),
+        telemetry_age_ms: age,
+        target: dev.target_sent.map(|sp| TargetView::new(sp, fw)),
+        control_hz: dev.control_hz,
+        telemetry_hz: dev.telemetry_hz,
+    }
+}
+
+/// List the devices of a bus with their latest telemetry.
+#[utoipa::path(get, path = "/api/v1/buses/{bus}/devices", tag = TAG_DEVICES,
+    params(BusPath),
+    responses((status = 200, description = "Devices known on the bus", body = DeviceList), ErrorResponses))]
+async fn list_devices(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<BusPath>,
+) -> ApiResult<Json<DeviceList>> {
+    let snap = state.bus(&p.bus)?.snapshot();
+    let now = Instant::now();
+    Ok(Json(DeviceList {
+        bus: snap.name.clone(),
+        devices: snap.devices.values().map(|d| summary(d, now)).collect(),
+    }))
+}
+
+/// One device's full state: INFO_01 and INFO_02 decoded, firmware, fault names.
+#[utoipa::path(get, path = "/api/v1/buses/{bus}/devices/{id}", tag = TAG_DEVICES,
+    params(DevicePath, FreshQuery),
+    responses((status = 200, description = "The device's state", body = DeviceDetail), ErrorResponses))]
+async fn get_device(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<DevicePath>,
+    ApiQuery(q): ApiQuery<FreshQuery>,
+) -> ApiResult<Json<DeviceDetail>> {
+    let (bus, id) = p.resolve(&state)?;
+    let snap = bus.snapshot();
+    let mut dev = known_device(&snap, id)?.clone();
+    if q.fresh {
+        refresh(bus, &mut dev).await?;
+    }
+    let now = Instant::now();
+    let fw = firmware_of(&dev);
+    Ok(Json(DeviceDetail {
+        bus: snap.name.clone(),
+        id,
+        online: dev.online,
+        firmware: dev.info01.as_ref().map(|(i, _)| i.firmware().dotted()),
+        mode: dev.mode.map(mode_name),
+        status: dev.info01.as_ref().map(|(i, at)| status_view(i, *at, now)),
+        motion: dev
+            .info02
+            .as_ref()
+            .map(|(i, at)| motion_view(i, fw, *at, now)),
+        target: dev.target_sent.map(|sp| TargetView::new(sp, fw)),
+        limits: state.limits(&snap.name, id),
+        missed_polls: dev.missed_polls,
+        control_hz: dev.control_hz,
+        telemetry_hz: dev.telemetry_hz,
+    }))
+}
+
+/// Reads INFO_01 then INFO_02 from the device into `dev`.
+async fn refresh(bus: &crate::bus::BusHandle, dev: &mut DeviceState) -> ApiResult<()> {
+    let id = dev.dev_id;
+    let r1 = bus.read_info(id, InfoBlock::Info01).await?;
+    let r2 = bus.read_info(id, InfoBlock::Info02).await?;
+    let now = Instant::now();
+    match (r1.body(), r2.body()) {
+        (ReplyBody::Info01(a), ReplyBody::Info02(b)) => {
+            dev.info01 = Some((a, now));
+            dev.info02 = Some((b, now));
+            dev.online = true;
+            Ok(())
+        }
+        _ => Err(ApiError::new(
+            axum::http::StatusCode::BAD_GATEWAY,
+            "unexpected-reply",
+            "Unexpected reply",
+            format!("device {id} answered a read with another block"),
+        )),
+    }
+}

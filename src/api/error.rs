@@ -1,0 +1,307 @@
+//! One error shape for every failure: RFC 9457 problem details
+//! (`application/problem+json`), and the single place where bus and unit
+//! errors become HTTP statuses.
+//!
+//! | cause | status |
+//! |---|---|
+//! | malformed JSON, unparsable path or query | 400 |
+//! | missing or wrong bearer token | 401 |
+//! | unknown bus, device or route | 404 |
+//! | wrong state (jog while disabled), device refused (RES 0), preempted by e-stop | 409 |
+//! | JSON body not `application/json` | 415 |
+//! | value out of range, soft limit, invalid field | 422 |
+//! | device acknowledged a write but reads back another value | 502 |
+//! | bus down, request queue full, bus owner stopped | 503 |
+//! | device did not answer | 504 |
+
+use axum::http::{header, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+use utoipa::ToSchema;
+
+use crate::bus::BusError;
+use crate::protocol::units::UnitError;
+
+/// Media type of every error body.
+pub const PROBLEM_JSON: &str = "application/problem+json";
+/// Prefix of every problem `type` (a URN: no documentation host is implied).
+const TYPE_PREFIX: &str = "urn:jointd:problem:";
+/// Seconds a client should wait before retrying a full request queue.
+const RETRY_AFTER_BUSY_S: &str = "1";
+
+/// The allowed range of a field that was out of it.
+#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
+pub struct AllowedRange {
+    #[schema(example = -90.0)]
+    pub min: f64,
+    #[schema(example = 90.0)]
+    pub max: f64,
+    #[schema(example = "deg")]
+    pub unit: String,
+}
+
+/// RFC 9457 problem details, with jointd's extension members.
+#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
+#[schema(example = json!({
+    "type": "urn:jointd:problem:soft-limit",
+    "title": "Target outside the joint's soft limits",
+    "status": 422,
+    "detail": "position_deg = 120 deg is outside the soft limits of joint 3 on bus0 (-90..=90 deg)",
+    "field": "position_deg",
+    "allowed": {"min": -90.0, "max": 90.0, "unit": "deg"}
+}))]
+pub struct Problem {
+    /// A URN naming the kind of problem, e.g. `urn:jointd:problem:device-timeout`.
+    #[serde(rename = "type")]
+    pub kind: String,
+    pub title: String,
+    pub status: u16,
+    pub detail: String,
+    /// The request field at fault (JSON name), for 400/422.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+    /// The range the field must lie in, when it has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub allowed: Option<AllowedRange>,
+    /// What was already done before the failure (e.g. parameters written), or
+    /// per-bus results of an e-stop that did not stop everything.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<Object>)]
+    pub partial: Option<serde_json::Value>,
+}
+
+/// An error a handler returns; renders as a [`Problem`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ApiError {
+    /// Boxed: errors travel in every `Result` of the API, keep them one pointer wide.
+    pub problem: Box<Problem>,
+}
+
+impl ApiError {
+    pub fn new(status: StatusCode, kind: &str, title: &str, detail: impl Into<String>) -> Self {
+        Self {
+            problem: Box::new(Problem {
+                kind: format!("{TYPE_PREFIX}{kind}"),
+                title: title.to_owned(),
+                status: status.as_u16(),
+                detail: detail.into(),
+                field: None,
+                allowed: None,
+                partial: None,
+            }),
+        }
+    }
+
+    pub fn status(&self) -> StatusCode {
+        StatusCode::from_u16(self.problem.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR)
+    }
+
+    pub fn with_field(mut self, field: impl Into<String>) -> Self {
+        self.problem.field = Some(field.into());
+        self
+    }
+
+    pub fn with_range(mut self, min: f64, max: f64, unit: &str) -> Self {
+        self.problem.allowed = Some(AllowedRange {
+            min,
+            max,
+            unit: unit.to_owned(),
+        });
+        self
+    }
+
+    pub fn with_partial(mut self, partial: serde_json::Value) -> Self {
+        self.problem.partial = Some(partial);
+        self
+    }
+
+    pub fn bad_request(detail: impl Into<String>) -> Self {
+        Self::new(
+            StatusCode::BAD_REQUEST,
+            "bad-request",
+            "Malformed request",
+            detail,
+        )
+    }
+
+    /// A well-formed value the API will not accept (422).
+    pub fn invalid(field: &str, detail: impl Into<String>) -> Self {
+        Self::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid-value",
+            "Invalid value",
+            detail,
+        )
+        .with_field(field)
+    }
+
+    /// A value outside the range its field allows (422).
+    pub fn out_of_range(field: &str, value: f64, (min, max): (f64, f64), unit: &str) -> Self {
+        Self::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "out-of-range",
+            "Value out of range",
+            format!("{field} = {value} {unit} is out of range; allowed {min}..={max} {unit}"),
+        )
+        .with_field(field)
+        .with_range(min, max, unit)
+    }
+
+    pub fn not_found(kind: &str, detail: impl Into<String>) -> Self {
+        Self::new(StatusCode::NOT_FOUND, kind, "Not found", detail)
+    }
+
+    pub fn unknown_bus(name: &str) -> Self {
+        Self::not_found("unknown-bus", format!("no bus named `{name}`"))
+    }
+
+    pub fn conflict(kind: &str, title: &str, detail: impl Into<String>) -> Self {
+        Self::new(StatusCode::CONFLICT, kind, title, detail)
+    }
+
+    pub fn unauthorized(detail: &str) -> Self {
+        Self::new(
+            StatusCode::UNAUTHORIZED,
+            "unauthorized",
+            "Bearer token required",
+            detail,
+        )
+    }
+
+    /// A unit conversion refused a value of `field`.
+    pub fn from_unit(field: &str, err: UnitError) -> Self {
+        match err {
+            UnitError::OutOfRange {
+                value,
+                min,
+                max,
+                unit,
+                ..
+            } => Self::out_of_range(field, value, (min, max), unit),
+            UnitError::NotFinite { .. } => Self::invalid(field, format!("{field} must be finite")),
+            UnitError::NotMultiple { value, step, .. } => Self::invalid(
+                field,
+                format!("{field} = {value} ms is not a multiple of {step} ms"),
+            ),
+        }
+    }
+}
+
+impl From<BusError> for ApiError {
+    fn from(err: BusError) -> Self {
+        let detail = err.to_string();
+        let (status, kind, title) = match &err {
+            BusError::Timeout { .. } => (
+                StatusCode::GATEWAY_TIMEOUT,
+                "device-timeout",
+                "Device did not answer",
+            ),
+            BusError::Down { .. } => (StatusCode::SERVICE_UNAVAILABLE, "bus-down", "Bus is down"),
+            BusError::Refused { .. } => (StatusCode::CONFLICT, "device-refused", "Device refused"),
+            BusError::VerifyMismatch { .. } => (
+                StatusCode::BAD_GATEWAY,
+                "verify-mismatch",
+                "Read-back differs from the value written",
+            ),
+            BusError::UnknownDevice { .. } => {
+                (StatusCode::NOT_FOUND, "unknown-device", "Not found")
+            }
+            BusError::WrongState(_) => (StatusCode::CONFLICT, "wrong-state", "Wrong device state"),
+            BusError::Invalid(_) => (
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "invalid-value",
+                "Invalid value",
+            ),
+            BusError::Busy { .. } => (
+                StatusCode::SERVICE_UNAVAILABLE,
+                "bus-busy",
+                "Bus request queue full",
+            ),
+            BusError::Preempted => (
+                StatusCode::CONFLICT,
+                "preempted",
+                "Preempted by an emergency stop",
+            ),
+            BusError::OwnerTimeout | BusError::Stopped => (
+                StatusCode::SERVICE_UNAVAILABLE,
+                "bus-unavailable",
+                "Bus owner unavailable",
+            ),
+        };
+        Self::new(status, kind, title, detail)
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let status = self.status();
+        let body = serde_json::to_vec(&self.problem).unwrap_or_default();
+        let mut resp = (status, body).into_response();
+        let headers = resp.headers_mut();
+        headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON));
+        if status == StatusCode::UNAUTHORIZED {
+            headers.insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+        }
+        if self.problem.kind.ends_with("bus-busy") {
+            headers.insert(
+                header::RETRY_AFTER,
+                HeaderValue::from_static(RETRY_AFTER_BUSY_S),
+            );
+        }
+        resp
+    }
+}
+
+pub type ApiResult<T> = Result<T, ApiError>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bus_errors_map_to_documented_statuses() {
+        let cases = [
+            (
+                BusError::Timeout {
+                    dev_id: 1,
+                    what: "INFO_01".into(),
+                    attempts: 2,
+                    timeout_us: 1000,
+                },
+                504,
+            ),
+            (
+                BusError::Down {
+                    bus: "b".into(),
+                    reason: "gone".into(),
+                },
+                503,
+            ),
+            (
+                BusError::UnknownDevice {
+                    bus: "b".into(),
+                    dev_id: 9,
+                },
+                404,
+            ),
+            (BusError::WrongState("disabled".into()), 409),
+            (BusError::Invalid("bad".into()), 422),
+            (BusError::Preempted, 409),
+            (BusError::Busy { depth: 64 }, 503),
+            (BusError::Stopped, 503),
+        ];
+        for (err, status) in cases {
+            assert_eq!(ApiError::from(err.clone()).problem.status, status, "{err}");
+        }
+    }
+
+    #[test]
+    fn unit_range_errors_name_field_and_range() {
+        let err = crate::protocol::units::angle_to_raw(300.0).unwrap_err();
+        let api = ApiError::from_unit("position_deg", err);
+        assert_eq!(api.problem.status, 422);
+        assert_eq!(api.problem.field.as_deref(), Some("position_deg"));
+        let range = api.problem.allowed.unwrap();
+        assert_eq!((range.min, range.max), (-255.0, 255.0));
+    }
+}

@@ -1,0 +1,135 @@
+//! Emergency stop: one call disables every device on every bus at once,
+//! ahead of anything queued, and reports what it did. Buses are stopped
+//! concurrently, not one after another.
+
+use std::time::Instant;
+
+use axum::extract::State;
+use axum::http::StatusCode;
+use axum::Json;
+use serde::Serialize;
+use utoipa::ToSchema;
+use utoipa_axum::{router::OpenApiRouter, routes};
+
+use super::error::{ApiError, ApiResult};
+use super::extract::ApiPath;
+use super::openapi::{ErrorResponses, TAG_ESTOP};
+use super::state::{AppState, BusPath};
+use crate::bus::BusHandle;
+
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(estop_all))
+        .routes(routes!(estop_bus))
+}
+
+/// What the e-stop did on one bus.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct BusStop {
+    #[schema(example = "sim0")]
+    pub bus: String,
+    /// True when every disable frame was written.
+    #[schema(example = true)]
+    pub stopped: bool,
+    /// Disable frames written (`0xFF` first, then one per known device).
+    #[schema(example = 17)]
+    pub frames_sent: u32,
+    /// Queued requests failed because the e-stop went first.
+    #[schema(example = 2)]
+    pub preempted_requests: u32,
+    /// From the call to the first disable frame handed to the port, µs.
+    #[schema(example = 180)]
+    pub latency_us: u64,
+    /// Why this bus could not be stopped, if it could not.
+    pub error: Option<String>,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct EstopResult {
+    #[schema(example = true)]
+    pub stopped: bool,
+    pub buses: Vec<BusStop>,
+    /// Wall time of the whole call, µs.
+    #[schema(example = 950)]
+    pub elapsed_us: u64,
+}
+
+async fn stop_one(bus: BusHandle) -> BusStop {
+    match bus.estop().await {
+        Ok(r) => BusStop {
+            bus: r.bus,
+            stopped: true,
+            frames_sent: r.frames_sent,
+            preempted_requests: r.preempted_requests,
+            latency_us: r.latency_us,
+            error: None,
+        },
+        Err(e) => BusStop {
+            bus: bus.name().to_owned(),
+            stopped: false,
+            frames_sent: 0,
+            preempted_requests: 0,
+            latency_us: 0,
+            error: Some(e.to_string()),
+        },
+    }
+}
+
+/// Stops the given buses concurrently; 503 (with every bus's result in
+/// `partial`) unless all of them stopped.
+async fn stop(buses: Vec<BusHandle>) -> ApiResult<Json<EstopResult>> {
+    let started = Instant::now();
+    let mut tasks = tokio::task::JoinSet::new();
+    for bus in buses {
+        tasks.spawn(stop_one(bus));
+    }
+    let mut results = Vec::new();
+    while let Some(joined) = tasks.join_next().await {
+        if let Ok(stop) = joined {
+            results.push(stop);
+        }
+    }
+    results.sort_by(|a, b| a.bus.cmp(&b.bus));
+    let result = EstopResult {
+        stopped: results.iter().all(|r| r.stopped),
+        elapsed_us: u64::try_from(started.elapsed().as_micros()).unwrap_or(u64::MAX),
+        buses: results,
+    };
+    if result.stopped {
+        return Ok(Json(result));
+    }
+    let failed: Vec<&str> = result
+        .buses
+        .iter()
+        .filter(|b| !b.stopped)
+        .map(|b| b.bus.as_str())
+        .collect();
+    Err(ApiError::new(
+        StatusCode::SERVICE_UNAVAILABLE,
+        "estop-incomplete",
+        "Emergency stop incomplete",
+        format!(
+            "could not confirm the stop of bus(es): {}",
+            failed.join(", ")
+        ),
+    )
+    .with_partial(serde_json::to_value(&result).unwrap_or_default()))
+}
+
+/// Disable every device on every bus at once, ahead of anything queued.
+#[utoipa::path(post, path = "/api/v1/estop", tag = TAG_ESTOP,
+    responses((status = 200, description = "Every bus stopped", body = EstopResult), ErrorResponses))]
+async fn estop_all(State(state): State<AppState>) -> ApiResult<Json<EstopResult>> {
+    stop(state.buses().cloned().collect()).await
+}
+
+/// Disable every device on one bus, ahead of anything queued.
+#[utoipa::path(post, path = "/api/v1/buses/{bus}/estop", tag = TAG_ESTOP, params(BusPath),
+    responses((status = 200, description = "The bus stopped", body = EstopResult), ErrorResponses))]
+async fn estop_bus(
+    State(state): State<AppState>,
+    ApiPath(p): ApiPath<BusPath>,
+) -> ApiResult<Json<EstopResult>> {
+    let bus = state.bus(&p.bus)?.clone();
+    stop(vec![bus]).await
+}

@@ -1,0 +1,209 @@
+//! Soft limits per joint (min/max angle, max speed) from the daemon's config.
+//! A target outside them is rejected with 422 naming the limit; nothing is
+//! ever clamped silently.
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+use utoipa::ToSchema;
+
+use super::error::ApiError;
+use crate::protocol::units::MAX_ANGLE_DEG;
+
+/// One rule of the `[[limit]]` table. Later rules override earlier ones
+/// field by field, so a bus-wide default can be narrowed for single joints.
+#[derive(Debug, Clone, PartialEq, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LimitRule {
+    /// Bus name; absent = every bus.
+    #[serde(default)]
+    pub bus: Option<String>,
+    /// Device ids; empty = every joint of the bus.
+    #[serde(default)]
+    pub ids: Vec<u8>,
+    pub min_deg: Option<f64>,
+    pub max_deg: Option<f64>,
+    /// Largest rotor speed a target may ask for (speed limit in position
+    /// mode, |speed| in speed mode), rpm.
+    pub max_rpm: Option<f64>,
+}
+
+/// The limits that apply to one joint.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, ToSchema)]
+pub struct JointLimits {
+    #[schema(example = -90.0)]
+    pub min_deg: f64,
+    #[schema(example = 90.0)]
+    pub max_deg: f64,
+    /// Absent: only the firmware's speed range applies.
+    #[schema(example = 3000.0)]
+    pub max_rpm: Option<f64>,
+}
+
+impl Default for JointLimits {
+    fn default() -> Self {
+        Self {
+            min_deg: -MAX_ANGLE_DEG,
+            max_deg: MAX_ANGLE_DEG,
+            max_rpm: None,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum LimitError {
+    #[error("limit rule {rule}: {why}")]
+    Bad { rule: usize, why: String },
+}
+
+/// Every configured rule, checked once at start-up.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SoftLimits {
+    rules: Vec<LimitRule>,
+}
+
+impl SoftLimits {
+    pub fn new(rules: Vec<LimitRule>) -> Result<Self, LimitError> {
+        let limits = Self { rules };
+        for (i, rule) in limits.rules.iter().enumerate() {
+            let bad = |why: String| LimitError::Bad { rule: i + 1, why };
+            for deg in [rule.min_deg, rule.max_deg].into_iter().flatten() {
+                if !deg.is_finite() || deg.abs() > MAX_ANGLE_DEG {
+                    return Err(bad(format!("angle {deg} is outside ±{MAX_ANGLE_DEG}°")));
+                }
+            }
+            if let Some(rpm) = rule.max_rpm {
+                if !rpm.is_finite() || rpm < 0.0 {
+                    return Err(bad(format!("max_rpm {rpm} must be ≥ 0")));
+                }
+            }
+        }
+        // A rule may set only one side; the combined result must still be a range.
+        for (bus, id) in limits.mentioned_joints() {
+            let j = limits.for_joint(bus.as_deref().unwrap_or(""), id);
+            if j.min_deg > j.max_deg {
+                return Err(LimitError::Bad {
+                    rule: 0,
+                    why: format!("joint {id}: min_deg {} > max_deg {}", j.min_deg, j.max_deg),
+                });
+            }
+        }
+        Ok(limits)
+    }
+
+    fn mentioned_joints(&self) -> Vec<(Option<String>, u8)> {
+        let ids = self.rules.iter().flat_map(|r| r.ids.iter().copied());
+        let ids: Vec<u8> = ids.chain(std::iter::once(0)).collect();
+        let buses: Vec<Option<String>> = self.rules.iter().map(|r| r.bus.clone()).collect();
+        buses
+            .into_iter()
+            .chain(std::iter::once(None))
+            .flat_map(|b| ids.iter().map(move |id| (b.clone(), *id)))
+            .collect()
+    }
+
+    /// The limits of joint `id` on `bus`: every matching rule applied in order.
+    pub fn for_joint(&self, bus: &str, id: u8) -> JointLimits {
+        let mut j = JointLimits::default();
+        let matching = self.rules.iter().filter(|r| {
+            r.bus.as_deref().map_or(true, |b| b == bus) && (r.ids.is_empty() || r.ids.contains(&id))
+        });
+        for rule in matching {
+            j.min_deg = rule.min_deg.unwrap_or(j.min_deg);
+            j.max_deg = rule.max_deg.unwrap_or(j.max_deg);
+            j.max_rpm = rule.max_rpm.or(j.max_rpm);
+        }
+        j
+    }
+}
+
+impl JointLimits {
+    /// Refuses a position target outside `min_deg..=max_deg`.
+    pub fn check_position(&self, field: &str, deg: f64, who: &str) -> Result<(), ApiError> {
+        if !deg.is_finite() {
+            return Err(ApiError::invalid(field, format!("{field} must be finite")));
+        }
+        if deg < self.min_deg || deg > self.max_deg {
+            return Err(soft_limit(
+                field,
+                deg,
+                (self.min_deg, self.max_deg),
+                "deg",
+                who,
+            ));
+        }
+        Ok(())
+    }
+
+    /// Refuses a speed whose magnitude exceeds `max_rpm`.
+    pub fn check_speed(&self, field: &str, rpm: f64, who: &str) -> Result<(), ApiError> {
+        match self.max_rpm {
+            Some(max) if rpm.abs() > max => Err(soft_limit(field, rpm, (-max, max), "rpm", who)),
+            _ => Ok(()),
+        }
+    }
+}
+
+fn soft_limit(field: &str, value: f64, (min, max): (f64, f64), unit: &str, who: &str) -> ApiError {
+    ApiError::new(
+        axum::http::StatusCode::UNPROCESSABLE_ENTITY,
+        "soft-limit",
+        "Target outside the joint's soft limits",
+        format!(
+            "{field} = {value} {unit} is outside the soft limits of {who} ({min}..={max} {unit})"
+        ),
+    )
+    .with_field(field)
+    .with_range(min, max, unit)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rule(bus: Option<&str>, ids: &[u8], min: f64, max: f64, rpm: Option<f64>) -> LimitRule {
+        LimitRule {
+            bus: bus.map(str::to_owned),
+            ids: ids.to_vec(),
+            min_deg: Some(min),
+            max_deg: Some(max),
+            max_rpm: rpm,
+        }
+    }
+
+    #[test]
+    fn later_rules_narrow_earlier_ones() {
+        let limits = SoftLimits::new(vec![
+            rule(None, &[], -100.0, 100.0, Some(5000.0)),
+            rule(Some("left"), &[3], -10.0, 20.0, None),
+        ])
+        .unwrap();
+        let j3 = limits.for_joint("left", 3);
+        assert_eq!(
+            (j3.min_deg, j3.max_deg, j3.max_rpm),
+            (-10.0, 20.0, Some(5000.0))
+        );
+        let other = limits.for_joint("right", 3);
+        assert_eq!((other.min_deg, other.max_deg), (-100.0, 100.0));
+        assert!(j3.check_position("position_deg", 25.0, "joint 3").is_err());
+        assert!(j3.check_position("position_deg", 20.0, "joint 3").is_ok());
+        let err = j3.check_speed("speed_rpm", -6000.0, "joint 3").unwrap_err();
+        assert_eq!(err.problem.status, 422);
+        assert_eq!(err.problem.allowed.unwrap().max, 5000.0);
+    }
+
+    #[test]
+    fn inconsistent_rules_are_refused_at_start() {
+        assert!(SoftLimits::new(vec![rule(None, &[], 10.0, -10.0, None)]).is_err());
+        assert!(SoftLimits::new(vec![rule(None, &[], -300.0, 0.0, None)]).is_err());
+        let one_sided = LimitRule {
+            min_deg: Some(50.0),
+            ..Default::default()
+        };
+        let narrowing = LimitRule {
+            ids: vec![2],
+            max_deg: Some(40.0),
+            ..Default::default()
+        };
+        assert!(SoftLimits::new(vec![one_sided, narrowing]).is_err());
+    }
+}

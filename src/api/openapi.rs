@@ -1,0 +1,149 @@
+//! The OpenAPI document, generated from the handlers' `#[utoipa::path]`
+//! annotations, served at `/openapi.json` with a Swagger UI at `/docs`
+//! (vendored: no network needed). `openapi/openapi.json` in the repository is
+//! a copy a test keeps equal to the served document.
+
+use std::collections::BTreeMap;
+
+use axum::Router;
+use utoipa::openapi::security::{Http, HttpAuthScheme, SecurityScheme};
+use utoipa::openapi::{ContentBuilder, Ref, RefOr, Response, ResponseBuilder};
+use utoipa::{IntoResponses, Modify, OpenApi};
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_swagger_ui::SwaggerUi;
+
+use super::error::{Problem, PROBLEM_JSON};
+use super::state::AppState;
+
+pub const TAG_BUSES: &str = "buses";
+pub const TAG_DEVICES: &str = "devices";
+pub const TAG_CONTROL: &str = "control";
+pub const TAG_CONFIG: &str = "configuration";
+pub const TAG_ESTOP: &str = "emergency stop";
+pub const TAG_HEALTH: &str = "health";
+/// Where the document and its docs page are served.
+pub const OPENAPI_PATH: &str = "/openapi.json";
+pub const DOCS_PATH: &str = "/docs";
+/// Name of the bearer security scheme in the document.
+const BEARER_SCHEME: &str = "bearer";
+
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "jointd REST API",
+        description = "Everything a user can do with a joint module, over HTTP. Angles are \
+            output-shaft degrees, speeds rotor rpm (before the 568.81:1 gearbox), currents \
+            amperes. Every failure is an RFC 9457 problem (application/problem+json). When the \
+            daemon has a token, every request but /healthz needs `Authorization: Bearer <token>`."
+    ),
+    modifiers(&BearerAuth),
+    components(schemas(Problem)),
+    tags(
+        (name = "buses", description = "Serial buses: state, stats, scan, baud"),
+        (name = "devices", description = "Joint modules on a bus and their telemetry"),
+        (name = "control", description = "Enable, disable, targets, mode, jog, re-zero"),
+        (name = "configuration", description = "Parameters (INFO_03..06), persist, id change"),
+        (name = "emergency stop", description = "Disable every device on every bus at once"),
+        (name = "health", description = "Liveness, readiness, Prometheus metrics"),
+    )
+)]
+struct ApiDoc;
+
+/// Declares the optional bearer token.
+struct BearerAuth;
+
+impl Modify for BearerAuth {
+    fn modify(&self, doc: &mut utoipa::openapi::OpenApi) {
+        let components = doc.components.get_or_insert_with(Default::default);
+        components.add_security_scheme(
+            BEARER_SCHEME,
+            SecurityScheme::Http(Http::new(HttpAuthScheme::Bearer)),
+        );
+        // Required only when the daemon has a token: either no security or bearer.
+        doc.security = Some(vec![
+            utoipa::openapi::security::SecurityRequirement::new::<_, _, &str>(BEARER_SCHEME, []),
+            utoipa::openapi::security::SecurityRequirement::default(),
+        ]);
+    }
+}
+
+/// The failures any operation may answer with, each a [`Problem`].
+pub struct ErrorResponses;
+
+/// Status and description of every documented failure.
+const ERRORS: [(&str, &str); 10] = [
+    (
+        "400",
+        "Malformed request (JSON syntax, unparsable path or query)",
+    ),
+    ("401", "Missing or wrong bearer token"),
+    ("404", "Unknown bus, device or route"),
+    (
+        "409",
+        "Wrong device state, device refused, or preempted by an e-stop",
+    ),
+    ("415", "Body is not application/json"),
+    (
+        "422",
+        "Value out of range or outside a soft limit; names the field and the range",
+    ),
+    (
+        "502",
+        "Device acknowledged a write but reads back another value",
+    ),
+    ("503", "Bus down, request queue full, or bus owner stopped"),
+    ("504", "Device did not answer"),
+    ("500", "Internal error (a bug; never expected)"),
+];
+
+impl IntoResponses for ErrorResponses {
+    fn responses() -> BTreeMap<String, RefOr<Response>> {
+        ERRORS
+            .iter()
+            .map(|(status, description)| {
+                let content = ContentBuilder::new()
+                    .schema(Some(Ref::from_schema_name("Problem")))
+                    .build();
+                let response = ResponseBuilder::new()
+                    .description(*description)
+                    .content(PROBLEM_JSON, content)
+                    .build();
+                (status.to_string(), RefOr::T(response))
+            })
+            .collect()
+    }
+}
+
+/// Every documented route, with its part of the document.
+pub fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::with_openapi(ApiDoc::openapi())
+        .merge(super::health::router())
+        .merge(super::buses::router())
+        .merge(super::devices::router())
+        .merge(super::control::router())
+        .merge(super::config::router())
+        .merge(super::estop::router())
+}
+
+/// The document as served, with the crate version.
+pub fn document() -> utoipa::openapi::OpenApi {
+    let (_, mut doc) = router().split_for_parts();
+    doc.info.version = env!("CARGO_PKG_VERSION").to_owned();
+    doc
+}
+
+/// `/openapi.json` and the Swagger UI at `/docs`.
+pub fn docs(mut doc: utoipa::openapi::OpenApi) -> Router<AppState> {
+    doc.info.version = env!("CARGO_PKG_VERSION").to_owned();
+    SwaggerUi::new(DOCS_PATH).url(OPENAPI_PATH, doc).into()
+}
+
+/// The document as pretty JSON, as checked in under `openapi/`.
+pub fn document_json() -> String {
+    let doc = document();
+    let mut text = doc
+        .to_pretty_json()
+        .unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"));
+    text.push('\n');
+    text
+}

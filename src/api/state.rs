@@ -1,0 +1,121 @@
+//! What every handler shares: the bus handles by name, the soft limits and
+//! the token. Cheap to clone (one `Arc`).
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::Instant;
+
+use super::error::{ApiError, ApiResult};
+use super::limits::{JointLimits, SoftLimits};
+use crate::bus::handle::DeviceState;
+use crate::bus::{BusHandle, BusSnapshot};
+use crate::protocol::{is_device_id, MAX_DEVICE_ID, MIN_DEVICE_ID};
+
+#[derive(Clone)]
+pub struct AppState {
+    inner: Arc<Inner>,
+}
+
+struct Inner {
+    buses: BTreeMap<String, BusHandle>,
+    limits: SoftLimits,
+    token: Option<String>,
+    started: Instant,
+}
+
+impl AppState {
+    /// An empty token counts as none.
+    pub fn new(buses: Vec<BusHandle>, limits: SoftLimits, token: Option<String>) -> Self {
+        let buses = buses
+            .into_iter()
+            .map(|h| (h.name().to_owned(), h))
+            .collect();
+        Self {
+            inner: Arc::new(Inner {
+                buses,
+                limits,
+                token: token.filter(|t| !t.is_empty()),
+                started: Instant::now(),
+            }),
+        }
+    }
+
+    pub fn buses(&self) -> impl Iterator<Item = &BusHandle> {
+        self.inner.buses.values()
+    }
+
+    pub fn bus(&self, name: &str) -> ApiResult<&BusHandle> {
+        self.inner
+            .buses
+            .get(name)
+            .ok_or_else(|| ApiError::unknown_bus(name))
+    }
+
+    pub fn token(&self) -> Option<&str> {
+        self.inner.token.as_deref()
+    }
+
+    pub fn limits(&self, bus: &str, id: u8) -> JointLimits {
+        self.inner.limits.for_joint(bus, id)
+    }
+
+    pub fn uptime_s(&self) -> f64 {
+        self.inner.started.elapsed().as_secs_f64()
+    }
+}
+
+/// A device id from a path or body: 1..=159, else 422 naming the range.
+pub fn device_id(field: &str, id: i64) -> ApiResult<u8> {
+    u8::try_from(id)
+        .ok()
+        .filter(|id| is_device_id(*id))
+        .ok_or_else(|| {
+            ApiError::out_of_range(
+                field,
+                id as f64,
+                (f64::from(MIN_DEVICE_ID), f64::from(MAX_DEVICE_ID)),
+                "",
+            )
+        })
+}
+
+/// The snapshot entry of a device, or 404.
+pub fn known_device(snap: &BusSnapshot, id: u8) -> ApiResult<&DeviceState> {
+    snap.devices.get(&id).ok_or_else(|| {
+        ApiError::not_found(
+            "unknown-device",
+            format!(
+                "device {id} is not known on bus {} (scan the bus to discover devices)",
+                snap.name
+            ),
+        )
+    })
+}
+
+/// `{bus}` path parameter.
+#[derive(Debug, serde::Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Path)]
+pub struct BusPath {
+    /// Bus name as configured (`bus0`, ... for `--bus` / `--sim`).
+    #[param(example = "sim0")]
+    pub bus: String,
+}
+
+/// `{bus}/devices/{id}` path parameters.
+#[derive(Debug, serde::Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Path)]
+pub struct DevicePath {
+    #[param(example = "sim0")]
+    pub bus: String,
+    /// Device id, 1..=159.
+    #[param(minimum = 1, maximum = 159, example = 1)]
+    pub id: i64,
+}
+
+impl DevicePath {
+    /// The bus handle and the checked device id.
+    pub fn resolve<'a>(&self, state: &'a AppState) -> ApiResult<(&'a BusHandle, u8)> {
+        let bus = state.bus(&self.bus)?;
+        Ok((bus, device_id("id", self.id)?))
+    }
+}

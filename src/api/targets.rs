@@ -1,0 +1,151 @@
+//! Targets in physical units → raw setpoints: soft limits first, then the
+//! wire range via [`crate::protocol::units`], with the speed base of the
+//! device's own firmware. Also the "is it enabled?" check that jogs and
+//! targets need.
+
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use super::error::{ApiError, ApiResult};
+use super::limits::JointLimits;
+use super::telemetry::{firmware_of, is_enabled, measured_angle_raw, TargetView};
+use crate::bus::handle::DeviceState;
+use crate::bus::{BusHandle, Setpoint};
+use crate::protocol::reply::fsm_name;
+use crate::protocol::units;
+use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
+
+/// Speed limit of a position target that names none, rotor rpm (≈ 32 °/s at
+/// the output): slow enough to be safe, fast enough to see.
+pub const DEFAULT_SPEED_LIMIT_RPM: f64 = 3000.0;
+/// How long a target request waits to see its frame written before
+/// answering 202 instead of 200.
+pub const WIRE_ACK_WAIT: Duration = Duration::from_millis(250);
+
+/// A target for one joint. Position mode: `position_deg` (required) and
+/// `speed_rpm` as the speed limit (default 3000 rpm, capped by the soft
+/// limit). Speed mode: `speed_rpm` (signed, required) only.
+#[derive(Debug, Clone, Deserialize, Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+#[schema(example = json!({"position_deg": 45.0, "speed_rpm": 3000.0}))]
+pub struct TargetRequest {
+    /// Output angle, degrees (−255..=255, narrowed by soft limits).
+    #[schema(example = 45.0)]
+    pub position_deg: Option<f64>,
+    /// Rotor rpm: the speed limit in position mode, the speed in speed mode.
+    #[schema(example = 3000.0)]
+    pub speed_rpm: Option<f64>,
+}
+
+/// What a target request did.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct TargetAck {
+    #[schema(example = "sim0")]
+    pub bus: String,
+    /// Sequence number of this write in the bus's setpoint store.
+    #[schema(example = 42)]
+    pub seq: u64,
+    /// True when the frame carrying the targets has been written to the
+    /// port (status 200); false when still waiting (status 202).
+    #[schema(example = true)]
+    pub on_wire: bool,
+    pub targets: Vec<JointTarget>,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct JointTarget {
+    #[schema(example = 1)]
+    pub id: u8,
+    #[serde(flatten)]
+    pub target: TargetView,
+}
+
+/// Converts one joint's target; `field` prefixes error field names
+/// (`targets[2].` in a group request).
+pub fn setpoint(
+    dev: &DeviceState,
+    limits: &JointLimits,
+    req: &TargetRequest,
+    field: &str,
+) -> ApiResult<Setpoint> {
+    let who = format!("joint {}", dev.dev_id);
+    let fw = firmware_of(dev);
+    let pos_field = format!("{field}position_deg");
+    let spd_field = format!("{field}speed_rpm");
+    if dev.mode == Some(CtrlMode::Speed) {
+        if req.position_deg.is_some() {
+            return Err(ApiError::invalid(
+                &pos_field,
+                format!("{who} is in speed mode: a position has no effect (set mode to position)"),
+            ));
+        }
+        let rpm = req.speed_rpm.ok_or_else(|| {
+            ApiError::invalid(
+                &spd_field,
+                format!("{who} is in speed mode: speed_rpm is required"),
+            )
+        })?;
+        limits.check_speed(&spd_field, rpm, &who)?;
+        let spd_ref =
+            units::speed_to_raw(rpm, fw).map_err(|e| ApiError::from_unit(&spd_field, e))?;
+        let pos_ref = dev
+            .target_sent
+            .map(|t| t.pos_ref)
+            .or_else(|| measured_angle_raw(dev))
+            .unwrap_or(0);
+        return Ok(Setpoint { pos_ref, spd_ref });
+    }
+    let deg = req.position_deg.ok_or_else(|| {
+        ApiError::invalid(
+            &pos_field,
+            format!("{who} is in position mode: position_deg is required"),
+        )
+    })?;
+    limits.check_position(&pos_field, deg, &who)?;
+    let pos_ref = units::angle_to_raw(deg).map_err(|e| ApiError::from_unit(&pos_field, e))?;
+    let default_rpm = limits
+        .max_rpm
+        .map_or(DEFAULT_SPEED_LIMIT_RPM, |m| m.min(DEFAULT_SPEED_LIMIT_RPM));
+    let rpm = req.speed_rpm.unwrap_or(default_rpm);
+    limits.check_speed(&spd_field, rpm, &who)?;
+    let spd_ref =
+        units::speed_limit_to_raw(rpm, fw).map_err(|e| ApiError::from_unit(&spd_field, e))?;
+    Ok(Setpoint { pos_ref, spd_ref })
+}
+
+/// 409 unless the device runs (or aligns). The cached INFO_01 may predate a
+/// just-made enable, so a "not enabled" answer is confirmed by a fresh read.
+pub async fn ensure_enabled(bus: &BusHandle, dev: &DeviceState, what: &str) -> ApiResult<()> {
+    if dev.info01.as_ref().is_some_and(|(i, _)| is_enabled(i)) {
+        return Ok(());
+    }
+    let reply = bus.read_info(dev.dev_id, InfoBlock::Info01).await?;
+    match reply.body() {
+        ReplyBody::Info01(i) if is_enabled(&i) => Ok(()),
+        ReplyBody::Info01(i) => Err(ApiError::conflict(
+            "not-enabled",
+            "Device not enabled",
+            format!(
+                "{what} needs device {} enabled; it is `{}` (enable it first)",
+                dev.dev_id,
+                fsm_name(i.fsm)
+            ),
+        )),
+        _ => Err(ApiError::new(
+            axum::http::StatusCode::BAD_GATEWAY,
+            "unexpected-reply",
+            "Unexpected reply",
+            format!("device {} answered INFO_01 with another block", dev.dev_id),
+        )),
+    }
+}
+
+/// Waits (briefly) until the setpoint write `seq` is on the wire.
+pub async fn wait_on_wire(bus: &BusHandle, seq: u64) -> bool {
+    let mut acks = bus.wire_acks();
+    tokio::time::timeout(WIRE_ACK_WAIT, acks.wait_for(|a| a.seq >= seq))
+        .await
+        .is_ok_and(|r| r.is_ok())
+}

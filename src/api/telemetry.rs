@@ -1,0 +1,191 @@
+//! Snapshot → physical-unit views shared by the device, bus and control
+//! areas. Raw values stay beside the physical ones where users need them.
+
+use std::time::Instant;
+
+use serde::Serialize;
+use utoipa::ToSchema;
+
+use crate::bus::handle::DeviceState;
+use crate::bus::Setpoint;
+use crate::protocol::reply::{fault_name, fsm, fsm_name};
+use crate::protocol::units::{self, FirmwareVersion};
+use crate::protocol::{CtrlMode, Info01, Info02};
+
+/// Low nibble of err_code: the active fault; high nibble: latched history (SPEC §5).
+const FAULT_ACTIVE_MASK: u8 = 0x0F;
+const FAULT_HISTORY_SHIFT: u8 = 4;
+
+/// The speed base to assume before a device has reported its firmware: the
+/// newer 50000 rpm base, so an rpm request maps to at most the asked speed
+/// on older firmware (40000 rpm base), never more.
+pub const ASSUMED_FIRMWARE: FirmwareVersion = FirmwareVersion::SPEED_BASE_50K;
+
+/// The firmware a device reported in INFO_01, or [`ASSUMED_FIRMWARE`].
+pub fn firmware_of(dev: &DeviceState) -> FirmwareVersion {
+    dev.info01
+        .as_ref()
+        .map(|(i, _)| i.firmware())
+        .unwrap_or(ASSUMED_FIRMWARE)
+}
+
+/// Whether the device runs (or is aligning towards running): the states in
+/// which targets and jogs act.
+pub fn is_enabled(info: &Info01) -> bool {
+    info.fsm == fsm::RUN || info.fsm == fsm::ALIGN
+}
+
+pub fn mode_name(mode: CtrlMode) -> &'static str {
+    match mode {
+        CtrlMode::None => "none",
+        CtrlMode::Speed => "speed",
+        CtrlMode::Position => "position",
+        CtrlMode::Current => "current",
+    }
+}
+
+/// A fault code decoded to names.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct FaultView {
+    /// err_code as sent.
+    #[schema(example = 0)]
+    pub code: u8,
+    /// Name of the active fault (low nibble), `none` when healthy.
+    #[schema(example = "none")]
+    pub active: &'static str,
+    /// Name of the latched fault history (high nibble, rev 2.0.8 firmware).
+    #[schema(example = "none")]
+    pub history: &'static str,
+}
+
+impl FaultView {
+    pub fn new(code: u8) -> Self {
+        Self {
+            code,
+            active: fault_name(code & FAULT_ACTIVE_MASK),
+            history: fault_name(code >> FAULT_HISTORY_SHIFT),
+        }
+    }
+}
+
+/// INFO_01 decoded: state and health.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct StatusView {
+    #[schema(example = 7)]
+    pub fsm: u8,
+    /// `ready`, `align`, `run`, `fault`, ...
+    #[schema(example = "run")]
+    pub state: &'static str,
+    pub fault: FaultView,
+    #[schema(example = 128)]
+    pub soft_ver: u8,
+    #[schema(example = "1.2.8")]
+    pub firmware: String,
+    #[schema(example = 31.0)]
+    pub temp_c: f64,
+    #[schema(example = 45.5)]
+    pub angle_deg: f64,
+    #[schema(example = 12.1)]
+    pub vbus_v: f64,
+    /// The 8 data bytes as received, hex.
+    #[schema(example = "07 00 80 51 C0 16 0D 06")]
+    pub raw: String,
+    /// Milliseconds since this block was received.
+    #[schema(example = 120.5)]
+    pub age_ms: f64,
+}
+
+/// INFO_02 decoded: fast telemetry.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct MotionView {
+    #[schema(example = 45.5)]
+    pub angle_deg: f64,
+    /// Rotor speed (before the 568.81:1 gearbox).
+    #[schema(example = 2000.0)]
+    pub speed_rpm: f64,
+    /// Output-shaft speed.
+    #[schema(example = 21.1)]
+    pub output_deg_per_s: f64,
+    #[schema(example = 0.01)]
+    pub d_current_a: f64,
+    #[schema(example = 0.25)]
+    pub q_current_a: f64,
+    #[schema(example = "00 00 B6 02 E6 07 C0 16")]
+    pub raw: String,
+    #[schema(example = 8.2)]
+    pub age_ms: f64,
+}
+
+/// A target in physical units with its raw wire values.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct TargetView {
+    #[schema(example = 45.0)]
+    pub position_deg: f64,
+    #[schema(example = 3000.0)]
+    pub speed_rpm: f64,
+    #[schema(example = 5760)]
+    pub pos_ref_raw: i16,
+    #[schema(example = 1966)]
+    pub spd_ref_raw: i16,
+}
+
+impl TargetView {
+    pub fn new(sp: Setpoint, fw: FirmwareVersion) -> Self {
+        Self {
+            position_deg: units::angle_deg(sp.pos_ref),
+            speed_rpm: units::speed_rpm(sp.spd_ref, fw),
+            pos_ref_raw: sp.pos_ref,
+            spd_ref_raw: sp.spd_ref,
+        }
+    }
+}
+
+pub fn hex(bytes: &[u8]) -> String {
+    bytes
+        .iter()
+        .map(|b| format!("{b:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn age_ms(at: Instant, now: Instant) -> f64 {
+    now.saturating_duration_since(at).as_secs_f64() * 1000.0
+}
+
+pub fn status_view(info: &Info01, at: Instant, now: Instant) -> StatusView {
+    StatusView {
+        fsm: info.fsm,
+        state: fsm_name(info.fsm),
+        fault: FaultView::new(info.err_code),
+        soft_ver: info.soft_ver,
+        firmware: info.firmware().dotted(),
+        temp_c: info.temp_c(),
+        angle_deg: info.angle_deg(),
+        vbus_v: info.vbus_v(),
+        raw: hex(&info.to_bytes()),
+        age_ms: age_ms(at, now),
+    }
+}
+
+pub fn motion_view(info: &Info02, fw: FirmwareVersion, at: Instant, now: Instant) -> MotionView {
+    let rpm = info.speed_rpm(fw);
+    MotionView {
+        angle_deg: info.angle_deg(),
+        speed_rpm: rpm,
+        output_deg_per_s: units::output_deg_per_s(rpm),
+        d_current_a: units::current_a(info.d_cur),
+        q_current_a: units::current_a(info.q_cur),
+        raw: hex(&info.to_bytes()),
+        age_ms: age_ms(at, now),
+    }
+}
+
+/// Latest angle the daemon knows: INFO_02 if fresher than INFO_01.
+pub fn measured_angle_raw(dev: &DeviceState) -> Option<i16> {
+    match (&dev.info01, &dev.info02) {
+        (Some((a, ta)), Some((b, tb))) => Some(if tb >= ta { b.angle } else { a.angle }),
+        (Some((a, _)), None) => Some(a.angle),
+        (None, Some((b, _))) => Some(b.angle),
+        (None, None) => None,
+    }
+}
