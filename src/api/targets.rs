@@ -32,10 +32,11 @@ pub const WIRE_ACK_WAIT: Duration = Duration::from_millis(250);
 #[schema(example = json!({"position_deg": 45.0, "speed_rpm": 3000.0}))]
 pub struct TargetRequest {
     /// Output angle, degrees (−255..=255, narrowed by soft limits).
-    #[schema(example = 45.0)]
+    #[schema(example = 45.0, minimum = -255.0, maximum = 255.0)]
     pub position_deg: Option<f64>,
-    /// Rotor rpm: the speed limit in position mode, the speed in speed mode.
-    #[schema(example = 3000.0)]
+    /// Rotor rpm: the speed limit in position mode (≥ 0), the speed in speed
+    /// mode (signed); within the firmware's base speed (50000 rpm from 1.2.4, else 40000).
+    #[schema(example = 3000.0, minimum = -50000.0, maximum = 50000.0)]
     pub speed_rpm: Option<f64>,
 }
 
