@@ -4,7 +4,7 @@
 
 mod sim_support;
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use jointd::protocol::reply::fsm;
 use jointd::protocol::units::{angle_to_raw, output_deg_per_s, speed_limit_to_raw};
@@ -112,7 +112,10 @@ fn every_read_answers_with_the_spec_layout() {
 
 #[test]
 fn enable_goes_through_align_to_run_and_disable_to_ready() {
-    let (sim, mut host) = pty(config(&[1]));
+    let mut cfg = config(&[1]);
+    // Long enough to catch the align state on a loaded machine.
+    cfg.align_time = Duration::from_millis(500);
+    let (sim, mut host) = pty(cfg);
     host.recv(WAIT).expect("power-up INFO_01");
     host.send(Command::Control(Control::enable(1)));
     assert_eq!(info01(&mut host, 1).map(|i| i.fsm), Some(fsm::ALIGN));
