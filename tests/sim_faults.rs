@@ -12,8 +12,8 @@ use jointd::protocol::{
     InfoBlock, ReplyBody, ALL_DEVICES,
 };
 use jointd::sim::{Fault, SimHandle};
-use jointd::transport::tty::TtyPort;
 use jointd::transport::is_hangup;
+use jointd::transport::tty::TtyPort;
 use sim_support::*;
 
 const FW: FirmwareVersion = FirmwareVersion(128);
