@@ -48,10 +48,11 @@ curl -fsS -H "$AUTH" "$BASE/readyz" >/dev/null || { echo "jointd never became re
 curl -fsS -H "$AUTH" "$BASE/openapi.json" -o "$WORK/openapi.json"
 
 echo "== schemathesis $SCHEMATHESIS_VERSION against $BASE ($EXAMPLES examples per operation)"
-schemathesis run "$WORK/openapi.json" --url "$BASE" -H "$AUTH" \
+# Run from the scratch directory: schemathesis keeps a cache in ./.schemathesis.
+(cd "$WORK" && schemathesis run openapi.json --url "$BASE" -H "$AUTH" \
   --checks not_a_server_error,response_schema_conformance \
   --max-examples "$EXAMPLES" --workers 1 --seed 5 \
-  --request-timeout 20 --suppress-health-check all
+  --request-timeout 20 --suppress-health-check all)
 
 echo "== graceful shutdown"
 kill -TERM "$PID"

@@ -20,6 +20,8 @@ use crate::sim::{SimConfig, SimError, SimHandle, Simulator};
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8080";
 /// Name of the bus `--sim` starts.
 pub const SIM_BUS_NAME: &str = "sim0";
+/// Reply slack of the `--sim` bus, µs (see [`crate::bus::Timing`]).
+const SIM_REPLY_MARGIN_US: u64 = 10_000;
 /// How long shutdown waits for each bus to disable its joints and close.
 const BUS_STOP_TIMEOUT: Duration = Duration::from_secs(5);
 
@@ -150,6 +152,9 @@ fn start_sim(joints: u8, baud: u32) -> Result<(SimHandle, BusConfig), DaemonErro
     tracing::info!(path = %path.display(), joints, baud, "simulated bus started");
     let mut cfg = BusConfig::new(SIM_BUS_NAME, path, baud);
     cfg.ids = ids;
+    // The simulator shares the CPU with the daemon: on a busy machine its
+    // replies can come milliseconds late, which is not a silent device.
+    cfg.timing.reply_margin_us = SIM_REPLY_MARGIN_US;
     Ok((sim, cfg))
 }
 
@@ -204,7 +209,10 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
 async fn stop_buses(threads: Vec<crate::bus::BusThread>) {
     for thread in threads {
         let stopping = tokio::task::spawn_blocking(move || thread.stop());
-        if tokio::time::timeout(BUS_STOP_TIMEOUT, stopping).await.is_err() {
+        if tokio::time::timeout(BUS_STOP_TIMEOUT, stopping)
+            .await
+            .is_err()
+        {
             tracing::error!("a bus did not stop within {BUS_STOP_TIMEOUT:?}");
         }
     }

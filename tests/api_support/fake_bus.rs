@@ -7,12 +7,11 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant};
 
 use jointd::bus::error::BusError;
 use jointd::bus::handle::{
-    BusCounters, BusShared, DeviceState, EstopReport, LinkState, Request, WriteOutcome,
-    REQUEST_QUEUE_LEN,
+    BusShared, DeviceState, EstopReport, LinkState, Request, WriteOutcome, REQUEST_QUEUE_LEN,
 };
 use jointd::bus::{BusHandle, BusSnapshot, Targets};
 use jointd::protocol::reply::fsm;
@@ -76,17 +75,9 @@ impl FakeBus {
                 (id, dev)
             })
             .collect();
-        let snap = BusSnapshot {
-            name: name.into(),
-            path: "/dev/fake".into(),
-            baud: 500_000,
-            link: LinkState::Up,
-            devices: devices.clone(),
-            counters: BusCounters::default(),
-            queue_depth: 0,
-            published_at: now,
-            published_wall: SystemTime::now(),
-        };
+        let mut snap = BusSnapshot::new(name, "/dev/fake", 500_000);
+        snap.link = LinkState::Up;
+        snap.devices = devices.clone();
         let shared = BusShared::new(name.into(), snap);
         let (tx, rx) = sync_channel(REQUEST_QUEUE_LEN);
         let script = Arc::new(Mutex::new(Script::default()));

@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub mod fake_bus;
+pub mod sim_bus;
 
 use reqwest::{Method, StatusCode};
 use serde_json::Value;

@@ -15,8 +15,15 @@ use super::{serve, Server};
 pub const WAIT: Duration = Duration::from_secs(10);
 pub const BAUD: u32 = 500_000;
 pub const BUS: &str = "sim0";
+pub const REPLY_MARGIN_US: u64 = 20_000;
+
+/// One simulated bus at a time per test binary: each runs two timing-precise
+/// threads (simulator and bus owner), and several at once on a loaded
+/// 2-core machine would starve each other's wire timing.
+static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
 pub struct SimBus {
+    _turn: tokio::sync::MutexGuard<'static, ()>,
     pub sim: SimHandle,
     pub handle: BusHandle,
     pub thread: Option<BusThread>,
@@ -26,6 +33,7 @@ pub struct SimBus {
 /// `n` joints (ids 1..=n) behind a pty, the engine on it, the API in front;
 /// returns once every joint is online.
 pub async fn start(n: u8, token: Option<&str>) -> SimBus {
+    let turn = ONE_AT_A_TIME.lock().await;
     let ids: Vec<u8> = (1..=n).collect();
     let mut cfg = SimConfig::new(ids.clone(), BAUD);
     cfg.align_time = Duration::from_millis(50);
@@ -34,6 +42,9 @@ pub async fn start(n: u8, token: Option<&str>) -> SimBus {
     let path = sim.device_path().expect("pty path");
     let mut bus_cfg = BusConfig::new(BUS, path, BAUD);
     bus_cfg.ids = ids;
+    // A loaded 2-core machine delays pty bytes by milliseconds: give replies
+    // that much slack so a late reply is not mistaken for a silent device.
+    bus_cfg.timing.reply_margin_us = REPLY_MARGIN_US;
     let (handle, thread) = spawn_bus(bus_cfg).expect("bus");
     let limits = SoftLimits::new(vec![LimitRule {
         ids: vec![2],
@@ -49,6 +60,7 @@ pub async fn start(n: u8, token: Option<&str>) -> SimBus {
         server = server.with_token(t);
     }
     let bus = SimBus {
+        _turn: turn,
         sim,
         handle,
         thread: Some(thread),
