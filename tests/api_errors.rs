@@ -161,7 +161,9 @@ async fn targets_need_an_enabled_joint_and_respect_soft_limits() {
     let r = s
         .put(&format!("{DEV}/1/target"), json!({"position_deg": 300}))
         .await;
-    assert_eq!(r.problem(422)["allowed"]["max"], 255.0);
+    let p = r.problem(422);
+    assert_eq!(p["allowed"]["max"], 255.0);
+    assert_eq!(p["type"], "urn:jointd:problem:out-of-range");
 }
 
 #[tokio::test]
@@ -305,7 +307,7 @@ async fn estop_preempts_queued_requests() {
         && bus.script().log.is_empty()
         && tokio::time::Instant::now() < deadline
     {
-        tokio::task::yield_now().await;
+        tokio::time::sleep(std::time::Duration::from_millis(1)).await;
     }
     let r = s.post_empty("/api/v1/estop").await;
     let body = r.ok();

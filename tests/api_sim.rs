@@ -265,6 +265,7 @@ async fn buses_frames_scan_metrics_and_auth() {
     let m = s.get("/metrics").await;
     let text = m.body.as_str().unwrap().to_owned();
     assert!(text.contains("jointd_bus_up{bus=\"sim0\"} 1"));
+    assert!(text.contains("jointd_bus_wire_utilisation{bus=\"sim0\"}"));
     assert!(text
         .lines()
         .any(|l| l.starts_with("jointd_bus_frames_rx_total{bus=\"sim0\"}") && !l.ends_with(" 0")));
@@ -285,4 +286,30 @@ async fn baud_change_end_to_end() {
     assert_eq!(s.get("/api/v1/buses/sim0").await.ok()["baud"], 230400);
     s.get(&format!("{DEV}/2?fresh=true")).await.ok();
     assert_eq!(b.sim.device(2).unwrap().baud, 230400);
+}
+
+/// What the daemon does on SIGTERM after the server stops: each bus owner
+/// disables every joint before it closes the port.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stopping_the_bus_disables_every_joint() {
+    let mut b = start(3, None).await;
+    let s = &b.server;
+    s.post("/api/v1/buses/sim0/control/enable", json!({}))
+        .await
+        .ok();
+    for id in 1..=3 {
+        b.wait_fsm(id, fsm::RUN).await;
+    }
+    let thread = b.thread.take().expect("bus thread");
+    tokio::task::spawn_blocking(move || thread.stop())
+        .await
+        .unwrap();
+    let deadline = std::time::Instant::now() + api_support::sim_bus::WAIT;
+    while b.sim.devices().iter().any(|d| d.enabled) {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "joints still enabled after stop"
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(1)).await;
+    }
 }

@@ -56,6 +56,13 @@ pub struct BusView {
     /// Monotonic counters since start (frames by kind, CRC errors, timeouts, retries, ...).
     #[schema(value_type = Object, example = json!({"frames_rx": 10432, "crc_errors": 0, "timeouts": 3}))]
     pub counters: serde_json::Value,
+    /// Rates over the last statistics window (~1 s): frames/s by kind, wire
+    /// utilisation as the daemon sees it, setpoint age percentiles.
+    #[schema(value_type = Object, example = json!({"window_s": 1.0, "frames_tx_per_s": 2310.5,
+        "wire_utilisation": 0.97, "setpoint_age_p99_us": 1800}))]
+    pub rates: serde_json::Value,
+    /// What opening the port found worth telling (e.g. an FTDI latency timer and its fix).
+    pub port_notes: Vec<String>,
 }
 
 impl BusView {
@@ -78,6 +85,8 @@ impl BusView {
             devices_online: snap.devices.values().filter(|d| d.online).count(),
             queue_depth: snap.queue_depth,
             counters: serde_json::to_value(&snap.counters).unwrap_or_default(),
+            rates: serde_json::to_value(&snap.rates).unwrap_or_default(),
+            port_notes: snap.port_notes.clone(),
         }
     }
 }

@@ -71,8 +71,8 @@ pub struct Written {
     pub raw: u16,
     #[schema(example = 18)]
     pub index: u8,
-    /// `res` (the device's RES reply) or `readback` (the INFO block read back).
-    #[schema(example = "readback")]
+    /// `res` (the device's RES reply) or `read_back` (the INFO block read back).
+    #[schema(example = "read_back")]
     pub verified_by: &'static str,
 }
 

@@ -184,6 +184,14 @@ fn bus_metrics(m: &mut Metrics, snap: &BusSnapshot) {
             }
         }
     }
+    // Rates over the engine's last window, as gauges by field name.
+    if let Ok(serde_json::Value::Object(fields)) = serde_json::to_value(&snap.rates) {
+        for (name, value) in fields {
+            if let Some(v) = value.as_f64() {
+                m.gauge(&format!("jointd_bus_{name}"), l.clone(), v);
+            }
+        }
+    }
 }
 
 fn device_metrics(m: &mut Metrics, snap: &BusSnapshot, now: Instant) {

@@ -122,6 +122,11 @@ impl JointLimits {
         if !deg.is_finite() {
             return Err(ApiError::invalid(field, format!("{field} must be finite")));
         }
+        if deg.abs() > MAX_ANGLE_DEG {
+            // The device's own range, not a configured limit.
+            let range = (-MAX_ANGLE_DEG, MAX_ANGLE_DEG);
+            return Err(ApiError::out_of_range(field, deg, range, "deg"));
+        }
         if deg < self.min_deg || deg > self.max_deg {
             return Err(soft_limit(
                 field,

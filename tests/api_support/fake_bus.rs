@@ -259,7 +259,7 @@ impl Owner {
                         dev_id,
                         index,
                         value,
-                        verified_by: "readback",
+                        verified_by: "read_back",
                     })
                 };
                 let r = self.gate(Some(dev_id)).and(outcome);
