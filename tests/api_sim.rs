@@ -9,6 +9,8 @@ use jointd::sim::Fault;
 use serde_json::json;
 
 const DEV: &str = "/api/v1/buses/sim0/devices";
+/// Rotor speed (raw Q15) below which a joint counts as settled (~15 rpm).
+const SETTLED_RAW_SPEED: i16 = 10;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn move_a_joint_end_to_end() {
@@ -37,10 +39,9 @@ async fn move_a_joint_end_to_end() {
         .await;
     assert_eq!(r.ok()["targets"][0]["pos_ref_raw"], 2560);
     b.wait_snapshot("joint 1 near 20°", |snap| {
-        snap.devices[&1]
-            .info02
-            .as_ref()
-            .is_some_and(|(i, _)| (i.angle_deg() - 20.0).abs() < 0.5)
+        snap.devices[&1].info02.as_ref().is_some_and(|(i, _)| {
+            (i.angle_deg() - 20.0).abs() < 0.5 && i.speed.abs() < SETTLED_RAW_SPEED
+        })
     })
     .await;
     assert!((b.sim.device(1).unwrap().target_deg - 20.0).abs() < 1e-6);
@@ -49,7 +50,8 @@ async fn move_a_joint_end_to_end() {
     assert_eq!(d["status"]["state"], "run");
     assert_eq!(d["firmware"], "1.2.8");
     assert_eq!(d["status"]["fault"]["active"], "none");
-    assert!((d["motion"]["angle_deg"].as_f64().unwrap() - 20.0).abs() < 0.5);
+    let angle = d["motion"]["angle_deg"].as_f64().unwrap();
+    assert!((angle - 20.0).abs() < 0.5, "settled at {angle}°: {d}");
     // Jog, re-zero, disable.
     s.post(&format!("{DEV}/1/jog"), json!({"direction": "cw"}))
         .await

@@ -15,7 +15,7 @@ use super::{serve, Server};
 pub const WAIT: Duration = Duration::from_secs(10);
 pub const BAUD: u32 = 500_000;
 pub const BUS: &str = "sim0";
-pub const REPLY_MARGIN_US: u64 = 20_000;
+pub const REPLY_MARGIN_US: u64 = 50_000;
 
 /// One simulated bus at a time per test binary: each runs two timing-precise
 /// threads (simulator and bus owner), and several at once on a loaded
