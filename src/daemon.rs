@@ -21,7 +21,7 @@ pub const DEFAULT_LISTEN: &str = "127.0.0.1:8080";
 /// Name of the bus `--sim` starts.
 pub const SIM_BUS_NAME: &str = "sim0";
 /// Reply slack of the `--sim` bus, µs (see [`crate::bus::Timing`]).
-const SIM_REPLY_MARGIN_US: u64 = 10_000;
+const SIM_REPLY_MARGIN_US: u64 = 20_000;
 /// How long shutdown waits for each bus to disable its joints and close.
 const BUS_STOP_TIMEOUT: Duration = Duration::from_secs(5);
 
