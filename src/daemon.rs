@@ -170,14 +170,7 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
         }
         None => None,
     };
-    let mut handles: Vec<BusHandle> = Vec::new();
-    let mut threads = Vec::new();
-    for cfg in configs {
-        tracing::info!(bus = %cfg.name, path = %cfg.path.display(), baud = cfg.baud, "starting bus");
-        let (handle, thread) = spawn_bus(cfg)?;
-        handles.push(handle);
-        threads.push(thread);
-    }
+    let (handles, threads) = start_buses(configs)?;
     let listener = TcpListener::bind(plan.listen)
         .await
         .map_err(|e| DaemonError::Io {
@@ -203,6 +196,21 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     drop(sim);
     tracing::info!("stopped");
     Ok(())
+}
+
+/// Starts one owner per bus; a port that is not there yet is retried by its owner.
+fn start_buses(
+    configs: Vec<BusConfig>,
+) -> Result<(Vec<BusHandle>, Vec<crate::bus::BusThread>), DaemonError> {
+    let mut handles = Vec::with_capacity(configs.len());
+    let mut threads = Vec::with_capacity(configs.len());
+    for cfg in configs {
+        tracing::info!(bus = %cfg.name, path = %cfg.path.display(), baud = cfg.baud, "starting bus");
+        let (handle, thread) = spawn_bus(cfg)?;
+        handles.push(handle);
+        threads.push(thread);
+    }
+    Ok((handles, threads))
 }
 
 /// Disables every joint and closes each port (the owner does both on stop).

@@ -273,6 +273,11 @@ async fn buses_frames_scan_metrics_and_auth() {
         .any(|l| l.starts_with("jointd_bus_frames_rx_total{bus=\"sim0\"}") && !l.ends_with(" 0")));
     s.get("/api/v1/buses/sim0/devices/99").await.problem(404);
     s.get("/api/v1/buses/nope/devices").await.problem(404);
+    s.get(&format!("{DEV}/abc")).await.problem(400);
+    let r = s
+        .put(&format!("{DEV}/1/target"), json!({"position_deg": 300}))
+        .await;
+    assert_eq!(r.problem(422)["field"], "position_deg");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
