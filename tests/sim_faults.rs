@@ -99,6 +99,8 @@ fn a_power_cycle_reannounces_and_reloads_flash() {
     let (sim, mut host) = booted(&[1]);
     enable_and_run(&sim, &mut host, 1);
     write(&mut host, 1, ConfigParam::MaxCur(123));
+    let r = host.read(1, InfoBlock::Info04).unwrap();
+    assert!(matches!(r.body(), ReplyBody::Info04(i) if i.max_current == 123));
     sim.inject(Fault::PowerCycle { dev_id: 1 });
     let hello = host.recv(WAIT).expect("re-announcement");
     assert!(matches!(hello.body(), ReplyBody::Info01(i) if i.fsm == fsm::READY));

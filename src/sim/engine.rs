@@ -59,26 +59,7 @@ impl Engine {
         let level = BaudLevel::from_baud(cfg.baud).ok_or(SimError::BadBaud(cfg.baud))?;
         let flash = FlashStore::new(cfg.state_file.clone());
         let saved = flash.load()?;
-        let timing = DeviceTiming {
-            align_time: cfg.align_time,
-            boot_delay: cfg.boot_delay,
-            stall_fault_after: cfg.stall_fault_after,
-            soft_ver: cfg.soft_ver,
-        };
-        let slot_time = frame_time(cfg.baud) + cfg.turnaround + ANNOUNCE_GAP;
-        let devices = cfg
-            .ids
-            .iter()
-            .enumerate()
-            .map(|(slot, &id)| {
-                let image = saved.get(slot).copied().unwrap_or(FlashImage {
-                    id,
-                    params: Params::factory(level),
-                });
-                let stagger = slot_time * u32::try_from(slot).unwrap_or(u32::MAX);
-                Device::new(slot, image, timing, now, stagger, cfg.seed ^ slot as u64)
-            })
-            .collect();
+        let devices = build_devices(cfg, &saved, Params::factory(level), now);
         Ok(Self {
             turnaround: cfg.turnaround,
             default_baud: cfg.baud,
@@ -369,6 +350,37 @@ impl Engine {
     pub fn count_overrun(&mut self, bytes: usize) {
         self.stats.host_overrun_bytes += bytes as u64;
     }
+}
+
+/// The devices of a bus powered up at `now`: flash from `saved` by slot,
+/// factory parameters otherwise. Announcements are staggered one frame slot
+/// apart so a healthy bus can be discovered from them.
+fn build_devices(
+    cfg: &SimConfig,
+    saved: &[FlashImage],
+    factory: Params,
+    now: Instant,
+) -> Vec<Device> {
+    let timing = DeviceTiming {
+        align_time: cfg.align_time,
+        boot_delay: cfg.boot_delay,
+        stall_fault_after: cfg.stall_fault_after,
+        soft_ver: cfg.soft_ver,
+    };
+    let slot_time = frame_time(cfg.baud) + cfg.turnaround + ANNOUNCE_GAP;
+    let images = cfg.ids.iter().enumerate().map(|(slot, &id)| {
+        saved.get(slot).copied().unwrap_or(FlashImage {
+            id,
+            params: factory,
+        })
+    });
+    images
+        .enumerate()
+        .map(|(slot, image)| {
+            let stagger = slot_time * u32::try_from(slot).unwrap_or(u32::MAX);
+            Device::new(slot, image, timing, now, stagger, cfg.seed ^ slot as u64)
+        })
+        .collect()
 }
 
 /// The id a host command addresses (none for group broadcasts).

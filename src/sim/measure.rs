@@ -77,8 +77,9 @@ fn signed_ns(later: Instant, earlier: Instant) -> i64 {
 
 /// Runs `polls` INFO_02 polls against device `cfg.ids[0]` over a pty.
 pub fn run(cfg: SimConfig, polls: usize) -> Result<Report, SimError> {
+    cfg.validate()?;
     let baud = cfg.baud;
-    let id = cfg.ids[0];
+    let id = cfg.ids.first().copied().unwrap_or(1);
     let model = frame_time(baud) * 2 + cfg.turnaround;
     let sim = Simulator::spawn_pty(cfg)?;
     let path = sim.device_path().unwrap_or_default();

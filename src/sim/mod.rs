@@ -104,10 +104,10 @@ impl SimHandle {
     ) -> Result<Self, SimError> {
         let engine = Arc::new(Mutex::new(Engine::new(cfg, Instant::now())?));
         let ctl = Arc::new(Control::default());
-        let (e, c) = (engine.clone(), ctl.clone());
+        let (e, c, rt) = (engine.clone(), ctl.clone(), cfg.realtime);
         let thread = std::thread::Builder::new()
             .name("jointd-sim".into())
-            .spawn(move || runner::run(e, line, c))
+            .spawn(move || runner::run(e, line, c, rt))
             .map_err(SimError::Thread)?;
         Ok(Self {
             inner: Arc::new(Inner {

@@ -90,6 +90,24 @@ fn set_timer_slack() {
     }
 }
 
+/// A low real-time priority: above every normal thread, below the kernel's own.
+const REALTIME_PRIORITY: libc::c_int = 10;
+
+/// Moves this thread to SCHED_FIFO; a refusal (no privilege) is only logged.
+fn set_realtime() {
+    let param = libc::sched_param {
+        sched_priority: REALTIME_PRIORITY,
+    };
+    // SAFETY: pid 0 is this thread; `param` is a valid sched_param.
+    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+    if rc != 0 {
+        tracing::warn!(
+            "simulator: no real-time scheduling: {}",
+            std::io::Error::last_os_error()
+        );
+    }
+}
+
 struct Runner {
     engine: Arc<Mutex<Engine>>,
     line: Box<dyn Line>,
@@ -98,8 +116,11 @@ struct Runner {
 }
 
 /// The thread body: runs until shutdown is requested.
-pub fn run(engine: Arc<Mutex<Engine>>, line: Box<dyn Line>, ctl: Arc<Control>) {
+pub fn run(engine: Arc<Mutex<Engine>>, line: Box<dyn Line>, ctl: Arc<Control>, realtime: bool) {
     set_timer_slack();
+    if realtime {
+        set_realtime();
+    }
     let mut r = Runner {
         engine,
         line,
