@@ -295,3 +295,17 @@ fn a_baud_change_answers_then_listens_only_at_the_new_baud() {
     let last = log.last().unwrap();
     assert_eq!((last.end - last.start).as_micros(), 1736);
 }
+
+#[test]
+fn the_handle_is_shareable_and_dropping_the_last_one_stops_the_simulator() {
+    fn shareable<T: Send + Sync + Clone>() {}
+    shareable::<SimHandle>();
+    let (sim, _host) = pty(config(&[1]));
+    let path = sim.device_path().unwrap();
+    let clone = sim.clone();
+    drop(sim);
+    assert!(path.exists(), "a clone keeps it running");
+    assert!(clone.device(1).is_some());
+    drop(clone);
+    assert!(!path.exists(), "the link goes with the simulator");
+}

@@ -22,6 +22,9 @@ use super::wire::{frame_time, DeviceTx, HostTx, Wire, WireEvent};
 
 /// Delivery-error samples kept for measurement.
 const DELIVERY_SAMPLES: usize = 100_000;
+/// Devices' physics is run at least this often, so no observer or frame
+/// ever has to integrate a long idle stretch while holding the lock.
+const TICK: Duration = Duration::from_millis(20);
 /// Extra gap between the staggered power-up announcements.
 const ANNOUNCE_GAP: Duration = Duration::from_micros(100);
 
@@ -50,6 +53,7 @@ pub struct Engine {
     /// End of the last garbled transmission handed to the host: overlapping
     /// collided transmissions reach the host as one garbled frame.
     garbage_until: Option<Instant>,
+    last_tick: Instant,
 }
 
 impl Engine {
@@ -75,6 +79,7 @@ impl Engine {
             unplugged: false,
             delivery_errors_ns: VecDeque::new(),
             garbage_until: None,
+            last_tick: now,
         })
     }
 
@@ -95,6 +100,14 @@ impl Engine {
         match (self.wire.next_event(), announce) {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
+        }
+    }
+
+    /// Runs every device's physics up to `now` if it has not run for a while.
+    pub fn tick(&mut self, now: Instant) {
+        if now.saturating_duration_since(self.last_tick) >= TICK {
+            self.devices.iter_mut().for_each(|d| d.advance_to(now));
+            self.last_tick = now;
         }
     }
 

@@ -137,7 +137,8 @@ impl Runner {
     /// One turn: wait for input or the next event, then run what is due.
     fn turn(&mut self) {
         let (next, backlog) = {
-            let e = lock_engine(&self.engine);
+            let mut e = lock_engine(&self.engine);
+            e.tick(Instant::now());
             (e.next_event(), e.host_backlog())
         };
         let can_read = !self.line.is_unplugged() && backlog < MAX_BACKLOG;
