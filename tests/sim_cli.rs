@@ -72,7 +72,11 @@ fn sim_measure_reports_timing_and_occupancy_as_json() {
         .args(["sim", "--ids", "1", "--measure", "50"])
         .output()
         .expect("run jointd sim --measure");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON report");
     assert_eq!(v["lost"], 0);
     assert_eq!(v["model_poll_us"], 900.0);

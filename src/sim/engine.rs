@@ -11,12 +11,12 @@ use std::time::{Duration, Instant};
 use crate::protocol::{BaudLevel, Command, Frame, FrameBytes, StreamDecoder};
 
 use super::config::{SimConfig, SimError};
-use super::device::{Device, DeviceTiming};
-use super::faults::{collide, Fault, LineFaults};
-use super::log::{FrameLog, WireFrame};
+use super::device::Device;
+use super::faults::{collide, misframed, noise_frame, Fault, LineFaults};
+use super::log::{addressed_id, FrameLog, WireFrame};
 use super::params::{FlashImage, FlashStore, Params};
 use super::rng::Rng;
-use super::stats::{FrameKinds, SimStats};
+use super::stats::SimStats;
 use super::view::DeviceView;
 use super::wire::{frame_time, DeviceTx, HostTx, Wire, WireEvent};
 
@@ -25,8 +25,6 @@ const DELIVERY_SAMPLES: usize = 100_000;
 /// Devices' physics is run at least this often, so no observer or frame
 /// ever has to integrate a long idle stretch while holding the lock.
 const TICK: Duration = Duration::from_millis(20);
-/// Extra gap between the staggered power-up announcements.
-const ANNOUNCE_GAP: Duration = Duration::from_micros(100);
 
 /// Reply bytes due at the host at `due`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -63,7 +61,7 @@ impl Engine {
         let level = BaudLevel::from_baud(cfg.baud).ok_or(SimError::BadBaud(cfg.baud))?;
         let flash = FlashStore::new(cfg.state_file.clone());
         let saved = flash.load()?;
-        let devices = build_devices(cfg, &saved, Params::factory(level), now);
+        let devices = Device::bus(cfg, &saved, Params::factory(level), now);
         Ok(Self {
             turnaround: cfg.turnaround,
             default_baud: cfg.baud,
@@ -192,7 +190,7 @@ impl Engine {
             self.stats.kinds.not_a_command += 1;
             return;
         };
-        count_kind(&mut self.stats.kinds, &cmd);
+        self.stats.kinds.count(&cmd);
         self.dispatch(&cmd, &h);
     }
 
@@ -257,13 +255,10 @@ impl Engine {
                 return None;
             }
             self.garbage_until = Some(d.end);
-            let noise = self.rng.next_u64().to_le_bytes().repeat(3);
-            let mut other = [0u8; 20];
-            other.copy_from_slice(&noise[..20]);
-            bytes = collide(&bytes, &other);
+            bytes = collide(&bytes, &noise_frame(&mut self.rng));
         } else if host_baud != Some(d.baud) {
-            // Framing errors at the wrong baud: what arrives is not the frame.
-            bytes = collide(&bytes, &[0xF0; 20]);
+            self.stats.baud_mismatches += 1;
+            bytes = misframed(&bytes);
         } else if self.faults.corrupt(&mut bytes, &mut self.rng) {
             self.stats.corrupted_replies += 1;
         } else if d.spontaneous {
@@ -362,59 +357,6 @@ impl Engine {
 
     pub fn count_overrun(&mut self, bytes: usize) {
         self.stats.host_overrun_bytes += bytes as u64;
-    }
-}
-
-/// The devices of a bus powered up at `now`: flash from `saved` by slot,
-/// factory parameters otherwise. Announcements are staggered one frame slot
-/// apart so a healthy bus can be discovered from them.
-fn build_devices(
-    cfg: &SimConfig,
-    saved: &[FlashImage],
-    factory: Params,
-    now: Instant,
-) -> Vec<Device> {
-    let timing = DeviceTiming {
-        align_time: cfg.align_time,
-        boot_delay: cfg.boot_delay,
-        stall_fault_after: cfg.stall_fault_after,
-        soft_ver: cfg.soft_ver,
-    };
-    let slot_time = frame_time(cfg.baud) + cfg.turnaround + ANNOUNCE_GAP;
-    let images = cfg.ids.iter().enumerate().map(|(slot, &id)| {
-        saved.get(slot).copied().unwrap_or(FlashImage {
-            id,
-            params: factory,
-        })
-    });
-    images
-        .enumerate()
-        .map(|(slot, image)| {
-            let stagger = slot_time * u32::try_from(slot).unwrap_or(u32::MAX);
-            Device::new(slot, image, timing, now, stagger, cfg.seed ^ slot as u64)
-        })
-        .collect()
-}
-
-/// The id a host command addresses (none for group broadcasts).
-fn addressed_id(cmd: &Command) -> Option<u8> {
-    match cmd {
-        Command::Control(c) => Some(c.dev_id),
-        Command::Jog(j) => Some(j.dev_id),
-        Command::Config(c) => Some(c.dev_id),
-        _ => None,
-    }
-}
-
-fn count_kind(k: &mut FrameKinds, cmd: &Command) {
-    match cmd {
-        Command::Control(_) => k.control += 1,
-        Command::Jog(_) => k.jog += 1,
-        Command::Config(c) if c.param.is_read() => k.config_read += 1,
-        Command::Config(_) => k.config_write += 1,
-        Command::BroadcastPos(_) => k.broadcast_pos += 1,
-        Command::BroadcastSpd(_) => k.broadcast_spd += 1,
-        Command::BroadcastEnableUnverified(_) => k.broadcast_enable += 1,
     }
 }
 
