@@ -6,9 +6,11 @@
 //! - [`cli`]: the `jointd frame …` tools for reading a serial capture by hand.
 //! - [`bus`]: one owner thread per bus, its scheduler, and the handle the API uses.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty, in-memory pipe).
+//! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory).
 
 pub mod bus;
 pub mod cli;
 pub mod frame_json;
 pub mod protocol;
+pub mod sim;
 pub mod transport;

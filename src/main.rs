@@ -17,6 +17,8 @@ enum Command {
     /// Decode or encode single frames (for reading a serial capture by hand).
     #[command(subcommand)]
     Frame(FrameCommand),
+    /// Run a simulated bus of joint modules on a pseudo-terminal (path on stdout).
+    Sim(jointd::sim::cli::SimArgs),
 }
 
 #[derive(Subcommand, Debug)]
@@ -40,6 +42,13 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Frame(cmd) => run_frame(cmd),
+        Command::Sim(args) => match jointd::sim::cli::run(&args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("jointd sim: {e}");
+                ExitCode::FAILURE
+            }
+        },
     }
 }
 

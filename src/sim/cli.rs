@@ -1,0 +1,141 @@
+//! `jointd sim`: runs a simulated bus on a pseudo-terminal until Ctrl-C,
+//! printing the device path as the first line of stdout. Faults can be set
+//! by flags at start and switched from stdin while it runs ([`super::console`]).
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use clap::Args;
+use nix::sys::signal::{SigSet, Signal};
+
+use super::{parse_ids, Fault, SimConfig, SimError, SimHandle, Simulator};
+
+/// Arguments of `jointd sim`.
+#[derive(Args, Debug, Clone)]
+pub struct SimArgs {
+    /// Device ids, e.g. `1-16` or `1,2,5-7` (duplicates reproduce id conflicts).
+    #[arg(long, default_value = "1-16")]
+    pub ids: String,
+    /// Starting baud of the devices (500000, 230400, 115200, 38400, 19200).
+    #[arg(long, default_value_t = 500_000)]
+    pub baud: u32,
+    /// Request's last byte to reply's first byte, µs.
+    #[arg(long, default_value_t = 100)]
+    pub turnaround_us: u64,
+    /// Encoder alignment after the first enable, ms.
+    #[arg(long, default_value_t = 1000)]
+    pub align_ms: u64,
+    /// Power-up to the spontaneous INFO_01, ms.
+    #[arg(long, default_value_t = 5)]
+    pub boot_ms: u64,
+    /// Keeps flash (ids, parameters) across runs, as JSON.
+    #[arg(long)]
+    pub state_file: Option<PathBuf>,
+    /// Probability that each byte on the line is garbled.
+    #[arg(long, default_value_t = 0.0)]
+    pub corrupt_rate: f64,
+    /// Probability that a reply is lost.
+    #[arg(long, default_value_t = 0.0)]
+    pub drop_rate: f64,
+    /// Added to every turnaround, µs.
+    #[arg(long, default_value_t = 0)]
+    pub extra_turnaround_us: u64,
+    /// Devices blocked by an obstacle where they stand, e.g. `--stall 3 --stall 4`.
+    #[arg(long)]
+    pub stall: Vec<u8>,
+    /// Devices whose supply sags below the under-voltage level.
+    #[arg(long)]
+    pub under_voltage: Vec<u8>,
+    /// Seed of noise and fault dice.
+    #[arg(long, default_value_t = super::config::DEFAULT_SEED)]
+    pub seed: u64,
+    /// Run the simulator thread under SCHED_FIFO when permitted (tighter timing).
+    #[arg(long)]
+    pub realtime: bool,
+    /// Instead of serving: poll the first device N times over a pty and print
+    /// real-vs-model timing errors (µs percentiles) as JSON.
+    #[arg(long, value_name = "N")]
+    pub measure: Option<usize>,
+}
+
+impl SimArgs {
+    pub fn config(&self) -> Result<SimConfig, SimError> {
+        let mut cfg = SimConfig::new(parse_ids(&self.ids)?, self.baud);
+        cfg.turnaround = Duration::from_micros(self.turnaround_us);
+        cfg.align_time = Duration::from_millis(self.align_ms);
+        cfg.boot_delay = Duration::from_millis(self.boot_ms);
+        cfg.state_file = self.state_file.clone();
+        cfg.seed = self.seed;
+        cfg.realtime = self.realtime;
+        Ok(cfg)
+    }
+
+    /// The faults the flags ask for, applied at start.
+    pub fn faults(&self) -> Vec<Fault> {
+        let mut faults = Vec::new();
+        if self.corrupt_rate > 0.0 {
+            faults.push(Fault::CorruptRate(self.corrupt_rate));
+        }
+        if self.drop_rate > 0.0 {
+            faults.push(Fault::DropReplies {
+                dev_id: None,
+                rate: self.drop_rate,
+            });
+        }
+        if self.extra_turnaround_us > 0 {
+            faults.push(Fault::ExtraTurnaround(Duration::from_micros(
+                self.extra_turnaround_us,
+            )));
+        }
+        faults.extend(self.stall.iter().map(|&dev_id| Fault::Stall {
+            dev_id,
+            at_deg: None,
+        }));
+        faults.extend(
+            self.under_voltage
+                .iter()
+                .map(|&dev_id| Fault::UnderVoltage { dev_id, on: true }),
+        );
+        faults
+    }
+}
+
+/// Runs the simulator until SIGINT/SIGTERM; prints the path first, stats last (stderr).
+pub fn run(args: &SimArgs) -> Result<(), SimError> {
+    let cfg = args.config()?;
+    if let Some(polls) = args.measure {
+        let report = super::measure::run(cfg, polls)?;
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report).unwrap_or_default()
+        );
+        return Ok(());
+    }
+    // Block the signals before the simulator thread exists so only sigwait sees them.
+    let mut signals = SigSet::empty();
+    signals.add(Signal::SIGINT);
+    signals.add(Signal::SIGTERM);
+    signals
+        .thread_block()
+        .map_err(|e| SimError::Pty(e.into()))?;
+    let sim = Simulator::spawn_pty(cfg)?;
+    apply_faults(&sim, &args.faults());
+    let path = sim.device_path().unwrap_or_default();
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{}", path.display());
+    let _ = out.flush();
+    drop(out);
+    super::console::spawn(sim.clone());
+    let _ = signals.wait();
+    let stats = sim.stats();
+    sim.shutdown();
+    eprintln!("{}", serde_json::to_string(&stats).unwrap_or_default());
+    Ok(())
+}
+
+fn apply_faults(sim: &SimHandle, faults: &[Fault]) {
+    for f in faults {
+        sim.inject(*f);
+    }
+}

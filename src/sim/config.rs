@@ -1,0 +1,157 @@
+//! What a simulated bus is made of: its device ids, starting baud, timing
+//! constants, optional flash state file, and the errors of building one.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use thiserror::Error;
+
+use crate::protocol::{is_device_id, BaudLevel};
+
+/// SPEC §1 leaves the turnaround undocumented; the simulator's default.
+pub const DEFAULT_TURNAROUND: Duration = Duration::from_micros(100);
+/// SPEC §4.1: "about 1 s" of encoder alignment after the first enable.
+pub const DEFAULT_ALIGN_TIME: Duration = Duration::from_secs(1);
+/// Power-up to the spontaneous INFO_01 (a few ms of firmware start-up).
+pub const DEFAULT_BOOT_DELAY: Duration = Duration::from_millis(5);
+/// How long a blocked joint pushes before the device latches a stall fault.
+pub const DEFAULT_STALL_FAULT_AFTER: Duration = Duration::from_secs(3);
+/// Firmware the simulated modules report (≥ 124: 50000 rpm speed base).
+pub const DEFAULT_SOFT_VER: u8 = 128;
+/// Frame log ring size.
+pub const DEFAULT_LOG_CAPACITY: usize = 100_000;
+/// Seed of the simulator's noise and fault dice (reproducible by default).
+pub const DEFAULT_SEED: u64 = 0x5EED_1D0C;
+
+/// Everything a simulated bus is built from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimConfig {
+    /// One device per entry, in bus order; duplicates make id conflicts.
+    pub ids: Vec<u8>,
+    /// The baud the devices start at (unless a state file says otherwise).
+    pub baud: u32,
+    /// Request's last byte to reply's first byte.
+    pub turnaround: Duration,
+    /// Duration of `mcAlign` after the first enable since power-up.
+    pub align_time: Duration,
+    /// Power-up to the spontaneous INFO_01.
+    pub boot_delay: Duration,
+    /// Where flash contents (ids, parameters) survive a restart, as JSON.
+    pub state_file: Option<PathBuf>,
+    pub stall_fault_after: Duration,
+    pub soft_ver: u8,
+    pub log_capacity: usize,
+    pub seed: u64,
+    /// Run the simulator thread under SCHED_FIFO if the system allows it:
+    /// tighter delivery times on a busy machine. Off by default (it is a
+    /// privilege, and a spinning real-time thread competes with everything).
+    pub realtime: bool,
+}
+
+impl SimConfig {
+    pub fn new(ids: Vec<u8>, baud: u32) -> Self {
+        Self {
+            ids,
+            baud,
+            turnaround: DEFAULT_TURNAROUND,
+            align_time: DEFAULT_ALIGN_TIME,
+            boot_delay: DEFAULT_BOOT_DELAY,
+            state_file: None,
+            stall_fault_after: DEFAULT_STALL_FAULT_AFTER,
+            soft_ver: DEFAULT_SOFT_VER,
+            log_capacity: DEFAULT_LOG_CAPACITY,
+            seed: DEFAULT_SEED,
+            realtime: false,
+        }
+    }
+
+    /// Refuses what no bus could be: no devices, a bad id, a baud no module speaks.
+    pub fn validate(&self) -> Result<(), SimError> {
+        if self.ids.is_empty() {
+            return Err(SimError::BadIds("a bus needs at least one device".into()));
+        }
+        if let Some(bad) = self.ids.iter().find(|id| !is_device_id(**id)) {
+            return Err(SimError::BadIds(format!(
+                "{bad} is not a device id (1..=159)"
+            )));
+        }
+        if BaudLevel::from_baud(self.baud).is_none() {
+            return Err(SimError::BadBaud(self.baud));
+        }
+        Ok(())
+    }
+}
+
+/// Why a simulator could not be built or run.
+#[derive(Debug, Error)]
+pub enum SimError {
+    #[error("bad device ids: {0}")]
+    BadIds(String),
+    #[error("baud {0} is not one the modules speak (500000, 230400, 115200, 38400, 19200)")]
+    BadBaud(u32),
+    #[error("state file {path}: {why}")]
+    StateFile { path: PathBuf, why: String },
+    #[error("pseudo-terminal: {0}")]
+    Pty(#[source] std::io::Error),
+    #[error("simulator thread: {0}")]
+    Thread(#[source] std::io::Error),
+}
+
+/// Parses `"1-16"`, `"1,2,5-7"`, `"3,3"`: ranges and lists, duplicates kept
+/// (they reproduce id conflicts), order kept.
+pub fn parse_ids(spec: &str) -> Result<Vec<u8>, SimError> {
+    let mut ids = Vec::new();
+    for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        match part.split_once('-') {
+            Some((a, b)) => {
+                let (lo, hi) = (parse_one(a)?, parse_one(b)?);
+                if lo > hi {
+                    return Err(SimError::BadIds(format!("range {part} runs backwards")));
+                }
+                ids.extend(lo..=hi);
+            }
+            None => ids.push(parse_one(part)?),
+        }
+    }
+    if ids.is_empty() {
+        return Err(SimError::BadIds(format!("`{spec}` names no device")));
+    }
+    Ok(ids)
+}
+
+fn parse_one(text: &str) -> Result<u8, SimError> {
+    let text = text.trim();
+    match text.parse::<u8>() {
+        Ok(id) if is_device_id(id) => Ok(id),
+        _ => Err(SimError::BadIds(format!(
+            "`{text}` is not a device id (1..=159)"
+        ))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ids_parse_ranges_lists_and_duplicates() {
+        assert_eq!(parse_ids("1-4").unwrap(), vec![1, 2, 3, 4]);
+        assert_eq!(parse_ids("1,2,5-7").unwrap(), vec![1, 2, 5, 6, 7]);
+        assert_eq!(parse_ids("3,3").unwrap(), vec![3, 3]);
+        assert_eq!(parse_ids(" 159 ").unwrap(), vec![159]);
+    }
+
+    #[test]
+    fn bad_ids_are_refused() {
+        for bad in ["", "0", "160", "5-2", "a", "1-", "1,,x"] {
+            assert!(parse_ids(bad).is_err(), "{bad:?} should fail");
+        }
+    }
+
+    #[test]
+    fn config_validation_checks_baud_and_ids() {
+        assert!(SimConfig::new(vec![1], 500_000).validate().is_ok());
+        assert!(SimConfig::new(vec![1], 9600).validate().is_err());
+        assert!(SimConfig::new(vec![], 500_000).validate().is_err());
+    }
+}

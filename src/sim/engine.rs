@@ -1,0 +1,365 @@
+//! The simulated bus as a pure function of timestamps: host bytes go in with
+//! their arrival instant, the line model places and referees them, devices
+//! act on the frames that reach them intact, and reply bytes come out with
+//! the instant they are due at the host. The runner thread supplies real
+//! time and moves the bytes; tests can drive this directly with made-up
+//! instants.
+
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+use crate::protocol::{BaudLevel, Command, Frame, FrameBytes, StreamDecoder};
+
+use super::config::{SimConfig, SimError};
+use super::device::Device;
+use super::faults::{collide, misframed, noise_frame, Fault, LineFaults};
+use super::log::{addressed_id, FrameLog, WireFrame};
+use super::params::{FlashImage, FlashStore, Params};
+use super::rng::Rng;
+use super::stats::SimStats;
+use super::view::DeviceView;
+use super::wire::{frame_time, DeviceTx, HostTx, Wire, WireEvent};
+
+/// Delivery-error samples kept for measurement.
+const DELIVERY_SAMPLES: usize = 100_000;
+/// Devices' physics is run at least this often, so no observer or frame
+/// ever has to integrate a long idle stretch while holding the lock.
+const TICK: Duration = Duration::from_millis(20);
+
+/// Reply bytes due at the host at `due`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Delivery {
+    pub due: Instant,
+    pub bytes: FrameBytes,
+}
+
+#[derive(Debug)]
+pub struct Engine {
+    turnaround: Duration,
+    default_baud: u32,
+    devices: Vec<Device>,
+    wire: Wire,
+    decoder: StreamDecoder,
+    faults: LineFaults,
+    stats: SimStats,
+    corrupted_host_frames: u64,
+    log: FrameLog,
+    flash: FlashStore,
+    rng: Rng,
+    unplugged: bool,
+    delivery_errors_ns: VecDeque<i64>,
+    /// End of the last garbled transmission handed to the host: overlapping
+    /// collided transmissions reach the host as one garbled frame.
+    garbage_until: Option<Instant>,
+    last_tick: Instant,
+}
+
+impl Engine {
+    /// Powers the bus up at `now` (flash from the state file, if any).
+    pub fn new(cfg: &SimConfig, now: Instant) -> Result<Self, SimError> {
+        cfg.validate()?;
+        let level = BaudLevel::from_baud(cfg.baud).ok_or(SimError::BadBaud(cfg.baud))?;
+        let flash = FlashStore::new(cfg.state_file.clone());
+        let saved = flash.load()?;
+        let devices = Device::bus(cfg, &saved, Params::factory(level), now);
+        Ok(Self {
+            turnaround: cfg.turnaround,
+            default_baud: cfg.baud,
+            devices,
+            wire: Wire::new(),
+            decoder: StreamDecoder::new(),
+            faults: LineFaults::default(),
+            stats: SimStats::new(now),
+            corrupted_host_frames: 0,
+            log: FrameLog::new(cfg.log_capacity),
+            flash,
+            rng: Rng::new(cfg.seed),
+            unplugged: false,
+            delivery_errors_ns: VecDeque::new(),
+            garbage_until: None,
+            last_tick: now,
+        })
+    }
+
+    /// Bytes the host wrote, read at `at`, while its port was set to `host_baud`.
+    pub fn on_host_bytes(&mut self, bytes: &[u8], at: Instant, host_baud: Option<u32>) {
+        self.decoder.push(bytes);
+        while let Some((_, fb)) = self.decoder.next_frame_with_bytes() {
+            let dur = frame_time(host_baud.unwrap_or(self.default_baud));
+            let p = self.wire.place_host(fb, at, host_baud, dur);
+            self.stats.queued_ahead += u64::from(p.queued);
+            self.stats.collisions += p.collisions;
+        }
+    }
+
+    /// When something next happens on the line.
+    pub fn next_event(&self) -> Option<Instant> {
+        let announce = self.devices.iter().filter_map(Device::announce_at).min();
+        match (self.wire.next_event(), announce) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// Runs every device's physics up to `now` if it has not run for a while.
+    pub fn tick(&mut self, now: Instant) {
+        if now.saturating_duration_since(self.last_tick) >= TICK {
+            self.devices.iter_mut().for_each(|d| d.advance_to(now));
+            self.last_tick = now;
+        }
+    }
+
+    /// Host frames waiting for or on the line.
+    pub fn host_backlog(&self) -> usize {
+        self.wire.host_backlog()
+    }
+
+    /// Runs everything due by `now`; returns the bytes due at the host, in order.
+    /// `host_baud` is the host port's setting now (replies at another baud are garbage to it).
+    pub fn advance(&mut self, now: Instant, host_baud: Option<u32>) -> Vec<Delivery> {
+        let mut out = Vec::new();
+        loop {
+            let wire_t = self.wire.next_event().filter(|t| *t <= now);
+            let announce = self.next_announcement(now);
+            match (wire_t, announce) {
+                (None, None) => break,
+                (w, Some((t, slot))) if w.map_or(true, |w| t < w) => self.announce(slot, t),
+                _ => match self.wire.pop_due(now) {
+                    Some(WireEvent::Host(h)) => self.on_host_frame(h),
+                    Some(WireEvent::Device(d)) => out.extend(self.deliver(d, host_baud)),
+                    None => break,
+                },
+            }
+        }
+        self.wire.fold(now);
+        out
+    }
+
+    fn next_announcement(&self, now: Instant) -> Option<(Instant, usize)> {
+        self.devices
+            .iter()
+            .filter_map(|d| d.announce_at().filter(|t| *t <= now).map(|t| (t, d.slot)))
+            .min()
+    }
+
+    fn announce(&mut self, slot: usize, at: Instant) {
+        let Some(dev) = self.devices.get_mut(slot) else {
+            return;
+        };
+        let Some(reply) = dev.take_announcement(at) else {
+            return;
+        };
+        let baud = dev.baud();
+        let tx = DeviceTx {
+            start: at,
+            end: at + frame_time(baud),
+            slot,
+            dev_id: reply.dev_id,
+            bytes: reply.encode(),
+            baud,
+            spontaneous: true,
+            collided: false,
+        };
+        self.stats.collisions += self.wire.schedule_device(tx, Duration::ZERO);
+    }
+
+    /// A host frame has fully arrived: every device that heard it intact acts on it.
+    fn on_host_frame(&mut self, h: HostTx) {
+        self.stats.host_frames += 1;
+        let cmd = Frame::decode(&h.bytes)
+            .ok()
+            .and_then(|f| Command::from_frame(&f).ok());
+        self.log.push(WireFrame {
+            start: h.start,
+            end: h.end,
+            from_host: true,
+            dev_id: cmd.as_ref().and_then(addressed_id),
+            bytes: h.bytes,
+            collided: h.collided,
+        });
+        if h.collided {
+            self.stats.collided_host_frames += 1;
+            return;
+        }
+        let mut bytes = h.bytes;
+        if self.faults.corrupt(&mut bytes, &mut self.rng) {
+            self.corrupted_host_frames += 1;
+            return;
+        }
+        let Some(cmd) = cmd else {
+            self.stats.kinds.not_a_command += 1;
+            return;
+        };
+        self.stats.kinds.count(&cmd);
+        self.dispatch(&cmd, &h);
+    }
+
+    fn dispatch(&mut self, cmd: &Command, h: &HostTx) {
+        let mut mismatch = false;
+        let mut persist = false;
+        let lead = self.turnaround + self.faults.extra_turnaround;
+        for slot in 0..self.devices.len() {
+            let dev = &mut self.devices[slot];
+            if h.baud != Some(dev.baud()) {
+                mismatch = true;
+                continue;
+            }
+            let outcome = dev.handle(cmd, h.end);
+            persist |= outcome.persist;
+            let Some(reply) = outcome.reply else { continue };
+            if self.faults.drops(reply.dev_id, &mut self.rng) {
+                self.stats.dropped_replies += 1;
+                continue;
+            }
+            let start = h.end + lead;
+            let baud = h.baud.unwrap_or(self.default_baud);
+            let tx = DeviceTx {
+                start,
+                end: start + frame_time(baud),
+                slot,
+                dev_id: reply.dev_id,
+                bytes: reply.encode(),
+                baud,
+                spontaneous: false,
+                collided: false,
+            };
+            self.stats.collisions += self.wire.schedule_device(tx, lead);
+        }
+        self.stats.baud_mismatches += u64::from(mismatch);
+        if persist {
+            self.save_flash();
+        }
+    }
+
+    fn save_flash(&self) {
+        let images: Vec<FlashImage> = self.devices.iter().map(Device::flash_image).collect();
+        if let Err(e) = self.flash.save(&images) {
+            tracing::warn!("simulator flash not saved: {e}");
+        }
+    }
+
+    /// A device transmission has left the line: the bytes the host receives.
+    fn deliver(&mut self, d: DeviceTx, host_baud: Option<u32>) -> Option<Delivery> {
+        self.log.push(WireFrame {
+            start: d.start,
+            end: d.end,
+            from_host: false,
+            dev_id: Some(d.dev_id),
+            bytes: d.bytes,
+            collided: d.collided,
+        });
+        let mut bytes = d.bytes;
+        if d.collided {
+            self.stats.collided_replies += 1;
+            if self.garbage_until.is_some_and(|g| d.start < g) {
+                return None;
+            }
+            self.garbage_until = Some(d.end);
+            bytes = collide(&bytes, &noise_frame(&mut self.rng));
+        } else if host_baud != Some(d.baud) {
+            self.stats.baud_mismatches += 1;
+            bytes = misframed(&bytes);
+        } else if self.faults.corrupt(&mut bytes, &mut self.rng) {
+            self.stats.corrupted_replies += 1;
+        } else if d.spontaneous {
+            self.stats.announcements += 1;
+        } else {
+            self.stats.replies += 1;
+        }
+        if self.unplugged {
+            return None;
+        }
+        Some(Delivery { due: d.end, bytes })
+    }
+
+    /// Counters and line busy time as of `now`.
+    pub fn stats(&self, now: Instant) -> SimStats {
+        let dec = self.decoder.stats();
+        SimStats {
+            at: now,
+            busy: self.wire.busy_until(now),
+            crc_errors: dec.crc_errors + self.corrupted_host_frames,
+            skipped_bytes: dec.skipped_bytes,
+            unplugged: self.unplugged,
+            ..self.stats
+        }
+    }
+
+    /// Every device's state, physics run up to `now`.
+    pub fn views(&mut self, now: Instant) -> Vec<DeviceView> {
+        self.devices
+            .iter_mut()
+            .map(|d| {
+                d.advance_to(now);
+                d.view()
+            })
+            .collect()
+    }
+
+    pub fn frame_log(&self) -> Vec<WireFrame> {
+        self.log.snapshot()
+    }
+
+    pub fn clear_frame_log(&mut self) {
+        self.log.clear();
+    }
+
+    /// Applies a device or line fault (unplugging itself is the runner's job).
+    pub fn inject(&mut self, fault: Fault, now: Instant) {
+        match fault {
+            Fault::CorruptRate(r) => self.faults.corrupt_rate = r.clamp(0.0, 1.0),
+            Fault::DropReplies { dev_id, rate } => self.faults.set_drop(dev_id, rate),
+            Fault::ExtraTurnaround(d) => self.faults.extra_turnaround = d,
+            Fault::Stall { dev_id, at_deg } => self.each(dev_id, |d| d.set_obstacle(at_deg, now)),
+            Fault::PowerCycle { dev_id } => self.each(dev_id, |d| d.power_up(now, Duration::ZERO)),
+            Fault::UnderVoltage { dev_id, on } => {
+                self.each(dev_id, |d| d.set_under_voltage(on, now))
+            }
+            Fault::ClearAll => {
+                self.faults = LineFaults::default();
+                for d in &mut self.devices {
+                    d.clear_obstacle(now);
+                    d.set_under_voltage(false, now);
+                }
+            }
+            Fault::Unplug | Fault::Replug => {}
+        }
+    }
+
+    fn each(&mut self, id: u8, f: impl FnMut(&mut Device)) {
+        self.devices.iter_mut().filter(|d| d.id == id).for_each(f);
+    }
+
+    /// The line was unplugged (in-flight frames are lost) or plugged back.
+    pub fn set_unplugged(&mut self, unplugged: bool) {
+        self.unplugged = unplugged;
+        if unplugged {
+            self.wire.clear_in_flight();
+        }
+        self.decoder.clear();
+    }
+
+    pub fn record_delivery(&mut self, due: Instant, written: Instant) {
+        let err = if written >= due {
+            i64::try_from((written - due).as_nanos()).unwrap_or(i64::MAX)
+        } else {
+            -i64::try_from((due - written).as_nanos()).unwrap_or(i64::MAX)
+        };
+        if self.delivery_errors_ns.len() == DELIVERY_SAMPLES {
+            self.delivery_errors_ns.pop_front();
+        }
+        self.delivery_errors_ns.push_back(err);
+    }
+
+    pub fn delivery_errors_ns(&self) -> Vec<i64> {
+        self.delivery_errors_ns.iter().copied().collect()
+    }
+
+    pub fn count_overrun(&mut self, bytes: usize) {
+        self.stats.host_overrun_bytes += bytes as u64;
+    }
+}
+
+#[cfg(test)]
+#[path = "engine_tests.rs"]
+mod tests;

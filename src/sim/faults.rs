@@ -1,0 +1,172 @@
+//! Faults that can be switched on and off while the simulator runs, and the
+//! line-level ones' state (corruption, dropped replies, extra turnaround).
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use crate::protocol::FrameBytes;
+
+use super::rng::Rng;
+
+/// A fault to inject (or clear) at run time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Fault {
+    /// Each byte on the line (either direction) is garbled with this probability.
+    CorruptRate(f64),
+    /// Replies of one device (or all) vanish with this probability.
+    DropReplies {
+        dev_id: Option<u8>,
+        rate: f64,
+    },
+    /// Added to every device's turnaround.
+    ExtraTurnaround(Duration),
+    /// An obstacle at `at_deg` (reported °), or right where the joint is now.
+    Stall {
+        dev_id: u8,
+        at_deg: Option<f64>,
+    },
+    /// Power off and on: RAM from flash, INFO_01 re-announced.
+    PowerCycle {
+        dev_id: u8,
+    },
+    UnderVoltage {
+        dev_id: u8,
+        on: bool,
+    },
+    /// The whole bus unplugged: the host's port hangs up.
+    Unplug,
+    /// Plugged back (a pty gets a new /dev/pts node behind the same link).
+    Replug,
+    /// Every fault off, obstacles removed, voltage restored, line plugged.
+    ClearAll,
+}
+
+/// Line-level fault settings.
+#[derive(Debug, Clone, Default)]
+pub struct LineFaults {
+    pub corrupt_rate: f64,
+    /// Drop rate per device id; `None` is every device.
+    pub drop_rates: BTreeMap<Option<u8>, f64>,
+    pub extra_turnaround: Duration,
+}
+
+impl LineFaults {
+    pub fn set_drop(&mut self, dev_id: Option<u8>, rate: f64) {
+        if rate > 0.0 {
+            self.drop_rates.insert(dev_id, rate.min(1.0));
+        } else {
+            self.drop_rates.remove(&dev_id);
+        }
+    }
+
+    /// Whether this device's reply is swallowed this time.
+    pub fn drops(&self, dev_id: u8, rng: &mut Rng) -> bool {
+        let all = self.drop_rates.get(&None).copied().unwrap_or(0.0);
+        let one = self.drop_rates.get(&Some(dev_id)).copied().unwrap_or(0.0);
+        rng.chance(all.max(one))
+    }
+
+    /// Garbles bytes at the corruption rate; true if any byte changed.
+    pub fn corrupt(&self, bytes: &mut FrameBytes, rng: &mut Rng) -> bool {
+        let mut hit = false;
+        for b in bytes.iter_mut() {
+            if rng.chance(self.corrupt_rate) {
+                // Flip at least one bit so the byte really changes.
+                *b ^= (rng.next_u64() as u8) | 1;
+                hit = true;
+            }
+        }
+        hit
+    }
+}
+
+/// What two devices talking at once leave on the line: each bit is pulled
+/// low by whichever driver sends a 0 (open-collector reading), and a frame
+/// that happens to survive that is garbled in its CRC so it never decodes.
+pub fn collide(a: &FrameBytes, b: &FrameBytes) -> FrameBytes {
+    let mut out = [0u8; 20];
+    for (o, (x, y)) in out.iter_mut().zip(a.iter().zip(b)) {
+        *o = x & y;
+    }
+    if out == *a || out == *b {
+        garble_crc(&mut out);
+    }
+    out
+}
+
+/// What another driver puts on the line during a collision: random bits.
+pub fn noise_frame(rng: &mut Rng) -> FrameBytes {
+    let mut out = [0u8; 20];
+    for chunk in out.chunks_mut(8) {
+        let n = chunk.len();
+        chunk.copy_from_slice(&rng.next_u64().to_le_bytes()[..n]);
+    }
+    out
+}
+
+/// The bit pattern a UART at another baud makes of a frame: framing errors
+/// and wrong bits. Modelled as the high nibbles stuck (a slower receiver
+/// samples the tail of each byte as stop-bit marks), which never decodes.
+pub fn misframed(bytes: &FrameBytes) -> FrameBytes {
+    collide(bytes, &[MISFRAMED_MASK; 20])
+}
+
+const MISFRAMED_MASK: u8 = 0xF0;
+
+/// Offset of the CRC of a standard frame, the bytes both layouts' CRCs touch.
+const CRC_AT: usize = 16;
+const CRC_GARBLE: u8 = 0x5A;
+
+/// Makes a frame fail its CRC check (both layouts).
+pub fn garble_crc(bytes: &mut FrameBytes) {
+    bytes[CRC_AT] ^= CRC_GARBLE;
+    bytes[CRC_AT + 1] ^= CRC_GARBLE;
+    bytes[CRC_AT + 2] ^= CRC_GARBLE;
+    bytes[CRC_AT + 3] ^= CRC_GARBLE;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::{Command, Config, Frame, InfoBlock};
+
+    #[test]
+    fn identical_frames_colliding_still_fail_crc() {
+        let f = Command::Config(Config::read(1, InfoBlock::Info01)).encode();
+        assert!(Frame::decode(&collide(&f, &f)).is_err());
+    }
+
+    #[test]
+    fn misframed_and_noisy_frames_never_decode() {
+        let f = Command::Config(Config::read(1, InfoBlock::Info01)).encode();
+        assert!(Frame::decode(&misframed(&f)).is_err());
+        let mut rng = Rng::new(5);
+        assert_ne!(noise_frame(&mut rng), noise_frame(&mut rng));
+    }
+
+    #[test]
+    fn corruption_at_rate_one_changes_every_byte() {
+        let mut rng = Rng::new(3);
+        let faults = LineFaults {
+            corrupt_rate: 1.0,
+            ..Default::default()
+        };
+        let orig = [0x55u8; 20];
+        let mut b = orig;
+        assert!(faults.corrupt(&mut b, &mut rng));
+        assert!(b.iter().zip(orig.iter()).all(|(x, y)| x != y));
+    }
+
+    #[test]
+    fn drop_rate_per_device_or_all() {
+        let mut rng = Rng::new(9);
+        let mut f = LineFaults::default();
+        f.set_drop(Some(2), 1.0);
+        assert!(f.drops(2, &mut rng));
+        assert!(!f.drops(3, &mut rng));
+        f.set_drop(None, 1.0);
+        assert!(f.drops(3, &mut rng));
+        f.set_drop(None, 0.0);
+        assert!(!f.drops(3, &mut rng));
+    }
+}

@@ -1,0 +1,72 @@
+//! The device end of the line, as the runner thread needs it: timed reads,
+//! non-blocking writes, the host port's baud, and unplug/replug. Two kinds:
+//! the in-memory pipe here, the pseudo-terminal in [`super::pty`].
+
+use std::io;
+use std::path::Path;
+use std::time::Duration;
+
+use crate::transport::memory::MemoryPort;
+use crate::transport::{is_hangup, Transport};
+
+/// What the runner needs from the device end of a line.
+pub trait Line: Send {
+    /// Waits up to `timeout` for host bytes; `Ok(0)` on timeout or while unplugged.
+    fn read_timeout(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize>;
+    /// Hands bytes to the host without blocking; returns how many it took.
+    fn write(&mut self, bytes: &[u8]) -> io::Result<usize>;
+    /// The baud the host's port is set to now (unknown rates: `None`).
+    fn host_baud(&self) -> Option<u32>;
+    fn unplug(&mut self) -> io::Result<()>;
+    fn replug(&mut self) -> io::Result<()>;
+    fn is_unplugged(&self) -> bool;
+    /// The path a host opens, for a tty-like line.
+    fn path(&self) -> Option<&Path> {
+        None
+    }
+}
+
+/// The device end of an in-memory pipe.
+pub struct MemoryLine {
+    port: MemoryPort,
+}
+
+impl MemoryLine {
+    pub fn new(port: MemoryPort) -> Self {
+        Self { port }
+    }
+}
+
+impl Line for MemoryLine {
+    fn read_timeout(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
+        match self.port.read_timeout(buf, timeout) {
+            Err(e) if is_hangup(&e) => Ok(0),
+            other => other,
+        }
+    }
+
+    fn write(&mut self, bytes: &[u8]) -> io::Result<usize> {
+        self.port.write_all(bytes).map(|()| bytes.len())
+    }
+
+    fn host_baud(&self) -> Option<u32> {
+        Some(self.port.baud())
+    }
+
+    fn unplug(&mut self) -> io::Result<()> {
+        self.port.set_hung_up(true);
+        Ok(())
+    }
+
+    fn replug(&mut self) -> io::Result<()> {
+        // Restoring clears the pipe: only do it if the line really was down.
+        if self.port.is_hung_up() {
+            self.port.set_hung_up(false);
+        }
+        Ok(())
+    }
+
+    fn is_unplugged(&self) -> bool {
+        self.port.is_hung_up()
+    }
+}

@@ -1,0 +1,222 @@
+//! The wire-accurate simulator of a bus of joint modules: the daemon's
+//! embedded default, every integration test's fixture, the load of every
+//! benchmark. Its behaviour comes from SPEC.md; its bytes from
+//! [`crate::protocol`].
+//!
+//! # Layout
+//! - [`config`]: [`SimConfig`], [`parse_ids`], [`SimError`].
+//! - [`wire`]: the half-duplex line and its referee (queueing, collisions), pure.
+//! - [`busy`]: line occupancy accounting.
+//! - [`engine`]: the whole bus as a function of timestamps (wire + devices + faults).
+//! - [`device`]: one module's state machine and SPEC behaviour, pure.
+//! - [`physics`]: angle, speed, current, protection, burst, temperature.
+//! - [`params`]: RAM/flash parameters and the JSON state file.
+//! - [`faults`]: run-time fault injection ([`Fault`]).
+//! - [`line`], [`pty`]: the device end of an in-memory pipe or a pseudo-terminal.
+//! - [`runner`]: the dedicated thread that moves bytes at their modelled instants.
+//! - [`stats`], [`log`], [`view`]: what observers see.
+//! - [`measure`]: real delivery times against the model (`jointd sim --measure N`).
+//! - [`cli`], [`console`]: `jointd sim` and its stdin fault commands.
+//!
+//! # The wire model
+//! Every frame occupies 200/baud s of one half-duplex line. A host frame's
+//! interval starts when its bytes arrive (or when the previous host frame
+//! leaves the line: *queued ahead*, as a UART FIFO). A device acts on a frame
+//! when its last byte arrives; a reply starts a turnaround later and reaches
+//! the host when its last byte would. Any two transmissions that overlap
+//! collide: the host gets garbage, the device applies nothing. Busy time is
+//! the union of frames on the line plus the turnaround before each reply.
+//!
+//! # Modelling choices SPEC leaves open
+//! - A baud change (index 15) is RAM: it takes effect after the RES and is
+//!   kept over a reboot only after WRITE_FLASH. SET_ID is flash at once.
+//! - Power-up announcements are staggered one frame slot per device (by bus
+//!   position) so a healthy bus can be discovered from them.
+//! - Enable holds the current angle; references sent while disabled are kept
+//!   but replaced by that hold on enable. Jog and references in READY do nothing.
+//! - COMM_SILENT with a non-zero value silences the device; with 0 it speaks
+//!   again; a reboot or power cycle also ends the silence.
+//! - UPDATE_ENC_ZERO answers RES (rev 2.0.8): success in READY (the next
+//!   enable aligns again), failure while enabled.
+//! - The output zero set by a jog or UPDATE_FIN_ZERO survives a power cycle.
+//! - Under-voltage reports err 5 (as the captured vendor frame does); it faults
+//!   an enabled device. A stall latches err 8 after `stall_fault_after` of
+//!   pushing; disable clears a fault whose cause is gone.
+//! - The current cap (MAX_CUR, or PROTECT_CUR_LIMIT while protection holds)
+//!   limits the reported current, not the motion of a free joint.
+//!
+//! ```no_run
+//! use jointd::sim::{parse_ids, SimConfig, Simulator};
+//! let sim = Simulator::spawn_pty(SimConfig::new(parse_ids("1-16")?, 500_000))?;
+//! println!("{}", sim.device_path().unwrap().display());
+//! # Ok::<(), jointd::sim::SimError>(())
+//! ```
+
+pub mod busy;
+pub mod cli;
+pub mod config;
+pub mod console;
+pub mod device;
+pub mod engine;
+pub mod faults;
+pub mod line;
+pub mod log;
+pub mod measure;
+pub mod params;
+pub mod physics;
+pub mod pty;
+mod rng;
+pub mod runner;
+pub mod stats;
+pub mod view;
+pub mod wire;
+
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+pub use config::{parse_ids, SimConfig, SimError};
+pub use faults::Fault;
+pub use log::WireFrame;
+pub use params::Params;
+pub use stats::{FrameKinds, SimStats};
+pub use view::DeviceView;
+
+use crate::transport::memory::{self, MemoryPort};
+use engine::Engine;
+use line::{Line, MemoryLine};
+use pty::PtyLine;
+use runner::{lock_engine, Control, LineOp};
+
+/// Starts simulated buses.
+pub struct Simulator;
+
+impl Simulator {
+    /// A bus behind a pseudo-terminal; `device_path()` is the tty to open.
+    pub fn spawn_pty(cfg: SimConfig) -> Result<SimHandle, SimError> {
+        cfg.validate()?;
+        let line = PtyLine::open(cfg.baud).map_err(SimError::Pty)?;
+        let path = line.path().map(PathBuf::from);
+        SimHandle::spawn(&cfg, Box::new(line), path)
+    }
+
+    /// A bus behind an in-memory pipe; returns the host end.
+    pub fn spawn_memory(cfg: SimConfig) -> Result<(SimHandle, MemoryPort), SimError> {
+        cfg.validate()?;
+        let (host, device) = memory::pair(cfg.baud);
+        let handle = SimHandle::spawn(&cfg, Box::new(MemoryLine::new(device)), None)?;
+        Ok((handle, host))
+    }
+}
+
+/// A running simulator. Clones share it; the last one dropped stops it.
+#[derive(Clone)]
+pub struct SimHandle {
+    inner: Arc<Inner>,
+}
+
+struct Inner {
+    engine: Arc<Mutex<Engine>>,
+    ctl: Arc<Control>,
+    thread: Mutex<Option<JoinHandle<()>>>,
+    device_path: Option<PathBuf>,
+}
+
+impl SimHandle {
+    fn spawn(
+        cfg: &SimConfig,
+        line: Box<dyn Line>,
+        device_path: Option<PathBuf>,
+    ) -> Result<Self, SimError> {
+        let engine = Arc::new(Mutex::new(Engine::new(cfg, Instant::now())?));
+        let ctl = Arc::new(Control::default());
+        let (e, c, rt) = (engine.clone(), ctl.clone(), cfg.realtime);
+        let thread = std::thread::Builder::new()
+            .name("jointd-sim".into())
+            .spawn(move || runner::run(e, line, c, rt))
+            .map_err(SimError::Thread)?;
+        Ok(Self {
+            inner: Arc::new(Inner {
+                engine,
+                ctl,
+                thread: Mutex::new(Some(thread)),
+                device_path,
+            }),
+        })
+    }
+
+    fn engine(&self) -> std::sync::MutexGuard<'_, Engine> {
+        lock_engine(&self.inner.engine)
+    }
+
+    /// The tty a host opens (a stable link; `None` for the memory pipe).
+    pub fn device_path(&self) -> Option<PathBuf> {
+        self.inner.device_path.clone()
+    }
+
+    /// Counters and busy time as of now.
+    pub fn stats(&self) -> SimStats {
+        self.engine().stats(Instant::now())
+    }
+
+    /// Every transmission that left the line, oldest first (bounded ring).
+    pub fn frame_log(&self) -> Vec<WireFrame> {
+        self.engine().frame_log()
+    }
+
+    pub fn clear_frame_log(&self) {
+        self.engine().clear_frame_log();
+    }
+
+    /// The first device with this id, as it is now.
+    pub fn device(&self, id: u8) -> Option<DeviceView> {
+        self.devices().into_iter().find(|d| d.id == id)
+    }
+
+    /// Every device in bus order (duplicates included).
+    pub fn devices(&self) -> Vec<DeviceView> {
+        self.engine().views(Instant::now())
+    }
+
+    /// Switches a fault on or off. Unplug and replug return once done.
+    pub fn inject(&self, fault: Fault) {
+        match fault {
+            Fault::Unplug => self.inner.ctl.line_op(LineOp::Unplug),
+            Fault::Replug => self.inner.ctl.line_op(LineOp::Replug),
+            Fault::ClearAll => {
+                self.engine().inject(fault, Instant::now());
+                self.inner.ctl.line_op(LineOp::Replug);
+            }
+            other => self.engine().inject(other, Instant::now()),
+        }
+    }
+
+    /// Real delivery instant minus modelled instant of each reply (ns, late > 0).
+    pub fn delivery_errors_ns(&self) -> Vec<i64> {
+        self.engine().delivery_errors_ns()
+    }
+
+    /// Stops the thread (idempotent; also done when the last handle drops).
+    pub fn shutdown(&self) {
+        self.inner.stop();
+    }
+}
+
+impl Inner {
+    fn stop(&self) {
+        self.ctl.request_shutdown();
+        let thread = self.thread.lock().unwrap_or_else(|p| p.into_inner()).take();
+        if let Some(t) = thread {
+            if t.thread().id() != std::thread::current().id() {
+                let _ = t.join();
+            }
+        }
+    }
+}
+
+impl Drop for Inner {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}

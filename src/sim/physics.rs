@@ -1,0 +1,345 @@
+//! One joint's mechanics and electrics, integrated in small time steps:
+//! output angle and speed under a position or speed drive shaped by the LPF
+//! level, an optional obstacle, the q-axis current that results, the current
+//! protection and burst of SPEC §4.3 (indices 18–23, 26, 27) and the winding
+//! temperature.
+//!
+//! All angles here are *physical* output degrees (before the device's zero
+//! offset); speeds are output °/s.
+
+use crate::protocol::units::{burst_ms, current_limit_a};
+
+use super::params::Params;
+
+/// Largest integration step; longer advances are split.
+pub const MAX_STEP_S: f64 = 0.000_5;
+/// Position loop gain: commanded speed per degree of error (1/s).
+const POS_GAIN: f64 = 40.0;
+/// Speed smoothing time constant per LPF level 0..=5 (higher = smoother).
+const LPF_TAU_S: [f64; 6] = [0.004, 0.015, 0.03, 0.06, 0.12, 0.25];
+/// How fast a released joint coasts to rest.
+const COAST_TAU_S: f64 = 0.05;
+/// Current to hold position at rest, A.
+const HOLD_CURRENT_A: f64 = 0.03;
+/// Friction current per output °/s.
+const FRICTION_A_PER_DEG_S: f64 = 0.0015;
+/// Inertial current per output °/s².
+const INERTIA_A_PER_DEG_S2: f64 = 0.000_08;
+/// How fast the current climbs while pushing against an obstacle, A/s.
+const BLOCKED_RAMP_A_PER_S: f64 = 4.0;
+/// Closer than this to the obstacle counts as touching it, degrees.
+const CONTACT_DEG: f64 = 1e-6;
+/// Ambient temperature and heating (steady-state rise per A²), °C.
+pub const AMBIENT_C: f64 = 29.0;
+const HEAT_C_PER_A2: f64 = 40.0;
+const THERMAL_TAU_S: f64 = 30.0;
+const MS_PER_S: f64 = 1000.0;
+
+/// What the controller asks of the motor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Drive {
+    /// Released: no torque, the joint coasts to rest.
+    Off,
+    /// Hold or move to `target` (physical °) at up to `vmax` °/s.
+    Position { target: f64, vmax: f64 },
+    /// Turn at `vel` °/s.
+    Speed { vel: f64 },
+}
+
+/// Something the joint cannot move past.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Obstacle {
+    /// Physical angle, °.
+    pub at: f64,
+    /// Which side the joint is on (+1: above `at`); learnt from the first
+    /// motion when the obstacle is placed right where the joint is.
+    pub side: Option<f64>,
+}
+
+impl Obstacle {
+    pub fn at(at: f64) -> Self {
+        Self { at, side: None }
+    }
+}
+
+/// Current protection and burst state.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Protection {
+    pub active: bool,
+    above_s: f64,
+    below_s: f64,
+    burst_left_s: f64,
+    cool_left_s: f64,
+}
+
+impl Protection {
+    pub fn bursting(&self) -> bool {
+        self.burst_left_s > 0.0
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Joint {
+    pub pos: f64,
+    pub vel: f64,
+    pub acc: f64,
+    /// q-axis current, A (signed).
+    pub current: f64,
+    pub temp_c: f64,
+    pub obstacle: Option<Obstacle>,
+    /// Pushing against the obstacle right now.
+    pub blocked: bool,
+    /// How long it has been pushing without a break, s.
+    pub blocked_s: f64,
+    pub prot: Protection,
+}
+
+impl Default for Joint {
+    fn default() -> Self {
+        Self {
+            pos: 0.0,
+            vel: 0.0,
+            acc: 0.0,
+            current: 0.0,
+            temp_c: AMBIENT_C,
+            obstacle: None,
+            blocked: false,
+            blocked_s: 0.0,
+            prot: Protection::default(),
+        }
+    }
+}
+
+impl Joint {
+    /// Advances by `dt` seconds (split into small steps).
+    pub fn advance(&mut self, dt: f64, drive: Drive, p: &Params, bounds: (f64, f64)) {
+        let mut left = dt;
+        while left > 0.0 {
+            let h = left.min(MAX_STEP_S);
+            self.step(h, drive, p, bounds);
+            left -= h;
+        }
+    }
+
+    fn step(&mut self, dt: f64, drive: Drive, p: &Params, bounds: (f64, f64)) {
+        let (v_des, tau) = match drive {
+            Drive::Off => (0.0, COAST_TAU_S),
+            Drive::Position { target, vmax } => (
+                (POS_GAIN * (target - self.pos)).clamp(-vmax, vmax),
+                lpf_tau(p),
+            ),
+            Drive::Speed { vel } => (vel, lpf_tau(p)),
+        };
+        let vel = self.vel + (v_des - self.vel) * (dt / tau).min(1.0);
+        self.acc = (vel - self.vel) / dt;
+        self.vel = vel;
+        self.move_by(vel * dt, v_des, bounds);
+        self.update_current(dt, drive, v_des, p);
+        self.update_protection(dt, p);
+        let heat = AMBIENT_C + HEAT_C_PER_A2 * self.current * self.current;
+        self.temp_c += (heat - self.temp_c) * dt / THERMAL_TAU_S;
+    }
+
+    /// Moves, stopping at the travel bounds and at the obstacle.
+    fn move_by(&mut self, delta: f64, v_des: f64, (lo, hi): (f64, f64)) {
+        let mut next = (self.pos + delta).clamp(lo, hi);
+        if next != self.pos + delta {
+            self.vel = 0.0;
+        }
+        self.blocked = false;
+        if let Some(ob) = self.obstacle.as_mut() {
+            let side = *ob.side.get_or_insert_with(|| {
+                let d = self.pos - ob.at;
+                if d.abs() > CONTACT_DEG {
+                    d.signum()
+                } else {
+                    -v_des.signum()
+                }
+            });
+            if side != 0.0 && (next - ob.at) * side < 0.0 {
+                next = ob.at;
+                self.vel = 0.0;
+            }
+            let touching = (next - ob.at).abs() < CONTACT_DEG;
+            self.blocked = touching && v_des * side < 0.0;
+            if side == 0.0 {
+                ob.side = None;
+            }
+        }
+        self.pos = next;
+    }
+
+    fn update_current(&mut self, dt: f64, drive: Drive, v_des: f64, p: &Params) {
+        let cap = self.current_cap(p);
+        let demand = match drive {
+            Drive::Off => 0.0,
+            _ if self.blocked => {
+                self.blocked_s += dt;
+                v_des.signum() * (self.current.abs() + BLOCKED_RAMP_A_PER_S * dt)
+            }
+            _ => {
+                let sign = if self.vel != 0.0 {
+                    self.vel.signum()
+                } else {
+                    1.0
+                };
+                sign * HOLD_CURRENT_A
+                    + FRICTION_A_PER_DEG_S * self.vel
+                    + INERTIA_A_PER_DEG_S2 * self.acc
+            }
+        };
+        if !self.blocked {
+            self.blocked_s = 0.0;
+        }
+        self.current = demand.clamp(-cap, cap);
+    }
+
+    /// Max current, or the protection limit while protection holds (but not
+    /// during a burst).
+    pub fn current_cap(&self, p: &Params) -> f64 {
+        if self.prot.active && !self.prot.bursting() {
+            current_limit_a(p.protect_limit)
+        } else {
+            current_limit_a(p.max_cur)
+        }
+    }
+
+    fn update_protection(&mut self, dt: f64, p: &Params) {
+        let i = self.current.abs();
+        let pr = &mut self.prot;
+        pr.burst_left_s = (pr.burst_left_s - dt).max(0.0);
+        pr.cool_left_s = (pr.cool_left_s - dt).max(0.0);
+        if !pr.active {
+            pr.above_s = if i > current_limit_a(p.protect_lv1) {
+                pr.above_s + dt
+            } else {
+                0.0
+            };
+            if pr.above_s * MS_PER_S >= f64::from(p.lv1_delay_ms) && pr.above_s > 0.0 {
+                pr.active = true;
+                pr.below_s = 0.0;
+            }
+        } else {
+            pr.below_s = if i < current_limit_a(p.recv_cur) {
+                pr.below_s + dt
+            } else {
+                0.0
+            };
+            if pr.below_s * MS_PER_S >= f64::from(p.recv_win_ms) && pr.below_s > 0.0 {
+                pr.active = false;
+                pr.above_s = 0.0;
+            }
+        }
+    }
+
+    /// A new command while protection holds: a burst of full current for
+    /// PLUS_TIME, then no other burst until COLD_TIME has passed.
+    pub fn command_burst(&mut self, p: &Params) {
+        let pr = &mut self.prot;
+        if pr.active && pr.cool_left_s <= 0.0 && p.plus_time > 0 {
+            pr.burst_left_s = f64::from(burst_ms(p.plus_time)) / MS_PER_S;
+            pr.cool_left_s = pr.burst_left_s + f64::from(burst_ms(p.cold_time)) / MS_PER_S;
+        }
+    }
+}
+
+fn lpf_tau(p: &Params) -> f64 {
+    LPF_TAU_S[usize::from(p.lpf_level).min(LPF_TAU_S.len() - 1)]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::BaudLevel;
+
+    const BOUNDS: (f64, f64) = (-255.0, 255.0);
+
+    fn params() -> Params {
+        Params::factory(BaudLevel::B500000)
+    }
+
+    #[test]
+    fn position_drive_cruises_at_the_speed_limit_and_settles() {
+        let mut j = Joint::default();
+        let d = Drive::Position {
+            target: 90.0,
+            vmax: 100.0,
+        };
+        j.advance(0.5, d, &params(), BOUNDS);
+        assert!((j.vel - 100.0).abs() < 1.0, "cruise {}", j.vel);
+        assert!((j.pos - 50.0).abs() < 3.0, "pos {}", j.pos);
+        j.advance(1.0, d, &params(), BOUNDS);
+        assert!((j.pos - 90.0).abs() < 0.05, "settled {}", j.pos);
+        assert!(j.current.abs() < 0.1);
+    }
+
+    #[test]
+    fn speed_drive_stops_at_the_travel_bound() {
+        let mut j = Joint::default();
+        j.advance(2.0, Drive::Speed { vel: 200.0 }, &params(), BOUNDS);
+        assert_eq!(j.pos, 255.0);
+    }
+
+    #[test]
+    fn obstacle_blocks_and_protection_engages_then_bursts() {
+        let p = params();
+        let mut j = Joint {
+            obstacle: Some(Obstacle::at(10.0)),
+            ..Joint::default()
+        };
+        let d = Drive::Position {
+            target: 40.0,
+            vmax: 100.0,
+        };
+        j.advance(0.5, d, &p, BOUNDS);
+        assert_eq!(j.pos, 10.0);
+        assert!(j.blocked);
+        j.advance(1.0, d, &p, BOUNDS);
+        assert!(j.prot.active, "current {}", j.current);
+        assert!(j.current.abs() <= current_limit_a(p.protect_limit) + 1e-9);
+        j.command_burst(&p);
+        j.advance(0.05, d, &p, BOUNDS);
+        assert!(j.current.abs() > current_limit_a(p.protect_limit));
+        j.advance(0.1, d, &p, BOUNDS);
+        assert!(j.current.abs() <= current_limit_a(p.protect_limit) + 1e-9);
+        assert!(j.blocked_s > 1.0);
+    }
+
+    #[test]
+    fn moving_away_from_the_obstacle_is_free() {
+        let mut j = Joint {
+            obstacle: Some(Obstacle::at(5.0)),
+            ..Joint::default()
+        };
+        j.advance(
+            0.5,
+            Drive::Position {
+                target: -20.0,
+                vmax: 100.0,
+            },
+            &params(),
+            BOUNDS,
+        );
+        assert!((j.pos + 20.0).abs() < 0.5, "{}", j.pos);
+        assert!(!j.blocked);
+    }
+
+    #[test]
+    fn an_obstacle_placed_at_the_joint_blocks_the_first_motion() {
+        let mut j = Joint {
+            obstacle: Some(Obstacle::at(0.0)),
+            ..Joint::default()
+        };
+        j.advance(
+            0.2,
+            Drive::Position {
+                target: -20.0,
+                vmax: 100.0,
+            },
+            &params(),
+            BOUNDS,
+        );
+        assert_eq!(j.pos, 0.0);
+        assert!(j.blocked);
+    }
+}

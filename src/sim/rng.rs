@@ -1,0 +1,53 @@
+//! A small seedable random source (xorshift64*) for sensor noise and fault
+//! dice: reproducible runs, and no dependency for a few random numbers.
+
+/// Multiplier of xorshift64* (Vigna).
+const MULTIPLIER: u64 = 0x2545_F491_4F6C_DD1D;
+/// Replaces a zero seed, which xorshift cannot leave.
+const NONZERO_SEED: u64 = 0x9E37_79B9_7F4A_7C15;
+
+#[derive(Debug, Clone)]
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Self(if seed == 0 { NONZERO_SEED } else { seed })
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        let mut x = self.0;
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        self.0 = x;
+        x.wrapping_mul(MULTIPLIER)
+    }
+
+    /// Uniform in `[0, 1)`.
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Uniform in `[-amp, amp)`.
+    pub fn noise(&mut self, amp: f64) -> f64 {
+        (self.unit() * 2.0 - 1.0) * amp
+    }
+
+    /// True with probability `p`.
+    pub fn chance(&mut self, p: f64) -> bool {
+        p > 0.0 && self.unit() < p
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chance_follows_its_rate() {
+        let mut r = Rng::new(1);
+        let hits = (0..10_000).filter(|_| r.chance(0.25)).count();
+        assert!((2_200..2_800).contains(&hits), "{hits}");
+        assert!(!Rng::new(0).chance(0.0));
+    }
+}

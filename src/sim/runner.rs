@@ -1,0 +1,222 @@
+//! The simulator's one OS thread: reads host bytes with precise timeouts,
+//! timestamps them, runs the engine, and writes each reply at the instant
+//! the model says its last byte arrives: it sleeps (`ppoll`, timer slack
+//! 1 ns) to just before that instant, then spins the rest of the way.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use super::engine::{Delivery, Engine};
+use super::line::Line;
+
+/// Spin (instead of sleeping) for this long before a delivery is due.
+const SPIN: Duration = Duration::from_micros(100);
+/// Longest wait without an event, so requests and shutdown are seen promptly.
+const MAX_IDLE: Duration = Duration::from_millis(2);
+/// Host frames the simulated UART FIFO holds before the host's writes stall
+/// (≈ the 4 KiB transmit buffer of a serial driver).
+const MAX_BACKLOG: usize = 200;
+const READ_BUF: usize = 4096;
+/// How long `inject(Unplug|Replug)` waits for the thread to act.
+const LINE_OP_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Unplug and replug act on the line, which only the runner owns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LineOp {
+    Unplug,
+    Replug,
+}
+
+#[derive(Debug, Default)]
+struct Ops {
+    pending: Vec<(u64, LineOp)>,
+    next_seq: u64,
+    done_seq: u64,
+}
+
+/// What handles share with the runner besides the engine.
+#[derive(Debug, Default)]
+pub struct Control {
+    shutdown: AtomicBool,
+    ops: Mutex<Ops>,
+    done: Condvar,
+}
+
+impl Control {
+    fn lock(&self) -> MutexGuard<'_, Ops> {
+        self.ops.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    pub fn request_shutdown(&self) {
+        self.shutdown.store(true, Ordering::SeqCst);
+    }
+
+    fn stopping(&self) -> bool {
+        self.shutdown.load(Ordering::SeqCst)
+    }
+
+    /// Queues a line operation and waits (bounded) until the runner did it.
+    pub fn line_op(&self, op: LineOp) {
+        let mut ops = self.lock();
+        ops.next_seq += 1;
+        let seq = ops.next_seq;
+        ops.pending.push((seq, op));
+        let deadline = Instant::now() + LINE_OP_TIMEOUT;
+        while ops.done_seq < seq && !self.stopping() {
+            let now = Instant::now();
+            if now >= deadline {
+                tracing::warn!("simulator thread did not act on {op:?} in time");
+                return;
+            }
+            ops = self
+                .done
+                .wait_timeout(ops, deadline - now)
+                .map(|(g, _)| g)
+                .unwrap_or_else(|p| p.into_inner().0);
+        }
+    }
+}
+
+pub fn lock_engine(engine: &Mutex<Engine>) -> MutexGuard<'_, Engine> {
+    engine.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Lets `sleep`/`ppoll` wake on time instead of up to 50 µs late.
+fn set_timer_slack() {
+    // SAFETY: PR_SET_TIMERSLACK takes one integer argument and touches only this thread.
+    unsafe {
+        libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0);
+    }
+}
+
+/// A low real-time priority: above every normal thread, below the kernel's own.
+const REALTIME_PRIORITY: libc::c_int = 10;
+
+/// Moves this thread to SCHED_FIFO; a refusal (no privilege) is only logged.
+fn set_realtime() {
+    let param = libc::sched_param {
+        sched_priority: REALTIME_PRIORITY,
+    };
+    // SAFETY: pid 0 is this thread; `param` is a valid sched_param.
+    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+    if rc != 0 {
+        tracing::warn!(
+            "simulator: no real-time scheduling: {}",
+            std::io::Error::last_os_error()
+        );
+    }
+}
+
+struct Runner {
+    engine: Arc<Mutex<Engine>>,
+    line: Box<dyn Line>,
+    ctl: Arc<Control>,
+    buf: Vec<u8>,
+}
+
+/// The thread body: runs until shutdown is requested.
+pub fn run(engine: Arc<Mutex<Engine>>, line: Box<dyn Line>, ctl: Arc<Control>, realtime: bool) {
+    set_timer_slack();
+    if realtime {
+        set_realtime();
+    }
+    let mut r = Runner {
+        engine,
+        line,
+        ctl,
+        buf: vec![0; READ_BUF],
+    };
+    while !r.ctl.stopping() {
+        r.do_line_ops();
+        r.turn();
+    }
+}
+
+impl Runner {
+    /// One turn: wait for input or the next event, then run what is due.
+    fn turn(&mut self) {
+        let (next, backlog) = {
+            let mut e = lock_engine(&self.engine);
+            e.tick(Instant::now());
+            (e.next_event(), e.host_backlog())
+        };
+        let can_read = !self.line.is_unplugged() && backlog < MAX_BACKLOG;
+        let now = Instant::now();
+        let Some(due) = next else {
+            self.wait(now + MAX_IDLE, can_read);
+            return;
+        };
+        let spin_from = due.checked_sub(SPIN).unwrap_or(due);
+        if now < spin_from {
+            self.wait(spin_from.min(now + MAX_IDLE), can_read);
+            return;
+        }
+        while Instant::now() < due {
+            if can_read {
+                self.read(Duration::ZERO);
+            }
+            std::hint::spin_loop();
+        }
+        self.run_due();
+    }
+
+    /// Sleeps until `until`, returning early if host bytes arrive.
+    fn wait(&mut self, until: Instant, can_read: bool) {
+        let left = until.saturating_duration_since(Instant::now());
+        if can_read {
+            self.read(left);
+        } else {
+            std::thread::sleep(left);
+        }
+    }
+
+    fn read(&mut self, timeout: Duration) {
+        match self.line.read_timeout(&mut self.buf, timeout) {
+            Ok(0) => {}
+            Ok(n) => {
+                let at = Instant::now();
+                let baud = self.line.host_baud();
+                lock_engine(&self.engine).on_host_bytes(&self.buf[..n], at, baud);
+            }
+            Err(e) => {
+                tracing::debug!("simulator read: {e}");
+                std::thread::sleep(MAX_IDLE);
+            }
+        }
+    }
+
+    fn run_due(&mut self) {
+        let baud = self.line.host_baud();
+        let mut engine = lock_engine(&self.engine);
+        let out: Vec<Delivery> = engine.advance(Instant::now(), baud);
+        for d in out {
+            let taken = self.line.write(&d.bytes).unwrap_or(0);
+            engine.record_delivery(d.due, Instant::now());
+            if taken < d.bytes.len() {
+                engine.count_overrun(d.bytes.len() - taken);
+            }
+        }
+    }
+
+    fn do_line_ops(&mut self) {
+        let pending = std::mem::take(&mut self.ctl.lock().pending);
+        let Some(&(last, _)) = pending.last() else {
+            return;
+        };
+        for (_, op) in pending {
+            let unplug = op == LineOp::Unplug;
+            let result = if unplug {
+                self.line.unplug()
+            } else {
+                self.line.replug()
+            };
+            if let Err(e) = result {
+                tracing::warn!("simulator {op:?} failed: {e}");
+            }
+            lock_engine(&self.engine).set_unplugged(self.line.is_unplugged());
+        }
+        self.ctl.lock().done_seq = last;
+        self.ctl.done.notify_all();
+    }
+}

@@ -1,0 +1,53 @@
+//! What observers (tests, the CLI, the dashboard) can see of a simulated
+//! device without going through the wire.
+
+use serde::Serialize;
+
+use crate::protocol::CtrlMode;
+
+use super::params::Params;
+
+/// A snapshot of one device's state, physical units.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DeviceView {
+    /// Position on the bus (stable across id changes).
+    pub slot: usize,
+    pub id: u8,
+    /// SPEC §5 fsm (0 ready, 5 align, 7 run, 9 fault).
+    pub fsm: u8,
+    pub err_code: u8,
+    #[serde(serialize_with = "mode_name")]
+    pub mode: CtrlMode,
+    /// In align or run: the motor is powered.
+    pub enabled: bool,
+    pub aligned: bool,
+    pub angle_deg: f64,
+    pub target_deg: f64,
+    pub velocity_deg_s: f64,
+    /// Last speed reference (Q15): the limit in position mode.
+    pub spd_ref: i16,
+    pub q_current_a: f64,
+    pub temp_c: f64,
+    pub vbus_v: f64,
+    /// The baud the device listens at.
+    pub baud: u32,
+    pub silent: bool,
+    pub booting: bool,
+    pub jogging: bool,
+    pub blocked: bool,
+    pub protection_active: bool,
+    pub bursting: bool,
+    pub under_voltage: bool,
+    /// RAM parameters (what INFO_03..06 report).
+    pub params: Params,
+    pub flash: Params,
+}
+
+fn mode_name<S: serde::Serializer>(mode: &CtrlMode, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(match mode {
+        CtrlMode::None => "none",
+        CtrlMode::Speed => "speed",
+        CtrlMode::Position => "position",
+        CtrlMode::Current => "current",
+    })
+}
