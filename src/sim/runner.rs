@@ -136,10 +136,10 @@ pub fn run(engine: Arc<Mutex<Engine>>, line: Box<dyn Line>, ctl: Arc<Control>, r
 impl Runner {
     /// One turn: wait for input or the next event, then run what is due.
     fn turn(&mut self) {
-        let (next, backlog) = {
+        let (next, delivery, backlog) = {
             let mut e = lock_engine(&self.engine);
             e.tick(Instant::now());
-            (e.next_event(), e.host_backlog())
+            (e.next_event(), e.next_delivery(), e.host_backlog())
         };
         let can_read = !self.line.is_unplugged() && backlog < MAX_BACKLOG;
         let now = Instant::now();
@@ -147,7 +147,12 @@ impl Runner {
             self.wait(now + MAX_IDLE, can_read);
             return;
         };
-        let spin_from = due.checked_sub(SPIN).unwrap_or(due);
+        // Only bytes due at the host need the spin; the engine's own events
+        // carry their modelled instants, so running them a little late is harmless.
+        let spin_from = match delivery {
+            Some(d) if d == due => due.checked_sub(SPIN).unwrap_or(due),
+            _ => due,
+        };
         if now < spin_from {
             self.wait(spin_from.min(now + MAX_IDLE), can_read);
             return;
