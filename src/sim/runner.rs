@@ -14,9 +14,11 @@ use super::line::Line;
 const SPIN: Duration = Duration::from_micros(100);
 /// Longest wait without an event, so requests and shutdown are seen promptly.
 const MAX_IDLE: Duration = Duration::from_millis(2);
-/// Host frames the simulated UART FIFO holds before the host's writes stall
-/// (≈ the 4 KiB transmit buffer of a serial driver).
-const MAX_BACKLOG: usize = 200;
+/// Host frames the simulated transmit path (driver buffer, adapter FIFO)
+/// holds before the host's writes stall: 20 KiB, 0.4 s at 500000 baud.
+/// Larger than a bare UART driver's 4 KiB so that a simulator thread starved
+/// by a busy machine for tens of ms does not open gaps in a saturated line.
+const MAX_BACKLOG: usize = 1024;
 const READ_BUF: usize = 4096;
 /// How long `inject(Unplug|Replug)` waits for the thread to act.
 const LINE_OP_TIMEOUT: Duration = Duration::from_secs(2);
