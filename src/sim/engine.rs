@@ -101,6 +101,11 @@ impl Engine {
         }
     }
 
+    /// When bytes are next due at the host (the instant that needs precision).
+    pub fn next_delivery(&self) -> Option<Instant> {
+        self.wire.next_device_end()
+    }
+
     /// Runs every device's physics up to `now` if it has not run for a while.
     pub fn tick(&mut self, now: Instant) {
         if now.saturating_duration_since(self.last_tick) >= TICK {

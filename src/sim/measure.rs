@@ -104,6 +104,10 @@ pub fn run(cfg: SimConfig, polls: usize) -> Result<Report, SimError> {
     let loop_from = sim.stats();
     let host = poll_loop(&mut port, id, polls);
     let loop_to = sim.stats();
+    let answered: Vec<(Instant, Instant)> = host
+        .iter()
+        .filter_map(|p| Some((p.written, p.answered?)))
+        .collect();
     let log = sim.frame_log();
     let mut delivery = sim.delivery_errors_ns();
     let delivery = delivery.split_off(before.min(delivery.len()));
@@ -114,12 +118,13 @@ pub fn run(cfg: SimConfig, polls: usize) -> Result<Report, SimError> {
     Ok(Report {
         baud,
         polls,
-        lost: polls - host.len(),
+        lost: polls - answered.len(),
         model_poll_us: model.as_secs_f64() * 1e6,
         arrival_lag_us: spread(arrival_lags(&log, &host)),
         delivery_error_us: spread(delivery),
         end_to_end_error_us: spread(
-            host.iter()
+            answered
+                .iter()
                 .map(|(w, r)| signed_ns(*r, *w) - model_ns)
                 .collect(),
         ),
@@ -129,26 +134,42 @@ pub fn run(cfg: SimConfig, polls: usize) -> Result<Report, SimError> {
     })
 }
 
-/// Polls back to back; the (write, reply) instants of the polls answered.
-fn poll_loop(port: &mut TtyPort, id: u8, polls: usize) -> Vec<(Instant, Instant)> {
+/// Polls back to back (every request that was written).
+fn poll_loop(port: &mut TtyPort, id: u8, polls: usize) -> Vec<Poll> {
     let request = Command::Config(Config::read(id, InfoBlock::Info02)).encode();
     (0..polls).filter_map(|_| poll(port, &request)).collect()
 }
 
-/// One poll: (write returned, reply decoded), or `None` if it never came.
-fn poll(port: &mut TtyPort, request: &[u8]) -> Option<(Instant, Instant)> {
+/// One poll: when the write returned and when the reply was decoded.
+#[derive(Debug, Clone, Copy)]
+struct Poll {
+    written: Instant,
+    answered: Option<Instant>,
+}
+
+/// Sends one request and waits for its reply. After a loss it lets a late
+/// reply arrive and throws it away, so it cannot pass for the next one's.
+fn poll(port: &mut TtyPort, request: &[u8]) -> Option<Poll> {
     port.write_all(request).ok()?;
     let written = Instant::now();
+    let answered = await_reply(port, written + POLL_TIMEOUT);
+    if answered.is_none() {
+        std::thread::sleep(POLL_TIMEOUT);
+        port.discard_input().ok()?;
+    }
+    Some(Poll { written, answered })
+}
+
+fn await_reply(port: &mut TtyPort, deadline: Instant) -> Option<Instant> {
     let mut decoder = StreamDecoder::new();
     let mut buf = [0u8; 64];
-    let deadline = written + POLL_TIMEOUT;
     loop {
         let left = deadline.checked_duration_since(Instant::now())?;
         let n = port.read_timeout(&mut buf, left).ok()?;
         decoder.push(&buf[..n]);
         if let Some(frame) = decoder.next_frame() {
             if matches!(Message::from_frame(&frame), Ok(Message::Reply(_))) {
-                return Some((written, Instant::now()));
+                return Some(Instant::now());
             }
         }
     }
@@ -205,11 +226,11 @@ fn wait_stats(sim: &SimHandle, done: impl Fn(&SimStats) -> bool) -> Option<SimSt
 }
 
 /// Host write → simulator arrival, pairing host polls with logged requests.
-fn arrival_lags(log: &[WireFrame], host: &[(Instant, Instant)]) -> Vec<i64> {
+fn arrival_lags(log: &[WireFrame], host: &[Poll]) -> Vec<i64> {
     let requests = log.iter().filter(|f| f.from_host);
     requests
         .zip(host)
-        .map(|(f, (w, _))| signed_ns(f.start, *w))
+        .map(|(f, p)| signed_ns(f.start, p.written))
         .collect()
 }
 
