@@ -33,7 +33,12 @@ impl Owner {
         let inbox = std::mem::take(&mut self.link.inbox);
         for (reply, at) in &inbox {
             self.link.counters.unsolicited += 1;
-            let effect = self.reg.on_reply(reply, *at, false, &mut self.events);
+            let late = self
+                .overdue
+                .take_if(|w| w.dev_id == reply.dev_id && w.index == reply.index);
+            let effect = self
+                .reg
+                .on_reply(reply, *at, late.is_some(), &mut self.events);
             if effect.rebooted {
                 // A rebooted device is disabled and forgot its target:
                 // whatever was waiting for it is stale.
@@ -139,6 +144,7 @@ impl Owner {
                 Ok(Some(reply))
             }
             None => {
+                self.overdue = Some(want);
                 self.link.counters.timeouts += 1;
                 self.link.clock.line_free(Instant::now());
                 self.reg.on_missed(want.dev_id, &mut self.events);
