@@ -19,6 +19,9 @@ enum Command {
     Frame(FrameCommand),
     /// Run a simulated bus of joint modules on a pseudo-terminal (path on stdout).
     Sim(jointd::sim::cli::SimArgs),
+    /// Measure the bus engine against the simulator: occupancy, collisions,
+    /// per-joint rates, setpoint-to-wire latency, daemon CPU.
+    Bench(jointd::bench::BenchArgs),
 }
 
 #[derive(Subcommand, Debug)]
@@ -46,6 +49,14 @@ fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("jointd sim: {e}");
+                ExitCode::FAILURE
+            }
+        },
+        Command::Bench(args) => match jointd::bench::run(&args) {
+            Ok(true) => ExitCode::SUCCESS,
+            Ok(false) => ExitCode::FAILURE,
+            Err(e) => {
+                eprintln!("jointd bench: {e}");
                 ExitCode::FAILURE
             }
         },

@@ -14,6 +14,7 @@ use crate::protocol::{
     Reply, ReplyBody, ALL_DEVICES,
 };
 
+use super::coalesce::Pending;
 use super::error::BusError;
 use super::handle::{BusEvent, Request, Targets, WriteOutcome};
 use super::link::Want;
@@ -116,8 +117,9 @@ impl Owner {
         for &id in &ids {
             // It holds where it is; a target set before the enable goes out again.
             self.reg.forget_target(id);
-            if let Some(sp) = self.shared.setpoints.get(id) {
-                self.pending.insert(id, sp);
+            if let Some(setpoint) = self.shared.setpoints.get(id) {
+                let since = setpoint.accepted;
+                self.pending.insert(id, Pending { setpoint, since });
             }
         }
         for &id in &ids {

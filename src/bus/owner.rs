@@ -18,9 +18,10 @@ use std::time::{Duration, Instant};
 use crate::protocol::{Command, Control, ALL_DEVICES};
 use crate::transport::tty::PortNote;
 
+use super::coalesce::Pending;
 use super::config::BusConfig;
 use super::error::BusError;
-use super::handle::{BusEvent, BusShared, EstopReport, LinkState, Request, StoredSetpoint};
+use super::handle::{BusEvent, BusShared, EstopReport, LinkState, Request};
 use super::link::Link;
 use super::poll::{ControlBudget, PollPlanner};
 use super::registry::Registry;
@@ -49,7 +50,7 @@ pub(super) struct Owner {
     pub(super) planner: PollPlanner,
     pub(super) budget: ControlBudget,
     /// Setpoints taken from the store and not yet on the wire.
-    pub(super) pending: BTreeMap<u8, StoredSetpoint>,
+    pub(super) pending: BTreeMap<u8, Pending>,
     /// Highest store sequence number taken into `pending`.
     pub(super) seen_seq: u64,
     pub(super) acked_seq: u64,
