@@ -9,8 +9,10 @@
 //! - [`bus`]: one owner thread per bus, its scheduler, and the handle the API uses.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty, in-memory pipe).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory).
+//! - [`bench`]: `jointd bench`: the bus engine against the simulator, measured.
 
 pub mod api;
+pub mod bench;
 pub mod bus;
 pub mod cli;
 pub mod daemon;

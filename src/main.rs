@@ -27,6 +27,9 @@ enum Command {
     Run(jointd::daemon::RunArgs),
     /// Print the OpenAPI document of the REST API (as checked in under openapi/).
     Openapi,
+    /// Measure the bus engine against the simulator: occupancy, collisions,
+    /// per-joint rates, setpoint-to-wire latency, daemon CPU.
+    Bench(jointd::bench::BenchArgs),
 }
 
 #[derive(Subcommand, Debug)]
@@ -60,6 +63,14 @@ fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("jointd sim: {e}");
+                ExitCode::FAILURE
+            }
+        },
+        Some(Command::Bench(args)) => match jointd::bench::run(&args) {
+            Ok(true) => ExitCode::SUCCESS,
+            Ok(false) => ExitCode::FAILURE,
+            Err(e) => {
+                eprintln!("jointd bench: {e}");
                 ExitCode::FAILURE
             }
         },

@@ -35,6 +35,15 @@ pub struct SlotInfo {
     pub measured: Option<i16>,
 }
 
+/// A setpoint waiting for the wire, and since when its joint has waited
+/// (a newer setpoint replacing it does not reset the wait: a joint whose
+/// target keeps changing must not be starved by the others).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Pending {
+    pub setpoint: StoredSetpoint,
+    pub since: std::time::Instant,
+}
+
 /// One frame and the setpoints it delivers.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Planned {
@@ -46,7 +55,7 @@ pub struct Planned {
 /// What to do with the pending setpoints.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Plan {
-    /// Frames, the one carrying the oldest setpoint first.
+    /// Frames, the one whose joints waited longest first.
     pub frames: Vec<Planned>,
     /// Setpoints equal to what the device already has: nothing to send.
     pub settled: Vec<(u8, StoredSetpoint)>,
@@ -58,10 +67,11 @@ const GROUPS: [Group; 2] = [Group::Low, Group::High];
 const SLOTS: usize = 8;
 
 /// Plans frames for `pending`; `view(id)` is `None` for an id with no device.
-pub fn plan(pending: &BTreeMap<u8, StoredSetpoint>, view: impl Fn(u8) -> Option<SlotInfo>) -> Plan {
+pub fn plan(pending: &BTreeMap<u8, Pending>, view: impl Fn(u8) -> Option<SlotInfo>) -> Plan {
     let mut out = Plan::default();
     let mut left: BTreeMap<u8, (StoredSetpoint, SlotInfo)> = BTreeMap::new();
-    for (&id, &sp) in pending {
+    for (&id, p) in pending {
+        let sp = p.setpoint;
         match view(id) {
             None => out.unknown.push(id),
             Some(info) if info.target == Some(sp.setpoint) => out.settled.push((id, sp)),
@@ -86,16 +96,14 @@ pub fn plan(pending: &BTreeMap<u8, StoredSetpoint>, view: impl Fn(u8) -> Option<
             carries: vec![(id, sp)],
         });
     }
-    out.frames.sort_by_key(oldest);
+    let since = |f: &Planned| {
+        f.carries
+            .iter()
+            .filter_map(|(id, _)| pending.get(id).map(|p| p.since))
+            .min()
+    };
+    out.frames.sort_by_cached_key(since);
     out
-}
-
-fn oldest(p: &Planned) -> std::time::Instant {
-    p.carries
-        .iter()
-        .map(|(_, s)| s.accepted)
-        .min()
-        .unwrap_or_else(std::time::Instant::now)
 }
 
 fn remove_carried(left: &mut BTreeMap<u8, (StoredSetpoint, SlotInfo)>, frame: &Planned) {
@@ -176,14 +184,18 @@ mod tests {
     use super::*;
     use std::time::{Duration, Instant};
 
-    fn sp(pos: i16, spd: i16, seq: u64, t0: Instant) -> StoredSetpoint {
-        StoredSetpoint {
-            setpoint: Setpoint {
-                pos_ref: pos,
-                spd_ref: spd,
+    fn sp(pos: i16, spd: i16, seq: u64, t0: Instant) -> Pending {
+        let accepted = t0 + Duration::from_micros(seq);
+        Pending {
+            setpoint: StoredSetpoint {
+                setpoint: Setpoint {
+                    pos_ref: pos,
+                    spd_ref: spd,
+                },
+                seq,
+                accepted,
             },
-            seq,
-            accepted: t0 + Duration::from_micros(seq),
+            since: accepted,
         }
     }
 
@@ -303,6 +315,29 @@ mod tests {
         assert!(p.frames.iter().any(|f| f.command
             == Command::Control(Control::set_ref(3, 33, 5000))
             && f.carries.len() == 1));
+    }
+
+    #[test]
+    fn the_group_that_waited_longest_goes_first() {
+        let t0 = Instant::now();
+        let mut pending = BTreeMap::from([
+            (1, sp(11, 1000, 5, t0)),
+            (2, sp(22, 1000, 5, t0)),
+            (9, sp(99, 1000, 5, t0)),
+            (10, sp(101, 1000, 5, t0)),
+        ]);
+        // Joints 9 and 10 have waited since before 1 and 2's newest values.
+        for id in [9, 10] {
+            pending.get_mut(&id).unwrap().since = t0;
+        }
+        let p = plan(&pending, view_n(16));
+        assert!(matches!(
+            p.frames[0].command,
+            Command::BroadcastPos(BroadcastPos {
+                group: Group::High,
+                ..
+            })
+        ));
     }
 
     #[test]

@@ -103,7 +103,7 @@ impl Default for Timing {
     fn default() -> Self {
         Self {
             turnaround_us: 100,
-            reply_margin_us: 1500,
+            reply_margin_us: 2000,
             retries: 2,
             write_lead_us: 150,
         }

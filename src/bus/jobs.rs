@@ -14,6 +14,7 @@ use crate::protocol::{
     Reply, ReplyBody, ALL_DEVICES,
 };
 
+use super::coalesce::Pending;
 use super::error::BusError;
 use super::handle::{BusEvent, Request, Targets, WriteOutcome};
 use super::link::Want;
@@ -116,8 +117,9 @@ impl Owner {
         for &id in &ids {
             // It holds where it is; a target set before the enable goes out again.
             self.reg.forget_target(id);
-            if let Some(sp) = self.shared.setpoints.get(id) {
-                self.pending.insert(id, sp);
+            if let Some(setpoint) = self.shared.setpoints.get(id) {
+                let since = setpoint.accepted;
+                self.pending.insert(id, Pending { setpoint, since });
             }
         }
         for &id in &ids {
@@ -353,18 +355,35 @@ impl Owner {
         }
         let mut found = Vec::new();
         for id in first..=last {
-            let want = Want {
-                dev_id: id,
-                index: index::INFO_01_R,
-            };
-            if self
-                .try_transact(Config::read(id, InfoBlock::Info01), want, 1)?
-                .is_some()
-            {
+            if self.probe(id)? {
                 found.push(id);
             }
         }
         Ok(found)
+    }
+
+    /// Asks `id` for INFO_01 once; again (up to the configured retries) only
+    /// if the line carried garbage meanwhile: silence means nobody is there,
+    /// garbage may be its reply colliding with an announcement.
+    fn probe(&mut self, id: u8) -> Result<bool, BusError> {
+        let want = Want {
+            dev_id: id,
+            index: index::INFO_01_R,
+        };
+        for _ in 0..=self.cfg.timing.retries {
+            let garbage = self.link.counters.skipped_bytes;
+            if self
+                .try_transact(Config::read(id, InfoBlock::Info01), want, 1)?
+                .is_some()
+            {
+                return Ok(true);
+            }
+            if self.link.counters.skipped_bytes == garbage {
+                return Ok(false);
+            }
+            self.link.counters.retries += 1;
+        }
+        Ok(false)
     }
 
     /// The scan of the configured range when no ids were given.

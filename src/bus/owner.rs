@@ -18,9 +18,10 @@ use std::time::{Duration, Instant};
 use crate::protocol::{Command, Control, ALL_DEVICES};
 use crate::transport::tty::PortNote;
 
+use super::coalesce::Pending;
 use super::config::BusConfig;
 use super::error::BusError;
-use super::handle::{BusEvent, BusShared, EstopReport, LinkState, Request, StoredSetpoint};
+use super::handle::{BusEvent, BusShared, EstopReport, LinkState, Request};
 use super::link::Link;
 use super::poll::{ControlBudget, PollPlanner};
 use super::registry::Registry;
@@ -34,6 +35,10 @@ const IDLE_TICK: Duration = Duration::from_millis(1);
 const DOWN_TICK: Duration = Duration::from_millis(10);
 const BACKOFF_FIRST: Duration = Duration::from_millis(20);
 const BACKOFF_MAX: Duration = Duration::from_secs(1);
+/// How long a freshly opened port is only listened to: devices powered up
+/// with the daemon announce themselves (INFO_01) within a few ms, and a
+/// frame written meanwhile would collide with their announcements.
+const LISTEN_ON_OPEN: Duration = Duration::from_millis(20);
 
 pub(super) struct Owner {
     pub(super) cfg: BusConfig,
@@ -45,7 +50,7 @@ pub(super) struct Owner {
     pub(super) planner: PollPlanner,
     pub(super) budget: ControlBudget,
     /// Setpoints taken from the store and not yet on the wire.
-    pub(super) pending: BTreeMap<u8, StoredSetpoint>,
+    pub(super) pending: BTreeMap<u8, Pending>,
     /// Highest store sequence number taken into `pending`.
     pub(super) seen_seq: u64,
     pub(super) acked_seq: u64,
@@ -59,6 +64,9 @@ pub(super) struct Owner {
     /// Frames the current one-shot request has written (setpoints may
     /// interleave after its first).
     pub(super) job_frames: u32,
+    /// The last read that timed out: its reply may still come, late, and
+    /// must not be taken for a power-up announcement.
+    pub(super) overdue: Option<super::link::Want>,
     backoff: Duration,
     next_open: Instant,
     ever_up: bool,
@@ -97,6 +105,7 @@ impl Owner {
             link_state: LinkState::Opening,
             port_notes: Vec::new(),
             job_frames: 0,
+            overdue: None,
             backoff: BACKOFF_FIRST,
             next_open: now,
             ever_up: false,
@@ -261,6 +270,7 @@ impl Owner {
                 self.events.push(BusEvent::BusUp {
                     bus: self.cfg.name.clone(),
                 });
+                let _ = self.wait_until(Instant::now() + LISTEN_ON_OPEN);
             }
             Err(e) => {
                 let retry = self.backoff;

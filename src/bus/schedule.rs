@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use crate::protocol::{Command, Config, ConfigParam, Reply, ReplyBody};
 
-use super::coalesce;
+use super::coalesce::{self, Pending};
 use super::error::BusError;
 use super::handle::WireAck;
 use super::link::Want;
@@ -33,7 +33,12 @@ impl Owner {
         let inbox = std::mem::take(&mut self.link.inbox);
         for (reply, at) in &inbox {
             self.link.counters.unsolicited += 1;
-            let effect = self.reg.on_reply(reply, *at, false, &mut self.events);
+            let late = self
+                .overdue
+                .take_if(|w| w.dev_id == reply.dev_id && w.index == reply.index);
+            let effect = self
+                .reg
+                .on_reply(reply, *at, late.is_some(), &mut self.events);
             if effect.rebooted {
                 // A rebooted device is disabled and forgot its target:
                 // whatever was waiting for it is stale.
@@ -47,9 +52,10 @@ impl Owner {
 
     /// Takes what changed in the setpoint store into `pending`.
     pub(super) fn collect_setpoints(&mut self) {
-        for (id, sp) in self.shared.setpoints.changed_since(self.seen_seq) {
-            self.seen_seq = self.seen_seq.max(sp.seq);
-            self.pending.insert(id, sp);
+        for (id, setpoint) in self.shared.setpoints.changed_since(self.seen_seq) {
+            self.seen_seq = self.seen_seq.max(setpoint.seq);
+            let since = self.pending.get(&id).map_or(setpoint.accepted, |p| p.since);
+            self.pending.insert(id, Pending { setpoint, since });
         }
     }
 
@@ -86,14 +92,14 @@ impl Owner {
 
     /// Drops `id` from pending unless a newer setpoint replaced it meanwhile.
     fn settle(&mut self, id: u8, seq: u64) {
-        if self.pending.get(&id).is_some_and(|p| p.seq <= seq) {
+        if self.pending.get(&id).is_some_and(|p| p.setpoint.seq <= seq) {
             self.pending.remove(&id);
         }
     }
 
     /// Publishes the highest sequence number all of whose joints are on the wire.
     fn publish_ack(&mut self, at: Instant) {
-        let oldest_pending = self.pending.values().map(|s| s.seq).min();
+        let oldest_pending = self.pending.values().map(|p| p.setpoint.seq).min();
         let seq = oldest_pending.map_or(self.seen_seq, |s| s.saturating_sub(1));
         if seq > self.acked_seq {
             self.acked_seq = seq;
@@ -139,6 +145,7 @@ impl Owner {
                 Ok(Some(reply))
             }
             None => {
+                self.overdue = Some(want);
                 self.link.counters.timeouts += 1;
                 self.link.clock.line_free(Instant::now());
                 self.reg.on_missed(want.dev_id, &mut self.events);

@@ -137,7 +137,7 @@ mod tests {
         let c = clock(t0);
         assert_eq!(
             c.reply_deadline(t0),
-            t0 + Duration::from_micros(100 + 400 + 1500)
+            t0 + Duration::from_micros(100 + 400 + 2000)
         );
         assert_eq!(c.reply_cost(), Duration::from_micros(500));
     }

@@ -1,0 +1,197 @@
+//! `jointd bench`: the bus engine against the simulator over a pty, with a
+//! client streaming every joint's target, measured by the simulator as
+//! referee (issue 4's workload).
+//!
+//! The simulator runs in this process (its frame log and the client share
+//! one clock), so daemon CPU is the bus owner thread's own run time from
+//! `/proc/self/task/*/schedstat`; the simulator's and the client's threads
+//! are reported beside it, not charged to the daemon.
+//!
+//! # Layout
+//! - [`client`]: the streaming client (angles encode which write they are).
+//! - [`analysis`]: per-joint rates and setpoint-to-wire latency from the frame log.
+//! - [`cpu`]: per-thread CPU time by thread name.
+//! - [`report`]: the result, the issue's targets, the printout.
+
+pub mod analysis;
+pub mod client;
+pub mod cpu;
+pub mod report;
+
+use std::time::{Duration, Instant};
+
+use clap::Args;
+use thiserror::Error;
+
+use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle, Targets, THREAD_PREFIX};
+use crate::protocol::reply::fsm;
+use crate::sim::{SimConfig, SimError, SimHandle, SimStats, Simulator};
+
+use client::{Client, CLIENT_THREAD};
+use report::Report;
+
+/// Arguments of `jointd bench`.
+#[derive(Args, Debug, Clone)]
+pub struct BenchArgs {
+    /// Baud rate of a workload; repeat for several (default: 500000 and 230400).
+    #[arg(long = "baud", default_values_t = [500_000u32, 230_400])]
+    pub bauds: Vec<u32>,
+    /// Joints on the bus (ids 1..=N).
+    #[arg(long, default_value_t = 16)]
+    pub joints: u8,
+    /// How often the client writes every joint's target, Hz.
+    #[arg(long, default_value_t = 1000)]
+    pub rate_hz: u32,
+    /// Measured time per workload, seconds.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Streaming time before measuring, seconds.
+    #[arg(long, default_value_t = 2.0)]
+    pub warmup: f64,
+    /// Overrides the poll plan's control share of the wire (default: the bus default).
+    #[arg(long)]
+    pub control_share: Option<f64>,
+    /// The simulated devices' turnaround, µs.
+    #[arg(long, default_value_t = 100)]
+    pub turnaround_us: u64,
+}
+
+#[derive(Debug, Error)]
+pub enum BenchError {
+    #[error("simulator: {0}")]
+    Sim(#[from] SimError),
+    #[error("bus: {0}")]
+    Bus(#[from] BusError),
+    #[error("{0}")]
+    Setup(String),
+    #[error("i/o: {0}")]
+    Io(#[from] std::io::Error),
+}
+
+/// Align time of the simulated joints: short, the bench is about the bus.
+const ALIGN: Duration = Duration::from_millis(100);
+/// Bound on each setup step (discovery, enable); the steps end on the event.
+const SETUP_WAIT: Duration = Duration::from_secs(10);
+/// Thread name prefix of the simulator's runner.
+const SIM_THREAD: &str = "jointd-sim";
+
+/// Runs every workload and prints its report; true when all met their targets.
+pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
+    if !(args.seconds > 0.0 && args.warmup >= 0.0 && args.rate_hz > 0 && args.joints > 0) {
+        return Err(BenchError::Setup(
+            "seconds, rate and joints must be positive".into(),
+        ));
+    }
+    println!(
+        "jointd bench: load average {} (other work on this machine skews the numbers)",
+        load_average()
+    );
+    let mut all = true;
+    for &baud in &args.bauds {
+        let report = workload(args, baud)?;
+        println!("{report}");
+        all &= report.passed();
+    }
+    Ok(all)
+}
+
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|_| "unknown".into())
+}
+
+fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
+    let ids: Vec<u8> = (1..=args.joints).collect();
+    let mut sim_cfg = SimConfig::new(ids.clone(), baud);
+    sim_cfg.align_time = ALIGN;
+    sim_cfg.turnaround = Duration::from_micros(args.turnaround_us);
+    let sim = Simulator::spawn_pty(sim_cfg)?;
+    let path = sim
+        .device_path()
+        .ok_or_else(|| BenchError::Setup("the simulator has no pty path".into()))?;
+    let mut cfg = BusConfig::new("bench", path, baud);
+    cfg.ids = ids.clone();
+    cfg.timing.turnaround_us = args.turnaround_us;
+    if let Some(share) = args.control_share {
+        cfg.poll.control_share = share;
+    }
+    let (bus, thread) = spawn_bus(cfg)?;
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    rt.block_on(bring_up(&bus, ids.len()))?;
+    wait_running(&sim, &ids)?;
+
+    let period = Duration::from_secs_f64(1.0 / f64::from(args.rate_hz));
+    let client = Client::start(bus.clone(), ids.clone(), period)?;
+    std::thread::sleep(Duration::from_secs_f64(args.warmup));
+    sim.clear_frame_log();
+    let (s0, cpu0) = (sim.stats(), cpu_now());
+    std::thread::sleep(Duration::from_secs_f64(args.seconds));
+    let (s1, cpu1) = (sim.stats(), cpu_now());
+    let writes = client.finish();
+    let log = sim.frame_log();
+    let daemon = bus.snapshot().rates.clone();
+    thread.stop();
+    sim.shutdown();
+
+    let share = |i: usize| cpu_share(&cpu0, &cpu1, &s0, &s1, i);
+    Ok(Report {
+        baud,
+        joints: ids.len(),
+        rate_hz: args.rate_hz,
+        warmup: Duration::from_secs_f64(args.warmup),
+        occupancy: SimStats::occupancy(&s0, &s1),
+        collisions: s1.collisions.saturating_sub(s0.collisions),
+        analysis: analysis::analyse(&log, &writes, &ids, s0.at, s1.at),
+        cpu_owner: share(0),
+        cpu_sim: share(1),
+        cpu_client: share(2),
+        daemon,
+    })
+}
+
+/// Waits for every joint online, then enables them all.
+async fn bring_up(bus: &BusHandle, n: usize) -> Result<(), BenchError> {
+    let mut rx = bus.watch();
+    let online = rx.wait_for(|s| s.devices.values().filter(|d| d.online).count() >= n);
+    match tokio::time::timeout(SETUP_WAIT, online).await {
+        Ok(Ok(_)) => {}
+        _ => return Err(BenchError::Setup(format!("not all {n} joints came online"))),
+    }
+    bus.enable(Targets::All).await?;
+    Ok(())
+}
+
+/// Waits until the simulated joints finished aligning (bounded; the
+/// simulator offers no event for it).
+fn wait_running(sim: &SimHandle, ids: &[u8]) -> Result<(), BenchError> {
+    let deadline = Instant::now() + SETUP_WAIT;
+    while !ids
+        .iter()
+        .all(|id| sim.device(*id).is_some_and(|d| d.fsm == fsm::RUN))
+    {
+        if Instant::now() > deadline {
+            return Err(BenchError::Setup("joints did not reach run".into()));
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    Ok(())
+}
+
+const CPU_THREADS: [&str; 3] = [THREAD_PREFIX, SIM_THREAD, CLIENT_THREAD];
+
+fn cpu_now() -> Vec<Duration> {
+    let by = cpu::by_prefix(&CPU_THREADS);
+    CPU_THREADS
+        .iter()
+        .map(|p| by.get(*p).copied().unwrap_or_default())
+        .collect()
+}
+
+fn cpu_share(a: &[Duration], b: &[Duration], s0: &SimStats, s1: &SimStats, i: usize) -> f64 {
+    let wall = s1.at.saturating_duration_since(s0.at).as_secs_f64();
+    let used = b[i].saturating_sub(a[i]).as_secs_f64();
+    used / wall.max(f64::EPSILON)
+}

@@ -1,0 +1,143 @@
+//! One workload's result, checked against issue 4's targets and printed.
+
+use std::fmt;
+use std::time::Duration;
+
+use crate::bus::handle::BusRates;
+
+use super::analysis::Analysis;
+
+/// The issue's targets at 500000 baud; rates scale with the baud.
+const REFERENCE_BAUD: f64 = 500_000.0;
+const MIN_OCCUPANCY: f64 = 0.95;
+const MIN_CONTROL_HZ: f64 = 400.0;
+const MIN_TELEMETRY_HZ: f64 = 40.0;
+const MAX_P99_US: u64 = 3_000;
+const MAX_DAEMON_CPU: f64 = 0.15;
+
+pub struct Report {
+    pub baud: u32,
+    pub joints: usize,
+    pub rate_hz: u32,
+    pub warmup: Duration,
+    pub occupancy: f64,
+    pub collisions: u64,
+    pub analysis: Analysis,
+    /// Share of one core over the window: bus owner, simulator, client.
+    pub cpu_owner: f64,
+    pub cpu_sim: f64,
+    pub cpu_client: f64,
+    /// The daemon's own statistics at the end of the window.
+    pub daemon: BusRates,
+}
+
+impl Report {
+    fn scale(&self) -> f64 {
+        f64::from(self.baud) / REFERENCE_BAUD
+    }
+
+    /// Every target of the issue, scaled for the baud: (what, met).
+    pub fn checks(&self) -> Vec<(String, bool)> {
+        let a = &self.analysis;
+        let control = MIN_CONTROL_HZ * self.scale();
+        let telemetry = MIN_TELEMETRY_HZ * self.scale();
+        vec![
+            (
+                format!("occupancy >= {MIN_OCCUPANCY}"),
+                self.occupancy >= MIN_OCCUPANCY,
+            ),
+            ("zero collisions".into(), self.collisions == 0),
+            (
+                format!("control >= {control:.1}/s every joint"),
+                Analysis::min_rate(&a.control_hz) >= control,
+            ),
+            (
+                format!("telemetry >= {telemetry:.1}/s every joint"),
+                Analysis::min_rate(&a.telemetry_hz) >= telemetry,
+            ),
+            (
+                format!("setpoint-to-wire p99 <= {} ms", MAX_P99_US / 1000),
+                a.latency_us(0.99) <= MAX_P99_US,
+            ),
+            (
+                format!("daemon CPU <= {:.0} %", MAX_DAEMON_CPU * 100.0),
+                self.cpu_owner <= MAX_DAEMON_CPU,
+            ),
+        ]
+    }
+
+    pub fn passed(&self) -> bool {
+        self.checks().iter().all(|(_, ok)| *ok)
+    }
+}
+
+fn ms(us: u64) -> f64 {
+    us as f64 / 1000.0
+}
+
+impl fmt::Display for Report {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let a = &self.analysis;
+        writeln!(
+            f,
+            "== {} joints at {} baud, client streaming all targets at {} Hz; {:.1} s measured after {:.1} s warm-up",
+            self.joints, self.baud, self.rate_hz, a.window.as_secs_f64(), self.warmup.as_secs_f64()
+        )?;
+        writeln!(
+            f,
+            "  wire occupancy (simulator referee)  {:.4}",
+            self.occupancy
+        )?;
+        writeln!(
+            f,
+            "  collisions                          {}",
+            self.collisions
+        )?;
+        let rates = |m| {
+            format!(
+                "min {:7.1}  mean {:7.1}  max {:7.1}",
+                Analysis::min_rate(m),
+                Analysis::mean_rate(m),
+                m.values().copied().fold(0.0, f64::max)
+            )
+        };
+        writeln!(
+            f,
+            "  control updates/s per joint         {}",
+            rates(&a.control_hz)
+        )?;
+        writeln!(
+            f,
+            "  telemetry samples/s per joint       {}",
+            rates(&a.telemetry_hz)
+        )?;
+        writeln!(
+            f,
+            "  setpoint-to-wire latency            p50 {:.2} ms  p99 {:.2} ms  max {:.2} ms  ({} of {} joint-writes carried; the rest were superseded before a frame was due)",
+            ms(a.latency_us(0.5)), ms(a.latency_us(0.99)), ms(a.latency_us(1.0)), a.latencies_us.len(), a.written
+        )?;
+        writeln!(
+            f,
+            "  daemon CPU (bus owner thread)       {:.1} % of one core   [simulator thread {:.1} %, client thread {:.1} %]",
+            self.cpu_owner * 100.0, self.cpu_sim * 100.0, self.cpu_client * 100.0
+        )?;
+        let secs = a.window.as_secs_f64().max(f64::EPSILON);
+        writeln!(
+            f,
+            "  host frames/s on the wire           broadcast {:.0}  control {:.0}  poll {:.0}",
+            a.broadcasts as f64 / secs,
+            a.control_frames as f64 / secs,
+            a.polls as f64 / secs
+        )?;
+        let d = &self.daemon;
+        writeln!(
+            f,
+            "  the daemon's own view (last 1 s)    utilisation {:.3}  timeouts/s {:.1}  setpoint age p50 {:.2} ms p99 {:.2} ms",
+            d.wire_utilisation, d.timeouts_per_s, ms(d.setpoint_age_p50_us), ms(d.setpoint_age_p99_us)
+        )?;
+        for (what, ok) in self.checks() {
+            writeln!(f, "  [{}] {what}", if ok { "ok" } else { "FAIL" })?;
+        }
+        Ok(())
+    }
+}

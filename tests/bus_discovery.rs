@@ -1,0 +1,59 @@
+//! Discovery against the simulator: power-up announcements and an active
+//! scan each find every device, telemetry flows, nothing collides.
+
+mod bus_support;
+
+use bus_support::*;
+
+fn sixteen() -> Vec<u8> {
+    (1..=16).collect()
+}
+
+#[tokio::test]
+async fn announcements_register_devices_powered_up_with_the_daemon() {
+    let rig = rig(&sixteen());
+    let snap = rig.online(16).await;
+    assert_eq!(snap.devices.keys().copied().collect::<Vec<_>>(), sixteen());
+    assert_eq!(rig.sim.stats().collisions, 0);
+}
+
+#[tokio::test]
+async fn scan_discovers_sixteen_devices_already_running_and_polls_them() {
+    let rig = rig_after_boot(sim_config(&sixteen(), BAUD), |cfg| {
+        cfg.scan_last = 20;
+    });
+    let snap = rig.online(16).await;
+    assert_eq!(snap.devices.keys().copied().collect::<Vec<_>>(), sixteen());
+    // Polls begin once the scan is over; telemetry keeps coming for every device.
+    let snap = rig
+        .until("INFO_02 of every device", |s| {
+            s.devices.values().all(|d| d.info02.is_some())
+        })
+        .await;
+    // Every id of the range was asked: 1..=20 over the wire.
+    let asked: std::collections::BTreeSet<u8> =
+        rig.host_frames().iter().filter_map(|f| f.dev_id).collect();
+    assert!(asked.is_superset(&(1..=20).collect()), "asked {asked:?}");
+    assert!(snap.counters.polls > 16);
+    assert_eq!(rig.sim.stats().collisions, 0);
+}
+
+#[tokio::test]
+async fn expected_ids_are_polled_and_missing_ones_stay_offline() {
+    let rig = rig_with(sim_config(&[1, 2, 3], BAUD), |cfg| {
+        cfg.ids = vec![1, 2, 3, 7];
+        cfg.timing.reply_margin_us = 2_000;
+    });
+    let snap = rig
+        .until("1..=3 online, 7 missed", |s| {
+            s.devices.values().filter(|d| d.online).count() == 3
+                && s.devices.get(&7).is_some_and(|d| d.missed_polls >= 2)
+        })
+        .await;
+    assert!(!snap.devices[&7].online);
+    // Nothing was scanned: only the expected ids were asked.
+    assert!(rig
+        .host_frames()
+        .iter()
+        .all(|f| matches!(f.dev_id, Some(1 | 2 | 3 | 7))));
+}
