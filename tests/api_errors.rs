@@ -340,6 +340,12 @@ async fn metrics_readyz_and_bus_views() {
     assert!(text.contains("jointd_device_online{bus=\"fake\",id=\"3\"} 1"));
     assert_eq!(text.matches("# TYPE jointd_device_online gauge").count(), 1);
     s.get("/readyz").await.ok();
+    // A wide scan goes to the bus in chunks of 16 ids.
+    let found = s
+        .post("/api/v1/buses/fake/scan", json!({"first": 1, "last": 40}))
+        .await;
+    assert_eq!(found.ok()["found"], json!([1, 2, 3]));
+    assert_eq!(bus.script().log.iter().filter(|k| **k == "scan").count(), 3);
     let mut snap = (*bus.handle.snapshot()).clone();
     snap.link = jointd::bus::handle::LinkState::Down {
         reason: "unplugged".into(),

@@ -19,6 +19,9 @@ use crate::bus::BusSnapshot;
 use crate::frame_json::frame_to_json;
 use crate::protocol::{BaudLevel, Frame, MAX_DEVICE_ID};
 
+/// Ids per bus scan request (16 absent ids at 19200 baud take well under
+/// the handle's request timeout).
+const SCAN_CHUNK: usize = 16;
 /// Frames the log view returns when no `limit` is given.
 const DEFAULT_FRAME_LIMIT: i64 = 50;
 
@@ -190,7 +193,14 @@ async fn scan(
             "",
         ));
     }
-    let found = bus.scan(first, last).await?;
+    let mut found = Vec::new();
+    // In chunks: each bus request must finish within the handle's request
+    // timeout (a full-range scan at a low baud would not), and other
+    // requests get the wire between chunks.
+    for chunk_first in (first..=last).step_by(SCAN_CHUNK) {
+        let chunk_last = chunk_first.saturating_add(SCAN_CHUNK as u8 - 1).min(last);
+        found.extend(bus.scan(chunk_first, chunk_last).await?);
+    }
     Ok(Json(ScanResult { bus: p.bus, found }))
 }
 
