@@ -283,8 +283,8 @@ pub struct BusSnapshot {
     pub published_wall: SystemTime,
     /// Rates over the last statistics window.
     pub rates: BusRates,
-    /// What opening the port found worth telling (failed ioctls on a pty,
-    /// an FTDI latency timer and its fix).
+    /// What starting the owner and opening the port found worth telling
+    /// (no real-time priority, failed ioctls on a pty, an FTDI latency timer and its fix).
     pub port_notes: Vec<String>,
 }
 

@@ -26,7 +26,7 @@ use super::link::Link;
 use super::poll::{ControlBudget, PollPlanner};
 use super::registry::Registry;
 use super::stats::Stats;
-use super::wire::precise_timers;
+use super::wire::{precise_timers, set_fifo};
 
 /// How long the owner listens when there is nothing to send. Bounds how
 /// late it notices a request or setpoint on an idle bus.
@@ -59,6 +59,8 @@ pub(super) struct Owner {
     pub(super) stats: Stats,
     pub(super) link_state: LinkState,
     pub(super) port_notes: Vec<String>,
+    /// What starting the thread found worth telling (no real-time priority).
+    pub(super) thread_notes: Vec<String>,
     /// The configured range still has to be scanned (no expected ids given).
     pub(super) needs_scan: bool,
     /// Frames the current one-shot request has written (setpoints may
@@ -104,6 +106,7 @@ impl Owner {
             events: Vec::new(),
             link_state: LinkState::Opening,
             port_notes: Vec::new(),
+            thread_notes: Vec::new(),
             job_frames: 0,
             overdue: None,
             backoff: BACKOFF_FIRST,
@@ -115,6 +118,7 @@ impl Owner {
     /// The thread's body: runs until [`super::BusThread::stop`].
     pub(super) fn run(mut self) {
         precise_timers();
+        self.realtime();
         while !self.stop.load(Ordering::Acquire) {
             if self.link.is_up() {
                 self.turn();
@@ -123,6 +127,20 @@ impl Owner {
             }
         }
         self.shutdown();
+    }
+
+    fn realtime(&mut self) {
+        let priority = self.cfg.timing.rt_priority;
+        if priority == 0 {
+            return;
+        }
+        if let Err(e) = set_fifo(0, priority) {
+            let note = format!(
+                "real-time priority {priority} refused ({e}): replies wait for the CPU under load"
+            );
+            tracing::info!(bus = %self.cfg.name, "{note}");
+            self.thread_notes.push(note);
+        }
     }
 
     /// One decision at the moment the line can take the next host frame.

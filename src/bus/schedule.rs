@@ -80,7 +80,7 @@ impl Owner {
         let end = self.link.send(&[first.command]).map_err(|e| self.lost(e))?;
         self.budget.spend(self.link.clock.frame_time());
         for (id, sp) in first.carries {
-            self.reg.record_sent(id, sp.setpoint);
+            self.reg.record_sent(id, sp.setpoint, end);
             self.settle(id, sp.seq);
             self.stats
                 .setpoint_age(end.saturating_duration_since(sp.accepted));

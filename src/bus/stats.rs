@@ -109,7 +109,12 @@ impl Owner {
             published_at: now,
             published_wall: SystemTime::now(),
             rates: self.stats.rates.clone(),
-            port_notes: self.port_notes.clone(),
+            port_notes: self
+                .thread_notes
+                .iter()
+                .chain(&self.port_notes)
+                .cloned()
+                .collect(),
         };
         self.shared.snapshot.send_replace(Arc::new(snapshot));
         for event in self.events.drain(..) {

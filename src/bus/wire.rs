@@ -60,8 +60,12 @@ impl WireClock {
     /// When to hand the next host frame to the port: a little before the line
     /// frees, so the port's queue never runs dry, yet as late as possible so
     /// the frame carries the freshest setpoints.
+    ///
+    /// The lead stays below ¾ of a frame time, so at most one frame waits in
+    /// the port's queue and an e-stop is never behind more than one frame.
     pub fn write_at(&self) -> Instant {
-        self.free_at.checked_sub(self.lead).unwrap_or(self.free_at)
+        let lead = self.lead.min(self.frame * 3 / 4);
+        self.free_at.checked_sub(lead).unwrap_or(self.free_at)
     }
 
     /// Accounts `n` host frames handed to the port at `now`; returns when the
@@ -102,6 +106,20 @@ pub fn precise_timers() {
     }
 }
 
+/// Puts thread `tid` (0: the calling thread) in the real-time FIFO class at
+/// `priority` (1..=99), so other work on the machine cannot hold it back for
+/// milliseconds while the wire waits. Needs CAP_SYS_NICE or an RTPRIO limit.
+pub fn set_fifo(tid: libc::pid_t, priority: u8) -> std::io::Result<()> {
+    let param = libc::sched_param {
+        sched_priority: libc::c_int::from(priority),
+    };
+    // SAFETY: a valid sched_param; on Linux the pid argument names a thread.
+    if unsafe { libc::sched_setscheduler(tid, libc::SCHED_FIFO, &param) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -128,7 +146,22 @@ mod tests {
         let t0 = Instant::now();
         let mut c = clock(t0);
         let end = c.host_frames(t0, 1);
-        assert_eq!(c.write_at(), end - Duration::from_micros(150));
+        assert_eq!(c.write_at(), end - Duration::from_micros(300));
+    }
+
+    #[test]
+    fn lead_stays_below_a_frame() {
+        let t0 = Instant::now();
+        let timing = Timing {
+            write_lead_us: 5_000,
+            ..Timing::default()
+        };
+        let mut c = WireClock::new(500_000, &timing, t0);
+        let end = c.host_frames(t0, 1);
+        assert_eq!(c.write_at(), end - Duration::from_micros(300));
+        c.set_baud(19_200);
+        let end = c.host_frames(end, 1);
+        assert_eq!(c.write_at(), end - Duration::from_micros(5_000));
     }
 
     #[test]
@@ -137,7 +170,7 @@ mod tests {
         let c = clock(t0);
         assert_eq!(
             c.reply_deadline(t0),
-            t0 + Duration::from_micros(100 + 400 + 2000)
+            t0 + Duration::from_micros(100 + 400 + 5000)
         );
         assert_eq!(c.reply_cost(), Duration::from_micros(500));
     }
