@@ -159,8 +159,8 @@ impl fmt::Display for Report {
         let d = &self.daemon;
         writeln!(
             f,
-            "  the daemon's own view (last 1 s)    utilisation {:.3}  timeouts/s {:.1}  setpoint age p50 {:.2} ms p99 {:.2} ms",
-            d.wire_utilisation, d.timeouts_per_s, ms(d.setpoint_age_p50_us), ms(d.setpoint_age_p99_us)
+            "  the daemon's own view (last 1 s)    utilisation {:.3}  timeouts/s {:.1}  reply timeout {:.1} ms  setpoint age p50 {:.2} ms p99 {:.2} ms",
+            d.wire_utilisation, d.timeouts_per_s, ms(d.reply_timeout_us), ms(d.setpoint_age_p50_us), ms(d.setpoint_age_p99_us)
         )?;
         for (what, ok) in self.checks() {
             writeln!(f, "  [{}] {what}", if ok { "ok" } else { "FAIL" })?;

@@ -266,6 +266,9 @@ pub struct BusRates {
     pub setpoint_age_p50_us: u64,
     pub setpoint_age_p99_us: u64,
     pub setpoint_age_max_us: u64,
+    /// The reply timeout now in force (request end to giving up), µs: the
+    /// model, the configured margin and what the host path's lateness adds.
+    pub reply_timeout_us: u64,
 }
 
 /// What the owner publishes after every change worth seeing.

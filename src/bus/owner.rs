@@ -66,9 +66,9 @@ pub(super) struct Owner {
     /// Frames the current one-shot request has written (setpoints may
     /// interleave after its first).
     pub(super) job_frames: u32,
-    /// The last read that timed out: its reply may still come, late, and
-    /// must not be taken for a power-up announcement.
-    pub(super) overdue: Option<super::link::Want>,
+    /// The last read that timed out and when its reply was due: the reply
+    /// may still come, late, and must not be taken for an announcement.
+    pub(super) overdue: Option<(super::link::Want, Instant)>,
     backoff: Duration,
     next_open: Instant,
     ever_up: bool,

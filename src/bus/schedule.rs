@@ -35,7 +35,10 @@ impl Owner {
             self.link.counters.unsolicited += 1;
             let late = self
                 .overdue
-                .take_if(|w| w.dev_id == reply.dev_id && w.index == reply.index);
+                .take_if(|(w, _)| w.dev_id == reply.dev_id && w.index == reply.index);
+            if let Some((_, due)) = late {
+                self.link.clock.observe_reply(due, *at);
+            }
             let effect = self
                 .reg
                 .on_reply(reply, *at, late.is_some(), &mut self.events);
@@ -130,11 +133,13 @@ impl Owner {
             .link
             .send(&[Command::Config(cmd)])
             .map_err(|e| self.lost(e))?;
+        let due = self.link.clock.reply_due(end);
         let deadline = self.link.clock.reply_deadline(end);
         let got = self.link.wait(Some(want), deadline);
         self.absorb_inbox();
         match got.map_err(|e| self.lost(e))? {
             Some((reply, at)) => {
+                self.link.clock.observe_reply(due, at);
                 // A RES from a new id (SET_ID) is not a device yet: the
                 // request renames the old entry itself.
                 let feeds = self.reg.get(reply.dev_id).is_some()
@@ -145,7 +150,7 @@ impl Owner {
                 Ok(Some(reply))
             }
             None => {
-                self.overdue = Some(want);
+                self.overdue = Some((want, due));
                 self.link.counters.timeouts += 1;
                 self.link.clock.line_free(Instant::now());
                 self.reg.on_missed(want.dev_id, &mut self.events);

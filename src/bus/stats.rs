@@ -80,6 +80,7 @@ fn rates(base: &BusCounters, now: &BusCounters, window: Duration, ages: &mut [u6
         setpoint_age_p50_us: pct(0.50),
         setpoint_age_p99_us: pct(0.99),
         setpoint_age_max_us: ages.last().copied().unwrap_or(0),
+        reply_timeout_us: 0,
     }
 }
 
@@ -89,6 +90,8 @@ impl Owner {
     pub(super) fn housekeeping(&mut self, now: Instant) {
         if let Some(window) = self.stats.roll(now, &self.link.counters) {
             self.reg.roll_rates(window);
+            let timeout = self.link.clock.reply_deadline(now) - now;
+            self.stats.rates.reply_timeout_us = timeout.as_micros() as u64;
         }
         if now >= self.stats.next_publish || !self.events.is_empty() {
             self.publish(now);

@@ -21,7 +21,19 @@ pub struct WireClock {
     lead: Duration,
     /// When the last host frame handed to the port leaves the wire.
     free_at: Instant,
+    /// The largest lateness of a reply against the model seen lately
+    /// (decaying), and when it was seen: the host path's own latency.
+    late: Duration,
+    late_at: Instant,
 }
+
+/// Half-life of the observed reply lateness: a stall seen once keeps the
+/// deadline wide for minutes, since such stalls come back.
+const LATE_HALF_LIFE_S: f64 = 60.0;
+/// The deadline allows this many times the lateness seen.
+const LATE_FACTOR: u32 = 2;
+/// Bound on what observed lateness adds to the deadline.
+const MAX_LATE_ALLOWANCE: Duration = Duration::from_millis(200);
 
 impl WireClock {
     pub fn new(baud: u32, timing: &Timing, now: Instant) -> Self {
@@ -31,6 +43,8 @@ impl WireClock {
             reply_margin: Duration::from_micros(timing.reply_margin_us),
             lead: Duration::from_micros(timing.write_lead_us),
             free_at: now,
+            late: Duration::ZERO,
+            late_at: now,
         }
     }
 
@@ -75,9 +89,32 @@ impl WireClock {
         self.free_at
     }
 
-    /// The latest a reply to a request ending at `request_end` may complete.
+    /// When a reply to a request ending at `request_end` should complete.
+    pub fn reply_due(&self, request_end: Instant) -> Instant {
+        request_end + self.turnaround + self.frame
+    }
+
+    /// The latest a reply to a request ending at `request_end` may
+    /// complete: the model, the configured margin, and twice the lateness
+    /// the host path has shown lately (like TCP's retransmission timeout,
+    /// the allowance follows what is measured).
     pub fn reply_deadline(&self, request_end: Instant) -> Instant {
-        request_end + self.turnaround + self.frame + self.reply_margin
+        let allowance = (self.late_now(request_end) * LATE_FACTOR).min(MAX_LATE_ALLOWANCE);
+        self.reply_due(request_end) + self.reply_margin + allowance
+    }
+
+    /// A reply due at `due` arrived at `arrived`.
+    pub fn observe_reply(&mut self, due: Instant, arrived: Instant) {
+        let late = arrived.saturating_duration_since(due);
+        if late > self.late_now(arrived) {
+            self.late = late;
+            self.late_at = arrived;
+        }
+    }
+
+    fn late_now(&self, now: Instant) -> Duration {
+        let age = now.saturating_duration_since(self.late_at).as_secs_f64();
+        self.late.mul_f64(0.5f64.powf(age / LATE_HALF_LIFE_S))
     }
 
     /// A reply arrived (or its time ran out) at `at`: the line is free from then.
@@ -173,6 +210,25 @@ mod tests {
             t0 + Duration::from_micros(100 + 400 + 5000)
         );
         assert_eq!(c.reply_cost(), Duration::from_micros(500));
+    }
+
+    #[test]
+    fn late_replies_widen_the_deadline_for_a_while() {
+        let t0 = Instant::now();
+        let mut c = clock(t0);
+        let base = c.reply_deadline(t0) - t0;
+        // A reply 26 ms late (a stalled pty worker).
+        c.observe_reply(c.reply_due(t0), c.reply_due(t0) + Duration::from_millis(26));
+        let wide = c.reply_deadline(t0) - t0;
+        assert!(wide >= base + Duration::from_millis(51), "{wide:?}");
+        // A minute later half of it is left; an on-time reply does not shrink it.
+        let later = t0 + Duration::from_secs(60);
+        c.observe_reply(c.reply_due(later), c.reply_due(later));
+        let half = c.reply_deadline(later) - later;
+        assert!(
+            half > base + Duration::from_millis(25) && half < wide,
+            "{half:?}"
+        );
     }
 
     #[test]
