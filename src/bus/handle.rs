@@ -73,6 +73,11 @@ impl SetpointStore {
         seq
     }
 
+    /// The sequence number of the latest write (it may still be landing).
+    pub fn latest_seq(&self) -> u64 {
+        self.next_seq.load(Ordering::Acquire)
+    }
+
     /// Every stored target with a sequence number above `after`.
     pub fn changed_since(&self, after: u64) -> Vec<(u8, StoredSetpoint)> {
         self.lock()

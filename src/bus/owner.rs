@@ -61,6 +61,9 @@ pub(super) struct Owner {
     pub(super) port_notes: Vec<String>,
     /// What starting the thread found worth telling (no real-time priority).
     pub(super) thread_notes: Vec<String>,
+    /// A control frame planned while a reply was on the wire, and the store
+    /// sequence number it was planned at.
+    pub(super) prepared: Option<(super::coalesce::Planned, u64)>,
     /// The configured range still has to be scanned (no expected ids given).
     pub(super) needs_scan: bool,
     /// Frames the current one-shot request has written (setpoints may
@@ -109,6 +112,7 @@ impl Owner {
             thread_notes: Vec::new(),
             job_frames: 0,
             overdue: None,
+            prepared: None,
             backoff: BACKOFF_FIRST,
             next_open: now,
             ever_up: false,
@@ -145,14 +149,23 @@ impl Owner {
 
     /// One decision at the moment the line can take the next host frame.
     fn turn(&mut self) {
-        self.housekeeping(Instant::now());
-        if self.wait_until(self.link.clock.write_at()).is_err() {
+        // Bookkeeping goes where the line leaves slack, not between a reply
+        // and the next frame (unless it has waited too long).
+        let (now, write_at) = (Instant::now(), self.link.clock.write_at());
+        if write_at > now || self.stats.overdue(now) {
+            self.housekeeping(now);
+        }
+        if self.wait_until(write_at).is_err() {
             return;
+        }
+        if self.estop_pending() || self.needs_scan {
+            self.prepared = None;
         }
         if self.estop_pending() {
             return self.estop();
         }
         if let Some(req) = self.next_request() {
+            self.prepared = None;
             return self.run_request(req);
         }
         if self.needs_scan {
@@ -164,6 +177,13 @@ impl Owner {
 
     /// Setpoints within budget, else a poll, else setpoints, else listen.
     fn schedule_wire(&mut self, now: Instant) -> Result<(), BusError> {
+        let sent_prepared =
+            self.prepared.is_some() && self.budget.allows(now) && self.send_control()?;
+        // A prepared frame is good for this decision only.
+        self.prepared = None;
+        if sent_prepared {
+            return Ok(());
+        }
         self.collect_setpoints();
         if !self.pending.is_empty() && self.budget.allows(now) && self.send_control()? {
             return Ok(());
@@ -247,6 +267,7 @@ impl Owner {
 
     /// Forgets pending setpoints and skips what the store holds now.
     pub(super) fn drop_setpoints(&mut self) {
+        self.prepared = None;
         self.collect_setpoints();
         self.pending.clear();
         self.acked_seq = self.seen_seq;
@@ -306,6 +327,7 @@ impl Owner {
     /// The port failed: the bus is down until it reopens.
     pub(super) fn lost(&mut self, e: io::Error) -> BusError {
         self.link.close();
+        self.prepared = None;
         self.reg.all_offline(&mut self.events);
         self.pending.clear();
         self.backoff = BACKOFF_FIRST;

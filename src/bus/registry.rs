@@ -121,13 +121,12 @@ impl Registry {
         events: &mut Vec<BusEvent>,
     ) -> ReplyEffect {
         let known = self.entries.contains_key(&reply.dev_id);
-        let bus = self.bus.clone();
-        let entry = self
-            .entries
+        let Registry { bus, entries, .. } = self;
+        let entry = entries
             .entry(reply.dev_id)
             .or_insert_with(|| Entry::new(reply.dev_id));
         let mut effect = ReplyEffect::default();
-        mark_online(&bus, entry, events);
+        mark_online(bus, entry, events);
         match reply.body() {
             ReplyBody::Info01(info) => {
                 effect.rebooted = !solicited && known;
@@ -135,7 +134,7 @@ impl Registry {
                     entry.state.mode = None;
                     entry.state.target_sent = None;
                 }
-                note_fault(&bus, entry, &info, events);
+                note_fault(bus, entry, &info, events);
                 entry.state.info01 = Some((info, now));
                 entry.measured = Some((info.angle, now));
                 entry.telemetry_samples += u32::from(solicited);

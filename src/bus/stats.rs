@@ -42,6 +42,11 @@ impl Stats {
         }
     }
 
+    /// The snapshot is more than one period late.
+    pub(super) fn overdue(&self, now: Instant) -> bool {
+        now > self.next_publish + self.publish_every
+    }
+
     /// Closes the window if it is over; returns its length when it did.
     fn roll(&mut self, now: Instant, counters: &BusCounters) -> Option<Duration> {
         let window = now.saturating_duration_since(self.window_start);
