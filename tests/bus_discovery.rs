@@ -14,7 +14,7 @@ async fn announcements_register_devices_powered_up_with_the_daemon() {
     let rig = rig(&sixteen());
     let snap = rig.online(16).await;
     assert_eq!(snap.devices.keys().copied().collect::<Vec<_>>(), sixteen());
-    assert_eq!(rig.sim.stats().collisions, 0);
+    rig.assert_no_collisions();
 }
 
 #[tokio::test]
@@ -35,7 +35,7 @@ async fn scan_discovers_sixteen_devices_already_running_and_polls_them() {
         rig.host_frames().iter().filter_map(|f| f.dev_id).collect();
     assert!(asked.is_superset(&(1..=20).collect()), "asked {asked:?}");
     assert!(snap.counters.polls > 16);
-    assert_eq!(rig.sim.stats().collisions, 0);
+    rig.assert_no_collisions();
 }
 
 #[tokio::test]

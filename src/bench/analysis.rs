@@ -31,13 +31,22 @@ pub struct Analysis {
     pub broadcasts: u64,
     pub control_frames: u64,
     pub polls: u64,
+    /// Idle line before each host frame, µs, sorted: after a reply (the
+    /// host's reaction through two OS hops) and after a host frame.
+    pub idle_after_reply_us: Vec<u64>,
+    pub idle_after_host_us: Vec<u64>,
+}
+
+/// The `p`-quantile (0..=1) of sorted values.
+pub fn quantile(sorted: &[u64], p: f64) -> u64 {
+    let i = ((sorted.len() as f64 * p).ceil() as usize).saturating_sub(1);
+    sorted.get(i).copied().unwrap_or(0)
 }
 
 impl Analysis {
     /// The `p`-quantile (0..=1) of the latencies, µs.
     pub fn latency_us(&self, p: f64) -> u64 {
-        let i = ((self.latencies_us.len() as f64 * p).ceil() as usize).saturating_sub(1);
-        self.latencies_us.get(i).copied().unwrap_or(0)
+        quantile(&self.latencies_us, p)
     }
 
     pub fn min_rate(rates: &BTreeMap<u8, f64>) -> f64 {
@@ -91,6 +100,7 @@ pub fn analyse(
         latencies_us: Vec::new(),
     };
     let mut telemetry: BTreeMap<u8, u64> = BTreeMap::new();
+    idle_gaps(log, from, to, &mut a);
     for f in log
         .iter()
         .filter(|f| !f.collided && f.end >= from && f.end < to)
@@ -115,6 +125,55 @@ pub fn analyse(
     tally.latencies_us.sort_unstable();
     a.latencies_us = tally.latencies_us;
     a
+}
+
+/// Idle time on the line before each host frame that started in the window.
+fn idle_gaps(log: &[WireFrame], from: Instant, to: Instant, a: &mut Analysis) {
+    for pair in log.windows(2) {
+        let (prev, next) = (&pair[0], &pair[1]);
+        if !next.from_host || next.start < from || next.start >= to {
+            continue;
+        }
+        let gap = next.start.saturating_duration_since(prev.end).as_micros() as u64;
+        if prev.from_host {
+            a.idle_after_host_us.push(gap);
+        } else {
+            a.idle_after_reply_us.push(gap);
+        }
+    }
+    a.idle_after_reply_us.sort_unstable();
+    a.idle_after_host_us.sort_unstable();
+}
+
+/// The `p`-quantile of sorted signed values.
+pub fn quantile_i64(sorted: &[i64], p: f64) -> i64 {
+    let i = ((sorted.len() as f64 * p).ceil() as usize).saturating_sub(1);
+    sorted.get(i).copied().unwrap_or(0)
+}
+
+/// Three frames either side of each collision, one line each (µs from the
+/// first frame of the log), for reading what went wrong.
+pub fn collision_context(log: &[WireFrame]) -> Vec<String> {
+    const SIDE: usize = 3;
+    let Some(t0) = log.first().map(|f| f.start) else {
+        return Vec::new();
+    };
+    let mut lines = Vec::new();
+    for (i, _) in log.iter().enumerate().filter(|(_, f)| f.collided) {
+        lines.push("  -- collision".to_string());
+        for f in &log[i.saturating_sub(SIDE)..(i + SIDE + 1).min(log.len())] {
+            lines.push(format!(
+                "  {:>10} .. {:>10} µs  {}  {:<8}{}  {:02X?}",
+                (f.start - t0).as_micros(),
+                (f.end - t0).as_micros(),
+                if f.from_host { "host  " } else { "device" },
+                f.dev_id.map_or("-".to_string(), |id| id.to_string()),
+                if f.collided { " collided" } else { "" },
+                &f.bytes[..10]
+            ));
+        }
+    }
+    lines
 }
 
 fn host_frame(f: &WireFrame, ids: &[u8], tally: &mut Tally<'_>, a: &mut Analysis) {

@@ -41,13 +41,25 @@ pub struct Client {
 }
 
 impl Client {
-    /// Starts streaming targets for `ids` every `period`.
-    pub fn start(bus: BusHandle, ids: Vec<u8>, period: Duration) -> std::io::Result<Client> {
+    /// Starts streaming targets for `ids` every `period`, at real-time
+    /// `priority` unless 0.
+    pub fn start(
+        bus: BusHandle,
+        ids: Vec<u8>,
+        period: Duration,
+        priority: u8,
+    ) -> std::io::Result<Client> {
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
         let join = std::thread::Builder::new()
             .name(CLIENT_THREAD.into())
-            .spawn(move || stream(&bus, &ids, period, &flag))?;
+            .spawn(move || {
+                if priority > 0 {
+                    // Best effort: the bench reports whether it got it.
+                    let _ = crate::bus::wire::set_fifo(0, priority);
+                }
+                stream(&bus, &ids, period, &flag)
+            })?;
         Ok(Client { stop, join })
     }
 

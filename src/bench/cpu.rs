@@ -31,6 +31,21 @@ pub fn by_prefix(prefixes: &[&str]) -> BTreeMap<String, Duration> {
     out
 }
 
+/// Thread ids of this process whose name starts with `prefix`.
+pub fn tids(prefix: &str) -> Vec<libc::pid_t> {
+    let Ok(tasks) = fs::read_dir("/proc/self/task") else {
+        return Vec::new();
+    };
+    tasks
+        .flatten()
+        .filter(|t| {
+            fs::read_to_string(t.path().join("comm"))
+                .is_ok_and(|c| c.trim_end().starts_with(prefix))
+        })
+        .filter_map(|t| t.file_name().to_str()?.parse().ok())
+        .collect()
+}
+
 /// First field of a schedstat file: time spent on the CPU, ns.
 fn run_time(path: &std::path::Path) -> Option<Duration> {
     let text = fs::read_to_string(path).ok()?;

@@ -54,7 +54,20 @@ pub struct BenchArgs {
     /// The simulated devices' turnaround, µs.
     #[arg(long, default_value_t = 100)]
     pub turnaround_us: u64,
+    /// Run every thread at normal priority. By default the simulator (the
+    /// referee) runs at real-time priority 30, the bus owner at its default
+    /// 10 and the client at 10, so other work on the machine does not decide
+    /// the result.
+    #[arg(long)]
+    pub no_rt: bool,
+    /// Print the frames around every collision the simulator saw.
+    #[arg(long)]
+    pub show_collisions: bool,
 }
+
+/// Real-time priorities of the bench's threads (the owner's is its config default).
+const SIM_PRIORITY: u8 = 30;
+const CLIENT_PRIORITY: u8 = 10;
 
 #[derive(Debug, Error)]
 pub enum BenchError {
@@ -83,8 +96,13 @@ pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
         ));
     }
     println!(
-        "jointd bench: load average {} (other work on this machine skews the numbers)",
-        load_average()
+        "jointd bench: load average {}; threads at {}",
+        load_average(),
+        if args.no_rt {
+            "normal priority (other work on the machine skews the numbers)".to_string()
+        } else {
+            format!("real-time priority: simulator {SIM_PRIORITY}, bus owner and client {CLIENT_PRIORITY}")
+        }
     );
     let mut all = true;
     for &baud in &args.bauds {
@@ -107,12 +125,18 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
     sim_cfg.align_time = ALIGN;
     sim_cfg.turnaround = Duration::from_micros(args.turnaround_us);
     let sim = Simulator::spawn_pty(sim_cfg)?;
+    if !args.no_rt {
+        referee_realtime()?;
+    }
     let path = sim
         .device_path()
         .ok_or_else(|| BenchError::Setup("the simulator has no pty path".into()))?;
     let mut cfg = BusConfig::new("bench", path, baud);
     cfg.ids = ids.clone();
     cfg.timing.turnaround_us = args.turnaround_us;
+    if args.no_rt {
+        cfg.timing.rt_priority = 0;
+    }
     if let Some(share) = args.control_share {
         cfg.poll.control_share = share;
     }
@@ -124,7 +148,8 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
     wait_running(&sim, &ids)?;
 
     let period = Duration::from_secs_f64(1.0 / f64::from(args.rate_hz));
-    let client = Client::start(bus.clone(), ids.clone(), period)?;
+    let client_rt = if args.no_rt { 0 } else { CLIENT_PRIORITY };
+    let client = Client::start(bus.clone(), ids.clone(), period, client_rt)?;
     std::thread::sleep(Duration::from_secs_f64(args.warmup));
     sim.clear_frame_log();
     let (s0, cpu0) = (sim.stats(), cpu_now());
@@ -132,7 +157,18 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
     let (s1, cpu1) = (sim.stats(), cpu_now());
     let writes = client.finish();
     let log = sim.frame_log();
-    let daemon = bus.snapshot().rates.clone();
+    if args.show_collisions {
+        analysis::collision_context(&log)
+            .iter()
+            .for_each(|l| println!("{l}"));
+    }
+    let mut referee_late_ns = sim.delivery_errors_ns();
+    referee_late_ns.sort_unstable();
+    let snapshot = bus.snapshot();
+    let daemon = snapshot.rates.clone();
+    for note in &snapshot.port_notes {
+        println!("  note from the bus owner: {note}");
+    }
     thread.stop();
     sim.shutdown();
 
@@ -149,7 +185,34 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
         cpu_sim: share(1),
         cpu_client: share(2),
         daemon,
+        referee_late_us: [0.5, 0.99].map(|p| {
+            let late = analysis::quantile_i64(&referee_late_ns, p);
+            late as f64 / 1e3
+        }),
     })
+}
+
+/// The simulator's runner thread at real-time priority: a referee the OS
+/// holds back mis-times replies and collisions.
+fn referee_realtime() -> Result<(), BenchError> {
+    // A new thread names itself once it runs: look again for a moment.
+    let deadline = Instant::now() + SETUP_WAIT;
+    let mut tids = cpu::tids(SIM_THREAD);
+    while tids.is_empty() {
+        if Instant::now() > deadline {
+            return Err(BenchError::Setup("no simulator thread found".into()));
+        }
+        std::thread::sleep(Duration::from_millis(1));
+        tids = cpu::tids(SIM_THREAD);
+    }
+    for tid in tids {
+        crate::bus::wire::set_fifo(tid, SIM_PRIORITY).map_err(|e| {
+            BenchError::Setup(format!(
+                "real-time priority for the simulator refused ({e}); run with --no-rt"
+            ))
+        })?;
+    }
+    Ok(())
 }
 
 /// Waits for every joint online, then enables them all.

@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use crate::bus::handle::BusRates;
 
-use super::analysis::Analysis;
+use super::analysis::{quantile, Analysis};
 
 /// The targets at 500000 baud; rates scale with the baud.
 const REFERENCE_BAUD: f64 = 500_000.0;
@@ -29,6 +29,9 @@ pub struct Report {
     pub cpu_client: f64,
     /// The daemon's own statistics at the end of the window.
     pub daemon: BusRates,
+    /// How late the simulator delivered replies against its own model, µs
+    /// (p50, p99): the referee's precision on this machine.
+    pub referee_late_us: [f64; 2],
 }
 
 impl Report {
@@ -129,11 +132,35 @@ impl fmt::Display for Report {
             a.control_frames as f64 / secs,
             a.polls as f64 / secs
         )?;
+        let gaps = |v: &[u64]| {
+            format!(
+                "{} gaps, p50 {} µs, p99 {} µs, {:.1} % of the time",
+                v.len(),
+                quantile(v, 0.5),
+                quantile(v, 0.99),
+                v.iter().sum::<u64>() as f64 / 1e4 / secs
+            )
+        };
+        writeln!(
+            f,
+            "  idle line after a reply             {}",
+            gaps(&a.idle_after_reply_us)
+        )?;
+        writeln!(
+            f,
+            "  idle line after a host frame        {}",
+            gaps(&a.idle_after_host_us)
+        )?;
+        writeln!(
+            f,
+            "  referee's reply delivery vs model   p50 {:.1} µs late, p99 {:.1} µs late",
+            self.referee_late_us[0], self.referee_late_us[1]
+        )?;
         let d = &self.daemon;
         writeln!(
             f,
-            "  the daemon's own view (last 1 s)    utilisation {:.3}  timeouts/s {:.1}  setpoint age p50 {:.2} ms p99 {:.2} ms",
-            d.wire_utilisation, d.timeouts_per_s, ms(d.setpoint_age_p50_us), ms(d.setpoint_age_p99_us)
+            "  the daemon's own view (last 1 s)    utilisation {:.3}  timeouts/s {:.1}  reply timeout {:.1} ms  setpoint age p50 {:.2} ms p99 {:.2} ms",
+            d.wire_utilisation, d.timeouts_per_s, ms(d.reply_timeout_us), ms(d.setpoint_age_p50_us), ms(d.setpoint_age_p99_us)
         )?;
         for (what, ok) in self.checks() {
             writeln!(f, "  [{}] {what}", if ok { "ok" } else { "FAIL" })?;

@@ -19,6 +19,7 @@
 //! Pure: the owner passes the pending setpoints and a view of the devices.
 
 use std::collections::BTreeMap;
+use std::time::Instant;
 
 use crate::protocol::{BroadcastPos, BroadcastSpd, Command, Control, Group};
 
@@ -33,6 +34,8 @@ pub struct SlotInfo {
     pub target: Option<Setpoint>,
     /// Its angle from telemetry, if fresh (not from before a re-zero).
     pub measured: Option<i16>,
+    /// When a frame last carried a new target to it.
+    pub last_sent: Option<Instant>,
 }
 
 /// A setpoint waiting for the wire, and since when its joint has waited
@@ -41,7 +44,7 @@ pub struct SlotInfo {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Pending {
     pub setpoint: StoredSetpoint,
-    pub since: std::time::Instant,
+    pub since: Instant,
 }
 
 /// One frame and the setpoints it delivers.
@@ -96,13 +99,17 @@ pub fn plan(pending: &BTreeMap<u8, Pending>, view: impl Fn(u8) -> Option<SlotInf
             carries: vec![(id, sp)],
         });
     }
-    let since = |f: &Planned| {
-        f.carries
+    // Longest waiting first; on a tie (one write for every joint) the
+    // joints served least recently, so two groups take turns.
+    let key = |f: &Planned| {
+        let waited = f.carries.iter().filter_map(|(id, _)| pending.get(id));
+        let served = f
+            .carries
             .iter()
-            .filter_map(|(id, _)| pending.get(id).map(|p| p.since))
-            .min()
+            .map(|(id, _)| view(*id).and_then(|v| v.last_sent));
+        (waited.map(|p| p.since).min(), served.min().flatten())
     };
-    out.frames.sort_by_cached_key(since);
+    out.frames.sort_by_cached_key(key);
     out
 }
 
@@ -182,7 +189,7 @@ fn speed_broadcast(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::time::{Duration, Instant};
+    use std::time::Duration;
 
     fn sp(pos: i16, spd: i16, seq: u64, t0: Instant) -> Pending {
         let accepted = t0 + Duration::from_micros(seq);
@@ -209,6 +216,7 @@ mod tests {
                     spd_ref: 1000,
                 }),
                 measured: Some(5 * i16::from(id)),
+                last_sent: None,
             })
         }
     }
@@ -341,6 +349,31 @@ mod tests {
     }
 
     #[test]
+    fn on_a_tie_the_group_served_least_recently_goes_first() {
+        let t0 = Instant::now();
+        let pending = BTreeMap::from([
+            (1, sp(11, 1000, 5, t0)),
+            (2, sp(22, 1000, 5, t0)),
+            (9, sp(99, 1000, 5, t0)),
+            (10, sp(101, 1000, 5, t0)),
+        ]);
+        let served = move |id: u8| {
+            view_n(16)(id).map(|v| SlotInfo {
+                last_sent: Some(t0 + Duration::from_micros(if id <= 8 { 2 } else { 1 })),
+                ..v
+            })
+        };
+        let p = plan(&pending, served);
+        assert!(matches!(
+            p.frames[0].command,
+            Command::BroadcastPos(BroadcastPos {
+                group: Group::High,
+                ..
+            })
+        ));
+    }
+
+    #[test]
     fn unchanged_and_unknown_setpoints_send_nothing() {
         let t0 = Instant::now();
         let pending = BTreeMap::from([(2, sp(20, 1000, 1, t0)), (99, sp(1, 1, 1, t0))]);
@@ -359,6 +392,7 @@ mod tests {
                     speed_mode: id != 12,
                     target: None,
                     measured: Some(0),
+                    last_sent: None,
                 })
             }
         };

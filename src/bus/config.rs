@@ -14,6 +14,10 @@ use crate::protocol::{is_device_id, BaudLevel, MAX_DEVICE_ID, MIN_DEVICE_ID};
 
 use super::error::BusError;
 
+/// Low among real-time priorities: above every normal thread, below the
+/// kernel's own real-time work.
+pub const DEFAULT_RT_PRIORITY: u8 = 10;
+
 /// The factory baud of the modules (SPEC §1, level 1).
 pub const FACTORY_BAUD: u32 = 230_400;
 
@@ -55,8 +59,9 @@ pub struct PollPlan {
     /// wants the wire (0..=1). Control takes everything when there is nothing
     /// to poll; polls take everything control leaves.
     ///
-    /// 0.35 gives 16 joints at 500000 baud ~437 control updates/s each (two
-    /// broadcasts per update) and ~42 telemetry samples/s each.
+    /// 0.34 gives 16 joints at 500000 baud ~425 control updates/s each (two
+    /// broadcasts per update) and, with ~5 % of the time lost to the host's
+    /// reaction after replies, ~42 telemetry samples/s each.
     pub control_share: f64,
     /// Every Nth poll of a device reads INFO_01 (state, faults) instead of INFO_02.
     pub info01_every: u32,
@@ -71,7 +76,7 @@ pub struct PollPlan {
 impl Default for PollPlan {
     fn default() -> Self {
         Self {
-            control_share: 0.35,
+            control_share: 0.34,
             info01_every: 8,
             offline_after: 3,
             offline_poll_ms: 200,
@@ -89,23 +94,32 @@ pub struct Timing {
     /// Counted as busy wire time; undocumented by the vendor (SPEC §1).
     pub turnaround_us: u64,
     /// Slack on top of the modelled reply time before a reply counts as
-    /// missing: OS and adapter latency (an FTDI latency timer is added to it).
+    /// missing: OS and adapter latency (an FTDI latency timer is added to
+    /// it). Generous on purpose: writing while a late reply is still on its
+    /// way is a collision, and only a missing device pays for the wait.
     pub reply_margin_us: u64,
     /// Extra attempts of a one-shot transaction after a timeout (polls are not retried).
     pub retries: u32,
     /// How long before the line frees the next host frame is handed to the
-    /// port, µs: enough to cover the OS's write latency so the line never
-    /// idles between host frames, short enough to sample setpoints late.
+    /// port, µs (at most ¾ of a frame time): enough to cover the OS's write
+    /// latency so the line never idles between host frames, short enough
+    /// to sample setpoints late.
     pub write_lead_us: u64,
+    /// Real-time (SCHED_FIFO) priority of the owner thread, 0 = normal
+    /// scheduling. It blocks on the port almost all the time, but when a
+    /// reply comes it must run within tens of µs, even on a busy machine.
+    /// Refused without CAP_SYS_NICE/RLIMIT_RTPRIO: logged, not fatal.
+    pub rt_priority: u8,
 }
 
 impl Default for Timing {
     fn default() -> Self {
         Self {
             turnaround_us: 100,
-            reply_margin_us: 2000,
+            reply_margin_us: 5000,
             retries: 2,
-            write_lead_us: 150,
+            write_lead_us: 300,
+            rt_priority: DEFAULT_RT_PRIORITY,
         }
     }
 }

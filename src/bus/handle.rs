@@ -73,6 +73,11 @@ impl SetpointStore {
         seq
     }
 
+    /// The sequence number of the latest write (it may still be landing).
+    pub fn latest_seq(&self) -> u64 {
+        self.next_seq.load(Ordering::Acquire)
+    }
+
     /// Every stored target with a sequence number above `after`.
     pub fn changed_since(&self, after: u64) -> Vec<(u8, StoredSetpoint)> {
         self.lock()
@@ -266,6 +271,9 @@ pub struct BusRates {
     pub setpoint_age_p50_us: u64,
     pub setpoint_age_p99_us: u64,
     pub setpoint_age_max_us: u64,
+    /// The reply timeout now in force (request end to giving up), µs: the
+    /// model, the configured margin and what the host path's lateness adds.
+    pub reply_timeout_us: u64,
 }
 
 /// What the owner publishes after every change worth seeing.
@@ -283,8 +291,8 @@ pub struct BusSnapshot {
     pub published_wall: SystemTime,
     /// Rates over the last statistics window.
     pub rates: BusRates,
-    /// What opening the port found worth telling (failed ioctls on a pty,
-    /// an FTDI latency timer and its fix).
+    /// What starting the owner and opening the port found worth telling
+    /// (no real-time priority, failed ioctls on a pty, an FTDI latency timer and its fix).
     pub port_notes: Vec<String>,
 }
 

@@ -26,7 +26,7 @@ use super::link::Link;
 use super::poll::{ControlBudget, PollPlanner};
 use super::registry::Registry;
 use super::stats::Stats;
-use super::wire::precise_timers;
+use super::wire::{precise_timers, set_fifo};
 
 /// How long the owner listens when there is nothing to send. Bounds how
 /// late it notices a request or setpoint on an idle bus.
@@ -59,14 +59,19 @@ pub(super) struct Owner {
     pub(super) stats: Stats,
     pub(super) link_state: LinkState,
     pub(super) port_notes: Vec<String>,
+    /// What starting the thread found worth telling (no real-time priority).
+    pub(super) thread_notes: Vec<String>,
+    /// A control frame planned while a reply was on the wire, and the store
+    /// sequence number it was planned at.
+    pub(super) prepared: Option<(super::coalesce::Planned, u64)>,
     /// The configured range still has to be scanned (no expected ids given).
     pub(super) needs_scan: bool,
     /// Frames the current one-shot request has written (setpoints may
     /// interleave after its first).
     pub(super) job_frames: u32,
-    /// The last read that timed out: its reply may still come, late, and
-    /// must not be taken for a power-up announcement.
-    pub(super) overdue: Option<super::link::Want>,
+    /// The last read that timed out and when its reply was due: the reply
+    /// may still come, late, and must not be taken for an announcement.
+    pub(super) overdue: Option<(super::link::Want, Instant)>,
     backoff: Duration,
     next_open: Instant,
     ever_up: bool,
@@ -104,8 +109,10 @@ impl Owner {
             events: Vec::new(),
             link_state: LinkState::Opening,
             port_notes: Vec::new(),
+            thread_notes: Vec::new(),
             job_frames: 0,
             overdue: None,
+            prepared: None,
             backoff: BACKOFF_FIRST,
             next_open: now,
             ever_up: false,
@@ -115,6 +122,7 @@ impl Owner {
     /// The thread's body: runs until [`super::BusThread::stop`].
     pub(super) fn run(mut self) {
         precise_timers();
+        self.realtime();
         while !self.stop.load(Ordering::Acquire) {
             if self.link.is_up() {
                 self.turn();
@@ -125,16 +133,39 @@ impl Owner {
         self.shutdown();
     }
 
+    fn realtime(&mut self) {
+        let priority = self.cfg.timing.rt_priority;
+        if priority == 0 {
+            return;
+        }
+        if let Err(e) = set_fifo(0, priority) {
+            let note = format!(
+                "real-time priority {priority} refused ({e}): replies wait for the CPU under load"
+            );
+            tracing::info!(bus = %self.cfg.name, "{note}");
+            self.thread_notes.push(note);
+        }
+    }
+
     /// One decision at the moment the line can take the next host frame.
     fn turn(&mut self) {
-        self.housekeeping(Instant::now());
-        if self.wait_until(self.link.clock.write_at()).is_err() {
+        // Bookkeeping goes where the line leaves slack, not between a reply
+        // and the next frame (unless it has waited too long).
+        let (now, write_at) = (Instant::now(), self.link.clock.write_at());
+        if write_at > now || self.stats.overdue(now) {
+            self.housekeeping(now);
+        }
+        if self.wait_until(write_at).is_err() {
             return;
+        }
+        if self.estop_pending() || self.needs_scan {
+            self.prepared = None;
         }
         if self.estop_pending() {
             return self.estop();
         }
         if let Some(req) = self.next_request() {
+            self.prepared = None;
             return self.run_request(req);
         }
         if self.needs_scan {
@@ -146,6 +177,13 @@ impl Owner {
 
     /// Setpoints within budget, else a poll, else setpoints, else listen.
     fn schedule_wire(&mut self, now: Instant) -> Result<(), BusError> {
+        let sent_prepared =
+            self.prepared.is_some() && self.budget.allows(now) && self.send_control()?;
+        // A prepared frame is good for this decision only.
+        self.prepared = None;
+        if sent_prepared {
+            return Ok(());
+        }
         self.collect_setpoints();
         if !self.pending.is_empty() && self.budget.allows(now) && self.send_control()? {
             return Ok(());
@@ -229,6 +267,7 @@ impl Owner {
 
     /// Forgets pending setpoints and skips what the store holds now.
     pub(super) fn drop_setpoints(&mut self) {
+        self.prepared = None;
         self.collect_setpoints();
         self.pending.clear();
         self.acked_seq = self.seen_seq;
@@ -288,6 +327,7 @@ impl Owner {
     /// The port failed: the bus is down until it reopens.
     pub(super) fn lost(&mut self, e: io::Error) -> BusError {
         self.link.close();
+        self.prepared = None;
         self.reg.all_offline(&mut self.events);
         self.pending.clear();
         self.backoff = BACKOFF_FIRST;

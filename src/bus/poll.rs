@@ -70,6 +70,9 @@ pub struct PollState {
     pub retry_at: Option<Instant>,
 }
 
+/// An offline device's polls may take at most 1/this of the wire.
+const OFFLINE_COST_INV: u32 = 20;
+
 /// One telemetry read to send.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Poll {
@@ -98,18 +101,22 @@ impl PollPlanner {
     /// The next poll, given `(id, online, state)` of every known device in id
     /// order. An offline device whose retry is due goes first (INFO_01, the
     /// read that tells its state); else the next online device round-robin.
-    /// Counts the poll in the device's state.
+    /// Counts the poll in the device's state. `timeout` is what an
+    /// unanswered poll costs: offline devices are asked no more often than
+    /// keeps each one's cost within a small share of the wire.
     pub fn next<'a>(
         &mut self,
         devices: impl Iterator<Item = (u8, bool, &'a mut PollState)>,
         now: Instant,
+        timeout: Duration,
     ) -> Option<Poll> {
+        let offline_interval = self.offline_interval.max(timeout * OFFLINE_COST_INV);
         let mut online: Vec<(u8, &'a mut PollState)> = Vec::new();
         for (id, is_online, state) in devices {
             if is_online {
                 online.push((id, state));
             } else if !matches!(state.retry_at, Some(t) if t > now) {
-                state.retry_at = Some(now + self.offline_interval);
+                state.retry_at = Some(now + offline_interval);
                 return Some(Poll {
                     dev_id: id,
                     block: InfoBlock::Info01,
@@ -183,7 +190,7 @@ mod tests {
                 .iter_mut()
                 .enumerate()
                 .map(|(i, s)| (i as u8 + 1, true, s));
-            let poll = p.next(devs, t0).unwrap();
+            let poll = p.next(devs, t0, FRAME).unwrap();
             seen.push((poll.dev_id, poll.block == InfoBlock::Info01));
         }
         let ids: Vec<u8> = seen.iter().map(|s| s.0).collect();
@@ -203,7 +210,7 @@ mod tests {
                 .iter_mut()
                 .enumerate()
                 .map(|(i, s)| (i as u8 + 1, i == 0, s));
-            p.next(devs, now).unwrap()
+            p.next(devs, now, FRAME).unwrap()
         };
         assert_eq!(poll_at(&mut st, t0).dev_id, 2, "never asked: due now");
         assert_eq!(poll_at(&mut st, t0).dev_id, 1);
@@ -213,8 +220,19 @@ mod tests {
     }
 
     #[test]
+    fn a_long_timeout_spaces_offline_polls_out() {
+        let t0 = Instant::now();
+        let mut p = PollPlanner::new(8, Duration::from_millis(200));
+        let mut st = states(1);
+        let timeout = Duration::from_millis(25);
+        let devs = st.iter_mut().map(|s| (1, false, s));
+        assert!(p.next(devs, t0, timeout).is_some());
+        assert_eq!(st[0].retry_at, Some(t0 + Duration::from_millis(500)));
+    }
+
+    #[test]
     fn nothing_to_poll_without_devices() {
         let mut p = PollPlanner::new(8, Duration::from_millis(200));
-        assert_eq!(p.next(std::iter::empty(), Instant::now()), None);
+        assert_eq!(p.next(std::iter::empty(), Instant::now(), FRAME), None);
     }
 }

@@ -22,6 +22,8 @@ pub struct Entry {
     pub poll: PollState,
     /// Latest angle from INFO_01/INFO_02; cleared when the zero moves.
     pub measured: Option<(i16, Instant)>,
+    /// When a frame last carried a new target to it.
+    last_sent: Option<Instant>,
     control_updates: u32,
     telemetry_samples: u32,
 }
@@ -35,6 +37,7 @@ impl Entry {
             },
             poll: PollState::default(),
             measured: None,
+            last_sent: None,
             control_updates: 0,
             telemetry_samples: 0,
         }
@@ -104,6 +107,7 @@ impl Registry {
             speed_mode: e.state.mode == Some(CtrlMode::Speed),
             target: e.state.target_sent,
             measured: e.measured.map(|(angle, _)| angle),
+            last_sent: e.last_sent,
         })
     }
 
@@ -117,13 +121,12 @@ impl Registry {
         events: &mut Vec<BusEvent>,
     ) -> ReplyEffect {
         let known = self.entries.contains_key(&reply.dev_id);
-        let bus = self.bus.clone();
-        let entry = self
-            .entries
+        let Registry { bus, entries, .. } = self;
+        let entry = entries
             .entry(reply.dev_id)
             .or_insert_with(|| Entry::new(reply.dev_id));
         let mut effect = ReplyEffect::default();
-        mark_online(&bus, entry, events);
+        mark_online(bus, entry, events);
         match reply.body() {
             ReplyBody::Info01(info) => {
                 effect.rebooted = !solicited && known;
@@ -131,7 +134,7 @@ impl Registry {
                     entry.state.mode = None;
                     entry.state.target_sent = None;
                 }
-                note_fault(&bus, entry, &info, events);
+                note_fault(bus, entry, &info, events);
                 entry.state.info01 = Some((info, now));
                 entry.measured = Some((info.angle, now));
                 entry.telemetry_samples += u32::from(solicited);
@@ -176,10 +179,11 @@ impl Registry {
         }
     }
 
-    /// A frame carrying `setpoint` to `id` was written.
-    pub fn record_sent(&mut self, id: u8, setpoint: Setpoint) {
+    /// A frame carrying `setpoint` to `id` was written at `at`.
+    pub fn record_sent(&mut self, id: u8, setpoint: Setpoint, at: Instant) {
         if let Some(e) = self.entries.get_mut(&id) {
             e.state.target_sent = Some(setpoint);
+            e.last_sent = Some(at);
             e.control_updates += 1;
         }
     }
@@ -313,6 +317,7 @@ mod tests {
                 pos_ref: 1,
                 spd_ref: 2,
             },
+            now,
         );
         let fx = r.on_reply(&info01(2, 0, 0), now, false, &mut ev);
         assert!(fx.rebooted);
@@ -346,7 +351,7 @@ mod tests {
             pos_ref: 0,
             spd_ref: 0,
         };
-        (0..4).for_each(|_| r.record_sent(1, sp));
+        (0..4).for_each(|_| r.record_sent(1, sp, now));
         r.roll_rates(Duration::from_millis(500));
         let s = &r.get(1).unwrap().state;
         assert_eq!((s.control_hz, s.telemetry_hz), (8.0, 2.0));

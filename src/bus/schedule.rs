@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use crate::protocol::{Command, Config, ConfigParam, Reply, ReplyBody};
 
-use super::coalesce::{self, Pending};
+use super::coalesce::{self, Pending, Planned};
 use super::error::BusError;
 use super::handle::WireAck;
 use super::link::Want;
@@ -19,6 +19,9 @@ use super::owner::Owner;
 /// Setpoint frames that may go out between two frames of a one-shot
 /// request, so a long scan does not freeze the joints.
 const MAX_INTERLEAVED: u32 = 2;
+/// How long before a reply is due the next control frame is planned:
+/// ample for planning, short enough that the setpoints it samples are fresh.
+const PREPARE_LEAD: std::time::Duration = std::time::Duration::from_micros(100);
 
 impl Owner {
     /// Listens until `at`; replies nobody waited for are taken in.
@@ -35,7 +38,10 @@ impl Owner {
             self.link.counters.unsolicited += 1;
             let late = self
                 .overdue
-                .take_if(|w| w.dev_id == reply.dev_id && w.index == reply.index);
+                .take_if(|(w, _)| w.dev_id == reply.dev_id && w.index == reply.index);
+            if let Some((_, due)) = late {
+                self.link.clock.observe_reply(due, *at);
+            }
             let effect = self
                 .reg
                 .on_reply(reply, *at, late.is_some(), &mut self.events);
@@ -44,6 +50,7 @@ impl Owner {
                 // whatever was waiting for it is stale.
                 self.shared.setpoints.clear(Some(&[reply.dev_id]));
                 self.pending.remove(&reply.dev_id);
+                self.prepared = None;
             }
         }
         self.link.inbox = inbox;
@@ -60,10 +67,27 @@ impl Owner {
     }
 
     /// Writes the frame carrying the oldest pending setpoint; false when
-    /// nothing needs a frame.
+    /// nothing needs a frame. A frame prepared while the last reply was on
+    /// the wire is used if no setpoint came in since.
     pub(super) fn send_control(&mut self) -> Result<bool, BusError> {
+        let prepared = self.prepared.take();
+        let planned = match prepared {
+            Some((frame, seq)) if seq == self.shared.setpoints.latest_seq() => Some(frame),
+            _ => {
+                self.collect_setpoints();
+                self.plan_control()
+            }
+        };
+        match planned {
+            Some(frame) => self.send_planned(frame).map(|()| true),
+            None => Ok(false),
+        }
+    }
+
+    /// The frame carrying the oldest pending setpoint; drops what needs none.
+    fn plan_control(&mut self) -> Option<Planned> {
         if self.pending.is_empty() {
-            return Ok(false);
+            return None;
         }
         let plan = coalesce::plan(&self.pending, |id| self.reg.slot_info(id));
         for (id, sp) in &plan.settled {
@@ -73,21 +97,38 @@ impl Owner {
             self.pending.remove(id);
             self.link.counters.setpoints_dropped += 1;
         }
-        let Some(first) = plan.frames.into_iter().next() else {
+        let first = plan.frames.into_iter().next();
+        if first.is_none() {
             self.publish_ack(Instant::now());
-            return Ok(false);
+        }
+        first
+    }
+
+    /// While a reply is on the wire: sample the setpoints and plan the frame
+    /// that follows it, so the line idles no longer than needed after the
+    /// reply (planning takes µs a cold cache makes tens of).
+    fn prepare_control(&mut self, at: Instant) {
+        self.collect_setpoints();
+        let latest = self.shared.setpoints.latest_seq();
+        self.prepared = if !self.pending.is_empty() && self.budget.allows(at) {
+            self.plan_control().map(|frame| (frame, latest))
+        } else {
+            None
         };
-        let end = self.link.send(&[first.command]).map_err(|e| self.lost(e))?;
+    }
+
+    fn send_planned(&mut self, frame: Planned) -> Result<(), BusError> {
+        let end = self.link.send(&[frame.command]).map_err(|e| self.lost(e))?;
         self.budget.spend(self.link.clock.frame_time());
-        for (id, sp) in first.carries {
-            self.reg.record_sent(id, sp.setpoint);
+        for (id, sp) in frame.carries {
+            self.reg.record_sent(id, sp.setpoint, end);
             self.settle(id, sp.seq);
             self.stats
                 .setpoint_age(end.saturating_duration_since(sp.accepted));
             self.link.counters.setpoints_sent += 1;
         }
         self.publish_ack(end);
-        Ok(true)
+        Ok(())
     }
 
     /// Drops `id` from pending unless a newer setpoint replaced it meanwhile.
@@ -111,7 +152,9 @@ impl Owner {
 
     /// One telemetry poll; false when there is nobody to poll.
     pub(super) fn poll_once(&mut self) -> Result<bool, BusError> {
-        let Some(poll) = self.planner.next(self.reg.poll_states(), Instant::now()) else {
+        let now = Instant::now();
+        let timeout = self.link.clock.reply_deadline(now) - now;
+        let Some(poll) = self.planner.next(self.reg.poll_states(), now, timeout) else {
             return Ok(false);
         };
         self.link.counters.polls += 1;
@@ -119,22 +162,40 @@ impl Owner {
             dev_id: poll.dev_id,
             index: poll.block.index(),
         };
-        self.exchange(Config::read(poll.dev_id, poll.block), want)?;
+        self.exchange(Config::read(poll.dev_id, poll.block), want, true)?;
         Ok(true)
     }
 
-    /// Writes one config/read frame and waits for the reply it asks for.
-    /// `None` when it did not come in time (counted as a missed poll).
-    fn exchange(&mut self, cmd: Config, want: Want) -> Result<Option<Reply>, BusError> {
+    /// Writes one config/read frame and waits for the reply it asks for;
+    /// with `prepare`, plans the next control frame meanwhile. `None` when
+    /// the reply did not come in time (counted as a missed poll).
+    fn exchange(
+        &mut self,
+        cmd: Config,
+        want: Want,
+        prepare: bool,
+    ) -> Result<Option<Reply>, BusError> {
         let end = self
             .link
             .send(&[Command::Config(cmd)])
             .map_err(|e| self.lost(e))?;
+        let due = self.link.clock.reply_due(end);
         let deadline = self.link.clock.reply_deadline(end);
-        let got = self.link.wait(Some(want), deadline);
+        let mut got = Ok(None);
+        if prepare {
+            let prepare_at = due.checked_sub(PREPARE_LEAD).unwrap_or(due);
+            got = self.link.wait(Some(want), prepare_at);
+            if matches!(got, Ok(None)) {
+                self.prepare_control(due);
+            }
+        }
+        if matches!(got, Ok(None)) {
+            got = self.link.wait(Some(want), deadline);
+        }
         self.absorb_inbox();
         match got.map_err(|e| self.lost(e))? {
             Some((reply, at)) => {
+                self.link.clock.observe_reply(due, at);
                 // A RES from a new id (SET_ID) is not a device yet: the
                 // request renames the old entry itself.
                 let feeds = self.reg.get(reply.dev_id).is_some()
@@ -145,7 +206,7 @@ impl Owner {
                 Ok(Some(reply))
             }
             None => {
-                self.overdue = Some(want);
+                self.overdue = Some((want, due));
                 self.link.counters.timeouts += 1;
                 self.link.clock.line_free(Instant::now());
                 self.reg.on_missed(want.dev_id, &mut self.events);
@@ -167,7 +228,7 @@ impl Owner {
                 self.link.counters.retries += 1;
             }
             self.before_job_frame()?;
-            if let Some(reply) = self.exchange(cmd, want)? {
+            if let Some(reply) = self.exchange(cmd, want, false)? {
                 return Ok(Some(reply));
             }
         }

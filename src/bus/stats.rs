@@ -42,6 +42,11 @@ impl Stats {
         }
     }
 
+    /// The snapshot is more than one period late.
+    pub(super) fn overdue(&self, now: Instant) -> bool {
+        now > self.next_publish + self.publish_every
+    }
+
     /// Closes the window if it is over; returns its length when it did.
     fn roll(&mut self, now: Instant, counters: &BusCounters) -> Option<Duration> {
         let window = now.saturating_duration_since(self.window_start);
@@ -80,6 +85,7 @@ fn rates(base: &BusCounters, now: &BusCounters, window: Duration, ages: &mut [u6
         setpoint_age_p50_us: pct(0.50),
         setpoint_age_p99_us: pct(0.99),
         setpoint_age_max_us: ages.last().copied().unwrap_or(0),
+        reply_timeout_us: 0,
     }
 }
 
@@ -89,6 +95,8 @@ impl Owner {
     pub(super) fn housekeeping(&mut self, now: Instant) {
         if let Some(window) = self.stats.roll(now, &self.link.counters) {
             self.reg.roll_rates(window);
+            let timeout = self.link.clock.reply_deadline(now) - now;
+            self.stats.rates.reply_timeout_us = timeout.as_micros() as u64;
         }
         if now >= self.stats.next_publish || !self.events.is_empty() {
             self.publish(now);
@@ -109,7 +117,12 @@ impl Owner {
             published_at: now,
             published_wall: SystemTime::now(),
             rates: self.stats.rates.clone(),
-            port_notes: self.port_notes.clone(),
+            port_notes: self
+                .thread_notes
+                .iter()
+                .chain(&self.port_notes)
+                .cloned()
+                .collect(),
         };
         self.shared.snapshot.send_replace(Arc::new(snapshot));
         for event in self.events.drain(..) {

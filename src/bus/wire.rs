@@ -21,7 +21,21 @@ pub struct WireClock {
     lead: Duration,
     /// When the last host frame handed to the port leaves the wire.
     free_at: Instant,
+    /// The largest lateness of a reply against the model seen lately
+    /// (decaying), and when it was seen: the host path's own latency.
+    late: Duration,
+    late_at: Instant,
 }
+
+/// Half-life of the observed reply lateness: a stall seen once keeps the
+/// deadline wide for minutes, since such stalls come back.
+const LATE_HALF_LIFE_S: f64 = 60.0;
+/// The deadline allows this many times the lateness seen.
+const LATE_FACTOR: u32 = 2;
+/// Bound on what observed lateness adds to the deadline: nothing else may
+/// be written while a reply is due, so a long wait for a missing device
+/// holds every joint's setpoints back.
+const MAX_LATE_ALLOWANCE: Duration = Duration::from_millis(20);
 
 impl WireClock {
     pub fn new(baud: u32, timing: &Timing, now: Instant) -> Self {
@@ -31,6 +45,8 @@ impl WireClock {
             reply_margin: Duration::from_micros(timing.reply_margin_us),
             lead: Duration::from_micros(timing.write_lead_us),
             free_at: now,
+            late: Duration::ZERO,
+            late_at: now,
         }
     }
 
@@ -60,8 +76,12 @@ impl WireClock {
     /// When to hand the next host frame to the port: a little before the line
     /// frees, so the port's queue never runs dry, yet as late as possible so
     /// the frame carries the freshest setpoints.
+    ///
+    /// The lead stays below ¾ of a frame time, so at most one frame waits in
+    /// the port's queue and an e-stop is never behind more than one frame.
     pub fn write_at(&self) -> Instant {
-        self.free_at.checked_sub(self.lead).unwrap_or(self.free_at)
+        let lead = self.lead.min(self.frame * 3 / 4);
+        self.free_at.checked_sub(lead).unwrap_or(self.free_at)
     }
 
     /// Accounts `n` host frames handed to the port at `now`; returns when the
@@ -71,9 +91,32 @@ impl WireClock {
         self.free_at
     }
 
-    /// The latest a reply to a request ending at `request_end` may complete.
+    /// When a reply to a request ending at `request_end` should complete.
+    pub fn reply_due(&self, request_end: Instant) -> Instant {
+        request_end + self.turnaround + self.frame
+    }
+
+    /// The latest a reply to a request ending at `request_end` may
+    /// complete: the model, the configured margin, and twice the lateness
+    /// the host path has shown lately (like TCP's retransmission timeout,
+    /// the allowance follows what is measured).
     pub fn reply_deadline(&self, request_end: Instant) -> Instant {
-        request_end + self.turnaround + self.frame + self.reply_margin
+        let allowance = (self.late_now(request_end) * LATE_FACTOR).min(MAX_LATE_ALLOWANCE);
+        self.reply_due(request_end) + self.reply_margin + allowance
+    }
+
+    /// A reply due at `due` arrived at `arrived`.
+    pub fn observe_reply(&mut self, due: Instant, arrived: Instant) {
+        let late = arrived.saturating_duration_since(due);
+        if late > self.late_now(arrived) {
+            self.late = late;
+            self.late_at = arrived;
+        }
+    }
+
+    fn late_now(&self, now: Instant) -> Duration {
+        let age = now.saturating_duration_since(self.late_at).as_secs_f64();
+        self.late.mul_f64(0.5f64.powf(age / LATE_HALF_LIFE_S))
     }
 
     /// A reply arrived (or its time ran out) at `at`: the line is free from then.
@@ -102,6 +145,20 @@ pub fn precise_timers() {
     }
 }
 
+/// Puts thread `tid` (0: the calling thread) in the real-time FIFO class at
+/// `priority` (1..=99), so other work on the machine cannot hold it back for
+/// milliseconds while the wire waits. Needs CAP_SYS_NICE or an RTPRIO limit.
+pub fn set_fifo(tid: libc::pid_t, priority: u8) -> std::io::Result<()> {
+    let param = libc::sched_param {
+        sched_priority: libc::c_int::from(priority),
+    };
+    // SAFETY: a valid sched_param; on Linux the pid argument names a thread.
+    if unsafe { libc::sched_setscheduler(tid, libc::SCHED_FIFO, &param) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -128,7 +185,22 @@ mod tests {
         let t0 = Instant::now();
         let mut c = clock(t0);
         let end = c.host_frames(t0, 1);
-        assert_eq!(c.write_at(), end - Duration::from_micros(150));
+        assert_eq!(c.write_at(), end - Duration::from_micros(300));
+    }
+
+    #[test]
+    fn lead_stays_below_a_frame() {
+        let t0 = Instant::now();
+        let timing = Timing {
+            write_lead_us: 5_000,
+            ..Timing::default()
+        };
+        let mut c = WireClock::new(500_000, &timing, t0);
+        let end = c.host_frames(t0, 1);
+        assert_eq!(c.write_at(), end - Duration::from_micros(300));
+        c.set_baud(19_200);
+        let end = c.host_frames(end, 1);
+        assert_eq!(c.write_at(), end - Duration::from_micros(5_000));
     }
 
     #[test]
@@ -137,9 +209,32 @@ mod tests {
         let c = clock(t0);
         assert_eq!(
             c.reply_deadline(t0),
-            t0 + Duration::from_micros(100 + 400 + 2000)
+            t0 + Duration::from_micros(100 + 400 + 5000)
         );
         assert_eq!(c.reply_cost(), Duration::from_micros(500));
+    }
+
+    #[test]
+    fn late_replies_widen_the_deadline_for_a_while() {
+        let t0 = Instant::now();
+        let mut c = clock(t0);
+        let base = c.reply_deadline(t0) - t0;
+        // A reply 26 ms late (a stalled pty worker): twice that, capped.
+        let due = c.reply_due(t0);
+        c.observe_reply(due, due + Duration::from_millis(26));
+        let wide = c.reply_deadline(t0) - t0;
+        assert_eq!(wide, base + Duration::from_millis(20));
+        // An on-time reply does not shrink it; time does (half-life 60 s).
+        let later = t0 + Duration::from_secs(60);
+        c.observe_reply(c.reply_due(later), c.reply_due(later));
+        assert_eq!(
+            c.reply_deadline(later) - later,
+            wide,
+            "13 ms doubled, capped"
+        );
+        let much_later = t0 + Duration::from_secs(180);
+        let less = c.reply_deadline(much_later) - much_later;
+        assert!(less > base && less < wide, "{less:?}");
     }
 
     #[test]

@@ -7,13 +7,14 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use jointd::bus::handle::BusEvent;
-use jointd::bus::{spawn_bus, BusConfig, BusHandle, BusSnapshot};
+use jointd::bus::{spawn_bus, BusConfig, BusHandle, BusSnapshot, Setpoint, Targets};
+use jointd::protocol::reply::fsm;
 use jointd::sim::{SimConfig, SimHandle, Simulator, WireFrame};
 
 /// Deadline of every wait: they end on the event, this only bounds a failure.
 pub const WAIT: Duration = Duration::from_secs(10);
 pub const BAUD: u32 = 500_000;
-pub const TEST_REPLY_MARGIN_US: u64 = 20_000;
+pub const TEST_REPLY_MARGIN_US: u64 = 100_000;
 
 pub struct Rig {
     pub sim: SimHandle,
@@ -53,9 +54,10 @@ pub fn rig_after_boot(sim_cfg: SimConfig, tune: impl FnOnce(&mut BusConfig)) -> 
 fn bus_on(sim: SimHandle, baud: u32, tune: impl FnOnce(&mut BusConfig)) -> Rig {
     let path = sim.device_path().expect("pty path");
     let mut cfg = BusConfig::new("test", path, baud);
-    cfg.scan_last = 16;
-    // The referee is a thread on a loaded machine: when the OS holds it back
-    // for milliseconds, a reply arrives that late. Wait long enough that a
+    cfg.scan_last = sim.devices().iter().map(|d| d.id).max().unwrap_or(1);
+    // The referee is a thread behind a pty on a loaded machine: when the OS
+    // holds it (or the pty's kernel worker) back, a frame reaches the
+    // simulated wire tens of ms after it was written. Wait long enough that a
     // reply given up on is really gone (on hardware, the default is ample).
     cfg.timing.reply_margin_us = TEST_REPLY_MARGIN_US;
     tune(&mut cfg);
@@ -102,6 +104,14 @@ impl Rig {
             .collect()
     }
 
+    /// Host frames that started on the wire at or after `mark`.
+    pub fn host_frames_since(&self, mark: std::time::Instant) -> Vec<WireFrame> {
+        self.host_frames()
+            .into_iter()
+            .filter(|f| f.start >= mark)
+            .collect()
+    }
+
     pub fn stop(&mut self) {
         if let Some(t) = self.thread.take() {
             t.stop();
@@ -143,4 +153,69 @@ pub fn summary(s: &BusSnapshot) -> String {
         devices.join(" "),
         s.counters
     )
+}
+
+/// 20000 rpm, the vendor's recommended speed limit (Q15).
+pub const SPEED: i16 = 13_106;
+
+pub fn target(deg: f64) -> Setpoint {
+    Setpoint {
+        pos_ref: (deg * 128.0).round() as i16,
+        spd_ref: SPEED,
+    }
+}
+
+impl Rig {
+    /// Enables every device and waits until each reports run (INFO_01).
+    pub async fn enable_all(&self, n: usize) {
+        self.bus.enable(Targets::All).await.expect("enable");
+        self.until("all running", |s| {
+            s.devices
+                .values()
+                .filter(|d| d.info01.is_some_and(|(i, _)| i.fsm == fsm::RUN))
+                .count()
+                == n
+        })
+        .await;
+    }
+
+    /// Waits until device `id`'s telemetry angle is within 1° of `deg`.
+    pub async fn reaches(&self, id: u8, deg: f64) {
+        self.until(&format!("device {id} at {deg}°"), |s| {
+            s.devices
+                .get(&id)
+                .and_then(|d| d.info02)
+                .is_some_and(|(i, _)| (f64::from(i.angle) / 128.0 - deg).abs() < 1.0)
+        })
+        .await;
+    }
+
+    /// Waits (bounded) until the simulator's view satisfies `pred`: the
+    /// simulator publishes no events, so this polls it.
+    pub fn sim_until(&self, what: &str, pred: impl Fn(&SimHandle) -> bool) {
+        let deadline = std::time::Instant::now() + WAIT;
+        while !pred(&self.sim) {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "timed out waiting for {what}"
+            );
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+}
+
+impl Rig {
+    /// Asserts the simulator saw no collision, showing the frames around any.
+    pub fn assert_no_collisions(&self) {
+        let stats = self.sim.stats();
+        if stats.collisions > 0 {
+            let context = jointd::bench::analysis::collision_context(&self.sim.frame_log());
+            panic!(
+                "{} collision(s):\n{}\n{}",
+                stats.collisions,
+                context.join("\n"),
+                summary(&self.bus.snapshot())
+            );
+        }
+    }
 }

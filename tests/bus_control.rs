@@ -1,0 +1,162 @@
+//! Setpoints on the wire and the e-stop, against the simulator.
+
+mod bus_support;
+
+use std::time::{Duration, Instant};
+
+use bus_support::*;
+use jointd::bus::{BusError, Targets};
+use jointd::protocol::{Command, Control, ControlOp, Frame, Group, InfoBlock};
+use jointd::sim::WireFrame;
+
+fn command(f: &WireFrame) -> Option<Command> {
+    Frame::decode(&f.bytes)
+        .ok()
+        .and_then(|fr| Command::from_frame(&fr).ok())
+}
+
+#[tokio::test]
+async fn broadcasts_coalesce_and_fill_other_slots_with_target_or_measured_angle() {
+    let rig = rig(&[1, 2, 3, 4, 5, 6, 7, 8]);
+    rig.online(8).await;
+    rig.enable_all(8).await;
+    // Joint 3 to 20°, joint 4 to -10°: one control frame each (new speed limit).
+    rig.bus
+        .set_targets(&[(3, target(20.0)), (4, target(-10.0))]);
+    rig.reaches(3, 20.0).await;
+    rig.reaches(4, -10.0).await;
+    // Joint 3 disabled and enabled again: no target of ours, it holds at 20°.
+    rig.bus.disable(Targets::Ids(vec![3])).await.unwrap();
+    rig.bus.enable(Targets::Ids(vec![3])).await.unwrap();
+
+    // Joints 1 and 2 move: their first frames set the speed limit, the next share a broadcast.
+    rig.bus.set_targets(&[(1, target(5.0)), (2, target(6.0))]);
+    rig.reaches(1, 5.0).await;
+    let mark = Instant::now();
+    rig.bus.set_targets(&[(1, target(7.0)), (2, target(8.0))]);
+    rig.reaches(2, 8.0).await;
+
+    let cmds: Vec<Command> = rig
+        .host_frames_since(mark)
+        .iter()
+        .filter_map(command)
+        .collect();
+    let bcasts: Vec<_> = cmds
+        .iter()
+        .filter_map(|c| match c {
+            Command::BroadcastPos(b) => Some(*b),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(bcasts.len(), 1, "one broadcast for both joints: {cmds:?}");
+    let b = bcasts[0];
+    assert_eq!(b.group, Group::Low);
+    assert_eq!(&b.pos_ref[..2], &[7 * 128, 8 * 128]);
+    // Slot 3: never commanded since its enable: its measured angle, not 0.
+    assert!(
+        (i32::from(b.pos_ref[2]) - 20 * 128).abs() < 128,
+        "slot 3 = {}",
+        b.pos_ref[2]
+    );
+    // Slot 4: its current target.
+    assert_eq!(b.pos_ref[3], -10 * 128);
+    assert!(!cmds.iter().any(|c| matches!(
+        c,
+        Command::Control(Control {
+            op: ControlOp::SetRef,
+            ..
+        })
+    )));
+    // The device behind slot 3 kept its place.
+    let d3 = rig.sim.device(3).unwrap();
+    assert!(
+        (d3.target_deg - 20.0).abs() < 1.0,
+        "device 3 target {}",
+        d3.target_deg
+    );
+
+    // A single changed joint gets a control frame, not a broadcast.
+    let mark = Instant::now();
+    rig.bus.set_targets(&[(1, target(9.0))]);
+    rig.reaches(1, 9.0).await;
+    let cmds: Vec<Command> = rig
+        .host_frames_since(mark)
+        .iter()
+        .filter_map(command)
+        .collect();
+    assert!(cmds.contains(&Command::Control(Control::set_ref(1, 9 * 128, SPEED))));
+    assert!(!cmds.iter().any(|c| matches!(c, Command::BroadcastPos(_))));
+    rig.assert_no_collisions();
+}
+
+#[tokio::test]
+async fn wire_acks_follow_setpoints_onto_the_wire() {
+    let rig = rig(&[1, 2]);
+    rig.online(2).await;
+    let mut acks = rig.bus.wire_acks();
+    let seq = rig.bus.set_targets(&[(1, target(1.0)), (2, target(2.0))]);
+    let waited = tokio::time::timeout(WAIT, acks.wait_for(|a| a.seq >= seq)).await;
+    let ack = *waited.expect("ack in time").expect("ack channel open");
+    assert!(ack.at.is_some());
+}
+
+#[tokio::test]
+async fn estop_disables_everything_ahead_of_queued_requests() {
+    let rig = rig(&[1, 2, 3, 4]);
+    rig.online(4).await;
+    rig.enable_all(4).await;
+    rig.bus.set_targets(&[(1, target(10.0)), (2, target(10.0))]);
+    // A long scan of absent ids keeps the owner busy; three reads queue behind it.
+    let scan = tokio::spawn({
+        let bus = rig.bus.clone();
+        async move { bus.scan(100, 159).await }
+    });
+    rig.sim_until("the scan on the wire", |sim| {
+        sim.frame_log()
+            .iter()
+            .any(|f| f.from_host && f.dev_id >= Some(100))
+    });
+    let reads: Vec<_> = (1..=3)
+        .map(|id| {
+            let bus = rig.bus.clone();
+            tokio::spawn(async move { bus.read_info(id, InfoBlock::Info03).await })
+        })
+        .collect();
+    // Let the reads reach the queue before the e-stop.
+    rig.until("three requests queued", |s| s.queue_depth >= 3)
+        .await;
+
+    let report = rig.bus.estop().await.expect("e-stop");
+    assert_eq!(report.frames_sent, 5, "0xFF and each of the 4 devices");
+    assert_eq!(report.preempted_requests, 3);
+    assert!(matches!(scan.await.unwrap(), Err(BusError::Preempted)));
+    for r in reads {
+        assert!(matches!(r.await.unwrap(), Err(BusError::Preempted)));
+    }
+    rig.sim_until("every device disabled", |sim| {
+        (1..=4).all(|id| sim.device(id).is_some_and(|d| !d.enabled))
+    });
+    assert_eq!(rig.bus.shared().setpoints.get(1), None, "setpoints cleared");
+    let first_disable = rig.host_frames().iter().filter_map(command).find(|c| {
+        matches!(
+            c,
+            Command::Control(Control {
+                op: ControlOp::Disable,
+                ..
+            })
+        )
+    });
+    assert_eq!(
+        first_disable,
+        Some(Command::Control(Control::disable(0xFF)))
+    );
+    rig.assert_no_collisions();
+    // The bus carries on after an e-stop.
+    tokio::time::timeout(
+        Duration::from_secs(5),
+        rig.bus.read_info(1, InfoBlock::Info01),
+    )
+    .await
+    .expect("in time")
+    .expect("reads work again");
+}

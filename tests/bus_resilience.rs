@@ -1,0 +1,142 @@
+//! A device power cycle, an unplugged bus, and a long mixed run: the bus
+//! recovers by itself and nothing ever collides.
+
+mod bus_support;
+
+use std::time::{Duration, Instant};
+
+use bus_support::*;
+use jointd::bench::client::Client;
+use jointd::bus::handle::{BusEvent, LinkState};
+use jointd::bus::{spawn_bus_on, BusConfig, BusError};
+use jointd::protocol::{Command, ConfigParam, Frame, InfoBlock};
+use jointd::sim::{Fault, Simulator};
+
+#[tokio::test]
+async fn a_power_cycled_device_goes_offline_and_comes_back_by_itself() {
+    let mut sim_cfg = sim_config(&[1, 2, 3], BAUD);
+    // Long enough a boot that the device misses several polls.
+    sim_cfg.boot_delay = Duration::from_millis(300);
+    let rig = rig_with(sim_cfg, |cfg| {
+        cfg.ids = vec![1, 2, 3];
+        cfg.timing.reply_margin_us = 5_000;
+    });
+    rig.online(3).await;
+    let mut events = rig.bus.events();
+    rig.sim.inject(Fault::PowerCycle { dev_id: 2 });
+    event(&mut events, "device 2 offline", |e| {
+        matches!(e, BusEvent::DeviceOffline { dev_id: 2, .. })
+    })
+    .await;
+    let back = event(&mut events, "device 2 online", |e| {
+        matches!(e, BusEvent::DeviceOnline { dev_id: 2, .. })
+            || matches!(e, BusEvent::DeviceOffline { dev_id: 1 | 3, .. })
+    })
+    .await;
+    assert!(
+        matches!(back, BusEvent::DeviceOnline { dev_id: 2, .. }),
+        "{back:?}"
+    );
+    let snap = rig.online(3).await;
+    assert_eq!(
+        snap.devices[&2].target_sent, None,
+        "a rebooted device holds no target"
+    );
+}
+
+#[tokio::test]
+async fn an_unplugged_bus_goes_down_and_resumes_when_plugged_back() {
+    let rig = rig(&[1, 2]);
+    rig.online(2).await;
+    let mut events = rig.bus.events();
+    rig.sim.inject(Fault::Unplug);
+    event(&mut events, "bus down", |e| {
+        matches!(e, BusEvent::BusDown { .. })
+    })
+    .await;
+    let snap = rig
+        .until("down with every device offline", |s| {
+            matches!(s.link, LinkState::Down { .. }) && s.devices.values().all(|d| !d.online)
+        })
+        .await;
+    assert_eq!(snap.devices.len(), 2, "devices stay known while down");
+    let down = rig.bus.read_info(1, InfoBlock::Info01).await;
+    assert!(matches!(down, Err(BusError::Down { .. })), "{down:?}");
+
+    rig.sim.inject(Fault::Replug);
+    event(&mut events, "bus up", |e| {
+        matches!(e, BusEvent::BusUp { .. })
+    })
+    .await;
+    rig.online(2).await;
+    rig.bus.read_info(1, InfoBlock::Info01).await.unwrap();
+    assert!(rig.bus.snapshot().counters.reconnects >= 1);
+}
+
+#[tokio::test]
+async fn a_bus_on_an_in_memory_line_survives_a_hangup() {
+    let (sim, host) = Simulator::spawn_memory(sim_config(&[4, 5], BAUD)).unwrap();
+    let mut cfg = BusConfig::new("mem", "memory", BAUD);
+    cfg.ids = vec![4, 5];
+    let (bus, thread) = spawn_bus_on(cfg, Box::new(host)).unwrap();
+    let rig = Rig {
+        sim,
+        bus,
+        thread: Some(thread),
+    };
+    rig.online(2).await;
+    rig.sim.inject(Fault::Unplug);
+    rig.until("down", |s| matches!(s.link, LinkState::Down { .. }))
+        .await;
+    rig.sim.inject(Fault::Replug);
+    rig.until("up again", |s| s.link == LinkState::Up).await;
+    rig.online(2).await;
+}
+
+#[tokio::test]
+async fn a_long_mixed_run_of_setpoints_polls_and_config_never_collides() {
+    let ids: Vec<u8> = (1..=16).collect();
+    let rig = rig(&ids);
+    rig.online(16).await;
+    rig.enable_all(16).await;
+    let start = Instant::now();
+    let client = Client::start(rig.bus.clone(), ids.clone(), Duration::from_millis(1), 0).unwrap();
+    let blocks = [
+        InfoBlock::Info03,
+        InfoBlock::Info04,
+        InfoBlock::Info05,
+        InfoBlock::Info06,
+    ];
+    let mut ops = 0u16;
+    while start.elapsed() < Duration::from_secs(3) {
+        let id = ids[usize::from(ops) % ids.len()];
+        rig.bus
+            .read_info(id, blocks[usize::from(ops) % blocks.len()])
+            .await
+            .unwrap();
+        rig.bus
+            .write_config(id, ConfigParam::PosLpf((ops % 4) as u8))
+            .await
+            .unwrap();
+        ops += 1;
+    }
+    let writes = client.finish();
+    rig.bus.disable(jointd::bus::Targets::All).await.unwrap();
+    assert!(writes.len() > 1000, "client wrote {}", writes.len());
+
+    let cmds: Vec<Command> = rig
+        .host_frames_since(start)
+        .iter()
+        .filter_map(|f| Frame::decode(&f.bytes).ok())
+        .filter_map(|f| Command::from_frame(&f).ok())
+        .collect();
+    let count = |pred: fn(&Command) -> bool| cmds.iter().filter(|c| pred(c)).count();
+    let broadcasts = count(|c| matches!(c, Command::BroadcastPos(_)));
+    let reads = count(|c| matches!(c, Command::Config(c) if c.param.is_read()));
+    let writes = count(|c| matches!(c, Command::Config(c) if !c.param.is_read()));
+    assert!(
+        broadcasts > 500 && reads > 500 && writes >= usize::from(ops),
+        "{broadcasts} {reads} {writes}"
+    );
+    rig.assert_no_collisions();
+}
