@@ -7,6 +7,7 @@
 //! - [`api`]: the REST API (axum routers over the bus handles, OpenAPI, auth, soft limits).
 //! - [`bus`]: one owner thread per bus, its scheduler, and the handle the API uses.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty, in-memory pipe).
+//! - [`ws`]: the WebSocket endpoint: telemetry streams, batch setpoints, teleop watchdog.
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory).
 
 pub mod api;
@@ -16,3 +17,4 @@ pub mod frame_json;
 pub mod protocol;
 pub mod sim;
 pub mod transport;
+pub mod ws;

@@ -25,12 +25,25 @@ pub async fn require_token(State(state): State<AppState>, req: Request, next: Ne
         .headers()
         .get(AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
-        .and_then(bearer_token);
+        .and_then(bearer_token)
+        .or_else(|| websocket_query_token(&req));
     match presented {
         Some(p) if constant_time_eq(p.as_bytes(), token.as_bytes()) => next.run(req).await,
         Some(_) => ApiError::unauthorized("the bearer token is not valid").into_response(),
         None => ApiError::unauthorized("send `Authorization: Bearer <token>`").into_response(),
     }
+}
+
+/// Browsers cannot set headers on a WebSocket upgrade, so the WebSocket
+/// endpoint (only) also takes `?token=`.
+fn websocket_query_token(req: &Request) -> Option<&str> {
+    if req.uri().path() != crate::ws::WS_PATH {
+        return None;
+    }
+    req.uri()
+        .query()?
+        .split('&')
+        .find_map(|pair| pair.strip_prefix("token="))
 }
 
 /// The token of an `Authorization` value; the scheme is case-insensitive.

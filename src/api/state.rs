@@ -21,6 +21,7 @@ struct Inner {
     limits: SoftLimits,
     token: Option<String>,
     started: Instant,
+    ws: crate::ws::WsHub,
 }
 
 impl AppState {
@@ -36,6 +37,7 @@ impl AppState {
                 limits,
                 token: token.filter(|t| !t.is_empty()),
                 started: Instant::now(),
+                ws: crate::ws::WsHub::default(),
             }),
         }
     }
@@ -57,6 +59,11 @@ impl AppState {
 
     pub fn limits(&self, bus: &str, id: u8) -> JointLimits {
         self.inner.limits.for_joint(bus, id)
+    }
+
+    /// What the WebSocket connections share.
+    pub fn ws(&self) -> &crate::ws::WsHub {
+        &self.inner.ws
     }
 
     pub fn uptime_s(&self) -> f64 {

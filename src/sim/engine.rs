@@ -330,10 +330,7 @@ impl Engine {
     }
 
     fn each(&mut self, id: u8, f: impl FnMut(&mut Device)) {
-        self.devices
-            .iter_mut()
-            .filter(|d| d.id == id)
-            .for_each(f);
+        self.devices.iter_mut().filter(|d| d.id == id).for_each(f);
     }
 
     /// The line was unplugged (in-flight frames are lost) or plugged back.
