@@ -8,6 +8,7 @@
 //! - [`bus`]: one owner thread per bus, its scheduler, and the handle the API uses.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty, in-memory pipe).
 //! - [`ws`]: the WebSocket endpoint: telemetry streams, batch setpoints, teleop watchdog.
+//! - [`web`]: the embedded dashboard (or `--web-dir` while developing).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory).
 
 pub mod api;
@@ -17,4 +18,5 @@ pub mod frame_json;
 pub mod protocol;
 pub mod sim;
 pub mod transport;
+pub mod web;
 pub mod ws;

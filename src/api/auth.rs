@@ -18,7 +18,7 @@ pub async fn require_token(State(state): State<AppState>, req: Request, next: Ne
     let Some(token) = state.token() else {
         return next.run(req).await;
     };
-    if req.uri().path() == HEALTHZ_PATH {
+    if req.uri().path() == HEALTHZ_PATH || crate::web::is_public(req.uri().path()) {
         return next.run(req).await;
     }
     let presented = req

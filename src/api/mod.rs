@@ -48,6 +48,7 @@ pub fn app(state: AppState) -> Router {
     router
         .merge(openapi::docs(doc))
         .merge(crate::ws::router())
+        .merge(crate::web::router())
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(axum::middleware::from_fn_with_state(
