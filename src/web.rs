@@ -2,7 +2,7 @@
 //! serves it. While developing, `--web-dir web` serves the folder from disk
 //! instead, so a page reload picks up edits without a rebuild.
 
-use std::path::PathBuf;
+use std::path::Path;
 
 use axum::extract::State;
 use axum::http::{header, StatusCode, Uri};
@@ -76,6 +76,6 @@ async fn asset(State(state): State<AppState>, uri: Uri) -> Response {
         .into_response()
 }
 
-async fn read_from(dir: &PathBuf, file: &str) -> std::io::Result<String> {
+async fn read_from(dir: &Path, file: &str) -> std::io::Result<String> {
     tokio::fs::read_to_string(dir.join(file)).await
 }
