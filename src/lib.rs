@@ -5,6 +5,7 @@
 //! - [`frame_json`]: frames ↔ JSON with the field names of `vectors.json` (CLI, API, tests).
 //! - [`cli`]: the `jointd frame …` tools for reading a serial capture by hand.
 //! - [`api`]: the REST API (axum routers over the bus handles, OpenAPI, auth, soft limits).
+//! - [`daemon`]: `jointd [run]`: config, buses, the HTTP server, graceful shutdown.
 //! - [`bus`]: one owner thread per bus, its scheduler, and the handle the API uses.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty, in-memory pipe).
 //! - [`ws`]: the WebSocket endpoint: telemetry streams, batch setpoints, teleop watchdog.
@@ -14,6 +15,7 @@
 pub mod api;
 pub mod bus;
 pub mod cli;
+pub mod daemon;
 pub mod frame_json;
 pub mod protocol;
 pub mod sim;

@@ -6,10 +6,13 @@ use clap::{Parser, Subcommand};
 
 /// jointd: a gateway daemon for RS-485 servo joint modules.
 #[derive(Parser, Debug)]
-#[command(version, about, long_about = None)]
+#[command(version, about, long_about = None, args_conflicts_with_subcommands = true)]
 struct Cli {
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
+    /// With no subcommand, jointd runs the daemon (same flags as `jointd run`).
+    #[command(flatten)]
+    run: jointd::daemon::RunArgs,
 }
 
 #[derive(Subcommand, Debug)]
@@ -19,6 +22,10 @@ enum Command {
     Frame(FrameCommand),
     /// Run a simulated bus of joint modules on a pseudo-terminal (path on stdout).
     Sim(jointd::sim::cli::SimArgs),
+    /// Run the daemon: buses, REST API, graceful shutdown on SIGINT/SIGTERM (the default).
+    Run(jointd::daemon::RunArgs),
+    /// Print the OpenAPI document of the REST API (as checked in under openapi/).
+    Openapi,
 }
 
 #[derive(Subcommand, Debug)]
@@ -41,14 +48,44 @@ const EXIT_BAD_INPUT: u8 = 2;
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
-        Command::Frame(cmd) => run_frame(cmd),
-        Command::Sim(args) => match jointd::sim::cli::run(&args) {
+        None => run_daemon(cli.run),
+        Some(Command::Run(args)) => run_daemon(args),
+        Some(Command::Openapi) => {
+            print!("{}", jointd::api::openapi::document_json());
+            ExitCode::SUCCESS
+        }
+        Some(Command::Frame(cmd)) => run_frame(cmd),
+        Some(Command::Sim(args)) => match jointd::sim::cli::run(&args) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("jointd sim: {e}");
                 ExitCode::FAILURE
             }
         },
+    }
+}
+
+fn run_daemon(args: jointd::daemon::RunArgs) -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let runtime = match tokio::runtime::Runtime::new() {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("jointd: cannot start the async runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match runtime.block_on(jointd::daemon::run(args)) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("jointd: {e}");
+            ExitCode::FAILURE
+        }
     }
 }
 

@@ -109,8 +109,8 @@ pub struct ScanResult {
 #[derive(Debug, Deserialize, Serialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BaudRequest {
-    /// One of 500000, 230400, 115200, 38400, 19200.
-    #[schema(example = 500000)]
+    /// One of the device baud levels.
+    #[schema(example = 500000, minimum = 19200, maximum = 500000)]
     pub baud: i64,
 }
 

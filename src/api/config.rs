@@ -67,7 +67,7 @@ pub struct Written {
     pub param: &'static str,
     #[schema(example = 2.0)]
     pub value: f64,
-    #[schema(example = 11651)]
+    #[schema(example = 11650)]
     pub raw: u16,
     #[schema(example = 18)]
     pub index: u8,

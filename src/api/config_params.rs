@@ -209,35 +209,44 @@ impl ParamValue {
 #[serde(deny_unknown_fields)]
 #[schema(example = json!({"pos_kp": 1.25, "max_current_a": 2.0, "burst_plus_ms": 100.0}))]
 pub struct ConfigPatch {
-    /// Position loop KP, 0..=8.0 (Q12).
-    #[schema(example = 1.25)]
+    /// Position loop KP, 0..<8.0 (Q12).
+    #[schema(example = 1.25, minimum = 0.0, maximum = 7.999755859375)]
     pub pos_kp: Option<f64>,
-    /// Position loop KD, 0..=8.0 (Q12).
+    /// Position loop KD, 0..<8.0 (Q12).
+    #[schema(minimum = 0.0, maximum = 7.999755859375)]
     pub pos_kd: Option<f64>,
-    /// Speed loop KP, 0..=8.0 (Q12).
+    /// Speed loop KP, 0..<8.0 (Q12).
+    #[schema(minimum = 0.0, maximum = 7.999755859375)]
     pub spd_kp: Option<f64>,
     /// Speed loop KI, 0..<1.0 (Q15).
+    #[schema(minimum = 0.0, maximum = 0.999969482421875)]
     pub spd_ki: Option<f64>,
     /// Position smoothing level, 0..=5 (higher = smoother).
-    #[schema(example = 2)]
+    #[schema(example = 2, minimum = 0, maximum = 5, multiple_of = 1)]
     pub lpf_level: Option<f64>,
     /// Maximum output current, 0..=5.625 A.
-    #[schema(example = 2.0)]
+    #[schema(example = 2.0, minimum = 0.0, maximum = 5.625)]
     pub max_current_a: Option<f64>,
     /// Current cap while protection is active, 0..=5.625 A.
+    #[schema(minimum = 0.0, maximum = 5.625)]
     pub protect_current_limit_a: Option<f64>,
     /// Protection level-1 threshold, 0..=5.625 A.
+    #[schema(minimum = 0.0, maximum = 5.625)]
     pub protect_current_lv1_a: Option<f64>,
     /// Time above the threshold before protection engages, 0..=65000 ms.
+    #[schema(minimum = 0.0, maximum = 65000.0)]
     pub protect_delay_ms: Option<f64>,
     /// Recovery threshold, 0..=5.625 A.
+    #[schema(minimum = 0.0, maximum = 5.625)]
     pub recover_current_a: Option<f64>,
     /// Time below recovery threshold before protection releases, 0..=65000 ms.
+    #[schema(minimum = 0.0, maximum = 65000.0)]
     pub recover_window_ms: Option<f64>,
     /// Burst cool-down, multiples of 25 ms, 0..=6375 ms.
+    #[schema(minimum = 0.0, maximum = 6375.0, multiple_of = 25.0)]
     pub burst_cold_ms: Option<f64>,
     /// Burst duration, multiples of 25 ms, 0..=6375 ms.
-    #[schema(example = 100.0)]
+    #[schema(example = 100.0, minimum = 0.0, maximum = 6375.0, multiple_of = 25.0)]
     pub burst_plus_ms: Option<f64>,
 }
 

@@ -53,7 +53,7 @@ pub struct ActionDone {
 #[derive(Debug, Default, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GroupRequest {
-    #[schema(example = json!([1, 2, 3]))]
+    #[schema(example = json!([1, 2, 3]), min_items = 1)]
     pub ids: Option<Vec<i64>>,
 }
 
@@ -105,11 +105,13 @@ pub struct JogRequest {
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GroupTarget {
-    #[schema(example = 1)]
+    #[schema(example = 1, minimum = 1, maximum = 159)]
     pub id: i64,
-    #[schema(example = 45.0)]
+    /// Output angle, degrees (see `TargetRequest`).
+    #[schema(example = 45.0, minimum = -255.0, maximum = 255.0)]
     pub position_deg: Option<f64>,
-    #[schema(example = 3000.0)]
+    /// Rotor rpm (see `TargetRequest`).
+    #[schema(example = 3000.0, minimum = -50000.0, maximum = 50000.0)]
     pub speed_rpm: Option<f64>,
 }
 

@@ -141,7 +141,14 @@ impl ApiError {
             StatusCode::UNPROCESSABLE_ENTITY,
             "out-of-range",
             "Value out of range",
-            format!("{field} = {value} {unit} is out of range; allowed {min}..={max} {unit}"),
+            format!(
+                "{field} = {value}{u} is out of range; allowed {min}..={max}{u}",
+                u = if unit.is_empty() {
+                    String::new()
+                } else {
+                    format!(" {unit}")
+                }
+            ),
         )
         .with_field(field)
         .with_range(min, max, unit)

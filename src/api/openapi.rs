@@ -49,7 +49,7 @@ const BEARER_SCHEME: &str = "bearer";
 )]
 struct ApiDoc;
 
-/// Declares the optional bearer token.
+/// Declares the optional bearer token and the shared failure responses.
 struct BearerAuth;
 
 impl Modify for BearerAuth {
@@ -59,6 +59,7 @@ impl Modify for BearerAuth {
             BEARER_SCHEME,
             SecurityScheme::Http(Http::new(HttpAuthScheme::Bearer)),
         );
+        add_problem_responses(components);
         // Required only when the daemon has a token: either no security or bearer.
         doc.security = Some(vec![
             utoipa::openapi::security::SecurityRequirement::new::<_, _, &str>(BEARER_SCHEME, []),
@@ -96,21 +97,39 @@ const ERRORS: [(&str, &str); 10] = [
     ("500", "Internal error (a bug; never expected)"),
 ];
 
+/// Name of the shared response component of a failure status.
+fn problem_response_name(status: &str) -> String {
+    format!("Problem{status}")
+}
+
 impl IntoResponses for ErrorResponses {
+    /// References to the shared components, so the document lists each
+    /// failure once.
     fn responses() -> BTreeMap<String, RefOr<Response>> {
         ERRORS
             .iter()
-            .map(|(status, description)| {
-                let content = ContentBuilder::new()
-                    .schema(Some(Ref::from_schema_name("Problem")))
-                    .build();
-                let response = ResponseBuilder::new()
-                    .description(*description)
-                    .content(PROBLEM_JSON, content)
-                    .build();
-                (status.to_string(), RefOr::T(response))
+            .map(|(status, _)| {
+                let name = problem_response_name(status);
+                let reference = Ref::new(format!("#/components/responses/{name}"));
+                (status.to_string(), RefOr::Ref(reference))
             })
             .collect()
+    }
+}
+
+/// The shared failure responses, each a [`Problem`].
+fn add_problem_responses(components: &mut utoipa::openapi::Components) {
+    for (status, description) in ERRORS {
+        let content = ContentBuilder::new()
+            .schema(Some(Ref::from_schema_name("Problem")))
+            .build();
+        let response = ResponseBuilder::new()
+            .description(description)
+            .content(PROBLEM_JSON, content)
+            .build();
+        components
+            .responses
+            .insert(problem_response_name(status), RefOr::T(response));
     }
 }
 

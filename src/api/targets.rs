@@ -32,10 +32,11 @@ pub const WIRE_ACK_WAIT: Duration = Duration::from_millis(250);
 #[schema(example = json!({"position_deg": 45.0, "speed_rpm": 3000.0}))]
 pub struct TargetRequest {
     /// Output angle, degrees (−255..=255, narrowed by soft limits).
-    #[schema(example = 45.0)]
+    #[schema(example = 45.0, minimum = -255.0, maximum = 255.0)]
     pub position_deg: Option<f64>,
-    /// Rotor rpm: the speed limit in position mode, the speed in speed mode.
-    #[schema(example = 3000.0)]
+    /// Rotor rpm: the speed limit in position mode (≥ 0), the speed in speed
+    /// mode (signed); within the firmware's base speed (50000 rpm from 1.2.4, else 40000).
+    #[schema(example = 3000.0, minimum = -50000.0, maximum = 50000.0)]
     pub speed_rpm: Option<f64>,
 }
 
@@ -148,4 +149,78 @@ pub async fn wait_on_wire(bus: &BusHandle, seq: u64) -> bool {
     tokio::time::timeout(WIRE_ACK_WAIT, acks.wait_for(|a| a.seq >= seq))
         .await
         .is_ok_and(|r| r.is_ok())
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Instant;
+
+    use super::*;
+    use crate::protocol::units::FirmwareVersion;
+    use crate::protocol::Info01;
+
+    fn dev(mode: CtrlMode, soft_ver: Option<u8>) -> DeviceState {
+        DeviceState {
+            dev_id: 4,
+            online: true,
+            mode: Some(mode),
+            info01: soft_ver.map(|v| {
+                let info = Info01 {
+                    soft_ver: v,
+                    angle: 1280,
+                    ..Default::default()
+                };
+                (info, Instant::now())
+            }),
+            ..Default::default()
+        }
+    }
+
+    fn req(pos: Option<f64>, spd: Option<f64>) -> TargetRequest {
+        TargetRequest {
+            position_deg: pos,
+            speed_rpm: spd,
+        }
+    }
+
+    #[test]
+    fn position_mode_uses_the_firmware_speed_base() {
+        let limits = JointLimits::default();
+        let new_fw = dev(CtrlMode::Position, Some(128));
+        let sp = setpoint(&new_fw, &limits, &req(Some(-10.5), Some(20000.0)), "").unwrap();
+        assert_eq!((sp.pos_ref, sp.spd_ref), (-1344, 13107));
+        let old_fw = dev(CtrlMode::Position, Some(117));
+        let sp = setpoint(&old_fw, &limits, &req(Some(0.0), Some(20000.0)), "").unwrap();
+        assert_eq!(sp.spd_ref, 16384, "40000 rpm base before firmware 1.2.4");
+        let err = setpoint(&new_fw, &limits, &req(Some(0.0), Some(-5.0)), "").unwrap_err();
+        assert_eq!(err.problem.field.as_deref(), Some("speed_rpm"));
+        let err = setpoint(&new_fw, &limits, &req(None, Some(5.0)), "t.").unwrap_err();
+        assert_eq!(err.problem.field.as_deref(), Some("t.position_deg"));
+    }
+
+    #[test]
+    fn default_speed_limit_respects_the_soft_limit() {
+        let limits = JointLimits {
+            max_rpm: Some(1000.0),
+            ..Default::default()
+        };
+        let sp = setpoint(
+            &dev(CtrlMode::Position, None),
+            &limits,
+            &req(Some(1.0), None),
+            "",
+        );
+        let expected = units::speed_limit_to_raw(1000.0, FirmwareVersion::SPEED_BASE_50K).unwrap();
+        assert_eq!(sp.unwrap().spd_ref, expected);
+    }
+
+    #[test]
+    fn speed_mode_takes_a_signed_speed_and_holds_the_position_slot() {
+        let limits = JointLimits::default();
+        let d = dev(CtrlMode::Speed, Some(128));
+        let sp = setpoint(&d, &limits, &req(None, Some(-1000.0)), "").unwrap();
+        assert_eq!((sp.pos_ref, sp.spd_ref), (1280, -655));
+        assert!(setpoint(&d, &limits, &req(Some(3.0), Some(1.0)), "").is_err());
+        assert!(setpoint(&d, &limits, &req(None, None), "").is_err());
+    }
 }

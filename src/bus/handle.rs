@@ -12,7 +12,7 @@
 //! the owner is a plain OS thread.
 
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant, SystemTime};
 
@@ -241,6 +241,31 @@ pub struct BusCounters {
     pub requests_queued: u64,
     pub setpoints_sent: u64,
     pub reconnects: u64,
+    /// Polls (INFO reads of the telemetry plan) sent.
+    pub polls: u64,
+    /// Setpoints dropped because their id has no device on the bus.
+    pub setpoints_dropped: u64,
+}
+
+/// Rates over the last statistics window (about one second).
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct BusRates {
+    pub window_s: f64,
+    pub frames_tx_per_s: f64,
+    pub broadcast_per_s: f64,
+    pub control_per_s: f64,
+    /// Config frames: polls, reads and writes.
+    pub config_per_s: f64,
+    pub frames_rx_per_s: f64,
+    pub polls_per_s: f64,
+    pub timeouts_per_s: f64,
+    /// Share of the window the daemon had the line busy: its frames plus
+    /// each reply's turnaround and frame. The simulator is the referee.
+    pub wire_utilisation: f64,
+    /// Age of setpoints when the last byte of their frame is due on the wire, µs.
+    pub setpoint_age_p50_us: u64,
+    pub setpoint_age_p99_us: u64,
+    pub setpoint_age_max_us: u64,
 }
 
 /// What the owner publishes after every change worth seeing.
@@ -256,6 +281,30 @@ pub struct BusSnapshot {
     pub queue_depth: usize,
     pub published_at: Instant,
     pub published_wall: SystemTime,
+    /// Rates over the last statistics window.
+    pub rates: BusRates,
+    /// What opening the port found worth telling (failed ioctls on a pty,
+    /// an FTDI latency timer and its fix).
+    pub port_notes: Vec<String>,
+}
+
+impl BusSnapshot {
+    /// The snapshot of a bus not opened yet.
+    pub fn new(name: &str, path: &str, baud: u32) -> Self {
+        Self {
+            name: name.to_string(),
+            path: path.to_string(),
+            baud,
+            link: LinkState::Opening,
+            devices: BTreeMap::new(),
+            counters: BusCounters::default(),
+            queue_depth: 0,
+            published_at: Instant::now(),
+            published_wall: SystemTime::now(),
+            rates: BusRates::default(),
+            port_notes: Vec::new(),
+        }
+    }
 }
 
 /// Something subscribers should hear about as it happens.
@@ -331,6 +380,10 @@ pub struct BusShared {
     pub events: broadcast::Sender<BusEvent>,
     pub wire_acks: watch::Sender<WireAck>,
     pub frame_log: Mutex<std::collections::VecDeque<LoggedFrame>>,
+    /// When the latest e-stop was called, for its latency report.
+    pub estop_called: Mutex<Option<Instant>>,
+    /// Requests handed to the owner and not yet taken.
+    pub queued: AtomicUsize,
 }
 
 /// How many frames the raw frame view keeps.
@@ -349,6 +402,8 @@ impl BusShared {
             events: broadcast::channel(1024).0,
             wire_acks: watch::channel(WireAck::default()).0,
             frame_log: Mutex::new(std::collections::VecDeque::with_capacity(FRAME_LOG_LEN)),
+            estop_called: Mutex::new(None),
+            queued: AtomicUsize::new(0),
         })
     }
 
@@ -425,6 +480,12 @@ impl BusHandle {
     /// Disables every device on this bus ahead of anything queued, and
     /// reports what was done once the frames are written.
     pub async fn estop(&self) -> Result<EstopReport, BusError> {
+        let now = Instant::now();
+        self.shared
+            .estop_called
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get_or_insert(now);
         let generation = self.shared.estop_generation.fetch_add(1, Ordering::SeqCst) + 1;
         let mut done = self.shared.estop_done.subscribe();
         let wait = async {
@@ -440,11 +501,16 @@ impl BusHandle {
 
     async fn call<T>(&self, make: impl FnOnce(Reply1<T>) -> Request) -> Result<T, BusError> {
         let (tx, rx) = oneshot::channel();
-        self.requests.try_send(make(tx)).map_err(|e| match e {
-            std::sync::mpsc::TrySendError::Full(_) => BusError::Busy {
-                depth: REQUEST_QUEUE_LEN,
-            },
-            std::sync::mpsc::TrySendError::Disconnected(_) => BusError::Stopped,
+        // Counted before sending so the owner never takes one not yet counted.
+        self.shared.queued.fetch_add(1, Ordering::Relaxed);
+        self.requests.try_send(make(tx)).map_err(|e| {
+            self.shared.queued.fetch_sub(1, Ordering::Relaxed);
+            match e {
+                std::sync::mpsc::TrySendError::Full(_) => BusError::Busy {
+                    depth: REQUEST_QUEUE_LEN,
+                },
+                std::sync::mpsc::TrySendError::Disconnected(_) => BusError::Stopped,
+            }
         })?;
         match tokio::time::timeout(REQUEST_TIMEOUT, rx).await {
             Ok(Ok(result)) => result,

@@ -2,12 +2,145 @@
 //! frame and publishes what it learns; the rest of the daemon uses a
 //! [`handle::BusHandle`].
 //!
+//! Why a thread and not a tokio task: tokio's timer has millisecond
+//! granularity, a frame at 500000 baud lasts 400 µs. The owner blocks in
+//! `ppoll` with sub-millisecond timeouts and talks to the async world through
+//! channels and watches.
+//!
 //! # Layout
 //! - [`handle`]: the cloneable handle, setpoint store, requests, snapshots, events.
 //! - [`error`]: the bus errors, one HTTP status each.
+//! - [`config`]: [`BusConfig`]: port, baud, expected ids, poll plan, timing.
+//! - `owner`: the thread: priorities, e-stop, port loss and reopen, shutdown.
+//! - `schedule`: wire primitives: setpoints out, polls, transactions.
+//! - `jobs`, `baud`: one-shot requests (enable, verified writes, id and baud change, scan).
+//! - [`coalesce`]: pending setpoints → cheapest correct frames (pure).
+//! - [`poll`]: control budget and poll plan (pure).
+//! - [`wire`]: the line model: when frames leave, when a reply is overdue (pure).
+//! - [`verify`]: how each config write is confirmed (pure).
+//! - [`registry`]: per-device state, online/offline, rates.
+//! - `link`: the port: writes, reads, reply matching, frame log, reopen.
+//! - `stats`: rate windows and snapshot publication.
 
+mod baud;
+pub mod coalesce;
+pub mod config;
 pub mod error;
 pub mod handle;
+mod jobs;
+mod link;
+mod owner;
+pub mod poll;
+pub mod registry;
+mod schedule;
+mod stats;
+pub mod verify;
+pub mod wire;
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+
+pub use config::{BusConfig, PollPlan, Timing};
 pub use error::BusError;
-pub use handle::{BusHandle, BusSnapshot, Setpoint, Targets};
+pub use handle::{BusHandle, BusShared, BusSnapshot, Setpoint, Targets};
+
+use crate::transport::Transport;
+use link::{tty_opener, Link, Opener};
+use owner::Owner;
+
+/// Prefix of every owner thread's name (`/proc/*/task/*/comm`), so tools
+/// and the bench can find the daemon's bus threads.
+pub const THREAD_PREFIX: &str = "bus-";
+/// Linux keeps 15 bytes of a thread name.
+const THREAD_NAME_MAX: usize = 15;
+
+/// The running owner of one bus. Dropping it stops the owner too.
+pub struct BusThread {
+    stop: Arc<AtomicBool>,
+    join: Option<JoinHandle<()>>,
+}
+
+impl BusThread {
+    /// Disables every device, closes the port and waits for the owner to end.
+    pub fn stop(mut self) {
+        self.halt();
+    }
+
+    /// True once the owner thread has ended.
+    pub fn is_finished(&self) -> bool {
+        self.join.as_ref().map_or(true, |j| j.is_finished())
+    }
+
+    fn halt(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(join) = self.join.take() {
+            if join.join().is_err() {
+                tracing::error!("bus owner thread panicked");
+            }
+        }
+    }
+}
+
+impl Drop for BusThread {
+    fn drop(&mut self) {
+        self.halt();
+    }
+}
+
+/// Starts the owner of a bus on a tty path. A port that cannot be opened
+/// yet is not an error: the bus starts down and keeps retrying.
+pub fn spawn_bus(cfg: BusConfig) -> Result<(BusHandle, BusThread), BusError> {
+    let opener = tty_opener(cfg.path.clone());
+    spawn(cfg, None, Some(opener))
+}
+
+/// Starts the owner of a bus on a transport handed in (an in-memory pipe in
+/// tests). After a hang-up the same transport is probed until it works again.
+pub fn spawn_bus_on(
+    cfg: BusConfig,
+    transport: Box<dyn Transport>,
+) -> Result<(BusHandle, BusThread), BusError> {
+    spawn(cfg, Some(transport), None)
+}
+
+fn spawn(
+    cfg: BusConfig,
+    port: Option<Box<dyn Transport>>,
+    opener: Option<Opener>,
+) -> Result<(BusHandle, BusThread), BusError> {
+    cfg.validate()?;
+    let path = cfg.path.display().to_string();
+    let shared = BusShared::new(
+        cfg.name.clone(),
+        BusSnapshot::new(&cfg.name, &path, cfg.baud),
+    );
+    let (tx, rx) = std::sync::mpsc::sync_channel(handle::REQUEST_QUEUE_LEN);
+    let stop = Arc::new(AtomicBool::new(false));
+    let link = Link::new(port, opener, cfg.baud, &cfg.timing, shared.clone());
+    let name = thread_name(&cfg.name);
+    let owner = Owner::new(cfg, shared.clone(), rx, stop.clone(), link);
+    let join = std::thread::Builder::new()
+        .name(name)
+        .spawn(move || owner.run())
+        .map_err(|e| BusError::Down {
+            bus: shared.name.clone(),
+            reason: format!("cannot start the owner thread: {e}"),
+        })?;
+    let handle = BusHandle::new(shared, tx);
+    Ok((
+        handle,
+        BusThread {
+            stop,
+            join: Some(join),
+        },
+    ))
+}
+
+fn thread_name(bus: &str) -> String {
+    let mut name = format!("{THREAD_PREFIX}{bus}");
+    while name.len() > THREAD_NAME_MAX {
+        name.pop();
+    }
+    name
+}

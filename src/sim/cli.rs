@@ -1,5 +1,6 @@
 //! `jointd sim`: runs a simulated bus on a pseudo-terminal until Ctrl-C,
-//! printing the device path as the first line of stdout.
+//! printing the device path as the first line of stdout. Faults can be set
+//! by flags at start and switched from stdin while it runs ([`super::console`]).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -49,6 +50,10 @@ pub struct SimArgs {
     /// Seed of noise and fault dice.
     #[arg(long, default_value_t = super::config::DEFAULT_SEED)]
     pub seed: u64,
+    /// Instead of serving: poll the first device N times over a pty and print
+    /// real-vs-model timing errors (µs percentiles) as JSON.
+    #[arg(long, value_name = "N")]
+    pub measure: Option<usize>,
 }
 
 impl SimArgs {
@@ -95,6 +100,14 @@ impl SimArgs {
 /// Runs the simulator until SIGINT/SIGTERM; prints the path first, stats last (stderr).
 pub fn run(args: &SimArgs) -> Result<(), SimError> {
     let cfg = args.config()?;
+    if let Some(polls) = args.measure {
+        let report = super::measure::run(cfg, polls)?;
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report).unwrap_or_default()
+        );
+        return Ok(());
+    }
     // Block the signals before the simulator thread exists so only sigwait sees them.
     let mut signals = SigSet::empty();
     signals.add(Signal::SIGINT);
@@ -109,6 +122,7 @@ pub fn run(args: &SimArgs) -> Result<(), SimError> {
     let _ = writeln!(out, "{}", path.display());
     let _ = out.flush();
     drop(out);
+    super::console::spawn(sim.clone());
     let _ = signals.wait();
     let stats = sim.stats();
     sim.shutdown();

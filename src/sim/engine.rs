@@ -47,6 +47,9 @@ pub struct Engine {
     rng: Rng,
     unplugged: bool,
     delivery_errors_ns: VecDeque<i64>,
+    /// End of the last garbled transmission handed to the host: overlapping
+    /// collided transmissions reach the host as one garbled frame.
+    garbage_until: Option<Instant>,
 }
 
 impl Engine {
@@ -90,6 +93,7 @@ impl Engine {
             rng: Rng::new(cfg.seed),
             unplugged: false,
             delivery_errors_ns: VecDeque::new(),
+            garbage_until: None,
         })
     }
 
@@ -255,6 +259,10 @@ impl Engine {
         let mut bytes = d.bytes;
         if d.collided {
             self.stats.collided_replies += 1;
+            if self.garbage_until.is_some_and(|g| d.start < g) {
+                return None;
+            }
+            self.garbage_until = Some(d.end);
             let noise = self.rng.next_u64().to_le_bytes().repeat(3);
             let mut other = [0u8; 20];
             other.copy_from_slice(&noise[..20]);
@@ -384,3 +392,7 @@ fn count_kind(k: &mut FrameKinds, cmd: &Command) {
         Command::BroadcastEnableUnverified(_) => k.broadcast_enable += 1,
     }
 }
+
+#[cfg(test)]
+#[path = "engine_tests.rs"]
+mod tests;

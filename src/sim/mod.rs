@@ -15,7 +15,8 @@
 //! - [`line`], [`pty`]: the device end of an in-memory pipe or a pseudo-terminal.
 //! - [`runner`]: the dedicated thread that moves bytes at their modelled instants.
 //! - [`stats`], [`log`], [`view`]: what observers see.
-//! - [`cli`]: `jointd sim`.
+//! - [`measure`]: real delivery times against the model (`jointd sim --measure N`).
+//! - [`cli`], [`console`]: `jointd sim` and its stdin fault commands.
 //!
 //! ```no_run
 //! use jointd::sim::{parse_ids, SimConfig, Simulator};
@@ -27,11 +28,13 @@
 pub mod busy;
 pub mod cli;
 pub mod config;
+pub mod console;
 pub mod device;
 pub mod engine;
 pub mod faults;
 pub mod line;
 pub mod log;
+pub mod measure;
 pub mod params;
 pub mod physics;
 pub mod pty;

@@ -1,0 +1,339 @@
+//! Turns the setpoints waiting to go out into the cheapest correct frames.
+//!
+//! - Two or more position-mode joints of one broadcast group (ids 1–8, 9–16)
+//!   with new targets share one broadcast frame. A broadcast overwrites the
+//!   target of every device of its group (SPEC §3.2), so the other slots
+//!   carry each joint's current target, or its measured angle if it was never
+//!   commanded, never 0. A group with a known joint that has neither gets no
+//!   broadcast: its joints go one frame each.
+//! - A broadcast carries no speed limit, so a joint whose speed limit changes
+//!   gets its own control frame (which carries both).
+//! - Speed-mode joints share a speed broadcast only when every known joint of
+//!   the group is in speed mode (a speed broadcast would rewrite the speed
+//!   limit of a position-mode joint).
+//! - A single changed joint and ids above 16 get a standard control frame.
+//!
+//! Slots of ids with no device known on the bus carry 0: there is nothing
+//! there to move (a device that powers up announces itself first).
+//!
+//! Pure: the owner passes the pending setpoints and a view of the devices.
+
+use std::collections::BTreeMap;
+
+use crate::protocol::{BroadcastPos, BroadcastSpd, Command, Control, Group};
+
+use super::handle::{Setpoint, StoredSetpoint};
+
+/// What the planner needs to know about one device on the bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SlotInfo {
+    /// The device was put in speed mode (power-up is position mode).
+    pub speed_mode: bool,
+    /// The target it was last sent (position and speed limit).
+    pub target: Option<Setpoint>,
+    /// Its angle from telemetry, if fresh (not from before a re-zero).
+    pub measured: Option<i16>,
+}
+
+/// One frame and the setpoints it delivers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Planned {
+    pub command: Command,
+    /// Joints whose new setpoint this frame completes.
+    pub carries: Vec<(u8, StoredSetpoint)>,
+}
+
+/// What to do with the pending setpoints.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Plan {
+    /// Frames, the one carrying the oldest setpoint first.
+    pub frames: Vec<Planned>,
+    /// Setpoints equal to what the device already has: nothing to send.
+    pub settled: Vec<(u8, StoredSetpoint)>,
+    /// Setpoints for ids no device answers to on this bus: dropped.
+    pub unknown: Vec<u8>,
+}
+
+const GROUPS: [Group; 2] = [Group::Low, Group::High];
+const SLOTS: usize = 8;
+
+/// Plans frames for `pending`; `view(id)` is `None` for an id with no device.
+pub fn plan(pending: &BTreeMap<u8, StoredSetpoint>, view: impl Fn(u8) -> Option<SlotInfo>) -> Plan {
+    let mut out = Plan::default();
+    let mut left: BTreeMap<u8, (StoredSetpoint, SlotInfo)> = BTreeMap::new();
+    for (&id, &sp) in pending {
+        match view(id) {
+            None => out.unknown.push(id),
+            Some(info) if info.target == Some(sp.setpoint) => out.settled.push((id, sp)),
+            Some(info) => {
+                left.insert(id, (sp, info));
+            }
+        }
+    }
+    for group in GROUPS {
+        if let Some(frame) = position_broadcast(group, &left, &view) {
+            remove_carried(&mut left, &frame);
+            out.frames.push(frame);
+        } else if let Some(frame) = speed_broadcast(group, &left, &view) {
+            remove_carried(&mut left, &frame);
+            out.frames.push(frame);
+        }
+    }
+    for (id, (sp, _)) in left {
+        let s = sp.setpoint;
+        out.frames.push(Planned {
+            command: Command::Control(Control::set_ref(id, s.pos_ref, s.spd_ref)),
+            carries: vec![(id, sp)],
+        });
+    }
+    out.frames.sort_by_key(oldest);
+    out
+}
+
+fn oldest(p: &Planned) -> std::time::Instant {
+    p.carries
+        .iter()
+        .map(|(_, s)| s.accepted)
+        .min()
+        .unwrap_or_else(std::time::Instant::now)
+}
+
+fn remove_carried(left: &mut BTreeMap<u8, (StoredSetpoint, SlotInfo)>, frame: &Planned) {
+    for (id, _) in &frame.carries {
+        left.remove(id);
+    }
+}
+
+fn group_ids(group: Group) -> impl Iterator<Item = (usize, u8)> {
+    (0..SLOTS).map(move |slot| (slot, group.first_id() + slot as u8))
+}
+
+/// A pending joint a position broadcast can complete: position mode, speed
+/// limit unchanged since its last frame.
+fn pos_candidate(sp: &StoredSetpoint, info: &SlotInfo) -> bool {
+    !info.speed_mode && info.target.map(|t| t.spd_ref) == Some(sp.setpoint.spd_ref)
+}
+
+fn position_broadcast(
+    group: Group,
+    left: &BTreeMap<u8, (StoredSetpoint, SlotInfo)>,
+    view: &impl Fn(u8) -> Option<SlotInfo>,
+) -> Option<Planned> {
+    let mut carries = Vec::new();
+    let mut pos_ref = [0i16; SLOTS];
+    for (slot, id) in group_ids(group) {
+        pos_ref[slot] = match left.get(&id) {
+            // Speed mode ignores position targets: keep where it is.
+            Some((sp, info)) if info.speed_mode => info.measured.unwrap_or(sp.setpoint.pos_ref),
+            Some((sp, info)) => {
+                if pos_candidate(sp, info) {
+                    carries.push((id, *sp));
+                }
+                // A joint that also needs its own frame gets its new target
+                // here too, so the order of the two frames does not matter.
+                sp.setpoint.pos_ref
+            }
+            None => match view(id) {
+                None => 0,
+                Some(info) if info.speed_mode => info.measured.unwrap_or(0),
+                Some(info) => info.target.map(|t| t.pos_ref).or(info.measured)?,
+            },
+        };
+    }
+    (carries.len() >= 2).then_some(Planned {
+        command: Command::BroadcastPos(BroadcastPos { group, pos_ref }),
+        carries,
+    })
+}
+
+fn speed_broadcast(
+    group: Group,
+    left: &BTreeMap<u8, (StoredSetpoint, SlotInfo)>,
+    view: &impl Fn(u8) -> Option<SlotInfo>,
+) -> Option<Planned> {
+    let mut carries = Vec::new();
+    let mut spd_ref = [0i16; SLOTS];
+    for (slot, id) in group_ids(group) {
+        spd_ref[slot] = match (left.get(&id), view(id)) {
+            (_, None) => 0,
+            (_, Some(info)) if !info.speed_mode => return None,
+            (Some((sp, _)), Some(_)) => {
+                carries.push((id, *sp));
+                sp.setpoint.spd_ref
+            }
+            // A speed-mode joint nobody commanded keeps its speed (0 at rest).
+            (None, Some(info)) => info.target.map_or(0, |t| t.spd_ref),
+        };
+    }
+    (carries.len() >= 2).then_some(Planned {
+        command: Command::BroadcastSpd(BroadcastSpd { group, spd_ref }),
+        carries,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::{Duration, Instant};
+
+    fn sp(pos: i16, spd: i16, seq: u64, t0: Instant) -> StoredSetpoint {
+        StoredSetpoint {
+            setpoint: Setpoint {
+                pos_ref: pos,
+                spd_ref: spd,
+            },
+            seq,
+            accepted: t0 + Duration::from_micros(seq),
+        }
+    }
+
+    /// Devices 1..=n in position mode, each last sent (10·id, 1000), measured 5·id.
+    fn view_n(n: u8) -> impl Fn(u8) -> Option<SlotInfo> {
+        move |id| {
+            (1..=n).contains(&id).then_some(SlotInfo {
+                speed_mode: false,
+                target: Some(Setpoint {
+                    pos_ref: 10 * i16::from(id),
+                    spd_ref: 1000,
+                }),
+                measured: Some(5 * i16::from(id)),
+            })
+        }
+    }
+
+    #[test]
+    fn two_joints_of_a_group_share_a_broadcast_with_other_slots_filled() {
+        let t0 = Instant::now();
+        let pending = BTreeMap::from([(2, sp(700, 1000, 1, t0)), (5, sp(-300, 1000, 1, t0))]);
+        let p = plan(&pending, view_n(6));
+        assert_eq!(p.frames.len(), 1);
+        let Command::BroadcastPos(b) = p.frames[0].command else {
+            panic!(
+                "expected a position broadcast, got {:?}",
+                p.frames[0].command
+            )
+        };
+        assert_eq!(b.group, Group::Low);
+        // Slots 1, 3, 4, 6: their current targets; 7, 8: no device there.
+        assert_eq!(b.pos_ref, [10, 700, 30, 40, -300, 60, 0, 0]);
+        assert_eq!(p.frames[0].carries.len(), 2);
+    }
+
+    #[test]
+    fn never_commanded_joints_carry_their_measured_angle_never_zero() {
+        let t0 = Instant::now();
+        let view = |id: u8| {
+            (1..=3).contains(&id).then(|| SlotInfo {
+                target: (id != 3).then_some(Setpoint {
+                    pos_ref: 1,
+                    spd_ref: 9,
+                }),
+                measured: Some(-1234),
+                ..SlotInfo::default()
+            })
+        };
+        let pending = BTreeMap::from([(1, sp(50, 9, 1, t0)), (2, sp(60, 9, 1, t0))]);
+        let Command::BroadcastPos(b) = plan(&pending, view).frames[0].command else {
+            panic!("expected a broadcast")
+        };
+        assert_eq!(&b.pos_ref[..3], &[50, 60, -1234]);
+    }
+
+    #[test]
+    fn a_slot_with_no_target_and_no_angle_forbids_the_broadcast() {
+        let t0 = Instant::now();
+        let view = |id: u8| {
+            (1..=3).contains(&id).then(|| SlotInfo {
+                target: (id != 3).then_some(Setpoint {
+                    pos_ref: 1,
+                    spd_ref: 9,
+                }),
+                ..SlotInfo::default()
+            })
+        };
+        let pending = BTreeMap::from([(1, sp(50, 9, 1, t0)), (2, sp(60, 9, 1, t0))]);
+        let p = plan(&pending, view);
+        assert_eq!(p.frames.len(), 2);
+        assert!(p
+            .frames
+            .iter()
+            .all(|f| matches!(f.command, Command::Control(_))));
+    }
+
+    #[test]
+    fn single_joint_high_ids_and_speed_changes_use_control_frames() {
+        let t0 = Instant::now();
+        let pending = BTreeMap::from([
+            (3, sp(100, 1000, 1, t0)),
+            (9, sp(200, 1000, 2, t0)),
+            (10, sp(300, 2000, 3, t0)),
+            (20, sp(400, 1000, 4, t0)),
+        ]);
+        let p = plan(&pending, view_n(20));
+        let ids: Vec<_> = p
+            .frames
+            .iter()
+            .map(|f| match f.command {
+                Command::Control(c) => c.dev_id,
+                other => panic!("unexpected {other:?}"),
+            })
+            .collect();
+        assert_eq!(ids, vec![3, 9, 10, 20], "oldest first");
+    }
+
+    #[test]
+    fn speed_limit_change_gets_its_own_frame_and_its_new_target_in_the_broadcast() {
+        let t0 = Instant::now();
+        let pending = BTreeMap::from([
+            (1, sp(11, 1000, 1, t0)),
+            (2, sp(22, 1000, 1, t0)),
+            (3, sp(33, 5000, 1, t0)),
+        ]);
+        let p = plan(&pending, view_n(8));
+        assert_eq!(p.frames.len(), 2);
+        let bc = p
+            .frames
+            .iter()
+            .find_map(|f| match f.command {
+                Command::BroadcastPos(b) => Some(b),
+                _ => None,
+            })
+            .expect("a broadcast");
+        assert_eq!(&bc.pos_ref[..3], &[11, 22, 33]);
+        assert!(p.frames.iter().any(|f| f.command
+            == Command::Control(Control::set_ref(3, 33, 5000))
+            && f.carries.len() == 1));
+    }
+
+    #[test]
+    fn unchanged_and_unknown_setpoints_send_nothing() {
+        let t0 = Instant::now();
+        let pending = BTreeMap::from([(2, sp(20, 1000, 1, t0)), (99, sp(1, 1, 1, t0))]);
+        let p = plan(&pending, view_n(8));
+        assert!(p.frames.is_empty());
+        assert_eq!(p.settled.len(), 1);
+        assert_eq!(p.unknown, vec![99]);
+    }
+
+    #[test]
+    fn speed_mode_group_shares_a_speed_broadcast_only_if_all_in_speed_mode() {
+        let t0 = Instant::now();
+        let speed = |n: u8| {
+            move |id: u8| {
+                (9..=n).contains(&id).then_some(SlotInfo {
+                    speed_mode: id != 12,
+                    target: None,
+                    measured: Some(0),
+                })
+            }
+        };
+        let pending = BTreeMap::from([(9, sp(0, 500, 1, t0)), (10, sp(0, -500, 1, t0))]);
+        let p = plan(&pending, speed(11));
+        let Command::BroadcastSpd(b) = p.frames[0].command else {
+            panic!("expected a speed broadcast")
+        };
+        assert_eq!(&b.spd_ref[..4], &[500, -500, 0, 0]);
+        // Device 12 is in position mode: one control frame each instead.
+        assert_eq!(plan(&pending, speed(12)).frames.len(), 2);
+    }
+}

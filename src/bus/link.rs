@@ -1,0 +1,296 @@
+//! The port and the only code that touches it: writes host frames (paced by
+//! the [`WireClock`]), reads and decodes what comes back, matches the reply
+//! a transaction waits for and keeps the rest for the owner, counts and logs
+//! every frame, and reopens the port after it was lost.
+
+use std::io;
+use std::sync::Arc;
+use std::time::{Instant, SystemTime};
+
+use crate::protocol::{Command, FrameBytes, Message, Reply, StreamDecoder, FRAME_LEN};
+use crate::transport::tty::{PortNote, TtyPort};
+use crate::transport::Transport;
+
+use super::config::Timing;
+use super::handle::{BusCounters, BusShared, LoggedFrame};
+use super::wire::WireClock;
+
+/// Opens the port at a baud: a tty by path for real buses.
+pub type Opener =
+    Box<dyn FnMut(u32) -> io::Result<(Box<dyn Transport>, Vec<PortNote>)> + Send + 'static>;
+
+/// An opener for a tty path (USB adapter, pty, `/dev/serial/by-id` link).
+pub fn tty_opener(path: std::path::PathBuf) -> Opener {
+    Box::new(move |baud| {
+        let (port, notes) = TtyPort::open(&path, baud)?;
+        Ok((Box::new(port) as Box<dyn Transport>, notes))
+    })
+}
+
+/// The reply a transaction waits for: matched by device id and index.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Want {
+    pub dev_id: u8,
+    pub index: u8,
+}
+
+/// Bytes read per system call; a few frames.
+const READ_BUF: usize = 256;
+
+pub struct Link {
+    port: Option<Box<dyn Transport>>,
+    /// Reopens a lost port; `None` when the transport was handed in, which
+    /// is then probed until it answers again.
+    opener: Option<Opener>,
+    up: bool,
+    baud: u32,
+    decoder: StreamDecoder,
+    buf: [u8; READ_BUF],
+    tx: Vec<u8>,
+    pub clock: WireClock,
+    pub counters: BusCounters,
+    shared: Arc<BusShared>,
+    /// Replies nobody was waiting for (power-up announcements, late replies).
+    pub inbox: Vec<(Reply, Instant)>,
+}
+
+fn not_open() -> io::Error {
+    io::Error::new(io::ErrorKind::NotConnected, "port is not open")
+}
+
+impl Link {
+    pub fn new(
+        port: Option<Box<dyn Transport>>,
+        opener: Option<Opener>,
+        baud: u32,
+        timing: &Timing,
+        shared: Arc<BusShared>,
+    ) -> Self {
+        Self {
+            port,
+            opener,
+            up: false,
+            baud,
+            decoder: StreamDecoder::new(),
+            buf: [0; READ_BUF],
+            tx: Vec::with_capacity(FRAME_LEN * 32),
+            clock: WireClock::new(baud, timing, Instant::now()),
+            counters: BusCounters::default(),
+            shared,
+            inbox: Vec::new(),
+        }
+    }
+
+    pub fn is_up(&self) -> bool {
+        self.up
+    }
+
+    pub fn baud(&self) -> u32 {
+        self.baud
+    }
+
+    /// Opens (or, for a handed-in transport, probes) the port.
+    pub fn open(&mut self) -> io::Result<Vec<PortNote>> {
+        let notes = match self.opener.as_mut() {
+            Some(open) => {
+                let (port, notes) = open(self.baud)?;
+                self.port = Some(port);
+                notes
+            }
+            None => {
+                let port = self.port.as_mut().ok_or_else(not_open)?;
+                port.read_timeout(&mut self.buf, std::time::Duration::ZERO)?;
+                Vec::new()
+            }
+        };
+        if let Some(port) = self.port.as_mut() {
+            // What a previous owner or a glitch left in the buffer is not ours.
+            port.discard_input()?;
+        }
+        self.decoder.clear();
+        self.up = true;
+        self.clock.line_free(Instant::now());
+        Ok(notes)
+    }
+
+    /// Marks the port lost; a reopenable port is closed.
+    pub fn close(&mut self) {
+        self.up = false;
+        if self.opener.is_some() {
+            self.port = None;
+        }
+    }
+
+    fn port(&mut self) -> io::Result<&mut Box<dyn Transport>> {
+        match (self.up, self.port.as_mut()) {
+            (true, Some(port)) => Ok(port),
+            _ => Err(not_open()),
+        }
+    }
+
+    /// Hands `cmds` to the port back to back; returns when the last one's
+    /// last byte leaves the wire.
+    pub fn send(&mut self, cmds: &[Command]) -> io::Result<Instant> {
+        self.tx.clear();
+        for cmd in cmds {
+            self.tx.extend_from_slice(&cmd.encode());
+        }
+        match (self.up, self.port.as_mut()) {
+            (true, Some(port)) => port.write_all(&self.tx)?,
+            _ => return Err(not_open()),
+        }
+        let now = Instant::now();
+        let n = cmds.len() as u32;
+        let end = self.clock.host_frames(now, n);
+        self.counters.wire_busy_us += (self.clock.frame_time() * n).as_micros() as u64;
+        for (cmd, bytes) in cmds.iter().zip(self.tx.chunks_exact(FRAME_LEN)) {
+            count_tx(&mut self.counters, cmd);
+            if let Ok(bytes) = bytes.try_into() {
+                self.log(true, bytes);
+            }
+        }
+        Ok(end)
+    }
+
+    /// Reads until `want` arrives or `deadline` passes. Other replies go to
+    /// the inbox. With `want` = `None` this is an idle wait that listens.
+    pub fn wait(
+        &mut self,
+        want: Option<Want>,
+        deadline: Instant,
+    ) -> io::Result<Option<(Reply, Instant)>> {
+        loop {
+            if let Some(found) = self.take_decoded(want) {
+                return Ok(Some(found));
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(None);
+            }
+            let n = match (self.up, self.port.as_mut()) {
+                (true, Some(port)) => port.read_timeout(&mut self.buf, deadline - now)?,
+                _ => return Err(not_open()),
+            };
+            self.decoder.push(&self.buf[..n]);
+        }
+    }
+
+    /// Decodes buffered bytes; returns the wanted reply if it is among them.
+    fn take_decoded(&mut self, want: Option<Want>) -> Option<(Reply, Instant)> {
+        let mut found = None;
+        while let Some((frame, bytes)) = self.decoder.next_frame_with_bytes() {
+            let at = Instant::now();
+            self.log(false, &bytes);
+            self.counters.frames_rx += 1;
+            // A command is our own frame echoed by an adapter: not a reply.
+            let Ok(Message::Reply(reply)) = Message::from_frame(&frame) else {
+                continue;
+            };
+            self.clock.line_free(at);
+            self.counters.wire_busy_us += self.clock.reply_cost().as_micros() as u64;
+            let wanted = want.is_some_and(|w| w.dev_id == reply.dev_id && w.index == reply.index);
+            if wanted && found.is_none() {
+                found = Some((reply, at));
+            } else {
+                self.inbox.push((reply, at));
+            }
+        }
+        let stats = self.decoder.stats();
+        self.counters.crc_errors = stats.crc_errors;
+        self.counters.skipped_bytes = stats.skipped_bytes;
+        found
+    }
+
+    /// Changes the port's speed (after the devices switched), dropping what
+    /// was read at the old one.
+    pub fn set_baud(&mut self, baud: u32) -> io::Result<()> {
+        let port = self.port()?;
+        port.set_baud(baud)?;
+        port.discard_input()?;
+        self.decoder.clear();
+        self.baud = baud;
+        self.clock.set_baud(baud);
+        Ok(())
+    }
+
+    fn log(&self, tx: bool, bytes: &FrameBytes) {
+        self.shared.log_frame(LoggedFrame {
+            at: SystemTime::now(),
+            tx,
+            bytes: *bytes,
+        });
+    }
+}
+
+fn count_tx(c: &mut BusCounters, cmd: &Command) {
+    match cmd {
+        Command::BroadcastPos(_) | Command::BroadcastSpd(_) => c.frames_tx_broadcast += 1,
+        Command::BroadcastEnableUnverified(_) => c.frames_tx_broadcast += 1,
+        Command::Control(_) => c.frames_tx_control += 1,
+        Command::Jog(_) => c.frames_tx_jog += 1,
+        Command::Config(_) => c.frames_tx_config += 1,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bus::handle::BusSnapshot;
+    use crate::protocol::{Config, InfoBlock, ReplyBody};
+    use crate::transport::memory;
+    use std::time::Duration;
+
+    fn link_pair() -> (Link, memory::MemoryPort) {
+        let (host, dev) = memory::pair(500_000);
+        let shared = BusShared::new("t".into(), BusSnapshot::new("t", "mem", 500_000));
+        let mut link = Link::new(
+            Some(Box::new(host)),
+            None,
+            500_000,
+            &Timing::default(),
+            shared,
+        );
+        link.open().unwrap();
+        (link, dev)
+    }
+
+    #[test]
+    fn the_wanted_reply_is_returned_and_others_kept() {
+        let (mut link, mut dev) = link_pair();
+        let end = link
+            .send(&[Command::Config(Config::read(3, InfoBlock::Info02))])
+            .unwrap();
+        let other = Reply::new(9, ReplyBody::Res { index: 13, code: 1 });
+        let wanted = Reply::new(3, ReplyBody::Unknown { index: 2 });
+        let mut bytes = other.encode().to_vec();
+        bytes.extend_from_slice(&[0x55, 0x00, 0x13]); // garbage between frames
+        bytes.extend_from_slice(&wanted.encode());
+        dev.write_all(&bytes).unwrap();
+        let want = Want {
+            dev_id: 3,
+            index: 2,
+        };
+        let got = link
+            .wait(Some(want), link.clock.reply_deadline(end))
+            .unwrap();
+        assert_eq!(got.map(|(r, _)| r), Some(wanted));
+        assert_eq!(link.inbox.len(), 1);
+        assert_eq!(link.counters.frames_tx_config, 1);
+        assert_eq!(link.counters.frames_rx, 2);
+    }
+
+    #[test]
+    fn silence_times_out_and_hangup_is_an_error() {
+        let (mut link, dev) = link_pair();
+        let soon = Instant::now() + Duration::from_millis(2);
+        assert_eq!(link.wait(None, soon).unwrap(), None);
+        dev.set_hung_up(true);
+        assert!(link
+            .wait(None, Instant::now() + Duration::from_millis(50))
+            .is_err());
+        link.close();
+        assert!(link.open().is_err(), "still hung up");
+        dev.set_hung_up(false);
+        assert!(link.open().is_ok(), "probed back up");
+    }
+}

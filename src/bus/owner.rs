@@ -1,0 +1,354 @@
+//! The bus owner: one OS thread per bus and the only code that touches its
+//! port. Each time the line can take a frame it picks, in this order:
+//! e-stop, a queued one-shot request, setpoints (within the control budget),
+//! a telemetry poll, setpoints again (when there is nothing to poll).
+//! While a reply is due nothing else is written.
+//!
+//! A lost port marks the bus down and every device offline; the owner then
+//! retries with backoff, failing requests with `Down` meanwhile, and resumes
+//! when the port is back. Nothing here can take another bus down.
+
+use std::collections::BTreeMap;
+use std::io;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use crate::protocol::{Command, Control, ALL_DEVICES};
+use crate::transport::tty::PortNote;
+
+use super::config::BusConfig;
+use super::error::BusError;
+use super::handle::{BusEvent, BusShared, EstopReport, LinkState, Request, StoredSetpoint};
+use super::link::Link;
+use super::poll::{ControlBudget, PollPlanner};
+use super::registry::Registry;
+use super::stats::Stats;
+use super::wire::precise_timers;
+
+/// How long the owner listens when there is nothing to send. Bounds how
+/// late it notices a request or setpoint on an idle bus.
+const IDLE_TICK: Duration = Duration::from_millis(1);
+/// How often a down bus looks at its requests and e-stops.
+const DOWN_TICK: Duration = Duration::from_millis(10);
+const BACKOFF_FIRST: Duration = Duration::from_millis(20);
+const BACKOFF_MAX: Duration = Duration::from_secs(1);
+
+pub(super) struct Owner {
+    pub(super) cfg: BusConfig,
+    pub(super) shared: Arc<BusShared>,
+    pub(super) requests: Receiver<Request>,
+    stop: Arc<AtomicBool>,
+    pub(super) link: Link,
+    pub(super) reg: Registry,
+    pub(super) planner: PollPlanner,
+    pub(super) budget: ControlBudget,
+    /// Setpoints taken from the store and not yet on the wire.
+    pub(super) pending: BTreeMap<u8, StoredSetpoint>,
+    /// Highest store sequence number taken into `pending`.
+    pub(super) seen_seq: u64,
+    pub(super) acked_seq: u64,
+    estop_seen: u64,
+    pub(super) events: Vec<BusEvent>,
+    pub(super) stats: Stats,
+    pub(super) link_state: LinkState,
+    pub(super) port_notes: Vec<String>,
+    /// The configured range still has to be scanned (no expected ids given).
+    pub(super) needs_scan: bool,
+    /// Frames the current one-shot request has written (setpoints may
+    /// interleave after its first).
+    pub(super) job_frames: u32,
+    backoff: Duration,
+    next_open: Instant,
+    ever_up: bool,
+}
+
+impl Owner {
+    pub(super) fn new(
+        cfg: BusConfig,
+        shared: Arc<BusShared>,
+        requests: Receiver<Request>,
+        stop: Arc<AtomicBool>,
+        link: Link,
+    ) -> Self {
+        let now = Instant::now();
+        let mut reg = Registry::new(&cfg.name, cfg.poll.offline_after);
+        cfg.ids.iter().for_each(|id| reg.expect(*id));
+        Self {
+            planner: PollPlanner::new(
+                cfg.poll.info01_every,
+                Duration::from_millis(cfg.poll.offline_poll_ms),
+            ),
+            budget: ControlBudget::new(cfg.poll.control_share, cfg.frame_time(), now),
+            stats: Stats::new(Duration::from_millis(cfg.poll.snapshot_ms), now),
+            needs_scan: cfg.ids.is_empty(),
+            cfg,
+            shared,
+            requests,
+            stop,
+            link,
+            reg,
+            pending: BTreeMap::new(),
+            seen_seq: 0,
+            acked_seq: 0,
+            estop_seen: 0,
+            events: Vec::new(),
+            link_state: LinkState::Opening,
+            port_notes: Vec::new(),
+            job_frames: 0,
+            backoff: BACKOFF_FIRST,
+            next_open: now,
+            ever_up: false,
+        }
+    }
+
+    /// The thread's body: runs until [`super::BusThread::stop`].
+    pub(super) fn run(mut self) {
+        precise_timers();
+        while !self.stop.load(Ordering::Acquire) {
+            if self.link.is_up() {
+                self.turn();
+            } else {
+                self.while_down();
+            }
+        }
+        self.shutdown();
+    }
+
+    /// One decision at the moment the line can take the next host frame.
+    fn turn(&mut self) {
+        self.housekeeping(Instant::now());
+        if self.wait_until(self.link.clock.write_at()).is_err() {
+            return;
+        }
+        if self.estop_pending() {
+            return self.estop();
+        }
+        if let Some(req) = self.next_request() {
+            return self.run_request(req);
+        }
+        if self.needs_scan {
+            return self.startup_scan();
+        }
+        // Errors have already marked the bus down; the loop sees it.
+        let _ = self.schedule_wire(Instant::now());
+    }
+
+    /// Setpoints within budget, else a poll, else setpoints, else listen.
+    fn schedule_wire(&mut self, now: Instant) -> Result<(), BusError> {
+        self.collect_setpoints();
+        if !self.pending.is_empty() && self.budget.allows(now) && self.send_control()? {
+            return Ok(());
+        }
+        if self.poll_once()? || self.send_control()? {
+            return Ok(());
+        }
+        self.wait_until(now + IDLE_TICK)
+    }
+
+    pub(super) fn estop_pending(&self) -> bool {
+        self.shared.estop_generation.load(Ordering::SeqCst) > self.estop_seen
+    }
+
+    fn next_request(&mut self) -> Option<Request> {
+        let req = self.requests.try_recv().ok()?;
+        self.shared.queued.fetch_sub(1, Ordering::Relaxed);
+        self.link.counters.requests_queued += 1;
+        Some(req)
+    }
+
+    /// Fails every queued request with `err`; returns how many.
+    fn fail_queued(&mut self, err: &BusError) -> u32 {
+        let mut n = 0;
+        while let Some(req) = self.next_request() {
+            super::jobs::fail(req, err.clone());
+            n += 1;
+        }
+        n
+    }
+
+    /// Disables every device ahead of everything queued (SPEC errata 3:
+    /// standard control frames, `0xFF` first, then each known device).
+    fn estop(&mut self) {
+        let generation = self.shared.estop_generation.load(Ordering::SeqCst);
+        self.estop_seen = generation;
+        let called = self
+            .shared
+            .estop_called
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .take();
+        let sent = self.disable_everything();
+        let preempted = self.fail_queued(&BusError::Preempted);
+        let result = sent.map(|(frames_sent, handed)| EstopReport {
+            bus: self.cfg.name.clone(),
+            frames_sent,
+            preempted_requests: preempted,
+            latency_us: called.map_or(0, |c| {
+                handed.saturating_duration_since(c).as_micros() as u64
+            }),
+        });
+        self.events.push(BusEvent::Estop {
+            bus: self.cfg.name.clone(),
+        });
+        self.shared
+            .estop_done
+            .send_replace((generation, Some(result)));
+        self.publish(Instant::now());
+    }
+
+    /// Writes the disable frames and forgets every setpoint; returns the
+    /// frame count and when they were handed to the port.
+    fn disable_everything(&mut self) -> Result<(u32, Instant), BusError> {
+        self.shared.setpoints.clear(None);
+        self.drop_setpoints();
+        for id in self.reg.ids() {
+            self.reg.forget_target(id);
+        }
+        if !self.link.is_up() {
+            return Err(self.down_error());
+        }
+        let cmds: Vec<Command> = std::iter::once(ALL_DEVICES)
+            .chain(self.reg.ids())
+            .map(|id| Command::Control(Control::disable(id)))
+            .collect();
+        let handed = Instant::now();
+        self.link.send(&cmds).map_err(|e| self.lost(e))?;
+        Ok((cmds.len() as u32, handed))
+    }
+
+    /// Forgets pending setpoints and skips what the store holds now.
+    pub(super) fn drop_setpoints(&mut self) {
+        self.collect_setpoints();
+        self.pending.clear();
+        self.acked_seq = self.seen_seq;
+    }
+
+    fn while_down(&mut self) {
+        let now = Instant::now();
+        self.housekeeping(now);
+        if self.estop_pending() {
+            self.estop();
+        }
+        // A setpoint sent while the bus was down is stale when it comes back.
+        self.drop_setpoints();
+        if now >= self.next_open {
+            self.try_open();
+            return;
+        }
+        let wait = DOWN_TICK.min(self.next_open - now);
+        match self.requests.recv_timeout(wait) {
+            Ok(req) => {
+                self.shared.queued.fetch_sub(1, Ordering::Relaxed);
+                super::jobs::fail(req, self.down_error());
+            }
+            Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => {}
+        }
+    }
+
+    fn try_open(&mut self) {
+        match self.link.open() {
+            Ok(notes) => {
+                self.note_port(notes);
+                if self.ever_up {
+                    self.link.counters.reconnects += 1;
+                }
+                self.ever_up = true;
+                self.backoff = BACKOFF_FIRST;
+                self.link_state = LinkState::Up;
+                tracing::info!(bus = %self.cfg.name, path = %self.cfg.path.display(), "bus up");
+                self.events.push(BusEvent::BusUp {
+                    bus: self.cfg.name.clone(),
+                });
+            }
+            Err(e) => {
+                let retry = self.backoff;
+                self.next_open = Instant::now() + retry;
+                self.backoff = (self.backoff * 2).min(BACKOFF_MAX);
+                self.mark_down(
+                    format!("cannot open {}: {e}", self.cfg.path.display()),
+                    retry,
+                );
+            }
+        }
+        self.publish(Instant::now());
+    }
+
+    /// The port failed: the bus is down until it reopens.
+    pub(super) fn lost(&mut self, e: io::Error) -> BusError {
+        self.link.close();
+        self.reg.all_offline(&mut self.events);
+        self.pending.clear();
+        self.backoff = BACKOFF_FIRST;
+        self.next_open = Instant::now() + BACKOFF_FIRST;
+        self.mark_down(format!("port lost: {e}"), BACKOFF_FIRST);
+        self.down_error()
+    }
+
+    fn mark_down(&mut self, reason: String, retry: Duration) {
+        let was_down = matches!(self.link_state, LinkState::Down { .. });
+        if !was_down {
+            tracing::warn!(bus = %self.cfg.name, %reason, "bus down");
+            self.events.push(BusEvent::BusDown {
+                bus: self.cfg.name.clone(),
+                reason: reason.clone(),
+            });
+        }
+        self.link_state = LinkState::Down {
+            reason,
+            retry_in_ms: retry.as_millis() as u64,
+        };
+    }
+
+    pub(super) fn down_error(&self) -> BusError {
+        let reason = match &self.link_state {
+            LinkState::Down { reason, .. } => reason.clone(),
+            LinkState::Opening => "port not open yet".into(),
+            LinkState::Up => "port not open".into(),
+        };
+        BusError::Down {
+            bus: self.cfg.name.clone(),
+            reason,
+        }
+    }
+
+    /// Logs what opening the port found; an FTDI latency timer also widens
+    /// the reply timeout, since it delays every reply by that much.
+    fn note_port(&mut self, notes: Vec<PortNote>) {
+        self.port_notes.clear();
+        for note in notes {
+            let text = match note {
+                PortNote::IoctlUnsupported { what, error } => {
+                    tracing::info!(bus = %self.cfg.name, "{what} not set ({error}); normal on a pty");
+                    format!("{what} not supported: {error}")
+                }
+                PortNote::FtdiLatency { ms, fix } => {
+                    self.link
+                        .clock
+                        .add_reply_margin(Duration::from_millis(u64::from(ms)));
+                    let text =
+                        format!("FTDI latency timer is {ms} ms (delays every reply); fix: {fix}");
+                    tracing::warn!(bus = %self.cfg.name, "{text}");
+                    text
+                }
+            };
+            self.port_notes.push(text);
+        }
+    }
+
+    /// Brings the joints to a safe state and closes the port.
+    fn shutdown(&mut self) {
+        if let Ok(_sent) = self.disable_everything() {
+            // Let the disable frames leave the wire before the port closes.
+            let _ = self.wait_until(self.link.clock.free_at());
+        }
+        self.fail_queued(&BusError::Stopped);
+        self.link.close();
+        self.link_state = LinkState::Down {
+            reason: "stopped".into(),
+            retry_in_ms: 0,
+        };
+        self.publish(Instant::now());
+    }
+}

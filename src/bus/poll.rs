@@ -1,0 +1,220 @@
+//! How the wire is shared: a control budget (setpoints may take up to a
+//! configured share of wire time while telemetry wants it) and the poll plan
+//! that fills what is left (INFO_02 round-robin over online devices, INFO_01
+//! every Nth poll of a device, offline devices asked now and then).
+//!
+//! Pure: driven by the instants and device lists the owner passes.
+
+use std::time::{Duration, Instant};
+
+use crate::protocol::InfoBlock;
+
+/// How much wire time control frames may still take.
+///
+/// Credit grows with `share` × elapsed time and each control frame spends
+/// its frame time. Capped at a few frames so an idle client cannot save up
+/// a burst that starves telemetry.
+#[derive(Debug, Clone)]
+pub struct ControlBudget {
+    share: f64,
+    /// Wire time control may still use, seconds (negative: in debt).
+    credit: f64,
+    cap: f64,
+    last: Instant,
+}
+
+/// How many frames of credit control may save up.
+const CREDIT_CAP_FRAMES: f64 = 2.0;
+
+impl ControlBudget {
+    pub fn new(share: f64, frame: Duration, now: Instant) -> Self {
+        let cap = CREDIT_CAP_FRAMES * frame.as_secs_f64();
+        Self {
+            share,
+            credit: cap,
+            cap,
+            last: now,
+        }
+    }
+
+    /// After a baud change the cap follows the frame time.
+    pub fn set_frame(&mut self, frame: Duration) {
+        self.cap = CREDIT_CAP_FRAMES * frame.as_secs_f64();
+        self.credit = self.credit.min(self.cap);
+    }
+
+    fn refill(&mut self, now: Instant) {
+        let dt = now.saturating_duration_since(self.last).as_secs_f64();
+        self.last = self.last.max(now);
+        self.credit = (self.credit + self.share * dt).min(self.cap);
+    }
+
+    /// True when a control frame may go out now.
+    pub fn allows(&mut self, now: Instant) -> bool {
+        self.refill(now);
+        self.credit >= 0.0
+    }
+
+    /// Charges `wire` time of control frames.
+    pub fn spend(&mut self, wire: Duration) {
+        self.credit -= wire.as_secs_f64();
+    }
+}
+
+/// What the poll plan remembers per device.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PollState {
+    /// Polls sent to this device (INFO_01 on every Nth).
+    pub polls: u32,
+    /// For an offline device: when to ask it again.
+    pub retry_at: Option<Instant>,
+}
+
+/// One telemetry read to send.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Poll {
+    pub dev_id: u8,
+    pub block: InfoBlock,
+}
+
+/// The round-robin cursor and the plan's parameters.
+#[derive(Debug, Clone)]
+pub struct PollPlanner {
+    info01_every: u32,
+    offline_interval: Duration,
+    /// The id polled last; the next online id above it goes next.
+    cursor: u8,
+}
+
+impl PollPlanner {
+    pub fn new(info01_every: u32, offline_interval: Duration) -> Self {
+        Self {
+            info01_every: info01_every.max(1),
+            offline_interval,
+            cursor: 0,
+        }
+    }
+
+    /// The next poll, given `(id, online, state)` of every known device in id
+    /// order. An offline device whose retry is due goes first (INFO_01, the
+    /// read that tells its state); else the next online device round-robin.
+    /// Counts the poll in the device's state.
+    pub fn next<'a>(
+        &mut self,
+        devices: impl Iterator<Item = (u8, bool, &'a mut PollState)>,
+        now: Instant,
+    ) -> Option<Poll> {
+        let mut online: Vec<(u8, &'a mut PollState)> = Vec::new();
+        for (id, is_online, state) in devices {
+            if is_online {
+                online.push((id, state));
+            } else if !matches!(state.retry_at, Some(t) if t > now) {
+                state.retry_at = Some(now + self.offline_interval);
+                return Some(Poll {
+                    dev_id: id,
+                    block: InfoBlock::Info01,
+                });
+            }
+        }
+        let pos = online
+            .iter()
+            .position(|(id, _)| *id > self.cursor)
+            .unwrap_or(0);
+        let (id, state) = online.into_iter().nth(pos)?;
+        self.cursor = id;
+        state.polls = state.polls.wrapping_add(1);
+        let block = if state.polls % self.info01_every == 1 || self.info01_every == 1 {
+            InfoBlock::Info01
+        } else {
+            InfoBlock::Info02
+        };
+        Some(Poll { dev_id: id, block })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const FRAME: Duration = Duration::from_micros(400);
+
+    #[test]
+    fn budget_limits_control_to_its_share_of_time() {
+        let t0 = Instant::now();
+        let mut b = ControlBudget::new(0.25, FRAME, t0);
+        let mut sent = 0;
+        // Offer a control slot every 100 µs for one second.
+        for i in 0..10_000u32 {
+            let now = t0 + Duration::from_micros(100 * u64::from(i));
+            if b.allows(now) {
+                b.spend(FRAME);
+                sent += 1;
+            }
+        }
+        // 0.25 s of wire / 400 µs = 625 frames, plus the initial credit.
+        assert!((624..=628).contains(&sent), "sent {sent}");
+    }
+
+    #[test]
+    fn idle_budget_saves_only_a_small_burst() {
+        let t0 = Instant::now();
+        let mut b = ControlBudget::new(0.5, FRAME, t0);
+        let later = t0 + Duration::from_secs(10);
+        let mut burst = 0;
+        while b.allows(later) {
+            b.spend(FRAME);
+            burst += 1;
+        }
+        assert_eq!(burst, 3, "cap of two frames, the last spend goes into debt");
+    }
+
+    fn states(n: usize) -> Vec<PollState> {
+        vec![PollState::default(); n]
+    }
+
+    #[test]
+    fn polls_go_round_robin_with_info01_every_nth() {
+        let t0 = Instant::now();
+        let mut p = PollPlanner::new(3, Duration::from_millis(200));
+        let mut st = states(3);
+        let mut seen = Vec::new();
+        for _ in 0..9 {
+            let devs = st
+                .iter_mut()
+                .enumerate()
+                .map(|(i, s)| (i as u8 + 1, true, s));
+            let poll = p.next(devs, t0).unwrap();
+            seen.push((poll.dev_id, poll.block == InfoBlock::Info01));
+        }
+        let ids: Vec<u8> = seen.iter().map(|s| s.0).collect();
+        assert_eq!(ids, vec![1, 2, 3, 1, 2, 3, 1, 2, 3]);
+        let info01 = seen.iter().filter(|s| s.1).count();
+        assert_eq!(info01, 3, "each device's first of every three polls");
+    }
+
+    #[test]
+    fn offline_devices_are_asked_at_their_interval() {
+        let t0 = Instant::now();
+        let interval = Duration::from_millis(200);
+        let mut p = PollPlanner::new(8, interval);
+        let mut st = states(2);
+        let mut poll_at = |st: &mut Vec<PollState>, now| {
+            let devs = st
+                .iter_mut()
+                .enumerate()
+                .map(|(i, s)| (i as u8 + 1, i == 0, s));
+            p.next(devs, now).unwrap()
+        };
+        assert_eq!(poll_at(&mut st, t0).dev_id, 2, "never asked: due now");
+        assert_eq!(poll_at(&mut st, t0).dev_id, 1);
+        assert_eq!(poll_at(&mut st, t0 + interval / 2).dev_id, 1);
+        let due = poll_at(&mut st, t0 + interval);
+        assert_eq!((due.dev_id, due.block), (2, InfoBlock::Info01));
+    }
+
+    #[test]
+    fn nothing_to_poll_without_devices() {
+        let mut p = PollPlanner::new(8, Duration::from_millis(200));
+        assert_eq!(p.next(std::iter::empty(), Instant::now()), None);
+    }
+}

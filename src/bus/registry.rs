@@ -1,0 +1,363 @@
+//! What the owner knows about each device: latest telemetry, online or not,
+//! the target it was last sent, its mode, and the counts behind its rates.
+//!
+//! The registry turns replies and missed polls into state changes and
+//! [`BusEvent`]s; it never touches the port.
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use crate::protocol::reply::{fault_name, fsm};
+use crate::protocol::{CtrlMode, Info01, Reply, ReplyBody};
+
+use super::coalesce::SlotInfo;
+use super::handle::{BusEvent, DeviceState, Setpoint};
+use super::poll::PollState;
+
+/// One device as the owner tracks it.
+#[derive(Debug, Clone)]
+pub struct Entry {
+    /// What snapshots publish.
+    pub state: DeviceState,
+    pub poll: PollState,
+    /// Latest angle from INFO_01/INFO_02; cleared when the zero moves.
+    pub measured: Option<(i16, Instant)>,
+    control_updates: u32,
+    telemetry_samples: u32,
+}
+
+impl Entry {
+    fn new(dev_id: u8) -> Self {
+        Self {
+            state: DeviceState {
+                dev_id,
+                ..DeviceState::default()
+            },
+            poll: PollState::default(),
+            measured: None,
+            control_updates: 0,
+            telemetry_samples: 0,
+        }
+    }
+}
+
+/// What a reply changed that the owner must act on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ReplyEffect {
+    /// A known device announced itself again: it rebooted, lost its mode,
+    /// its target and its enable.
+    pub rebooted: bool,
+}
+
+/// Every device of one bus, by id.
+#[derive(Debug)]
+pub struct Registry {
+    bus: String,
+    offline_after: u32,
+    entries: BTreeMap<u8, Entry>,
+}
+
+impl Registry {
+    pub fn new(bus: &str, offline_after: u32) -> Self {
+        Self {
+            bus: bus.to_string(),
+            offline_after: offline_after.max(1),
+            entries: BTreeMap::new(),
+        }
+    }
+
+    /// Adds a device expected on the bus (offline until it answers).
+    pub fn expect(&mut self, id: u8) {
+        self.entries.entry(id).or_insert_with(|| Entry::new(id));
+    }
+
+    pub fn ids(&self) -> Vec<u8> {
+        self.entries.keys().copied().collect()
+    }
+
+    pub fn get(&self, id: u8) -> Option<&Entry> {
+        self.entries.get(&id)
+    }
+
+    pub fn is_online(&self, id: u8) -> bool {
+        self.entries.get(&id).is_some_and(|e| e.state.online)
+    }
+
+    pub fn online_ids(&self) -> Vec<u8> {
+        self.entries
+            .values()
+            .filter(|e| e.state.online)
+            .map(|e| e.state.dev_id)
+            .collect()
+    }
+
+    /// `(id, online, poll state)` of every device, for the poll planner.
+    pub fn poll_states(&mut self) -> impl Iterator<Item = (u8, bool, &mut PollState)> {
+        self.entries
+            .iter_mut()
+            .map(|(id, e)| (*id, e.state.online, &mut e.poll))
+    }
+
+    /// What the coalescer needs to fill a broadcast slot.
+    pub fn slot_info(&self, id: u8) -> Option<SlotInfo> {
+        self.entries.get(&id).map(|e| SlotInfo {
+            speed_mode: e.state.mode == Some(CtrlMode::Speed),
+            target: e.state.target_sent,
+            measured: e.measured.map(|(angle, _)| angle),
+        })
+    }
+
+    /// Takes in a reply. `solicited` is false for a frame nobody asked for:
+    /// a power-up INFO_01.
+    pub fn on_reply(
+        &mut self,
+        reply: &Reply,
+        now: Instant,
+        solicited: bool,
+        events: &mut Vec<BusEvent>,
+    ) -> ReplyEffect {
+        let known = self.entries.contains_key(&reply.dev_id);
+        let bus = self.bus.clone();
+        let entry = self
+            .entries
+            .entry(reply.dev_id)
+            .or_insert_with(|| Entry::new(reply.dev_id));
+        let mut effect = ReplyEffect::default();
+        mark_online(&bus, entry, events);
+        match reply.body() {
+            ReplyBody::Info01(info) => {
+                effect.rebooted = !solicited && known;
+                if effect.rebooted {
+                    entry.state.mode = None;
+                    entry.state.target_sent = None;
+                }
+                note_fault(&bus, entry, &info, events);
+                entry.state.info01 = Some((info, now));
+                entry.measured = Some((info.angle, now));
+                entry.telemetry_samples += u32::from(solicited);
+            }
+            ReplyBody::Info02(info) => {
+                entry.state.info02 = Some((info, now));
+                entry.measured = Some((info.angle, now));
+                entry.telemetry_samples += 1;
+            }
+            _ => {}
+        }
+        effect
+    }
+
+    /// A poll or read of `id` went unanswered.
+    pub fn on_missed(&mut self, id: u8, events: &mut Vec<BusEvent>) {
+        let Some(entry) = self.entries.get_mut(&id) else {
+            return;
+        };
+        entry.state.missed_polls = entry.state.missed_polls.saturating_add(1);
+        if entry.state.online && entry.state.missed_polls >= self.offline_after {
+            entry.state.online = false;
+            entry.poll.retry_at = None;
+            events.push(BusEvent::DeviceOffline {
+                bus: self.bus.clone(),
+                dev_id: id,
+            });
+        }
+    }
+
+    /// The port is gone: nobody can be heard.
+    pub fn all_offline(&mut self, events: &mut Vec<BusEvent>) {
+        for (id, entry) in &mut self.entries {
+            if entry.state.online {
+                entry.state.online = false;
+                entry.poll.retry_at = None;
+                events.push(BusEvent::DeviceOffline {
+                    bus: self.bus.clone(),
+                    dev_id: *id,
+                });
+            }
+        }
+    }
+
+    /// A frame carrying `setpoint` to `id` was written.
+    pub fn record_sent(&mut self, id: u8, setpoint: Setpoint) {
+        if let Some(e) = self.entries.get_mut(&id) {
+            e.state.target_sent = Some(setpoint);
+            e.control_updates += 1;
+        }
+    }
+
+    /// The device holds no target of ours any more (disabled, mode change).
+    pub fn forget_target(&mut self, id: u8) {
+        if let Some(e) = self.entries.get_mut(&id) {
+            e.state.target_sent = None;
+        }
+    }
+
+    /// The device's zero moved (jog, re-zero): old angles and targets mean
+    /// something else now.
+    pub fn zero_moved(&mut self, id: u8) {
+        if let Some(e) = self.entries.get_mut(&id) {
+            e.state.target_sent = None;
+            e.measured = None;
+        }
+    }
+
+    pub fn set_mode(&mut self, id: u8, mode: CtrlMode) {
+        if let Some(e) = self.entries.get_mut(&id) {
+            e.state.mode = Some(mode);
+            e.state.target_sent = None;
+        }
+    }
+
+    /// After an id change the entry moves with the device.
+    pub fn rename(&mut self, old: u8, new: u8) {
+        if let Some(mut e) = self.entries.remove(&old) {
+            e.state.dev_id = new;
+            self.entries.insert(new, e);
+        }
+    }
+
+    /// Turns the counts of the window just ended into rates.
+    pub fn roll_rates(&mut self, window: Duration) {
+        let secs = window.as_secs_f64().max(f64::EPSILON);
+        for e in self.entries.values_mut() {
+            e.state.control_hz = f64::from(e.control_updates) / secs;
+            e.state.telemetry_hz = f64::from(e.telemetry_samples) / secs;
+            e.control_updates = 0;
+            e.telemetry_samples = 0;
+        }
+    }
+
+    pub fn device_states(&self) -> BTreeMap<u8, DeviceState> {
+        self.entries
+            .iter()
+            .map(|(id, e)| (*id, e.state.clone()))
+            .collect()
+    }
+}
+
+fn mark_online(bus: &str, entry: &mut Entry, events: &mut Vec<BusEvent>) {
+    entry.state.missed_polls = 0;
+    entry.poll.retry_at = None;
+    if !entry.state.online {
+        entry.state.online = true;
+        events.push(BusEvent::DeviceOnline {
+            bus: bus.to_string(),
+            dev_id: entry.state.dev_id,
+        });
+    }
+}
+
+/// Reports a fault when the device enters one (not on every poll while in it).
+fn note_fault(bus: &str, entry: &Entry, info: &Info01, events: &mut Vec<BusEvent>) {
+    let active = |i: &Info01| (i.fsm == fsm::FAULT, i.err_code & 0x0F);
+    let was = entry.state.info01.as_ref().map(|(i, _)| active(i));
+    let now = active(info);
+    let faulty = now.0 || now.1 != 0;
+    if faulty && was != Some(now) {
+        events.push(BusEvent::Fault {
+            bus: bus.to_string(),
+            dev_id: entry.state.dev_id,
+            err_code: info.err_code,
+            name: fault_name(now.1),
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn info01(id: u8, fsm: u8, err: u8) -> Reply {
+        Reply::new(
+            id,
+            ReplyBody::Info01(Info01 {
+                fsm,
+                err_code: err,
+                soft_ver: 128,
+                temp_raw: 80,
+                angle: 640,
+                vbus: 1536,
+            }),
+        )
+    }
+
+    #[test]
+    fn announcement_registers_and_misses_take_a_device_offline() {
+        let mut r = Registry::new("b", 3);
+        let mut ev = Vec::new();
+        let now = Instant::now();
+        r.on_reply(&info01(4, 0, 0), now, false, &mut ev);
+        assert!(r.is_online(4));
+        assert!(matches!(ev[0], BusEvent::DeviceOnline { dev_id: 4, .. }));
+        assert_eq!(r.slot_info(4).unwrap().measured, Some(640));
+        for _ in 0..2 {
+            r.on_missed(4, &mut ev);
+        }
+        assert!(r.is_online(4), "two misses are not enough");
+        r.on_missed(4, &mut ev);
+        assert!(!r.is_online(4));
+        assert!(matches!(ev[1], BusEvent::DeviceOffline { dev_id: 4, .. }));
+        r.on_reply(&info01(4, 0, 0), now, true, &mut ev);
+        assert!(r.is_online(4), "comes back by itself");
+    }
+
+    #[test]
+    fn a_second_announcement_is_a_reboot_that_forgets_target_and_mode() {
+        let mut r = Registry::new("b", 3);
+        let mut ev = Vec::new();
+        let now = Instant::now();
+        r.on_reply(&info01(2, 0, 0), now, true, &mut ev);
+        r.set_mode(2, CtrlMode::Speed);
+        r.record_sent(
+            2,
+            Setpoint {
+                pos_ref: 1,
+                spd_ref: 2,
+            },
+        );
+        let fx = r.on_reply(&info01(2, 0, 0), now, false, &mut ev);
+        assert!(fx.rebooted);
+        let s = &r.get(2).unwrap().state;
+        assert_eq!((s.mode, s.target_sent), (None, None));
+    }
+
+    #[test]
+    fn a_fault_is_reported_once_on_entry() {
+        let mut r = Registry::new("b", 3);
+        let mut ev = Vec::new();
+        let now = Instant::now();
+        r.on_reply(&info01(1, 7, 0), now, true, &mut ev);
+        r.on_reply(&info01(1, 9, 8), now, true, &mut ev);
+        r.on_reply(&info01(1, 9, 8), now, true, &mut ev);
+        let faults: Vec<_> = ev
+            .iter()
+            .filter(|e| matches!(e, BusEvent::Fault { .. }))
+            .collect();
+        assert_eq!(faults.len(), 1);
+        assert!(matches!(faults[0], BusEvent::Fault { name: "stall", .. }));
+    }
+
+    #[test]
+    fn rates_count_control_updates_and_telemetry_per_window() {
+        let mut r = Registry::new("b", 3);
+        let mut ev = Vec::new();
+        let now = Instant::now();
+        r.on_reply(&info01(1, 0, 0), now, true, &mut ev);
+        let sp = Setpoint {
+            pos_ref: 0,
+            spd_ref: 0,
+        };
+        (0..4).for_each(|_| r.record_sent(1, sp));
+        r.roll_rates(Duration::from_millis(500));
+        let s = &r.get(1).unwrap().state;
+        assert_eq!((s.control_hz, s.telemetry_hz), (8.0, 2.0));
+    }
+
+    #[test]
+    fn rename_moves_the_entry() {
+        let mut r = Registry::new("b", 3);
+        r.expect(3);
+        r.rename(3, 12);
+        assert!(r.get(3).is_none());
+        assert_eq!(r.get(12).unwrap().state.dev_id, 12);
+    }
+}

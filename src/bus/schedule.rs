@@ -1,0 +1,235 @@
+//! The owner's wire primitives: waiting for the line, putting setpoints on
+//! it (coalesced, acknowledged), telemetry polls, and the request/response
+//! transactions one-shot requests are made of.
+//!
+//! Every frame is handed to the port when the [`super::wire::WireClock`]
+//! says the line is about to free; after a request that expects a reply,
+//! nothing is written until the reply arrives or its deadline passes.
+
+use std::time::Instant;
+
+use crate::protocol::{Command, Config, ConfigParam, Reply, ReplyBody};
+
+use super::coalesce;
+use super::error::BusError;
+use super::handle::WireAck;
+use super::link::Want;
+use super::owner::Owner;
+
+/// Setpoint frames that may go out between two frames of a one-shot
+/// request, so a long scan does not freeze the joints.
+const MAX_INTERLEAVED: u32 = 2;
+
+impl Owner {
+    /// Listens until `at`; replies nobody waited for are taken in.
+    pub(super) fn wait_until(&mut self, at: Instant) -> Result<(), BusError> {
+        let waited = self.link.wait(None, at);
+        self.absorb_inbox();
+        waited.map(|_| ()).map_err(|e| self.lost(e))
+    }
+
+    /// Unsolicited replies: power-up announcements, late replies.
+    pub(super) fn absorb_inbox(&mut self) {
+        let inbox = std::mem::take(&mut self.link.inbox);
+        for (reply, at) in &inbox {
+            self.link.counters.unsolicited += 1;
+            let effect = self.reg.on_reply(reply, *at, false, &mut self.events);
+            if effect.rebooted {
+                // A rebooted device is disabled and forgot its target:
+                // whatever was waiting for it is stale.
+                self.shared.setpoints.clear(Some(&[reply.dev_id]));
+                self.pending.remove(&reply.dev_id);
+            }
+        }
+        self.link.inbox = inbox;
+        self.link.inbox.clear();
+    }
+
+    /// Takes what changed in the setpoint store into `pending`.
+    pub(super) fn collect_setpoints(&mut self) {
+        for (id, sp) in self.shared.setpoints.changed_since(self.seen_seq) {
+            self.seen_seq = self.seen_seq.max(sp.seq);
+            self.pending.insert(id, sp);
+        }
+    }
+
+    /// Writes the frame carrying the oldest pending setpoint; false when
+    /// nothing needs a frame.
+    pub(super) fn send_control(&mut self) -> Result<bool, BusError> {
+        if self.pending.is_empty() {
+            return Ok(false);
+        }
+        let plan = coalesce::plan(&self.pending, |id| self.reg.slot_info(id));
+        for (id, sp) in &plan.settled {
+            self.settle(*id, sp.seq);
+        }
+        for id in &plan.unknown {
+            self.pending.remove(id);
+            self.link.counters.setpoints_dropped += 1;
+        }
+        let Some(first) = plan.frames.into_iter().next() else {
+            self.publish_ack(Instant::now());
+            return Ok(false);
+        };
+        let end = self.link.send(&[first.command]).map_err(|e| self.lost(e))?;
+        self.budget.spend(self.link.clock.frame_time());
+        for (id, sp) in first.carries {
+            self.reg.record_sent(id, sp.setpoint);
+            self.settle(id, sp.seq);
+            self.stats
+                .setpoint_age(end.saturating_duration_since(sp.accepted));
+            self.link.counters.setpoints_sent += 1;
+        }
+        self.publish_ack(end);
+        Ok(true)
+    }
+
+    /// Drops `id` from pending unless a newer setpoint replaced it meanwhile.
+    fn settle(&mut self, id: u8, seq: u64) {
+        if self.pending.get(&id).is_some_and(|p| p.seq <= seq) {
+            self.pending.remove(&id);
+        }
+    }
+
+    /// Publishes the highest sequence number all of whose joints are on the wire.
+    fn publish_ack(&mut self, at: Instant) {
+        let oldest_pending = self.pending.values().map(|s| s.seq).min();
+        let seq = oldest_pending.map_or(self.seen_seq, |s| s.saturating_sub(1));
+        if seq > self.acked_seq {
+            self.acked_seq = seq;
+            self.shared
+                .wire_acks
+                .send_replace(WireAck { seq, at: Some(at) });
+        }
+    }
+
+    /// One telemetry poll; false when there is nobody to poll.
+    pub(super) fn poll_once(&mut self) -> Result<bool, BusError> {
+        let Some(poll) = self.planner.next(self.reg.poll_states(), Instant::now()) else {
+            return Ok(false);
+        };
+        self.link.counters.polls += 1;
+        let want = Want {
+            dev_id: poll.dev_id,
+            index: poll.block.index(),
+        };
+        self.exchange(Config::read(poll.dev_id, poll.block), want)?;
+        Ok(true)
+    }
+
+    /// Writes one config/read frame and waits for the reply it asks for.
+    /// `None` when it did not come in time (counted as a missed poll).
+    fn exchange(&mut self, cmd: Config, want: Want) -> Result<Option<Reply>, BusError> {
+        let end = self
+            .link
+            .send(&[Command::Config(cmd)])
+            .map_err(|e| self.lost(e))?;
+        let deadline = self.link.clock.reply_deadline(end);
+        let got = self.link.wait(Some(want), deadline);
+        self.absorb_inbox();
+        match got.map_err(|e| self.lost(e))? {
+            Some((reply, at)) => {
+                // A RES from a new id (SET_ID) is not a device yet: the
+                // request renames the old entry itself.
+                let feeds = self.reg.get(reply.dev_id).is_some()
+                    || matches!(reply.body(), ReplyBody::Info01(_));
+                if feeds {
+                    self.reg.on_reply(&reply, at, true, &mut self.events);
+                }
+                Ok(Some(reply))
+            }
+            None => {
+                self.link.counters.timeouts += 1;
+                self.link.clock.line_free(Instant::now());
+                self.reg.on_missed(want.dev_id, &mut self.events);
+                Ok(None)
+            }
+        }
+    }
+
+    /// A request/response transaction of a one-shot request, retried
+    /// `attempts` times in all. `None` after the last timeout.
+    pub(super) fn try_transact(
+        &mut self,
+        cmd: Config,
+        want: Want,
+        attempts: u32,
+    ) -> Result<Option<Reply>, BusError> {
+        for attempt in 0..attempts.max(1) {
+            if attempt > 0 {
+                self.link.counters.retries += 1;
+            }
+            self.before_job_frame()?;
+            if let Some(reply) = self.exchange(cmd, want)? {
+                return Ok(Some(reply));
+            }
+        }
+        Ok(None)
+    }
+
+    /// [`Self::try_transact`] with the configured retries; a timeout is an error.
+    pub(super) fn transact(&mut self, cmd: Config, want: Want) -> Result<Reply, BusError> {
+        let attempts = 1 + self.cfg.timing.retries;
+        self.try_transact(cmd, want, attempts)?
+            .ok_or_else(|| self.timeout_error(want.dev_id, &cmd.param, attempts))
+    }
+
+    pub(super) fn timeout_error(&self, dev_id: u8, param: &ConfigParam, attempts: u32) -> BusError {
+        let t0 = Instant::now();
+        let timeout = self.link.clock.reply_deadline(t0) - t0;
+        BusError::Timeout {
+            dev_id,
+            what: describe(param),
+            attempts,
+            timeout_us: timeout.as_micros() as u64,
+        }
+    }
+
+    /// Writes frames of a one-shot request that expect no reply.
+    pub(super) fn job_send(&mut self, cmds: &[Command]) -> Result<(), BusError> {
+        self.before_job_frame()?;
+        self.link.send(cmds).map_err(|e| self.lost(e))?;
+        Ok(())
+    }
+
+    /// Before each frame of a one-shot request: let waiting setpoints out
+    /// (after its first frame), wait for the line, and give way to an e-stop.
+    fn before_job_frame(&mut self) -> Result<(), BusError> {
+        if self.job_frames > 0 {
+            self.interleave_control()?;
+        }
+        self.job_frames += 1;
+        self.wait_until(self.link.clock.write_at())?;
+        self.housekeeping(Instant::now());
+        if self.estop_pending() {
+            return Err(BusError::Preempted);
+        }
+        if !self.link.is_up() {
+            return Err(self.down_error());
+        }
+        Ok(())
+    }
+
+    fn interleave_control(&mut self) -> Result<(), BusError> {
+        self.collect_setpoints();
+        for _ in 0..MAX_INTERLEAVED {
+            if self.pending.is_empty() || self.estop_pending() {
+                break;
+            }
+            self.wait_until(self.link.clock.write_at())?;
+            if !self.send_control()? {
+                break;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What a config frame does, for error messages.
+pub(super) fn describe(param: &ConfigParam) -> String {
+    let (index, value) = param.index_value();
+    match param {
+        ConfigParam::ReadInfo(block) => format!("read {block:?}"),
+        _ => format!("write index {index} = {value}"),
+    }
+}

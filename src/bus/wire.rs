@@ -1,0 +1,163 @@
+//! The owner's model of the half-duplex line: when its last host frame leaves
+//! the wire, when the next one should be handed to the port, and when a reply
+//! is overdue.
+//!
+//! The port cannot tell us (a pty ignores the baud; a USB adapter's write
+//! returns before the bytes leave the UART), so the owner paces by this model:
+//! a frame handed over at `now` leaves the wire at
+//! `max(now, free_at) + 200/baud` (SPEC §1). Pure: driven by the instants
+//! the caller passes, so it is tested without threads.
+
+use std::time::{Duration, Instant};
+
+use super::config::{frame_time, Timing};
+
+/// The line as the owner believes it to be.
+#[derive(Debug, Clone)]
+pub struct WireClock {
+    frame: Duration,
+    turnaround: Duration,
+    reply_margin: Duration,
+    lead: Duration,
+    /// When the last host frame handed to the port leaves the wire.
+    free_at: Instant,
+}
+
+impl WireClock {
+    pub fn new(baud: u32, timing: &Timing, now: Instant) -> Self {
+        Self {
+            frame: frame_time(baud),
+            turnaround: Duration::from_micros(timing.turnaround_us),
+            reply_margin: Duration::from_micros(timing.reply_margin_us),
+            lead: Duration::from_micros(timing.write_lead_us),
+            free_at: now,
+        }
+    }
+
+    /// After a baud change: frames take another time from now on.
+    pub fn set_baud(&mut self, baud: u32) {
+        self.frame = frame_time(baud);
+    }
+
+    /// Extra margin for an adapter that holds replies back (FTDI latency timer).
+    pub fn add_reply_margin(&mut self, extra: Duration) {
+        self.reply_margin += extra;
+    }
+
+    pub fn frame_time(&self) -> Duration {
+        self.frame
+    }
+
+    pub fn turnaround(&self) -> Duration {
+        self.turnaround
+    }
+
+    /// When the line is free of every host frame handed over so far.
+    pub fn free_at(&self) -> Instant {
+        self.free_at
+    }
+
+    /// When to hand the next host frame to the port: a little before the line
+    /// frees, so the port's queue never runs dry, yet as late as possible so
+    /// the frame carries the freshest setpoints.
+    pub fn write_at(&self) -> Instant {
+        self.free_at.checked_sub(self.lead).unwrap_or(self.free_at)
+    }
+
+    /// Accounts `n` host frames handed to the port at `now`; returns when the
+    /// last byte of the last one leaves the wire.
+    pub fn host_frames(&mut self, now: Instant, n: u32) -> Instant {
+        self.free_at = self.free_at.max(now) + self.frame * n;
+        self.free_at
+    }
+
+    /// The latest a reply to a request ending at `request_end` may complete.
+    pub fn reply_deadline(&self, request_end: Instant) -> Instant {
+        request_end + self.turnaround + self.frame + self.reply_margin
+    }
+
+    /// A reply arrived (or its time ran out) at `at`: the line is free from then.
+    pub fn line_free(&mut self, at: Instant) {
+        self.free_at = self.free_at.max(at);
+    }
+
+    /// Wire time a reply costs: the device's turnaround and the frame.
+    pub fn reply_cost(&self) -> Duration {
+        self.turnaround + self.frame
+    }
+}
+
+/// Makes this thread's timed waits precise: Linux otherwise lets a timer fire
+/// up to 50 µs late (timer slack), an eighth of a frame at 500000 baud.
+pub fn precise_timers() {
+    /// The smallest slack the kernel accepts (0 would mean "reset to default").
+    const SLACK_NS: libc::c_ulong = 1;
+    // SAFETY: PR_SET_TIMERSLACK takes one integer argument and touches no memory.
+    let rc = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, SLACK_NS, 0, 0, 0) };
+    if rc != 0 {
+        tracing::debug!(
+            "PR_SET_TIMERSLACK failed: {}",
+            std::io::Error::last_os_error()
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn clock(now: Instant) -> WireClock {
+        WireClock::new(500_000, &Timing::default(), now)
+    }
+
+    #[test]
+    fn frames_queue_behind_each_other() {
+        let t0 = Instant::now();
+        let mut c = clock(t0);
+        let frame = Duration::from_micros(400);
+        assert_eq!(c.host_frames(t0, 1), t0 + frame);
+        // Handed over while the first is on the wire: starts when it ends.
+        assert_eq!(c.host_frames(t0 + frame / 2, 2), t0 + frame * 3);
+        // Handed over to an idle line: starts at once.
+        let later = t0 + Duration::from_millis(5);
+        assert_eq!(c.host_frames(later, 1), later + frame);
+    }
+
+    #[test]
+    fn next_write_leads_the_free_line() {
+        let t0 = Instant::now();
+        let mut c = clock(t0);
+        let end = c.host_frames(t0, 1);
+        assert_eq!(c.write_at(), end - Duration::from_micros(150));
+    }
+
+    #[test]
+    fn reply_deadline_covers_turnaround_frame_and_margin() {
+        let t0 = Instant::now();
+        let c = clock(t0);
+        assert_eq!(
+            c.reply_deadline(t0),
+            t0 + Duration::from_micros(100 + 400 + 1500)
+        );
+        assert_eq!(c.reply_cost(), Duration::from_micros(500));
+    }
+
+    #[test]
+    fn a_reply_frees_the_line_when_it_arrives() {
+        let t0 = Instant::now();
+        let mut c = clock(t0);
+        c.host_frames(t0, 1);
+        let rx = t0 + Duration::from_micros(900);
+        c.line_free(rx);
+        assert_eq!(c.free_at(), rx);
+        c.line_free(t0);
+        assert_eq!(c.free_at(), rx, "the line never frees in the past");
+    }
+
+    #[test]
+    fn baud_change_changes_frame_time() {
+        let mut c = clock(Instant::now());
+        c.set_baud(230_400);
+        assert_eq!(c.frame_time().as_nanos(), 868_056);
+    }
+}

@@ -1,0 +1,305 @@
+//! `jointd [run]`: config file and flags → buses (serial or an in-process
+//! simulator on a pty) → the HTTP API → on SIGINT/SIGTERM stop accepting,
+//! disable every joint, close the ports, exit 0.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use serde::Deserialize;
+use thiserror::Error;
+use tokio::net::TcpListener;
+use tokio::signal::unix::{signal, SignalKind};
+
+use crate::api::limits::{LimitError, LimitRule, SoftLimits};
+use crate::api::{app, AppState};
+use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle};
+use crate::sim::{SimConfig, SimError, SimHandle, Simulator};
+
+/// Default HTTP address: loopback only.
+pub const DEFAULT_LISTEN: &str = "127.0.0.1:8080";
+/// Name of the bus `--sim` starts.
+pub const SIM_BUS_NAME: &str = "sim0";
+/// Reply slack of the `--sim` bus, µs (see [`crate::bus::Timing`]).
+const SIM_REPLY_MARGIN_US: u64 = 10_000;
+/// How long shutdown waits for each bus to disable its joints and close.
+const BUS_STOP_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Flags of the run command (also accepted with no subcommand at all).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct RunArgs {
+    /// A serial bus, `[NAME=]PATH@BAUD` (repeatable), e.g. `/dev/ttyUSB0@500000`
+    /// or `left=/dev/serial/by-id/usb-FTDI…@230400`.
+    #[arg(long = "bus", value_name = "[NAME=]PATH@BAUD")]
+    pub buses: Vec<String>,
+    /// Start an in-process simulated bus `sim0` of N joints (ids 1..=N) on a
+    /// pseudo-terminal, opened through the same serial code as hardware.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=159))]
+    pub sim: Option<u8>,
+    /// Baud of the simulated bus.
+    #[arg(long, value_name = "BAUD", default_value_t = 500_000)]
+    pub sim_baud: u32,
+    /// HTTP address to listen on [default: 127.0.0.1:8080]; port 0 picks a free
+    /// port (the first line on stdout says which).
+    #[arg(long, value_name = "ADDR")]
+    pub listen: Option<SocketAddr>,
+    /// Bearer token required on everything but /healthz.
+    #[arg(long, env = "JOINTD_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// Allow listening beyond loopback without a token.
+    #[arg(long)]
+    pub insecure: bool,
+    /// TOML config file: `listen`, `token`, `insecure`, `[[bus]]` tables
+    /// (name, path, baud, ids, poll, timing) and `[[limit]]` soft limits.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+}
+
+/// The config file. Flags override its values.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FileConfig {
+    pub listen: Option<SocketAddr>,
+    pub token: Option<String>,
+    #[serde(default)]
+    pub insecure: bool,
+    #[serde(default, rename = "bus")]
+    pub buses: Vec<BusConfig>,
+    #[serde(default, rename = "limit")]
+    pub limits: Vec<LimitRule>,
+}
+
+#[derive(Debug, Error)]
+pub enum DaemonError {
+    #[error("config file {path}: {why}")]
+    Config { path: PathBuf, why: String },
+    #[error(
+        "refusing to listen on {addr} without a token: set --token (or JOINTD_TOKEN), \
+         listen on 127.0.0.1, or pass --insecure"
+    )]
+    Insecure { addr: SocketAddr },
+    #[error("soft limits: {0}")]
+    Limits(#[from] LimitError),
+    #[error("bus: {0}")]
+    Bus(#[from] BusError),
+    #[error("simulator: {0}")]
+    Sim(#[from] SimError),
+    #[error("no bus configured: give --bus PATH@BAUD, --sim N or [[bus]] in --config")]
+    NoBus,
+    #[error("{what}: {source}")]
+    Io {
+        what: String,
+        source: std::io::Error,
+    },
+}
+
+/// Everything the daemon will run with, after file and flags are merged.
+#[derive(Debug)]
+pub struct Plan {
+    pub listen: SocketAddr,
+    pub token: Option<String>,
+    pub buses: Vec<BusConfig>,
+    pub limits: SoftLimits,
+    pub sim: Option<(u8, u32)>,
+}
+
+fn load_file(path: &PathBuf) -> Result<FileConfig, DaemonError> {
+    let bad = |why: String| DaemonError::Config {
+        path: path.clone(),
+        why,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+    toml::from_str(&text).map_err(|e| bad(e.to_string()))
+}
+
+/// Merges the config file and the flags, and refuses unsafe combinations.
+pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
+    let file = match &args.config {
+        Some(path) => load_file(path)?,
+        None => FileConfig::default(),
+    };
+    let default_listen: SocketAddr = DEFAULT_LISTEN.parse().map_err(|_| DaemonError::NoBus)?;
+    let listen = args.listen.or(file.listen).unwrap_or(default_listen);
+    let token = args.token.clone().or(file.token).filter(|t| !t.is_empty());
+    if !listen.ip().is_loopback() && token.is_none() && !(args.insecure || file.insecure) {
+        return Err(DaemonError::Insecure { addr: listen });
+    }
+    let mut buses = file.buses;
+    for spec in &args.buses {
+        buses.push(BusConfig::parse_cli(spec)?);
+    }
+    let sim = args.sim.map(|n| (n, args.sim_baud));
+    if buses.is_empty() && sim.is_none() {
+        return Err(DaemonError::NoBus);
+    }
+    Ok(Plan {
+        listen,
+        token,
+        buses,
+        limits: SoftLimits::new(file.limits)?,
+        sim,
+    })
+}
+
+/// Starts the simulator of `--sim` and the bus config that opens its pty.
+fn start_sim(joints: u8, baud: u32) -> Result<(SimHandle, BusConfig), DaemonError> {
+    let ids: Vec<u8> = (1..=joints).collect();
+    let sim = Simulator::spawn_pty(SimConfig::new(ids.clone(), baud))?;
+    let path = sim.device_path().ok_or_else(|| DaemonError::Io {
+        what: "simulator".into(),
+        source: std::io::Error::other("the simulator has no device path"),
+    })?;
+    tracing::info!(path = %path.display(), joints, baud, "simulated bus started");
+    let mut cfg = BusConfig::new(SIM_BUS_NAME, path, baud);
+    cfg.ids = ids;
+    // The simulator shares the CPU with the daemon: on a busy machine its
+    // replies can come milliseconds late, which is not a silent device.
+    cfg.timing.reply_margin_us = SIM_REPLY_MARGIN_US;
+    Ok((sim, cfg))
+}
+
+/// Runs the daemon until SIGINT or SIGTERM.
+pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
+    let plan = plan(&args)?;
+    let mut configs = plan.buses;
+    let sim = match plan.sim {
+        Some((n, baud)) => {
+            let (sim, cfg) = start_sim(n, baud)?;
+            configs.push(cfg);
+            Some(sim)
+        }
+        None => None,
+    };
+    let mut handles: Vec<BusHandle> = Vec::new();
+    let mut threads = Vec::new();
+    for cfg in configs {
+        tracing::info!(bus = %cfg.name, path = %cfg.path.display(), baud = cfg.baud, "starting bus");
+        let (handle, thread) = spawn_bus(cfg)?;
+        handles.push(handle);
+        threads.push(thread);
+    }
+    let listener = TcpListener::bind(plan.listen)
+        .await
+        .map_err(|e| DaemonError::Io {
+            what: format!("cannot listen on {}", plan.listen),
+            source: e,
+        })?;
+    let addr = listener.local_addr().map_err(|e| DaemonError::Io {
+        what: "listener address".into(),
+        source: e,
+    })?;
+    // First line on stdout: scripts and tests read the port from it.
+    println!("listening on http://{addr}");
+    tracing::info!(%addr, auth = plan.token.is_some(), "serving the API");
+    let state = AppState::new(handles, plan.limits, plan.token);
+    axum::serve(listener, app(state))
+        .with_graceful_shutdown(shutdown_signal())
+        .await
+        .map_err(|e| DaemonError::Io {
+            what: "HTTP server".into(),
+            source: e,
+        })?;
+    stop_buses(threads).await;
+    drop(sim);
+    tracing::info!("stopped");
+    Ok(())
+}
+
+/// Disables every joint and closes each port (the owner does both on stop).
+async fn stop_buses(threads: Vec<crate::bus::BusThread>) {
+    for thread in threads {
+        let stopping = tokio::task::spawn_blocking(move || thread.stop());
+        if tokio::time::timeout(BUS_STOP_TIMEOUT, stopping)
+            .await
+            .is_err()
+        {
+            tracing::error!("a bus did not stop within {BUS_STOP_TIMEOUT:?}");
+        }
+    }
+}
+
+/// Resolves on the first SIGINT or SIGTERM.
+async fn shutdown_signal() {
+    let (Ok(mut int), Ok(mut term)) = (
+        signal(SignalKind::interrupt()),
+        signal(SignalKind::terminate()),
+    ) else {
+        tracing::error!("cannot install signal handlers; stop with SIGKILL");
+        return std::future::pending().await;
+    };
+    tokio::select! {
+        _ = int.recv() => tracing::info!("SIGINT: shutting down"),
+        _ = term.recv() => tracing::info!("SIGTERM: shutting down"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(listen: &str) -> RunArgs {
+        RunArgs {
+            sim: Some(2),
+            listen: Some(listen.parse().unwrap()),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn non_loopback_needs_a_token_or_insecure() {
+        assert!(matches!(
+            plan(&args("0.0.0.0:8080")),
+            Err(DaemonError::Insecure { .. })
+        ));
+        let mut with_token = args("0.0.0.0:8080");
+        with_token.token = Some("t".into());
+        assert!(plan(&with_token).is_ok());
+        let mut insecure = args("0.0.0.0:8080");
+        insecure.insecure = true;
+        assert!(plan(&insecure).is_ok());
+        assert!(plan(&args("127.0.0.1:0")).is_ok());
+        let mut empty_token = args("[::]:80");
+        empty_token.token = Some(String::new());
+        assert!(plan(&empty_token).is_err(), "an empty token is no token");
+    }
+
+    #[test]
+    fn default_bind_is_loopback_and_a_bus_is_required() {
+        let p = plan(&RunArgs {
+            sim: Some(1),
+            ..Default::default()
+        })
+        .unwrap();
+        assert_eq!(p.listen.to_string(), DEFAULT_LISTEN);
+        assert!(matches!(plan(&RunArgs::default()), Err(DaemonError::NoBus)));
+    }
+
+    #[test]
+    fn config_file_gives_buses_and_limits_and_flags_win() {
+        let dir = std::env::temp_dir().join(format!("jointd-cfg-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("jointd.toml");
+        let text = "listen = \"0.0.0.0:9000\"\ntoken = \"file\"\n\
+            [[bus]]\nname = \"left\"\npath = \"/dev/ttyUSB0\"\nbaud = 500000\n\
+            [[limit]]\nbus = \"left\"\nids = [3]\nmin_deg = -45.0\nmax_deg = 45.0\n";
+        std::fs::write(&path, text).unwrap();
+        let p = plan(&RunArgs {
+            config: Some(path.clone()),
+            token: Some("flag".into()),
+            ..Default::default()
+        })
+        .unwrap();
+        assert_eq!(p.token.as_deref(), Some("flag"));
+        assert_eq!(p.listen.port(), 9000);
+        assert_eq!(p.buses[0].name, "left");
+        assert_eq!(p.limits.for_joint("left", 3).max_deg, 45.0);
+        std::fs::write(&path, "bogus = 1\n").unwrap();
+        let err = plan(&RunArgs {
+            config: Some(path),
+            sim: Some(1),
+            ..Default::default()
+        });
+        assert!(matches!(err, Err(DaemonError::Config { .. })));
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}

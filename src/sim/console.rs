@@ -1,0 +1,140 @@
+//! Run-time control of `jointd sim` from its stdin, one command a line, so
+//! faults can be switched while a daemon is attached:
+//!
+//! ```text
+//! unplug | replug | clear | stats | devices | help
+//! power-cycle ID          under-voltage ID on|off
+//! stall ID [DEG]          corrupt RATE
+//! drop RATE [ID]          extra-turnaround MICROS
+//! ```
+//! Answers go to stderr (stdout carries only the device path).
+
+use std::io::BufRead;
+use std::time::Duration;
+
+use super::{Fault, SimHandle};
+
+pub const HELP: &str = "commands: unplug | replug | clear | stats | devices | help | \
+power-cycle ID | under-voltage ID on|off | stall ID [DEG] | corrupt RATE | \
+drop RATE [ID] | extra-turnaround MICROS";
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum ConsoleCmd {
+    Fault(Fault),
+    Stats,
+    Devices,
+    Help,
+}
+
+fn num<T: std::str::FromStr>(word: Option<&str>, what: &str) -> Result<T, String> {
+    let w = word.ok_or_else(|| format!("missing {what}"))?;
+    w.parse()
+        .map_err(|_| format!("`{w}` is not a valid {what}"))
+}
+
+/// Parses one console line.
+pub fn parse(line: &str) -> Result<ConsoleCmd, String> {
+    let mut words = line.split_whitespace();
+    let cmd = words.next().unwrap_or("help");
+    let fault = match cmd {
+        "stats" => return Ok(ConsoleCmd::Stats),
+        "devices" => return Ok(ConsoleCmd::Devices),
+        "help" => return Ok(ConsoleCmd::Help),
+        "unplug" => Fault::Unplug,
+        "replug" => Fault::Replug,
+        "clear" => Fault::ClearAll,
+        "power-cycle" => Fault::PowerCycle {
+            dev_id: num(words.next(), "device id")?,
+        },
+        "stall" => Fault::Stall {
+            dev_id: num(words.next(), "device id")?,
+            at_deg: words.next().map(|w| num(Some(w), "angle")).transpose()?,
+        },
+        "under-voltage" => Fault::UnderVoltage {
+            dev_id: num(words.next(), "device id")?,
+            on: match words.next() {
+                Some("on") => true,
+                Some("off") => false,
+                _ => return Err("under-voltage ID on|off".into()),
+            },
+        },
+        "corrupt" => Fault::CorruptRate(num(words.next(), "rate")?),
+        "drop" => Fault::DropReplies {
+            rate: num(words.next(), "rate")?,
+            dev_id: words
+                .next()
+                .map(|w| num(Some(w), "device id"))
+                .transpose()?,
+        },
+        "extra-turnaround" => {
+            Fault::ExtraTurnaround(Duration::from_micros(num(words.next(), "microseconds")?))
+        }
+        other => return Err(format!("unknown command `{other}`; {HELP}")),
+    };
+    Ok(ConsoleCmd::Fault(fault))
+}
+
+/// Executes one line against the simulator; the answer to print.
+pub fn execute(sim: &SimHandle, line: &str) -> String {
+    match parse(line) {
+        Ok(ConsoleCmd::Fault(f)) => {
+            sim.inject(f);
+            format!("ok: {f:?}")
+        }
+        Ok(ConsoleCmd::Stats) => serde_json::to_string(&sim.stats()).unwrap_or_default(),
+        Ok(ConsoleCmd::Devices) => serde_json::to_string(&sim.devices()).unwrap_or_default(),
+        Ok(ConsoleCmd::Help) => HELP.to_string(),
+        Err(e) => format!("error: {e}"),
+    }
+}
+
+/// Serves stdin in a background thread until it closes.
+pub fn spawn(sim: SimHandle) {
+    let spawned = std::thread::Builder::new()
+        .name("jointd-sim-console".into())
+        .spawn(move || {
+            for line in std::io::stdin().lock().lines().map_while(Result::ok) {
+                if !line.trim().is_empty() {
+                    eprintln!("{}", execute(&sim, &line));
+                }
+            }
+        });
+    if let Err(e) = spawned {
+        tracing::warn!("no simulator console: {e}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn commands_parse_to_faults() {
+        assert_eq!(parse("unplug"), Ok(ConsoleCmd::Fault(Fault::Unplug)));
+        assert_eq!(
+            parse("stall 3 12.5"),
+            Ok(ConsoleCmd::Fault(Fault::Stall {
+                dev_id: 3,
+                at_deg: Some(12.5)
+            }))
+        );
+        assert_eq!(
+            parse("drop 0.5"),
+            Ok(ConsoleCmd::Fault(Fault::DropReplies {
+                dev_id: None,
+                rate: 0.5
+            }))
+        );
+        assert_eq!(
+            parse("under-voltage 2 off"),
+            Ok(ConsoleCmd::Fault(Fault::UnderVoltage {
+                dev_id: 2,
+                on: false
+            }))
+        );
+        assert_eq!(parse("stats"), Ok(ConsoleCmd::Stats));
+        assert!(parse("stall x").is_err());
+        assert!(parse("explode").is_err());
+        assert!(parse("under-voltage 2").is_err());
+    }
+}

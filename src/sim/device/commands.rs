@@ -1,0 +1,209 @@
+//! What a device does with each command it hears (SPEC §4).
+
+use std::time::{Duration, Instant};
+
+use crate::protocol::command::{index, WRITE_FLASH_KEY};
+use crate::protocol::reply::{fault, fsm, RES_FAILURE, RES_SUCCESS};
+use crate::protocol::units::{angle_deg, MAX_ANGLE_DEG};
+use crate::protocol::{
+    BroadcastEnable, Command, Config, ConfigParam, Control, ControlOp, CtrlMode, Group, JogDir,
+    Reply, ReplyBody, ALL_DEVICES,
+};
+
+use super::{Device, Outcome, JOG_CCW_DEG, JOG_CW_DEG};
+
+impl Device {
+    /// Handles one command heard on the line at `now`.
+    pub fn handle(&mut self, cmd: &Command, now: Instant) -> Outcome {
+        self.advance_to(now);
+        if self.booting(now) {
+            return Outcome::default();
+        }
+        if self.silent && !self.is_silence_command(cmd) {
+            return Outcome::default();
+        }
+        match cmd {
+            Command::Control(c) if self.addressed(c.dev_id) => self.control(c, now),
+            Command::Jog(j) if self.addressed(j.dev_id) => self.jog(j.dir),
+            Command::Config(c) => return self.config(c, now),
+            Command::BroadcastPos(b) => self.broadcast(b.group, &b.pos_ref, true),
+            Command::BroadcastSpd(b) => self.broadcast(b.group, &b.spd_ref, false),
+            Command::BroadcastEnableUnverified(b) => self.broadcast_enable(b, now),
+            _ => {}
+        }
+        Outcome::default()
+    }
+
+    fn addressed(&self, dev_id: u8) -> bool {
+        dev_id == self.id || dev_id == ALL_DEVICES
+    }
+
+    fn is_silence_command(&self, cmd: &Command) -> bool {
+        matches!(cmd, Command::Config(Config { dev_id, param: ConfigParam::CommSilent(_) }) if self.addressed(*dev_id))
+    }
+
+    fn control(&mut self, c: &Control, now: Instant) {
+        match c.op {
+            ControlOp::Enable => self.enable(now),
+            ControlOp::Disable => self.disable(),
+            ControlOp::SetRef => self.set_ref(Some(c.pos_ref), Some(c.spd_ref)),
+        }
+    }
+
+    fn enable(&mut self, now: Instant) {
+        if self.fsm != fsm::READY {
+            return;
+        }
+        if self.under_voltage {
+            self.enter_fault(fault::HW_UNDER_VOLTAGE);
+        } else if self.aligned {
+            self.fsm = fsm::RUN;
+            self.target = self.angle();
+        } else {
+            self.fsm = fsm::ALIGN;
+            self.align_done_at = Some(now + self.timing.align_time);
+        }
+    }
+
+    fn disable(&mut self) {
+        self.fsm = fsm::READY;
+        self.align_done_at = None;
+        self.jog_goal = None;
+        self.err_code = if self.under_voltage {
+            fault::HW_UNDER_VOLTAGE
+        } else {
+            fault::NONE
+        };
+    }
+
+    /// New references (SET_REF or a broadcast). In speed mode the angle is ignored.
+    fn set_ref(&mut self, pos_ref: Option<i16>, spd_ref: Option<i16>) {
+        if let Some(p) = pos_ref.filter(|_| self.mode != CtrlMode::Speed) {
+            self.target = angle_deg(p).clamp(-MAX_ANGLE_DEG, MAX_ANGLE_DEG);
+            self.jog_goal = None;
+        }
+        if let Some(s) = spd_ref {
+            self.spd_ref = s;
+        }
+        self.joint.command_burst(&self.ram);
+    }
+
+    fn broadcast(&mut self, group: Group, values: &[i16; 8], is_pos: bool) {
+        let Some((g, slot)) = Group::slot_of(self.id) else {
+            return;
+        };
+        if g != group {
+            return;
+        }
+        let v = values[slot];
+        if is_pos {
+            self.set_ref(Some(v), None);
+        } else {
+            self.set_ref(None, Some(v));
+        }
+    }
+
+    fn broadcast_enable(&mut self, b: &BroadcastEnable, now: Instant) {
+        let Some(op) = usize::from(self.id)
+            .checked_sub(1)
+            .and_then(|i| b.ops.get(i))
+        else {
+            return;
+        };
+        match *op {
+            1 => self.enable(now),
+            2 => self.disable(),
+            _ => {}
+        }
+    }
+
+    fn jog(&mut self, dir: JogDir) {
+        if self.fsm != fsm::RUN {
+            return;
+        }
+        let step = match dir {
+            JogDir::Cw => JOG_CW_DEG,
+            JogDir::Ccw => JOG_CCW_DEG,
+            JogDir::None => return,
+        };
+        self.jog_goal = Some((self.angle() + step).clamp(-MAX_ANGLE_DEG, MAX_ANGLE_DEG));
+    }
+
+    fn config(&mut self, c: &Config, now: Instant) -> Outcome {
+        if let ConfigParam::ReadInfo(block) = c.param {
+            // Reads cannot be broadcast (SPEC §4.3): only the exact id answers.
+            return if c.dev_id == self.id {
+                Outcome::reply(self.info(block))
+            } else {
+                Outcome::default()
+            };
+        }
+        if !self.addressed(c.dev_id) {
+            return Outcome::default();
+        }
+        self.write(&c.param, now)
+    }
+
+    fn res(&self, index: u8, ok: bool) -> Reply {
+        let code = if ok { RES_SUCCESS } else { RES_FAILURE };
+        Reply::new(self.id, ReplyBody::Res { index, code })
+    }
+
+    fn write(&mut self, p: &ConfigParam, now: Instant) -> Outcome {
+        match *p {
+            ConfigParam::Reboot(_) => self.power_up(now, Duration::ZERO),
+            ConfigParam::UpdateFinZero => self.rezero(),
+            ConfigParam::SetId { new_id } => {
+                self.id = new_id;
+                return Outcome {
+                    reply: Some(self.res(index::SET_ID, true)),
+                    persist: true,
+                };
+            }
+            ConfigParam::UpdateEncZero => {
+                let idle = self.fsm == fsm::READY;
+                if idle {
+                    self.aligned = false;
+                }
+                return Outcome::reply(self.res(index::UPDATE_ENC_ZERO, idle));
+            }
+            ConfigParam::CommSilent(v) => self.silent = v != 0,
+            ConfigParam::CtrlMode(m) => self.switch_mode(m),
+            ConfigParam::WriteFlash { key } => return self.write_flash(key),
+            ConfigParam::ReadFlash => self.ram = self.flash,
+            ConfigParam::BaudRate(level) => {
+                // The RES goes out at the old baud (the engine times it by the
+                // request); from now on the device listens at the new one.
+                self.ram.baud_level = level as u8;
+                return Outcome::reply(self.res(index::BAUD_RATE, true));
+            }
+            ref other => {
+                self.ram.apply(other);
+            }
+        }
+        Outcome::default()
+    }
+
+    fn write_flash(&mut self, key: u8) -> Outcome {
+        let ok = key == WRITE_FLASH_KEY;
+        if ok {
+            self.flash = self.ram;
+        }
+        Outcome {
+            reply: Some(self.res(index::WRITE_FLASH, ok)),
+            persist: ok,
+        }
+    }
+
+    fn switch_mode(&mut self, m: CtrlMode) {
+        if m == CtrlMode::None || m == self.mode {
+            return;
+        }
+        self.mode = m;
+        self.jog_goal = None;
+        self.target = self.angle();
+        if m == CtrlMode::Speed {
+            self.spd_ref = 0;
+        }
+    }
+}

@@ -1,0 +1,358 @@
+//! The API over HTTP against a scripted bus owner: every error status, auth
+//! on and off, soft limits, and what each endpoint asks of the bus.
+
+mod api_support;
+
+use std::time::Duration;
+
+use api_support::fake_bus::FakeBus;
+use api_support::{serve, Server};
+use jointd::api::limits::{LimitRule, SoftLimits};
+use jointd::api::AppState;
+use serde_json::json;
+
+const DEV: &str = "/api/v1/buses/fake/devices";
+
+fn limits() -> SoftLimits {
+    SoftLimits::new(vec![LimitRule {
+        bus: Some("fake".into()),
+        ids: vec![2],
+        min_deg: Some(-90.0),
+        max_deg: Some(90.0),
+        max_rpm: Some(4000.0),
+    }])
+    .unwrap()
+}
+
+async fn setup(token: Option<&str>) -> (FakeBus, Server) {
+    let bus = FakeBus::new("fake", &[1, 2, 3]);
+    let state = AppState::new(vec![bus.handle.clone()], limits(), token.map(str::to_owned));
+    let server = serve(state).await;
+    (bus, server)
+}
+
+#[tokio::test]
+async fn auth_on_requires_the_bearer_token_everywhere_but_healthz() {
+    let (_bus, server) = setup(Some("s3cret")).await;
+    server.get("/healthz").await.ok();
+    let r = server.get("/api/v1/buses").await;
+    r.problem(401);
+    assert_eq!(r.headers["www-authenticate"], "Bearer");
+    server.get("/openapi.json").await.problem(401);
+    server.get("/metrics").await.problem(401);
+    let wrong = server.with_token("s3creT");
+    wrong.get("/api/v1/buses").await.problem(401);
+    let right = wrong.with_token("s3cret");
+    assert_eq!(
+        right.get("/api/v1/buses").await.ok()["buses"][0]["name"],
+        "fake"
+    );
+    right.get("/readyz").await.ok();
+}
+
+#[tokio::test]
+async fn auth_off_serves_without_a_token() {
+    let (_bus, server) = setup(None).await;
+    server.get("/api/v1/buses").await.ok();
+    server.get(DEV).await.ok();
+}
+
+#[tokio::test]
+async fn bad_input_gets_400_404_405_415_422_never_500() {
+    let (_bus, s) = setup(None).await;
+    s.get("/api/v1/buses/nope").await.problem(404);
+    s.get(&format!("{DEV}/9")).await.problem(404);
+    s.get("/api/v1/nothing-here").await.problem(404);
+    let r = s.get(&format!("{DEV}/200")).await;
+    let p = r.problem(422);
+    assert_eq!(p["field"], "id");
+    assert_eq!(
+        (p["allowed"]["min"].as_f64(), p["allowed"]["max"].as_f64()),
+        (Some(1.0), Some(159.0))
+    );
+    s.get(&format!("{DEV}/abc")).await.problem(400);
+    s.get(&format!("{DEV}/1?fresh=maybe")).await.problem(400);
+    s.get("/api/v1/buses/fake/frames?limit=0")
+        .await
+        .problem(422);
+    s.call(reqwest::Method::DELETE, "/api/v1/buses", None)
+        .await
+        .problem(405);
+    // Body problems: not JSON, wrong shape, unknown field, wrong media type.
+    let raw = s
+        .client
+        .put(format!("{}{DEV}/1/target", s.base))
+        .header("content-type", "application/json")
+        .body("{")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(raw.status(), 400);
+    s.put(&format!("{DEV}/1/target"), json!({"position_deg": "ten"}))
+        .await
+        .problem(422);
+    s.put(
+        &format!("{DEV}/1/target"),
+        json!({"position_deg": 1, "torque": 3}),
+    )
+    .await
+    .problem(422);
+    let plain = s
+        .client
+        .put(format!("{}{DEV}/1/target", s.base))
+        .body("{}")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(plain.status(), 415);
+    s.put("/api/v1/buses/fake/baud", json!({"baud": 12345}))
+        .await
+        .problem(422);
+    s.post("/api/v1/buses/fake/scan", json!({"first": 10, "last": 2}))
+        .await
+        .problem(422);
+}
+
+#[tokio::test]
+async fn targets_need_an_enabled_joint_and_respect_soft_limits() {
+    let (bus, s) = setup(None).await;
+    let p = s
+        .put(&format!("{DEV}/2/target"), json!({"position_deg": 10}))
+        .await;
+    assert!(p.problem(409)["detail"]
+        .as_str()
+        .unwrap()
+        .contains("enable it first"));
+    s.post_empty(&format!("{DEV}/2/enable")).await.ok();
+    let r = s
+        .put(&format!("{DEV}/2/target"), json!({"position_deg": 120}))
+        .await;
+    let p = r.problem(422);
+    assert_eq!(p["type"], "urn:jointd:problem:soft-limit");
+    assert_eq!(p["field"], "position_deg");
+    assert_eq!(p["allowed"]["max"], 90.0);
+    let p = s
+        .put(
+            &format!("{DEV}/2/target"),
+            json!({"position_deg": 10, "speed_rpm": 5000}),
+        )
+        .await;
+    assert_eq!(p.problem(422)["allowed"]["max"], 4000.0);
+    assert!(
+        bus.handle.shared().setpoints.get(2).is_none(),
+        "a refused target is not stored"
+    );
+    // Within limits: stored raw (Q7 degrees, Q15 of 50000 rpm for firmware 1.2.8).
+    let r = s
+        .put(
+            &format!("{DEV}/2/target"),
+            json!({"position_deg": 45.5, "speed_rpm": 3000}),
+        )
+        .await;
+    let body = r.ok();
+    assert_eq!(body["targets"][0]["pos_ref_raw"], 5824);
+    let stored = bus.handle.shared().setpoints.get(2).expect("stored");
+    assert_eq!(
+        (stored.setpoint.pos_ref, stored.setpoint.spd_ref),
+        (5824, 1966)
+    );
+    // Joint 1 has no soft limits, only the device range.
+    s.post_empty(&format!("{DEV}/1/enable")).await.ok();
+    let r = s
+        .put(&format!("{DEV}/1/target"), json!({"position_deg": 300}))
+        .await;
+    assert_eq!(r.problem(422)["allowed"]["max"], 255.0);
+}
+
+#[tokio::test]
+async fn group_targets_are_all_or_nothing() {
+    let (bus, s) = setup(None).await;
+    s.post("/api/v1/buses/fake/control/enable", json!({}))
+        .await
+        .ok();
+    let bad = json!({"targets": [{"id": 1, "position_deg": 10}, {"id": 2, "position_deg": -100}]});
+    let r = s.put("/api/v1/buses/fake/control/targets", bad).await;
+    assert_eq!(r.problem(422)["field"], "targets[1].position_deg");
+    assert!(bus.handle.shared().setpoints.get(1).is_none());
+    let good = json!({"targets": [{"id": 1, "position_deg": 10}, {"id": 2, "position_deg": -10}]});
+    let r = s.put("/api/v1/buses/fake/control/targets", good).await;
+    let seq = r.ok()["seq"].as_u64().unwrap();
+    let (a, b) = (
+        bus.handle.shared().setpoints.get(1).unwrap(),
+        bus.handle.shared().setpoints.get(2).unwrap(),
+    );
+    assert_eq!((a.seq, b.seq), (seq, seq), "one write for the whole group");
+    s.put("/api/v1/buses/fake/control/targets", json!({"targets": []}))
+        .await
+        .problem(422);
+    s.post("/api/v1/buses/fake/control/disable", json!({"ids": [7]}))
+        .await
+        .problem(404);
+}
+
+#[tokio::test]
+async fn jog_while_disabled_is_409_and_works_once_enabled() {
+    let (bus, s) = setup(None).await;
+    s.post(&format!("{DEV}/3/jog"), json!({"direction": "cw"}))
+        .await
+        .problem(409);
+    assert!(!bus.script().log.contains(&"jog"));
+    s.post_empty(&format!("{DEV}/3/enable")).await.ok();
+    let r = s
+        .post(&format!("{DEV}/3/jog"), json!({"direction": "ccw"}))
+        .await;
+    assert_eq!(r.ok()["value"], "ccw");
+    s.post(&format!("{DEV}/3/jog"), json!({"direction": "up"}))
+        .await
+        .problem(422);
+}
+
+#[tokio::test]
+async fn silent_device_is_504_and_down_bus_is_503() {
+    let (bus, s) = setup(None).await;
+    bus.script().silent.insert(1);
+    s.get(&format!("{DEV}/1?fresh=true")).await.problem(504);
+    s.get(&format!("{DEV}/1/config")).await.problem(504);
+    s.get(&format!("{DEV}/2?fresh=true")).await.ok();
+    bus.script().down = true;
+    s.post_empty(&format!("{DEV}/2/enable")).await.problem(503);
+    s.post("/api/v1/buses/fake/scan", json!({"first": 1, "last": 16}))
+        .await
+        .problem(503);
+}
+
+#[tokio::test]
+async fn config_reads_in_physical_units_and_writes_are_checked_first() {
+    let (bus, s) = setup(None).await;
+    let c = s.get(&format!("{DEV}/1/config")).await;
+    let c = c.ok();
+    assert_eq!(c["max_current_a"]["raw"], 4368);
+    assert!((c["max_current_a"]["value"].as_f64().unwrap() - 0.7498).abs() < 1e-3);
+    assert_eq!(c["protect_delay_ms"]["value"], 600.0);
+    assert_eq!(c["burst_cold_ms"]["value"], 100.0);
+    assert_eq!(c["baud"], 500000);
+    let r = s
+        .patch(
+            &format!("{DEV}/1/config"),
+            json!({"pos_kp": 1.0, "lpf_level": 6}),
+        )
+        .await;
+    assert_eq!(r.problem(422)["field"], "lpf_level");
+    assert!(
+        !bus.script().log.contains(&"write_config"),
+        "nothing written when one value is bad"
+    );
+    let r = s
+        .patch(
+            &format!("{DEV}/1/config"),
+            json!({"pos_kp": 1.25, "max_current_a": 2.0}),
+        )
+        .await;
+    let w = &r.ok()["written"];
+    assert_eq!(
+        (w[0]["param"].as_str(), w[0]["raw"].as_u64()),
+        (Some("pos_kp"), Some(5120))
+    );
+    assert_eq!(
+        (w[1]["index"].as_u64(), w[1]["raw"].as_u64()),
+        (Some(18), Some(11650))
+    );
+    bus.script().mismatch = true;
+    let r = s
+        .patch(&format!("{DEV}/1/config"), json!({"spd_ki": 0.5}))
+        .await;
+    assert_eq!(r.problem(502)["field"], "spd_ki");
+    let r = s.post_empty(&format!("{DEV}/1/config/persist")).await;
+    assert_eq!(r.ok()["verified_by"], "res");
+}
+
+#[tokio::test]
+async fn id_change_refuses_a_taken_id() {
+    let (_bus, s) = setup(None).await;
+    let r = s.put(&format!("{DEV}/1/id"), json!({"new_id": 2})).await;
+    assert_eq!(r.problem(409)["field"], "new_id");
+    s.put(&format!("{DEV}/1/id"), json!({"new_id": 0}))
+        .await
+        .problem(422);
+    s.put(&format!("{DEV}/1/id"), json!({"new_id": 7}))
+        .await
+        .ok();
+    s.get(&format!("{DEV}/7")).await.ok();
+    s.get(&format!("{DEV}/1")).await.problem(404);
+}
+
+#[tokio::test]
+async fn estop_preempts_queued_requests() {
+    let (bus, s) = setup(None).await;
+    bus.script().delay = Duration::from_millis(200);
+    let busy: Vec<_> = (0..3)
+        .map(|_| {
+            let (base, client) = (s.base.clone(), s.client.clone());
+            tokio::spawn(async move {
+                client
+                    .post(format!("{base}/api/v1/buses/fake/scan"))
+                    .json(&json!({"first": 1, "last": 3}))
+                    .send()
+                    .await
+                    .unwrap()
+                    .status()
+            })
+        })
+        .collect();
+    // Wait until the owner is busy with the first request before stopping.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(5);
+    while bus.handle.snapshot().queue_depth == 0
+        && bus.script().log.is_empty()
+        && tokio::time::Instant::now() < deadline
+    {
+        tokio::task::yield_now().await;
+    }
+    let r = s.post_empty("/api/v1/estop").await;
+    let body = r.ok();
+    assert_eq!(body["stopped"], true);
+    assert_eq!(body["buses"][0]["frames_sent"], 4);
+    let mut statuses = Vec::new();
+    for b in busy {
+        statuses.push(b.await.unwrap().as_u16());
+    }
+    assert!(
+        statuses.contains(&409),
+        "queued work is preempted: {statuses:?}"
+    );
+    let log = bus.script().log.clone();
+    let stop_at = log.iter().position(|k| *k == "estop").unwrap();
+    assert!(
+        log[stop_at..].iter().all(|k| *k != "scan"),
+        "nothing queued ran after the e-stop: {log:?}"
+    );
+}
+
+#[tokio::test]
+async fn metrics_readyz_and_bus_views() {
+    let (bus, s) = setup(None).await;
+    let m = s.get("/metrics").await;
+    let text = m.body.as_str().unwrap();
+    assert!(m.content_type.starts_with("text/plain"));
+    assert!(text.contains("jointd_bus_up{bus=\"fake\"} 1"), "{text}");
+    assert!(text.contains("jointd_bus_frames_rx_total{bus=\"fake\"} 0"));
+    assert!(text.contains("jointd_device_online{bus=\"fake\",id=\"3\"} 1"));
+    assert_eq!(text.matches("# TYPE jointd_device_online gauge").count(), 1);
+    s.get("/readyz").await.ok();
+    let mut snap = (*bus.handle.snapshot()).clone();
+    snap.link = jointd::bus::handle::LinkState::Down {
+        reason: "unplugged".into(),
+        retry_in_ms: 500,
+    };
+    bus.handle
+        .shared()
+        .snapshot
+        .send_replace(std::sync::Arc::new(snap));
+    s.get("/readyz").await.problem(503);
+    let v = s.get("/api/v1/buses/fake").await;
+    assert_eq!(v.ok()["link"], "down");
+    assert_eq!(v.body["down_reason"], "unplugged");
+    s.put("/api/v1/buses/fake/baud", json!({"baud": 115200}))
+        .await
+        .ok();
+    assert_eq!(bus.handle.snapshot().baud, 115200);
+}

@@ -1,0 +1,104 @@
+//! The API in front of the real bus engine and the simulator on a pty, as
+//! the daemon runs it with `--sim`.
+#![allow(dead_code)]
+
+use std::time::Duration;
+
+use jointd::api::limits::{LimitRule, SoftLimits};
+use jointd::api::AppState;
+use jointd::bus::{spawn_bus, BusConfig, BusHandle, BusSnapshot, BusThread};
+use jointd::sim::{SimConfig, SimHandle, Simulator};
+
+use super::{serve, Server};
+
+/// Generous: the machine is loaded; every wait ends on its event.
+pub const WAIT: Duration = Duration::from_secs(10);
+pub const BAUD: u32 = 500_000;
+pub const BUS: &str = "sim0";
+pub const REPLY_MARGIN_US: u64 = 20_000;
+
+/// One simulated bus at a time per test binary: each runs two timing-precise
+/// threads (simulator and bus owner), and several at once on a loaded
+/// 2-core machine would starve each other's wire timing.
+static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+pub struct SimBus {
+    _turn: tokio::sync::MutexGuard<'static, ()>,
+    pub sim: SimHandle,
+    pub handle: BusHandle,
+    pub thread: Option<BusThread>,
+    pub server: Server,
+}
+
+/// `n` joints (ids 1..=n) behind a pty, the engine on it, the API in front;
+/// returns once every joint is online.
+pub async fn start(n: u8, token: Option<&str>) -> SimBus {
+    let turn = ONE_AT_A_TIME.lock().await;
+    let ids: Vec<u8> = (1..=n).collect();
+    let mut cfg = SimConfig::new(ids.clone(), BAUD);
+    cfg.align_time = Duration::from_millis(50);
+    cfg.boot_delay = Duration::from_millis(2);
+    let sim = Simulator::spawn_pty(cfg).expect("simulator");
+    let path = sim.device_path().expect("pty path");
+    let mut bus_cfg = BusConfig::new(BUS, path, BAUD);
+    bus_cfg.ids = ids;
+    // A loaded 2-core machine delays pty bytes by milliseconds: give replies
+    // that much slack so a late reply is not mistaken for a silent device.
+    bus_cfg.timing.reply_margin_us = REPLY_MARGIN_US;
+    let (handle, thread) = spawn_bus(bus_cfg).expect("bus");
+    let limits = SoftLimits::new(vec![LimitRule {
+        ids: vec![2],
+        min_deg: Some(-45.0),
+        max_deg: Some(45.0),
+        max_rpm: Some(6000.0),
+        ..Default::default()
+    }])
+    .expect("limits");
+    let state = AppState::new(vec![handle.clone()], limits, token.map(str::to_owned));
+    let mut server = serve(state).await;
+    if let Some(t) = token {
+        server = server.with_token(t);
+    }
+    let bus = SimBus {
+        _turn: turn,
+        sim,
+        handle,
+        thread: Some(thread),
+        server,
+    };
+    let count = usize::from(n);
+    bus.wait_snapshot("every joint online", |s| {
+        s.devices.values().filter(|d| d.online).count() == count
+    })
+    .await;
+    bus
+}
+
+impl SimBus {
+    /// Waits until a published snapshot satisfies `pred`.
+    pub async fn wait_snapshot(&self, what: &str, pred: impl Fn(&BusSnapshot) -> bool) {
+        let mut rx = self.handle.watch();
+        let waited = tokio::time::timeout(WAIT, rx.wait_for(|s| pred(s))).await;
+        assert!(matches!(waited, Ok(Ok(_))), "timed out waiting for: {what}");
+    }
+
+    /// Waits until device `id` reports fsm `state` in its INFO_01.
+    pub async fn wait_fsm(&self, id: u8, state: u8) {
+        self.wait_snapshot(&format!("device {id} in fsm {state}"), |s| {
+            s.devices
+                .get(&id)
+                .and_then(|d| d.info01.as_ref())
+                .is_some_and(|(i, _)| i.fsm == state)
+        })
+        .await;
+    }
+}
+
+impl Drop for SimBus {
+    fn drop(&mut self) {
+        if let Some(t) = self.thread.take() {
+            t.stop();
+        }
+        self.sim.shutdown();
+    }
+}
