@@ -122,6 +122,15 @@ impl JointLimits {
         if !deg.is_finite() {
             return Err(ApiError::invalid(field, format!("{field} must be finite")));
         }
+        // Beyond what the wire carries is a range error, not a user's limit.
+        if deg.abs() > MAX_ANGLE_DEG {
+            return Err(ApiError::out_of_range(
+                field,
+                deg,
+                (-MAX_ANGLE_DEG, MAX_ANGLE_DEG),
+                "deg",
+            ));
+        }
         if deg < self.min_deg || deg > self.max_deg {
             return Err(soft_limit(
                 field,
