@@ -314,6 +314,9 @@ const PARAMS = [
   ["recover_window_ms", "time below recovery"], ["burst_cold_ms", "burst cool-down"], ["burst_plus_ms", "burst duration"],
 ];
 
+/** A parameter as a person reads it: at most 4 decimals, no float noise. */
+const shown = (v) => String(Number(Number(v).toFixed(4)));
+
 async function loadConfig() {
   const cfg = await act(null, () => api("GET", dev("/config")));
   if (!cfg) return;
@@ -326,8 +329,11 @@ async function loadConfig() {
     const tr = document.createElement("tr");
     tr.innerHTML = `<td>${label}</td><td><input data-param="${name}" data-testid="param-${name}" type="number" step="any"></td><td>${p.unit}</td><td>${p.raw}</td>`;
     const input = tr.querySelector("input");
-    input.value = p.value;
-    input.oninput = () => tr.classList.toggle("changed", Number(input.value) !== p.value);
+    // Shown rounded (Q12/Q15 steps print as 0.9997558…); "changed" compares
+    // with what was shown, so an untouched field is never written back.
+    input.value = shown(p.value);
+    input.dataset.shown = input.value;
+    input.oninput = () => tr.classList.toggle("changed", input.value !== input.dataset.shown);
     tbody.appendChild(tr);
   }
 }
@@ -337,7 +343,7 @@ $("#config-apply").onclick = async () => {
   const patch = {};
   for (const input of document.querySelectorAll("#config input[data-param]")) {
     const name = input.dataset.param;
-    if (Number(input.value) !== state.config[name].value) patch[name] = Number(input.value);
+    if (input.value !== input.dataset.shown) patch[name] = Number(input.value);
   }
   if (!Object.keys(patch).length) return say("Nothing changed.", "info");
   const done = await act(`Applied to RAM and verified: ${Object.keys(patch).join(", ")}.`, () => api("PATCH", dev("/config"), patch));
@@ -359,7 +365,7 @@ $("#change-id").onclick = async () => {
 
 async function loadFrames() {
   if (!state.selected) return;
-  const data = await act(null, () => api("GET", `buses/${encodeURIComponent(state.selected.bus)}/frames?limit=40`));
+  const data = await act(null, () => api("GET", `buses/${encodeURIComponent(state.selected.bus)}/frames?limit=30`));
   if (!data) return;
   const tbody = $("#frames tbody");
   tbody.innerHTML = "";
