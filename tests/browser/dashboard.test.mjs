@@ -7,7 +7,6 @@ import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
 import { spawn } from "node:child_process";
 import { mkdirSync } from "node:fs";
-import net from "node:net";
 import { chromium } from "playwright-core";
 
 const ROOT = new URL("../../", import.meta.url).pathname;
@@ -18,14 +17,17 @@ const WAIT = 20_000;
 
 let daemon, browser, page, base;
 
-function freePort() {
+/** The daemon's first stdout line is `listening on <url>` (port 0 picks a free port). */
+function listeningUrl(child) {
   return new Promise((resolve, reject) => {
-    const srv = net.createServer();
-    srv.listen(0, "127.0.0.1", () => {
-      const { port } = srv.address();
-      srv.close(() => resolve(port));
+    let buf = "";
+    const timer = setTimeout(() => reject(new Error("jointd did not report its address")), WAIT);
+    child.stdout.on("data", (chunk) => {
+      buf += chunk;
+      const m = buf.match(/^listening on (\S+)/m);
+      if (m) { clearTimeout(timer); resolve(m[1]); }
     });
-    srv.on("error", reject);
+    child.once("exit", (code) => reject(new Error(`jointd exited early with ${code}`)));
   });
 }
 
@@ -55,9 +57,8 @@ const cell = (id, field) => page.locator(`[data-testid="device-row-sim0-${id}"] 
 
 before(async () => {
   mkdirSync(SHOTS, { recursive: true });
-  const port = await freePort();
-  base = `http://127.0.0.1:${port}`;
-  daemon = spawn(BIN, ["--sim", "16", "--listen", `127.0.0.1:${port}`], { stdio: ["ignore", "inherit", "inherit"] });
+  daemon = spawn(BIN, ["--sim", "16", "--listen", "127.0.0.1:0"], { stdio: ["ignore", "pipe", "inherit"] });
+  base = await listeningUrl(daemon);
   await waitReady(base);
   browser = await chromium.launch({
     executablePath: CHROMIUM,
