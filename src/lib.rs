@@ -8,6 +8,8 @@
 //! - [`daemon`]: `jointd [run]`: config, buses, the HTTP server, graceful shutdown.
 //! - [`bus`]: one owner thread per bus, its scheduler, and the handle the API uses.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty, in-memory pipe).
+//! - [`ws`]: the WebSocket endpoint: telemetry streams, batch setpoints, teleop watchdog.
+//! - [`web`]: the embedded dashboard (or `--web-dir` while developing).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory).
 //! - [`bench`]: `jointd bench`: the bus engine against the simulator, measured.
 
@@ -20,3 +22,5 @@ pub mod frame_json;
 pub mod protocol;
 pub mod sim;
 pub mod transport;
+pub mod web;
+pub mod ws;

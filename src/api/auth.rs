@@ -18,19 +18,32 @@ pub async fn require_token(State(state): State<AppState>, req: Request, next: Ne
     let Some(token) = state.token() else {
         return next.run(req).await;
     };
-    if req.uri().path() == HEALTHZ_PATH {
+    if req.uri().path() == HEALTHZ_PATH || crate::web::is_public(req.uri().path()) {
         return next.run(req).await;
     }
     let presented = req
         .headers()
         .get(AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
-        .and_then(bearer_token);
+        .and_then(bearer_token)
+        .or_else(|| websocket_query_token(&req));
     match presented {
         Some(p) if constant_time_eq(p.as_bytes(), token.as_bytes()) => next.run(req).await,
         Some(_) => ApiError::unauthorized("the bearer token is not valid").into_response(),
         None => ApiError::unauthorized("send `Authorization: Bearer <token>`").into_response(),
     }
+}
+
+/// Browsers cannot set headers on a WebSocket upgrade, so the WebSocket
+/// endpoint (only) also takes `?token=`.
+fn websocket_query_token(req: &Request) -> Option<&str> {
+    if req.uri().path() != crate::ws::WS_PATH {
+        return None;
+    }
+    req.uri()
+        .query()?
+        .split('&')
+        .find_map(|pair| pair.strip_prefix("token="))
 }
 
 /// The token of an `Authorization` value; the scheme is case-insensitive.

@@ -47,6 +47,8 @@ pub fn app(state: AppState) -> Router {
     let (router, doc) = openapi::router().split_for_parts();
     router
         .merge(openapi::docs(doc))
+        .merge(crate::ws::router())
+        .merge(crate::web::router())
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(axum::middleware::from_fn_with_state(

@@ -21,6 +21,8 @@ struct Inner {
     limits: SoftLimits,
     token: Option<String>,
     started: Instant,
+    ws: crate::ws::WsHub,
+    web_dir: std::sync::OnceLock<std::path::PathBuf>,
 }
 
 impl AppState {
@@ -36,6 +38,8 @@ impl AppState {
                 limits,
                 token: token.filter(|t| !t.is_empty()),
                 started: Instant::now(),
+                ws: crate::ws::WsHub::default(),
+                web_dir: std::sync::OnceLock::new(),
             }),
         }
     }
@@ -57,6 +61,21 @@ impl AppState {
 
     pub fn limits(&self, bus: &str, id: u8) -> JointLimits {
         self.inner.limits.for_joint(bus, id)
+    }
+
+    /// Serve the dashboard from this folder instead of the embedded copy
+    /// (set once, at start; a second call is refused).
+    pub fn set_web_dir(&self, dir: std::path::PathBuf) -> Result<(), std::path::PathBuf> {
+        self.inner.web_dir.set(dir)
+    }
+
+    pub fn web_dir(&self) -> Option<&std::path::PathBuf> {
+        self.inner.web_dir.get()
+    }
+
+    /// What the WebSocket connections share.
+    pub fn ws(&self) -> &crate::ws::WsHub {
+        &self.inner.ws
     }
 
     pub fn uptime_s(&self) -> f64 {

@@ -28,6 +28,8 @@ pub struct SimBus {
     pub handle: BusHandle,
     pub thread: Option<BusThread>,
     pub server: Server,
+    /// The state the server runs on (WebSocket sessions driven directly use it).
+    pub server_state: AppState,
 }
 
 /// `n` joints (ids 1..=n) behind a pty, the engine on it, the API in front;
@@ -55,7 +57,7 @@ pub async fn start(n: u8, token: Option<&str>) -> SimBus {
     }])
     .expect("limits");
     let state = AppState::new(vec![handle.clone()], limits, token.map(str::to_owned));
-    let mut server = serve(state).await;
+    let mut server = serve(state.clone()).await;
     if let Some(t) = token {
         server = server.with_token(t);
     }
@@ -65,6 +67,7 @@ pub async fn start(n: u8, token: Option<&str>) -> SimBus {
         handle,
         thread: Some(thread),
         server,
+        server_state: state,
     };
     let count = usize::from(n);
     bus.wait_snapshot("every joint online", |s| {

@@ -1,0 +1,303 @@
+//! The messages of `jointd.ws.v1` (docs/websocket.md), parsed strictly:
+//! an unknown type or field is an error naming it, never silently ignored.
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use crate::bus::handle::BusEvent;
+
+/// Name and version of this protocol, sent in `welcome`.
+pub const PROTOCOL: &str = "jointd.ws.v1";
+
+/// A message from the client.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ClientMessage {
+    Subscribe(Subscribe),
+    Unsubscribe { seq: Option<u64> },
+    Setpoints(SetpointBatch),
+    Watchdog(WatchdogRequest),
+    Ping { seq: Option<u64> },
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Subscribe {
+    pub seq: Option<u64>,
+    /// Bus names; all buses when absent.
+    pub buses: Option<Vec<String>>,
+    /// Device ids; all devices when absent.
+    pub devices: Option<Vec<i64>>,
+    /// Joint fields; all when absent.
+    pub fields: Option<Vec<Field>>,
+    /// Telemetry messages per second.
+    pub rate_hz: Option<f64>,
+}
+
+/// The joint fields a telemetry message can carry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Field {
+    AngleDeg,
+    TargetDeg,
+    SpeedRpm,
+    CurrentA,
+    Fsm,
+    Fault,
+    TempC,
+    VbusV,
+}
+
+impl Field {
+    pub const ALL: [Field; 8] = [
+        Field::AngleDeg,
+        Field::TargetDeg,
+        Field::SpeedRpm,
+        Field::CurrentA,
+        Field::Fsm,
+        Field::Fault,
+        Field::TempC,
+        Field::VbusV,
+    ];
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SetpointBatch {
+    pub seq: Option<u64>,
+    /// Answer with an `ack` once every target is on the wire.
+    #[serde(default)]
+    pub ack: bool,
+    pub targets: Vec<TargetItem>,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetItem {
+    /// Optional when the daemon has exactly one bus.
+    pub bus: Option<String>,
+    pub dev_id: i64,
+    pub position_deg: Option<f64>,
+    pub speed_rpm: Option<f64>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WatchdogPolicy {
+    /// Freeze each joint where it is (target := measured angle).
+    Hold,
+    /// Disable each joint.
+    Disable,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WatchdogRequest {
+    pub seq: Option<u64>,
+    /// 0 disarms.
+    pub hold_timeout_ms: u64,
+    #[serde(default = "default_policy")]
+    pub policy: WatchdogPolicy,
+}
+
+fn default_policy() -> WatchdogPolicy {
+    WatchdogPolicy::Hold
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SeqOnly {
+    seq: Option<u64>,
+}
+
+/// Why a client message could not be read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParseError {
+    pub code: ErrorCode,
+    pub message: String,
+    /// The `seq` of the message, when it could be read.
+    pub seq: Option<u64>,
+}
+
+/// Parses one text frame.
+pub fn parse(text: &str) -> Result<ClientMessage, ParseError> {
+    let mut value: Value = serde_json::from_str(text).map_err(|e| ParseError {
+        code: ErrorCode::BadJson,
+        message: format!("not valid JSON: {e}"),
+        seq: None,
+    })?;
+    let seq = value.get("seq").and_then(Value::as_u64);
+    let bad = |message: String| ParseError {
+        code: ErrorCode::BadMessage,
+        message,
+        seq,
+    };
+    let obj = value
+        .as_object_mut()
+        .ok_or_else(|| bad("a message is a JSON object with a `type`".into()))?;
+    let kind = match obj.remove("type") {
+        Some(Value::String(s)) => s,
+        _ => {
+            return Err(bad(
+                "missing `type` (subscribe, unsubscribe, setpoints, watchdog, ping)".into(),
+            ))
+        }
+    };
+    let rest = Value::Object(std::mem::take(obj));
+    let field_err = |e: serde_json::Error| bad(format!("`{kind}`: {e}"));
+    match kind.as_str() {
+        "subscribe" => serde_json::from_value(rest).map(ClientMessage::Subscribe),
+        "unsubscribe" => serde_json::from_value::<SeqOnly>(rest)
+            .map(|s| ClientMessage::Unsubscribe { seq: s.seq }),
+        "setpoints" => serde_json::from_value(rest).map(ClientMessage::Setpoints),
+        "watchdog" => serde_json::from_value(rest).map(ClientMessage::Watchdog),
+        "ping" => {
+            serde_json::from_value::<SeqOnly>(rest).map(|s| ClientMessage::Ping { seq: s.seq })
+        }
+        other => {
+            return Err(bad(format!(
+                "unknown type `{other}` (subscribe, unsubscribe, setpoints, watchdog, ping)"
+            )))
+        }
+    }
+    .map_err(field_err)
+}
+
+/// Error codes of docs/websocket.md.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorCode {
+    BadJson,
+    BadMessage,
+    UnknownBus,
+    UnknownDevice,
+    OutOfRange,
+    OutOfLimit,
+    WrongState,
+    TooMany,
+    BusError,
+}
+
+/// A message to the client.
+#[derive(Debug, Clone, Serialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ServerMessage {
+    Welcome {
+        protocol: &'static str,
+        buses: Vec<BusInfo>,
+        limits: Limits,
+    },
+    Telemetry {
+        seq: u64,
+        t_ms: u64,
+        dropped: u64,
+        joints: Vec<serde_json::Map<String, Value>>,
+    },
+    Event {
+        seq: u64,
+        event: EventBody,
+        #[serde(skip_serializing_if = "is_zero")]
+        dropped_events: u64,
+    },
+    Ack {
+        ref_seq: Option<u64>,
+        joints: usize,
+        latency_us: u64,
+    },
+    Error {
+        ref_seq: Option<u64>,
+        code: ErrorCode,
+        message: String,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        field: Option<String>,
+    },
+    Subscribed {
+        ref_seq: Option<u64>,
+        buses: Vec<String>,
+        devices: Option<Vec<u8>>,
+        fields: Vec<Field>,
+        rate_hz: f64,
+    },
+    Unsubscribed {
+        ref_seq: Option<u64>,
+    },
+    WatchdogSet {
+        ref_seq: Option<u64>,
+        hold_timeout_ms: u64,
+        policy: WatchdogPolicy,
+    },
+    Pong {
+        ref_seq: Option<u64>,
+    },
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct BusInfo {
+    pub name: String,
+    pub baud: u32,
+    pub devices: Vec<u8>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Limits {
+    pub max_rate_hz: f64,
+    pub max_batch: usize,
+}
+
+/// An event as sent: a bus's own, or one of this layer (the teleop watchdog).
+#[derive(Debug, Clone, Serialize)]
+#[serde(untagged)]
+pub enum EventBody {
+    Bus(BusEvent),
+    Watchdog(WatchdogEvent),
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct WatchdogEvent {
+    /// Always `"watchdog"`.
+    pub event: &'static str,
+    /// The connection whose stream stopped.
+    pub client: u64,
+    pub policy: WatchdogPolicy,
+    /// `why`: `timeout` or `closed`.
+    pub why: &'static str,
+    pub joints: Vec<JointRef>,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+pub struct JointRef {
+    pub bus: String,
+    pub dev_id: u8,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_each_type_and_names_what_is_wrong() {
+        assert!(matches!(
+            parse(r#"{"type":"ping","seq":3}"#),
+            Ok(ClientMessage::Ping { seq: Some(3) })
+        ));
+        let m = parse(r#"{"type":"setpoints","seq":1,"targets":[{"dev_id":1,"position_deg":5}]}"#);
+        assert!(matches!(m, Ok(ClientMessage::Setpoints(b)) if b.targets.len() == 1 && !b.ack));
+        let e =
+            parse(r#"{"type":"setpoints","seq":9,"targets":[{"dev_id":1,"pos":5}]}"#).unwrap_err();
+        assert_eq!((e.code, e.seq), (ErrorCode::BadMessage, Some(9)));
+        assert!(e.message.contains("pos"), "{}", e.message);
+        assert_eq!(parse("{").unwrap_err().code, ErrorCode::BadJson);
+        assert!(parse(r#"{"type":"dance"}"#)
+            .unwrap_err()
+            .message
+            .contains("dance"));
+        assert!(parse(r#"[1]"#).is_err());
+        let s = parse(r#"{"type":"subscribe","fields":["angle_deg"],"rate_hz":10}"#);
+        assert!(
+            matches!(s, Ok(ClientMessage::Subscribe(s)) if s.fields == Some(vec![Field::AngleDeg]))
+        );
+    }
+}

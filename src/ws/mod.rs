@@ -1,0 +1,47 @@
+//! The WebSocket endpoint `/api/v1/ws` (protocol `jointd.ws.v1`,
+//! docs/websocket.md): telemetry streams for dashboards and high-rate
+//! setpoints for teleoperation, on the same bus handles as the REST API.
+//!
+//! # Layout
+//! - [`messages`]: the message types, parsed strictly.
+//! - [`session`]: one connection's reader: apply messages, run the watchdog.
+//! - [`writer`]: one connection's writer: telemetry, events, acks; bounded.
+//! - [`setpoints`]: validate a batch whole, then store it.
+//! - [`telemetry`]: snapshot → joint fields in physical units.
+//! - [`watchdog`]: the teleop hold-timeout state machine.
+//! - [`hub`]: what all connections share (watchdog events, counters).
+
+pub mod hub;
+pub mod messages;
+pub mod session;
+pub mod setpoints;
+pub mod telemetry;
+pub mod watchdog;
+pub mod writer;
+
+use axum::extract::{State, WebSocketUpgrade};
+use axum::response::Response;
+use axum::routing::get;
+use axum::Router;
+use futures_util::StreamExt;
+
+use crate::api::AppState;
+
+pub use hub::WsHub;
+
+/// Where the endpoint is served.
+pub const WS_PATH: &str = "/api/v1/ws";
+/// Largest client message accepted (a full batch is well under this).
+const MAX_MESSAGE_BYTES: usize = 256 * 1024;
+
+pub fn router() -> Router<AppState> {
+    Router::new().route(WS_PATH, get(upgrade))
+}
+
+async fn upgrade(ws: WebSocketUpgrade, State(state): State<AppState>) -> Response {
+    ws.max_message_size(MAX_MESSAGE_BYTES)
+        .on_upgrade(move |socket| async move {
+            let (sink, stream) = socket.split();
+            session::run(state, sink, stream).await;
+        })
+}

@@ -1,0 +1,300 @@
+//! One WebSocket connection: a reader (this task) that parses and applies
+//! client messages and runs the watchdog, and a [`Writer`] task that alone
+//! writes to the socket. Generic over `Sink`/`Stream` so tests can drive it
+//! without a network.
+
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use axum::extract::ws::Message;
+use futures_util::{Sink, Stream, StreamExt};
+use tokio::sync::{mpsc, watch};
+use tokio::time::Instant;
+
+use super::hub::WsHub;
+use super::messages::{
+    self, BusInfo, ClientMessage, ErrorCode, Field, JointRef, Limits, ServerMessage, Subscribe,
+    WatchdogEvent, WatchdogPolicy, WatchdogRequest,
+};
+use super::setpoints::{self, WsError, MAX_BATCH};
+use super::telemetry::Subscription;
+use super::watchdog::{Watchdog, MAX_HOLD, MIN_HOLD};
+use super::writer::{PendingAck, Writer};
+use crate::api::state::device_id;
+use crate::api::telemetry::measured_angle_raw;
+use crate::api::AppState;
+use crate::bus::{Setpoint, Targets};
+
+/// Replies (acks, errors) a connection may have queued; beyond, they are dropped and counted.
+const OUT_QUEUE: usize = 64;
+/// Acks waiting for the wire, per connection.
+const MAX_PENDING_ACKS: usize = 256;
+/// Telemetry rate bounds and default, messages per second.
+pub const MAX_RATE_HZ: f64 = 1000.0;
+const MIN_RATE_HZ: f64 = 1.0;
+const DEFAULT_RATE_HZ: f64 = 50.0;
+
+/// Serves one connection until the client goes away.
+pub async fn run<Si, St, E>(state: AppState, sink: Si, mut stream: St)
+where
+    Si: Sink<Message> + Unpin + Send + 'static,
+    St: Stream<Item = Result<Message, E>> + Unpin,
+{
+    let client = state.ws().next_client_id();
+    state.ws().connections.fetch_add(1, Ordering::Relaxed);
+    let (out_tx, out_rx) = mpsc::channel(OUT_QUEUE);
+    let (sub_tx, sub_rx) = watch::channel(None);
+    let (ack_tx, ack_rx) = mpsc::channel(MAX_PENDING_ACKS);
+    let writer = tokio::spawn(Writer::new(state.clone(), sink).run(out_rx, sub_rx, ack_rx));
+    let mut conn = Connection {
+        state: state.clone(),
+        client,
+        out: out_tx,
+        sub: sub_tx,
+        acks: ack_tx,
+        watchdog: Watchdog::default(),
+    };
+    conn.reply(welcome(&state));
+    loop {
+        let deadline = conn.watchdog.deadline();
+        tokio::select! {
+            msg = stream.next() => match msg {
+                Some(Ok(Message::Text(text))) => conn.handle(text.as_str()).await,
+                Some(Ok(Message::Binary(_))) => conn.reject(None, WsError::new(ErrorCode::BadMessage, "binary frames are not part of jointd.ws.v1; send JSON text")),
+                Some(Ok(Message::Close(_))) | Some(Err(_)) | None => break,
+                Some(Ok(_)) => {} // ping/pong: the library answers
+            },
+            _ = sleep_until(deadline), if deadline.is_some() => conn.fire_watchdog("timeout").await,
+        }
+    }
+    if conn.watchdog.is_armed() {
+        conn.fire_watchdog("closed").await;
+    }
+    drop(conn);
+    let _ = writer.await;
+    state.ws().connections.fetch_sub(1, Ordering::Relaxed);
+}
+
+async fn sleep_until(deadline: Option<Instant>) {
+    if let Some(d) = deadline {
+        tokio::time::sleep_until(d).await;
+    }
+}
+
+fn welcome(state: &AppState) -> ServerMessage {
+    let buses = state
+        .buses()
+        .map(|b| {
+            let snap = b.snapshot();
+            BusInfo {
+                name: snap.name.clone(),
+                baud: snap.baud,
+                devices: snap.devices.keys().copied().collect(),
+            }
+        })
+        .collect();
+    ServerMessage::Welcome {
+        protocol: messages::PROTOCOL,
+        buses,
+        limits: Limits {
+            max_rate_hz: MAX_RATE_HZ,
+            max_batch: MAX_BATCH,
+        },
+    }
+}
+
+struct Connection {
+    state: AppState,
+    client: u64,
+    out: mpsc::Sender<ServerMessage>,
+    sub: watch::Sender<Option<Subscription>>,
+    acks: mpsc::Sender<PendingAck>,
+    watchdog: Watchdog,
+}
+
+impl Connection {
+    /// Queues a reply; a client too slow to take its replies loses them (counted).
+    fn reply(&self, msg: ServerMessage) {
+        if self.out.try_send(msg).is_err() {
+            WsHub::count(&self.state.ws().dropped_replies, 1);
+        }
+    }
+
+    fn reject(&self, ref_seq: Option<u64>, e: WsError) {
+        self.reply(ServerMessage::Error {
+            ref_seq,
+            code: e.code,
+            message: e.message,
+            field: e.field,
+        });
+    }
+
+    async fn handle(&mut self, text: &str) {
+        let msg = match messages::parse(text) {
+            Ok(m) => m,
+            Err(e) => return self.reject(e.seq, WsError::new(e.code, e.message)),
+        };
+        match msg {
+            ClientMessage::Subscribe(s) => self.subscribe(s),
+            ClientMessage::Unsubscribe { seq } => {
+                self.sub.send_replace(None);
+                self.reply(ServerMessage::Unsubscribed { ref_seq: seq });
+            }
+            ClientMessage::Setpoints(batch) => self.setpoints(batch),
+            ClientMessage::Watchdog(w) => self.arm_watchdog(w),
+            ClientMessage::Ping { seq } => self.reply(ServerMessage::Pong { ref_seq: seq }),
+        }
+    }
+
+    fn subscribe(&mut self, s: Subscribe) {
+        match subscription(&self.state, &s) {
+            Ok(sub) => {
+                self.reply(ServerMessage::Subscribed {
+                    ref_seq: s.seq,
+                    buses: sub.buses.clone(),
+                    devices: sub.devices.clone(),
+                    fields: sub.fields.clone(),
+                    rate_hz: sub.rate_hz,
+                });
+                self.sub.send_replace(Some(sub));
+            }
+            Err(e) => self.reject(s.seq, e),
+        }
+    }
+
+    fn setpoints(&mut self, batch: messages::SetpointBatch) {
+        match setpoints::apply(&self.state, &batch) {
+            Ok(applied) => {
+                self.watchdog.feed(&applied.joints, Instant::now());
+                if batch.ack {
+                    let ack = PendingAck {
+                        ref_seq: batch.seq,
+                        joints: applied.joints.len(),
+                        accepted: applied.accepted,
+                        writes: applied.writes,
+                    };
+                    if self.acks.try_send(ack).is_err() {
+                        self.reject(batch.seq, WsError::new(ErrorCode::TooMany, format!("more than {MAX_PENDING_ACKS} acks pending; targets applied, not acknowledged")));
+                    }
+                }
+            }
+            Err(e) => self.reject(batch.seq, e),
+        }
+    }
+
+    fn arm_watchdog(&mut self, w: WatchdogRequest) {
+        let hold = Duration::from_millis(w.hold_timeout_ms);
+        if !hold.is_zero() && !(MIN_HOLD..=MAX_HOLD).contains(&hold) {
+            let msg = format!(
+                "hold_timeout_ms = {} is out of range; allowed 0 (off) or {}..={}",
+                w.hold_timeout_ms,
+                MIN_HOLD.as_millis(),
+                MAX_HOLD.as_millis()
+            );
+            let mut e = WsError::new(ErrorCode::OutOfRange, msg);
+            e.field = Some("hold_timeout_ms".into());
+            return self.reject(w.seq, e);
+        }
+        self.watchdog.arm(hold, w.policy, Instant::now());
+        self.reply(ServerMessage::WatchdogSet {
+            ref_seq: w.seq,
+            hold_timeout_ms: w.hold_timeout_ms,
+            policy: w.policy,
+        });
+    }
+
+    /// Applies the policy to every joint this client commanded, and tells everyone.
+    async fn fire_watchdog(&mut self, why: &'static str) {
+        let Some((policy, joints)) = self.watchdog.fire() else {
+            return;
+        };
+        tracing::warn!(
+            client = self.client,
+            ?policy,
+            why,
+            joints = joints.len(),
+            "teleop watchdog fired"
+        );
+        apply_policy(&self.state, policy, &joints).await;
+        self.state.ws().publish(WatchdogEvent {
+            event: "watchdog",
+            client: self.client,
+            policy,
+            why,
+            joints,
+        });
+    }
+}
+
+async fn apply_policy(state: &AppState, policy: WatchdogPolicy, joints: &[JointRef]) {
+    for bus in state.buses() {
+        let ids: Vec<u8> = joints
+            .iter()
+            .filter(|j| j.bus == bus.name())
+            .map(|j| j.dev_id)
+            .collect();
+        if ids.is_empty() {
+            continue;
+        }
+        match policy {
+            WatchdogPolicy::Disable => {
+                if let Err(e) = bus.disable(Targets::Ids(ids)).await {
+                    tracing::error!(bus = bus.name(), error = %e, "watchdog could not disable joints");
+                }
+            }
+            WatchdogPolicy::Hold => {
+                let snap = bus.snapshot();
+                let holds: Vec<(u8, Setpoint)> = ids
+                    .iter()
+                    .filter_map(|id| snap.devices.get(id))
+                    .filter_map(|d| {
+                        Some((
+                            d.dev_id,
+                            Setpoint {
+                                pos_ref: measured_angle_raw(d)?,
+                                spd_ref: d.target_sent?.spd_ref,
+                            },
+                        ))
+                    })
+                    .collect();
+                bus.set_targets(&holds);
+            }
+        }
+    }
+}
+
+fn subscription(state: &AppState, s: &Subscribe) -> Result<Subscription, WsError> {
+    let buses = match &s.buses {
+        Some(names) => {
+            for n in names {
+                state.bus(n)?;
+            }
+            names.clone()
+        }
+        None => state.buses().map(|b| b.name().to_owned()).collect(),
+    };
+    let devices = match &s.devices {
+        Some(ids) => Some(
+            ids.iter()
+                .map(|&id| device_id("devices", id))
+                .collect::<Result<Vec<u8>, _>>()?,
+        ),
+        None => None,
+    };
+    let rate_hz = s.rate_hz.unwrap_or(DEFAULT_RATE_HZ);
+    if !(MIN_RATE_HZ..=MAX_RATE_HZ).contains(&rate_hz) {
+        let mut e = WsError::new(
+            ErrorCode::OutOfRange,
+            format!("rate_hz = {rate_hz} is out of range; allowed {MIN_RATE_HZ}..={MAX_RATE_HZ}"),
+        );
+        e.field = Some("rate_hz".into());
+        return Err(e);
+    }
+    let fields = s.fields.clone().unwrap_or_else(|| Field::ALL.to_vec());
+    Ok(Subscription {
+        buses,
+        devices,
+        fields,
+        rate_hz,
+    })
+}

@@ -1,0 +1,179 @@
+//! A `setpoints` batch: validate every target first (bus, device, state,
+//! wire range, soft limits, with the REST API's own conversion), then store
+//! them all, one store write per bus. One bad target rejects the batch:
+//! nothing of it is applied.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use super::messages::{ErrorCode, JointRef, SetpointBatch, TargetItem};
+use crate::api::state::{device_id, known_device};
+use crate::api::targets::{setpoint, TargetRequest};
+use crate::api::telemetry::is_enabled;
+use crate::api::{ApiError, AppState};
+use crate::bus::{BusSnapshot, Setpoint};
+
+/// Most targets one batch may carry (16 joints × a few buses, with room).
+pub const MAX_BATCH: usize = 256;
+
+/// A rejected message: code, words, and the field at fault.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WsError {
+    pub code: ErrorCode,
+    pub message: String,
+    pub field: Option<String>,
+}
+
+impl WsError {
+    pub fn new(code: ErrorCode, message: impl Into<String>) -> Self {
+        Self {
+            code,
+            message: message.into(),
+            field: None,
+        }
+    }
+
+    fn with_field(mut self, field: String) -> Self {
+        self.field = Some(field);
+        self
+    }
+}
+
+/// The REST API's problem kinds, as WebSocket error codes.
+impl From<ApiError> for WsError {
+    fn from(e: ApiError) -> Self {
+        let p = e.problem;
+        let kind = p.kind.rsplit(':').next().unwrap_or_default();
+        let code = match (p.status, kind) {
+            (404, "unknown-bus") => ErrorCode::UnknownBus,
+            (404, _) => ErrorCode::UnknownDevice,
+            (422, "soft-limit") => ErrorCode::OutOfLimit,
+            (422, _) => ErrorCode::OutOfRange,
+            (409, _) => ErrorCode::WrongState,
+            _ => ErrorCode::BusError,
+        };
+        WsError {
+            code,
+            message: p.detail,
+            field: p.field,
+        }
+    }
+}
+
+/// What an accepted batch did.
+#[derive(Debug, Clone)]
+pub struct Applied {
+    pub accepted: Instant,
+    /// (bus name, store sequence number) per bus the batch touched.
+    pub writes: Vec<(String, u64)>,
+    pub joints: Vec<JointRef>,
+}
+
+/// Validates and stores a batch.
+pub fn apply(state: &AppState, batch: &SetpointBatch) -> Result<Applied, WsError> {
+    if batch.targets.is_empty() {
+        return Err(WsError::new(ErrorCode::BadMessage, "`targets` is empty"));
+    }
+    if batch.targets.len() > MAX_BATCH {
+        return Err(WsError::new(
+            ErrorCode::TooMany,
+            format!(
+                "{} targets in one batch; at most {MAX_BATCH}",
+                batch.targets.len()
+            ),
+        ));
+    }
+    let per_bus = validate(state, &batch.targets)?;
+    let accepted = Instant::now();
+    let mut writes = Vec::new();
+    let mut joints = Vec::new();
+    for (name, targets) in per_bus {
+        let bus = state.bus(&name)?;
+        joints.extend(targets.iter().map(|(id, _)| JointRef {
+            bus: name.clone(),
+            dev_id: *id,
+        }));
+        writes.push((name, bus.set_targets(&targets)));
+    }
+    Ok(Applied {
+        accepted,
+        writes,
+        joints,
+    })
+}
+
+type PerBus = BTreeMap<String, Vec<(u8, Setpoint)>>;
+
+fn validate(state: &AppState, targets: &[TargetItem]) -> Result<PerBus, WsError> {
+    let mut snapshots: BTreeMap<String, std::sync::Arc<BusSnapshot>> = BTreeMap::new();
+    let mut per_bus = PerBus::new();
+    for (i, t) in targets.iter().enumerate() {
+        let field = format!("targets[{i}].");
+        let name = bus_name(state, t).map_err(|e| e.with_field(format!("{field}bus")))?;
+        let snap = match snapshots.get(&name) {
+            Some(s) => s.clone(),
+            None => {
+                let s = state.bus(&name)?.snapshot();
+                snapshots.insert(name.clone(), s.clone());
+                s
+            }
+        };
+        let (id, sp) = one_target(state, &snap, t, &field)?;
+        let list = per_bus.entry(name.clone()).or_default();
+        if list.iter().any(|(seen, _)| *seen == id) {
+            return Err(WsError::new(
+                ErrorCode::BadMessage,
+                format!("joint {id} of bus {name} appears twice in one batch"),
+            )
+            .with_field(format!("{field}dev_id")));
+        }
+        list.push((id, sp));
+    }
+    Ok(per_bus)
+}
+
+fn one_target(
+    state: &AppState,
+    snap: &BusSnapshot,
+    t: &TargetItem,
+    field: &str,
+) -> Result<(u8, Setpoint), WsError> {
+    let id = device_id(&format!("{field}dev_id"), t.dev_id)?;
+    let dev = known_device(snap, id)?;
+    // Only a state known to be disabled is refused: checking freshly would
+    // cost a bus round trip per message at teleoperation rates.
+    if let Some((info, _)) = &dev.info01 {
+        if !is_enabled(info) {
+            return Err(WsError::new(
+                ErrorCode::WrongState,
+                format!(
+                    "joint {id} of bus {} is not enabled (enable it first)",
+                    snap.name
+                ),
+            )
+            .with_field(format!("{field}dev_id")));
+        }
+    }
+    let limits = state.limits(&snap.name, id);
+    let req = TargetRequest {
+        position_deg: t.position_deg,
+        speed_rpm: t.speed_rpm,
+    };
+    Ok((id, setpoint(dev, &limits, &req, field)?))
+}
+
+/// The target's bus, or the only bus when it names none.
+fn bus_name(state: &AppState, t: &TargetItem) -> Result<String, WsError> {
+    if let Some(name) = &t.bus {
+        state.bus(name)?;
+        return Ok(name.clone());
+    }
+    let mut names = state.buses().map(|b| b.name().to_owned());
+    match (names.next(), names.next()) {
+        (Some(only), None) => Ok(only),
+        _ => Err(WsError::new(
+            ErrorCode::BadMessage,
+            "`bus` is required when the daemon has more than one bus",
+        )),
+    }
+}

@@ -1,0 +1,106 @@
+//! Builds `telemetry` messages from the buses' latest snapshots: whatever
+//! is newest when the client can take it, in physical units.
+
+use std::time::Instant;
+
+use serde_json::{Map, Value};
+
+use super::messages::Field;
+use crate::api::telemetry::{firmware_of, measured_angle_raw};
+use crate::bus::handle::DeviceState;
+use crate::bus::BusSnapshot;
+use crate::protocol::reply::{fault_name, fsm_name};
+use crate::protocol::units;
+
+/// What a client asked to receive.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Subscription {
+    pub buses: Vec<String>,
+    /// `None`: every device.
+    pub devices: Option<Vec<u8>>,
+    pub fields: Vec<Field>,
+    pub rate_hz: f64,
+}
+
+/// The joints of one bus snapshot that the subscription selects.
+pub fn joints(
+    sub: &Subscription,
+    snap: &BusSnapshot,
+    now: Instant,
+    out: &mut Vec<Map<String, Value>>,
+) {
+    for dev in snap.devices.values() {
+        if sub
+            .devices
+            .as_ref()
+            .is_some_and(|ids| !ids.contains(&dev.dev_id))
+        {
+            continue;
+        }
+        out.push(joint(sub, &snap.name, dev, now));
+    }
+}
+
+fn joint(sub: &Subscription, bus: &str, dev: &DeviceState, now: Instant) -> Map<String, Value> {
+    let mut m = Map::new();
+    m.insert("bus".into(), bus.into());
+    m.insert("dev_id".into(), dev.dev_id.into());
+    m.insert("online".into(), dev.online.into());
+    m.insert(
+        "age_ms".into(),
+        age_ms(dev, now).map_or(Value::Null, Value::from),
+    );
+    for f in &sub.fields {
+        m.insert(field_name(*f).into(), field_value(*f, dev));
+    }
+    m
+}
+
+/// Age of the newest sample of the joint.
+fn age_ms(dev: &DeviceState, now: Instant) -> Option<f64> {
+    let newest = [
+        dev.info01.as_ref().map(|x| x.1),
+        dev.info02.as_ref().map(|x| x.1),
+    ]
+    .into_iter()
+    .flatten()
+    .max()?;
+    Some(round3(
+        now.saturating_duration_since(newest).as_secs_f64() * 1000.0,
+    ))
+}
+
+fn round3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
+pub fn field_name(f: Field) -> &'static str {
+    match f {
+        Field::AngleDeg => "angle_deg",
+        Field::TargetDeg => "target_deg",
+        Field::SpeedRpm => "speed_rpm",
+        Field::CurrentA => "current_a",
+        Field::Fsm => "fsm",
+        Field::Fault => "fault",
+        Field::TempC => "temp_c",
+        Field::VbusV => "vbus_v",
+    }
+}
+
+fn field_value(f: Field, dev: &DeviceState) -> Value {
+    let info01 = dev.info01.as_ref().map(|x| x.0);
+    let info02 = dev.info02.as_ref().map(|x| x.0);
+    let v = match f {
+        Field::AngleDeg => measured_angle_raw(dev).map(|a| Value::from(units::angle_deg(a))),
+        Field::TargetDeg => dev
+            .target_sent
+            .map(|t| Value::from(units::angle_deg(t.pos_ref))),
+        Field::SpeedRpm => info02.map(|i| Value::from(round3(i.speed_rpm(firmware_of(dev))))),
+        Field::CurrentA => info02.map(|i| Value::from(round3(units::current_a(i.q_cur)))),
+        Field::Fsm => info01.map(|i| Value::from(fsm_name(i.fsm))),
+        Field::Fault => info01.map(|i| Value::from(fault_name(i.err_code & 0x0F))),
+        Field::TempC => info01.map(|i| Value::from(i.temp_c())),
+        Field::VbusV => info01.map(|i| Value::from(i.vbus_v())),
+    };
+    v.unwrap_or(Value::Null)
+}

@@ -1,0 +1,272 @@
+//! The sending half of one connection. It alone writes to the socket, so a
+//! client that stops reading stalls only this task: telemetry ticks it
+//! could not take are skipped and counted (`dropped`), events it fell
+//! behind on are counted (`dropped_events`), and its queue stays bounded.
+
+use std::collections::HashMap;
+use std::pin::Pin;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use axum::extract::ws::{Message, Utf8Bytes};
+use futures_util::stream::{select_all, SelectAll};
+use futures_util::{Sink, SinkExt, Stream, StreamExt};
+use tokio::sync::{mpsc, watch};
+use tokio::time::{interval, Interval, MissedTickBehavior};
+use tokio_stream::wrappers::{errors::BroadcastStreamRecvError, BroadcastStream, WatchStream};
+
+use super::messages::{EventBody, ServerMessage};
+use super::telemetry::{joints, Subscription};
+use crate::api::AppState;
+use crate::bus::handle::WireAck;
+
+/// An ack the writer sends once every bus write of a batch is on the wire.
+#[derive(Debug, Clone)]
+pub struct PendingAck {
+    pub ref_seq: Option<u64>,
+    pub joints: usize,
+    pub accepted: Instant,
+    pub writes: Vec<(String, u64)>,
+}
+
+/// Longest wait for a batch to reach the wire before the client hears so.
+const ACK_TIMEOUT: Duration = Duration::from_secs(1);
+/// How often pending acks are checked for that timeout.
+const ACK_SWEEP: Duration = Duration::from_millis(100);
+
+type Events = SelectAll<Pin<Box<dyn Stream<Item = Result<EventBody, u64>> + Send>>>;
+type Acks = SelectAll<Pin<Box<dyn Stream<Item = (String, WireAck)> + Send>>>;
+
+pub struct Writer<S> {
+    state: AppState,
+    sink: S,
+    telemetry_seq: u64,
+    event_seq: u64,
+    last_sample: Option<Instant>,
+    dropped: u64,
+    dropped_events: u64,
+    pending: Vec<PendingAck>,
+    on_wire: HashMap<String, WireAck>,
+}
+
+impl<S> Writer<S>
+where
+    S: Sink<Message> + Unpin + Send,
+{
+    pub fn new(state: AppState, sink: S) -> Self {
+        Self {
+            state,
+            sink,
+            telemetry_seq: 0,
+            event_seq: 0,
+            last_sample: None,
+            dropped: 0,
+            dropped_events: 0,
+            pending: Vec::new(),
+            on_wire: HashMap::new(),
+        }
+    }
+
+    /// Runs until the reader drops its side of `out` or the socket fails.
+    pub async fn run(
+        mut self,
+        mut out: mpsc::Receiver<ServerMessage>,
+        mut sub: watch::Receiver<Option<Subscription>>,
+        mut acks_in: mpsc::Receiver<PendingAck>,
+    ) {
+        let mut events = self.event_streams();
+        let mut wire = self.ack_streams();
+        let mut ticker = ticker(sub.borrow().as_ref());
+        let mut sweep = interval(ACK_SWEEP);
+        loop {
+            let subscribed = sub.borrow().is_some();
+            let ok = tokio::select! {
+                biased;
+                msg = out.recv() => match msg {
+                    Some(m) => self.send(&m).await,
+                    None => break,
+                },
+                changed = sub.changed() => {
+                    if changed.is_err() { break; }
+                    ticker = ticker_for(&sub);
+                    self.last_sample = None;
+                    true
+                }
+                Some(item) = events.next() => self.event(item).await,
+                Some(ack) = acks_in.recv() => { self.pending.push(ack); true }
+                Some((bus, ack)) = wire.next() => { self.on_wire.insert(bus, ack); self.flush_acks().await }
+                _ = sweep.tick(), if !self.pending.is_empty() => self.expire_acks().await,
+                _ = ticker.tick(), if subscribed => self.telemetry(&sub).await,
+            };
+            if !ok {
+                break;
+            }
+        }
+    }
+
+    fn event_streams(&self) -> Events {
+        let mut all: Events = select_all(Vec::new());
+        for bus in self.state.buses() {
+            let s =
+                BroadcastStream::new(bus.events()).map(|r| r.map(EventBody::Bus).map_err(lagged));
+            all.push(Box::pin(s));
+        }
+        let hub = BroadcastStream::new(self.state.ws().subscribe())
+            .map(|r| r.map(EventBody::Watchdog).map_err(lagged));
+        all.push(Box::pin(hub));
+        all
+    }
+
+    fn ack_streams(&self) -> Acks {
+        let mut all: Acks = select_all(Vec::new());
+        for bus in self.state.buses() {
+            let name = bus.name().to_owned();
+            all.push(Box::pin(
+                WatchStream::new(bus.wire_acks()).map(move |a| (name.clone(), a)),
+            ));
+        }
+        all
+    }
+
+    async fn send(&mut self, msg: &ServerMessage) -> bool {
+        let Ok(text) = serde_json::to_string(msg) else {
+            tracing::error!(?msg, "could not serialise a WebSocket message");
+            return true;
+        };
+        self.sink
+            .send(Message::Text(Utf8Bytes::from(text)))
+            .await
+            .is_ok()
+    }
+
+    async fn event(&mut self, item: Result<EventBody, u64>) -> bool {
+        match item {
+            Ok(event) => {
+                self.event_seq += 1;
+                let dropped_events = std::mem::take(&mut self.dropped_events);
+                let msg = ServerMessage::Event {
+                    seq: self.event_seq,
+                    event,
+                    dropped_events,
+                };
+                self.send(&msg).await
+            }
+            Err(missed) => {
+                self.dropped_events += missed;
+                super::hub::WsHub::count(&self.state.ws().dropped_events, missed);
+                true
+            }
+        }
+    }
+
+    async fn telemetry(&mut self, sub: &watch::Receiver<Option<Subscription>>) -> bool {
+        let Some(sub) = sub.borrow().clone() else {
+            return true;
+        };
+        let now = Instant::now();
+        self.count_skipped_ticks(&sub, now);
+        let mut list = Vec::new();
+        for name in &sub.buses {
+            if let Ok(bus) = self.state.bus(name) {
+                joints(&sub, &bus.snapshot(), now, &mut list);
+            }
+        }
+        self.telemetry_seq += 1;
+        let msg = ServerMessage::Telemetry {
+            seq: self.telemetry_seq,
+            t_ms: unix_ms(),
+            dropped: std::mem::take(&mut self.dropped),
+            joints: list,
+        };
+        self.last_sample = Some(now);
+        self.send(&msg).await
+    }
+
+    /// Ticks that passed while the socket was not taking messages.
+    fn count_skipped_ticks(&mut self, sub: &Subscription, now: Instant) {
+        let Some(last) = self.last_sample else { return };
+        let periods = now.duration_since(last).as_secs_f64() * sub.rate_hz;
+        let skipped = (periods - 1.0).floor().max(0.0) as u64;
+        if skipped > 0 {
+            self.dropped += skipped;
+            super::hub::WsHub::count(&self.state.ws().dropped_samples, skipped);
+        }
+    }
+
+    async fn flush_acks(&mut self) -> bool {
+        let (done, waiting): (Vec<_>, Vec<_>) = std::mem::take(&mut self.pending)
+            .into_iter()
+            .partition(|p| {
+                p.writes
+                    .iter()
+                    .all(|(bus, seq)| self.on_wire.get(bus).is_some_and(|a| a.seq >= *seq))
+            });
+        self.pending = waiting;
+        for p in done {
+            let latency = p
+                .writes
+                .iter()
+                .filter_map(|(bus, _)| self.on_wire.get(bus).and_then(|a| a.at))
+                .map(|at| at.saturating_duration_since(p.accepted))
+                .max()
+                .unwrap_or_default();
+            let msg = ServerMessage::Ack {
+                ref_seq: p.ref_seq,
+                joints: p.joints,
+                latency_us: latency.as_micros() as u64,
+            };
+            if !self.send(&msg).await {
+                return false;
+            }
+        }
+        true
+    }
+
+    async fn expire_acks(&mut self) -> bool {
+        let now = Instant::now();
+        let (late, waiting): (Vec<_>, Vec<_>) = std::mem::take(&mut self.pending)
+            .into_iter()
+            .partition(|p| now.duration_since(p.accepted) > ACK_TIMEOUT);
+        self.pending = waiting;
+        for p in late {
+            let msg = ServerMessage::Error {
+                ref_seq: p.ref_seq,
+                code: super::messages::ErrorCode::BusError,
+                message: format!(
+                    "targets not seen on the wire within {} ms (bus down or busy?)",
+                    ACK_TIMEOUT.as_millis()
+                ),
+                field: None,
+            };
+            if !self.send(&msg).await {
+                return false;
+            }
+        }
+        true
+    }
+}
+
+fn lagged(e: BroadcastStreamRecvError) -> u64 {
+    match e {
+        BroadcastStreamRecvError::Lagged(n) => n,
+    }
+}
+
+fn ticker_for(sub: &watch::Receiver<Option<Subscription>>) -> Interval {
+    ticker(sub.borrow().as_ref())
+}
+
+/// A ticker at the subscription's rate; an idle one when unsubscribed.
+fn ticker(sub: Option<&Subscription>) -> Interval {
+    let period = sub.map_or(Duration::from_secs(3600), |s| {
+        Duration::from_secs_f64(1.0 / s.rate_hz)
+    });
+    let mut t = interval(period);
+    t.set_missed_tick_behavior(MissedTickBehavior::Skip);
+    t
+}
+
+fn unix_ms() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}

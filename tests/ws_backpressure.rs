@@ -1,0 +1,123 @@
+//! A client that stops reading never slows another client or the bus: its
+//! writer stalls alone, skipped telemetry is counted, memory stays bounded.
+//! The stalled side drives the session through its generic Sink/Stream
+//! interface, so "stops reading" is exact rather than a TCP buffer guess.
+
+mod api_support;
+
+use std::convert::Infallible;
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::extract::ws::Message;
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{json, Value};
+use tokio::sync::{mpsc, Semaphore};
+use tokio_stream::wrappers::UnboundedReceiverStream;
+use tokio_tungstenite::connect_async;
+
+use api_support::sim_bus::{self, WAIT};
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stalled_client_does_not_delay_another() {
+    let bus = sim_bus::start(4, None).await;
+
+    // The stalled client: its sink passes a message only when the gate allows.
+    let gate = Arc::new(Semaphore::new(3));
+    let (delivered_tx, mut delivered) = mpsc::unbounded_channel::<String>();
+    let sink_gate = gate.clone();
+    let sink = futures_util::sink::unfold(delivered_tx, move |tx, msg: Message| {
+        let gate = sink_gate.clone();
+        async move {
+            if let Ok(permit) = gate.acquire().await {
+                permit.forget();
+            }
+            if let Message::Text(t) = msg {
+                let _ = tx.send(t.as_str().to_owned());
+            }
+            Ok::<_, Infallible>(tx)
+        }
+    });
+    let (incoming_tx, incoming_rx) = mpsc::unbounded_channel::<Result<Message, Infallible>>();
+    let state = bus.server_state.clone();
+    tokio::spawn(jointd::ws::session::run(
+        state,
+        Box::pin(sink),
+        UnboundedReceiverStream::new(incoming_rx),
+    ));
+    let subscribe = json!({"type":"subscribe","rate_hz":200}).to_string();
+    incoming_tx
+        .send(Ok(Message::Text(subscribe.into())))
+        .expect("send");
+
+    // Let the stalled writer use up its 3 permits (welcome, subscribed, one sample).
+    for _ in 0..3 {
+        tokio::time::timeout(WAIT, delivered.recv())
+            .await
+            .expect("first messages")
+            .expect("open");
+    }
+
+    // The healthy client over a real socket keeps receiving at its rate.
+    let url = format!("{}/api/v1/ws", bus.server.base.replace("http://", "ws://"));
+    let (mut ws, _) = connect_async(url).await.expect("connect");
+    ws.send(tokio_tungstenite::tungstenite::Message::text(
+        json!({"type":"subscribe","rate_hz":50}).to_string(),
+    ))
+    .await
+    .expect("send");
+    let counters_before = bus.handle.snapshot().counters.clone();
+    let mut telemetry = 0;
+    let started = tokio::time::Instant::now();
+    while telemetry < 25 {
+        let msg = tokio::time::timeout(WAIT, ws.next())
+            .await
+            .expect("healthy client starved")
+            .expect("open")
+            .expect("message");
+        if let tokio_tungstenite::tungstenite::Message::Text(t) = msg {
+            let v: Value = serde_json::from_str(t.as_str()).expect("json");
+            if v["type"] == "telemetry" {
+                telemetry += 1;
+                assert_eq!(v["dropped"], 0, "the healthy client lost samples: {v}");
+            }
+        }
+    }
+    let elapsed = started.elapsed();
+    // 25 messages at 50 Hz: about half a second; the stalled peer must not stretch it.
+    assert!(
+        elapsed < Duration::from_secs(3),
+        "healthy client slowed to {elapsed:?}"
+    );
+    let counters_after = bus.handle.snapshot().counters.clone();
+    assert!(
+        counters_after.frames_rx > counters_before.frames_rx,
+        "the bus kept polling"
+    );
+
+    // Release the stalled client: its next telemetry reports what it skipped.
+    gate.add_permits(1000);
+    let dropped = async {
+        loop {
+            let text = delivered.recv().await.expect("open");
+            let v: Value = serde_json::from_str(&text).expect("json");
+            if v["type"] == "telemetry" {
+                return v["dropped"].as_u64().unwrap_or(0);
+            }
+        }
+    };
+    let dropped = tokio::time::timeout(WAIT, dropped)
+        .await
+        .expect("telemetry after release");
+    assert!(
+        dropped > 10,
+        "a client stalled ~0.5 s at 200 Hz skipped {dropped} samples"
+    );
+    assert!(
+        bus.server_state
+            .ws()
+            .dropped_samples
+            .load(std::sync::atomic::Ordering::Relaxed)
+            >= dropped
+    );
+}

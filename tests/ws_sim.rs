@@ -1,0 +1,348 @@
+//! The WebSocket endpoint over a real socket (tokio-tungstenite) against the
+//! bus engine and the simulator: subscribe and telemetry, batch setpoints
+//! moving joints, acks, every error, the watchdog's two policies, auth, and
+//! a stalled client not delaying another.
+
+mod api_support;
+
+use std::time::Duration;
+
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{json, Value};
+use tokio::net::TcpStream;
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::{connect_async, MaybeTlsStream, WebSocketStream};
+
+use api_support::sim_bus::{self, SimBus, WAIT};
+use jointd::protocol::reply::fsm;
+
+struct Client {
+    ws: WebSocketStream<MaybeTlsStream<TcpStream>>,
+}
+
+async fn connect_with(
+    url: String,
+    bearer: Option<&str>,
+) -> Result<Client, tokio_tungstenite::tungstenite::Error> {
+    let mut req = url.into_client_request()?;
+    if let Some(t) = bearer {
+        req.headers_mut().insert(
+            "Authorization",
+            format!("Bearer {t}").parse().expect("header"),
+        );
+    }
+    let (ws, _) = connect_async(req).await?;
+    Ok(Client { ws })
+}
+
+fn ws_url(bus: &SimBus) -> String {
+    format!("{}/api/v1/ws", bus.server.base.replace("http://", "ws://"))
+}
+
+async fn connect(bus: &SimBus) -> Client {
+    let mut c = connect_with(ws_url(bus), None).await.expect("connect");
+    let w = c.next_of("welcome").await;
+    assert_eq!(w["protocol"], "jointd.ws.v1");
+    c
+}
+
+impl Client {
+    async fn send(&mut self, v: Value) {
+        self.ws
+            .send(Message::text(v.to_string()))
+            .await
+            .expect("send");
+    }
+
+    async fn send_text(&mut self, t: &str) {
+        self.ws
+            .send(Message::text(t.to_owned()))
+            .await
+            .expect("send");
+    }
+
+    /// The next message of type `kind`, skipping others (telemetry, events).
+    async fn next_of(&mut self, kind: &str) -> Value {
+        let wait = async {
+            loop {
+                let msg = self.ws.next().await.expect("socket open").expect("message");
+                if let Message::Text(t) = msg {
+                    let v: Value = serde_json::from_str(t.as_str()).expect("server sends JSON");
+                    if v["type"] == kind {
+                        return v;
+                    }
+                }
+            }
+        };
+        tokio::time::timeout(WAIT, wait)
+            .await
+            .unwrap_or_else(|_| panic!("no `{kind}` message"))
+    }
+
+    /// Sends a message expected to be rejected; returns the error.
+    async fn rejected(&mut self, msg: Value) -> Value {
+        self.send(msg).await;
+        self.next_of("error").await
+    }
+}
+
+async fn enable(bus: &SimBus, ids: &[u8]) {
+    bus.server
+        .post("/api/v1/buses/sim0/control/enable", json!({"ids": ids}))
+        .await
+        .ok();
+    for &id in ids {
+        bus.wait_fsm(id, fsm::RUN).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn telemetry_subscription_content_and_rate() {
+    let bus = sim_bus::start(4, None).await;
+    let mut c = connect(&bus).await;
+    c.send(json!({"type":"subscribe","seq":7,"devices":[1,3],"fields":["angle_deg","fsm"],"rate_hz":20})).await;
+    let sub = c.next_of("subscribed").await;
+    assert_eq!(
+        (sub["ref_seq"].as_u64(), sub["rate_hz"].as_f64()),
+        (Some(7), Some(20.0))
+    );
+    let first = c.next_of("telemetry").await;
+    let started = tokio::time::Instant::now();
+    let joints = first["joints"].as_array().expect("joints");
+    assert_eq!(
+        joints
+            .iter()
+            .map(|j| j["dev_id"].as_u64().unwrap_or(0))
+            .collect::<Vec<_>>(),
+        vec![1, 3]
+    );
+    for j in joints {
+        assert_eq!(j["bus"], "sim0");
+        assert_eq!(j["online"], true);
+        assert!(j["angle_deg"].is_number() && j["fsm"] == "ready", "{j}");
+        assert!(j["age_ms"].as_f64().is_some_and(|a| a >= 0.0));
+        assert!(j.get("current_a").is_none(), "unsubscribed field sent: {j}");
+    }
+    let mut last = first["seq"].as_u64().expect("seq");
+    for _ in 0..10 {
+        let t = c.next_of("telemetry").await;
+        let seq = t["seq"].as_u64().expect("seq");
+        assert_eq!(seq, last + 1, "telemetry seq is monotonic");
+        last = seq;
+    }
+    // 10 messages at 20 Hz take about 0.5 s; far less means the rate is not applied.
+    assert!(
+        started.elapsed() >= Duration::from_millis(350),
+        "{:?}",
+        started.elapsed()
+    );
+    c.send(json!({"type":"unsubscribe","seq":8})).await;
+    assert_eq!(c.next_of("unsubscribed").await["ref_seq"], 8);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn batch_setpoints_move_joints_and_are_acknowledged() {
+    let bus = sim_bus::start(4, None).await;
+    enable(&bus, &[1, 3, 4]).await;
+    let mut c = connect(&bus).await;
+    c.send(json!({"type":"setpoints","seq":41,"ack":true,"targets":[
+        {"dev_id":1,"position_deg":20.0,"speed_rpm":20000},
+        {"bus":"sim0","dev_id":3,"position_deg":-15.0,"speed_rpm":20000},
+        {"dev_id":4,"position_deg":10.0}]}))
+        .await;
+    let ack = c.next_of("ack").await;
+    assert_eq!(
+        (ack["ref_seq"].as_u64(), ack["joints"].as_u64()),
+        (Some(41), Some(3))
+    );
+    assert!(ack["latency_us"].is_u64());
+    for (id, deg) in [(1u8, 20.0), (3, -15.0), (4, 10.0)] {
+        let reached = async {
+            loop {
+                if bus
+                    .sim
+                    .device(id)
+                    .is_some_and(|d| (d.angle_deg - deg).abs() < 0.5)
+                {
+                    return;
+                }
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+        };
+        tokio::time::timeout(WAIT, reached)
+            .await
+            .unwrap_or_else(|_| panic!("joint {id} did not reach {deg}°"));
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_error_is_reported_and_nothing_partial_is_applied() {
+    let bus = sim_bus::start(4, None).await;
+    enable(&bus, &[1, 2, 3]).await;
+    let mut c = connect(&bus).await;
+    let cases: Vec<(Value, &str)> = vec![
+        (json!({"type":"dance","seq":1}), "bad_message"),
+        (
+            json!({"type":"setpoints","seq":2,"targets":[{"dev_id":1,"pos":3}]}),
+            "bad_message",
+        ),
+        (
+            json!({"type":"setpoints","seq":3,"targets":[]}),
+            "bad_message",
+        ),
+        (
+            json!({"type":"setpoints","seq":4,"targets":[{"bus":"nope","dev_id":1,"position_deg":1}]}),
+            "unknown_bus",
+        ),
+        (
+            json!({"type":"setpoints","seq":5,"targets":[{"dev_id":40,"position_deg":1}]}),
+            "unknown_device",
+        ),
+        (
+            json!({"type":"setpoints","seq":6,"targets":[{"dev_id":1,"position_deg":300}]}),
+            "out_of_range",
+        ),
+        (
+            json!({"type":"setpoints","seq":7,"targets":[{"dev_id":200,"position_deg":1}]}),
+            "out_of_range",
+        ),
+        (
+            json!({"type":"setpoints","seq":8,"targets":[{"dev_id":2,"position_deg":60}]}),
+            "out_of_limit",
+        ),
+        (
+            json!({"type":"setpoints","seq":9,"targets":[{"dev_id":4,"position_deg":5}]}),
+            "wrong_state",
+        ),
+        (
+            json!({"type":"setpoints","seq":10,"targets":[{"dev_id":1,"position_deg":5},{"dev_id":1,"position_deg":6}]}),
+            "bad_message",
+        ),
+        (
+            json!({"type":"setpoints","seq":11,"targets":(0..300).map(|_| json!({"dev_id":1,"position_deg":1})).collect::<Vec<_>>()}),
+            "too_many",
+        ),
+        (
+            json!({"type":"subscribe","seq":12,"rate_hz":5000}),
+            "out_of_range",
+        ),
+        (
+            json!({"type":"subscribe","seq":13,"buses":["nope"]}),
+            "unknown_bus",
+        ),
+        (
+            json!({"type":"watchdog","seq":14,"hold_timeout_ms":5}),
+            "out_of_range",
+        ),
+    ];
+    for (msg, code) in cases {
+        let seq = msg["seq"].clone();
+        let e = c.rejected(msg).await;
+        assert_eq!(
+            (e["code"].as_str(), &e["ref_seq"]),
+            (Some(code), &seq),
+            "{e}"
+        );
+        assert!(e["message"].as_str().is_some_and(|m| !m.is_empty()));
+    }
+    c.send_text("{not json").await;
+    assert_eq!(c.next_of("error").await["code"], "bad_json");
+
+    // One bad target in a batch: the good one is not applied either.
+    let before = bus.handle.shared().setpoints.get(1);
+    let e = c
+        .rejected(json!({"type":"setpoints","seq":20,"targets":[
+        {"dev_id":1,"position_deg":10},{"dev_id":2,"position_deg":60}]}))
+        .await;
+    assert_eq!(
+        (e["code"].as_str(), e["field"].as_str()),
+        (Some("out_of_limit"), Some("targets[1].position_deg"))
+    );
+    assert_eq!(
+        bus.handle.shared().setpoints.get(1),
+        before,
+        "nothing of a rejected batch is applied"
+    );
+
+    // The connection is still usable.
+    c.send(json!({"type":"ping","seq":99})).await;
+    assert_eq!(c.next_of("pong").await["ref_seq"], 99);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn watchdog_hold_freezes_joints_and_tells_everyone() {
+    let bus = sim_bus::start(4, None).await;
+    enable(&bus, &[1, 2]).await;
+    let mut observer = connect(&bus).await;
+    let mut teleop = connect(&bus).await;
+    teleop
+        .send(json!({"type":"watchdog","seq":1,"hold_timeout_ms":150,"policy":"hold"}))
+        .await;
+    assert_eq!(teleop.next_of("watchdog_set").await["policy"], "hold");
+    // Stream towards far targets, then stop streaming mid-move.
+    teleop.send(json!({"type":"setpoints","targets":[{"dev_id":1,"position_deg":200,"speed_rpm":3000},{"dev_id":2,"position_deg":40,"speed_rpm":3000}]})).await;
+    let event = observer.next_of("event").await;
+    assert_eq!(
+        (
+            event["event"]["event"].as_str(),
+            event["event"]["policy"].as_str(),
+            event["event"]["why"].as_str()
+        ),
+        (Some("watchdog"), Some("hold"), Some("timeout"))
+    );
+    assert_eq!(event["event"]["joints"].as_array().map(Vec::len), Some(2));
+    // Held: joint 1 keeps running, and its target is no longer 200°.
+    let held = bus.handle.shared().setpoints.get(1).expect("a hold target");
+    assert!(
+        f64::from(held.setpoint.pos_ref) / 128.0 < 150.0,
+        "target still far: {held:?}"
+    );
+    assert_eq!(bus.sim.device(1).map(|d| d.fsm), Some(fsm::RUN));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn watchdog_disable_applies_when_the_socket_closes() {
+    let bus = sim_bus::start(4, None).await;
+    enable(&bus, &[3]).await;
+    let mut observer = connect(&bus).await;
+    let mut teleop = connect(&bus).await;
+    teleop
+        .send(json!({"type":"watchdog","hold_timeout_ms":5000,"policy":"disable"}))
+        .await;
+    teleop.next_of("watchdog_set").await;
+    teleop.send(json!({"type":"setpoints","seq":5,"ack":true,"targets":[{"dev_id":3,"position_deg":5}]})).await;
+    teleop.next_of("ack").await;
+    drop(teleop); // the network goes away: no close handshake
+    let event = observer.next_of("event").await;
+    assert_eq!(
+        (
+            event["event"]["policy"].as_str(),
+            event["event"]["why"].as_str()
+        ),
+        (Some("disable"), Some("closed"))
+    );
+    bus.wait_fsm(3, fsm::READY).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn auth_applies_to_the_websocket() {
+    let bus = sim_bus::start(2, Some("s3cret")).await;
+    let url = ws_url(&bus);
+    assert!(
+        connect_with(url.clone(), None).await.is_err(),
+        "no token must be refused"
+    );
+    assert!(
+        connect_with(url.clone(), Some("wrong")).await.is_err(),
+        "a wrong token must be refused"
+    );
+    let mut by_header = connect_with(url.clone(), Some("s3cret"))
+        .await
+        .expect("bearer header");
+    by_header.next_of("welcome").await;
+    let mut by_query = connect_with(format!("{url}?token=s3cret"), None)
+        .await
+        .expect("?token=");
+    by_query.next_of("welcome").await;
+}

@@ -1,0 +1,396 @@
+// jointd dashboard: REST for commands and configuration, the WebSocket
+// (jointd.ws.v1, docs/websocket.md) for live telemetry. No build step.
+
+const API = "/api/v1";
+const TELEMETRY_HZ = 20;
+const PLOT_SECONDS = 10;
+const $ = (sel) => document.querySelector(sel);
+
+const state = {
+  token: localStorage.getItem("jointd-token") || "",
+  joints: new Map(),          // "bus/id" -> latest telemetry joint
+  history: new Map(),         // "bus/id" -> [{t, angle, target, current}]
+  busHistory: new Map(),      // bus -> [{t, occupancy, fps}]
+  lastCounters: new Map(),    // bus -> {t, counters}
+  selected: null,             // {bus, id}
+  ws: null,
+  config: null,
+};
+
+// ---------------------------------------------------------------- messages
+
+function say(text, kind = "error") {
+  const div = document.createElement("div");
+  div.className = kind;
+  div.textContent = text;
+  $("#messages").prepend(div);
+  setTimeout(() => div.remove(), kind === "error" ? 8000 : 3000);
+  while ($("#messages").children.length > 4) $("#messages").lastChild.remove();
+}
+
+/** A problem-details body (or anything) as one sentence. */
+function describe(body, status) {
+  if (body && typeof body === "object") {
+    let text = body.detail || body.title || JSON.stringify(body);
+    if (body.allowed) text += ` (allowed ${body.allowed.min}..${body.allowed.max} ${body.allowed.unit})`;
+    if (body.partial) text += ` — already done: ${JSON.stringify(body.partial)}`;
+    return text;
+  }
+  return `HTTP ${status}`;
+}
+
+// ---------------------------------------------------------------- REST
+
+async function api(method, path, body) {
+  const headers = { "Accept": "application/json" };
+  if (body !== undefined) headers["Content-Type"] = "application/json";
+  if (state.token) headers["Authorization"] = `Bearer ${state.token}`;
+  const res = await fetch(path.startsWith("/") ? path : `${API}/${path}`, {
+    method, headers, body: body === undefined ? undefined : JSON.stringify(body),
+  });
+  const text = await res.text();
+  let data = null;
+  try { data = text ? JSON.parse(text) : null; } catch { data = text; }
+  if (res.status === 401) askToken();
+  if (!res.ok) throw new Error(describe(data, res.status));
+  return data;
+}
+
+/** Runs a user action; failures are shown in words. */
+async function act(label, fn) {
+  try {
+    const result = await fn();
+    if (label) say(label, "info");
+    return result;
+  } catch (e) {
+    say(`${label ? label.replace(/\.$/, "") + " failed: " : ""}${e.message}`);
+    return null;
+  }
+}
+
+function askToken() {
+  $("#token-button").hidden = false;
+  const dlg = $("#token-dialog");
+  if (!dlg.open) dlg.showModal();
+}
+
+$("#token-dialog").addEventListener("close", () => {
+  state.token = $("#token-input").value.trim();
+  localStorage.setItem("jointd-token", state.token);
+  connect();
+  refreshBuses();
+});
+$("#token-button").onclick = askToken;
+
+// ---------------------------------------------------------------- WebSocket telemetry
+
+function connect() {
+  if (state.ws) state.ws.close();
+  const proto = location.protocol === "https:" ? "wss" : "ws";
+  const q = state.token ? `?token=${encodeURIComponent(state.token)}` : "";
+  const ws = new WebSocket(`${proto}://${location.host}${API}/ws${q}`);
+  state.ws = ws;
+  ws.onopen = () => {
+    setLink(true);
+    ws.send(JSON.stringify({ type: "subscribe", seq: 1, rate_hz: TELEMETRY_HZ }));
+  };
+  ws.onclose = () => {
+    setLink(false);
+    if (state.ws === ws) setTimeout(connect, 1000);
+  };
+  ws.onmessage = (ev) => onMessage(JSON.parse(ev.data));
+}
+
+function setLink(up) {
+  $("#link").className = up ? "dot up" : "dot down";
+  $("#link").textContent = up ? "live" : "reconnecting…";
+}
+
+function onMessage(msg) {
+  if (msg.type === "telemetry") {
+    const now = performance.now() / 1000;
+    for (const j of msg.joints) {
+      const key = `${j.bus}/${j.dev_id}`;
+      state.joints.set(key, j);
+      const h = state.history.get(key) || [];
+      h.push({ t: now, angle: j.angle_deg, target: j.target_deg, current: j.current_a });
+      while (h.length && h[0].t < now - PLOT_SECONDS) h.shift();
+      state.history.set(key, h);
+    }
+    renderDevices();
+    renderPlot();
+  } else if (msg.type === "event") {
+    const e = msg.event;
+    if (e.event === "fault") say(`Joint ${e.dev_id} on ${e.bus}: fault ${e.name}`);
+    else if (e.event === "bus_down") say(`Bus ${e.bus} is down: ${e.reason}`);
+    else if (e.event === "watchdog") say(`Teleop watchdog (${e.why}): ${e.policy} on ${e.joints.length} joints`);
+    else if (e.event === "estop") say(`Emergency stop on ${e.bus}`, "info");
+  } else if (msg.type === "error") {
+    say(`WebSocket: ${msg.message}`);
+  }
+}
+
+// ---------------------------------------------------------------- device table
+
+const fmt = (v, digits = 1) => (v === null || v === undefined ? "–" : Number(v).toFixed(digits));
+
+function renderDevices() {
+  const tbody = $("#devices tbody");
+  const keys = [...state.joints.keys()].sort((a, b) => {
+    const [ba, ia] = a.split("/"); const [bb, ib] = b.split("/");
+    return ba === bb ? ia - ib : ba.localeCompare(bb);
+  });
+  for (const key of keys) {
+    const j = state.joints.get(key);
+    let tr = tbody.querySelector(`tr[data-key="${key}"]`);
+    if (!tr) {
+      tr = document.createElement("tr");
+      tr.dataset.key = key;
+      tr.dataset.testid = `device-row-${j.bus}-${j.dev_id}`;
+      tr.setAttribute("data-testid", `device-row-${j.bus}-${j.dev_id}`);
+      tr.innerHTML = "<td></td>".repeat(11);
+      tr.onclick = () => select(j.bus, j.dev_id);
+      tbody.appendChild(tr);
+    }
+    const cells = [j.bus, j.dev_id, j.fsm ?? "–", j.fault ?? "–", fmt(j.angle_deg, 2), fmt(j.target_deg, 2),
+      fmt(j.speed_rpm, 0), fmt(j.current_a, 3), fmt(j.vbus_v, 2), fmt(j.temp_c, 0), fmt(j.age_ms, 0)];
+    const fields = ["bus", "dev_id", "fsm", "fault", "angle_deg", "target_deg", "speed_rpm", "current_a", "vbus_v", "temp_c", "age_ms"];
+    cells.forEach((c, i) => {
+      const td = tr.children[i];
+      td.dataset.field = fields[i];
+      if (td.textContent !== String(c)) td.textContent = c;
+    });
+    tr.children[3].className = j.fault && j.fault !== "none" ? "fault" : "";
+    tr.classList.toggle("offline", !j.online);
+    tr.classList.toggle("selected", state.selected && key === `${state.selected.bus}/${state.selected.id}`);
+  }
+}
+
+// ---------------------------------------------------------------- bus overview
+
+async function refreshBuses() {
+  let data;
+  try { data = await api("GET", "buses"); } catch (e) { return; }
+  const now = performance.now() / 1000;
+  const root = $("#buses");
+  for (const b of data.buses) {
+    const prev = state.lastCounters.get(b.name);
+    state.lastCounters.set(b.name, { t: now, c: b.counters });
+    let occupancy = null, fps = null, rx = null;
+    if (prev) {
+      const dt = now - prev.t;
+      const tx = (c) => (c.frames_tx_broadcast || 0) + (c.frames_tx_control || 0) + (c.frames_tx_config || 0) + (c.frames_tx_jog || 0);
+      fps = (tx(b.counters) - tx(prev.c)) / dt;
+      rx = ((b.counters.frames_rx || 0) - (prev.c.frames_rx || 0)) / dt;
+      occupancy = ((b.counters.wire_busy_us || 0) - (prev.c.wire_busy_us || 0)) / 1e6 / dt;
+    }
+    const h = state.busHistory.get(b.name) || [];
+    if (occupancy !== null) h.push({ t: now, occupancy, fps });
+    while (h.length && h[0].t < now - 60) h.shift();
+    state.busHistory.set(b.name, h);
+    let card = root.querySelector(`[data-bus="${b.name}"]`);
+    if (!card) {
+      card = document.createElement("div");
+      card.className = "bus";
+      card.dataset.bus = b.name;
+      card.innerHTML = `<b></b><div class="kv"></div><canvas width="400" height="70"></canvas>`;
+      root.appendChild(card);
+    }
+    card.querySelector("b").textContent = `${b.name} — ${b.path}`;
+    const c = b.counters;
+    const kv = {
+      link: b.link + (b.down_reason ? ` (${b.down_reason})` : ""), baud: b.baud,
+      devices: `${b.devices_online} online / ${b.devices_known} known`,
+      occupancy: occupancy === null ? "–" : `${(occupancy * 100).toFixed(1)} %`,
+      "tx frames/s": fps === null ? "–" : fps.toFixed(0), "rx frames/s": rx === null ? "–" : rx.toFixed(0),
+      "CRC errors": c.crc_errors ?? 0, timeouts: c.timeouts ?? 0, retries: c.retries ?? 0, "queue depth": b.queue_depth,
+    };
+    card.querySelector(".kv").innerHTML = Object.entries(kv).map(([k, v]) => `<span>${k}</span><span data-field="${k}">${v}</span>`).join("");
+    drawSeries(card.querySelector("canvas"), h, [{ key: "occupancy", color: "#1d4ed8", max: 1 }]);
+  }
+}
+
+// ---------------------------------------------------------------- plots
+
+function drawSeries(canvas, points, series, t0, t1) {
+  const ctx = canvas.getContext("2d");
+  const w = canvas.width, h = canvas.height;
+  ctx.clearRect(0, 0, w, h);
+  if (points.length < 2) return;
+  const start = t0 ?? points[0].t, end = t1 ?? points[points.length - 1].t;
+  const x = (t) => ((t - start) / Math.max(end - start, 1e-6)) * (w - 40) + 35;
+  ctx.strokeStyle = "#e5e7eb"; ctx.beginPath(); ctx.moveTo(35, h - 15); ctx.lineTo(w - 5, h - 15); ctx.stroke();
+  for (const s of series) {
+    const vals = points.map((p) => p[s.key]).filter((v) => v !== null && v !== undefined);
+    if (!vals.length) continue;
+    const lo = s.min ?? Math.min(...vals, 0), hi = s.max ?? Math.max(...vals, lo + 1);
+    const y = (v) => h - 15 - ((v - lo) / Math.max(hi - lo, 1e-9)) * (h - 25);
+    ctx.strokeStyle = s.color; ctx.lineWidth = 1.5; ctx.beginPath();
+    let started = false;
+    for (const p of points) {
+      const v = p[s.key];
+      if (v === null || v === undefined) continue;
+      if (!started) { ctx.moveTo(x(p.t), y(v)); started = true; } else ctx.lineTo(x(p.t), y(v));
+    }
+    ctx.stroke();
+    if (s.label !== false) {
+      ctx.fillStyle = s.color; ctx.font = "11px sans-serif";
+      ctx.fillText(`${fmt(hi, 1)}`, s.right ? w - 38 : 2, 12);
+      ctx.fillText(`${fmt(lo, 1)}`, s.right ? w - 38 : 2, h - 18);
+    }
+  }
+}
+
+function renderPlot() {
+  if (!state.selected) return;
+  const key = `${state.selected.bus}/${state.selected.id}`;
+  const h = state.history.get(key) || [];
+  const now = performance.now() / 1000;
+  const angles = h.flatMap((p) => [p.angle, p.target]).filter((v) => v !== null && v !== undefined);
+  const lo = Math.min(...angles, -1), hi = Math.max(...angles, 1);
+  drawSeries($("#plot"), h, [
+    { key: "target", color: "#9ca3af", min: lo, max: hi, label: false },
+    { key: "angle", color: "#1d4ed8", min: lo, max: hi },
+    { key: "current", color: "#d97706", right: true },
+  ], now - PLOT_SECONDS, now);
+}
+
+// ---------------------------------------------------------------- device panel
+
+function dev(path = "") {
+  const { bus, id } = state.selected;
+  return `buses/${encodeURIComponent(bus)}/devices/${id}${path}`;
+}
+
+async function select(bus, id) {
+  state.selected = { bus, id };
+  $("#panel").hidden = false;
+  $("#panel-title").textContent = `${id} on ${bus}`;
+  renderDevices();
+  const detail = await act(null, () => api("GET", dev()));
+  if (detail) {
+    const lim = detail.limits || {};
+    const slider = $("#target-slider");
+    slider.min = lim.min_deg ?? -255; slider.max = lim.max_deg ?? 255;
+    const target = detail.target ? detail.target.position_deg : (detail.motion ? detail.motion.angle_deg : 0);
+    slider.value = target; $("#target-number").value = target;
+    if (detail.mode) $("#mode").value = detail.mode;
+  }
+  loadConfig();
+  loadFrames();
+}
+
+function sendTarget(deg) {
+  const { bus, id } = state.selected;
+  const speed = Number($("#speed-limit").value) || undefined;
+  return act(null, () => api("PUT", dev("/target"), { position_deg: deg, speed_rpm: speed }));
+}
+
+$("#enable").onclick = () => act("Enabled (the first enable aligns for about a second).", () => api("POST", dev("/enable")));
+$("#disable").onclick = () => act("Disabled.", () => api("POST", dev("/disable")));
+$("#jog-cw").onclick = () => act("Jogged +5°.", () => api("POST", dev("/jog"), { direction: "cw" }));
+$("#jog-ccw").onclick = () => act("Jogged −3°.", () => api("POST", dev("/jog"), { direction: "ccw" }));
+$("#rezero").onclick = () => act("Re-zeroed.", () => api("POST", dev("/rezero")));
+$("#mode").onchange = (e) => act(`Mode set to ${e.target.value}.`, () => api("PUT", dev("/mode"), { mode: e.target.value }));
+$("#move").onclick = () => sendTarget(Number($("#target-number").value));
+$("#target-number").onchange = (e) => { $("#target-slider").value = e.target.value; };
+
+// The slider streams targets while it moves, at most every 50 ms.
+let sliderTimer = null;
+$("#target-slider").oninput = (e) => {
+  $("#target-number").value = e.target.value;
+  if (sliderTimer) return;
+  sliderTimer = setTimeout(() => { sliderTimer = null; sendTarget(Number($("#target-slider").value)); }, 50);
+};
+$("#target-slider").onchange = (e) => sendTarget(Number(e.target.value));
+
+// ---------------------------------------------------------------- configuration
+
+const PARAMS = [
+  ["pos_kp", "position KP"], ["pos_kd", "position KD"], ["spd_kp", "speed KP"], ["spd_ki", "speed KI"],
+  ["lpf_level", "position smoothing (0–5)"], ["max_current_a", "max current"],
+  ["protect_current_limit_a", "current cap while protected"], ["protect_current_lv1_a", "protection threshold"],
+  ["protect_delay_ms", "time above threshold"], ["recover_current_a", "recovery threshold"],
+  ["recover_window_ms", "time below recovery"], ["burst_cold_ms", "burst cool-down"], ["burst_plus_ms", "burst duration"],
+];
+
+/** A parameter as a person reads it: at most 4 decimals, no float noise. */
+const shown = (v) => String(Number(Number(v).toFixed(4)));
+
+async function loadConfig() {
+  const cfg = await act(null, () => api("GET", dev("/config")));
+  if (!cfg) return;
+  state.config = cfg;
+  const tbody = $("#config tbody");
+  tbody.innerHTML = "";
+  for (const [name, label] of PARAMS) {
+    const p = cfg[name];
+    if (!p) continue;
+    const tr = document.createElement("tr");
+    tr.innerHTML = `<td>${label}</td><td><input data-param="${name}" data-testid="param-${name}" type="number" step="any"></td><td>${p.unit}</td><td>${p.raw}</td>`;
+    const input = tr.querySelector("input");
+    // Shown rounded (Q12/Q15 steps print as 0.9997558…); "changed" compares
+    // with what was shown, so an untouched field is never written back.
+    input.value = shown(p.value);
+    input.dataset.shown = input.value;
+    input.oninput = () => tr.classList.toggle("changed", input.value !== input.dataset.shown);
+    tbody.appendChild(tr);
+  }
+}
+
+$("#config-reload").onclick = loadConfig;
+$("#config-apply").onclick = async () => {
+  const patch = {};
+  for (const input of document.querySelectorAll("#config input[data-param]")) {
+    const name = input.dataset.param;
+    if (input.value !== input.dataset.shown) patch[name] = Number(input.value);
+  }
+  if (!Object.keys(patch).length) return say("Nothing changed.", "info");
+  const done = await act(`Applied to RAM and verified: ${Object.keys(patch).join(", ")}.`, () => api("PATCH", dev("/config"), patch));
+  if (done) loadConfig();
+};
+$("#config-persist").onclick = () => {
+  if (!confirm("Write the current RAM parameters to flash? They will survive power-off.")) return;
+  act("Persisted to flash.", () => api("POST", dev("/config/persist")));
+};
+$("#change-id").onclick = async () => {
+  const newId = Number($("#new-id").value);
+  if (!newId) return say("Enter the new id first.");
+  if (!confirm(`Change the id of joint ${state.selected.id} to ${newId}? It is stored to flash at once.`)) return;
+  const done = await act(`Id changed to ${newId}.`, () => api("PUT", dev("/id"), { new_id: newId }));
+  if (done) select(state.selected.bus, newId);
+};
+
+// ---------------------------------------------------------------- raw frames
+
+async function loadFrames() {
+  if (!state.selected) return;
+  const data = await act(null, () => api("GET", `buses/${encodeURIComponent(state.selected.bus)}/frames?limit=30`));
+  if (!data) return;
+  const tbody = $("#frames tbody");
+  tbody.innerHTML = "";
+  for (const f of data.frames.slice().reverse()) {
+    const d = f.decoded || {};
+    const summary = Object.entries(d).filter(([k]) => k !== "raw").map(([k, v]) => `${k}=${Array.isArray(v) ? "[…]" : v}`).join(" ");
+    const tr = document.createElement("tr");
+    const t = new Date(f.at * 1000);
+    tr.innerHTML = `<td>${t.toLocaleTimeString()}.${String(t.getMilliseconds()).padStart(3, "0")}</td><td>${f.direction}</td><td></td><td></td>`;
+    tr.children[2].textContent = f.hex; tr.children[3].textContent = summary;
+    tbody.appendChild(tr);
+  }
+}
+
+setInterval(() => { if ($("#frames-live").checked) loadFrames(); }, 1000);
+
+// ---------------------------------------------------------------- e-stop
+
+$("#estop").onclick = async () => {
+  const r = await act(null, () => api("POST", "estop"));
+  if (r) say(`Emergency stop: ${r.stopped ? "every bus stopped" : "NOT every bus stopped — see the bus list"} in ${r.elapsed_us} µs.`, r.stopped ? "info" : "error");
+};
+
+// ---------------------------------------------------------------- start
+
+connect();
+refreshBuses();
+setInterval(refreshBuses, 1000);
