@@ -71,33 +71,12 @@ pub fn setpoint(
     req: &TargetRequest,
     field: &str,
 ) -> ApiResult<Setpoint> {
+    if dev.mode == Some(CtrlMode::Speed) {
+        return speed_setpoint(dev, limits, req, field);
+    }
     let who = format!("joint {}", dev.dev_id);
     let fw = firmware_of(dev);
-    let pos_field = format!("{field}position_deg");
-    let spd_field = format!("{field}speed_rpm");
-    if dev.mode == Some(CtrlMode::Speed) {
-        if req.position_deg.is_some() {
-            return Err(ApiError::invalid(
-                &pos_field,
-                format!("{who} is in speed mode: a position has no effect (set mode to position)"),
-            ));
-        }
-        let rpm = req.speed_rpm.ok_or_else(|| {
-            ApiError::invalid(
-                &spd_field,
-                format!("{who} is in speed mode: speed_rpm is required"),
-            )
-        })?;
-        limits.check_speed(&spd_field, rpm, &who)?;
-        let spd_ref =
-            units::speed_to_raw(rpm, fw).map_err(|e| ApiError::from_unit(&spd_field, e))?;
-        let pos_ref = dev
-            .target_sent
-            .map(|t| t.pos_ref)
-            .or_else(|| measured_angle_raw(dev))
-            .unwrap_or(0);
-        return Ok(Setpoint { pos_ref, spd_ref });
-    }
+    let (pos_field, spd_field) = (format!("{field}position_deg"), format!("{field}speed_rpm"));
     let deg = req.position_deg.ok_or_else(|| {
         ApiError::invalid(
             &pos_field,
@@ -113,6 +92,39 @@ pub fn setpoint(
     limits.check_speed(&spd_field, rpm, &who)?;
     let spd_ref =
         units::speed_limit_to_raw(rpm, fw).map_err(|e| ApiError::from_unit(&spd_field, e))?;
+    Ok(Setpoint { pos_ref, spd_ref })
+}
+
+/// Speed mode: a signed speed only; the position slot keeps the last target
+/// (or the measured angle), since a broadcast carries both.
+fn speed_setpoint(
+    dev: &DeviceState,
+    limits: &JointLimits,
+    req: &TargetRequest,
+    field: &str,
+) -> ApiResult<Setpoint> {
+    let who = format!("joint {}", dev.dev_id);
+    let (pos_field, spd_field) = (format!("{field}position_deg"), format!("{field}speed_rpm"));
+    if req.position_deg.is_some() {
+        return Err(ApiError::invalid(
+            &pos_field,
+            format!("{who} is in speed mode: a position has no effect (set mode to position)"),
+        ));
+    }
+    let rpm = req.speed_rpm.ok_or_else(|| {
+        ApiError::invalid(
+            &spd_field,
+            format!("{who} is in speed mode: speed_rpm is required"),
+        )
+    })?;
+    limits.check_speed(&spd_field, rpm, &who)?;
+    let spd_ref = units::speed_to_raw(rpm, firmware_of(dev))
+        .map_err(|e| ApiError::from_unit(&spd_field, e))?;
+    let pos_ref = dev
+        .target_sent
+        .map(|t| t.pos_ref)
+        .or_else(|| measured_angle_raw(dev))
+        .unwrap_or(0);
     Ok(Setpoint { pos_ref, spd_ref })
 }
 
