@@ -2,6 +2,7 @@
 //! simulator on a pty) → the HTTP API → on SIGINT/SIGTERM stop accepting,
 //! disable every joint, close the ports, exit 0.
 
+use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -12,9 +13,12 @@ use tokio::net::TcpListener;
 use tokio::signal::unix::{signal, SignalKind};
 
 use crate::api::limits::{LimitError, LimitRule, SoftLimits};
+use crate::api::state::{StateOptions, WatchdogDefault};
 use crate::api::{app, AppState};
 use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle};
+use crate::protocol::is_device_id;
 use crate::sim::{SimConfig, SimError, SimHandle, Simulator};
+use crate::ws::watchdog::{MAX_HOLD, MIN_HOLD};
 
 /// Default HTTP address: loopback only.
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8080";
@@ -41,7 +45,7 @@ pub struct RunArgs {
     pub sim_baud: u32,
     /// HTTP address to listen on [default: 127.0.0.1:8080]; port 0 picks a free
     /// port (the first line on stdout says which).
-    #[arg(long, value_name = "ADDR")]
+    #[arg(long, value_name = "ADDR", env = "JOINTD_LISTEN")]
     pub listen: Option<SocketAddr>,
     /// Bearer token required on everything but /healthz.
     #[arg(long, env = "JOINTD_TOKEN", hide_env_values = true)]
@@ -49,10 +53,15 @@ pub struct RunArgs {
     /// Allow listening beyond loopback without a token.
     #[arg(long)]
     pub insecure: bool,
-    /// TOML config file: `listen`, `token`, `insecure`, `[[bus]]` tables
-    /// (name, path, baud, ids, poll, timing) and `[[limit]]` soft limits.
-    #[arg(long, value_name = "FILE")]
+    /// TOML config file (see jointd.example.toml): `listen`, `token`,
+    /// `insecure`, `web_dir`, `[[bus]]`, `[[limit]]`, `[[joint]]`, `[watchdog]`.
+    /// Flags and environment variables override it.
+    #[arg(long, value_name = "FILE", env = "JOINTD_CONFIG")]
     pub config: Option<PathBuf>,
+    /// Serve the dashboard from this folder instead of the copy built into
+    /// the binary (while editing web/).
+    #[arg(long, value_name = "DIR")]
+    pub web_dir: Option<PathBuf>,
 }
 
 /// The config file. Flags override its values.
@@ -67,6 +76,21 @@ pub struct FileConfig {
     pub buses: Vec<BusConfig>,
     #[serde(default, rename = "limit")]
     pub limits: Vec<LimitRule>,
+    #[serde(default, rename = "joint")]
+    pub joints: Vec<JointName>,
+    #[serde(default)]
+    pub watchdog: WatchdogDefault,
+    pub web_dir: Option<PathBuf>,
+}
+
+/// `[[joint]]`: a name for a joint, shown in the API, telemetry and dashboard.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointName {
+    /// Absent: the joint with this id on every bus.
+    pub bus: Option<String>,
+    pub id: u8,
+    pub name: String,
 }
 
 #[derive(Debug, Error)]
@@ -101,6 +125,7 @@ pub struct Plan {
     pub buses: Vec<BusConfig>,
     pub limits: SoftLimits,
     pub sim: Option<(u8, u32)>,
+    pub options: StateOptions,
 }
 
 fn load_file(path: &PathBuf) -> Result<FileConfig, DaemonError> {
@@ -132,13 +157,69 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     if buses.is_empty() && sim.is_none() {
         return Err(DaemonError::NoBus);
     }
+    let options = StateOptions {
+        web_dir: args.web_dir.clone().or(file.web_dir),
+        joint_names: joint_names(&file.joints, args)?,
+        watchdog: checked_watchdog(file.watchdog, args)?,
+    };
     Ok(Plan {
         listen,
         token,
         buses,
         limits: SoftLimits::new(file.limits)?,
         sim,
+        options,
     })
+}
+
+fn config_error(args: &RunArgs, why: String) -> DaemonError {
+    DaemonError::Config {
+        path: args.config.clone().unwrap_or_default(),
+        why,
+    }
+}
+
+/// `[[joint]]` entries as a lookup; ids in range, one name per joint.
+fn joint_names(
+    joints: &[JointName],
+    args: &RunArgs,
+) -> Result<BTreeMap<(Option<String>, u8), String>, DaemonError> {
+    let mut names = BTreeMap::new();
+    for (i, j) in joints.iter().enumerate() {
+        let at = format!("joint[{i}]");
+        if !is_device_id(j.id) {
+            return Err(config_error(
+                args,
+                format!("{at}.id = {}: device ids are 1..=159", j.id),
+            ));
+        }
+        if j.name.trim().is_empty() {
+            return Err(config_error(args, format!("{at}.name is empty")));
+        }
+        if names
+            .insert((j.bus.clone(), j.id), j.name.clone())
+            .is_some()
+        {
+            return Err(config_error(
+                args,
+                format!("{at}: joint {} is named twice", j.id),
+            ));
+        }
+    }
+    Ok(names)
+}
+
+/// `[watchdog]`: 0 (off) or within what a client may declare.
+fn checked_watchdog(w: WatchdogDefault, args: &RunArgs) -> Result<WatchdogDefault, DaemonError> {
+    let ms = w.hold_timeout_ms;
+    let (lo, hi) = (MIN_HOLD.as_millis() as u64, MAX_HOLD.as_millis() as u64);
+    if ms != 0 && !(lo..=hi).contains(&ms) {
+        return Err(config_error(
+            args,
+            format!("watchdog.hold_timeout_ms = {ms}: allowed 0 (off) or {lo}..={hi}"),
+        ));
+    }
+    Ok(w)
 }
 
 /// Starts the simulator of `--sim` and the bus config that opens its pty.
@@ -185,6 +266,8 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     println!("listening on http://{addr}");
     tracing::info!(%addr, auth = plan.token.is_some(), "serving the API");
     let state = AppState::new(handles, plan.limits, plan.token);
+    // A fresh state has no options yet: this cannot be refused.
+    let _ = state.set_options(plan.options);
     axum::serve(listener, app(state))
         .with_graceful_shutdown(shutdown_signal())
         .await

@@ -346,3 +346,41 @@ async fn auth_applies_to_the_websocket() {
         .expect("?token=");
     by_query.next_of("welcome").await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn config_default_watchdog_and_joint_names() {
+    use jointd::api::state::{StateOptions, WatchdogDefault};
+    use jointd::ws::messages::WatchdogPolicy;
+    let bus = sim_bus::start(2, None).await;
+    let mut options = StateOptions::default();
+    options
+        .joint_names
+        .insert((Some("sim0".into()), 1), "index_mcp".into());
+    options.watchdog = WatchdogDefault {
+        hold_timeout_ms: 100,
+        policy: WatchdogPolicy::Disable,
+    };
+    assert!(bus.server_state.set_options(options).is_ok());
+    enable(&bus, &[1]).await;
+    let mut observer = connect(&bus).await;
+    observer
+        .send(json!({"type":"subscribe","devices":[1],"fields":["angle_deg"],"rate_hz":20}))
+        .await;
+    let t = observer.next_of("telemetry").await;
+    assert_eq!(t["joints"][0]["name"], "index_mcp");
+    let mut teleop = connect(&bus).await;
+    // No `watchdog` message: the config's default arms on the first batch.
+    teleop
+        .send(json!({"type":"setpoints","targets":[{"dev_id":1,"position_deg":3}]}))
+        .await;
+    let event = observer.next_of("event").await;
+    assert_eq!(
+        (
+            event["event"]["policy"].as_str(),
+            event["event"]["why"].as_str()
+        ),
+        (Some("disable"), Some("timeout"))
+    );
+    bus.wait_fsm(1, fsm::READY).await;
+    drop(teleop);
+}

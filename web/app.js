@@ -148,19 +148,19 @@ function renderDevices() {
       tr.dataset.key = key;
       tr.dataset.testid = `device-row-${j.bus}-${j.dev_id}`;
       tr.setAttribute("data-testid", `device-row-${j.bus}-${j.dev_id}`);
-      tr.innerHTML = "<td></td>".repeat(11);
+      tr.innerHTML = "<td></td>".repeat(12);
       tr.onclick = () => select(j.bus, j.dev_id);
       tbody.appendChild(tr);
     }
-    const cells = [j.bus, j.dev_id, j.fsm ?? "–", j.fault ?? "–", fmt(j.angle_deg, 2), fmt(j.target_deg, 2),
+    const cells = [j.bus, j.dev_id, j.name ?? "", j.fsm ?? "–", j.fault ?? "–", fmt(j.angle_deg, 2), fmt(j.target_deg, 2),
       fmt(j.speed_rpm, 0), fmt(j.current_a, 3), fmt(j.vbus_v, 2), fmt(j.temp_c, 0), fmt(j.age_ms, 0)];
-    const fields = ["bus", "dev_id", "fsm", "fault", "angle_deg", "target_deg", "speed_rpm", "current_a", "vbus_v", "temp_c", "age_ms"];
+    const fields = ["bus", "dev_id", "name", "fsm", "fault", "angle_deg", "target_deg", "speed_rpm", "current_a", "vbus_v", "temp_c", "age_ms"];
     cells.forEach((c, i) => {
       const td = tr.children[i];
       td.dataset.field = fields[i];
       if (td.textContent !== String(c)) td.textContent = c;
     });
-    tr.children[3].className = j.fault && j.fault !== "none" ? "fault" : "";
+    tr.children[4].className = j.fault && j.fault !== "none" ? "fault" : "";
     tr.classList.toggle("offline", !j.online);
     tr.classList.toggle("selected", state.selected && key === `${state.selected.bus}/${state.selected.id}`);
   }
@@ -275,6 +275,7 @@ async function select(bus, id) {
     const target = detail.target ? detail.target.position_deg : (detail.motion ? detail.motion.angle_deg : 0);
     slider.value = target; $("#target-number").value = target;
     if (detail.mode) $("#mode").value = detail.mode;
+    if (detail.name) $("#panel-title").textContent = `${id} (${detail.name}) on ${bus}`;
   }
   loadConfig();
   loadFrames();

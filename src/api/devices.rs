@@ -31,6 +31,9 @@ pub fn router() -> OpenApiRouter<AppState> {
 pub struct DeviceSummary {
     #[schema(example = 1)]
     pub id: u8,
+    /// The joint's name from the config file (`[[joint]]`), if any.
+    #[schema(example = "index_mcp")]
+    pub name: Option<String>,
     #[schema(example = true)]
     pub online: bool,
     /// fsm state name from the latest INFO_01.
@@ -75,6 +78,9 @@ pub struct DeviceDetail {
     pub bus: String,
     #[schema(example = 1)]
     pub id: u8,
+    /// The joint's name from the config file (`[[joint]]`), if any.
+    #[schema(example = "index_mcp")]
+    pub name: Option<String>,
     #[schema(example = true)]
     pub online: bool,
     #[schema(example = "1.2.8")]
@@ -107,7 +113,7 @@ pub struct FreshQuery {
     pub fresh: bool,
 }
 
-fn summary(dev: &DeviceState, now: Instant) -> DeviceSummary {
+fn summary(dev: &DeviceState, name: Option<&str>, now: Instant) -> DeviceSummary {
     let fw = firmware_of(dev);
     let status = dev.info01.as_ref().map(|(i, at)| status_view(i, *at, now));
     let motion = dev
@@ -123,6 +129,7 @@ fn summary(dev: &DeviceState, now: Instant) -> DeviceSummary {
     .reduce(f64::min);
     DeviceSummary {
         id: dev.dev_id,
+        name: name.map(str::to_owned),
         online: dev.online,
         state: status.as_ref().map(|s| s.state),
         fault: status.as_ref().map(|s| s.fault.clone()),
@@ -154,7 +161,11 @@ async fn list_devices(
     let now = Instant::now();
     Ok(Json(DeviceList {
         bus: snap.name.clone(),
-        devices: snap.devices.values().map(|d| summary(d, now)).collect(),
+        devices: snap
+            .devices
+            .values()
+            .map(|d| summary(d, state.joint_name(&snap.name, d.dev_id), now))
+            .collect(),
     }))
 }
 
@@ -178,6 +189,7 @@ async fn get_device(
     Ok(Json(DeviceDetail {
         bus: snap.name.clone(),
         id,
+        name: state.joint_name(&snap.name, id).map(str::to_owned),
         online: dev.online,
         firmware: dev.info01.as_ref().map(|(i, _)| i.firmware().dotted()),
         mode: dev.mode.map(mode_name),

@@ -11,6 +11,33 @@ use crate::bus::handle::DeviceState;
 use crate::bus::{BusHandle, BusSnapshot};
 use crate::protocol::{is_device_id, MAX_DEVICE_ID, MIN_DEVICE_ID};
 
+/// Options of the config file that handlers read.
+#[derive(Debug, Clone, Default)]
+pub struct StateOptions {
+    pub web_dir: Option<std::path::PathBuf>,
+    /// (bus or every bus, id) → name.
+    pub joint_names: BTreeMap<(Option<String>, u8), String>,
+    pub watchdog: WatchdogDefault,
+}
+
+/// The config's `[watchdog]`: armed for every client that streams setpoints
+/// (`hold_timeout_ms` 0: only clients that ask get one).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WatchdogDefault {
+    pub hold_timeout_ms: u64,
+    pub policy: crate::ws::messages::WatchdogPolicy,
+}
+
+impl Default for WatchdogDefault {
+    fn default() -> Self {
+        Self {
+            hold_timeout_ms: 0,
+            policy: crate::ws::messages::WatchdogPolicy::Hold,
+        }
+    }
+}
+
 #[derive(Clone)]
 pub struct AppState {
     inner: Arc<Inner>,
@@ -22,7 +49,7 @@ struct Inner {
     token: Option<String>,
     started: Instant,
     ws: crate::ws::WsHub,
-    web_dir: std::sync::OnceLock<std::path::PathBuf>,
+    options: std::sync::OnceLock<StateOptions>,
 }
 
 impl AppState {
@@ -39,7 +66,7 @@ impl AppState {
                 token: token.filter(|t| !t.is_empty()),
                 started: Instant::now(),
                 ws: crate::ws::WsHub::default(),
-                web_dir: std::sync::OnceLock::new(),
+                options: std::sync::OnceLock::new(),
             }),
         }
     }
@@ -63,14 +90,38 @@ impl AppState {
         self.inner.limits.for_joint(bus, id)
     }
 
-    /// Serve the dashboard from this folder instead of the embedded copy
-    /// (set once, at start; a second call is refused).
-    pub fn set_web_dir(&self, dir: std::path::PathBuf) -> Result<(), std::path::PathBuf> {
-        self.inner.web_dir.set(dir)
+    /// The daemon's options beyond buses, limits and token (set once, at
+    /// start; a second call is refused and gets its options back).
+    pub fn set_options(&self, options: StateOptions) -> Result<(), StateOptions> {
+        self.inner.options.set(options)
     }
 
+    fn options(&self) -> &StateOptions {
+        static DEFAULTS: std::sync::OnceLock<StateOptions> = std::sync::OnceLock::new();
+        self.inner
+            .options
+            .get()
+            .unwrap_or_else(|| DEFAULTS.get_or_init(StateOptions::default))
+    }
+
+    /// Serve the dashboard from this folder instead of the embedded copy.
     pub fn web_dir(&self) -> Option<&std::path::PathBuf> {
-        self.inner.web_dir.get()
+        self.options().web_dir.as_ref()
+    }
+
+    /// The configured name of a joint (`[[joint]]` in the config file).
+    pub fn joint_name(&self, bus: &str, id: u8) -> Option<&str> {
+        let names = &self.options().joint_names;
+        names
+            .get(&(Some(bus.to_owned()), id))
+            .or_else(|| names.get(&(None, id)))
+            .map(String::as_str)
+    }
+
+    /// What applies to a WebSocket client that streams setpoints without
+    /// declaring a watchdog of its own.
+    pub fn watchdog_default(&self) -> WatchdogDefault {
+        self.options().watchdog
     }
 
     /// What the WebSocket connections share.

@@ -23,6 +23,7 @@ pub const FACTORY_BAUD: u32 = 230_400;
 
 /// One serial bus and how the owner drives it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct BusConfig {
     /// Name in the API and in logs (`/api/v1/buses/{name}`).
     pub name: String,
@@ -53,7 +54,7 @@ fn default_scan_last() -> u8 {
 
 /// How the wire left over by control is spent on telemetry.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct PollPlan {
     /// Largest share of wire time control frames may take while telemetry
     /// wants the wire (0..=1). Control takes everything when there is nothing
@@ -88,7 +89,7 @@ impl Default for PollPlan {
 /// Reply timing. The timeout of a transaction is
 /// `last byte of the request + turnaround + reply frame + reply_margin`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct Timing {
     /// The devices' turnaround (request's last byte to reply's first), µs.
     /// Counted as busy wire time; undocumented by the vendor (SPEC §1).

@@ -80,10 +80,11 @@ pub struct TargetItem {
     pub speed_rpm: Option<f64>,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum WatchdogPolicy {
     /// Freeze each joint where it is (target := measured angle).
+    #[default]
     Hold,
     /// Disable each joint.
     Disable,

@@ -165,6 +165,7 @@ impl Connection {
     fn setpoints(&mut self, batch: messages::SetpointBatch) {
         match setpoints::apply(&self.state, &batch) {
             Ok(applied) => {
+                self.arm_default_watchdog();
                 self.watchdog.feed(&applied.joints, Instant::now());
                 if batch.ack {
                     let ack = PendingAck {
@@ -201,6 +202,18 @@ impl Connection {
             hold_timeout_ms: w.hold_timeout_ms,
             policy: w.policy,
         });
+    }
+
+    /// The config's `[watchdog]` arms for a streaming client that declared none.
+    fn arm_default_watchdog(&mut self) {
+        let d = self.state.watchdog_default();
+        if d.hold_timeout_ms > 0 && !self.watchdog.declared() {
+            self.watchdog.arm(
+                Duration::from_millis(d.hold_timeout_ms),
+                d.policy,
+                Instant::now(),
+            );
+        }
     }
 
     /// Applies the policy to every joint this client commanded, and tells everyone.

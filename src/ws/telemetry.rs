@@ -22,10 +22,12 @@ pub struct Subscription {
     pub rate_hz: f64,
 }
 
-/// The joints of one bus snapshot that the subscription selects.
-pub fn joints(
+/// The joints of one bus snapshot that the subscription selects;
+/// `name_of` gives a joint's configured name.
+pub fn joints<'a>(
     sub: &Subscription,
     snap: &BusSnapshot,
+    name_of: impl Fn(u8) -> Option<&'a str>,
     now: Instant,
     out: &mut Vec<Map<String, Value>>,
 ) {
@@ -37,7 +39,11 @@ pub fn joints(
         {
             continue;
         }
-        out.push(joint(sub, &snap.name, dev, now));
+        let mut m = joint(sub, &snap.name, dev, now);
+        if let Some(name) = name_of(dev.dev_id) {
+            m.insert("name".into(), name.into());
+        }
+        out.push(m);
     }
 }
 

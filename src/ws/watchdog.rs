@@ -22,6 +22,8 @@ pub struct Watchdog {
     joints: BTreeSet<JointRef>,
     /// Set when fired, cleared by the next feed: fire once per stall.
     fired: bool,
+    /// The client (or the config's default) has set it, armed or not.
+    declared: bool,
 }
 
 impl Watchdog {
@@ -29,6 +31,13 @@ impl Watchdog {
         self.armed = (!hold.is_zero()).then_some((hold, policy));
         self.last_fed = Some(now);
         self.fired = false;
+        self.declared = true;
+    }
+
+    /// Whether a watchdog was ever set on this connection (a client's `0`
+    /// disarms it for good; the config's default does not override that).
+    pub fn declared(&self) -> bool {
+        self.declared
     }
 
     pub fn feed(&mut self, joints: &[JointRef], now: Instant) {

@@ -167,7 +167,8 @@ where
         let mut list = Vec::new();
         for name in &sub.buses {
             if let Ok(bus) = self.state.bus(name) {
-                joints(&sub, &bus.snapshot(), now, &mut list);
+                let names = |id| self.state.joint_name(name, id);
+                joints(&sub, &bus.snapshot(), names, now, &mut list);
             }
         }
         self.telemetry_seq += 1;
