@@ -58,6 +58,9 @@ if ! $BUILDAH inspect --type image localhost/jointd-rust:bookworm >/dev/null 2>&
   $BUILDAH run --isolation chroot "$ctr" -- sh -c \
     'apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq gcc libc6-dev >/dev/null'
   $BUILDAH copy "$ctr" "$toolchain" /usr/local/rust
+  # Registries may be reached through a TLS-inspecting proxy whose CA only
+  # the host trusts: give the build stage the host's bundle.
+  $BUILDAH copy "$ctr" /etc/ssl/certs/ca-certificates.crt /etc/ssl/certs/ca-certificates.crt
   $BUILDAH config --env PATH=/usr/local/rust/bin:/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin \
     --env CARGO_HOME=/usr/local/cargo "$ctr"
   $BUILDAH commit --rm "$ctr" localhost/jointd-rust:bookworm
