@@ -193,26 +193,33 @@ impl Owner {
             got = self.link.wait(Some(want), deadline);
         }
         self.absorb_inbox();
-        match got.map_err(|e| self.lost(e))? {
-            Some((reply, at)) => {
-                self.link.clock.observe_reply(due, at);
-                // A RES from a new id (SET_ID) is not a device yet: the
-                // request renames the old entry itself.
-                let feeds = self.reg.get(reply.dev_id).is_some()
-                    || matches!(reply.body(), ReplyBody::Info01(_));
-                if feeds {
-                    self.reg.on_reply(&reply, at, true, &mut self.events);
-                }
-                Ok(Some(reply))
-            }
-            None => {
-                self.overdue = Some((want, due));
-                self.link.counters.timeouts += 1;
-                self.link.clock.line_free(Instant::now());
-                self.reg.on_missed(want.dev_id, &mut self.events);
-                Ok(None)
-            }
+        let got = got.map_err(|e| self.lost(e))?;
+        Ok(self.settle_exchange(got, want, due))
+    }
+
+    /// Takes in the reply of an exchange, or counts it missing.
+    fn settle_exchange(
+        &mut self,
+        got: Option<(Reply, Instant)>,
+        want: Want,
+        due: Instant,
+    ) -> Option<Reply> {
+        let Some((reply, at)) = got else {
+            self.overdue = Some((want, due));
+            self.link.counters.timeouts += 1;
+            self.link.clock.line_free(Instant::now());
+            self.reg.on_missed(want.dev_id, &mut self.events);
+            return None;
+        };
+        self.link.clock.observe_reply(due, at);
+        // A RES from a new id (SET_ID) is not a device yet: the request
+        // renames the old entry itself.
+        let feeds =
+            self.reg.get(reply.dev_id).is_some() || matches!(reply.body(), ReplyBody::Info01(_));
+        if feeds {
+            self.reg.on_reply(&reply, at, true, &mut self.events);
         }
+        Some(reply)
     }
 
     /// A request/response transaction of a one-shot request, retried
