@@ -22,6 +22,8 @@ const MAX_INTERLEAVED: u32 = 2;
 /// How long before a reply is due the next control frame is planned:
 /// ample for planning, short enough that the setpoints it samples are fresh.
 const PREPARE_LEAD: std::time::Duration = std::time::Duration::from_micros(100);
+/// How often a reply wait past its modelled time looks for an e-stop.
+const LATE_WAIT_SLICE: std::time::Duration = std::time::Duration::from_millis(1);
 
 impl Owner {
     /// Listens until `at`; replies nobody waited for are taken in.
@@ -180,7 +182,6 @@ impl Owner {
             .send(&[Command::Config(cmd)])
             .map_err(|e| self.lost(e))?;
         let due = self.link.clock.reply_due(end);
-        let deadline = self.link.clock.reply_deadline(end);
         let mut got = Ok(None);
         if prepare {
             let prepare_at = due.checked_sub(PREPARE_LEAD).unwrap_or(due);
@@ -190,11 +191,35 @@ impl Owner {
             }
         }
         if matches!(got, Ok(None)) {
-            got = self.link.wait(Some(want), deadline);
+            got = self.wait_reply(want, due, self.link.clock.reply_deadline(end));
         }
         self.absorb_inbox();
         let got = got.map_err(|e| self.lost(e))?;
         Ok(self.settle_exchange(got, want, due))
+    }
+
+    /// Waits for `want` until `deadline`. Past a frame after the modelled
+    /// reply the wait goes in short slices: a late or missing reply must not
+    /// hold an e-stop back, nor the snapshot.
+    fn wait_reply(
+        &mut self,
+        want: Want,
+        due: Instant,
+        deadline: Instant,
+    ) -> std::io::Result<Option<(Reply, Instant)>> {
+        let grace = due + self.link.clock.frame_time();
+        let mut got = self.link.wait(Some(want), grace.min(deadline));
+        while matches!(got, Ok(None)) && !self.estop_pending() {
+            let now = Instant::now();
+            if now >= deadline {
+                break;
+            }
+            self.housekeeping(now);
+            got = self
+                .link
+                .wait(Some(want), deadline.min(now + LATE_WAIT_SLICE));
+        }
+        got
     }
 
     /// Takes in the reply of an exchange, or counts it missing.
