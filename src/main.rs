@@ -17,7 +17,8 @@ enum Command {
     /// Decode or encode single frames (for reading a serial capture by hand).
     #[command(subcommand)]
     Frame(FrameCommand),
-    /// Run a simulated bus of joint modules on a pseudo-terminal (path on stdout).
+    /// Run a simulated bus of joint modules on a pseudo-terminal (path on stdout;
+    /// stdin takes fault commands, `help` lists them).
     Sim(jointd::sim::cli::SimArgs),
     /// Measure the bus engine against the simulator: occupancy, collisions,
     /// per-joint rates, setpoint-to-wire latency, daemon CPU.

@@ -65,3 +65,23 @@ fn sim_prints_its_path_answers_takes_faults_and_stops_on_sigint() {
     assert_eq!(v["dropped_replies"], 1);
     assert!(!path.exists(), "the link is removed on exit");
 }
+
+#[test]
+fn sim_measure_reports_timing_and_occupancy_as_json() {
+    let out = Process::new(env!("CARGO_BIN_EXE_jointd"))
+        .args(["sim", "--ids", "1", "--measure", "50"])
+        .output()
+        .expect("run jointd sim --measure");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON report");
+    // Losses depend on how loaded the machine is; they are reported, not asserted.
+    assert!(v["lost"].as_u64().unwrap() < 50);
+    assert_eq!(v["model_poll_us"], 900.0);
+    assert!(v["delivery_error_us"]["p50"].is_number());
+    assert!(v["saturated_occupancy"].as_f64().unwrap() >= 0.99);
+    assert!(v["idle_occupancy"].as_f64().unwrap() < 0.01);
+}

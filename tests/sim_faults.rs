@@ -45,12 +45,13 @@ fn enable_and_run(sim: &SimHandle, host: &mut Host, id: u8) {
 #[test]
 fn a_stall_engages_protection_bursts_on_a_new_command_then_faults() {
     let mut cfg = config(&[1]);
-    cfg.stall_fault_after = Duration::from_millis(600);
+    // Long enough that the protection and burst states are easy to catch.
+    cfg.stall_fault_after = Duration::from_millis(2000);
     let (sim, mut host) = memory(cfg);
     host.recv(WAIT).expect("power-up INFO_01");
     write(&mut host, 1, ConfigParam::CurLv1DelayMs(50));
     write(&mut host, 1, ConfigParam::CurRecvWinMs(50));
-    write(&mut host, 1, ConfigParam::PlusTime(20));
+    write(&mut host, 1, ConfigParam::PlusTime(40));
     enable_and_run(&sim, &mut host, 1);
     sim.inject(Fault::Stall {
         dev_id: 1,
@@ -96,18 +97,25 @@ fn a_stall_engages_protection_bursts_on_a_new_command_then_faults() {
 
 #[test]
 fn a_power_cycle_reannounces_and_reloads_flash() {
-    let (sim, mut host) = booted(&[1]);
+    let mut cfg = config(&[1]);
+    cfg.align_time = Duration::from_millis(500);
+    let (sim, mut host) = memory(cfg);
+    host.recv(WAIT).expect("power-up INFO_01");
     enable_and_run(&sim, &mut host, 1);
     write(&mut host, 1, ConfigParam::MaxCur(123));
+    let r = host.read(1, InfoBlock::Info04).unwrap();
+    assert!(matches!(r.body(), ReplyBody::Info04(i) if i.max_current == 123));
     sim.inject(Fault::PowerCycle { dev_id: 1 });
     let hello = host.recv(WAIT).expect("re-announcement");
     assert!(matches!(hello.body(), ReplyBody::Info01(i) if i.fsm == fsm::READY));
     let r = host.read(1, InfoBlock::Info04).unwrap();
     assert!(matches!(r.body(), ReplyBody::Info04(i) if i.max_current == 4368));
     host.send(Command::Control(Control::enable(1)));
-    wait_for("alignment again after power-up", || {
-        (sim.device(1)?.fsm == fsm::ALIGN).then_some(())
-    });
+    assert_eq!(
+        info01(&mut host, 1).map(|i| i.fsm),
+        Some(fsm::ALIGN),
+        "alignment again after power-up"
+    );
     assert_eq!(sim.stats().announcements, 2);
 }
 

@@ -33,6 +33,14 @@ fn enable(sim: &SimHandle, host: &mut Host, id: u8) {
     assert!(sim.device(id).unwrap().aligned);
 }
 
+/// Jogs device 1 and waits until the jog (if it started) is over. The read
+/// after the jog is answered only once the jog frame was heard (the wire keeps order).
+fn jog(sim: &SimHandle, host: &mut Host, dir: JogDir) {
+    host.send(Command::Jog(Jog { dev_id: 1, dir }));
+    assert!(info01(host, 1).is_some());
+    wait_for("jog done", || (!sim.device(1)?.jogging).then_some(()));
+}
+
 #[test]
 fn power_up_announces_info01_then_answers_polls() {
     let (sim, mut host) = pty(config(&[3]));
@@ -185,26 +193,26 @@ fn a_position_target_is_reached_at_the_commanded_speed() {
 fn jog_moves_then_rezeroes_and_fin_zero_rezeroes() {
     let (sim, mut host) = pty(config(&[1]));
     host.recv(WAIT).expect("power-up INFO_01");
-    host.send(Command::Jog(Jog {
-        dev_id: 1,
-        dir: JogDir::Cw,
-    }));
-    assert!(
-        !sim.device(1).unwrap().jogging,
+    jog(&sim, &mut host, JogDir::Cw);
+    assert_eq!(
+        sim.device(1).unwrap().zero_deg,
+        0.0,
         "jog needs an enabled device"
     );
     enable(&sim, &mut host, 1);
-    host.send(Command::Jog(Jog {
-        dev_id: 1,
-        dir: JogDir::Cw,
-    }));
-    let mut peak: f64 = 0.0;
-    wait_for("jog done", || {
-        peak = peak.max(info01(&mut host, 1)?.angle_deg());
-        (!sim.device(1)?.jogging).then_some(())
-    });
-    assert!(peak > 2.0, "the joint moved toward +5° (peak {peak})");
+    jog(&sim, &mut host, JogDir::Cw);
+    let d = sim.device(1).unwrap();
+    assert!(
+        (d.zero_deg - 5.0).abs() < 0.05,
+        "moved +5° (zero now at {})",
+        d.zero_deg
+    );
     assert!(info01(&mut host, 1).unwrap().angle_deg().abs() < 0.05);
+    jog(&sim, &mut host, JogDir::Ccw);
+    assert!(
+        (sim.device(1).unwrap().zero_deg - 2.0).abs() < 0.05,
+        "then −3°"
+    );
     // Move away, then zero at the current position.
     let spd = speed_limit_to_raw(20_000.0, FirmwareVersion(128)).unwrap();
     host.send(Command::Control(Control::set_ref(
@@ -294,4 +302,18 @@ fn a_baud_change_answers_then_listens_only_at_the_new_baud() {
     let log = sim.frame_log();
     let last = log.last().unwrap();
     assert_eq!((last.end - last.start).as_micros(), 1736);
+}
+
+#[test]
+fn the_handle_is_shareable_and_dropping_the_last_one_stops_the_simulator() {
+    fn shareable<T: Send + Sync + Clone>() {}
+    shareable::<SimHandle>();
+    let (sim, _host) = pty(config(&[1]));
+    let path = sim.device_path().unwrap();
+    let clone = sim.clone();
+    drop(sim);
+    assert!(path.exists(), "a clone keeps it running");
+    assert!(clone.device(1).is_some());
+    drop(clone);
+    assert!(!path.exists(), "the link goes with the simulator");
 }

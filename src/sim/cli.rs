@@ -50,6 +50,9 @@ pub struct SimArgs {
     /// Seed of noise and fault dice.
     #[arg(long, default_value_t = super::config::DEFAULT_SEED)]
     pub seed: u64,
+    /// Run the simulator thread under SCHED_FIFO when permitted (tighter timing).
+    #[arg(long)]
+    pub realtime: bool,
     /// Instead of serving: poll the first device N times over a pty and print
     /// real-vs-model timing errors (µs percentiles) as JSON.
     #[arg(long, value_name = "N")]
@@ -64,6 +67,7 @@ impl SimArgs {
         cfg.boot_delay = Duration::from_millis(self.boot_ms);
         cfg.state_file = self.state_file.clone();
         cfg.seed = self.seed;
+        cfg.realtime = self.realtime;
         Ok(cfg)
     }
 

@@ -42,6 +42,10 @@ pub struct SimConfig {
     pub soft_ver: u8,
     pub log_capacity: usize,
     pub seed: u64,
+    /// Run the simulator thread under SCHED_FIFO if the system allows it:
+    /// tighter delivery times on a busy machine. Off by default (it is a
+    /// privilege, and a spinning real-time thread competes with everything).
+    pub realtime: bool,
 }
 
 impl SimConfig {
@@ -57,6 +61,7 @@ impl SimConfig {
             soft_ver: DEFAULT_SOFT_VER,
             log_capacity: DEFAULT_LOG_CAPACITY,
             seed: DEFAULT_SEED,
+            realtime: false,
         }
     }
 

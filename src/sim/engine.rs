@@ -11,19 +11,20 @@ use std::time::{Duration, Instant};
 use crate::protocol::{BaudLevel, Command, Frame, FrameBytes, StreamDecoder};
 
 use super::config::{SimConfig, SimError};
-use super::device::{Device, DeviceTiming};
-use super::faults::{collide, Fault, LineFaults};
-use super::log::{FrameLog, WireFrame};
+use super::device::Device;
+use super::faults::{collide, misframed, noise_frame, Fault, LineFaults};
+use super::log::{addressed_id, FrameLog, WireFrame};
 use super::params::{FlashImage, FlashStore, Params};
 use super::rng::Rng;
-use super::stats::{FrameKinds, SimStats};
+use super::stats::SimStats;
 use super::view::DeviceView;
 use super::wire::{frame_time, DeviceTx, HostTx, Wire, WireEvent};
 
 /// Delivery-error samples kept for measurement.
 const DELIVERY_SAMPLES: usize = 100_000;
-/// Extra gap between the staggered power-up announcements.
-const ANNOUNCE_GAP: Duration = Duration::from_micros(100);
+/// Devices' physics is run at least this often, so no observer or frame
+/// ever has to integrate a long idle stretch while holding the lock.
+const TICK: Duration = Duration::from_millis(20);
 
 /// Reply bytes due at the host at `due`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -50,6 +51,7 @@ pub struct Engine {
     /// End of the last garbled transmission handed to the host: overlapping
     /// collided transmissions reach the host as one garbled frame.
     garbage_until: Option<Instant>,
+    last_tick: Instant,
 }
 
 impl Engine {
@@ -59,26 +61,7 @@ impl Engine {
         let level = BaudLevel::from_baud(cfg.baud).ok_or(SimError::BadBaud(cfg.baud))?;
         let flash = FlashStore::new(cfg.state_file.clone());
         let saved = flash.load()?;
-        let timing = DeviceTiming {
-            align_time: cfg.align_time,
-            boot_delay: cfg.boot_delay,
-            stall_fault_after: cfg.stall_fault_after,
-            soft_ver: cfg.soft_ver,
-        };
-        let slot_time = frame_time(cfg.baud) + cfg.turnaround + ANNOUNCE_GAP;
-        let devices = cfg
-            .ids
-            .iter()
-            .enumerate()
-            .map(|(slot, &id)| {
-                let image = saved.get(slot).copied().unwrap_or(FlashImage {
-                    id,
-                    params: Params::factory(level),
-                });
-                let stagger = slot_time * u32::try_from(slot).unwrap_or(u32::MAX);
-                Device::new(slot, image, timing, now, stagger, cfg.seed ^ slot as u64)
-            })
-            .collect();
+        let devices = Device::bus(cfg, &saved, Params::factory(level), now);
         Ok(Self {
             turnaround: cfg.turnaround,
             default_baud: cfg.baud,
@@ -94,6 +77,7 @@ impl Engine {
             unplugged: false,
             delivery_errors_ns: VecDeque::new(),
             garbage_until: None,
+            last_tick: now,
         })
     }
 
@@ -114,6 +98,19 @@ impl Engine {
         match (self.wire.next_event(), announce) {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
+        }
+    }
+
+    /// When bytes are next due at the host (the instant that needs precision).
+    pub fn next_delivery(&self) -> Option<Instant> {
+        self.wire.next_device_end()
+    }
+
+    /// Runs every device's physics up to `now` if it has not run for a while.
+    pub fn tick(&mut self, now: Instant) {
+        if now.saturating_duration_since(self.last_tick) >= TICK {
+            self.devices.iter_mut().for_each(|d| d.advance_to(now));
+            self.last_tick = now;
         }
     }
 
@@ -198,7 +195,7 @@ impl Engine {
             self.stats.kinds.not_a_command += 1;
             return;
         };
-        count_kind(&mut self.stats.kinds, &cmd);
+        self.stats.kinds.count(&cmd);
         self.dispatch(&cmd, &h);
     }
 
@@ -263,13 +260,10 @@ impl Engine {
                 return None;
             }
             self.garbage_until = Some(d.end);
-            let noise = self.rng.next_u64().to_le_bytes().repeat(3);
-            let mut other = [0u8; 20];
-            other.copy_from_slice(&noise[..20]);
-            bytes = collide(&bytes, &other);
+            bytes = collide(&bytes, &noise_frame(&mut self.rng));
         } else if host_baud != Some(d.baud) {
-            // Framing errors at the wrong baud: what arrives is not the frame.
-            bytes = collide(&bytes, &[0xF0; 20]);
+            self.stats.baud_mismatches += 1;
+            bytes = misframed(&bytes);
         } else if self.faults.corrupt(&mut bytes, &mut self.rng) {
             self.stats.corrupted_replies += 1;
         } else if d.spontaneous {
@@ -368,28 +362,6 @@ impl Engine {
 
     pub fn count_overrun(&mut self, bytes: usize) {
         self.stats.host_overrun_bytes += bytes as u64;
-    }
-}
-
-/// The id a host command addresses (none for group broadcasts).
-fn addressed_id(cmd: &Command) -> Option<u8> {
-    match cmd {
-        Command::Control(c) => Some(c.dev_id),
-        Command::Jog(j) => Some(j.dev_id),
-        Command::Config(c) => Some(c.dev_id),
-        _ => None,
-    }
-}
-
-fn count_kind(k: &mut FrameKinds, cmd: &Command) {
-    match cmd {
-        Command::Control(_) => k.control += 1,
-        Command::Jog(_) => k.jog += 1,
-        Command::Config(c) if c.param.is_read() => k.config_read += 1,
-        Command::Config(_) => k.config_write += 1,
-        Command::BroadcastPos(_) => k.broadcast_pos += 1,
-        Command::BroadcastSpd(_) => k.broadcast_spd += 1,
-        Command::BroadcastEnableUnverified(_) => k.broadcast_enable += 1,
     }
 }
 

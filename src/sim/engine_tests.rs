@@ -159,3 +159,35 @@ fn an_idle_line_is_not_busy() {
     let b = e.stats(t + Duration::from_secs(1));
     assert_eq!(SimStats::occupancy(&a, &b), 0.0);
 }
+
+#[test]
+fn a_frame_split_across_reads_starts_when_its_last_byte_arrives() {
+    let (mut e, t) = booted(&[1]);
+    let bytes = read(1).encode();
+    e.on_host_bytes(&[0x00, 0x13], t, Some(BAUD));
+    e.on_host_bytes(&bytes[..7], t, Some(BAUD));
+    let late = t + Duration::from_millis(1);
+    e.on_host_bytes(&bytes[7..], late, Some(BAUD));
+    let out = e.advance(late + Duration::from_millis(5), Some(BAUD));
+    assert_eq!(out[0].due, late + 2 * F + T);
+    assert_eq!(e.stats(late).skipped_bytes, 2, "leading garbage skipped");
+}
+
+#[test]
+fn reads_to_all_get_no_answer_and_writes_to_all_answer_together() {
+    let (mut e, t) = booted(&[1, 2]);
+    send(&mut e, t, &[read(0xFF)]);
+    assert!(e
+        .advance(t + Duration::from_millis(5), Some(BAUD))
+        .is_empty());
+    let t2 = t + Duration::from_millis(10);
+    let flash = Config {
+        dev_id: 0xFF,
+        param: crate::protocol::ConfigParam::WriteFlash { key: 0xA5 },
+    };
+    send(&mut e, t2, &[Command::Config(flash)]);
+    let out = e.advance(t2 + Duration::from_millis(5), Some(BAUD));
+    assert_eq!(out.len(), 1);
+    assert!(reply_of(&out[0]).is_none(), "two RES at once collide");
+    assert_eq!(e.stats(t2).collisions, 1);
+}

@@ -94,6 +94,25 @@ pub fn collide(a: &FrameBytes, b: &FrameBytes) -> FrameBytes {
     out
 }
 
+/// What another driver puts on the line during a collision: random bits.
+pub fn noise_frame(rng: &mut Rng) -> FrameBytes {
+    let mut out = [0u8; 20];
+    for chunk in out.chunks_mut(8) {
+        let n = chunk.len();
+        chunk.copy_from_slice(&rng.next_u64().to_le_bytes()[..n]);
+    }
+    out
+}
+
+/// The bit pattern a UART at another baud makes of a frame: framing errors
+/// and wrong bits. Modelled as the high nibbles stuck (a slower receiver
+/// samples the tail of each byte as stop-bit marks), which never decodes.
+pub fn misframed(bytes: &FrameBytes) -> FrameBytes {
+    collide(bytes, &[MISFRAMED_MASK; 20])
+}
+
+const MISFRAMED_MASK: u8 = 0xF0;
+
 /// Offset of the CRC of a standard frame, the bytes both layouts' CRCs touch.
 const CRC_AT: usize = 16;
 const CRC_GARBLE: u8 = 0x5A;
@@ -115,6 +134,14 @@ mod tests {
     fn identical_frames_colliding_still_fail_crc() {
         let f = Command::Config(Config::read(1, InfoBlock::Info01)).encode();
         assert!(Frame::decode(&collide(&f, &f)).is_err());
+    }
+
+    #[test]
+    fn misframed_and_noisy_frames_never_decode() {
+        let f = Command::Config(Config::read(1, InfoBlock::Info01)).encode();
+        assert!(Frame::decode(&misframed(&f)).is_err());
+        let mut rng = Rng::new(5);
+        assert_ne!(noise_frame(&mut rng), noise_frame(&mut rng));
     }
 
     #[test]

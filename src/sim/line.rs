@@ -59,7 +59,10 @@ impl Line for MemoryLine {
     }
 
     fn replug(&mut self) -> io::Result<()> {
-        self.port.set_hung_up(false);
+        // Restoring clears the pipe: only do it if the line really was down.
+        if self.port.is_hung_up() {
+            self.port.set_hung_up(false);
+        }
         Ok(())
     }
 

@@ -4,7 +4,7 @@
 use std::collections::VecDeque;
 use std::time::Instant;
 
-use crate::protocol::FrameBytes;
+use crate::protocol::{Command, FrameBytes};
 
 /// One transmission as the line carried it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -18,6 +18,16 @@ pub struct WireFrame {
     /// The bytes as sent (before collision or corruption garbled them).
     pub bytes: FrameBytes,
     pub collided: bool,
+}
+
+/// The id a host command addresses (none for group broadcasts).
+pub fn addressed_id(cmd: &Command) -> Option<u8> {
+    match cmd {
+        Command::Control(c) => Some(c.dev_id),
+        Command::Jog(j) => Some(j.dev_id),
+        Command::Config(c) => Some(c.dev_id),
+        _ => None,
+    }
 }
 
 #[derive(Debug)]

@@ -18,6 +18,33 @@
 //! - [`measure`]: real delivery times against the model (`jointd sim --measure N`).
 //! - [`cli`], [`console`]: `jointd sim` and its stdin fault commands.
 //!
+//! # The wire model
+//! Every frame occupies 200/baud s of one half-duplex line. A host frame's
+//! interval starts when its bytes arrive (or when the previous host frame
+//! leaves the line: *queued ahead*, as a UART FIFO). A device acts on a frame
+//! when its last byte arrives; a reply starts a turnaround later and reaches
+//! the host when its last byte would. Any two transmissions that overlap
+//! collide: the host gets garbage, the device applies nothing. Busy time is
+//! the union of frames on the line plus the turnaround before each reply.
+//!
+//! # Modelling choices SPEC leaves open
+//! - A baud change (index 15) is RAM: it takes effect after the RES and is
+//!   kept over a reboot only after WRITE_FLASH. SET_ID is flash at once.
+//! - Power-up announcements are staggered one frame slot per device (by bus
+//!   position) so a healthy bus can be discovered from them.
+//! - Enable holds the current angle; references sent while disabled are kept
+//!   but replaced by that hold on enable. Jog and references in READY do nothing.
+//! - COMM_SILENT with a non-zero value silences the device; with 0 it speaks
+//!   again; a reboot or power cycle also ends the silence.
+//! - UPDATE_ENC_ZERO answers RES (rev 2.0.8): success in READY (the next
+//!   enable aligns again), failure while enabled.
+//! - The output zero set by a jog or UPDATE_FIN_ZERO survives a power cycle.
+//! - Under-voltage reports err 5 (as the captured vendor frame does); it faults
+//!   an enabled device. A stall latches err 8 after `stall_fault_after` of
+//!   pushing; disable clears a fault whose cause is gone.
+//! - The current cap (MAX_CUR, or PROTECT_CUR_LIMIT while protection holds)
+//!   limits the reported current, not the motion of a free joint.
+//!
 //! ```no_run
 //! use jointd::sim::{parse_ids, SimConfig, Simulator};
 //! let sim = Simulator::spawn_pty(SimConfig::new(parse_ids("1-16")?, 500_000))?;
@@ -104,10 +131,10 @@ impl SimHandle {
     ) -> Result<Self, SimError> {
         let engine = Arc::new(Mutex::new(Engine::new(cfg, Instant::now())?));
         let ctl = Arc::new(Control::default());
-        let (e, c) = (engine.clone(), ctl.clone());
+        let (e, c, rt) = (engine.clone(), ctl.clone(), cfg.realtime);
         let thread = std::thread::Builder::new()
             .name("jointd-sim".into())
-            .spawn(move || runner::run(e, line, c))
+            .spawn(move || runner::run(e, line, c, rt))
             .map_err(SimError::Thread)?;
         Ok(Self {
             inner: Arc::new(Inner {

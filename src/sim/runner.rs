@@ -14,9 +14,11 @@ use super::line::Line;
 const SPIN: Duration = Duration::from_micros(100);
 /// Longest wait without an event, so requests and shutdown are seen promptly.
 const MAX_IDLE: Duration = Duration::from_millis(2);
-/// Host frames the simulated UART FIFO holds before the host's writes stall
-/// (≈ the 4 KiB transmit buffer of a serial driver).
-const MAX_BACKLOG: usize = 200;
+/// Host frames the simulated transmit path (driver buffer, adapter FIFO)
+/// holds before the host's writes stall: 20 KiB, 0.4 s at 500000 baud.
+/// Larger than a bare UART driver's 4 KiB so that a simulator thread starved
+/// by a busy machine for tens of ms does not open gaps in a saturated line.
+const MAX_BACKLOG: usize = 1024;
 const READ_BUF: usize = 4096;
 /// How long `inject(Unplug|Replug)` waits for the thread to act.
 const LINE_OP_TIMEOUT: Duration = Duration::from_secs(2);
@@ -90,6 +92,24 @@ fn set_timer_slack() {
     }
 }
 
+/// A low real-time priority: above every normal thread, below the kernel's own.
+const REALTIME_PRIORITY: libc::c_int = 10;
+
+/// Moves this thread to SCHED_FIFO; a refusal (no privilege) is only logged.
+fn set_realtime() {
+    let param = libc::sched_param {
+        sched_priority: REALTIME_PRIORITY,
+    };
+    // SAFETY: pid 0 is this thread; `param` is a valid sched_param.
+    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+    if rc != 0 {
+        tracing::warn!(
+            "simulator: no real-time scheduling: {}",
+            std::io::Error::last_os_error()
+        );
+    }
+}
+
 struct Runner {
     engine: Arc<Mutex<Engine>>,
     line: Box<dyn Line>,
@@ -98,8 +118,11 @@ struct Runner {
 }
 
 /// The thread body: runs until shutdown is requested.
-pub fn run(engine: Arc<Mutex<Engine>>, line: Box<dyn Line>, ctl: Arc<Control>) {
+pub fn run(engine: Arc<Mutex<Engine>>, line: Box<dyn Line>, ctl: Arc<Control>, realtime: bool) {
     set_timer_slack();
+    if realtime {
+        set_realtime();
+    }
     let mut r = Runner {
         engine,
         line,
@@ -115,9 +138,10 @@ pub fn run(engine: Arc<Mutex<Engine>>, line: Box<dyn Line>, ctl: Arc<Control>) {
 impl Runner {
     /// One turn: wait for input or the next event, then run what is due.
     fn turn(&mut self) {
-        let (next, backlog) = {
-            let e = lock_engine(&self.engine);
-            (e.next_event(), e.host_backlog())
+        let (next, delivery, backlog) = {
+            let mut e = lock_engine(&self.engine);
+            e.tick(Instant::now());
+            (e.next_event(), e.next_delivery(), e.host_backlog())
         };
         let can_read = !self.line.is_unplugged() && backlog < MAX_BACKLOG;
         let now = Instant::now();
@@ -125,7 +149,12 @@ impl Runner {
             self.wait(now + MAX_IDLE, can_read);
             return;
         };
-        let spin_from = due.checked_sub(SPIN).unwrap_or(due);
+        // Only bytes due at the host need the spin; the engine's own events
+        // carry their modelled instants, so running them a little late is harmless.
+        let spin_from = match delivery {
+            Some(d) if d == due => due.checked_sub(SPIN).unwrap_or(due),
+            _ => due,
+        };
         if now < spin_from {
             self.wait(spin_from.min(now + MAX_IDLE), can_read);
             return;

@@ -5,6 +5,8 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
+use crate::protocol::Command;
+
 /// Host frames by what they carried.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
 pub struct FrameKinds {
@@ -17,6 +19,21 @@ pub struct FrameKinds {
     pub broadcast_enable: u64,
     /// Valid CRC, but not a command (e.g. EN = 0, a reply's can_id, a bad field).
     pub not_a_command: u64,
+}
+
+impl FrameKinds {
+    /// Counts one command by its kind.
+    pub fn count(&mut self, cmd: &Command) {
+        match cmd {
+            Command::Control(_) => self.control += 1,
+            Command::Jog(_) => self.jog += 1,
+            Command::Config(c) if c.param.is_read() => self.config_read += 1,
+            Command::Config(_) => self.config_write += 1,
+            Command::BroadcastPos(_) => self.broadcast_pos += 1,
+            Command::BroadcastSpd(_) => self.broadcast_spd += 1,
+            Command::BroadcastEnableUnverified(_) => self.broadcast_enable += 1,
+        }
+    }
 }
 
 /// A snapshot of the simulator's counters at `at`.
@@ -43,7 +60,8 @@ pub struct SimStats {
     pub collided_replies: u64,
     /// Host frames that waited behind the previous host frame.
     pub queued_ahead: u64,
-    /// Host frames at a baud some device did not listen at (garbage to it).
+    /// Frames sent at a baud the other side did not listen at: host frames
+    /// some device took as garbage, device frames the host got as garbage.
     pub baud_mismatches: u64,
     /// Replies the drop fault swallowed.
     pub dropped_replies: u64,

@@ -23,6 +23,9 @@ pub struct DeviceView {
     pub aligned: bool,
     pub angle_deg: f64,
     pub target_deg: f64,
+    /// Where the reported zero is, in the joint's physical degrees (moved by
+    /// jog and UPDATE_FIN_ZERO).
+    pub zero_deg: f64,
     pub velocity_deg_s: f64,
     /// Last speed reference (Q15): the limit in position mode.
     pub spd_ref: i16,

@@ -177,6 +177,11 @@ impl Wire {
         }
     }
 
+    /// When the next device transmission reaches the host.
+    pub fn next_device_end(&self) -> Option<Instant> {
+        self.device.first().map(|d| d.end)
+    }
+
     /// The earliest transmission that has left the line by `now`.
     pub fn pop_due(&mut self, now: Instant) -> Option<WireEvent> {
         let h = self.host.front().map(|h| h.end).filter(|e| *e <= now);

@@ -103,6 +103,8 @@ impl Device {
         }
     }
 
+    /// `0xB155` in the table layout (SPEC errata 3: unverified): one byte per
+    /// device 1..16, with the control frame's EN codes.
     fn broadcast_enable(&mut self, b: &BroadcastEnable, now: Instant) {
         let Some(op) = usize::from(self.id)
             .checked_sub(1)
@@ -110,10 +112,10 @@ impl Device {
         else {
             return;
         };
-        match *op {
-            1 => self.enable(now),
-            2 => self.disable(),
-            _ => {}
+        if *op == ControlOp::Enable as u8 {
+            self.enable(now);
+        } else if *op == ControlOp::Disable as u8 {
+            self.disable();
         }
     }
 

@@ -15,9 +15,11 @@ use crate::protocol::reply::{fault, fsm};
 use crate::protocol::units::{output_deg_per_s, speed_rpm, MAX_ANGLE_DEG, Q15_MAX};
 use crate::protocol::{CtrlMode, FirmwareVersion, InfoBlock, Reply};
 
+use super::config::SimConfig;
 use super::params::{FlashImage, Params};
 use super::physics::{Drive, Joint, Obstacle};
 use super::rng::Rng;
+use super::wire::frame_time;
 
 /// Jog steps (SPEC §4.2).
 const JOG_CW_DEG: f64 = 5.0;
@@ -27,6 +29,8 @@ const JOG_RPM: f64 = 6000.0;
 /// A jog is over when the joint is this close to its goal and this slow.
 const JOG_DONE_DEG: f64 = 0.02;
 const JOG_DONE_DEG_S: f64 = 0.5;
+/// Extra gap between the staggered power-up announcements.
+const ANNOUNCE_GAP: Duration = Duration::from_micros(100);
 
 /// Timing the device takes from the simulator's configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -117,6 +121,32 @@ impl Device {
         };
         d.power_up(now, stagger);
         d
+    }
+
+    /// The devices of a bus powered up at `now`: flash from `saved` by slot,
+    /// factory parameters otherwise. Announcements are staggered one frame slot
+    /// apart so a healthy bus can be discovered from them.
+    pub fn bus(cfg: &SimConfig, saved: &[FlashImage], factory: Params, now: Instant) -> Vec<Self> {
+        let timing = DeviceTiming {
+            align_time: cfg.align_time,
+            boot_delay: cfg.boot_delay,
+            stall_fault_after: cfg.stall_fault_after,
+            soft_ver: cfg.soft_ver,
+        };
+        let slot_time = frame_time(cfg.baud) + cfg.turnaround + ANNOUNCE_GAP;
+        let images = cfg.ids.iter().enumerate().map(|(slot, &id)| {
+            saved.get(slot).copied().unwrap_or(FlashImage {
+                id,
+                params: factory,
+            })
+        });
+        images
+            .enumerate()
+            .map(|(slot, image)| {
+                let stagger = slot_time * u32::try_from(slot).unwrap_or(u32::MAX);
+                Self::new(slot, image, timing, now, stagger, cfg.seed ^ slot as u64)
+            })
+            .collect()
     }
 
     /// Power-up (or reboot): RAM from flash, ready, unaligned, position mode.

@@ -93,6 +93,7 @@ impl Device {
             enabled: self.fsm == fsm::RUN || self.fsm == fsm::ALIGN,
             aligned: self.aligned,
             angle_deg: self.angle(),
+            zero_deg: self.zero,
             target_deg: self.jog_goal.unwrap_or(self.target),
             velocity_deg_s: self.joint.vel,
             spd_ref: self.spd_ref,
