@@ -6,7 +6,7 @@
 //! says the line is about to free; after a request that expects a reply,
 //! nothing is written until the reply arrives or its deadline passes.
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use crate::protocol::{Command, Config, ConfigParam, Reply, ReplyBody};
 
@@ -21,9 +21,11 @@ use super::owner::Owner;
 const MAX_INTERLEAVED: u32 = 2;
 /// How long before a reply is due the next control frame is planned:
 /// ample for planning, short enough that the setpoints it samples are fresh.
-const PREPARE_LEAD: std::time::Duration = std::time::Duration::from_micros(100);
+const PREPARE_LEAD: Duration = Duration::from_micros(100);
 /// How often a reply wait past its modelled time looks for an e-stop.
-const LATE_WAIT_SLICE: std::time::Duration = std::time::Duration::from_millis(1);
+const LATE_WAIT_SLICE: Duration = Duration::from_millis(1);
+/// How long before a reply is due the owner stops sleeping.
+const SPIN_BEFORE_DUE: Duration = Duration::from_micros(10);
 
 impl Owner {
     /// Listens until `at`; replies nobody waited for are taken in.
@@ -208,7 +210,10 @@ impl Owner {
         deadline: Instant,
     ) -> std::io::Result<Option<(Reply, Instant)>> {
         let grace = due + self.link.clock.frame_time();
-        let mut got = self.link.wait(Some(want), grace.min(deadline));
+        let mut got = self.spin_for_reply(want, due);
+        if matches!(got, Ok(None)) {
+            got = self.link.wait(Some(want), grace.min(deadline));
+        }
         while matches!(got, Ok(None)) && !self.estop_pending() {
             let now = Instant::now();
             if now >= deadline {
@@ -218,6 +223,28 @@ impl Owner {
             got = self
                 .link
                 .wait(Some(want), deadline.min(now + LATE_WAIT_SLICE));
+        }
+        got
+    }
+
+    /// Blocks until shortly before the reply is due, then looks at the port
+    /// without sleeping for `reply_spin_us`: a thread woken from sleep (on a
+    /// VM, a halted virtual CPU woken too) reacts tens of µs later, and every
+    /// poll's reply is followed by such a gap on the line.
+    fn spin_for_reply(
+        &mut self,
+        want: Want,
+        due: Instant,
+    ) -> std::io::Result<Option<(Reply, Instant)>> {
+        let spin = Duration::from_micros(self.cfg.timing.reply_spin_us);
+        if spin.is_zero() {
+            return Ok(None);
+        }
+        let spin_from = due.checked_sub(SPIN_BEFORE_DUE).unwrap_or(due);
+        let mut got = self.link.wait(Some(want), spin_from);
+        while matches!(got, Ok(None)) && Instant::now() < due + spin {
+            std::hint::spin_loop();
+            got = self.link.poll_now(Some(want));
         }
         got
     }
