@@ -23,7 +23,7 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use thiserror::Error;
 
-use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle, Targets, THREAD_PREFIX};
+use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle, BusThread, Targets, THREAD_PREFIX};
 use crate::protocol::reply::fsm;
 use crate::sim::{SimConfig, SimError, SimHandle, SimStats, Simulator};
 
@@ -121,7 +121,48 @@ fn load_average() -> String {
 
 fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
     let ids: Vec<u8> = (1..=args.joints).collect();
-    let mut sim_cfg = SimConfig::new(ids.clone(), baud);
+    let (sim, bus, thread) = setup(args, baud, &ids)?;
+    let run = measure(args, &sim, &bus, &ids)?;
+    if args.show_collisions {
+        analysis::collision_context(&run.log)
+            .iter()
+            .for_each(|l| println!("{l}"));
+    }
+    let mut referee_late_ns = sim.delivery_errors_ns();
+    referee_late_ns.sort_unstable();
+    let snapshot = bus.snapshot();
+    for note in &snapshot.port_notes {
+        println!("  note from the bus owner: {note}");
+    }
+    thread.stop();
+    sim.shutdown();
+    let (s0, s1) = (&run.stats[0], &run.stats[1]);
+    let share = |i: usize| cpu_share(&run.cpu[0], &run.cpu[1], s0, s1, i);
+    Ok(Report {
+        baud,
+        joints: ids.len(),
+        rate_hz: args.rate_hz,
+        warmup: Duration::from_secs_f64(args.warmup),
+        occupancy: SimStats::occupancy(s0, s1),
+        collisions: s1.collisions.saturating_sub(s0.collisions),
+        analysis: analysis::analyse(&run.log, &run.writes, &ids, s0.at, s1.at),
+        cpu_owner: share(0),
+        cpu_sim: share(1),
+        cpu_client: share(2),
+        daemon: snapshot.rates.clone(),
+        referee_late_us: [0.5, 0.99]
+            .map(|p| analysis::quantile_i64(&referee_late_ns, p) as f64 / 1e3),
+    })
+}
+
+/// The simulator on a pty, the bus owner on its path (like hardware),
+/// every joint online, enabled and aligned.
+fn setup(
+    args: &BenchArgs,
+    baud: u32,
+    ids: &[u8],
+) -> Result<(SimHandle, BusHandle, BusThread), BenchError> {
+    let mut sim_cfg = SimConfig::new(ids.to_vec(), baud);
     sim_cfg.align_time = ALIGN;
     sim_cfg.turnaround = Duration::from_micros(args.turnaround_us);
     let sim = Simulator::spawn_pty(sim_cfg)?;
@@ -132,7 +173,7 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
         .device_path()
         .ok_or_else(|| BenchError::Setup("the simulator has no pty path".into()))?;
     let mut cfg = BusConfig::new("bench", path, baud);
-    cfg.ids = ids.clone();
+    cfg.ids = ids.to_vec();
     cfg.timing.turnaround_us = args.turnaround_us;
     if args.no_rt {
         cfg.timing.rt_priority = 0;
@@ -145,50 +186,40 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
         .enable_all()
         .build()?;
     rt.block_on(bring_up(&bus, ids.len()))?;
-    wait_running(&sim, &ids)?;
+    wait_running(&sim, ids)?;
+    Ok((sim, bus, thread))
+}
 
+/// What one measured window left behind.
+struct Run {
+    /// Simulator counters and thread CPU times at the window's start and end.
+    stats: [SimStats; 2],
+    cpu: [Vec<Duration>; 2],
+    writes: Vec<client::Write>,
+    log: Vec<crate::sim::WireFrame>,
+}
+
+/// Streams targets through the warm-up and the measured window.
+fn measure(
+    args: &BenchArgs,
+    sim: &SimHandle,
+    bus: &BusHandle,
+    ids: &[u8],
+) -> Result<Run, BenchError> {
     let period = Duration::from_secs_f64(1.0 / f64::from(args.rate_hz));
     let client_rt = if args.no_rt { 0 } else { CLIENT_PRIORITY };
-    let client = Client::start(bus.clone(), ids.clone(), period, client_rt)?;
+    let client = Client::start(bus.clone(), ids.to_vec(), period, client_rt)?;
     std::thread::sleep(Duration::from_secs_f64(args.warmup));
     sim.clear_frame_log();
     let (s0, cpu0) = (sim.stats(), cpu_now());
     std::thread::sleep(Duration::from_secs_f64(args.seconds));
     let (s1, cpu1) = (sim.stats(), cpu_now());
     let writes = client.finish();
-    let log = sim.frame_log();
-    if args.show_collisions {
-        analysis::collision_context(&log)
-            .iter()
-            .for_each(|l| println!("{l}"));
-    }
-    let mut referee_late_ns = sim.delivery_errors_ns();
-    referee_late_ns.sort_unstable();
-    let snapshot = bus.snapshot();
-    let daemon = snapshot.rates.clone();
-    for note in &snapshot.port_notes {
-        println!("  note from the bus owner: {note}");
-    }
-    thread.stop();
-    sim.shutdown();
-
-    let share = |i: usize| cpu_share(&cpu0, &cpu1, &s0, &s1, i);
-    Ok(Report {
-        baud,
-        joints: ids.len(),
-        rate_hz: args.rate_hz,
-        warmup: Duration::from_secs_f64(args.warmup),
-        occupancy: SimStats::occupancy(&s0, &s1),
-        collisions: s1.collisions.saturating_sub(s0.collisions),
-        analysis: analysis::analyse(&log, &writes, &ids, s0.at, s1.at),
-        cpu_owner: share(0),
-        cpu_sim: share(1),
-        cpu_client: share(2),
-        daemon,
-        referee_late_us: [0.5, 0.99].map(|p| {
-            let late = analysis::quantile_i64(&referee_late_ns, p);
-            late as f64 / 1e3
-        }),
+    Ok(Run {
+        stats: [s0, s1],
+        cpu: [cpu0, cpu1],
+        writes,
+        log: sim.frame_log(),
     })
 }
 

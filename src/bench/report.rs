@@ -1,5 +1,6 @@
 //! One workload's result, checked against issue 4's targets and printed.
 
+use std::collections::BTreeMap;
 use std::fmt;
 use std::time::Duration;
 
@@ -78,90 +79,112 @@ fn ms(us: u64) -> f64 {
     us as f64 / 1000.0
 }
 
+impl Report {
+    /// The measured quantities the issue sets targets for.
+    fn result_rows(&self) -> Vec<(&'static str, String)> {
+        let a = &self.analysis;
+        let rates = |m: &BTreeMap<u8, f64>| {
+            let max = m.values().copied().fold(0.0, f64::max);
+            let (min, mean) = (Analysis::min_rate(m), Analysis::mean_rate(m));
+            format!("min {min:7.1}  mean {mean:7.1}  max {max:7.1}")
+        };
+        let (p50, p99, max) = (a.latency_us(0.5), a.latency_us(0.99), a.latency_us(1.0));
+        vec![
+            (
+                "wire occupancy (simulator referee)",
+                format!("{:.4}", self.occupancy),
+            ),
+            ("collisions", self.collisions.to_string()),
+            ("control updates/s per joint", rates(&a.control_hz)),
+            ("telemetry samples/s per joint", rates(&a.telemetry_hz)),
+            (
+                "setpoint-to-wire latency",
+                format!(
+                    "p50 {:.2} ms  p99 {:.2} ms  max {:.2} ms  ({} of {} joint-writes carried; \
+                     the rest were superseded before a frame was due)",
+                    ms(p50),
+                    ms(p99),
+                    ms(max),
+                    a.latencies_us.len(),
+                    a.written
+                ),
+            ),
+            (
+                "daemon CPU (bus owner thread)",
+                format!(
+                    "{:.1} % of one core   [simulator thread {:.1} %, client thread {:.1} %]",
+                    self.cpu_owner * 100.0,
+                    self.cpu_sim * 100.0,
+                    self.cpu_client * 100.0
+                ),
+            ),
+        ]
+    }
+
+    /// Where the wire time went, and how precise the referee was.
+    fn context_rows(&self) -> Vec<(&'static str, String)> {
+        let a = &self.analysis;
+        let secs = a.window.as_secs_f64().max(f64::EPSILON);
+        let per_s = |n: u64| n as f64 / secs;
+        let gaps = |v: &[u64]| {
+            let share = v.iter().sum::<u64>() as f64 / 1e4 / secs;
+            let (p50, p99) = (quantile(v, 0.5), quantile(v, 0.99));
+            format!(
+                "{} gaps, p50 {p50} µs, p99 {p99} µs, {share:.1} % of the time",
+                v.len()
+            )
+        };
+        let d = &self.daemon;
+        vec![
+            (
+                "host frames/s on the wire",
+                format!(
+                    "broadcast {:.0}  control {:.0}  poll {:.0}",
+                    per_s(a.broadcasts),
+                    per_s(a.control_frames),
+                    per_s(a.polls)
+                ),
+            ),
+            ("idle line after a reply", gaps(&a.idle_after_reply_us)),
+            ("idle line after a host frame", gaps(&a.idle_after_host_us)),
+            (
+                "referee's reply delivery vs model",
+                format!(
+                    "p50 {:.1} µs late, p99 {:.1} µs late",
+                    self.referee_late_us[0], self.referee_late_us[1]
+                ),
+            ),
+            (
+                "the daemon's own view (last 1 s)",
+                format!(
+                    "utilisation {:.3}  timeouts/s {:.1}  reply timeout {:.1} ms  \
+                     setpoint age p50 {:.2} ms p99 {:.2} ms",
+                    d.wire_utilisation,
+                    d.timeouts_per_s,
+                    ms(d.reply_timeout_us),
+                    ms(d.setpoint_age_p50_us),
+                    ms(d.setpoint_age_p99_us)
+                ),
+            ),
+        ]
+    }
+}
+
 impl fmt::Display for Report {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let a = &self.analysis;
         writeln!(
             f,
-            "== {} joints at {} baud, client streaming all targets at {} Hz; {:.1} s measured after {:.1} s warm-up",
-            self.joints, self.baud, self.rate_hz, a.window.as_secs_f64(), self.warmup.as_secs_f64()
+            "== {} joints at {} baud, client streaming all targets at {} Hz; \
+             {:.1} s measured after {:.1} s warm-up",
+            self.joints,
+            self.baud,
+            self.rate_hz,
+            self.analysis.window.as_secs_f64(),
+            self.warmup.as_secs_f64()
         )?;
-        writeln!(
-            f,
-            "  wire occupancy (simulator referee)  {:.4}",
-            self.occupancy
-        )?;
-        writeln!(
-            f,
-            "  collisions                          {}",
-            self.collisions
-        )?;
-        let rates = |m| {
-            format!(
-                "min {:7.1}  mean {:7.1}  max {:7.1}",
-                Analysis::min_rate(m),
-                Analysis::mean_rate(m),
-                m.values().copied().fold(0.0, f64::max)
-            )
-        };
-        writeln!(
-            f,
-            "  control updates/s per joint         {}",
-            rates(&a.control_hz)
-        )?;
-        writeln!(
-            f,
-            "  telemetry samples/s per joint       {}",
-            rates(&a.telemetry_hz)
-        )?;
-        writeln!(
-            f,
-            "  setpoint-to-wire latency            p50 {:.2} ms  p99 {:.2} ms  max {:.2} ms  ({} of {} joint-writes carried; the rest were superseded before a frame was due)",
-            ms(a.latency_us(0.5)), ms(a.latency_us(0.99)), ms(a.latency_us(1.0)), a.latencies_us.len(), a.written
-        )?;
-        writeln!(
-            f,
-            "  daemon CPU (bus owner thread)       {:.1} % of one core   [simulator thread {:.1} %, client thread {:.1} %]",
-            self.cpu_owner * 100.0, self.cpu_sim * 100.0, self.cpu_client * 100.0
-        )?;
-        let secs = a.window.as_secs_f64().max(f64::EPSILON);
-        writeln!(
-            f,
-            "  host frames/s on the wire           broadcast {:.0}  control {:.0}  poll {:.0}",
-            a.broadcasts as f64 / secs,
-            a.control_frames as f64 / secs,
-            a.polls as f64 / secs
-        )?;
-        let gaps = |v: &[u64]| {
-            format!(
-                "{} gaps, p50 {} µs, p99 {} µs, {:.1} % of the time",
-                v.len(),
-                quantile(v, 0.5),
-                quantile(v, 0.99),
-                v.iter().sum::<u64>() as f64 / 1e4 / secs
-            )
-        };
-        writeln!(
-            f,
-            "  idle line after a reply             {}",
-            gaps(&a.idle_after_reply_us)
-        )?;
-        writeln!(
-            f,
-            "  idle line after a host frame        {}",
-            gaps(&a.idle_after_host_us)
-        )?;
-        writeln!(
-            f,
-            "  referee's reply delivery vs model   p50 {:.1} µs late, p99 {:.1} µs late",
-            self.referee_late_us[0], self.referee_late_us[1]
-        )?;
-        let d = &self.daemon;
-        writeln!(
-            f,
-            "  the daemon's own view (last 1 s)    utilisation {:.3}  timeouts/s {:.1}  reply timeout {:.1} ms  setpoint age p50 {:.2} ms p99 {:.2} ms",
-            d.wire_utilisation, d.timeouts_per_s, ms(d.reply_timeout_us), ms(d.setpoint_age_p50_us), ms(d.setpoint_age_p99_us)
-        )?;
+        for (label, value) in self.result_rows().into_iter().chain(self.context_rows()) {
+            writeln!(f, "  {label:<36}{value}")?;
+        }
         for (what, ok) in self.checks() {
             writeln!(f, "  [{}] {what}", if ok { "ok" } else { "FAIL" })?;
         }

@@ -45,7 +45,17 @@ impl Owner {
             }
         }
         self.switch_port(baud)?;
-        for &id in &ids {
+        self.confirm_level(&ids, level)?;
+        self.events.push(BusEvent::BaudChanged {
+            bus: self.cfg.name.clone(),
+            baud,
+        });
+        Ok(())
+    }
+
+    /// Every device answers at the new baud and reports the new level.
+    fn confirm_level(&mut self, ids: &[u8], level: BaudLevel) -> Result<(), BusError> {
+        for &id in ids {
             let info = Info04::from_bytes(&self.read_info(id, InfoBlock::Info04)?.data);
             if info.baud_level != level as u8 {
                 return Err(BusError::VerifyMismatch {
@@ -56,10 +66,6 @@ impl Owner {
                 });
             }
         }
-        self.events.push(BusEvent::BaudChanged {
-            bus: self.cfg.name.clone(),
-            baud,
-        });
         Ok(())
     }
 

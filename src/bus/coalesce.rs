@@ -66,7 +66,6 @@ pub struct Plan {
     pub unknown: Vec<u8>,
 }
 
-const GROUPS: [Group; 2] = [Group::Low, Group::High];
 const SLOTS: usize = 8;
 
 /// Plans frames for `pending`; `view(id)` is `None` for an id with no device.
@@ -83,40 +82,37 @@ pub fn plan(pending: &BTreeMap<u8, Pending>, view: impl Fn(u8) -> Option<SlotInf
             }
         }
     }
-    for group in GROUPS {
-        if let Some(frame) = position_broadcast(group, &left, &view) {
-            remove_carried(&mut left, &frame);
-            out.frames.push(frame);
-        } else if let Some(frame) = speed_broadcast(group, &left, &view) {
-            remove_carried(&mut left, &frame);
+    for group in [Group::Low, Group::High] {
+        let frame = position_broadcast(group, &left, &view)
+            .or_else(|| speed_broadcast(group, &left, &view));
+        if let Some(frame) = frame {
+            for (id, _) in &frame.carries {
+                left.remove(id);
+            }
             out.frames.push(frame);
         }
     }
-    for (id, (sp, _)) in left {
-        let s = sp.setpoint;
-        out.frames.push(Planned {
-            command: Command::Control(Control::set_ref(id, s.pos_ref, s.spd_ref)),
+    out.frames
+        .extend(left.into_iter().map(|(id, (sp, _))| Planned {
+            command: Command::Control(Control::set_ref(
+                id,
+                sp.setpoint.pos_ref,
+                sp.setpoint.spd_ref,
+            )),
             carries: vec![(id, sp)],
-        });
-    }
+        }));
     // Longest waiting first; on a tie (one write for every joint) the
     // joints served least recently, so two groups take turns.
-    let key = |f: &Planned| {
-        let waited = f.carries.iter().filter_map(|(id, _)| pending.get(id));
-        let served = f
-            .carries
-            .iter()
-            .map(|(id, _)| view(*id).and_then(|v| v.last_sent));
-        (waited.map(|p| p.since).min(), served.min().flatten())
-    };
-    out.frames.sort_by_cached_key(key);
+    out.frames.sort_by_cached_key(|f| {
+        let ids = || f.carries.iter().map(|(id, _)| *id);
+        let waited = ids()
+            .filter_map(|id| pending.get(&id))
+            .map(|p| p.since)
+            .min();
+        let served = ids().map(|id| view(id).and_then(|v| v.last_sent)).min();
+        (waited, served.flatten())
+    });
     out
-}
-
-fn remove_carried(left: &mut BTreeMap<u8, (StoredSetpoint, SlotInfo)>, frame: &Planned) {
-    for (id, _) in &frame.carries {
-        left.remove(id);
-    }
 }
 
 fn group_ids(group: Group) -> impl Iterator<Item = (usize, u8)> {
@@ -239,21 +235,26 @@ mod tests {
         assert_eq!(p.frames[0].carries.len(), 2);
     }
 
-    #[test]
-    fn never_commanded_joints_carry_their_measured_angle_never_zero() {
-        let t0 = Instant::now();
-        let view = |id: u8| {
+    /// Devices 1..=3; device 3 never commanded, with or without an angle.
+    fn third_uncommanded(measured: Option<i16>) -> impl Fn(u8) -> Option<SlotInfo> {
+        move |id| {
             (1..=3).contains(&id).then(|| SlotInfo {
                 target: (id != 3).then_some(Setpoint {
                     pos_ref: 1,
                     spd_ref: 9,
                 }),
-                measured: Some(-1234),
+                measured,
                 ..SlotInfo::default()
             })
-        };
+        }
+    }
+
+    #[test]
+    fn never_commanded_joints_carry_their_measured_angle_never_zero() {
+        let t0 = Instant::now();
         let pending = BTreeMap::from([(1, sp(50, 9, 1, t0)), (2, sp(60, 9, 1, t0))]);
-        let Command::BroadcastPos(b) = plan(&pending, view).frames[0].command else {
+        let p = plan(&pending, third_uncommanded(Some(-1234)));
+        let Command::BroadcastPos(b) = p.frames[0].command else {
             panic!("expected a broadcast")
         };
         assert_eq!(&b.pos_ref[..3], &[50, 60, -1234]);
@@ -262,17 +263,8 @@ mod tests {
     #[test]
     fn a_slot_with_no_target_and_no_angle_forbids_the_broadcast() {
         let t0 = Instant::now();
-        let view = |id: u8| {
-            (1..=3).contains(&id).then(|| SlotInfo {
-                target: (id != 3).then_some(Setpoint {
-                    pos_ref: 1,
-                    spd_ref: 9,
-                }),
-                ..SlotInfo::default()
-            })
-        };
         let pending = BTreeMap::from([(1, sp(50, 9, 1, t0)), (2, sp(60, 9, 1, t0))]);
-        let p = plan(&pending, view);
+        let p = plan(&pending, third_uncommanded(None));
         assert_eq!(p.frames.len(), 2);
         assert!(p
             .frames

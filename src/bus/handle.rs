@@ -11,10 +11,9 @@
 //! Locks here are `std::sync::Mutex`: no lock is held across an `.await`, and
 //! the owner is a plain OS thread.
 
-use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::{Duration, Instant, SystemTime};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use serde::Serialize;
 use tokio::sync::{broadcast, oneshot, watch};
@@ -22,94 +21,12 @@ use tokio::sync::{broadcast, oneshot, watch};
 use crate::protocol::{ConfigParam, CtrlMode, InfoBlock, JogDir, Reply};
 
 use super::error::BusError;
-
-/// A joint target as the wire carries it (raw Q7 degrees, raw Q15 speed).
-/// Units and soft limits are checked before a setpoint gets here.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-pub struct Setpoint {
-    pub pos_ref: i16,
-    pub spd_ref: i16,
-}
-
-/// One slot of the latest-value store.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct StoredSetpoint {
-    pub setpoint: Setpoint,
-    /// Store-wide sequence number of the write that produced this value.
-    pub seq: u64,
-    /// When the write was accepted (for setpoint-to-wire latency).
-    pub accepted: Instant,
-}
-
-/// Latest target per joint. Writers overwrite; the scheduler takes what
-/// changed since it last looked (`seq` above what it sent).
-#[derive(Debug, Default)]
-pub struct SetpointStore {
-    slots: Mutex<BTreeMap<u8, StoredSetpoint>>,
-    next_seq: AtomicU64,
-}
-
-impl SetpointStore {
-    fn lock(&self) -> MutexGuard<'_, BTreeMap<u8, StoredSetpoint>> {
-        self.slots.lock().unwrap_or_else(|p| p.into_inner())
-    }
-
-    /// Stores targets for several joints at once; returns the sequence number
-    /// they share.
-    pub fn set(&self, targets: &[(u8, Setpoint)]) -> u64 {
-        let seq = self.next_seq.fetch_add(1, Ordering::Relaxed) + 1;
-        let accepted = Instant::now();
-        let mut slots = self.lock();
-        for &(id, setpoint) in targets {
-            slots.insert(
-                id,
-                StoredSetpoint {
-                    setpoint,
-                    seq,
-                    accepted,
-                },
-            );
-        }
-        seq
-    }
-
-    /// The sequence number of the latest write (it may still be landing).
-    pub fn latest_seq(&self) -> u64 {
-        self.next_seq.load(Ordering::Acquire)
-    }
-
-    /// Every stored target with a sequence number above `after`.
-    pub fn changed_since(&self, after: u64) -> Vec<(u8, StoredSetpoint)> {
-        self.lock()
-            .iter()
-            .filter(|(_, s)| s.seq > after)
-            .map(|(id, s)| (*id, *s))
-            .collect()
-    }
-
-    pub fn get(&self, id: u8) -> Option<StoredSetpoint> {
-        self.lock().get(&id).copied()
-    }
-
-    /// Forgets targets (e-stop, disable): a later enable must not jump to a stale target.
-    pub fn clear(&self, ids: Option<&[u8]>) {
-        let mut slots = self.lock();
-        match ids {
-            None => slots.clear(),
-            Some(ids) => ids.iter().for_each(|id| {
-                slots.remove(id);
-            }),
-        }
-    }
-
-    /// Renames a joint's slot after an id change.
-    pub fn rename(&self, old: u8, new: u8) {
-        let mut slots = self.lock();
-        if let Some(s) = slots.remove(&old) {
-            slots.insert(new, s);
-        }
-    }
-}
+// The published state and the setpoint store live in their own files; they
+// are part of this contract and reachable under `bus::handle::` as before.
+pub use super::setpoints::{Setpoint, SetpointStore, StoredSetpoint};
+pub use super::state::{
+    BusCounters, BusEvent, BusRates, BusSnapshot, DeviceState, LinkState, LoggedFrame, WireAck,
+};
 
 /// Which devices a control request addresses.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -202,178 +119,8 @@ pub enum Request {
     },
 }
 
-/// Up, down (port lost, retrying), or not yet opened.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
-#[serde(tag = "state", rename_all = "snake_case")]
-pub enum LinkState {
-    Opening,
-    Up,
-    Down { reason: String, retry_in_ms: u64 },
-}
-
-/// Latest knowledge of one device.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct DeviceState {
-    pub dev_id: u8,
-    pub online: bool,
-    pub info01: Option<(crate::protocol::Info01, Instant)>,
-    pub info02: Option<(crate::protocol::Info02, Instant)>,
-    /// The mode the daemon last set (the device does not report it; power-up is position).
-    pub mode: Option<CtrlMode>,
-    /// The target last put on the wire.
-    pub target_sent: Option<Setpoint>,
-    pub missed_polls: u32,
-    /// Control updates and telemetry samples per second over the last second.
-    pub control_hz: f64,
-    pub telemetry_hz: f64,
-}
-
-/// Counters of one bus, monotonic since start (rates are derived by readers).
-#[derive(Debug, Clone, PartialEq, Default, Serialize)]
-pub struct BusCounters {
-    pub frames_tx_broadcast: u64,
-    pub frames_tx_control: u64,
-    pub frames_tx_config: u64,
-    pub frames_tx_jog: u64,
-    pub frames_rx: u64,
-    pub crc_errors: u64,
-    pub skipped_bytes: u64,
-    pub timeouts: u64,
-    pub retries: u64,
-    pub unsolicited: u64,
-    /// Wire time the daemon scheduled (frames + turnarounds), microseconds.
-    pub wire_busy_us: u64,
-    pub requests_queued: u64,
-    pub setpoints_sent: u64,
-    pub reconnects: u64,
-    /// Polls (INFO reads of the telemetry plan) sent.
-    pub polls: u64,
-    /// Setpoints dropped because their id has no device on the bus.
-    pub setpoints_dropped: u64,
-}
-
-/// Rates over the last statistics window (about one second).
-#[derive(Debug, Clone, PartialEq, Default, Serialize)]
-pub struct BusRates {
-    pub window_s: f64,
-    pub frames_tx_per_s: f64,
-    pub broadcast_per_s: f64,
-    pub control_per_s: f64,
-    /// Config frames: polls, reads and writes.
-    pub config_per_s: f64,
-    pub frames_rx_per_s: f64,
-    pub polls_per_s: f64,
-    pub timeouts_per_s: f64,
-    /// Share of the window the daemon had the line busy: its frames plus
-    /// each reply's turnaround and frame. The simulator is the referee.
-    pub wire_utilisation: f64,
-    /// Age of setpoints when the last byte of their frame is due on the wire, µs.
-    pub setpoint_age_p50_us: u64,
-    pub setpoint_age_p99_us: u64,
-    pub setpoint_age_max_us: u64,
-    /// The reply timeout now in force (request end to giving up), µs: the
-    /// model, the configured margin and what the host path's lateness adds.
-    pub reply_timeout_us: u64,
-}
-
-/// What the owner publishes after every change worth seeing.
-#[derive(Debug, Clone, PartialEq)]
-pub struct BusSnapshot {
-    pub name: String,
-    pub path: String,
-    pub baud: u32,
-    pub link: LinkState,
-    pub devices: BTreeMap<u8, DeviceState>,
-    pub counters: BusCounters,
-    /// Depth of the request queue when published.
-    pub queue_depth: usize,
-    pub published_at: Instant,
-    pub published_wall: SystemTime,
-    /// Rates over the last statistics window.
-    pub rates: BusRates,
-    /// What starting the owner and opening the port found worth telling
-    /// (no real-time priority, failed ioctls on a pty, an FTDI latency timer and its fix).
-    pub port_notes: Vec<String>,
-}
-
-impl BusSnapshot {
-    /// The snapshot of a bus not opened yet.
-    pub fn new(name: &str, path: &str, baud: u32) -> Self {
-        Self {
-            name: name.to_string(),
-            path: path.to_string(),
-            baud,
-            link: LinkState::Opening,
-            devices: BTreeMap::new(),
-            counters: BusCounters::default(),
-            queue_depth: 0,
-            published_at: Instant::now(),
-            published_wall: SystemTime::now(),
-            rates: BusRates::default(),
-            port_notes: Vec::new(),
-        }
-    }
-}
-
-/// Something subscribers should hear about as it happens.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(tag = "event", rename_all = "snake_case")]
-pub enum BusEvent {
-    DeviceOnline {
-        bus: String,
-        dev_id: u8,
-    },
-    DeviceOffline {
-        bus: String,
-        dev_id: u8,
-    },
-    Fault {
-        bus: String,
-        dev_id: u8,
-        err_code: u8,
-        name: &'static str,
-    },
-    BusUp {
-        bus: String,
-    },
-    BusDown {
-        bus: String,
-        reason: String,
-    },
-    IdChanged {
-        bus: String,
-        old: u8,
-        new: u8,
-    },
-    BaudChanged {
-        bus: String,
-        baud: u32,
-    },
-    Estop {
-        bus: String,
-    },
-}
-
-/// A frame seen on the wire, for the raw frame view.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct LoggedFrame {
-    pub at: SystemTime,
-    pub tx: bool,
-    pub bytes: [u8; 20],
-}
-
 /// How long a request may wait for the owner before the caller gives up.
 pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
-
-/// The latest setpoint write that reached the wire, for acknowledgements.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct WireAck {
-    /// Highest [`SetpointStore`] sequence number whose frame has been written
-    /// (every joint of that write is on the wire).
-    pub seq: u64,
-    /// When the last byte of that frame is due on the wire.
-    pub at: Option<Instant>,
-}
 
 /// State shared by every handle and the owner thread of one bus.
 pub struct BusShared {

@@ -175,6 +175,16 @@ impl Link {
         }
     }
 
+    /// One look at the port without waiting.
+    pub fn poll_now(&mut self, want: Option<Want>) -> io::Result<Option<(Reply, Instant)>> {
+        let n = match (self.up, self.port.as_mut()) {
+            (true, Some(port)) => port.read_timeout(&mut self.buf, std::time::Duration::ZERO)?,
+            _ => return Err(not_open()),
+        };
+        self.decoder.push(&self.buf[..n]);
+        Ok(self.take_decoded(want))
+    }
+
     /// Decodes buffered bytes; returns the wanted reply if it is among them.
     fn take_decoded(&mut self, want: Option<Want>) -> Option<(Reply, Instant)> {
         let mut found = None;

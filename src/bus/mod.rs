@@ -8,12 +8,15 @@
 //! channels and watches.
 //!
 //! # Layout
-//! - [`handle`]: the cloneable handle, setpoint store, requests, snapshots, events.
+//! - [`handle`]: the cloneable handle and the requests it sends (the API's contract).
+//! - [`setpoints`]: the latest-value store of joint targets.
+//! - [`state`]: what the owner publishes: snapshot, events, frame log, wire acks.
 //! - [`error`]: the bus errors, one HTTP status each.
 //! - [`config`]: [`BusConfig`]: port, baud, expected ids, poll plan, timing.
-//! - `owner`: the thread: priorities, e-stop, port loss and reopen, shutdown.
+//! - `owner`: the thread: priorities, e-stop, shutdown.
+//! - `recovery`: a lost port: bus down, devices offline, reopen with backoff.
 //! - `schedule`: wire primitives: setpoints out, polls, transactions.
-//! - `jobs`, `baud`: one-shot requests (enable, verified writes, id and baud change, scan).
+//! - `jobs`, `baud`, `scan`: one-shot requests (enable, verified writes, id and baud change, scan).
 //! - [`coalesce`]: pending setpoints → cheapest correct frames (pure).
 //! - [`poll`]: control budget and poll plan (pure).
 //! - [`wire`]: the line model: when frames leave, when a reply is overdue (pure).
@@ -31,8 +34,12 @@ mod jobs;
 mod link;
 mod owner;
 pub mod poll;
+mod recovery;
 pub mod registry;
+mod scan;
 mod schedule;
+pub mod setpoints;
+pub mod state;
 mod stats;
 pub mod verify;
 pub mod wire;

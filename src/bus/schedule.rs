@@ -6,7 +6,7 @@
 //! says the line is about to free; after a request that expects a reply,
 //! nothing is written until the reply arrives or its deadline passes.
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use crate::protocol::{Command, Config, ConfigParam, Reply, ReplyBody};
 
@@ -21,7 +21,11 @@ use super::owner::Owner;
 const MAX_INTERLEAVED: u32 = 2;
 /// How long before a reply is due the next control frame is planned:
 /// ample for planning, short enough that the setpoints it samples are fresh.
-const PREPARE_LEAD: std::time::Duration = std::time::Duration::from_micros(100);
+const PREPARE_LEAD: Duration = Duration::from_micros(100);
+/// How often a reply wait past its modelled time looks for an e-stop.
+const LATE_WAIT_SLICE: Duration = Duration::from_millis(1);
+/// How long before a reply is due the owner stops sleeping.
+const SPIN_BEFORE_DUE: Duration = Duration::from_micros(10);
 
 impl Owner {
     /// Listens until `at`; replies nobody waited for are taken in.
@@ -180,7 +184,6 @@ impl Owner {
             .send(&[Command::Config(cmd)])
             .map_err(|e| self.lost(e))?;
         let due = self.link.clock.reply_due(end);
-        let deadline = self.link.clock.reply_deadline(end);
         let mut got = Ok(None);
         if prepare {
             let prepare_at = due.checked_sub(PREPARE_LEAD).unwrap_or(due);
@@ -190,29 +193,85 @@ impl Owner {
             }
         }
         if matches!(got, Ok(None)) {
-            got = self.link.wait(Some(want), deadline);
+            got = self.wait_reply(want, due, self.link.clock.reply_deadline(end));
         }
         self.absorb_inbox();
-        match got.map_err(|e| self.lost(e))? {
-            Some((reply, at)) => {
-                self.link.clock.observe_reply(due, at);
-                // A RES from a new id (SET_ID) is not a device yet: the
-                // request renames the old entry itself.
-                let feeds = self.reg.get(reply.dev_id).is_some()
-                    || matches!(reply.body(), ReplyBody::Info01(_));
-                if feeds {
-                    self.reg.on_reply(&reply, at, true, &mut self.events);
-                }
-                Ok(Some(reply))
-            }
-            None => {
-                self.overdue = Some((want, due));
-                self.link.counters.timeouts += 1;
-                self.link.clock.line_free(Instant::now());
-                self.reg.on_missed(want.dev_id, &mut self.events);
-                Ok(None)
-            }
+        let got = got.map_err(|e| self.lost(e))?;
+        Ok(self.settle_exchange(got, want, due))
+    }
+
+    /// Waits for `want` until `deadline`. Past a frame after the modelled
+    /// reply the wait goes in short slices: a late or missing reply must not
+    /// hold an e-stop back, nor the snapshot.
+    fn wait_reply(
+        &mut self,
+        want: Want,
+        due: Instant,
+        deadline: Instant,
+    ) -> std::io::Result<Option<(Reply, Instant)>> {
+        let grace = due + self.link.clock.frame_time();
+        let mut got = self.spin_for_reply(want, due);
+        if matches!(got, Ok(None)) {
+            got = self.link.wait(Some(want), grace.min(deadline));
         }
+        while matches!(got, Ok(None)) && !self.estop_pending() {
+            let now = Instant::now();
+            if now >= deadline {
+                break;
+            }
+            self.housekeeping(now);
+            got = self
+                .link
+                .wait(Some(want), deadline.min(now + LATE_WAIT_SLICE));
+        }
+        got
+    }
+
+    /// Blocks until shortly before the reply is due, then looks at the port
+    /// without sleeping for `reply_spin_us`: a thread woken from sleep (on a
+    /// VM, a halted virtual CPU woken too) reacts tens of µs later, and every
+    /// poll's reply is followed by such a gap on the line.
+    fn spin_for_reply(
+        &mut self,
+        want: Want,
+        due: Instant,
+    ) -> std::io::Result<Option<(Reply, Instant)>> {
+        let spin = Duration::from_micros(self.cfg.timing.reply_spin_us);
+        if spin.is_zero() {
+            return Ok(None);
+        }
+        let spin_from = due.checked_sub(SPIN_BEFORE_DUE).unwrap_or(due);
+        let mut got = self.link.wait(Some(want), spin_from);
+        while matches!(got, Ok(None)) && Instant::now() < due + spin {
+            std::hint::spin_loop();
+            got = self.link.poll_now(Some(want));
+        }
+        got
+    }
+
+    /// Takes in the reply of an exchange, or counts it missing.
+    fn settle_exchange(
+        &mut self,
+        got: Option<(Reply, Instant)>,
+        want: Want,
+        due: Instant,
+    ) -> Option<Reply> {
+        let Some((reply, at)) = got else {
+            self.overdue = Some((want, due));
+            self.link.counters.timeouts += 1;
+            self.link.clock.line_free(Instant::now());
+            self.reg.on_missed(want.dev_id, &mut self.events);
+            return None;
+        };
+        self.link.clock.observe_reply(due, at);
+        // A RES from a new id (SET_ID) is not a device yet: the request
+        // renames the old entry itself.
+        let feeds =
+            self.reg.get(reply.dev_id).is_some() || matches!(reply.body(), ReplyBody::Info01(_));
+        if feeds {
+            self.reg.on_reply(&reply, at, true, &mut self.events);
+        }
+        Some(reply)
     }
 
     /// A request/response transaction of a one-shot request, retried

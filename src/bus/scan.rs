@@ -1,0 +1,66 @@
+//! Discovery by active scan: each id of a range is asked for INFO_01 once,
+//! again only if the line carried garbage meanwhile (its reply may have
+//! collided with a power-up announcement). A scan is a one-shot request
+//! like the others, so setpoints interleave with it and an e-stop ends it.
+
+use crate::protocol::command::index;
+use crate::protocol::{is_device_id, Config, InfoBlock};
+
+use super::error::BusError;
+use super::link::Want;
+use super::owner::Owner;
+
+impl Owner {
+    pub(super) fn scan(&mut self, first: u8, last: u8) -> Result<Vec<u8>, BusError> {
+        if !is_device_id(first) || !is_device_id(last) || first > last {
+            return Err(BusError::Invalid(format!(
+                "scan range {first}..={last} must lie within 1..=159"
+            )));
+        }
+        let mut found = Vec::new();
+        for id in first..=last {
+            if self.probe(id)? {
+                found.push(id);
+            }
+        }
+        Ok(found)
+    }
+
+    /// Asks `id` for INFO_01 once; again (up to the configured retries) only
+    /// if the line carried garbage meanwhile: silence means nobody is there,
+    /// garbage may be its reply colliding with an announcement.
+    fn probe(&mut self, id: u8) -> Result<bool, BusError> {
+        let want = Want {
+            dev_id: id,
+            index: index::INFO_01_R,
+        };
+        for _ in 0..=self.cfg.timing.retries {
+            let garbage = self.link.counters.skipped_bytes;
+            if self
+                .try_transact(Config::read(id, InfoBlock::Info01), want, 1)?
+                .is_some()
+            {
+                return Ok(true);
+            }
+            if self.link.counters.skipped_bytes == garbage {
+                return Ok(false);
+            }
+            self.link.counters.retries += 1;
+        }
+        Ok(false)
+    }
+
+    /// The scan of the configured range when no ids were given.
+    pub(super) fn startup_scan(&mut self) {
+        self.job_frames = 0;
+        let (first, last) = (self.cfg.scan_first, self.cfg.scan_last);
+        match self.scan(first, last) {
+            Ok(found) => {
+                tracing::info!(bus = %self.cfg.name, ?found, "scan {first}..={last} done");
+                self.needs_scan = false;
+            }
+            // Preempted or down: scan again once the bus runs.
+            Err(e) => tracing::info!(bus = %self.cfg.name, "scan interrupted: {e}"),
+        }
+    }
+}

@@ -1,0 +1,98 @@
+//! The latest-value store of joint targets: writers overwrite, the bus
+//! owner takes what changed since it last looked. A client faster than the
+//! wire overwrites; nothing queues.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Mutex, MutexGuard};
+use std::time::Instant;
+
+use serde::Serialize;
+
+/// A joint target as the wire carries it (raw Q7 degrees, raw Q15 speed).
+/// Units and soft limits are checked before a setpoint gets here.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct Setpoint {
+    pub pos_ref: i16,
+    pub spd_ref: i16,
+}
+
+/// One slot of the latest-value store.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StoredSetpoint {
+    pub setpoint: Setpoint,
+    /// Store-wide sequence number of the write that produced this value.
+    pub seq: u64,
+    /// When the write was accepted (for setpoint-to-wire latency).
+    pub accepted: Instant,
+}
+
+/// Latest target per joint. Writers overwrite; the scheduler takes what
+/// changed since it last looked (`seq` above what it sent).
+#[derive(Debug, Default)]
+pub struct SetpointStore {
+    slots: Mutex<BTreeMap<u8, StoredSetpoint>>,
+    next_seq: AtomicU64,
+}
+
+impl SetpointStore {
+    fn lock(&self) -> MutexGuard<'_, BTreeMap<u8, StoredSetpoint>> {
+        self.slots.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Stores targets for several joints at once; returns the sequence number
+    /// they share.
+    pub fn set(&self, targets: &[(u8, Setpoint)]) -> u64 {
+        let seq = self.next_seq.fetch_add(1, Ordering::Relaxed) + 1;
+        let accepted = Instant::now();
+        let mut slots = self.lock();
+        for &(id, setpoint) in targets {
+            slots.insert(
+                id,
+                StoredSetpoint {
+                    setpoint,
+                    seq,
+                    accepted,
+                },
+            );
+        }
+        seq
+    }
+
+    /// The sequence number of the latest write (it may still be landing).
+    pub fn latest_seq(&self) -> u64 {
+        self.next_seq.load(Ordering::Acquire)
+    }
+
+    /// Every stored target with a sequence number above `after`.
+    pub fn changed_since(&self, after: u64) -> Vec<(u8, StoredSetpoint)> {
+        self.lock()
+            .iter()
+            .filter(|(_, s)| s.seq > after)
+            .map(|(id, s)| (*id, *s))
+            .collect()
+    }
+
+    pub fn get(&self, id: u8) -> Option<StoredSetpoint> {
+        self.lock().get(&id).copied()
+    }
+
+    /// Forgets targets (e-stop, disable): a later enable must not jump to a stale target.
+    pub fn clear(&self, ids: Option<&[u8]>) {
+        let mut slots = self.lock();
+        match ids {
+            None => slots.clear(),
+            Some(ids) => ids.iter().for_each(|id| {
+                slots.remove(id);
+            }),
+        }
+    }
+
+    /// Renames a joint's slot after an id change.
+    pub fn rename(&self, old: u8, new: u8) {
+        let mut slots = self.lock();
+        if let Some(s) = slots.remove(&old) {
+            slots.insert(new, s);
+        }
+    }
+}
