@@ -17,6 +17,7 @@ pub mod analysis;
 pub mod client;
 pub mod cpu;
 pub mod report;
+pub mod ws;
 
 use std::time::{Duration, Instant};
 
@@ -63,6 +64,16 @@ pub struct BenchArgs {
     /// Print the frames around every collision the simulator saw.
     #[arg(long)]
     pub show_collisions: bool,
+    /// Measure the WebSocket path instead (issue 6): the engine alone, the
+    /// same stream through /api/v1/ws, then with telemetry clients added.
+    #[arg(long)]
+    pub ws: bool,
+    /// With --ws: telemetry clients subscribed to every joint.
+    #[arg(long, default_value_t = 100)]
+    pub telemetry_clients: usize,
+    /// With --ws: each telemetry client's rate, Hz.
+    #[arg(long, default_value_t = 100.0)]
+    pub telemetry_hz: f64,
 }
 
 /// Real-time priorities of the bench's threads (the owner's is its config default).
@@ -86,7 +97,7 @@ const ALIGN: Duration = Duration::from_millis(100);
 /// Bound on each setup step (discovery, enable); the steps end on the event.
 const SETUP_WAIT: Duration = Duration::from_secs(10);
 /// Thread name prefix of the simulator's runner.
-const SIM_THREAD: &str = "jointd-sim";
+pub(crate) const SIM_THREAD: &str = "jointd-sim";
 
 /// Runs every workload and prints its report; true when all met their targets.
 pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
@@ -104,6 +115,9 @@ pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
             format!("real-time priority: simulator {SIM_PRIORITY}, bus owner and client {CLIENT_PRIORITY}")
         }
     );
+    if args.ws {
+        return ws::run(args);
+    }
     let mut all = true;
     for &baud in &args.bauds {
         let report = workload(args, baud)?;
@@ -113,7 +127,7 @@ pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
     Ok(all)
 }
 
-fn load_average() -> String {
+pub(crate) fn load_average() -> String {
     std::fs::read_to_string("/proc/loadavg")
         .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
         .unwrap_or_else(|_| "unknown".into())
@@ -157,7 +171,7 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
 
 /// The simulator on a pty, the bus owner on its path (like hardware),
 /// every joint online, enabled and aligned.
-fn setup(
+pub(crate) fn setup(
     args: &BenchArgs,
     baud: u32,
     ids: &[u8],

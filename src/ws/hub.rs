@@ -19,6 +19,8 @@ pub struct WsHub {
     pub dropped_samples: AtomicU64,
     pub dropped_events: AtomicU64,
     pub dropped_replies: AtomicU64,
+    /// Telemetry JSON shared by connections with the same subscription.
+    pub fragments: super::telemetry::FragmentCache,
 }
 
 impl Default for WsHub {
@@ -30,6 +32,7 @@ impl Default for WsHub {
             dropped_samples: AtomicU64::new(0),
             dropped_events: AtomicU64::new(0),
             dropped_replies: AtomicU64::new(0),
+            fragments: Default::default(),
         }
     }
 }

@@ -178,7 +178,8 @@ pub enum ErrorCode {
     BusError,
 }
 
-/// A message to the client.
+/// A message to the client. (`telemetry` is written by the writer around
+/// shared JSON fragments: `{"type":"telemetry","seq","t_ms","dropped","joints"}`.)
 #[derive(Debug, Clone, Serialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum ServerMessage {
@@ -186,12 +187,6 @@ pub enum ServerMessage {
         protocol: &'static str,
         buses: Vec<BusInfo>,
         limits: Limits,
-    },
-    Telemetry {
-        seq: u64,
-        t_ms: u64,
-        dropped: u64,
-        joints: Vec<serde_json::Map<String, Value>>,
     },
     Event {
         seq: u64,

@@ -15,7 +15,7 @@ use tokio::time::{interval, Interval, MissedTickBehavior};
 use tokio_stream::wrappers::{errors::BroadcastStreamRecvError, BroadcastStream, WatchStream};
 
 use super::messages::{EventBody, ServerMessage};
-use super::telemetry::{joints, Subscription};
+use super::telemetry::Subscription;
 use crate::api::AppState;
 use crate::bus::handle::WireAck;
 
@@ -164,22 +164,35 @@ where
         };
         let now = Instant::now();
         self.count_skipped_ticks(&sub, now);
-        let mut list = Vec::new();
+        let mut parts: Vec<std::sync::Arc<str>> = Vec::with_capacity(sub.buses.len());
         for name in &sub.buses {
             if let Ok(bus) = self.state.bus(name) {
                 let names = |id| self.state.joint_name(name, id);
-                joints(&sub, &bus.snapshot(), names, now, &mut list);
+                let part = self
+                    .state
+                    .ws()
+                    .fragments
+                    .fragment(&sub, &bus.snapshot(), names, now);
+                if !part.is_empty() {
+                    parts.push(part);
+                }
             }
         }
         self.telemetry_seq += 1;
-        let msg = ServerMessage::Telemetry {
-            seq: self.telemetry_seq,
-            t_ms: unix_ms(),
-            dropped: std::mem::take(&mut self.dropped),
-            joints: list,
-        };
+        // Written by hand around the shared fragments, in the
+        // shape docs/websocket.md gives for `telemetry`.
+        let text = format!(
+            r#"{{"type":"telemetry","seq":{},"t_ms":{},"dropped":{},"joints":[{}]}}"#,
+            self.telemetry_seq,
+            unix_ms(),
+            std::mem::take(&mut self.dropped),
+            parts.join(",")
+        );
         self.last_sample = Some(now);
-        self.send(&msg).await
+        self.sink
+            .send(Message::Text(Utf8Bytes::from(text)))
+            .await
+            .is_ok()
     }
 
     /// Ticks that passed while the socket was not taking messages.

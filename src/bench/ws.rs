@@ -1,0 +1,545 @@
+//! `jointd bench --ws`: the WebSocket path, measured in one run against the
+//! engine alone (issue 6). Three phases share one simulated bus:
+//!
+//! 1. **engine**: the in-process client writes every joint's target at the
+//!    rate (the bus engine's own figure);
+//! 2. **ws**: the same stream from a WebSocket client through `/api/v1/ws`;
+//! 3. **ws + telemetry**: phase 2 with N telemetry clients subscribed to
+//!    every joint at their rate.
+//!
+//! Latency is client send → last byte of the carrying frame on the simulated
+//! wire (the angle encodes the write, as in `jointd bench`). Daemon CPU is the
+//! bus owner's and the HTTP/WebSocket runtime's threads; the clients' and the
+//! simulator's threads are reported apart. Clients are plain threads with a
+//! blocking socket, so their timing does not depend on tokio's timer.
+
+use std::fmt::Write as _;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use tungstenite::stream::MaybeTlsStream;
+use tungstenite::{Message, WebSocket};
+
+use super::analysis::{self, Analysis};
+use super::client::{angle_of, Client, Write, CLIENT_THREAD};
+use super::{cpu, BenchArgs, BenchError, SIM_THREAD};
+use crate::api::{app, state_for};
+use crate::bus::{BusHandle, THREAD_PREFIX};
+use crate::sim::{SimHandle, SimStats};
+
+/// Names of the threads the CPU report tells apart.
+const HTTP_THREAD: &str = "jointd-http";
+const TELEOP_THREAD: &str = "bench-ws";
+const TELEMETRY_THREAD: &str = "bench-tele";
+/// Speed limit the WebSocket client sends, rpm (the vendor's recommended maximum).
+const SPEED_RPM: f64 = 20_000.0;
+/// Worker threads of the HTTP/WebSocket runtime (the daemon's default on 2 cores).
+const HTTP_WORKERS: usize = 2;
+/// The issue's bounds: WebSocket path cost and load tolerance.
+const MAX_WS_COST_US: f64 = 500.0;
+const MAX_P99_US: u64 = 3000;
+const MAX_CHANGE: f64 = 0.10;
+
+type Socket = WebSocket<MaybeTlsStream<std::net::TcpStream>>;
+
+/// One measured window.
+struct Phase {
+    occupancy: f64,
+    collisions: u64,
+    analysis: Analysis,
+    cpu_daemon: f64,
+    cpu_clients: f64,
+    rss_mb: f64,
+    /// Telemetry messages/s per client (min, mean) and samples they skipped.
+    telemetry: Option<(f64, f64, u64)>,
+}
+
+pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
+    let baud = args.bauds.first().copied().unwrap_or(500_000);
+    let ids: Vec<u8> = (1..=args.joints).collect();
+    let period = Duration::from_secs_f64(1.0 / f64::from(args.rate_hz));
+    let (sim, bus, thread) = super::setup(args, baud, &ids)?;
+    let (runtime, url) = serve(bus.clone())?;
+    let phases = [
+        engine_phase(args, &sim, &bus, &ids, period)?,
+        ws_phase(args, &sim, &url, &ids, period, 0)?,
+        ws_phase(args, &sim, &url, &ids, period, args.telemetry_clients)?,
+    ];
+    runtime.shutdown_timeout(Duration::from_secs(1));
+    thread.stop();
+    sim.shutdown();
+    let (text, passed) = report(args, baud, &phases);
+    println!("{text}");
+    Ok(passed)
+}
+
+/// The REST/WebSocket app on 127.0.0.1:0 in its own named runtime.
+fn serve(bus: BusHandle) -> Result<(tokio::runtime::Runtime, String), BenchError> {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(HTTP_WORKERS)
+        .thread_name(HTTP_THREAD)
+        .enable_all()
+        .build()?;
+    let listener = std::net::TcpListener::bind("127.0.0.1:0")?;
+    listener.set_nonblocking(true)?;
+    let addr = listener.local_addr()?;
+    rt.spawn(async move {
+        match tokio::net::TcpListener::from_std(listener) {
+            Ok(l) => {
+                if let Err(e) = axum::serve(l, app(state_for(vec![bus]))).await {
+                    eprintln!("bench server: {e}");
+                }
+            }
+            Err(e) => eprintln!("bench server: {e}"),
+        }
+    });
+    Ok((rt, format!("ws://{addr}/api/v1/ws")))
+}
+
+fn engine_phase(
+    args: &BenchArgs,
+    sim: &SimHandle,
+    bus: &BusHandle,
+    ids: &[u8],
+    period: Duration,
+) -> Result<Phase, BenchError> {
+    let client = Client::start(bus.clone(), ids.to_vec(), period, 0)?;
+    let (w, ()) = window(args, sim, || (), || client.finish())?;
+    Ok(w.into_phase(ids, None))
+}
+
+fn ws_phase(
+    args: &BenchArgs,
+    sim: &SimHandle,
+    url: &str,
+    ids: &[u8],
+    period: Duration,
+    telemetry_clients: usize,
+) -> Result<Phase, BenchError> {
+    let watchers = Telemetry::start(url, telemetry_clients, args.telemetry_hz)?;
+    let teleop = Teleop::start(url, ids.to_vec(), period)?;
+    let (w, started) = window(args, sim, || watchers.counts(), || teleop.finish())?;
+    let telemetry = watchers.rates(&started, w.elapsed());
+    watchers.stop();
+    Ok(w.into_phase(ids, telemetry))
+}
+
+/// What a window's simulator, CPU and client recorded.
+struct Window {
+    stats: [SimStats; 2],
+    cpu: [Vec<Duration>; 2],
+    writes: Vec<Write>,
+    log: Vec<crate::sim::WireFrame>,
+    rss_mb: f64,
+}
+
+const CPU_THREADS: [&str; 6] = [
+    THREAD_PREFIX,
+    HTTP_THREAD,
+    SIM_THREAD,
+    CLIENT_THREAD,
+    TELEOP_THREAD,
+    TELEMETRY_THREAD,
+];
+
+fn cpu_now() -> Vec<Duration> {
+    let by = cpu::by_prefix(&CPU_THREADS);
+    CPU_THREADS
+        .iter()
+        .map(|p| by.get(*p).copied().unwrap_or_default())
+        .collect()
+}
+
+/// Warm-up, then the measured window. `mark` runs as the window opens
+/// (its result is returned beside the window); `finish` stops the client
+/// and returns its writes.
+fn window<T>(
+    args: &BenchArgs,
+    sim: &SimHandle,
+    mark: impl FnOnce() -> T,
+    finish: impl FnOnce() -> Vec<Write>,
+) -> Result<(Window, T), BenchError> {
+    std::thread::sleep(Duration::from_secs_f64(args.warmup));
+    sim.clear_frame_log();
+    let (s0, c0, marked) = (sim.stats(), cpu_now(), mark());
+    std::thread::sleep(Duration::from_secs_f64(args.seconds));
+    let (s1, c1) = (sim.stats(), cpu_now());
+    let writes = finish();
+    let w = Window {
+        stats: [s0, s1],
+        cpu: [c0, c1],
+        writes,
+        log: sim.frame_log(),
+        rss_mb: rss_mb(),
+    };
+    Ok((w, marked))
+}
+
+impl Window {
+    fn elapsed(&self) -> Duration {
+        self.stats[1].at.saturating_duration_since(self.stats[0].at)
+    }
+
+    fn share(&self, which: &[usize]) -> f64 {
+        let used: Duration = which
+            .iter()
+            .map(|&i| self.cpu[1][i].saturating_sub(self.cpu[0][i]))
+            .sum();
+        used.as_secs_f64() / self.elapsed().as_secs_f64().max(f64::EPSILON)
+    }
+
+    fn into_phase(self, ids: &[u8], telemetry: Option<(f64, f64, u64)>) -> Phase {
+        let (s0, s1) = (&self.stats[0], &self.stats[1]);
+        Phase {
+            occupancy: SimStats::occupancy(s0, s1),
+            collisions: s1.collisions.saturating_sub(s0.collisions),
+            analysis: analysis::analyse(&self.log, &self.writes, ids, s0.at, s1.at),
+            cpu_daemon: self.share(&[0, 1]),
+            cpu_clients: self.share(&[3, 4, 5]),
+            rss_mb: self.rss_mb,
+            telemetry,
+        }
+    }
+}
+
+/// Resident memory of the whole process (daemon, simulator and clients), MiB.
+fn rss_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmRSS:"))
+                .map(str::to_owned)
+        })
+        .and_then(|l| {
+            l.split_whitespace()
+                .nth(1)
+                .and_then(|kb| kb.parse::<f64>().ok())
+        })
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+fn connect(url: &str) -> Result<Socket, BenchError> {
+    let (mut ws, _) =
+        tungstenite::connect(url).map_err(|e| BenchError::Setup(format!("connect {url}: {e}")))?;
+    // The first message is `welcome`.
+    ws.read()
+        .map_err(|e| BenchError::Setup(format!("welcome: {e}")))?;
+    Ok(ws)
+}
+
+/// The teleoperation client: every joint's target each period, as one
+/// `setpoints` batch; the angle encodes the write's count.
+struct Teleop {
+    stop: Arc<AtomicBool>,
+    join: JoinHandle<Vec<Write>>,
+}
+
+impl Teleop {
+    fn start(url: &str, ids: Vec<u8>, period: Duration) -> Result<Teleop, BenchError> {
+        let ws = connect(url)?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let join = std::thread::Builder::new()
+            .name(TELEOP_THREAD.into())
+            .spawn(move || stream(ws, &ids, period, &flag))?;
+        Ok(Teleop { stop, join })
+    }
+
+    fn finish(self) -> Vec<Write> {
+        self.stop.store(true, Ordering::Release);
+        self.join.join().unwrap_or_default()
+    }
+}
+
+fn batch(ids: &[u8], n: u64) -> String {
+    let deg = f64::from(angle_of(n)) / 128.0;
+    let mut s = String::from(r#"{"type":"setpoints","targets":["#);
+    for (i, id) in ids.iter().enumerate() {
+        let sep = if i == 0 { "" } else { "," };
+        let _ = write!(
+            s,
+            r#"{sep}{{"dev_id":{id},"position_deg":{deg},"speed_rpm":{SPEED_RPM}}}"#
+        );
+    }
+    s.push_str("]}");
+    s
+}
+
+fn stream(mut ws: Socket, ids: &[u8], period: Duration, stop: &AtomicBool) -> Vec<Write> {
+    crate::bus::wire::precise_timers();
+    let mut writes = Vec::new();
+    let mut next = Instant::now();
+    while !stop.load(Ordering::Acquire) {
+        let n = writes.len() as u64;
+        let text = batch(ids, n);
+        let at = Instant::now();
+        if ws.send(Message::text(text)).is_err() {
+            break;
+        }
+        writes.push(Write { n, at });
+        next += period;
+        let now = Instant::now();
+        if next > now {
+            std::thread::sleep(next - now);
+        } else {
+            next = now;
+        }
+    }
+    let _ = ws.close(None);
+    writes
+}
+
+/// Telemetry clients: one thread each, counting telemetry messages and the
+/// samples the daemon reports they skipped.
+struct Telemetry {
+    stop: Arc<AtomicBool>,
+    counts: Arc<Vec<AtomicU64>>,
+    dropped: Arc<AtomicU64>,
+    joins: Vec<JoinHandle<()>>,
+}
+
+/// How long a telemetry client's read waits before it checks for stop.
+const READ_TIMEOUT: Duration = Duration::from_millis(100);
+
+impl Telemetry {
+    fn start(url: &str, n: usize, rate_hz: f64) -> Result<Telemetry, BenchError> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let counts = Arc::new((0..n).map(|_| AtomicU64::new(0)).collect::<Vec<_>>());
+        let dropped = Arc::new(AtomicU64::new(0));
+        let mut joins = Vec::with_capacity(n);
+        for i in 0..n {
+            let mut ws = connect(url)?;
+            if let MaybeTlsStream::Plain(s) = ws.get_ref() {
+                s.set_read_timeout(Some(READ_TIMEOUT))?;
+            }
+            let sub = format!(r#"{{"type":"subscribe","rate_hz":{rate_hz}}}"#);
+            ws.send(Message::text(sub))
+                .map_err(|e| BenchError::Setup(format!("subscribe: {e}")))?;
+            let (stop, counts, dropped) = (stop.clone(), counts.clone(), dropped.clone());
+            joins.push(
+                std::thread::Builder::new()
+                    .name(TELEMETRY_THREAD.into())
+                    .spawn(move || watch(ws, &counts[i], &dropped, &stop))?,
+            );
+        }
+        Ok(Telemetry {
+            stop,
+            counts,
+            dropped,
+            joins,
+        })
+    }
+
+    fn counts(&self) -> Vec<u64> {
+        self.counts
+            .iter()
+            .map(|c| c.load(Ordering::Relaxed))
+            .collect()
+    }
+
+    /// Per-client messages/s since `from` over `elapsed`: (min, mean), and skipped samples.
+    fn rates(&self, from: &[u64], elapsed: Duration) -> Option<(f64, f64, u64)> {
+        if from.is_empty() {
+            return None;
+        }
+        let secs = elapsed.as_secs_f64().max(f64::EPSILON);
+        let rates: Vec<f64> = self
+            .counts()
+            .iter()
+            .zip(from)
+            .map(|(b, a)| (b - a) as f64 / secs)
+            .collect();
+        let min = rates.iter().copied().fold(f64::INFINITY, f64::min);
+        let mean = rates.iter().sum::<f64>() / rates.len() as f64;
+        Some((min, mean, self.dropped.load(Ordering::Relaxed)))
+    }
+
+    fn stop(self) {
+        self.stop.store(true, Ordering::Release);
+        for j in self.joins {
+            let _ = j.join();
+        }
+    }
+}
+
+fn watch(mut ws: Socket, count: &AtomicU64, dropped: &AtomicU64, stop: &AtomicBool) {
+    while !stop.load(Ordering::Acquire) {
+        match ws.read() {
+            Ok(Message::Text(t)) if t.as_str().starts_with(r#"{"type":"telemetry""#) => {
+                count.fetch_add(1, Ordering::Relaxed);
+                dropped.fetch_add(dropped_field(t.as_str()), Ordering::Relaxed);
+            }
+            Ok(_) => {}
+            Err(tungstenite::Error::Io(e))
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
+            Err(_) => break,
+        }
+    }
+    let _ = ws.close(None);
+}
+
+/// The `dropped` count of a telemetry message, without parsing all of it.
+fn dropped_field(text: &str) -> u64 {
+    text.split_once(r#""dropped":"#)
+        .map(|(_, rest)| {
+            rest.chars()
+                .take_while(char::is_ascii_digit)
+                .collect::<String>()
+        })
+        .and_then(|d| d.parse().ok())
+        .unwrap_or(0)
+}
+
+fn report(args: &BenchArgs, baud: u32, p: &[Phase; 3]) -> (String, bool) {
+    let mut out = String::new();
+    let _ = writeln!(out, "WebSocket bench: {} joints at {baud} baud, every target at {} Hz; {:.0} s per phase after {:.0} s warm-up; load average {}",
+        args.joints, args.rate_hz, args.seconds, args.warmup, super::load_average());
+    let row = |out: &mut String, what: &str, f: &dyn Fn(&Phase) -> String| {
+        let _ = writeln!(
+            out,
+            "  {what:<44} {:>16} {:>16} {:>22}",
+            f(&p[0]),
+            f(&p[1]),
+            f(&p[2])
+        );
+    };
+    let _ = writeln!(
+        out,
+        "  {:<44} {:>16} {:>16} {:>22}",
+        "", "engine alone", "WebSocket", "WS + telemetry"
+    );
+    row(&mut out, "wire occupancy (referee)", &|x| {
+        format!("{:.3}", x.occupancy)
+    });
+    row(&mut out, "collisions", &|x| x.collisions.to_string());
+    row(&mut out, "control updates/s per joint (min)", &|x| {
+        format!("{:.0}", Analysis::min_rate(&x.analysis.control_hz))
+    });
+    row(&mut out, "telemetry samples/s per joint (min)", &|x| {
+        format!("{:.1}", Analysis::min_rate(&x.analysis.telemetry_hz))
+    });
+    row(&mut out, "setpoint-to-wire p50 / p99, µs", &|x| {
+        format!(
+            "{} / {}",
+            x.analysis.latency_us(0.5),
+            x.analysis.latency_us(0.99)
+        )
+    });
+    row(&mut out, "daemon CPU (bus owner + HTTP/WS), % core", &|x| {
+        format!("{:.1}", x.cpu_daemon * 100.0)
+    });
+    row(&mut out, "client threads CPU, % core", &|x| {
+        format!("{:.1}", x.cpu_clients * 100.0)
+    });
+    row(&mut out, "process RSS (daemon+sim+clients), MiB", &|x| {
+        format!("{:.1}", x.rss_mb)
+    });
+    row(&mut out, "telemetry msgs/s per client min / mean", &|x| {
+        x.telemetry
+            .map_or("-".into(), |(min, mean, _)| format!("{min:.0} / {mean:.0}"))
+    });
+    row(&mut out, "telemetry samples skipped (all clients)", &|x| {
+        x.telemetry.map_or("-".into(), |(_, _, d)| d.to_string())
+    });
+    let (checks, passed) = checks(&p[0], &p[1], &p[2]);
+    for (what, ok) in checks {
+        let _ = writeln!(out, "  [{}] {what}", if ok { "ok" } else { "MISS" });
+    }
+    (out, passed)
+}
+
+fn change(a: f64, b: f64) -> f64 {
+    if a == 0.0 {
+        0.0
+    } else {
+        (b - a) / a
+    }
+}
+
+fn checks(engine: &Phase, ws: &Phase, loaded: &Phase) -> (Vec<(String, bool)>, bool) {
+    let (e50, e99) = (
+        engine.analysis.latency_us(0.5) as f64,
+        engine.analysis.latency_us(0.99) as f64,
+    );
+    let (w50, w99) = (
+        ws.analysis.latency_us(0.5) as f64,
+        ws.analysis.latency_us(0.99) as f64,
+    );
+    let figures = |x: &Phase| {
+        [
+            ("occupancy", x.occupancy),
+            (
+                "min control rate",
+                Analysis::min_rate(&x.analysis.control_hz),
+            ),
+            (
+                "min telemetry rate",
+                Analysis::min_rate(&x.analysis.telemetry_hz),
+            ),
+        ]
+    };
+    let mut list = vec![
+        (
+            format!("WebSocket p99 {w99:.0} µs <= {MAX_P99_US} µs"),
+            ws.analysis.latency_us(0.99) <= MAX_P99_US,
+        ),
+        (
+            format!(
+                "WebSocket path cost p50 {:.0} µs, p99 {:.0} µs <= {MAX_WS_COST_US} µs",
+                w50 - e50,
+                w99 - e99
+            ),
+            w99 - e99 <= MAX_WS_COST_US,
+        ),
+        (
+            format!(
+                "no collisions ({} / {} / {})",
+                engine.collisions, ws.collisions, loaded.collisions
+            ),
+            engine.collisions + ws.collisions + loaded.collisions == 0,
+        ),
+    ];
+    for ((what, a), (_, b)) in figures(ws).into_iter().zip(figures(loaded)) {
+        let c = change(a, b);
+        list.push((
+            format!("{what} with telemetry clients: {:+.1} %", c * 100.0),
+            c.abs() <= MAX_CHANGE,
+        ));
+    }
+    let l99 = loaded.analysis.latency_us(0.99);
+    list.push((
+        format!("p99 with telemetry clients {l99} µs <= {MAX_P99_US} µs"),
+        l99 <= MAX_P99_US,
+    ));
+    let passed = list.iter().all(|(_, ok)| *ok);
+    (list, passed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn batches_encode_the_write_in_exact_degrees() {
+        let b = batch(&[1, 2], 3);
+        let v: serde_json::Value = serde_json::from_str(&b).expect("json");
+        let deg = v["targets"][1]["position_deg"].as_f64().expect("deg");
+        assert_eq!((deg * 128.0).round() as i16, angle_of(3));
+        assert_eq!(v["targets"].as_array().map(Vec::len), Some(2));
+    }
+
+    #[test]
+    fn dropped_is_read_from_the_message() {
+        assert_eq!(
+            dropped_field(r#"{"type":"telemetry","seq":4,"t_ms":1,"dropped":17,"joints":[]}"#),
+            17
+        );
+        assert_eq!(dropped_field(r#"{"type":"telemetry"}"#), 0);
+    }
+}
