@@ -42,6 +42,22 @@ pub struct BusConfig {
     pub poll: PollPlan,
     #[serde(default)]
     pub timing: Timing,
+    /// What the joints are left in when the daemon stops.
+    #[serde(default)]
+    pub on_shutdown: ShutdownState,
+}
+
+/// The safe state a bus leaves its joints in when the daemon stops.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ShutdownState {
+    /// Disable every joint (release the motors).
+    #[default]
+    Disable,
+    /// Leave enabled joints holding their last target (a grasp survives a
+    /// daemon restart). Modules that watch for a silent host may report
+    /// err 10, communication lost, once polling stops.
+    Hold,
 }
 
 fn default_scan_first() -> u8 {
@@ -142,6 +158,7 @@ impl BusConfig {
             scan_last: default_scan_last(),
             poll: PollPlan::default(),
             timing: Timing::default(),
+            on_shutdown: ShutdownState::default(),
         }
     }
 

@@ -264,11 +264,15 @@ impl Owner {
         self.acked_seq = self.seen_seq;
     }
 
-    /// Brings the joints to a safe state and closes the port.
+    /// Brings the joints to the configured safe state and closes the port.
     fn shutdown(&mut self) {
-        if let Ok(_sent) = self.disable_everything() {
+        let disable = self.cfg.on_shutdown == super::config::ShutdownState::Disable;
+        if disable && self.disable_everything().is_ok() {
             // Let the disable frames leave the wire before the port closes.
             let _ = self.wait_until(self.link.clock.free_at());
+        }
+        if !disable {
+            tracing::warn!(bus = %self.cfg.name, "stopping with the joints left enabled (on_shutdown = \"hold\")");
         }
         self.fail_queued(&BusError::Stopped);
         self.link.close();
