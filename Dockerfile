@@ -14,7 +14,7 @@ FROM ${RUST_IMAGE} AS build
 WORKDIR /src
 COPY . .
 RUN cargo build --release --locked --bin jointd \
- && install -m 0755 target/release/jointd /usr/local/bin/jointd
+ && install -s -m 0755 target/release/jointd /usr/local/bin/jointd
 
 FROM ${RUNTIME_IMAGE}
 # curl serves the health check; the jointd user is in dialout to open serial adapters.

@@ -67,7 +67,8 @@ if ! $BUILDAH inspect --type image localhost/jointd-rust:bookworm >/dev/null 2>&
 fi
 
 # 3. The Dockerfile itself, FROM images substituted.
-$BUILDAH bud --isolation chroot \
+# Docker format: the OCI format has no HEALTHCHECK.
+$BUILDAH bud --format docker --isolation chroot \
   --build-arg RUST_IMAGE=localhost/jointd-rust:bookworm \
   --build-arg RUNTIME_IMAGE=localhost/jointd-base:bookworm \
   -t "$IMAGE" .
