@@ -75,6 +75,26 @@ async fn an_unplugged_bus_goes_down_and_resumes_when_plugged_back() {
 }
 
 #[tokio::test]
+async fn one_bus_going_down_leaves_another_running() {
+    let a = rig(&[1, 2]);
+    let b = rig(&[1, 2]);
+    a.online(2).await;
+    b.online(2).await;
+    a.sim.inject(Fault::Unplug);
+    a.until("bus a down", |s| matches!(s.link, LinkState::Down { .. }))
+        .await;
+    let mark = Instant::now();
+    b.until("bus b polling on", |s| {
+        s.link == LinkState::Up
+            && s.devices
+                .values()
+                .all(|d| d.online && d.info02.is_some_and(|(_, at)| at > mark))
+    })
+    .await;
+    b.bus.read_info(2, InfoBlock::Info01).await.unwrap();
+}
+
+#[tokio::test]
 async fn a_bus_on_an_in_memory_line_survives_a_hangup() {
     let (sim, host) = Simulator::spawn_memory(sim_config(&[4, 5], BAUD)).unwrap();
     let mut cfg = BusConfig::new("mem", "memory", BAUD);

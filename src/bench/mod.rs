@@ -55,6 +55,10 @@ pub struct BenchArgs {
     /// The simulated devices' turnaround, µs.
     #[arg(long, default_value_t = 100)]
     pub turnaround_us: u64,
+    /// Overrides how long the owner looks at the port without sleeping once
+    /// a reply is due, µs (default: the bus default; 0 = always sleep).
+    #[arg(long)]
+    pub reply_spin_us: Option<u64>,
     /// Run every thread at normal priority. By default the simulator (the
     /// referee) runs at real-time priority 30, the bus owner at its default
     /// 10 and the client at 10, so other work on the machine does not decide
@@ -191,6 +195,9 @@ pub(crate) fn setup(
     cfg.timing.turnaround_us = args.turnaround_us;
     if args.no_rt {
         cfg.timing.rt_priority = 0;
+    }
+    if let Some(spin) = args.reply_spin_us {
+        cfg.timing.reply_spin_us = spin;
     }
     if let Some(share) = args.control_share {
         cfg.poll.control_share = share;

@@ -32,8 +32,31 @@ impl Owner {
                 self.cfg.name
             )));
         }
+        // Until every device and the port agree, an e-stop would not reach
+        // all of them: this phase (a few ms) runs to its end, then the e-stop.
+        self.exclusive = true;
+        let switched = self.switch_all(&ids, level, old_level, baud, old);
+        self.exclusive = false;
+        switched?;
+        self.confirm_level(&ids, level)?;
+        self.events.push(BusEvent::BaudChanged {
+            bus: self.cfg.name.clone(),
+            baud,
+        });
+        Ok(())
+    }
+
+    /// Each device, then the port; on a refusal the switched ones go back.
+    fn switch_all(
+        &mut self,
+        ids: &[u8],
+        level: BaudLevel,
+        old_level: BaudLevel,
+        baud: u32,
+        old: u32,
+    ) -> Result<(), BusError> {
         let mut touched = Vec::new();
-        for &id in &ids {
+        for &id in ids {
             let result = self.switch_device(id, level);
             // A timed-out device may have switched with its RES lost.
             if result.is_ok() || matches!(result, Err(BusError::Timeout { .. })) {
@@ -44,13 +67,7 @@ impl Owner {
                 return Err(e);
             }
         }
-        self.switch_port(baud)?;
-        self.confirm_level(&ids, level)?;
-        self.events.push(BusEvent::BaudChanged {
-            bus: self.cfg.name.clone(),
-            baud,
-        });
-        Ok(())
+        self.switch_port(baud)
     }
 
     /// Every device answers at the new baud and reports the new level.

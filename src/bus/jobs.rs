@@ -131,8 +131,13 @@ impl Owner {
     fn disable(&mut self, targets: Targets) -> Result<(), BusError> {
         let ids = self.resolve(&targets)?;
         self.job_send(&Self::control_frames(&targets, &ids, Control::disable))?;
-        self.shared.setpoints.clear(Some(&ids));
-        for &id in &ids {
+        // `0xFF` reached offline devices too: every target goes.
+        let cleared = match targets {
+            Targets::All => self.reg.ids(),
+            Targets::Ids(_) => ids.clone(),
+        };
+        self.shared.setpoints.clear(Some(&cleared));
+        for &id in &cleared {
             self.pending.remove(&id);
             self.reg.forget_target(id);
         }

@@ -60,6 +60,9 @@ pub(super) struct Owner {
     /// Frames the current one-shot request has written (setpoints may
     /// interleave after its first).
     pub(super) job_frames: u32,
+    /// The request is in a phase nothing may interrupt: devices and port at
+    /// different bauds, where an e-stop's frames would not reach everyone.
+    pub(super) exclusive: bool,
     /// The last read that timed out and when its reply was due: the reply
     /// may still come, late, and must not be taken for an announcement.
     pub(super) overdue: Option<(super::link::Want, Instant)>,
@@ -102,6 +105,7 @@ impl Owner {
             port_notes: Vec::new(),
             thread_notes: Vec::new(),
             job_frames: 0,
+            exclusive: false,
             overdue: None,
             prepared: None,
             backoff: BACKOFF_FIRST,

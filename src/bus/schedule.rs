@@ -322,13 +322,13 @@ impl Owner {
     /// Before each frame of a one-shot request: let waiting setpoints out
     /// (after its first frame), wait for the line, and give way to an e-stop.
     fn before_job_frame(&mut self) -> Result<(), BusError> {
-        if self.job_frames > 0 {
+        if self.job_frames > 0 && !self.exclusive {
             self.interleave_control()?;
         }
         self.job_frames += 1;
         self.wait_until(self.link.clock.write_at())?;
         self.housekeeping(Instant::now());
-        if self.estop_pending() {
+        if self.estop_pending() && !self.exclusive {
             return Err(BusError::Preempted);
         }
         if !self.link.is_up() {

@@ -64,10 +64,6 @@ impl WireClock {
         self.frame
     }
 
-    pub fn turnaround(&self) -> Duration {
-        self.turnaround
-    }
-
     /// When the line is free of every host frame handed over so far.
     pub fn free_at(&self) -> Instant {
         self.free_at
