@@ -73,7 +73,7 @@ impl Client {
 fn stream(bus: &BusHandle, ids: &[u8], period: Duration, stop: &AtomicBool) -> Vec<Write> {
     crate::bus::wire::precise_timers();
     let mut writes = Vec::new();
-    let mut next = Instant::now();
+    let mut pacer = Pacer::new(period);
     let mut targets: Vec<(u8, Setpoint)> = Vec::with_capacity(ids.len());
     while !stop.load(Ordering::Acquire) {
         let n = writes.len() as u64;
@@ -86,15 +86,36 @@ fn stream(bus: &BusHandle, ids: &[u8], period: Duration, stop: &AtomicBool) -> V
         let at = Instant::now();
         bus.set_targets(&targets);
         writes.push(Write { n, at });
-        next += period;
-        let now = Instant::now();
-        if next > now {
-            std::thread::sleep(next - now);
-        } else {
-            next = now;
-        }
+        pacer.wait();
     }
     writes
+}
+
+/// Paces a loop to absolute deadlines one period apart; a late iteration
+/// starts the schedule over instead of bursting to catch up.
+pub struct Pacer {
+    period: Duration,
+    next: Instant,
+}
+
+impl Pacer {
+    pub fn new(period: Duration) -> Self {
+        Self {
+            period,
+            next: Instant::now(),
+        }
+    }
+
+    /// Sleeps until the next deadline.
+    pub fn wait(&mut self) {
+        self.next += self.period;
+        let now = Instant::now();
+        if self.next > now {
+            std::thread::sleep(self.next - now);
+        } else {
+            self.next = now;
+        }
+    }
 }
 
 #[cfg(test)]

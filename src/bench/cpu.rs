@@ -31,6 +31,15 @@ pub fn by_prefix(prefixes: &[&str]) -> BTreeMap<String, Duration> {
     out
 }
 
+/// Run time per prefix, in the order of `prefixes` (zero for none running).
+pub fn snapshot(prefixes: &[&str]) -> Vec<Duration> {
+    let by = by_prefix(prefixes);
+    prefixes
+        .iter()
+        .map(|p| by.get(*p).copied().unwrap_or_default())
+        .collect()
+}
+
 /// Thread ids of this process whose name starts with `prefix`.
 pub fn tids(prefix: &str) -> Vec<libc::pid_t> {
     let Ok(tasks) = fs::read_dir("/proc/self/task") else {

@@ -298,11 +298,7 @@ fn wait_running(sim: &SimHandle, ids: &[u8]) -> Result<(), BenchError> {
 const CPU_THREADS: [&str; 3] = [THREAD_PREFIX, SIM_THREAD, CLIENT_THREAD];
 
 fn cpu_now() -> Vec<Duration> {
-    let by = cpu::by_prefix(&CPU_THREADS);
-    CPU_THREADS
-        .iter()
-        .map(|p| by.get(*p).copied().unwrap_or_default())
-        .collect()
+    cpu::snapshot(&CPU_THREADS)
 }
 
 fn cpu_share(a: &[Duration], b: &[Duration], s0: &SimStats, s1: &SimStats, i: usize) -> f64 {

@@ -23,7 +23,7 @@ use tungstenite::stream::MaybeTlsStream;
 use tungstenite::{Message, WebSocket};
 
 use super::analysis::{self, Analysis};
-use super::client::{angle_of, Client, Write, CLIENT_THREAD};
+use super::client::{angle_of, Client, Pacer, Write, CLIENT_THREAD};
 use super::{cpu, BenchArgs, BenchError, SIM_THREAD};
 use crate::api::{app, state_for};
 use crate::bus::{BusHandle, THREAD_PREFIX};
@@ -145,11 +145,7 @@ const CPU_THREADS: [&str; 6] = [
 ];
 
 fn cpu_now() -> Vec<Duration> {
-    let by = cpu::by_prefix(&CPU_THREADS);
-    CPU_THREADS
-        .iter()
-        .map(|p| by.get(*p).copied().unwrap_or_default())
-        .collect()
+    cpu::snapshot(&CPU_THREADS)
 }
 
 /// Warm-up, then the measured window. `mark` runs as the window opens
@@ -271,7 +267,7 @@ fn batch(ids: &[u8], n: u64) -> String {
 fn stream(mut ws: Socket, ids: &[u8], period: Duration, stop: &AtomicBool) -> Vec<Write> {
     crate::bus::wire::precise_timers();
     let mut writes = Vec::new();
-    let mut next = Instant::now();
+    let mut pacer = Pacer::new(period);
     while !stop.load(Ordering::Acquire) {
         let n = writes.len() as u64;
         let text = batch(ids, n);
@@ -280,13 +276,7 @@ fn stream(mut ws: Socket, ids: &[u8], period: Duration, stop: &AtomicBool) -> Ve
             break;
         }
         writes.push(Write { n, at });
-        next += period;
-        let now = Instant::now();
-        if next > now {
-            std::thread::sleep(next - now);
-        } else {
-            next = now;
-        }
+        pacer.wait();
     }
     let _ = ws.close(None);
     writes
