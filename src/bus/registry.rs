@@ -50,6 +50,11 @@ pub struct ReplyEffect {
     /// A known device announced itself again: it rebooted, lost its mode,
     /// its target and its enable.
     pub rebooted: bool,
+    /// The device just finished aligning (fsm align → run). A reference sent
+    /// while it aligned may not have taken (SPEC leaves it open; the
+    /// simulator holds its angle at the end of align), so its target must go
+    /// out again.
+    pub now_running: bool,
 }
 
 /// Every device of one bus, by id.
@@ -135,6 +140,8 @@ impl Registry {
                     entry.state.target_sent = None;
                 }
                 note_fault(bus, entry, &info, events);
+                let was_aligning = entry.state.info01.is_some_and(|(i, _)| i.fsm == fsm::ALIGN);
+                effect.now_running = was_aligning && info.fsm == fsm::RUN;
                 entry.state.info01 = Some((info, now));
                 entry.measured = Some((info.angle, now));
                 entry.telemetry_samples += u32::from(solicited);
@@ -269,6 +276,24 @@ fn note_fault(bus: &str, entry: &Entry, info: &Info01, events: &mut Vec<BusEvent
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_end_of_align_is_reported_once() {
+        let mut r = Registry::new("b".into(), 3);
+        let mut ev = Vec::new();
+        let now = Instant::now();
+        let run = r.on_reply(&info01(1, fsm::RUN, 0), now, true, &mut ev);
+        assert!(!run.now_running, "run without align before it");
+        r.on_reply(&info01(2, fsm::ALIGN, 0), now, true, &mut ev);
+        assert!(
+            r.on_reply(&info01(2, fsm::RUN, 0), now, true, &mut ev)
+                .now_running
+        );
+        assert!(
+            !r.on_reply(&info01(2, fsm::RUN, 0), now, true, &mut ev)
+                .now_running
+        );
+    }
 
     fn info01(id: u8, fsm: u8, err: u8) -> Reply {
         Reply::new(

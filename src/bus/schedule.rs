@@ -56,6 +56,7 @@ impl Owner {
                 self.pending.remove(&reply.dev_id);
                 self.prepared = None;
             }
+            self.resend_if_aligned(reply.dev_id, effect);
         }
         self.link.inbox = inbox;
         self.link.inbox.clear();
@@ -269,9 +270,23 @@ impl Owner {
         let feeds =
             self.reg.get(reply.dev_id).is_some() || matches!(reply.body(), ReplyBody::Info01(_));
         if feeds {
-            self.reg.on_reply(&reply, at, true, &mut self.events);
+            let effect = self.reg.on_reply(&reply, at, true, &mut self.events);
+            self.resend_if_aligned(reply.dev_id, effect);
         }
         Some(reply)
+    }
+
+    /// A joint that just finished aligning gets its latest target again,
+    /// through the store like any client write (a newer write wins).
+    fn resend_if_aligned(&mut self, id: u8, effect: super::registry::ReplyEffect) {
+        if !effect.now_running {
+            return;
+        }
+        if let Some(latest) = self.shared.setpoints.get(id) {
+            // What went out during align does not count as on the device.
+            self.reg.forget_target(id);
+            self.shared.setpoints.set(&[(id, latest.setpoint)]);
+        }
     }
 
     /// A request/response transaction of a one-shot request, retried
