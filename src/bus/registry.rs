@@ -279,7 +279,7 @@ mod tests {
 
     #[test]
     fn the_end_of_align_is_reported_once() {
-        let mut r = Registry::new("b".into(), 3);
+        let mut r = Registry::new("b", 3);
         let mut ev = Vec::new();
         let now = Instant::now();
         let run = r.on_reply(&info01(1, fsm::RUN, 0), now, true, &mut ev);
