@@ -81,12 +81,7 @@ pub fn encode_json(json: &str) -> Result<String, FrameCliError> {
     let value: serde_json::Value =
         serde_json::from_str(json).map_err(|e| FrameCliError::Json(e.into()))?;
     let cmd = command_from_json(&value).map_err(FrameCliError::Json)?;
-    Ok(cmd
-        .encode()
-        .iter()
-        .map(|b| format!("{b:02X}"))
-        .collect::<Vec<_>>()
-        .join(" "))
+    Ok(crate::frame_json::hex(&cmd.encode()))
 }
 
 #[cfg(test)]

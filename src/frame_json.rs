@@ -51,7 +51,8 @@ impl From<units::UnitError> for FrameJsonError {
     }
 }
 
-fn hex(bytes: &[u8]) -> String {
+/// Bytes as spaced upper-case hex (`55 AA 00 14`), as captures and the vectors write them.
+pub fn hex(bytes: &[u8]) -> String {
     bytes
         .iter()
         .map(|b| format!("{b:02X}"))

@@ -8,8 +8,8 @@ use std::time::Duration;
 use jointd::protocol::reply::{fault, fsm};
 use jointd::protocol::units::{angle_to_raw, speed_limit_to_raw, speed_to_raw};
 use jointd::protocol::{
-    BroadcastSpd, Command, Config, ConfigParam, Control, CtrlMode, FirmwareVersion, Group,
-    InfoBlock, ReplyBody, ALL_DEVICES,
+    BroadcastSpd, Command, ConfigParam, Control, CtrlMode, FirmwareVersion, Group, InfoBlock,
+    ReplyBody, ALL_DEVICES,
 };
 use jointd::sim::{Fault, SimHandle};
 use jointd::transport::is_hangup;
@@ -17,17 +17,6 @@ use jointd::transport::tty::TtyPort;
 use sim_support::*;
 
 const FW: FirmwareVersion = FirmwareVersion(128);
-
-fn write(host: &mut Host, dev_id: u8, param: ConfigParam) {
-    host.send(Command::Config(Config { dev_id, param }));
-}
-
-fn info01(host: &mut Host, id: u8) -> Option<jointd::protocol::Info01> {
-    match host.read(id, InfoBlock::Info01)?.body() {
-        ReplyBody::Info01(i) => Some(i),
-        _ => None,
-    }
-}
 
 fn booted(ids: &[u8]) -> (SimHandle, Host) {
     let (sim, mut host) = memory(config(ids));

@@ -9,22 +9,10 @@ use std::time::{Duration, Instant};
 use jointd::protocol::reply::fsm;
 use jointd::protocol::units::{angle_to_raw, output_deg_per_s, speed_limit_to_raw};
 use jointd::protocol::{
-    BaudLevel, Command, Config, ConfigParam, Control, FirmwareVersion, InfoBlock, Jog, JogDir,
-    ReplyBody,
+    BaudLevel, Command, ConfigParam, Control, FirmwareVersion, InfoBlock, Jog, JogDir, ReplyBody,
 };
 use jointd::sim::SimHandle;
 use sim_support::*;
-
-fn write(host: &mut Host, dev_id: u8, param: ConfigParam) {
-    host.send(Command::Config(Config { dev_id, param }));
-}
-
-fn info01(host: &mut Host, id: u8) -> Option<jointd::protocol::Info01> {
-    match host.read(id, InfoBlock::Info01)?.body() {
-        ReplyBody::Info01(i) => Some(i),
-        _ => None,
-    }
-}
 
 /// Enables `id` and waits for it to run.
 fn enable(sim: &SimHandle, host: &mut Host, id: u8) {

@@ -140,13 +140,7 @@ impl TargetView {
     }
 }
 
-pub fn hex(bytes: &[u8]) -> String {
-    bytes
-        .iter()
-        .map(|b| format!("{b:02X}"))
-        .collect::<Vec<_>>()
-        .join(" ")
-}
+pub use crate::frame_json::hex;
 
 fn age_ms(at: Instant, now: Instant) -> f64 {
     now.saturating_duration_since(at).as_secs_f64() * 1000.0

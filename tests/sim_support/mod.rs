@@ -4,7 +4,9 @@
 
 use std::time::{Duration, Instant};
 
-use jointd::protocol::{Command, Config, InfoBlock, Message, Reply, StreamDecoder};
+use jointd::protocol::{
+    Command, Config, ConfigParam, Info01, InfoBlock, Message, Reply, ReplyBody, StreamDecoder,
+};
 use jointd::sim::{SimConfig, SimHandle, Simulator};
 use jointd::transport::tty::TtyPort;
 use jointd::transport::Transport;
@@ -111,5 +113,18 @@ pub fn wait_for<T>(what: &str, mut f: impl FnMut() -> Option<T>) -> T {
         }
         assert!(Instant::now() < deadline, "timed out waiting for {what}");
         std::thread::yield_now();
+    }
+}
+
+/// Writes one parameter (no reply expected).
+pub fn write(host: &mut Host, dev_id: u8, param: ConfigParam) {
+    host.send(Command::Config(Config { dev_id, param }));
+}
+
+/// Reads device `id`'s INFO_01, if it answers one.
+pub fn info01(host: &mut Host, id: u8) -> Option<Info01> {
+    match host.read(id, InfoBlock::Info01)?.body() {
+        ReplyBody::Info01(i) => Some(i),
+        _ => None,
     }
 }
