@@ -161,20 +161,37 @@ fn a_position_target_is_reached_at_the_commanded_speed() {
             )
         })
         .collect();
-    let first = samples
+    // Cruise speed: least-squares slope over every sample between 9° and
+    // 21°, clear of the LPF's start and finish; one late-scheduled sample
+    // then moves the estimate little, where a two-point slope would not.
+    let cruise: Vec<(f64, f64)> = samples
         .iter()
-        .find(|(_, a)| *a >= 9.0)
-        .expect("sample near 9°");
-    let last = samples
-        .iter()
-        .find(|(_, a)| *a >= 21.0)
-        .expect("sample near 21°");
-    let speed = (last.1 - first.1) / (last.0 - first.0).as_secs_f64();
+        .filter(|(_, a)| (9.0..=21.0).contains(a))
+        .map(|(t, a)| (t.duration_since(samples[0].0).as_secs_f64(), *a))
+        .collect();
+    assert!(
+        cruise.len() >= 5,
+        "only {} samples while cruising",
+        cruise.len()
+    );
+    let speed = slope(&cruise);
     let want = output_deg_per_s(rpm);
     assert!(
         (speed - want).abs() < 0.05 * want,
         "cruise {speed:.1} °/s, commanded {want:.1} °/s"
     );
+}
+
+/// Least-squares slope of `y` over `x`.
+fn slope(points: &[(f64, f64)]) -> f64 {
+    let n = points.len() as f64;
+    let (mx, my) = points
+        .iter()
+        .fold((0.0, 0.0), |(sx, sy), (x, y)| (sx + x / n, sy + y / n));
+    let (cov, var) = points.iter().fold((0.0, 0.0), |(c, v), (x, y)| {
+        (c + (x - mx) * (y - my), v + (x - mx) * (x - mx))
+    });
+    cov / var
 }
 
 #[test]
