@@ -127,7 +127,10 @@ async fn estop_disables_everything_ahead_of_queued_requests() {
         .await;
 
     let report = rig.bus.estop().await.expect("e-stop");
-    assert_eq!(report.frames_sent, 5, "0xFF and each of the 4 devices");
+    assert_eq!(
+        report.frames_sent, 6,
+        "0xFF, each of the 4 devices, 0xFF again"
+    );
     assert_eq!(report.preempted_requests, 3);
     assert!(matches!(scan.await.unwrap(), Err(BusError::Preempted)));
     for r in reads {
@@ -149,6 +152,30 @@ async fn estop_disables_everything_ahead_of_queued_requests() {
     assert_eq!(
         first_disable,
         Some(Command::Control(Control::disable(0xFF)))
+    );
+    let disables = || -> Vec<Command> {
+        rig.host_frames()
+            .iter()
+            .filter_map(command)
+            .filter(|c| {
+                matches!(
+                    c,
+                    Command::Control(Control {
+                        op: ControlOp::Disable,
+                        ..
+                    })
+                )
+            })
+            .collect()
+    };
+    rig.sim_until("the whole disable sequence on the wire", |_| {
+        disables().len() >= 6
+    });
+    let disables = disables();
+    assert_eq!(
+        disables.last(),
+        Some(&Command::Control(Control::disable(0xFF))),
+        "the sequence ends with a second disable-all"
     );
     rig.assert_no_collisions();
     // The bus carries on after an e-stop.

@@ -251,8 +251,13 @@ impl Owner {
         if !self.link.is_up() {
             return Err(self.down_error());
         }
+        // 0xFF, each device, 0xFF again: an e-stop does not wait out a late
+        // reply, and one reply can collide with two consecutive host frames
+        // (0xFF and device 1's); it cannot reach both ends of the sequence,
+        // so every device hears at least one disable.
         let cmds: Vec<Command> = std::iter::once(ALL_DEVICES)
             .chain(self.reg.ids())
+            .chain(std::iter::once(ALL_DEVICES))
             .map(|id| Command::Control(Control::disable(id)))
             .collect();
         let handed = Instant::now();
