@@ -59,3 +59,24 @@ async fn expected_ids_are_polled_and_missing_ones_stay_offline() {
         .iter()
         .all(|f| matches!(f.dev_id, Some(1 | 2 | 3 | 7))));
 }
+
+#[tokio::test]
+async fn a_pty_refusing_rs485_mode_is_a_note_and_the_bus_runs() {
+    let rig = rig(&[1]);
+    let snap = rig.online(1).await;
+    assert!(
+        snap.port_notes
+            .iter()
+            .any(|n| n.contains("RS-485") && n.contains("not supported")),
+        "notes: {:?}",
+        snap.port_notes
+    );
+    // `rs485 = false` leaves the port alone: nothing asked, nothing to tell.
+    let rig = rig_with(sim_config(&[1], BAUD), |cfg| cfg.rs485 = false);
+    let snap = rig.online(1).await;
+    assert!(
+        snap.port_notes.iter().all(|n| !n.contains("RS-485")),
+        "notes: {:?}",
+        snap.port_notes
+    );
+}

@@ -45,6 +45,16 @@ pub struct BusConfig {
     /// What the joints are left in when the daemon stops.
     #[serde(default)]
     pub on_shutdown: ShutdownState,
+    /// Ask the kernel for RS-485 direction control (driver enable on RTS
+    /// while sending) where the serial driver offers it. A port already set
+    /// up for RS-485 (device tree, `setserial`) keeps its settings; `false`
+    /// leaves the port's RS-485 settings alone.
+    #[serde(default = "default_rs485")]
+    pub rs485: bool,
+}
+
+fn default_rs485() -> bool {
+    true
 }
 
 /// The safe state a bus leaves its joints in when the daemon stops.
@@ -158,6 +168,7 @@ impl BusConfig {
             scan_last: default_scan_last(),
             poll: PollPlan::default(),
             timing: Timing::default(),
+            rs485: default_rs485(),
             on_shutdown: ShutdownState::default(),
         }
     }

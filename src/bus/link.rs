@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::time::{Instant, SystemTime};
 
 use crate::protocol::{Command, FrameBytes, Message, Reply, StreamDecoder, FRAME_LEN};
-use crate::transport::tty::{PortNote, TtyPort};
+use crate::transport::tty::{PortNote, PortSetup, TtyPort};
 use crate::transport::Transport;
 
 use super::config::Timing;
@@ -19,10 +19,12 @@ use super::wire::WireClock;
 pub type Opener =
     Box<dyn FnMut(u32) -> io::Result<(Box<dyn Transport>, Vec<PortNote>)> + Send + 'static>;
 
-/// An opener for a tty path (USB adapter, pty, `/dev/serial/by-id` link).
-pub fn tty_opener(path: std::path::PathBuf) -> Opener {
+/// An opener for a tty path (USB adapter, pty, `/dev/serial/by-id` link);
+/// `rs485`: ask for the kernel's RS-485 direction control.
+pub fn tty_opener(path: std::path::PathBuf, rs485: bool) -> Opener {
     Box::new(move |baud| {
-        let (port, notes) = TtyPort::open(&path, baud)?;
+        let setup = PortSetup { rs485 };
+        let (port, notes) = TtyPort::open_with(&path, baud, setup)?;
         Ok((Box::new(port) as Box<dyn Transport>, notes))
     })
 }

@@ -98,7 +98,7 @@ impl Drop for BusThread {
 /// Starts the owner of a bus on a tty path. A port that cannot be opened
 /// yet is not an error: the bus starts down and keeps retrying.
 pub fn spawn_bus(cfg: BusConfig) -> Result<(BusHandle, BusThread), BusError> {
-    let opener = tty_opener(cfg.path.clone());
+    let opener = tty_opener(cfg.path.clone(), cfg.rs485);
     spawn(cfg, None, Some(opener))
 }
 

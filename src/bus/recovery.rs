@@ -124,6 +124,10 @@ impl Owner {
                     tracing::info!(bus = %self.cfg.name, "{what} not set ({error}); normal on a pty");
                     format!("{what} not supported: {error}")
                 }
+                PortNote::Rs485(text) => {
+                    tracing::info!(bus = %self.cfg.name, "{text}");
+                    text
+                }
                 PortNote::FtdiLatency { ms, fix } => {
                     self.link
                         .clock

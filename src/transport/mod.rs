@@ -9,8 +9,10 @@
 //! - [`Transport`]: what the bus owner needs from a line.
 //! - [`memory`]: an in-memory duplex pipe with a shared "baud" and hang-up.
 //! - [`tty`]: a tty opened raw at a baud rate (real adapter or pty slave).
+//! - [`rs485`]: the kernel's RS-485 direction control on a tty, where it exists.
 
 pub mod memory;
+pub mod rs485;
 pub mod tty;
 
 use std::io;

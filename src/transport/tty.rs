@@ -106,13 +106,32 @@ pub struct TtyPort {
 pub enum PortNote {
     /// `ASYNC_LOW_LATENCY` or RS-485 mode could not be set (normal on a pty).
     IoctlUnsupported { what: &'static str, error: String },
+    /// RS-485 direction control: what the driver was left doing.
+    Rs485(String),
     /// An FTDI adapter whose latency timer delays every reply.
     FtdiLatency { ms: u32, fix: String },
 }
 
+/// What to ask of a port besides raw mode and its baud.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PortSetup {
+    /// Turn on the kernel's RS-485 direction control if the driver has it.
+    pub rs485: bool,
+}
+
 impl TtyPort {
-    /// Opens `path` (any tty, a pty slave or a `/dev/serial/by-id` link included).
+    /// Opens `path` (any tty, a pty slave or a `/dev/serial/by-id` link
+    /// included) raw at `baud`, leaving its RS-485 settings alone.
     pub fn open(path: &Path, baud: u32) -> io::Result<(TtyPort, Vec<PortNote>)> {
+        Self::open_with(path, baud, PortSetup::default())
+    }
+
+    /// [`TtyPort::open`] with `setup`; what the port refuses becomes a note.
+    pub fn open_with(
+        path: &Path,
+        baud: u32,
+        setup: PortSetup,
+    ) -> io::Result<(TtyPort, Vec<PortNote>)> {
         let file = OpenOptions::new()
             .read(true)
             .write(true)
@@ -125,6 +144,9 @@ impl TtyPort {
                 what: "ASYNC_LOW_LATENCY",
                 error: e.to_string(),
             });
+        }
+        if setup.rs485 {
+            notes.extend(super::rs485::enable(&file));
         }
         notes.extend(ftdi_latency_note(path));
         Ok((
