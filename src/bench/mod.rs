@@ -10,12 +10,10 @@
 //! # Layout
 //! - [`client`]: the streaming client (angles encode which write they are).
 //! - [`analysis`]: per-joint rates and setpoint-to-wire latency from the frame log.
-//! - [`awake`]: `--keep-cpus-awake`, idle-class busy threads against vCPU wake-up latency.
 //! - [`cpu`]: per-thread CPU time by thread name.
 //! - [`report`]: the result, the targets, the printout.
 
 pub mod analysis;
-pub mod awake;
 pub mod client;
 pub mod cpu;
 pub mod report;
@@ -67,11 +65,6 @@ pub struct BenchArgs {
     /// the result.
     #[arg(long)]
     pub no_rt: bool,
-    /// Keep every CPU out of halt with one idle-class busy thread each, so
-    /// that a VM's vCPU wake-up latency (tens of µs per pty hop) does not
-    /// count as idle wire. Changes the machine, not the daemon; off by default.
-    #[arg(long)]
-    pub keep_cpus_awake: bool,
     /// Print the frames around every collision the simulator saw.
     #[arg(long)]
     pub show_collisions: bool,
@@ -126,13 +119,6 @@ pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
             format!("real-time priority: simulator {SIM_PRIORITY}, bus owner and client {CLIENT_PRIORITY}")
         }
     );
-    let _awake = match args.keep_cpus_awake {
-        true => {
-            println!("  CPUs kept out of halt by idle-class busy threads (--keep-cpus-awake)");
-            Some(awake::KeepAwake::start()?)
-        }
-        false => None,
-    };
     if args.ws {
         return ws::run(args);
     }
