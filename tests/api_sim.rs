@@ -226,6 +226,9 @@ async fn estop_preempts_a_busy_bus() {
     assert_eq!(report["bus"], BUS);
     assert_eq!(report["stopped"], true);
     assert!(report["frames_sent"].as_u64().unwrap() >= 1);
+    // Every joint was read back disabled before the call returned.
+    assert_eq!(report["confirmed"], json!([1, 2, 3, 4]), "{report}");
+    assert_eq!(report["unconfirmed"], json!([]));
     for id in 1..=4 {
         b.wait_fsm(id, fsm::READY).await;
         assert!(!b.sim.device(id).unwrap().enabled);

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use bus_support::*;
 use jointd::bus::{BusError, Targets};
 use jointd::protocol::{Command, Control, ControlOp, Frame, Group, InfoBlock};
-use jointd::sim::WireFrame;
+use jointd::sim::{Fault, WireFrame};
 
 fn command(f: &WireFrame) -> Option<Command> {
     Frame::decode(&f.bytes)
@@ -186,4 +186,57 @@ async fn estop_disables_everything_ahead_of_queued_requests() {
     .await
     .expect("in time")
     .expect("reads work again");
+}
+
+fn disables_of(rig: &Rig, id: u8) -> usize {
+    rig.host_frames()
+        .iter()
+        .filter_map(command)
+        .filter(|c| {
+            matches!(c, Command::Control(Control { dev_id, op: ControlOp::Disable, .. }) if *dev_id == id)
+        })
+        .count()
+}
+
+#[tokio::test]
+async fn estop_reads_every_device_back_and_disables_again_one_that_missed_it() {
+    let rig = rig(&[1, 2, 3, 4]);
+    rig.online(4).await;
+    rig.enable_all(4).await;
+    // Device 3 misses the e-stop's three disable frames (0xFF, its own, 0xFF).
+    rig.sim.inject(Fault::MissControl {
+        dev_id: 3,
+        count: 3,
+    });
+    let report = rig.bus.estop().await.expect("e-stop");
+    assert_eq!(report.disabled_again, vec![3], "{report:?}");
+    assert_eq!(report.confirmed, vec![1, 2, 3, 4], "{report:?}");
+    assert!(report.still_enabled.is_empty() && report.unconfirmed.is_empty());
+    rig.sim_until("every device disabled", |sim| {
+        (1..=4).all(|id| sim.device(id).is_some_and(|d| !d.enabled))
+    });
+    assert_eq!(
+        disables_of(&rig, 3),
+        2,
+        "its own in the sequence, then again"
+    );
+    assert_eq!(disables_of(&rig, 2), 1);
+    rig.assert_no_collisions();
+}
+
+#[tokio::test]
+async fn a_device_deaf_to_every_disable_is_reported_still_enabled() {
+    let rig = rig(&[1, 2, 3]);
+    rig.online(3).await;
+    rig.enable_all(3).await;
+    rig.sim.inject(Fault::MissControl {
+        dev_id: 2,
+        count: u32::MAX,
+    });
+    let report = rig.bus.estop().await.expect("e-stop frames written");
+    assert_eq!(report.still_enabled, vec![2], "{report:?}");
+    assert_eq!(report.disabled_again, vec![2]);
+    assert_eq!(report.confirmed, vec![1, 3]);
+    // The report tells the truth: the simulated joint is still enabled.
+    assert!(rig.sim.device(2).is_some_and(|d| d.enabled));
 }

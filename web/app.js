@@ -387,7 +387,15 @@ setInterval(() => { if ($("#frames-live").checked) loadFrames(); }, 1000);
 
 $("#estop").onclick = async () => {
   const r = await act(null, () => api("POST", "estop"));
-  if (r) say(`Emergency stop: ${r.stopped ? "every bus stopped" : "NOT every bus stopped — see the bus list"} in ${r.elapsed_us} µs.`, r.stopped ? "info" : "error");
+  if (!r) return;
+  const all = (key) => r.buses.flatMap((b) => b[key]);
+  const unconfirmed = all("unconfirmed");
+  const again = all("disabled_again");
+  let text = `Emergency stop: ${r.stopped ? "every bus stopped" : "NOT every bus stopped — see the bus list"} in ${r.elapsed_us} µs; ${all("confirmed").length} joint(s) read back disabled`;
+  if (again.length) text += `; disabled again: ${again.join(", ")}`;
+  if (all("still_enabled").length) text += `; STILL ENABLED: ${all("still_enabled").join(", ")}`;
+  if (unconfirmed.length) text += `; not confirmed (no answer): ${unconfirmed.join(", ")}`;
+  say(text + ".", r.stopped && !unconfirmed.length ? "info" : "error");
 };
 
 // ---------------------------------------------------------------- start

@@ -1,6 +1,7 @@
 //! Emergency stop: one call disables every device on every bus at once,
-//! ahead of anything queued, and reports what it did. Buses are stopped
-//! concurrently, not one after another.
+//! ahead of anything queued, and reports what it did: which devices read
+//! back stopped, which needed a second disable, which could not be read.
+//! Buses are stopped concurrently, not one after another.
 
 use std::time::Instant;
 
@@ -28,7 +29,8 @@ pub fn router() -> OpenApiRouter<AppState> {
 pub struct BusStop {
     #[schema(example = "sim0")]
     pub bus: String,
-    /// True when every disable frame was written.
+    /// True when every disable frame was written and no device read back
+    /// still driving its motor.
     #[schema(example = true)]
     pub stopped: bool,
     /// Disable frames written (`0xFF` first, then one per known device).
@@ -40,6 +42,20 @@ pub struct BusStop {
     /// From the call to the first disable frame handed to the port, µs.
     #[schema(example = 180)]
     pub latency_us: u64,
+    /// Devices read back afterwards not driving their motor.
+    #[schema(example = json!([1, 2, 3]))]
+    pub confirmed: Vec<u8>,
+    /// Devices read back still driving, which were sent their own disable
+    /// again (each is then in `confirmed` or `still_enabled`).
+    #[schema(example = json!([]))]
+    pub disabled_again: Vec<u8>,
+    /// Devices still driving after that second disable: NOT stopped.
+    #[schema(example = json!([]))]
+    pub still_enabled: Vec<u8>,
+    /// Devices whose state could not be read back (offline or silent):
+    /// they were sent the disables, but nothing confirms they stopped.
+    #[schema(example = json!([]))]
+    pub unconfirmed: Vec<u8>,
     /// Why this bus could not be stopped, if it could not.
     pub error: Option<String>,
 }
@@ -58,11 +74,20 @@ async fn stop_one(bus: BusHandle) -> BusStop {
     match bus.estop().await {
         Ok(r) => BusStop {
             bus: r.bus,
-            stopped: true,
+            stopped: r.still_enabled.is_empty(),
             frames_sent: r.frames_sent,
             preempted_requests: r.preempted_requests,
             latency_us: r.latency_us,
-            error: None,
+            error: (!r.still_enabled.is_empty()).then(|| {
+                format!(
+                    "device(s) {:?} still enabled after a second disable",
+                    r.still_enabled
+                )
+            }),
+            confirmed: r.confirmed,
+            disabled_again: r.disabled_again,
+            still_enabled: r.still_enabled,
+            unconfirmed: r.unconfirmed,
         },
         Err(e) => BusStop {
             bus: bus.name().to_owned(),
@@ -71,6 +96,10 @@ async fn stop_one(bus: BusHandle) -> BusStop {
             preempted_requests: 0,
             latency_us: 0,
             error: Some(e.to_string()),
+            confirmed: Vec::new(),
+            disabled_again: Vec::new(),
+            still_enabled: Vec::new(),
+            unconfirmed: Vec::new(),
         },
     }
 }

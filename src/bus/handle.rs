@@ -47,15 +47,24 @@ pub struct WriteOutcome {
 }
 
 /// What an e-stop did.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct EstopReport {
     pub bus: String,
-    /// Disable frames written (`0xFF` first, then one per known device).
+    /// Disable frames written (`0xFF` first, then one per known device, then `0xFF`).
     pub frames_sent: u32,
     /// Queued requests failed because the e-stop preempted them.
     pub preempted_requests: u32,
     /// Time from the call to the first disable frame being handed to the port.
     pub latency_us: u64,
+    /// Devices read back not driving their motor.
+    pub confirmed: Vec<u8>,
+    /// Devices read back still driving, sent a disable of their own again
+    /// (they are also in `confirmed` or `still_enabled`).
+    pub disabled_again: Vec<u8>,
+    /// Devices still driving after the second disable: not stopped.
+    pub still_enabled: Vec<u8>,
+    /// Devices whose state could not be read back (offline or silent).
+    pub unconfirmed: Vec<u8>,
 }
 
 type Reply1<T> = oneshot::Sender<Result<T, BusError>>;

@@ -13,7 +13,8 @@
 //! - [`state`]: what the owner publishes: snapshot, events, frame log, wire acks.
 //! - [`error`]: the bus errors, one HTTP status each.
 //! - [`config`]: [`BusConfig`]: port, baud, expected ids, poll plan, timing.
-//! - `owner`: the thread: priorities, e-stop, shutdown.
+//! - `owner`: the thread: priorities, the order of work, shutdown.
+//! - `estop`: the e-stop: disable frames first, then a read-back of every device.
 //! - `recovery`: a lost port: bus down, devices offline, reopen with backoff.
 //! - `schedule`: wire primitives: setpoints out, polls, transactions.
 //! - `jobs`, `baud`, `scan`: one-shot requests (enable, verified writes, id and baud change, scan).
@@ -29,6 +30,7 @@ mod baud;
 pub mod coalesce;
 pub mod config;
 pub mod error;
+mod estop;
 pub mod handle;
 mod jobs;
 mod link;

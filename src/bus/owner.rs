@@ -14,12 +14,10 @@ use std::sync::mpsc::Receiver;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crate::protocol::{Command, Control, ALL_DEVICES};
-
 use super::coalesce::Pending;
 use super::config::BusConfig;
 use super::error::BusError;
-use super::handle::{BusEvent, BusShared, EstopReport, LinkState, Request};
+use super::handle::{BusEvent, BusShared, LinkState, Request};
 use super::link::Link;
 use super::poll::{ControlBudget, PollPlanner};
 use super::recovery::BACKOFF_FIRST;
@@ -45,7 +43,7 @@ pub(super) struct Owner {
     /// Highest store sequence number taken into `pending`.
     pub(super) seen_seq: u64,
     pub(super) acked_seq: u64,
-    estop_seen: u64,
+    pub(super) estop_seen: u64,
     pub(super) events: Vec<BusEvent>,
     pub(super) stats: Stats,
     pub(super) link_state: LinkState,
@@ -208,61 +206,6 @@ impl Owner {
             n += 1;
         }
         n
-    }
-
-    /// Disables every device ahead of everything queued (SPEC errata 3:
-    /// standard control frames, `0xFF` first, then each known device).
-    pub(super) fn estop(&mut self) {
-        let generation = self.shared.estop_generation.load(Ordering::SeqCst);
-        self.estop_seen = generation;
-        let called = self
-            .shared
-            .estop_called
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .take();
-        let sent = self.disable_everything();
-        let preempted = self.fail_queued(&BusError::Preempted);
-        let result = sent.map(|(frames_sent, handed)| EstopReport {
-            bus: self.cfg.name.clone(),
-            frames_sent,
-            preempted_requests: preempted,
-            latency_us: called.map_or(0, |c| {
-                handed.saturating_duration_since(c).as_micros() as u64
-            }),
-        });
-        self.events.push(BusEvent::Estop {
-            bus: self.cfg.name.clone(),
-        });
-        self.shared
-            .estop_done
-            .send_replace((generation, Some(result)));
-        self.publish(Instant::now());
-    }
-
-    /// Writes the disable frames and forgets every setpoint; returns the
-    /// frame count and when they were handed to the port.
-    fn disable_everything(&mut self) -> Result<(u32, Instant), BusError> {
-        self.shared.setpoints.clear(None);
-        self.drop_setpoints();
-        for id in self.reg.ids() {
-            self.reg.forget_target(id);
-        }
-        if !self.link.is_up() {
-            return Err(self.down_error());
-        }
-        // 0xFF, each device, 0xFF again: an e-stop does not wait out a late
-        // reply, and one reply can collide with two consecutive host frames
-        // (0xFF and device 1's); it cannot reach both ends of the sequence,
-        // so every device hears at least one disable.
-        let cmds: Vec<Command> = std::iter::once(ALL_DEVICES)
-            .chain(self.reg.ids())
-            .chain(std::iter::once(ALL_DEVICES))
-            .map(|id| Command::Control(Control::disable(id)))
-            .collect();
-        let handed = Instant::now();
-        self.link.send(&cmds).map_err(|e| self.lost(e))?;
-        Ok((cmds.len() as u32, handed))
     }
 
     /// Forgets pending setpoints and skips what the store holds now.

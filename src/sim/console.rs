@@ -16,7 +16,7 @@ use super::{Fault, SimHandle};
 
 pub const HELP: &str = "commands: unplug | replug | clear | stats | devices | help | \
 power-cycle ID | under-voltage ID on|off | stall ID [DEG] | corrupt RATE | \
-drop RATE [ID] | extra-turnaround MICROS";
+drop RATE [ID] | extra-turnaround MICROS | miss-control ID COUNT";
 
 #[derive(Debug, Clone, PartialEq)]
 pub enum ConsoleCmd {
@@ -69,6 +69,10 @@ pub fn parse(line: &str) -> Result<ConsoleCmd, String> {
         "extra-turnaround" => {
             Fault::ExtraTurnaround(Duration::from_micros(num(words.next(), "microseconds")?))
         }
+        "miss-control" => Fault::MissControl {
+            dev_id: num(words.next(), "device id")?,
+            count: num(words.next(), "frame count")?,
+        },
         other => return Err(format!("unknown command `{other}`; {HELP}")),
     };
     Ok(ConsoleCmd::Fault(fault))
@@ -132,6 +136,14 @@ mod tests {
                 on: false
             }))
         );
+        assert_eq!(
+            parse("miss-control 4 3"),
+            Ok(ConsoleCmd::Fault(Fault::MissControl {
+                dev_id: 4,
+                count: 3
+            }))
+        );
+        assert!(parse("miss-control 4").is_err());
         assert_eq!(parse("stats"), Ok(ConsoleCmd::Stats));
         assert!(parse("stall x").is_err());
         assert!(parse("explode").is_err());

@@ -8,7 +8,7 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use crate::protocol::{BaudLevel, Command, Frame, FrameBytes, StreamDecoder};
+use crate::protocol::{BaudLevel, Command, Control, Frame, FrameBytes, StreamDecoder, ALL_DEVICES};
 
 use super::config::{SimConfig, SimError};
 use super::device::Device;
@@ -209,6 +209,13 @@ impl Engine {
                 mismatch = true;
                 continue;
             }
+            let for_it = |c: &Control| c.dev_id == dev.id || c.dev_id == ALL_DEVICES;
+            if let Command::Control(c) = cmd {
+                if for_it(c) && self.faults.misses_control(dev.id) {
+                    self.stats.missed_control_frames += 1;
+                    continue;
+                }
+            }
             let outcome = dev.handle(cmd, h.end);
             persist |= outcome.persist;
             let Some(reply) = outcome.reply else { continue };
@@ -315,6 +322,9 @@ impl Engine {
             Fault::CorruptRate(r) => self.faults.corrupt_rate = r.clamp(0.0, 1.0),
             Fault::DropReplies { dev_id, rate } => self.faults.set_drop(dev_id, rate),
             Fault::ExtraTurnaround(d) => self.faults.extra_turnaround = d,
+            Fault::MissControl { dev_id, count } => {
+                self.faults.miss_control.insert(dev_id, count);
+            }
             Fault::Stall { dev_id, at_deg } => self.each(dev_id, |d| d.set_obstacle(at_deg, now)),
             Fault::PowerCycle { dev_id } => self.each(dev_id, |d| d.power_up(now, Duration::ZERO)),
             Fault::UnderVoltage { dev_id, on } => {

@@ -20,6 +20,13 @@ pub enum Fault {
     },
     /// Added to every device's turnaround.
     ExtraTurnaround(Duration),
+    /// The device's receiver misses the next `count` control frames meant
+    /// for it (its id or `0xFF`), as noise on its stub would make it; other
+    /// frames still reach it. For proving that an e-stop checks its work.
+    MissControl {
+        dev_id: u8,
+        count: u32,
+    },
     /// An obstacle at `at_deg` (reported °), or right where the joint is now.
     Stall {
         dev_id: u8,
@@ -48,6 +55,8 @@ pub struct LineFaults {
     /// Drop rate per device id; `None` is every device.
     pub drop_rates: BTreeMap<Option<u8>, f64>,
     pub extra_turnaround: Duration,
+    /// Control frames each device is still to miss.
+    pub miss_control: BTreeMap<u8, u32>,
 }
 
 impl LineFaults {
@@ -56,6 +65,17 @@ impl LineFaults {
             self.drop_rates.insert(dev_id, rate.min(1.0));
         } else {
             self.drop_rates.remove(&dev_id);
+        }
+    }
+
+    /// Whether device `dev_id` misses this control frame (counting it down).
+    pub fn misses_control(&mut self, dev_id: u8) -> bool {
+        match self.miss_control.get_mut(&dev_id) {
+            Some(left) if *left > 0 => {
+                *left -= 1;
+                true
+            }
+            _ => false,
         }
     }
 
@@ -155,6 +175,16 @@ mod tests {
         let mut b = orig;
         assert!(faults.corrupt(&mut b, &mut rng));
         assert!(b.iter().zip(orig.iter()).all(|(x, y)| x != y));
+    }
+
+    #[test]
+    fn a_device_misses_exactly_the_control_frames_asked() {
+        let mut f = LineFaults::default();
+        f.miss_control.insert(4, 2);
+        assert!(f.misses_control(4));
+        assert!(!f.misses_control(5));
+        assert!(f.misses_control(4));
+        assert!(!f.misses_control(4), "only two");
     }
 
     #[test]

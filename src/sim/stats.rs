@@ -65,6 +65,8 @@ pub struct SimStats {
     pub baud_mismatches: u64,
     /// Replies the drop fault swallowed.
     pub dropped_replies: u64,
+    /// Control frames a device missed by an injected fault.
+    pub missed_control_frames: u64,
     /// Replies the corruption fault garbled.
     pub corrupted_replies: u64,
     /// Reply bytes the host was not reading fast enough to take.
@@ -90,6 +92,7 @@ impl SimStats {
             queued_ahead: 0,
             baud_mismatches: 0,
             dropped_replies: 0,
+            missed_control_frames: 0,
             corrupted_replies: 0,
             host_overrun_bytes: 0,
             unplugged: false,

@@ -143,6 +143,9 @@ impl Owner {
             frames_sent: 1 + self.devices.len() as u32,
             preempted_requests: 0,
             latency_us: 10,
+            // The fake's devices read back ready, as set above.
+            confirmed: self.devices.keys().copied().collect(),
+            ..EstopReport::default()
         };
         self.publish();
         self.shared
