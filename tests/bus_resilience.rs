@@ -11,6 +11,7 @@ use jointd::bus::handle::{BusEvent, LinkState};
 use jointd::bus::{spawn_bus_on, BusConfig, BusError};
 use jointd::protocol::{Command, ConfigParam, Frame, InfoBlock};
 use jointd::sim::{Fault, Simulator};
+use jointd::transport::Transport;
 
 #[tokio::test]
 async fn a_power_cycled_device_goes_offline_and_comes_back_by_itself() {
@@ -161,4 +162,73 @@ async fn a_long_mixed_run_of_setpoints_polls_and_config_never_collides() {
         "{broadcasts} broadcasts, {reads} reads, {writes} writes"
     );
     rig.assert_no_collisions();
+}
+
+/// A line whose driver has a bug: its `panic_at`-th write panics, once.
+struct PanicsOnce {
+    inner: Box<dyn Transport>,
+    writes: u32,
+    panic_at: u32,
+}
+
+impl Transport for PanicsOnce {
+    fn write_all(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        self.writes += 1;
+        if self.writes == self.panic_at {
+            panic!("driver bug on write {}", self.writes);
+        }
+        self.inner.write_all(bytes)
+    }
+    fn read_timeout(&mut self, buf: &mut [u8], timeout: Duration) -> std::io::Result<usize> {
+        self.inner.read_timeout(buf, timeout)
+    }
+    fn set_baud(&mut self, baud: u32) -> std::io::Result<()> {
+        self.inner.set_baud(baud)
+    }
+    fn baud(&self) -> u32 {
+        self.inner.baud()
+    }
+    fn discard_input(&mut self) -> std::io::Result<()> {
+        self.inner.discard_input()
+    }
+}
+
+#[tokio::test]
+async fn a_panic_in_the_owner_takes_the_bus_down_and_it_comes_back() {
+    let (sim, host) = Simulator::spawn_memory(sim_config(&[4, 5], BAUD)).unwrap();
+    let mut cfg = BusConfig::new("mem", "memory", BAUD);
+    cfg.ids = vec![4, 5];
+    let line = PanicsOnce {
+        inner: Box::new(host),
+        writes: 0,
+        panic_at: 50,
+    };
+    let (bus, thread) = spawn_bus_on(cfg, Box::new(line)).unwrap();
+    let rig = Rig {
+        sim,
+        bus,
+        thread: Some(thread),
+    };
+    let mut events = rig.bus.events();
+    rig.until("the panic caught", |s| s.counters.owner_panics == 1)
+        .await;
+    rig.until("up again", |s| s.link == LinkState::Up).await;
+    rig.online(2).await;
+    // The owner thread lives on and still answers requests.
+    assert!(!rig.thread.as_ref().unwrap().is_finished());
+    rig.bus
+        .read_info(4, InfoBlock::Info03)
+        .await
+        .expect("read after recovery");
+    let mut down = Vec::new();
+    while let Ok(ev) = events.try_recv() {
+        if let BusEvent::BusDown { reason, .. } = ev {
+            down.push(reason);
+        }
+    }
+    assert!(
+        down.iter()
+            .any(|r| r.contains("internal error: driver bug")),
+        "subscribers heard the bus go down and why: {down:?}"
+    );
 }

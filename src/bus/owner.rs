@@ -9,6 +9,7 @@
 //! when the port is back. Nothing here can take another bus down.
 
 use std::collections::BTreeMap;
+use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::Receiver;
 use std::sync::Arc;
@@ -117,13 +118,35 @@ impl Owner {
         precise_timers();
         self.realtime();
         while !self.stop.load(Ordering::Acquire) {
-            if self.link.is_up() {
-                self.turn();
-            } else {
-                self.while_down();
+            // A bug must not leave the joints with a dead owner and a stale
+            // "up" snapshot: the owner catches it and starts over like after
+            // an unplug (its state is rebuilt from the wire).
+            let step = catch_unwind(AssertUnwindSafe(|| {
+                if self.link.is_up() {
+                    self.turn();
+                } else {
+                    self.while_down();
+                }
+            }));
+            if let Err(panic) = step {
+                self.recover_from_panic(panic.as_ref());
             }
         }
         self.shutdown();
+    }
+
+    fn recover_from_panic(&mut self, panic: &(dyn std::any::Any + Send)) {
+        let what = panic
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_owned())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into());
+        tracing::error!(bus = %self.cfg.name, "bus owner caught a panic ({what}); reopening the port");
+        self.link.counters.owner_panics += 1;
+        self.exclusive = false;
+        self.job_frames = 0;
+        let _ = self.lost(std::io::Error::other(format!("internal error: {what}")));
+        self.publish(Instant::now());
     }
 
     fn realtime(&mut self) {

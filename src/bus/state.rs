@@ -58,6 +58,9 @@ pub struct BusCounters {
     pub polls: u64,
     /// Setpoints dropped because their id has no device on the bus.
     pub setpoints_dropped: u64,
+    /// Times the owner caught a panic of its own (a bug): each one took the
+    /// bus down and reopened the port, as after an unplug.
+    pub owner_panics: u64,
 }
 
 /// Rates over the last statistics window (about one second).
