@@ -145,7 +145,14 @@ impl Owner {
         self.link.counters.owner_panics += 1;
         self.exclusive = false;
         self.job_frames = 0;
-        let _ = self.lost(std::io::Error::other(format!("internal error: {what}")));
+        let err = self.lost(std::io::Error::other(format!("internal error: {what}")));
+        // An e-stop cut short says so now rather than at its caller's timeout.
+        let answered = self.shared.estop_done.borrow().0;
+        if self.estop_seen > answered {
+            self.shared
+                .estop_done
+                .send_replace((self.estop_seen, Some(Err(err))));
+        }
         self.publish(Instant::now());
     }
 
