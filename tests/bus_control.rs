@@ -5,7 +5,8 @@ mod bus_support;
 use std::time::{Duration, Instant};
 
 use bus_support::*;
-use jointd::bus::{BusError, Targets};
+use jointd::bench::client::Client;
+use jointd::bus::{BusError, Setpoint, Targets};
 use jointd::protocol::{Command, Control, ControlOp, Frame, Group, InfoBlock};
 use jointd::sim::{Fault, WireFrame};
 
@@ -239,4 +240,39 @@ async fn a_device_deaf_to_every_disable_is_reported_still_enabled() {
     assert_eq!(report.confirmed, vec![1, 3]);
     // The report tells the truth: the simulated joint is still enabled.
     assert!(rig.sim.device(2).is_some_and(|d| d.enabled));
+}
+
+#[tokio::test]
+async fn rezero_of_a_joint_in_full_swing_is_confirmed() {
+    // At the factory 230400 baud, with joint 2's stream of setpoints
+    // interleaved between the re-zero frame and the read-back (as the
+    // owner does so a one-shot request never freezes the other joints), the
+    // read-back comes ~3 frames (2.6 ms) later: time for joint 1 in full
+    // swing to turn over 1°.
+    let rig = rig_with(sim_config(&[1, 2], 230_400), |_| {});
+    rig.online(2).await;
+    rig.enable_all(2).await;
+    // Full speed (50000 rpm rotor, ~527 °/s at the output) towards 200°.
+    rig.bus.set_targets(&[(
+        1,
+        Setpoint {
+            pos_ref: 200 * 128,
+            spd_ref: i16::MAX,
+        },
+    )]);
+    rig.until("joint 1 turning faster than 400 °/s", |s| {
+        s.devices[&1]
+            .info02
+            .is_some_and(|(i, _)| i.speed > i16::MAX / 4 * 3)
+    })
+    .await;
+    let stream = Client::start(rig.bus.clone(), vec![2], Duration::from_millis(1), 0)
+        .expect("joint 2's stream");
+    // Between the re-zero frame and the read-back the joint travels more
+    // than the 0.5° a standing joint is allowed: still a confirmed re-zero.
+    let rezeroed = rig.bus.rezero(1).await;
+    drop(stream);
+    rezeroed.expect("re-zero confirmed");
+    let angle = rig.sim.device(1).unwrap().angle_deg;
+    assert!(angle.abs() < 30.0, "re-zeroed mid-swing, now {angle}°");
 }

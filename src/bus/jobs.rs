@@ -24,8 +24,17 @@ use super::verify::{confirmation, Confirm};
 
 /// INFO_01 reads that may pass before an enable/disable shows in the fsm.
 const FSM_CHECKS: u32 = 3;
-/// How close to 0° a re-zeroed angle must read (Q7: half a degree).
-const REZERO_TOLERANCE: i16 = 64;
+/// How close to 0° a re-zeroed angle must read when the joint stands still.
+const REZERO_TOLERANCE_DEG: f64 = 0.5;
+/// Fastest a joint's output turns (50000 rpm rotor through the gearbox,
+/// ~527 °/s): a joint moving while it is re-zeroed has left 0° by the time
+/// the read-back answers, by at most this speed times the time between.
+const MAX_OUTPUT_DEG_PER_S: f64 = 50_000.0 * 6.0 / crate::protocol::units::GEAR_RATIO;
+
+/// How far from 0° a joint re-zeroed `elapsed` before the read-back may be.
+fn rezero_tolerance_deg(elapsed: std::time::Duration) -> f64 {
+    REZERO_TOLERANCE_DEG + MAX_OUTPUT_DEG_PER_S * elapsed.as_secs_f64()
+}
 
 /// Answers a request with `err` without running it (bus down, e-stop, stop).
 pub(super) fn fail(req: Request, err: BusError) {
@@ -199,9 +208,14 @@ impl Owner {
             param: ConfigParam::UpdateFinZero,
         };
         self.job_send(&[Command::Config(cmd)])?;
+        // Handed to the port now, on the wire a little later: measuring from
+        // here bounds the joint's travel since from above.
+        let sent = std::time::Instant::now();
         self.zero_moved(dev_id);
         let angle = self.read_info01(dev_id)?.angle;
-        if angle.abs() > REZERO_TOLERANCE {
+        let within =
+            crate::protocol::units::angle_deg(angle).abs() <= rezero_tolerance_deg(sent.elapsed());
+        if !within {
             return Err(BusError::VerifyMismatch {
                 dev_id,
                 index: index::UPDATE_FIN_ZERO,
