@@ -3,7 +3,10 @@
 
 mod bus_support;
 
+use std::time::Duration;
+
 use bus_support::*;
+use jointd::sim::Fault;
 
 fn sixteen() -> Vec<u8> {
     (1..=16).collect()
@@ -79,4 +82,20 @@ async fn a_pty_refusing_rs485_mode_is_a_note_and_the_bus_runs() {
         "notes: {:?}",
         snap.port_notes
     );
+}
+
+#[tokio::test]
+async fn a_scan_counts_a_device_whose_reply_came_after_its_deadline() {
+    // The bus knows only id 5 (absent): device 1 announced itself before.
+    let rig = rig_after_boot(sim_config(&[1], BAUD), |cfg| {
+        cfg.ids = vec![5];
+        cfg.timing.reply_margin_us = 1_000;
+    });
+    // Device 1 now answers 2.5 ms later than the bus expects: its reply to
+    // the probe of 1 ends after that probe's deadline, while the probe of 2
+    // (nobody) waits, without touching it on the wire.
+    rig.sim
+        .inject(Fault::ExtraTurnaround(Duration::from_micros(2_500)));
+    let found = rig.bus.scan(1, 2).await.expect("scan");
+    assert_eq!(found, vec![1]);
 }

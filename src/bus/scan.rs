@@ -3,6 +3,8 @@
 //! collided with a power-up announcement). A scan is a one-shot request
 //! like the others, so setpoints interleave with it and an e-stop ends it.
 
+use std::time::Instant;
+
 use crate::protocol::command::index;
 use crate::protocol::{is_device_id, Config, InfoBlock};
 
@@ -17,13 +19,40 @@ impl Owner {
                 "scan range {first}..={last} must lie within 1..=159"
             )));
         }
+        let started = Instant::now();
         let mut found = Vec::new();
         for id in first..=last {
             if self.probe(id)? {
                 found.push(id);
             }
         }
+        self.add_late_answers(first..=last, started, &mut found);
         Ok(found)
+    }
+
+    /// A reply that came after its deadline (a slow adapter, a loaded host)
+    /// was taken in while later ids were probed: that device is there too.
+    fn add_late_answers(
+        &self,
+        range: std::ops::RangeInclusive<u8>,
+        since: Instant,
+        found: &mut Vec<u8>,
+    ) {
+        let answered = |id: u8| {
+            self.reg
+                .get(id)
+                .and_then(|e| e.state.info01)
+                .is_some_and(|(_, at)| at >= since)
+        };
+        let late: Vec<u8> = range
+            .filter(|id| !found.contains(id) && answered(*id))
+            .collect();
+        if late.is_empty() {
+            return;
+        }
+        tracing::info!(bus = %self.cfg.name, "scan: {late:?} answered after their deadline");
+        found.extend(late);
+        found.sort_unstable();
     }
 
     /// Asks `id` for INFO_01 once; again (up to the configured retries) only
