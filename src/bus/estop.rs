@@ -8,11 +8,10 @@ use std::sync::atomic::Ordering;
 use std::time::Instant;
 
 use crate::protocol::reply::fsm;
-use crate::protocol::{Command, Config, Control, InfoBlock, ReplyBody, ALL_DEVICES};
+use crate::protocol::{Command, Control, ALL_DEVICES};
 
 use super::error::BusError;
 use super::handle::{BusEvent, EstopReport};
-use super::link::Want;
 use super::owner::Owner;
 
 /// States in which a joint module powers its motor (SPEC §5 fsm; rev 2.0.8's
@@ -125,28 +124,20 @@ impl Owner {
                 }
             }
         }
-        self.job_frames = 0;
     }
 
     fn disable_again(&mut self, id: u8) -> Result<ReadBack, BusError> {
-        self.wait_until(self.link.clock.write_at())?;
-        self.link
-            .send(&[Command::Control(Control::disable(id))])
-            .map_err(|e| self.lost(e))?;
+        self.job_send(&[Command::Control(Control::disable(id))])?;
         self.read_back(id)
     }
 
+    /// INFO_01 with the configured retries; silence is an answer here.
     fn read_back(&mut self, id: u8) -> Result<ReadBack, BusError> {
-        let want = Want {
-            dev_id: id,
-            index: InfoBlock::Info01.index(),
-        };
-        let attempts = 1 + self.cfg.timing.retries;
-        let reply = self.try_transact(Config::read(id, InfoBlock::Info01), want, attempts)?;
-        Ok(match reply.map(|r| r.body()) {
-            Some(ReplyBody::Info01(info)) if drives_motor(info.fsm) => ReadBack::Driving,
-            Some(ReplyBody::Info01(_)) => ReadBack::Stopped,
-            _ => ReadBack::NoAnswer,
-        })
+        match self.read_info01(id) {
+            Ok(info) if drives_motor(info.fsm) => Ok(ReadBack::Driving),
+            Ok(_) => Ok(ReadBack::Stopped),
+            Err(BusError::Timeout { .. }) => Ok(ReadBack::NoAnswer),
+            Err(e) => Err(e),
+        }
     }
 }

@@ -178,7 +178,7 @@ impl Owner {
         )))
     }
 
-    fn read_info01(&mut self, id: u8) -> Result<Info01, BusError> {
+    pub(super) fn read_info01(&mut self, id: u8) -> Result<Info01, BusError> {
         match self.read_info(id, InfoBlock::Info01)?.body() {
             ReplyBody::Info01(info) => Ok(info),
             _ => Err(BusError::Invalid(

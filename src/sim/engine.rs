@@ -8,7 +8,7 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use crate::protocol::{BaudLevel, Command, Control, Frame, FrameBytes, StreamDecoder, ALL_DEVICES};
+use crate::protocol::{BaudLevel, Command, Frame, FrameBytes, StreamDecoder, ALL_DEVICES};
 
 use super::config::{SimConfig, SimError};
 use super::device::Device;
@@ -209,9 +209,9 @@ impl Engine {
                 mismatch = true;
                 continue;
             }
-            let for_it = |c: &Control| c.dev_id == dev.id || c.dev_id == ALL_DEVICES;
             if let Command::Control(c) = cmd {
-                if for_it(c) && self.faults.misses_control(dev.id) {
+                let for_it = c.dev_id == dev.id || c.dev_id == ALL_DEVICES;
+                if for_it && self.faults.misses_control(dev.id) {
                     self.stats.missed_control_frames += 1;
                     continue;
                 }

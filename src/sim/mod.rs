@@ -48,7 +48,9 @@
 //! ```no_run
 //! use jointd::sim::{parse_ids, SimConfig, Simulator};
 //! let sim = Simulator::spawn_pty(SimConfig::new(parse_ids("1-16")?, 500_000))?;
-//! println!("{}", sim.device_path().unwrap().display());
+//! if let Some(path) = sim.device_path() {
+//!     println!("{}", path.display());
+//! }
 //! # Ok::<(), jointd::sim::SimError>(())
 //! ```
 
