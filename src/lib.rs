@@ -11,9 +11,10 @@
 //! - [`ws`]: the WebSocket endpoint: telemetry streams, batch setpoints, teleop watchdog.
 //! - [`web`]: the embedded dashboard (or `--web-dir` while developing).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory).
-//! - [`bench`]: `jointd bench`: the bus engine against the simulator, measured.
+//! - `bench` (feature `bench`): `jointd bench`: the bus engine against the simulator, measured.
 
 pub mod api;
+#[cfg(feature = "bench")]
 pub mod bench;
 pub mod bus;
 pub mod cli;

@@ -29,6 +29,7 @@ enum Command {
     Openapi,
     /// Measure the bus engine against the simulator: occupancy, collisions,
     /// per-joint rates, setpoint-to-wire latency, daemon CPU.
+    #[cfg(feature = "bench")]
     Bench(jointd::bench::BenchArgs),
 }
 
@@ -66,6 +67,7 @@ fn main() -> ExitCode {
                 ExitCode::FAILURE
             }
         },
+        #[cfg(feature = "bench")]
         Some(Command::Bench(args)) => match jointd::bench::run(&args) {
             Ok(true) => ExitCode::SUCCESS,
             Ok(false) => ExitCode::FAILURE,

@@ -5,7 +5,6 @@ mod bus_support;
 use std::time::{Duration, Instant};
 
 use bus_support::*;
-use jointd::bench::client::Client;
 use jointd::bus::{BusError, Setpoint, Targets};
 use jointd::protocol::{Command, Control, ControlOp, Frame, Group, InfoBlock};
 use jointd::sim::{Fault, WireFrame};
@@ -266,8 +265,7 @@ async fn rezero_of_a_joint_in_full_swing_is_confirmed() {
             .is_some_and(|(i, _)| i.speed > i16::MAX / 4 * 3)
     })
     .await;
-    let stream = Client::start(rig.bus.clone(), vec![2], Duration::from_millis(1), 0)
-        .expect("joint 2's stream");
+    let stream = TargetStream::start(rig.bus.clone(), vec![2], Duration::from_millis(1));
     // Between the re-zero frame and the read-back the joint travels more
     // than the 0.5° a standing joint is allowed: still a confirmed re-zero.
     let rezeroed = rig.bus.rezero(1).await;

@@ -6,7 +6,6 @@ mod bus_support;
 use std::time::{Duration, Instant};
 
 use bus_support::*;
-use jointd::bench::client::Client;
 use jointd::bus::handle::{BusEvent, LinkState};
 use jointd::bus::{spawn_bus_on, BusConfig, BusError};
 use jointd::protocol::{Command, ConfigParam, Frame, InfoBlock};
@@ -122,7 +121,7 @@ async fn a_long_mixed_run_of_setpoints_polls_and_config_never_collides() {
     rig.online(16).await;
     rig.enable_all(16).await;
     let start = Instant::now();
-    let client = Client::start(rig.bus.clone(), ids.clone(), Duration::from_millis(1), 0).unwrap();
+    let client = TargetStream::start(rig.bus.clone(), ids.clone(), Duration::from_millis(1));
     let blocks = [
         InfoBlock::Info03,
         InfoBlock::Info04,
@@ -144,7 +143,7 @@ async fn a_long_mixed_run_of_setpoints_polls_and_config_never_collides() {
     }
     let writes = client.finish();
     rig.bus.disable(jointd::bus::Targets::All).await.unwrap();
-    assert!(writes.len() > 1000, "client wrote {}", writes.len());
+    assert!(writes > 1000, "client wrote {writes}");
 
     let cmds: Vec<Command> = rig
         .host_frames_since(start)

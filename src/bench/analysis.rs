@@ -151,31 +151,6 @@ pub fn quantile_i64(sorted: &[i64], p: f64) -> i64 {
     sorted.get(i).copied().unwrap_or(0)
 }
 
-/// Three frames either side of each collision, one line each (µs from the
-/// first frame of the log), for reading what went wrong.
-pub fn collision_context(log: &[WireFrame]) -> Vec<String> {
-    const SIDE: usize = 3;
-    let Some(t0) = log.first().map(|f| f.start) else {
-        return Vec::new();
-    };
-    let mut lines = Vec::new();
-    for (i, _) in log.iter().enumerate().filter(|(_, f)| f.collided) {
-        lines.push("  -- collision".to_string());
-        for f in &log[i.saturating_sub(SIDE)..(i + SIDE + 1).min(log.len())] {
-            lines.push(format!(
-                "  {:>10} .. {:>10} µs  {}  {:<8}{}  {:02X?}",
-                (f.start - t0).as_micros(),
-                (f.end - t0).as_micros(),
-                if f.from_host { "host  " } else { "device" },
-                f.dev_id.map_or("-".to_string(), |id| id.to_string()),
-                if f.collided { " collided" } else { "" },
-                &f.bytes[..10]
-            ));
-        }
-    }
-    lines
-}
-
 fn host_frame(f: &WireFrame, ids: &[u8], tally: &mut Tally<'_>, a: &mut Analysis) {
     let Ok(cmd) = Frame::decode(&f.bytes).and_then(|fr| Command::from_frame(&fr)) else {
         return;

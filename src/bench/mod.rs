@@ -142,7 +142,7 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
     let (sim, bus, thread) = setup(args, baud, &ids)?;
     let run = measure(args, &sim, &bus, &ids)?;
     if args.show_collisions {
-        analysis::collision_context(&run.log)
+        crate::sim::collision_context(&run.log)
             .iter()
             .for_each(|l| println!("{l}"));
     }

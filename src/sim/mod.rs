@@ -80,7 +80,7 @@ use std::time::Instant;
 
 pub use config::{parse_ids, SimConfig, SimError};
 pub use faults::Fault;
-pub use log::WireFrame;
+pub use log::{collision_context, WireFrame};
 pub use params::Params;
 pub use stats::{FrameKinds, SimStats};
 pub use view::DeviceView;

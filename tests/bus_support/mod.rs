@@ -210,7 +210,7 @@ impl Rig {
     pub fn assert_no_collisions(&self) {
         let stats = self.sim.stats();
         if stats.collisions > 0 {
-            let context = jointd::bench::analysis::collision_context(&self.sim.frame_log());
+            let context = jointd::sim::collision_context(&self.sim.frame_log());
             panic!(
                 "{} collision(s):\n{}\n{}",
                 stats.collisions,
@@ -218,5 +218,68 @@ impl Rig {
                 summary(&self.bus.snapshot())
             );
         }
+    }
+}
+
+/// A client streaming every joint's target once per `period` on its own
+/// thread (a ramp from 0° at 1/128° per write), as a teleoperation client
+/// would; stops when dropped.
+pub struct TargetStream {
+    stop: Arc<std::sync::atomic::AtomicBool>,
+    join: Option<std::thread::JoinHandle<u64>>,
+}
+
+impl TargetStream {
+    pub fn start(bus: BusHandle, ids: Vec<u8>, period: Duration) -> Self {
+        use std::sync::atomic::{AtomicBool, Ordering};
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let join = std::thread::spawn(move || {
+            let mut next = std::time::Instant::now();
+            let mut n: i16 = 0;
+            let mut writes = 0u64;
+            while !flag.load(Ordering::Acquire) {
+                let sp = Setpoint {
+                    pos_ref: n,
+                    spd_ref: 13_106,
+                };
+                let targets: Vec<(u8, Setpoint)> = ids.iter().map(|id| (*id, sp)).collect();
+                bus.set_targets(&targets);
+                writes += 1;
+                n = n.wrapping_add(1).max(0);
+                next += period;
+                let now = std::time::Instant::now();
+                if next > now {
+                    std::thread::sleep(next - now);
+                } else {
+                    next = now;
+                }
+            }
+            writes
+        });
+        Self {
+            stop,
+            join: Some(join),
+        }
+    }
+}
+
+impl TargetStream {
+    /// Stops the stream; how many writes it made.
+    pub fn finish(mut self) -> u64 {
+        self.halt()
+    }
+
+    fn halt(&mut self) -> u64 {
+        self.stop.store(true, std::sync::atomic::Ordering::Release);
+        self.join
+            .take()
+            .map_or(0, |join| join.join().unwrap_or_default())
+    }
+}
+
+impl Drop for TargetStream {
+    fn drop(&mut self) {
+        self.halt();
     }
 }
