@@ -13,14 +13,12 @@
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory).
 //! - [`bench`]: `jointd bench`: the bus engine against the simulator, measured.
 
-pub mod api;
 pub mod bench;
 pub mod bus;
 pub mod cli;
 pub mod daemon;
 pub mod frame_json;
+pub mod http;
 pub mod protocol;
 pub mod sim;
 pub mod transport;
-pub mod web;
-pub mod ws;

@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use api_support::fake_bus::FakeBus;
 use api_support::{serve, Server};
-use jointd::api::limits::{LimitRule, SoftLimits};
-use jointd::api::AppState;
+use jointd::http::limits::{LimitRule, SoftLimits};
+use jointd::http::AppState;
 use serde_json::json;
 
 const DEV: &str = "/api/v1/buses/fake/devices";

@@ -4,7 +4,8 @@
 mod api_support;
 
 use api_support::serve;
-use jointd::api::{openapi, state_for};
+use jointd::http::api::openapi;
+use jointd::http::state_for;
 use serde_json::Value;
 
 const CHECKED_IN: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/openapi/openapi.json");

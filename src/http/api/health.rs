@@ -12,11 +12,11 @@ use serde::Serialize;
 use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
-use super::error::{ApiError, ApiResult};
 use super::openapi::{ErrorResponses, TAG_HEALTH};
-use super::state::AppState;
 use crate::bus::handle::LinkState;
 use crate::bus::BusSnapshot;
+use crate::http::error::{ApiError, ApiResult};
+use crate::http::state::AppState;
 
 pub const HEALTHZ_PATH: &str = "/healthz";
 /// Content type of the Prometheus text exposition format.

@@ -12,21 +12,17 @@
 //! - [`buses`], [`devices`], [`control`], [`config`], [`estop`], [`health`]: one router per area.
 //! - [`openapi`]: the generated OpenAPI document and its docs page.
 
+pub mod api;
 pub mod auth;
-pub mod buses;
-pub mod config;
-pub mod config_params;
-pub mod control;
-pub mod devices;
 pub mod error;
-pub mod estop;
 pub mod extract;
-pub mod health;
+pub mod hub;
 pub mod limits;
-pub mod openapi;
 pub mod state;
 pub mod targets;
 pub mod telemetry;
+pub mod web;
+pub mod ws;
 
 use axum::http::StatusCode;
 use axum::Router;
@@ -44,11 +40,11 @@ pub const API_PREFIX: &str = "/api/v1";
 /// The whole HTTP application. Tests call it with `oneshot` or serve it on
 /// `127.0.0.1:0`; the daemon serves it on `--listen`.
 pub fn app(state: AppState) -> Router {
-    let (router, doc) = openapi::router().split_for_parts();
+    let (router, doc) = api::openapi::router().split_for_parts();
     router
-        .merge(openapi::docs(doc))
-        .merge(crate::ws::router())
-        .merge(crate::web::router())
+        .merge(api::openapi::docs(doc))
+        .merge(ws::router())
+        .merge(web::router())
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(axum::middleware::from_fn_with_state(

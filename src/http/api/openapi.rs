@@ -12,8 +12,8 @@ use utoipa::{IntoResponses, Modify, OpenApi};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_swagger_ui::SwaggerUi;
 
-use super::error::{Problem, PROBLEM_JSON};
-use super::state::AppState;
+use crate::http::error::{Problem, PROBLEM_JSON};
+use crate::http::state::AppState;
 
 pub const TAG_BUSES: &str = "buses";
 pub const TAG_DEVICES: &str = "devices";

@@ -10,13 +10,13 @@ use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::config_params::{Blocks, ConfigPatch, Param, ParamValue};
-use super::error::{ApiError, ApiResult};
-use super::extract::{ApiJson, ApiPath};
 use super::openapi::{ErrorResponses, TAG_CONFIG};
-use super::state::{device_id, known_device, AppState, DevicePath};
-use super::telemetry::hex;
 use crate::bus::handle::WriteOutcome;
 use crate::bus::BusHandle;
+use crate::http::error::{ApiError, ApiResult};
+use crate::http::extract::{ApiJson, ApiPath};
+use crate::http::state::{device_id, known_device, AppState, DevicePath};
+use crate::http::telemetry::hex;
 use crate::protocol::{BaudLevel, InfoBlock, ReplyBody};
 
 pub fn router() -> OpenApiRouter<AppState> {

@@ -11,7 +11,6 @@ use futures_util::{Sink, Stream, StreamExt};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
-use super::hub::WsHub;
 use super::messages::{
     self, BusInfo, ClientMessage, ErrorCode, Field, JointRef, Limits, ServerMessage, Subscribe,
     WatchdogEvent, WatchdogPolicy, WatchdogRequest,
@@ -20,10 +19,11 @@ use super::setpoints::{self, WsError, MAX_BATCH};
 use super::telemetry::Subscription;
 use super::watchdog::{Watchdog, MAX_HOLD, MIN_HOLD};
 use super::writer::{PendingAck, Writer};
-use crate::api::state::device_id;
-use crate::api::telemetry::measured_angle_raw;
-use crate::api::AppState;
 use crate::bus::{Setpoint, Targets};
+use crate::http::hub::WsHub;
+use crate::http::state::device_id;
+use crate::http::telemetry::measured_angle_raw;
+use crate::http::AppState;
 
 /// Replies (acks, errors) a connection may have queued; beyond, they are dropped and counted.
 const OUT_QUEUE: usize = 64;

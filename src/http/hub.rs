@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use tokio::sync::broadcast;
 
-use super::messages::WatchdogEvent;
+use crate::http::ws::messages::WatchdogEvent;
 
 /// Watchdog events a slow connection may fall behind on before it counts drops.
 const EVENT_BACKLOG: usize = 256;
@@ -20,7 +20,7 @@ pub struct WsHub {
     pub dropped_events: AtomicU64,
     pub dropped_replies: AtomicU64,
     /// Telemetry JSON shared by connections with the same subscription.
-    pub fragments: super::telemetry::FragmentCache,
+    pub fragments: crate::http::ws::telemetry::FragmentCache,
 }
 
 impl Default for WsHub {

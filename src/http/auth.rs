@@ -8,8 +8,8 @@ use axum::http::header::AUTHORIZATION;
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
+use super::api::health::HEALTHZ_PATH;
 use super::error::ApiError;
-use super::health::HEALTHZ_PATH;
 use super::state::AppState;
 
 const BEARER: &str = "Bearer ";
@@ -18,7 +18,7 @@ pub async fn require_token(State(state): State<AppState>, req: Request, next: Ne
     let Some(token) = state.token() else {
         return next.run(req).await;
     };
-    if req.uri().path() == HEALTHZ_PATH || crate::web::is_public(req.uri().path()) {
+    if req.uri().path() == HEALTHZ_PATH || crate::http::web::is_public(req.uri().path()) {
         return next.run(req).await;
     }
     let presented = req
@@ -37,7 +37,7 @@ pub async fn require_token(State(state): State<AppState>, req: Request, next: Ne
 /// Browsers cannot set headers on a WebSocket upgrade, so the WebSocket
 /// endpoint (only) also takes `?token=`.
 fn websocket_query_token(req: &Request) -> Option<&str> {
-    if req.uri().path() != crate::ws::WS_PATH {
+    if req.uri().path() != crate::http::ws::WS_PATH {
         return None;
     }
     req.uri()

@@ -12,11 +12,11 @@ use serde::Serialize;
 use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
-use super::error::{ApiError, ApiResult};
-use super::extract::ApiPath;
 use super::openapi::{ErrorResponses, TAG_ESTOP};
-use super::state::{AppState, BusPath};
 use crate::bus::BusHandle;
+use crate::http::error::{ApiError, ApiResult};
+use crate::http::extract::ApiPath;
+use crate::http::state::{AppState, BusPath};
 
 pub fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()

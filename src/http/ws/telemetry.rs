@@ -6,9 +6,9 @@ use std::time::Instant;
 use serde_json::{Map, Value};
 
 use super::messages::Field;
-use crate::api::telemetry::{firmware_of, measured_angle_raw};
 use crate::bus::handle::DeviceState;
 use crate::bus::BusSnapshot;
+use crate::http::telemetry::{firmware_of, measured_angle_raw};
 use crate::protocol::reply::{fault_name, fsm_name};
 use crate::protocol::units;
 

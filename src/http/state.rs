@@ -26,14 +26,14 @@ pub struct StateOptions {
 #[serde(deny_unknown_fields, default)]
 pub struct WatchdogDefault {
     pub hold_timeout_ms: u64,
-    pub policy: crate::ws::messages::WatchdogPolicy,
+    pub policy: crate::http::ws::messages::WatchdogPolicy,
 }
 
 impl Default for WatchdogDefault {
     fn default() -> Self {
         Self {
             hold_timeout_ms: 0,
-            policy: crate::ws::messages::WatchdogPolicy::Hold,
+            policy: crate::http::ws::messages::WatchdogPolicy::Hold,
         }
     }
 }
@@ -48,7 +48,7 @@ struct Inner {
     limits: SoftLimits,
     token: Option<String>,
     started: Instant,
-    ws: crate::ws::WsHub,
+    ws: crate::http::hub::WsHub,
     options: std::sync::OnceLock<StateOptions>,
 }
 
@@ -65,7 +65,7 @@ impl AppState {
                 limits,
                 token: token.filter(|t| !t.is_empty()),
                 started: Instant::now(),
-                ws: crate::ws::WsHub::default(),
+                ws: crate::http::hub::WsHub::default(),
                 options: std::sync::OnceLock::new(),
             }),
         }
@@ -125,7 +125,7 @@ impl AppState {
     }
 
     /// What the WebSocket connections share.
-    pub fn ws(&self) -> &crate::ws::WsHub {
+    pub fn ws(&self) -> &crate::http::hub::WsHub {
         &self.inner.ws
     }
 

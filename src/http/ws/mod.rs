@@ -11,7 +11,6 @@
 //! - [`watchdog`]: the teleop hold-timeout state machine.
 //! - [`hub`]: what all connections share (watchdog events, counters).
 
-pub mod hub;
 pub mod messages;
 pub mod session;
 pub mod setpoints;
@@ -25,9 +24,9 @@ use axum::routing::get;
 use axum::Router;
 use futures_util::StreamExt;
 
-use crate::api::AppState;
+use crate::http::AppState;
 
-pub use hub::WsHub;
+pub use crate::http::hub::WsHub;
 
 /// Where the endpoint is served.
 pub const WS_PATH: &str = "/api/v1/ws";
