@@ -14,8 +14,8 @@ use tokio::signal::unix::{signal, SignalKind};
 
 use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle};
 use crate::http::limits::{LimitError, LimitRule, SoftLimits};
-use crate::http::state::{StateOptions, WatchdogDefault};
-use crate::http::ws::watchdog::{MAX_HOLD, MIN_HOLD};
+use crate::http::state::StateOptions;
+use crate::http::teleop::{WatchdogDefault, MAX_HOLD, MIN_HOLD};
 use crate::http::{app, AppState};
 use crate::protocol::is_device_id;
 use crate::sim::{SimConfig, SimError, SimHandle, Simulator};

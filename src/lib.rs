@@ -4,12 +4,10 @@
 //! - [`protocol`]: pure wire protocol: frames, CRC, typed commands/replies, units, stream decoder.
 //! - [`frame_json`]: frames ↔ JSON with the field names of `vectors.json` (CLI, API, tests).
 //! - [`cli`]: the `jointd frame …` tools for reading a serial capture by hand.
-//! - [`api`]: the REST API (axum routers over the bus handles, OpenAPI, auth, soft limits).
+//! - [`http`]: the HTTP layer: `app(state)`, REST API + OpenAPI, WebSocket, dashboard, auth, errors.
 //! - [`daemon`]: `jointd [run]`: config, buses, the HTTP server, graceful shutdown.
 //! - [`bus`]: one owner thread per bus, its scheduler, and the handle the API uses.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty, in-memory pipe).
-//! - [`ws`]: the WebSocket endpoint: telemetry streams, batch setpoints, teleop watchdog.
-//! - [`web`]: the embedded dashboard (or `--web-dir` while developing).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory).
 //! - [`bench`]: `jointd bench`: the bus engine against the simulator, measured.
 

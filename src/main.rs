@@ -55,7 +55,7 @@ fn main() -> ExitCode {
         None => run_daemon(cli.run),
         Some(Command::Run(args)) => run_daemon(args),
         Some(Command::Openapi) => {
-            print!("{}", jointd::http::api::openapi::document_json());
+            print!("{}", jointd::http::api::document_json());
             ExitCode::SUCCESS
         }
         Some(Command::Frame(cmd)) => run_frame(cmd),

@@ -1,16 +1,26 @@
-//! The REST API: axum routers over the bus handles. Handlers never touch a
-//! port; they validate, convert physical units to raw with
-//! [`crate::protocol::units`], and call a [`BusHandle`].
+//! The HTTP layer: one axum application over the bus handles, built in one
+//! place ([`app`]). Handlers never touch a port; they validate, convert
+//! physical units to raw with [`crate::protocol::units`], and call a
+//! [`BusHandle`].
+//!
+//! The three areas below ([`api`], [`ws`], [`web`]) never import each
+//! other: what two of them need lives here, beside them, so every import
+//! points down or sideways into these shared files.
 //!
 //! # Layout
-//! - [`state`]: [`AppState`]: the bus handles by name, soft limits, token.
-//! - [`error`]: [`error::ApiError`], RFC 9457 problem details, the status of every failure.
+//! - [`api`]: the REST areas (buses, devices, control, config, e-stop, health) and the OpenAPI document.
+//! - [`ws`]: the WebSocket endpoint: telemetry streams, setpoint batches, teleop watchdog.
+//! - [`web`]: the embedded dashboard (or `--web-dir` while developing).
+//! - [`state`]: [`AppState`]: the bus handles by name, soft limits, token, options; path guards.
+//! - [`error`]: [`ApiError`], RFC 9457 problem details; the one place that picks HTTP statuses.
 //! - [`extract`]: JSON/path/query extractors whose rejections are problems.
-//! - [`auth`]: the bearer-token middleware (everything but `/healthz`).
+//! - [`auth`]: the bearer-token middleware (everything but the public paths).
+//! - [`paths`]: the URLs outside the OpenAPI routes, and which need no token.
 //! - [`limits`]: per-joint soft limits from the config.
-//! - [`telemetry`]: snapshot → physical-unit views shared by the areas below.
-//! - [`buses`], [`devices`], [`control`], [`config`], [`estop`], [`health`]: one router per area.
-//! - [`openapi`]: the generated OpenAPI document and its docs page.
+//! - [`telemetry`]: snapshot → physical-unit views (REST and WebSocket).
+//! - [`targets`]: physical targets → raw setpoints, checked (REST and WebSocket).
+//! - [`teleop`]: the watchdog policy, default and event both state and WebSocket use.
+//! - [`hub`]: what all WebSocket connections share (the state holds it).
 
 pub mod api;
 pub mod auth;
@@ -18,9 +28,11 @@ pub mod error;
 pub mod extract;
 pub mod hub;
 pub mod limits;
+pub mod paths;
 pub mod state;
 pub mod targets;
 pub mod telemetry;
+pub mod teleop;
 pub mod web;
 pub mod ws;
 
@@ -34,13 +46,10 @@ pub use state::AppState;
 
 use crate::bus::BusHandle;
 
-/// Prefix of every versioned resource.
-pub const API_PREFIX: &str = "/api/v1";
-
 /// The whole HTTP application. Tests call it with `oneshot` or serve it on
 /// `127.0.0.1:0`; the daemon serves it on `--listen`.
 pub fn app(state: AppState) -> Router {
-    let (router, doc) = api::openapi::router().split_for_parts();
+    let (router, doc) = api::router().split_for_parts();
     router
         .merge(api::openapi::docs(doc))
         .merge(ws::router())

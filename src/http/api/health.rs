@@ -18,7 +18,6 @@ use crate::bus::BusSnapshot;
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::state::AppState;
 
-pub const HEALTHZ_PATH: &str = "/healthz";
 /// Content type of the Prometheus text exposition format.
 const PROMETHEUS_TEXT: &str = "text/plain; version=0.0.4; charset=utf-8";
 

@@ -13,6 +13,7 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_swagger_ui::SwaggerUi;
 
 use crate::http::error::{Problem, PROBLEM_JSON};
+use crate::http::paths::{DOCS_PATH, OPENAPI_PATH};
 use crate::http::state::AppState;
 
 pub const TAG_BUSES: &str = "buses";
@@ -21,9 +22,6 @@ pub const TAG_CONTROL: &str = "control";
 pub const TAG_CONFIG: &str = "configuration";
 pub const TAG_ESTOP: &str = "emergency stop";
 pub const TAG_HEALTH: &str = "health";
-/// Where the document and its docs page are served.
-pub const OPENAPI_PATH: &str = "/openapi.json";
-pub const DOCS_PATH: &str = "/docs";
 /// Name of the bearer security scheme in the document.
 const BEARER_SCHEME: &str = "bearer";
 
@@ -133,22 +131,10 @@ fn add_problem_responses(components: &mut utoipa::openapi::Components) {
     }
 }
 
-/// Every documented route, with its part of the document.
-pub fn router() -> OpenApiRouter<AppState> {
+/// The document's head (info, tags, security, shared failures), before the
+/// areas add their routes.
+pub fn base() -> OpenApiRouter<AppState> {
     OpenApiRouter::with_openapi(ApiDoc::openapi())
-        .merge(super::health::router())
-        .merge(super::buses::router())
-        .merge(super::devices::router())
-        .merge(super::control::router())
-        .merge(super::config::router())
-        .merge(super::estop::router())
-}
-
-/// The document as served, with the crate version.
-pub fn document() -> utoipa::openapi::OpenApi {
-    let (_, mut doc) = router().split_for_parts();
-    doc.info.version = env!("CARGO_PKG_VERSION").to_owned();
-    doc
 }
 
 /// `/openapi.json` and the Swagger UI at `/docs`.
@@ -157,9 +143,8 @@ pub fn docs(mut doc: utoipa::openapi::OpenApi) -> Router<AppState> {
     SwaggerUi::new(DOCS_PATH).url(OPENAPI_PATH, doc).into()
 }
 
-/// The document as pretty JSON, as checked in under `openapi/`.
-pub fn document_json() -> String {
-    let doc = document();
+/// A document as pretty JSON, as checked in under `openapi/`.
+pub fn to_json(doc: &utoipa::openapi::OpenApi) -> String {
     let mut text = doc
         .to_pretty_json()
         .unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"));

@@ -17,7 +17,7 @@ use tokio_stream::wrappers::{errors::BroadcastStreamRecvError, BroadcastStream, 
 use super::messages::{EventBody, ServerMessage};
 use super::telemetry::Subscription;
 use crate::bus::handle::WireAck;
-use crate::http::AppState;
+use crate::http::state::AppState;
 
 /// An ack the writer sends once every bus write of a batch is on the wire.
 #[derive(Debug, Clone)]
@@ -168,11 +168,8 @@ where
         for name in &sub.buses {
             if let Ok(bus) = self.state.bus(name) {
                 let names = |id| self.state.joint_name(name, id);
-                let part = self
-                    .state
-                    .ws()
-                    .fragments
-                    .fragment(&sub, &bus.snapshot(), names, now);
+                let cache = &self.state.ws().fragments;
+                let part = super::telemetry::fragment(cache, &sub, &bus.snapshot(), names, now);
                 if !part.is_empty() {
                     parts.push(part);
                 }
