@@ -1,9 +1,8 @@
 //! Request extractors whose rejections are problem details, so a malformed
-//! body, path or query never produces axum's plain-text errors.
+//! body, path or query never produces axum's plain-text errors. (Which
+//! status each rejection gets is decided in `error.rs`.)
 
-use axum::extract::rejection::{JsonRejection, PathRejection, QueryRejection};
 use axum::extract::{FromRequest, FromRequestParts};
-use axum::http::StatusCode;
 
 use super::error::ApiError;
 
@@ -21,37 +20,3 @@ pub struct ApiPath<T>(pub T);
 #[derive(Debug, FromRequestParts)]
 #[from_request(via(axum::extract::Query), rejection(ApiError))]
 pub struct ApiQuery<T>(pub T);
-
-impl From<JsonRejection> for ApiError {
-    fn from(rej: JsonRejection) -> Self {
-        match rej {
-            // Well-formed JSON of the wrong shape: a missing field, a string
-            // where a number belongs, an unknown field.
-            JsonRejection::JsonDataError(e) => ApiError::new(
-                StatusCode::UNPROCESSABLE_ENTITY,
-                "invalid-body",
-                "Request body does not match the schema",
-                e.body_text(),
-            ),
-            JsonRejection::MissingJsonContentType(_) => ApiError::new(
-                StatusCode::UNSUPPORTED_MEDIA_TYPE,
-                "unsupported-media-type",
-                "Body must be application/json",
-                "send the body with `Content-Type: application/json`",
-            ),
-            other => ApiError::bad_request(other.body_text()),
-        }
-    }
-}
-
-impl From<PathRejection> for ApiError {
-    fn from(rej: PathRejection) -> Self {
-        ApiError::bad_request(rej.body_text())
-    }
-}
-
-impl From<QueryRejection> for ApiError {
-    fn from(rej: QueryRejection) -> Self {
-        ApiError::bad_request(rej.body_text())
-    }
-}

@@ -36,7 +36,6 @@ pub mod teleop;
 pub mod web;
 pub mod ws;
 
-use axum::http::StatusCode;
 use axum::Router;
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::trace::TraceLayer;
@@ -70,23 +69,13 @@ async fn not_found(uri: axum::http::Uri) -> ApiError {
 }
 
 async fn method_not_allowed(method: axum::http::Method) -> ApiError {
-    ApiError::new(
-        StatusCode::METHOD_NOT_ALLOWED,
-        "method-not-allowed",
-        "Method not allowed",
-        format!("{method} is not supported on this resource"),
-    )
+    ApiError::method_not_allowed(&method)
 }
 
 /// A bug must still answer in the one error shape (and is logged).
 fn panic_to_problem(_: Box<dyn std::any::Any + Send + 'static>) -> axum::response::Response {
     tracing::error!("request handler panicked");
-    axum::response::IntoResponse::into_response(ApiError::new(
-        StatusCode::INTERNAL_SERVER_ERROR,
-        "internal",
-        "Internal error",
-        "the request handler failed; see the daemon log",
-    ))
+    axum::response::IntoResponse::into_response(ApiError::internal())
 }
 
 /// Convenience for the daemon and tests: state from handles with no limits

@@ -11,7 +11,8 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_DEVICES};
 use crate::bus::handle::DeviceState;
-use crate::http::error::{ApiError, ApiResult};
+use crate::bus::BusError;
+use crate::http::error::ApiResult;
 use crate::http::extract::{ApiPath, ApiQuery};
 use crate::http::limits::JointLimits;
 use crate::http::state::{known_device, AppState, BusPath, DevicePath};
@@ -219,11 +220,9 @@ async fn refresh(bus: &crate::bus::BusHandle, dev: &mut DeviceState) -> ApiResul
             dev.online = true;
             Ok(())
         }
-        _ => Err(ApiError::new(
-            axum::http::StatusCode::BAD_GATEWAY,
-            "unexpected-reply",
-            "Unexpected reply",
-            format!("device {id} answered a read with another block"),
-        )),
+        _ => Err(BusError::UnexpectedReply(format!(
+            "device {id} answered a read with another block"
+        ))
+        .into()),
     }
 }

@@ -6,7 +6,6 @@
 use std::time::Instant;
 
 use axum::extract::State;
-use axum::http::StatusCode;
 use axum::Json;
 use serde::Serialize;
 use utoipa::ToSchema;
@@ -133,15 +132,10 @@ async fn stop(buses: Vec<BusHandle>) -> ApiResult<Json<EstopResult>> {
         .filter(|b| !b.stopped)
         .map(|b| b.bus.as_str())
         .collect();
-    Err(ApiError::new(
-        StatusCode::SERVICE_UNAVAILABLE,
-        "estop-incomplete",
-        "Emergency stop incomplete",
-        format!(
-            "could not confirm the stop of bus(es): {}",
-            failed.join(", ")
-        ),
-    )
+    Err(ApiError::estop_incomplete(format!(
+        "could not confirm the stop of bus(es): {}",
+        failed.join(", ")
+    ))
     .with_partial(serde_json::to_value(&result).unwrap_or_default()))
 }
 

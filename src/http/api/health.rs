@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::time::Instant;
 
 use axum::extract::State;
-use axum::http::{header, StatusCode};
+use axum::http::header;
 use axum::response::IntoResponse;
 use axum::Json;
 use serde::Serialize;
@@ -94,13 +94,7 @@ async fn readyz(State(state): State<AppState>) -> ApiResult<Json<Readiness>> {
     }
     let detail = format!("bus(es) not up: {}", down.join(", "));
     let partial = serde_json::to_value(&buses).unwrap_or_default();
-    Err(ApiError::new(
-        StatusCode::SERVICE_UNAVAILABLE,
-        "not-ready",
-        "Not ready",
-        detail,
-    )
-    .with_partial(partial))
+    Err(ApiError::not_ready(detail).with_partial(partial))
 }
 
 /// Prometheus text: bus counters, link state, per-joint gauges.

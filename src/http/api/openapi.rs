@@ -12,7 +12,7 @@ use utoipa::{IntoResponses, Modify, OpenApi};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_swagger_ui::SwaggerUi;
 
-use crate::http::error::{Problem, PROBLEM_JSON};
+use crate::http::error::{Problem, DOCUMENTED_STATUSES, PROBLEM_JSON};
 use crate::http::paths::{DOCS_PATH, OPENAPI_PATH};
 use crate::http::state::AppState;
 
@@ -69,32 +69,6 @@ impl Modify for BearerAuth {
 /// The failures any operation may answer with, each a [`Problem`].
 pub struct ErrorResponses;
 
-/// Status and description of every documented failure.
-const ERRORS: [(&str, &str); 10] = [
-    (
-        "400",
-        "Malformed request (JSON syntax, unparsable path or query)",
-    ),
-    ("401", "Missing or wrong bearer token"),
-    ("404", "Unknown bus, device or route"),
-    (
-        "409",
-        "Wrong device state, device refused, or preempted by an e-stop",
-    ),
-    ("415", "Body is not application/json"),
-    (
-        "422",
-        "Value out of range or outside a soft limit; names the field and the range",
-    ),
-    (
-        "502",
-        "Device acknowledged a write but reads back another value",
-    ),
-    ("503", "Bus down, request queue full, or bus owner stopped"),
-    ("504", "Device did not answer"),
-    ("500", "Internal error (a bug; never expected)"),
-];
-
 /// Name of the shared response component of a failure status.
 fn problem_response_name(status: &str) -> String {
     format!("Problem{status}")
@@ -104,7 +78,7 @@ impl IntoResponses for ErrorResponses {
     /// References to the shared components, so the document lists each
     /// failure once.
     fn responses() -> BTreeMap<String, RefOr<Response>> {
-        ERRORS
+        DOCUMENTED_STATUSES
             .iter()
             .map(|(status, _)| {
                 let name = problem_response_name(status);
@@ -117,7 +91,7 @@ impl IntoResponses for ErrorResponses {
 
 /// The shared failure responses, each a [`Problem`].
 fn add_problem_responses(components: &mut utoipa::openapi::Components) {
-    for (status, description) in ERRORS {
+    for (status, description) in DOCUMENTED_STATUSES {
         let content = ContentBuilder::new()
             .schema(Some(Ref::from_schema_name("Problem")))
             .build();
