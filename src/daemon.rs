@@ -12,13 +12,13 @@ use thiserror::Error;
 use tokio::net::TcpListener;
 use tokio::signal::unix::{signal, SignalKind};
 
-use crate::api::limits::{LimitError, LimitRule, SoftLimits};
-use crate::api::state::{StateOptions, WatchdogDefault};
-use crate::api::{app, AppState};
 use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle};
+use crate::http::limits::{LimitError, LimitRule, SoftLimits};
+use crate::http::state::StateOptions;
+use crate::http::teleop::{WatchdogDefault, MAX_HOLD, MIN_HOLD};
+use crate::http::{app, AppState};
 use crate::protocol::is_device_id;
 use crate::sim::{SimConfig, SimError, SimHandle, Simulator};
-use crate::ws::watchdog::{MAX_HOLD, MIN_HOLD};
 
 /// Default HTTP address: loopback only.
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8080";

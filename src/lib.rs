@@ -4,24 +4,20 @@
 //! - [`protocol`]: pure wire protocol: frames, CRC, typed commands/replies, units, stream decoder.
 //! - [`frame_json`]: frames ↔ JSON with the field names of `vectors.json` (CLI, API, tests).
 //! - [`cli`]: the `jointd frame …` tools for reading a serial capture by hand.
-//! - [`api`]: the REST API (axum routers over the bus handles, OpenAPI, auth, soft limits).
+//! - [`http`]: the HTTP layer: `app(state)`, REST API + OpenAPI, WebSocket, dashboard, auth, errors.
 //! - [`daemon`]: `jointd [run]`: config, buses, the HTTP server, graceful shutdown.
 //! - [`bus`]: one owner thread per bus, its scheduler, and the handle the API uses.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty, in-memory pipe).
-//! - [`ws`]: the WebSocket endpoint: telemetry streams, batch setpoints, teleop watchdog.
-//! - [`web`]: the embedded dashboard (or `--web-dir` while developing).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory).
 //! - `bench` (feature `bench`): `jointd bench`: the bus engine against the simulator, measured.
 
-pub mod api;
 #[cfg(feature = "bench")]
 pub mod bench;
 pub mod bus;
 pub mod cli;
 pub mod daemon;
 pub mod frame_json;
+pub mod http;
 pub mod protocol;
 pub mod sim;
 pub mod transport;
-pub mod web;
-pub mod ws;

@@ -56,7 +56,7 @@ fn main() -> ExitCode {
         None => run_daemon(cli.run),
         Some(Command::Run(args)) => run_daemon(args),
         Some(Command::Openapi) => {
-            print!("{}", jointd::api::openapi::document_json());
+            print!("{}", jointd::http::api::document_json());
             ExitCode::SUCCESS
         }
         Some(Command::Frame(cmd)) => run_frame(cmd),

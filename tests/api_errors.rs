@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use api_support::fake_bus::FakeBus;
 use api_support::{serve, Server};
-use jointd::api::limits::{LimitRule, SoftLimits};
-use jointd::api::AppState;
+use jointd::http::limits::{LimitRule, SoftLimits};
+use jointd::http::AppState;
 use serde_json::json;
 
 const DEV: &str = "/api/v1/buses/fake/devices";
@@ -266,6 +266,28 @@ async fn config_reads_in_physical_units_and_writes_are_checked_first() {
     assert_eq!(r.problem(502)["field"], "spd_ki");
     let r = s.post_empty(&format!("{DEV}/1/config/persist")).await;
     assert_eq!(r.ok()["verified_by"], "res");
+}
+
+/// A device that answers something other than what was asked is the
+/// device's failure: 502 `unexpected-reply` on every route, whether the
+/// handler or the bus owner noticed.
+#[tokio::test]
+async fn a_wrong_reply_is_the_same_502_on_every_route() {
+    let (bus, s) = setup(None).await;
+    bus.script().wrong_block = true;
+    let calls = [
+        s.get(&format!("{DEV}/1?fresh=true")).await,
+        s.get(&format!("{DEV}/1/config")).await,
+        s.post(&format!("{DEV}/1/jog"), json!({"direction": "cw"}))
+            .await,
+        s.put(&format!("{DEV}/1/target"), json!({"position_deg": 1.0}))
+            .await,
+        s.post_empty(&format!("{DEV}/1/config/persist")).await,
+    ];
+    for r in &calls {
+        let p = r.problem(502);
+        assert_eq!(p["type"], "urn:jointd:problem:unexpected-reply", "{p}");
+    }
 }
 
 #[tokio::test]

@@ -4,7 +4,8 @@
 mod api_support;
 
 use api_support::serve;
-use jointd::api::{openapi, state_for};
+use jointd::http::api;
+use jointd::http::state_for;
 use serde_json::Value;
 
 const CHECKED_IN: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/openapi/openapi.json");
@@ -12,7 +13,7 @@ const CHECKED_IN: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/openapi/openapi.j
 fn checked_in() -> Value {
     // `JOINTD_BLESS_OPENAPI=1 cargo test --test api_openapi` rewrites the file.
     if std::env::var_os("JOINTD_BLESS_OPENAPI").is_some() {
-        std::fs::write(CHECKED_IN, openapi::document_json()).expect("write openapi.json");
+        std::fs::write(CHECKED_IN, api::document_json()).expect("write openapi.json");
     }
     let text = std::fs::read_to_string(CHECKED_IN).expect("openapi/openapi.json exists");
     serde_json::from_str(&text).expect("openapi/openapi.json is JSON")
@@ -31,7 +32,7 @@ async fn checked_in_document_equals_the_served_one() {
     );
     // The text is exactly what `jointd openapi` prints, so diffs stay reviewable.
     let text = std::fs::read_to_string(CHECKED_IN).unwrap();
-    assert_eq!(text, openapi::document_json());
+    assert_eq!(text, api::document_json());
 }
 
 #[tokio::test]

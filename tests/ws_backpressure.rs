@@ -40,7 +40,7 @@ async fn stalled_client_does_not_delay_another() {
     });
     let (incoming_tx, incoming_rx) = mpsc::unbounded_channel::<Result<Message, Infallible>>();
     let state = bus.server_state.clone();
-    tokio::spawn(jointd::ws::session::run(
+    tokio::spawn(jointd::http::ws::session::run(
         state,
         Box::pin(sink),
         UnboundedReceiverStream::new(incoming_rx),

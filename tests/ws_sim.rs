@@ -349,8 +349,8 @@ async fn auth_applies_to_the_websocket() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn config_default_watchdog_and_joint_names() {
-    use jointd::api::state::{StateOptions, WatchdogDefault};
-    use jointd::ws::messages::WatchdogPolicy;
+    use jointd::http::state::StateOptions;
+    use jointd::http::teleop::{WatchdogDefault, WatchdogPolicy};
     let bus = sim_bus::start(2, None).await;
     let mut options = StateOptions::default();
     options

@@ -25,8 +25,8 @@ use tungstenite::{Message, WebSocket};
 use super::analysis::{self, Analysis};
 use super::client::{angle_of, Client, Pacer, Write, CLIENT_THREAD};
 use super::{cpu, BenchArgs, BenchError, SIM_THREAD};
-use crate::api::{app, state_for};
 use crate::bus::{BusHandle, THREAD_PREFIX};
+use crate::http::{app, state_for};
 use crate::sim::{SimHandle, SimStats};
 
 /// Names of the threads the CPU report tells apart.

@@ -1,11 +1,13 @@
-//! Errors of a bus: "the device refused" is not "the bus failed".
-//! The API maps each variant to one HTTP status (api/error.rs).
+//! Errors of a bus: what happened, told apart so callers can act on it —
+//! "the device refused" is not "the device answered something else", and
+//! neither is "the bus failed". Which HTTP status each becomes is the HTTP
+//! layer's business (`http/error.rs`), not the bus's.
 
 use thiserror::Error;
 
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum BusError {
-    /// The device did not answer (504).
+    /// The device did not answer.
     #[error(
         "device {dev_id} did not answer {what} after {attempts} attempt(s) of {timeout_us} µs each"
     )]
@@ -15,10 +17,10 @@ pub enum BusError {
         attempts: u32,
         timeout_us: u64,
     },
-    /// The port is lost and being retried (503).
+    /// The port is lost and being retried.
     #[error("bus {bus} is down: {reason}")]
     Down { bus: String, reason: String },
-    /// The device answered RES failure (409/502-ish: the device said no).
+    /// The device answered RES failure: it understood and said no.
     #[error("device {dev_id} refused {what} (RES code {code})")]
     Refused { dev_id: u8, what: String, code: u8 },
     /// A write's read-back shows another value.
@@ -29,22 +31,26 @@ pub enum BusError {
         expected: u16,
         found: u16,
     },
-    /// No such device on this bus (404).
+    /// The device answered, but not what was asked (another block, not a
+    /// RES): the device's failure, not the request's.
+    #[error("{0}")]
+    UnexpectedReply(String),
+    /// No such device on this bus.
     #[error("device {dev_id} is not known on bus {bus}")]
     UnknownDevice { bus: String, dev_id: u8 },
-    /// The device is not in a state that allows this (409), e.g. jog while disabled.
+    /// The device is not in a state that allows this, e.g. jog while disabled.
     #[error("{0}")]
     WrongState(String),
-    /// A request the owner refuses as malformed (422).
+    /// A request the owner refuses as malformed (the caller's mistake).
     #[error("{0}")]
     Invalid(String),
-    /// Too many requests waiting (503, retry).
+    /// Too many requests waiting (retry later).
     #[error("request queue full ({depth} waiting)")]
     Busy { depth: usize },
     /// An e-stop cancelled this request before it reached the wire.
     #[error("preempted by an emergency stop")]
     Preempted,
-    /// The owner did not answer in time (should not happen; 503).
+    /// The owner did not answer in time (should not happen).
     #[error("bus owner did not answer in time")]
     OwnerTimeout,
     /// The owner thread has stopped (shutdown).

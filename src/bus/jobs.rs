@@ -181,7 +181,7 @@ impl Owner {
     pub(super) fn read_info01(&mut self, id: u8) -> Result<Info01, BusError> {
         match self.read_info(id, InfoBlock::Info01)?.body() {
             ReplyBody::Info01(info) => Ok(info),
-            _ => Err(BusError::Invalid(
+            _ => Err(BusError::UnexpectedReply(
                 "INFO_01 read returned another block".into(),
             )),
         }
@@ -376,7 +376,7 @@ pub(super) fn check_res(reply: &Reply, param: &ConfigParam) -> Result<(), BusErr
             what: describe(param),
             code,
         }),
-        _ => Err(BusError::Invalid(format!(
+        _ => Err(BusError::UnexpectedReply(format!(
             "device {} answered {} with index {} instead of RES",
             reply.dev_id,
             describe(param),

@@ -30,6 +30,10 @@ pub struct Script {
     pub down: bool,
     /// Writes read back another value (502).
     pub mismatch: bool,
+    /// The device answers every read with INFO_07 and a flash write with
+    /// another block than RES, as a confused or misaddressed device would
+    /// (502 wherever it shows).
+    pub wrong_block: bool,
     /// Each request takes this long (to hold the queue busy for e-stop tests).
     pub delay: Duration,
     /// Requests served, by kind, in order.
@@ -269,6 +273,12 @@ impl Owner {
                 let _ = reply.send(r);
             }
             Request::WriteFlash { dev_id, reply } => {
+                if self.script.lock().unwrap().wrong_block {
+                    // What the real owner's RES check reports.
+                    let what = format!("device {dev_id} answered the flash write with INFO_07");
+                    let _ = reply.send(Err(BusError::UnexpectedReply(what)));
+                    return;
+                }
                 let r = self.gate(Some(dev_id)).map(|_| WriteOutcome {
                     dev_id,
                     index: 13,
@@ -317,7 +327,13 @@ impl Owner {
     }
 
     fn read(&mut self, id: u8, block: InfoBlock) -> Result<Reply, BusError> {
+        let wrong_block = self.script.lock().unwrap().wrong_block;
         let dev = self.known(id)?;
+        let block = if wrong_block {
+            InfoBlock::Info07
+        } else {
+            block
+        };
         let body = match block {
             InfoBlock::Info01 => ReplyBody::Info01(dev.info01.map(|(i, _)| i).unwrap_or_default()),
             InfoBlock::Info02 => ReplyBody::Info02(Default::default()),

@@ -7,7 +7,7 @@ pub mod sim_bus;
 use reqwest::{Method, StatusCode};
 use serde_json::Value;
 
-use jointd::api::{app, AppState};
+use jointd::http::{app, AppState};
 
 pub struct Server {
     pub base: String,

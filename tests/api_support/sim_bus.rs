@@ -4,9 +4,9 @@
 
 use std::time::Duration;
 
-use jointd::api::limits::{LimitRule, SoftLimits};
-use jointd::api::AppState;
 use jointd::bus::{spawn_bus, BusConfig, BusHandle, BusSnapshot, BusThread};
+use jointd::http::limits::{LimitRule, SoftLimits};
+use jointd::http::AppState;
 use jointd::sim::{SimConfig, SimHandle, Simulator};
 
 use super::{serve, Server};

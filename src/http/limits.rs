@@ -128,7 +128,7 @@ impl JointLimits {
             return Err(ApiError::out_of_range(field, deg, range, "deg"));
         }
         if deg < self.min_deg || deg > self.max_deg {
-            return Err(soft_limit(
+            return Err(ApiError::soft_limit(
                 field,
                 deg,
                 (self.min_deg, self.max_deg),
@@ -142,23 +142,12 @@ impl JointLimits {
     /// Refuses a speed whose magnitude exceeds `max_rpm`.
     pub fn check_speed(&self, field: &str, rpm: f64, who: &str) -> Result<(), ApiError> {
         match self.max_rpm {
-            Some(max) if rpm.abs() > max => Err(soft_limit(field, rpm, (-max, max), "rpm", who)),
+            Some(max) if rpm.abs() > max => {
+                Err(ApiError::soft_limit(field, rpm, (-max, max), "rpm", who))
+            }
             _ => Ok(()),
         }
     }
-}
-
-fn soft_limit(field: &str, value: f64, (min, max): (f64, f64), unit: &str, who: &str) -> ApiError {
-    ApiError::new(
-        axum::http::StatusCode::UNPROCESSABLE_ENTITY,
-        "soft-limit",
-        "Target outside the joint's soft limits",
-        format!(
-            "{field} = {value} {unit} is outside the soft limits of {who} ({min}..={max} {unit})"
-        ),
-    )
-    .with_field(field)
-    .with_range(min, max, unit)
 }
 
 #[cfg(test)]

@@ -8,15 +8,15 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
-use super::error::{ApiError, ApiResult};
-use super::extract::{ApiJson, ApiPath};
 use super::openapi::{ErrorResponses, TAG_CONTROL};
-use super::state::{device_id, known_device, AppState, BusPath, DevicePath};
-use super::targets::{
+use crate::bus::{BusHandle, BusSnapshot, Setpoint, Targets};
+use crate::http::error::{ApiError, ApiResult};
+use crate::http::extract::{ApiJson, ApiPath};
+use crate::http::state::{device_id, known_device, AppState, BusPath, DevicePath};
+use crate::http::targets::{
     ensure_enabled, setpoint, wait_on_wire, JointTarget, TargetAck, TargetRequest,
 };
-use super::telemetry::{firmware_of, mode_name, TargetView};
-use crate::bus::{BusHandle, BusSnapshot, Setpoint, Targets};
+use crate::http::telemetry::{firmware_of, mode_name, TargetView};
 use crate::protocol::{CtrlMode, JogDir};
 
 pub fn router() -> OpenApiRouter<AppState> {
@@ -175,7 +175,7 @@ async fn apply_targets(
                 .devices
                 .get(&id)
                 .map(firmware_of)
-                .unwrap_or(super::telemetry::ASSUMED_FIRMWARE);
+                .unwrap_or(crate::http::telemetry::ASSUMED_FIRMWARE);
             JointTarget {
                 id,
                 target: TargetView::new(sp, fw),

@@ -1,14 +1,16 @@
 //! Builds `telemetry` messages from the buses' latest snapshots: whatever
 //! is newest when the client can take it, in physical units.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use serde_json::{Map, Value};
 
 use super::messages::Field;
-use crate::api::telemetry::{firmware_of, measured_angle_raw};
 use crate::bus::handle::DeviceState;
 use crate::bus::BusSnapshot;
+use crate::http::hub::FragmentCache;
+use crate::http::telemetry::{firmware_of, measured_angle_raw};
 use crate::protocol::reply::{fault_name, fsm_name};
 use crate::protocol::units;
 
@@ -111,60 +113,24 @@ fn field_value(f: Field, dev: &DeviceState) -> Value {
     v.unwrap_or(Value::Null)
 }
 
-/// Serialized joints of one bus snapshot for one subscription shape, shared
-/// by every connection with that shape: a hundred dashboards at 100 Hz then
-/// cost one serialization per snapshot, not one per message. `age_ms` in a
-/// shared fragment is the age when it was built (at most one snapshot
-/// interval earlier than the message).
-#[derive(Debug, Default)]
-pub struct FragmentCache {
-    entries: std::sync::Mutex<std::collections::HashMap<FragmentKey, (usize, std::sync::Arc<str>)>>,
-}
-
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-struct FragmentKey {
-    bus: String,
-    devices: Option<Vec<u8>>,
-    fields: Vec<Field>,
-}
-
-/// Distinct subscription shapes kept; beyond, the cache starts over (a
-/// client cannot grow it without bound).
-const MAX_FRAGMENTS: usize = 64;
-
-impl FragmentCache {
-    /// The joints of `snap` for `sub`, comma-separated JSON objects.
-    pub fn fragment<'a>(
-        &self,
-        sub: &Subscription,
-        snap: &std::sync::Arc<BusSnapshot>,
-        name_of: impl Fn(u8) -> Option<&'a str>,
-        now: Instant,
-    ) -> std::sync::Arc<str> {
-        let key = FragmentKey {
-            bus: snap.name.clone(),
-            devices: sub.devices.clone(),
-            fields: sub.fields.clone(),
-        };
-        let id = std::sync::Arc::as_ptr(snap) as usize;
-        let mut entries = self.entries.lock().unwrap_or_else(|p| p.into_inner());
-        if let Some((cached_id, text)) = entries.get(&key) {
-            if *cached_id == id {
-                return text.clone();
-            }
-        }
+/// The joints of `snap` for `sub`, comma-separated JSON objects, from the
+/// cache shared by every connection with the same subscription shape.
+/// `age_ms` in a shared fragment is the age when it was built (at most one
+/// snapshot interval earlier than the message).
+pub fn fragment<'a>(
+    cache: &FragmentCache,
+    sub: &Subscription,
+    snap: &Arc<BusSnapshot>,
+    name_of: impl Fn(u8) -> Option<&'a str>,
+    now: Instant,
+) -> Arc<str> {
+    let shape = format!("{}|{:?}|{:?}", snap.name, sub.devices, sub.fields);
+    cache.get_or_build(shape, snap, || {
         let mut list = Vec::new();
         joints(sub, snap, name_of, now, &mut list);
-        let text: std::sync::Arc<str> = list
-            .iter()
+        list.iter()
             .map(|j| Value::Object(j.clone()).to_string())
             .collect::<Vec<_>>()
             .join(",")
-            .into();
-        if entries.len() >= MAX_FRAGMENTS && !entries.contains_key(&key) {
-            entries.clear();
-        }
-        entries.insert(key, (id, text.clone()));
-        text
-    }
+    })
 }

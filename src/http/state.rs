@@ -6,7 +6,9 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::error::{ApiError, ApiResult};
+use super::hub::WsHub;
 use super::limits::{JointLimits, SoftLimits};
+use super::teleop::WatchdogDefault;
 use crate::bus::handle::DeviceState;
 use crate::bus::{BusHandle, BusSnapshot};
 use crate::protocol::{is_device_id, MAX_DEVICE_ID, MIN_DEVICE_ID};
@@ -20,24 +22,6 @@ pub struct StateOptions {
     pub watchdog: WatchdogDefault,
 }
 
-/// The config's `[watchdog]`: armed for every client that streams setpoints
-/// (`hold_timeout_ms` 0: only clients that ask get one).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct WatchdogDefault {
-    pub hold_timeout_ms: u64,
-    pub policy: crate::ws::messages::WatchdogPolicy,
-}
-
-impl Default for WatchdogDefault {
-    fn default() -> Self {
-        Self {
-            hold_timeout_ms: 0,
-            policy: crate::ws::messages::WatchdogPolicy::Hold,
-        }
-    }
-}
-
 #[derive(Clone)]
 pub struct AppState {
     inner: Arc<Inner>,
@@ -48,7 +32,7 @@ struct Inner {
     limits: SoftLimits,
     token: Option<String>,
     started: Instant,
-    ws: crate::ws::WsHub,
+    ws: WsHub,
     options: std::sync::OnceLock<StateOptions>,
 }
 
@@ -65,7 +49,7 @@ impl AppState {
                 limits,
                 token: token.filter(|t| !t.is_empty()),
                 started: Instant::now(),
-                ws: crate::ws::WsHub::default(),
+                ws: WsHub::default(),
                 options: std::sync::OnceLock::new(),
             }),
         }
@@ -125,7 +109,7 @@ impl AppState {
     }
 
     /// What the WebSocket connections share.
-    pub fn ws(&self) -> &crate::ws::WsHub {
+    pub fn ws(&self) -> &WsHub {
         &self.inner.ws
     }
 

@@ -3,20 +3,19 @@
 //! verified by the bus engine), persist to flash, change a device's id.
 
 use axum::extract::State;
-use axum::http::StatusCode;
 use axum::Json;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::config_params::{Blocks, ConfigPatch, Param, ParamValue};
-use super::error::{ApiError, ApiResult};
-use super::extract::{ApiJson, ApiPath};
 use super::openapi::{ErrorResponses, TAG_CONFIG};
-use super::state::{device_id, known_device, AppState, DevicePath};
-use super::telemetry::hex;
 use crate::bus::handle::WriteOutcome;
-use crate::bus::BusHandle;
+use crate::bus::{BusError, BusHandle};
+use crate::http::error::{ApiError, ApiResult};
+use crate::http::extract::{ApiJson, ApiPath};
+use crate::http::state::{device_id, known_device, AppState, DevicePath};
+use crate::http::telemetry::hex;
 use crate::protocol::{BaudLevel, InfoBlock, ReplyBody};
 
 pub fn router() -> OpenApiRouter<AppState> {
@@ -144,12 +143,10 @@ async fn read_blocks(bus: &BusHandle, id: u8) -> ApiResult<(Blocks, [[u8; 8]; 4]
                 raw,
             ))
         }
-        _ => Err(ApiError::new(
-            StatusCode::BAD_GATEWAY,
-            "unexpected-reply",
-            "Unexpected reply",
-            format!("device {id} answered a parameter read with another block"),
-        )),
+        _ => Err(BusError::UnexpectedReply(format!(
+            "device {id} answered a parameter read with another block"
+        ))
+        .into()),
     }
 }
 

@@ -12,8 +12,9 @@ use utoipa::{IntoResponses, Modify, OpenApi};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_swagger_ui::SwaggerUi;
 
-use super::error::{Problem, PROBLEM_JSON};
-use super::state::AppState;
+use crate::http::error::{Problem, DOCUMENTED_STATUSES, PROBLEM_JSON};
+use crate::http::paths::{DOCS_PATH, OPENAPI_PATH};
+use crate::http::state::AppState;
 
 pub const TAG_BUSES: &str = "buses";
 pub const TAG_DEVICES: &str = "devices";
@@ -21,9 +22,6 @@ pub const TAG_CONTROL: &str = "control";
 pub const TAG_CONFIG: &str = "configuration";
 pub const TAG_ESTOP: &str = "emergency stop";
 pub const TAG_HEALTH: &str = "health";
-/// Where the document and its docs page are served.
-pub const OPENAPI_PATH: &str = "/openapi.json";
-pub const DOCS_PATH: &str = "/docs";
 /// Name of the bearer security scheme in the document.
 const BEARER_SCHEME: &str = "bearer";
 
@@ -71,32 +69,6 @@ impl Modify for BearerAuth {
 /// The failures any operation may answer with, each a [`Problem`].
 pub struct ErrorResponses;
 
-/// Status and description of every documented failure.
-const ERRORS: [(&str, &str); 10] = [
-    (
-        "400",
-        "Malformed request (JSON syntax, unparsable path or query)",
-    ),
-    ("401", "Missing or wrong bearer token"),
-    ("404", "Unknown bus, device or route"),
-    (
-        "409",
-        "Wrong device state, device refused, or preempted by an e-stop",
-    ),
-    ("415", "Body is not application/json"),
-    (
-        "422",
-        "Value out of range or outside a soft limit; names the field and the range",
-    ),
-    (
-        "502",
-        "Device acknowledged a write but reads back another value",
-    ),
-    ("503", "Bus down, request queue full, or bus owner stopped"),
-    ("504", "Device did not answer"),
-    ("500", "Internal error (a bug; never expected)"),
-];
-
 /// Name of the shared response component of a failure status.
 fn problem_response_name(status: &str) -> String {
     format!("Problem{status}")
@@ -106,7 +78,7 @@ impl IntoResponses for ErrorResponses {
     /// References to the shared components, so the document lists each
     /// failure once.
     fn responses() -> BTreeMap<String, RefOr<Response>> {
-        ERRORS
+        DOCUMENTED_STATUSES
             .iter()
             .map(|(status, _)| {
                 let name = problem_response_name(status);
@@ -119,7 +91,7 @@ impl IntoResponses for ErrorResponses {
 
 /// The shared failure responses, each a [`Problem`].
 fn add_problem_responses(components: &mut utoipa::openapi::Components) {
-    for (status, description) in ERRORS {
+    for (status, description) in DOCUMENTED_STATUSES {
         let content = ContentBuilder::new()
             .schema(Some(Ref::from_schema_name("Problem")))
             .build();
@@ -133,22 +105,10 @@ fn add_problem_responses(components: &mut utoipa::openapi::Components) {
     }
 }
 
-/// Every documented route, with its part of the document.
-pub fn router() -> OpenApiRouter<AppState> {
+/// The document's head (info, tags, security, shared failures), before the
+/// areas add their routes.
+pub fn base() -> OpenApiRouter<AppState> {
     OpenApiRouter::with_openapi(ApiDoc::openapi())
-        .merge(super::health::router())
-        .merge(super::buses::router())
-        .merge(super::devices::router())
-        .merge(super::control::router())
-        .merge(super::config::router())
-        .merge(super::estop::router())
-}
-
-/// The document as served, with the crate version.
-pub fn document() -> utoipa::openapi::OpenApi {
-    let (_, mut doc) = router().split_for_parts();
-    doc.info.version = env!("CARGO_PKG_VERSION").to_owned();
-    doc
 }
 
 /// `/openapi.json` and the Swagger UI at `/docs`.
@@ -157,9 +117,8 @@ pub fn docs(mut doc: utoipa::openapi::OpenApi) -> Router<AppState> {
     SwaggerUi::new(DOCS_PATH).url(OPENAPI_PATH, doc).into()
 }
 
-/// The document as pretty JSON, as checked in under `openapi/`.
-pub fn document_json() -> String {
-    let doc = document();
+/// A document as pretty JSON, as checked in under `openapi/`.
+pub fn to_json(doc: &utoipa::openapi::OpenApi) -> String {
     let mut text = doc
         .to_pretty_json()
         .unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"));

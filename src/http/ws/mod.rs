@@ -9,9 +9,7 @@
 //! - [`setpoints`]: validate a batch whole, then store it.
 //! - [`telemetry`]: snapshot → joint fields in physical units.
 //! - [`watchdog`]: the teleop hold-timeout state machine.
-//! - [`hub`]: what all connections share (watchdog events, counters).
 
-pub mod hub;
 pub mod messages;
 pub mod session;
 pub mod setpoints;
@@ -25,12 +23,8 @@ use axum::routing::get;
 use axum::Router;
 use futures_util::StreamExt;
 
-use crate::api::AppState;
-
-pub use hub::WsHub;
-
-/// Where the endpoint is served.
-pub const WS_PATH: &str = "/api/v1/ws";
+use crate::http::paths::WS_PATH;
+use crate::http::state::AppState;
 /// Largest client message accepted (a full batch is well under this).
 const MAX_MESSAGE_BYTES: usize = 256 * 1024;
 

@@ -5,70 +5,67 @@
 use std::path::Path;
 
 use axum::extract::State;
-use axum::http::{header, StatusCode, Uri};
+use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use axum::Router;
 
-use crate::api::AppState;
+use crate::http::paths::{DASHBOARD_INDEX, DASHBOARD_PAGE, DASHBOARD_SCRIPT, DASHBOARD_STYLE};
+use crate::http::state::AppState;
+
+/// One file of the dashboard.
+type Asset = (&'static str, &'static str, &'static str, &'static str);
 
 /// (URL path, file name, content type, embedded bytes).
-const ASSETS: [(&str, &str, &str, &str); 4] = [
+const ASSETS: [Asset; 4] = [
     (
-        "/",
+        DASHBOARD_PAGE,
         "index.html",
         "text/html; charset=utf-8",
-        include_str!("../web/index.html"),
+        include_str!("../../web/index.html"),
     ),
     (
-        "/index.html",
+        DASHBOARD_INDEX,
         "index.html",
         "text/html; charset=utf-8",
-        include_str!("../web/index.html"),
+        include_str!("../../web/index.html"),
     ),
     (
-        "/app.js",
+        DASHBOARD_SCRIPT,
         "app.js",
         "text/javascript; charset=utf-8",
-        include_str!("../web/app.js"),
+        include_str!("../../web/app.js"),
     ),
     (
-        "/style.css",
+        DASHBOARD_STYLE,
         "style.css",
         "text/css; charset=utf-8",
-        include_str!("../web/style.css"),
+        include_str!("../../web/style.css"),
     ),
 ];
 
-/// The dashboard's files need no token: they hold no data, and the page
-/// itself asks for the token when the API answers 401.
-pub fn is_public(path: &str) -> bool {
-    ASSETS.iter().any(|(p, ..)| *p == path)
-}
-
+/// One route per file; each handler knows its file, so no request can ask
+/// for one that is not there. (They need no token: `paths::is_public`.)
 pub fn router() -> Router<AppState> {
-    ASSETS
-        .iter()
-        .fold(Router::new(), |r, (path, ..)| r.route(path, get(asset)))
+    ASSETS.iter().fold(Router::new(), |r, a| {
+        r.route(a.0, get(move |State(state)| asset(state, *a)))
+    })
 }
 
-async fn asset(State(state): State<AppState>, uri: Uri) -> Response {
-    let Some((_, file, mime, embedded)) = ASSETS.iter().find(|(p, ..)| *p == uri.path()) else {
-        return StatusCode::NOT_FOUND.into_response();
-    };
+async fn asset(state: AppState, (_, file, mime, embedded): Asset) -> Response {
     let body = match state.web_dir() {
         Some(dir) => match read_from(dir, file).await {
             Ok(text) => text,
             Err(e) => {
                 tracing::warn!(file, error = %e, "cannot read dashboard file from disk; serving the embedded one");
-                (*embedded).to_owned()
+                embedded.to_owned()
             }
         },
-        None => (*embedded).to_owned(),
+        None => embedded.to_owned(),
     };
     (
         [
-            (header::CONTENT_TYPE, *mime),
+            (header::CONTENT_TYPE, mime),
             (header::CACHE_CONTROL, "no-cache"),
         ],
         body,

@@ -6,17 +6,16 @@
 use std::time::Instant;
 
 use axum::extract::State;
-use axum::http::StatusCode;
 use axum::Json;
 use serde::Serialize;
 use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
-use super::error::{ApiError, ApiResult};
-use super::extract::ApiPath;
 use super::openapi::{ErrorResponses, TAG_ESTOP};
-use super::state::{AppState, BusPath};
 use crate::bus::BusHandle;
+use crate::http::error::{ApiError, ApiResult};
+use crate::http::extract::ApiPath;
+use crate::http::state::{AppState, BusPath};
 
 pub fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
@@ -133,15 +132,10 @@ async fn stop(buses: Vec<BusHandle>) -> ApiResult<Json<EstopResult>> {
         .filter(|b| !b.stopped)
         .map(|b| b.bus.as_str())
         .collect();
-    Err(ApiError::new(
-        StatusCode::SERVICE_UNAVAILABLE,
-        "estop-incomplete",
-        "Emergency stop incomplete",
-        format!(
-            "could not confirm the stop of bus(es): {}",
-            failed.join(", ")
-        ),
-    )
+    Err(ApiError::estop_incomplete(format!(
+        "could not confirm the stop of bus(es): {}",
+        failed.join(", ")
+    ))
     .with_partial(serde_json::to_value(&result).unwrap_or_default()))
 }
 

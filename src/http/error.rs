@@ -1,19 +1,24 @@
 //! One error shape for every failure: RFC 9457 problem details
-//! (`application/problem+json`), and the single place where bus and unit
-//! errors become HTTP statuses.
+//! (`application/problem+json`), and the one file that picks HTTP
+//! statuses. Handlers return [`ApiResult`] and use `?` on bus errors; the
+//! same device answer is then the same status on every route. The OpenAPI
+//! document describes each status from [`DOCUMENTED_STATUSES`] below.
 //!
 //! | cause | status |
 //! |---|---|
 //! | malformed JSON, unparsable path or query | 400 |
 //! | missing or wrong bearer token | 401 |
 //! | unknown bus, device or route | 404 |
+//! | method not supported on the route | 405 |
 //! | wrong state (jog while disabled), device refused (RES 0), preempted by e-stop | 409 |
 //! | JSON body not `application/json` | 415 |
-//! | value out of range, soft limit, invalid field | 422 |
-//! | device acknowledged a write but reads back another value | 502 |
-//! | bus down, request queue full, bus owner stopped | 503 |
+//! | value out of range, soft limit, invalid field, body not of the schema | 422 |
+//! | a bug (handler panicked) | 500 |
+//! | device answered something other than what was asked, or reads back another value than written | 502 |
+//! | bus down, request queue full, bus owner stopped, not ready, e-stop unconfirmed | 503 |
 //! | device did not answer | 504 |
 
+use axum::extract::rejection::{JsonRejection, PathRejection, QueryRejection};
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
@@ -78,7 +83,9 @@ pub struct ApiError {
 }
 
 impl ApiError {
-    pub fn new(status: StatusCode, kind: &str, title: &str, detail: impl Into<String>) -> Self {
+    /// Private: a status is chosen by one of the named constructors or
+    /// `From` impls below, never by a handler.
+    fn new(status: StatusCode, kind: &str, title: &str, detail: impl Into<String>) -> Self {
         Self {
             problem: Box::new(Problem {
                 kind: format!("{TYPE_PREFIX}{kind}"),
@@ -192,52 +199,178 @@ impl ApiError {
             ),
         }
     }
+
+    /// A target outside the joint's configured soft limits (422).
+    pub fn soft_limit(field: &str, value: f64, range: (f64, f64), unit: &str, who: &str) -> Self {
+        let (min, max) = range;
+        Self::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "soft-limit",
+            "Target outside the joint's soft limits",
+            format!(
+                "{field} = {value} {unit} is outside the soft limits of {who} ({min}..={max} {unit})"
+            ),
+        )
+        .with_field(field)
+        .with_range(min, max, unit)
+    }
+
+    pub fn method_not_allowed(method: &axum::http::Method) -> Self {
+        Self::new(
+            StatusCode::METHOD_NOT_ALLOWED,
+            "method-not-allowed",
+            "Method not allowed",
+            format!("{method} is not supported on this resource"),
+        )
+    }
+
+    /// A bug: a handler panicked (logged by the caller).
+    pub fn internal() -> Self {
+        Self::new(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "internal",
+            "Internal error",
+            "the request handler failed; see the daemon log",
+        )
+    }
+
+    /// `/readyz` when a bus is not up (503; `partial` names each bus's link).
+    pub fn not_ready(detail: impl Into<String>) -> Self {
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "not-ready",
+            "Not ready",
+            detail,
+        )
+    }
+
+    /// An e-stop that could not confirm every bus stopped (503; `partial`
+    /// carries each bus's result).
+    pub fn estop_incomplete(detail: impl Into<String>) -> Self {
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "estop-incomplete",
+            "Emergency stop incomplete",
+            detail,
+        )
+    }
+}
+
+/// Status, problem type and title of each bus failure: the one table that
+/// turns what the bus reports into HTTP.
+fn bus_problem(err: &BusError) -> (StatusCode, &'static str, &'static str) {
+    match err {
+        BusError::Timeout { .. } => (
+            StatusCode::GATEWAY_TIMEOUT,
+            "device-timeout",
+            "Device did not answer",
+        ),
+        BusError::Down { .. } => (StatusCode::SERVICE_UNAVAILABLE, "bus-down", "Bus is down"),
+        BusError::Refused { .. } => (StatusCode::CONFLICT, "device-refused", "Device refused"),
+        // The device answered, but wrongly: the upstream failed, not the request.
+        BusError::VerifyMismatch { .. } => (
+            StatusCode::BAD_GATEWAY,
+            "verify-mismatch",
+            "Read-back differs from the value written",
+        ),
+        BusError::UnexpectedReply(_) => (
+            StatusCode::BAD_GATEWAY,
+            "unexpected-reply",
+            "Unexpected reply",
+        ),
+        BusError::UnknownDevice { .. } => (StatusCode::NOT_FOUND, "unknown-device", "Not found"),
+        BusError::WrongState(_) => (StatusCode::CONFLICT, "wrong-state", "Wrong device state"),
+        BusError::Invalid(_) => (
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid-value",
+            "Invalid value",
+        ),
+        BusError::Busy { .. } => (
+            StatusCode::SERVICE_UNAVAILABLE,
+            "bus-busy",
+            "Bus request queue full",
+        ),
+        BusError::Preempted => (
+            StatusCode::CONFLICT,
+            "preempted",
+            "Preempted by an emergency stop",
+        ),
+        BusError::OwnerTimeout | BusError::Stopped => (
+            StatusCode::SERVICE_UNAVAILABLE,
+            "bus-unavailable",
+            "Bus owner unavailable",
+        ),
+    }
 }
 
 impl From<BusError> for ApiError {
     fn from(err: BusError) -> Self {
-        let detail = err.to_string();
-        let (status, kind, title) = match &err {
-            BusError::Timeout { .. } => (
-                StatusCode::GATEWAY_TIMEOUT,
-                "device-timeout",
-                "Device did not answer",
-            ),
-            BusError::Down { .. } => (StatusCode::SERVICE_UNAVAILABLE, "bus-down", "Bus is down"),
-            BusError::Refused { .. } => (StatusCode::CONFLICT, "device-refused", "Device refused"),
-            BusError::VerifyMismatch { .. } => (
-                StatusCode::BAD_GATEWAY,
-                "verify-mismatch",
-                "Read-back differs from the value written",
-            ),
-            BusError::UnknownDevice { .. } => {
-                (StatusCode::NOT_FOUND, "unknown-device", "Not found")
-            }
-            BusError::WrongState(_) => (StatusCode::CONFLICT, "wrong-state", "Wrong device state"),
-            BusError::Invalid(_) => (
-                StatusCode::UNPROCESSABLE_ENTITY,
-                "invalid-value",
-                "Invalid value",
-            ),
-            BusError::Busy { .. } => (
-                StatusCode::SERVICE_UNAVAILABLE,
-                "bus-busy",
-                "Bus request queue full",
-            ),
-            BusError::Preempted => (
-                StatusCode::CONFLICT,
-                "preempted",
-                "Preempted by an emergency stop",
-            ),
-            BusError::OwnerTimeout | BusError::Stopped => (
-                StatusCode::SERVICE_UNAVAILABLE,
-                "bus-unavailable",
-                "Bus owner unavailable",
-            ),
-        };
-        Self::new(status, kind, title, detail)
+        let (status, kind, title) = bus_problem(&err);
+        Self::new(status, kind, title, err.to_string())
     }
 }
+
+impl From<JsonRejection> for ApiError {
+    fn from(rej: JsonRejection) -> Self {
+        match rej {
+            // Well-formed JSON of the wrong shape: a missing field, a string
+            // where a number belongs, an unknown field.
+            JsonRejection::JsonDataError(e) => ApiError::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "invalid-body",
+                "Request body does not match the schema",
+                e.body_text(),
+            ),
+            JsonRejection::MissingJsonContentType(_) => ApiError::new(
+                StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                "unsupported-media-type",
+                "Body must be application/json",
+                "send the body with `Content-Type: application/json`",
+            ),
+            other => ApiError::bad_request(other.body_text()),
+        }
+    }
+}
+
+impl From<PathRejection> for ApiError {
+    fn from(rej: PathRejection) -> Self {
+        ApiError::bad_request(rej.body_text())
+    }
+}
+
+impl From<QueryRejection> for ApiError {
+    fn from(rej: QueryRejection) -> Self {
+        ApiError::bad_request(rej.body_text())
+    }
+}
+
+/// Every failure status an operation may answer with, and what it means:
+/// the OpenAPI document's shared responses.
+pub const DOCUMENTED_STATUSES: [(&str, &str); 10] = [
+    (
+        "400",
+        "Malformed request (JSON syntax, unparsable path or query)",
+    ),
+    ("401", "Missing or wrong bearer token"),
+    ("404", "Unknown bus, device or route"),
+    (
+        "409",
+        "Wrong device state, device refused, or preempted by an e-stop",
+    ),
+    ("415", "Body is not application/json"),
+    (
+        "422",
+        "Value out of range or outside a soft limit; names the field and the range",
+    ),
+    (
+        "502",
+        "The device answered something other than what was asked (unexpected-reply), \
+         or a write reads back another value (verify-mismatch)",
+    ),
+    ("503", "Bus down, request queue full, or bus owner stopped"),
+    ("504", "Device did not answer"),
+    ("500", "Internal error (a bug; never expected)"),
+];
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
@@ -296,9 +429,34 @@ mod tests {
             (BusError::Preempted, 409),
             (BusError::Busy { depth: 64 }, 503),
             (BusError::Stopped, 503),
+            (BusError::OwnerTimeout, 503),
+            (
+                BusError::Refused {
+                    dev_id: 1,
+                    what: "persist".into(),
+                    code: 0,
+                },
+                409,
+            ),
+            (BusError::UnexpectedReply("INFO_07".into()), 502),
+            (
+                BusError::VerifyMismatch {
+                    dev_id: 1,
+                    index: 18,
+                    expected: 5,
+                    found: 0,
+                },
+                502,
+            ),
         ];
         for (err, status) in cases {
-            assert_eq!(ApiError::from(err.clone()).problem.status, status, "{err}");
+            let api = ApiError::from(err.clone());
+            assert_eq!(api.problem.status, status, "{err}");
+            // Every status a bus failure can get is in the OpenAPI document.
+            let documented = DOCUMENTED_STATUSES
+                .iter()
+                .any(|(s, _)| *s == status.to_string());
+            assert!(documented, "{status} of {err} is not documented");
         }
     }
 

@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::error::{ApiError, ApiResult};
+use crate::http::error::{ApiError, ApiResult};
 use crate::protocol::command::{index, MAX_LPF_LEVEL};
 use crate::protocol::units;
 use crate::protocol::{ConfigParam, Gains, Info04, Info05, Info06};

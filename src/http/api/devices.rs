@@ -9,15 +9,16 @@ use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
-use super::error::{ApiError, ApiResult};
-use super::extract::{ApiPath, ApiQuery};
-use super::limits::JointLimits;
 use super::openapi::{ErrorResponses, TAG_DEVICES};
-use super::state::{known_device, AppState, BusPath, DevicePath};
-use super::telemetry::{
+use crate::bus::handle::DeviceState;
+use crate::bus::BusError;
+use crate::http::error::ApiResult;
+use crate::http::extract::{ApiPath, ApiQuery};
+use crate::http::limits::JointLimits;
+use crate::http::state::{known_device, AppState, BusPath, DevicePath};
+use crate::http::telemetry::{
     firmware_of, mode_name, motion_view, status_view, FaultView, MotionView, StatusView, TargetView,
 };
-use crate::bus::handle::DeviceState;
 use crate::protocol::{InfoBlock, ReplyBody};
 
 pub fn router() -> OpenApiRouter<AppState> {
@@ -219,11 +220,9 @@ async fn refresh(bus: &crate::bus::BusHandle, dev: &mut DeviceState) -> ApiResul
             dev.online = true;
             Ok(())
         }
-        _ => Err(ApiError::new(
-            axum::http::StatusCode::BAD_GATEWAY,
-            "unexpected-reply",
-            "Unexpected reply",
-            format!("device {id} answered a read with another block"),
-        )),
+        _ => Err(BusError::UnexpectedReply(format!(
+            "device {id} answered a read with another block"
+        ))
+        .into()),
     }
 }

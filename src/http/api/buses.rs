@@ -9,14 +9,14 @@ use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
-use super::error::{ApiError, ApiResult};
-use super::extract::{ApiJson, ApiPath, ApiQuery};
 use super::health::link_name;
 use super::openapi::{ErrorResponses, TAG_BUSES};
-use super::state::{device_id, AppState, BusPath};
 use crate::bus::handle::{LinkState, FRAME_LOG_LEN};
 use crate::bus::BusSnapshot;
 use crate::frame_json::frame_to_json;
+use crate::http::error::{ApiError, ApiResult};
+use crate::http::extract::{ApiJson, ApiPath, ApiQuery};
+use crate::http::state::{device_id, AppState, BusPath};
 use crate::protocol::{BaudLevel, Frame, MAX_DEVICE_ID};
 
 /// Ids per bus scan request (16 absent ids at 19200 baud take well under
@@ -266,7 +266,7 @@ async fn frames(
                 .duration_since(UNIX_EPOCH)
                 .map_or(0.0, |d| d.as_secs_f64()),
             direction: if f.tx { "tx" } else { "rx" },
-            hex: super::telemetry::hex(&f.bytes),
+            hex: crate::http::telemetry::hex(&f.bytes),
             decoded: Frame::decode(&f.bytes)
                 .map(|fr| frame_to_json(&fr))
                 .unwrap_or_else(|e| serde_json::json!({"kind": "garbage", "error": e.to_string()})),

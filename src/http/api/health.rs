@@ -5,20 +5,19 @@ use std::fmt::Write as _;
 use std::time::Instant;
 
 use axum::extract::State;
-use axum::http::{header, StatusCode};
+use axum::http::header;
 use axum::response::IntoResponse;
 use axum::Json;
 use serde::Serialize;
 use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
-use super::error::{ApiError, ApiResult};
 use super::openapi::{ErrorResponses, TAG_HEALTH};
-use super::state::AppState;
 use crate::bus::handle::LinkState;
 use crate::bus::BusSnapshot;
+use crate::http::error::{ApiError, ApiResult};
+use crate::http::state::AppState;
 
-pub const HEALTHZ_PATH: &str = "/healthz";
 /// Content type of the Prometheus text exposition format.
 const PROMETHEUS_TEXT: &str = "text/plain; version=0.0.4; charset=utf-8";
 
@@ -95,13 +94,7 @@ async fn readyz(State(state): State<AppState>) -> ApiResult<Json<Readiness>> {
     }
     let detail = format!("bus(es) not up: {}", down.join(", "));
     let partial = serde_json::to_value(&buses).unwrap_or_default();
-    Err(ApiError::new(
-        StatusCode::SERVICE_UNAVAILABLE,
-        "not-ready",
-        "Not ready",
-        detail,
-    )
-    .with_partial(partial))
+    Err(ApiError::not_ready(detail).with_partial(partial))
 }
 
 /// Prometheus text: bus counters, link state, per-joint gauges.

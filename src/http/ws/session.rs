@@ -11,19 +11,20 @@ use futures_util::{Sink, Stream, StreamExt};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
-use super::hub::WsHub;
 use super::messages::{
-    self, BusInfo, ClientMessage, ErrorCode, Field, JointRef, Limits, ServerMessage, Subscribe,
-    WatchdogEvent, WatchdogPolicy, WatchdogRequest,
+    self, BusInfo, ClientMessage, ErrorCode, Field, Limits, ServerMessage, Subscribe,
+    WatchdogRequest,
 };
 use super::setpoints::{self, WsError, MAX_BATCH};
 use super::telemetry::Subscription;
-use super::watchdog::{Watchdog, MAX_HOLD, MIN_HOLD};
+use super::watchdog::Watchdog;
 use super::writer::{PendingAck, Writer};
-use crate::api::state::device_id;
-use crate::api::telemetry::measured_angle_raw;
-use crate::api::AppState;
 use crate::bus::{Setpoint, Targets};
+use crate::http::hub::WsHub;
+use crate::http::state::device_id;
+use crate::http::state::AppState;
+use crate::http::telemetry::measured_angle_raw;
+use crate::http::teleop::{JointRef, WatchdogEvent, WatchdogPolicy, MAX_HOLD, MIN_HOLD};
 
 /// Replies (acks, errors) a connection may have queued; beyond, they are dropped and counted.
 const OUT_QUEUE: usize = 64;

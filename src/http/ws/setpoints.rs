@@ -6,12 +6,14 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use super::messages::{ErrorCode, JointRef, SetpointBatch, TargetItem};
-use crate::api::state::{device_id, known_device};
-use crate::api::targets::{setpoint, TargetRequest};
-use crate::api::telemetry::is_enabled;
-use crate::api::{ApiError, AppState};
+use super::messages::{ErrorCode, SetpointBatch, TargetItem};
 use crate::bus::{BusSnapshot, Setpoint};
+use crate::http::error::ApiError;
+use crate::http::state::AppState;
+use crate::http::state::{device_id, known_device};
+use crate::http::targets::{setpoint, TargetRequest};
+use crate::http::telemetry::is_enabled;
+use crate::http::teleop::JointRef;
 
 /// Most targets one batch may carry (16 joints × a few buses, with room).
 pub const MAX_BATCH: usize = 256;

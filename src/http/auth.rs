@@ -1,5 +1,5 @@
 //! Bearer-token auth. When a token is configured, every request but
-//! `/healthz` must carry `Authorization: Bearer <token>`; a missing or wrong
+//! the public paths (`/healthz`, the dashboard files) must carry `Authorization: Bearer <token>`; a missing or wrong
 //! token is a 401 problem. With no token the API is open (the daemon refuses
 //! to listen beyond loopback that way unless told `--insecure`).
 
@@ -9,7 +9,7 @@ use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
 use super::error::ApiError;
-use super::health::HEALTHZ_PATH;
+use super::paths::{is_public, WS_PATH};
 use super::state::AppState;
 
 const BEARER: &str = "Bearer ";
@@ -18,7 +18,7 @@ pub async fn require_token(State(state): State<AppState>, req: Request, next: Ne
     let Some(token) = state.token() else {
         return next.run(req).await;
     };
-    if req.uri().path() == HEALTHZ_PATH || crate::web::is_public(req.uri().path()) {
+    if is_public(req.uri().path()) {
         return next.run(req).await;
     }
     let presented = req
@@ -37,7 +37,7 @@ pub async fn require_token(State(state): State<AppState>, req: Request, next: Ne
 /// Browsers cannot set headers on a WebSocket upgrade, so the WebSocket
 /// endpoint (only) also takes `?token=`.
 fn websocket_query_token(req: &Request) -> Option<&str> {
-    if req.uri().path() != crate::ws::WS_PATH {
+    if req.uri().path() != WS_PATH {
         return None;
     }
     req.uri()

@@ -12,7 +12,7 @@ use super::error::{ApiError, ApiResult};
 use super::limits::JointLimits;
 use super::telemetry::{firmware_of, is_enabled, measured_angle_raw, TargetView};
 use crate::bus::handle::DeviceState;
-use crate::bus::{BusHandle, Setpoint};
+use crate::bus::{BusError, BusHandle, Setpoint};
 use crate::protocol::reply::fsm_name;
 use crate::protocol::units;
 use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
@@ -146,12 +146,11 @@ pub async fn ensure_enabled(bus: &BusHandle, dev: &DeviceState, what: &str) -> A
                 fsm_name(i.fsm)
             ),
         )),
-        _ => Err(ApiError::new(
-            axum::http::StatusCode::BAD_GATEWAY,
-            "unexpected-reply",
-            "Unexpected reply",
-            format!("device {} answered INFO_01 with another block", dev.dev_id),
-        )),
+        _ => Err(BusError::UnexpectedReply(format!(
+            "device {} answered INFO_01 with another block",
+            dev.dev_id
+        ))
+        .into()),
     }
 }
 

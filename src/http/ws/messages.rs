@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::bus::handle::BusEvent;
+use crate::http::teleop::{WatchdogEvent, WatchdogPolicy};
 
 /// Name and version of this protocol, sent in `welcome`.
 pub const PROTOCOL: &str = "jointd.ws.v1";
@@ -78,16 +79,6 @@ pub struct TargetItem {
     pub dev_id: i64,
     pub position_deg: Option<f64>,
     pub speed_rpm: Option<f64>,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum WatchdogPolicy {
-    /// Freeze each joint where it is (target := measured angle).
-    #[default]
-    Hold,
-    /// Disable each joint.
-    Disable,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -249,24 +240,6 @@ pub struct Limits {
 pub enum EventBody {
     Bus(BusEvent),
     Watchdog(WatchdogEvent),
-}
-
-#[derive(Debug, Clone, Serialize)]
-pub struct WatchdogEvent {
-    /// Always `"watchdog"`.
-    pub event: &'static str,
-    /// The connection whose stream stopped.
-    pub client: u64,
-    pub policy: WatchdogPolicy,
-    /// `why`: `timeout` or `closed`.
-    pub why: &'static str,
-    pub joints: Vec<JointRef>,
-}
-
-#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
-pub struct JointRef {
-    pub bus: String,
-    pub dev_id: u8,
 }
 
 #[cfg(test)]

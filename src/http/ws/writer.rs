@@ -16,8 +16,8 @@ use tokio_stream::wrappers::{errors::BroadcastStreamRecvError, BroadcastStream, 
 
 use super::messages::{EventBody, ServerMessage};
 use super::telemetry::Subscription;
-use crate::api::AppState;
 use crate::bus::handle::WireAck;
+use crate::http::state::AppState;
 
 /// An ack the writer sends once every bus write of a batch is on the wire.
 #[derive(Debug, Clone)]
@@ -152,7 +152,7 @@ where
             }
             Err(missed) => {
                 self.dropped_events += missed;
-                super::hub::WsHub::count(&self.state.ws().dropped_events, missed);
+                crate::http::hub::WsHub::count(&self.state.ws().dropped_events, missed);
                 true
             }
         }
@@ -168,11 +168,8 @@ where
         for name in &sub.buses {
             if let Ok(bus) = self.state.bus(name) {
                 let names = |id| self.state.joint_name(name, id);
-                let part = self
-                    .state
-                    .ws()
-                    .fragments
-                    .fragment(&sub, &bus.snapshot(), names, now);
+                let cache = &self.state.ws().fragments;
+                let part = super::telemetry::fragment(cache, &sub, &bus.snapshot(), names, now);
                 if !part.is_empty() {
                     parts.push(part);
                 }
@@ -202,7 +199,7 @@ where
         let skipped = (periods - 1.0).floor().max(0.0) as u64;
         if skipped > 0 {
             self.dropped += skipped;
-            super::hub::WsHub::count(&self.state.ws().dropped_samples, skipped);
+            crate::http::hub::WsHub::count(&self.state.ws().dropped_samples, skipped);
         }
     }
 

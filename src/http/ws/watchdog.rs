@@ -7,11 +7,7 @@ use std::time::Duration;
 
 use tokio::time::Instant;
 
-use super::messages::{JointRef, WatchdogPolicy};
-
-/// Shortest and longest hold timeouts a client may declare.
-pub const MIN_HOLD: Duration = Duration::from_millis(20);
-pub const MAX_HOLD: Duration = Duration::from_millis(10_000);
+use crate::http::teleop::{JointRef, WatchdogPolicy};
 
 #[derive(Debug, Default)]
 pub struct Watchdog {

@@ -1,0 +1,45 @@
+//! The REST areas, one router each. This module merges them into the one
+//! documented router; the areas never import each other's routers (they
+//! share only the OpenAPI tags and failure responses of [`openapi`]).
+//!
+//! # Layout
+//! - [`buses`], [`devices`], [`control`], [`config`] (with [`config_params`]),
+//!   [`estop`], [`health`]: one router per area.
+//! - [`openapi`]: the document's head, the shared failure responses, the docs page.
+
+pub mod buses;
+pub mod config;
+pub mod config_params;
+pub mod control;
+pub mod devices;
+pub mod estop;
+pub mod health;
+pub mod openapi;
+
+use utoipa_axum::router::OpenApiRouter;
+
+use crate::http::state::AppState;
+
+/// Every documented route, with its part of the document.
+pub fn router() -> OpenApiRouter<AppState> {
+    openapi::base()
+        .merge(health::router())
+        .merge(buses::router())
+        .merge(devices::router())
+        .merge(control::router())
+        .merge(config::router())
+        .merge(estop::router())
+}
+
+/// The document as served, with the crate version.
+pub fn document() -> utoipa::openapi::OpenApi {
+    let (_, mut doc) = router().split_for_parts();
+    doc.info.version = env!("CARGO_PKG_VERSION").to_owned();
+    doc
+}
+
+/// The document as pretty JSON, as checked in under `openapi/` and printed
+/// by `jointd openapi`.
+pub fn document_json() -> String {
+    openapi::to_json(&document())
+}

@@ -1,0 +1,102 @@
+//! What all WebSocket connections share: the watchdog event channel (every
+//! subscriber hears when any teleop stream stops), connection ids,
+//! counters, and the telemetry text shared between like subscriptions.
+//! The app state holds it, so it knows nothing of the `ws` module's
+//! message types beyond the shared watchdog event.
+
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+use tokio::sync::broadcast;
+
+use super::teleop::WatchdogEvent;
+use crate::bus::BusSnapshot;
+
+/// Watchdog events a slow connection may fall behind on before it counts drops.
+const EVENT_BACKLOG: usize = 256;
+
+#[derive(Debug)]
+pub struct WsHub {
+    events: broadcast::Sender<WatchdogEvent>,
+    next_client: AtomicU64,
+    pub connections: AtomicU64,
+    pub dropped_samples: AtomicU64,
+    pub dropped_events: AtomicU64,
+    pub dropped_replies: AtomicU64,
+    /// Telemetry JSON shared by connections with the same subscription.
+    pub fragments: FragmentCache,
+}
+
+impl Default for WsHub {
+    fn default() -> Self {
+        Self {
+            events: broadcast::channel(EVENT_BACKLOG).0,
+            next_client: AtomicU64::new(1),
+            connections: AtomicU64::new(0),
+            dropped_samples: AtomicU64::new(0),
+            dropped_events: AtomicU64::new(0),
+            dropped_replies: AtomicU64::new(0),
+            fragments: Default::default(),
+        }
+    }
+}
+
+impl WsHub {
+    pub fn next_client_id(&self) -> u64 {
+        self.next_client.fetch_add(1, Ordering::Relaxed)
+    }
+
+    pub fn subscribe(&self) -> broadcast::Receiver<WatchdogEvent> {
+        self.events.subscribe()
+    }
+
+    pub fn publish(&self, event: WatchdogEvent) {
+        // No listener is fine: the event is also logged by the caller.
+        let _ = self.events.send(event);
+    }
+
+    pub fn count(counter: &AtomicU64, n: u64) {
+        counter.fetch_add(n, Ordering::Relaxed);
+    }
+}
+
+/// Serialized joints of one bus snapshot for one subscription shape, shared
+/// by every connection with that shape: a hundred dashboards at 100 Hz then
+/// cost one serialization per snapshot, not one per message. The shape is
+/// the caller's key (bus, devices, fields); a snapshot is known by its
+/// address, which changes with every new snapshot.
+#[derive(Debug, Default)]
+pub struct FragmentCache {
+    // std Mutex: held only while one fragment is looked up or built, never
+    // across an `.await`.
+    entries: Mutex<HashMap<String, (usize, Arc<str>)>>,
+}
+
+/// Distinct subscription shapes kept; beyond, the cache starts over (a
+/// client cannot grow it without bound).
+const MAX_FRAGMENTS: usize = 64;
+
+impl FragmentCache {
+    /// The text cached for `shape` and this very `snap`, or `build`'s.
+    pub fn get_or_build(
+        &self,
+        shape: String,
+        snap: &Arc<BusSnapshot>,
+        build: impl FnOnce() -> String,
+    ) -> Arc<str> {
+        let id = Arc::as_ptr(snap) as usize;
+        let mut entries = self.entries.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some((cached_id, text)) = entries.get(&shape) {
+            if *cached_id == id {
+                return text.clone();
+            }
+        }
+        let text: Arc<str> = build().into();
+        if entries.len() >= MAX_FRAGMENTS && !entries.contains_key(&shape) {
+            entries.clear();
+        }
+        entries.insert(shape, (id, text.clone()));
+        text
+    }
+}

@@ -1,0 +1,85 @@
+//! The HTTP layer: one axum application over the bus handles, built in one
+//! place ([`app`]). Handlers never touch a port; they validate, convert
+//! physical units to raw with [`crate::protocol::units`], and call a
+//! [`BusHandle`].
+//!
+//! The three areas below ([`api`], [`ws`], [`web`]) never import each
+//! other: what two of them need lives here, beside them, so every import
+//! points down or sideways into these shared files.
+//!
+//! # Layout
+//! - [`api`]: the REST areas (buses, devices, control, config, e-stop, health) and the OpenAPI document.
+//! - [`ws`]: the WebSocket endpoint: telemetry streams, setpoint batches, teleop watchdog.
+//! - [`web`]: the embedded dashboard (or `--web-dir` while developing).
+//! - [`state`]: [`AppState`]: the bus handles by name, soft limits, token, options; path guards.
+//! - [`error`]: [`ApiError`], RFC 9457 problem details; the one place that picks HTTP statuses.
+//! - [`extract`]: JSON/path/query extractors whose rejections are problems.
+//! - [`auth`]: the bearer-token middleware (everything but the public paths).
+//! - [`paths`]: the URLs outside the OpenAPI routes, and which need no token.
+//! - [`limits`]: per-joint soft limits from the config.
+//! - [`telemetry`]: snapshot → physical-unit views (REST and WebSocket).
+//! - [`targets`]: physical targets → raw setpoints, checked (REST and WebSocket).
+//! - [`teleop`]: the watchdog policy, default and event both state and WebSocket use.
+//! - [`hub`]: what all WebSocket connections share (the state holds it).
+
+pub mod api;
+pub mod auth;
+pub mod error;
+pub mod extract;
+pub mod hub;
+pub mod limits;
+pub mod paths;
+pub mod state;
+pub mod targets;
+pub mod telemetry;
+pub mod teleop;
+pub mod web;
+pub mod ws;
+
+use axum::Router;
+use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::trace::TraceLayer;
+
+pub use error::{ApiError, Problem};
+pub use state::AppState;
+
+use crate::bus::BusHandle;
+
+/// The whole HTTP application. Tests call it with `oneshot` or serve it on
+/// `127.0.0.1:0`; the daemon serves it on `--listen`.
+pub fn app(state: AppState) -> Router {
+    let (router, doc) = api::router().split_for_parts();
+    router
+        .merge(api::openapi::docs(doc))
+        .merge(ws::router())
+        .merge(web::router())
+        .fallback(not_found)
+        .method_not_allowed_fallback(method_not_allowed)
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            auth::require_token,
+        ))
+        .layer(CatchPanicLayer::custom(panic_to_problem))
+        .layer(TraceLayer::new_for_http())
+        .with_state(state)
+}
+
+async fn not_found(uri: axum::http::Uri) -> ApiError {
+    ApiError::not_found("unknown-route", format!("no resource at {}", uri.path()))
+}
+
+async fn method_not_allowed(method: axum::http::Method) -> ApiError {
+    ApiError::method_not_allowed(&method)
+}
+
+/// A bug must still answer in the one error shape (and is logged).
+fn panic_to_problem(_: Box<dyn std::any::Any + Send + 'static>) -> axum::response::Response {
+    tracing::error!("request handler panicked");
+    axum::response::IntoResponse::into_response(ApiError::internal())
+}
+
+/// Convenience for the daemon and tests: state from handles with no limits
+/// and no token.
+pub fn state_for(buses: Vec<BusHandle>) -> AppState {
+    AppState::new(buses, limits::SoftLimits::default(), None)
+}

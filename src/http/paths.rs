@@ -1,0 +1,45 @@
+//! Every URL the HTTP layer serves outside the OpenAPI routes, and which of
+//! them need no token. Kept apart so auth, the WebSocket and the dashboard
+//! agree on them without importing each other.
+
+/// Prefix of every versioned resource.
+pub const API_PREFIX: &str = "/api/v1";
+/// The WebSocket endpoint.
+pub const WS_PATH: &str = "/api/v1/ws";
+/// Liveness: public even when the daemon has a token.
+pub const HEALTHZ_PATH: &str = "/healthz";
+/// The OpenAPI document and its docs page.
+pub const OPENAPI_PATH: &str = "/openapi.json";
+pub const DOCS_PATH: &str = "/docs";
+/// The dashboard's files (`web/`): the page, its script, its style.
+pub const DASHBOARD_PAGE: &str = "/";
+pub const DASHBOARD_INDEX: &str = "/index.html";
+pub const DASHBOARD_SCRIPT: &str = "/app.js";
+pub const DASHBOARD_STYLE: &str = "/style.css";
+const DASHBOARD: [&str; 4] = [
+    DASHBOARD_PAGE,
+    DASHBOARD_INDEX,
+    DASHBOARD_SCRIPT,
+    DASHBOARD_STYLE,
+];
+
+/// Paths that need no token: `/healthz` (probes carry none) and the
+/// dashboard's files (they hold no data; the page asks for the token when
+/// the API answers 401).
+pub fn is_public(path: &str) -> bool {
+    path == HEALTHZ_PATH || DASHBOARD.contains(&path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_probes_and_dashboard_files_are_public() {
+        assert!(is_public("/healthz"));
+        assert!(is_public("/") && is_public("/app.js"));
+        assert!(!is_public("/readyz"));
+        assert!(!is_public(WS_PATH));
+        assert!(!is_public("/api/v1/buses"));
+    }
+}

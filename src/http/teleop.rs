@@ -1,0 +1,62 @@
+//! What the teleoperation watchdog shares beyond one WebSocket connection:
+//! the policy and hold-timeout bounds the config's `[watchdog]` default is
+//! checked against, and the event every connection hears when a stream
+//! stops. Here, not in `ws`, because the app state holds the default and
+//! the WebSocket hub carries the events.
+
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+/// Shortest and longest hold timeouts a client (or the config) may declare.
+pub const MIN_HOLD: Duration = Duration::from_millis(20);
+pub const MAX_HOLD: Duration = Duration::from_millis(10_000);
+
+/// What happens to a joint whose setpoint stream stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum WatchdogPolicy {
+    /// Freeze each joint where it is (target := measured angle).
+    #[default]
+    Hold,
+    /// Disable each joint.
+    Disable,
+}
+
+/// The config's `[watchdog]`: armed for every client that streams setpoints
+/// (`hold_timeout_ms` 0: only clients that ask get one).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WatchdogDefault {
+    pub hold_timeout_ms: u64,
+    pub policy: WatchdogPolicy,
+}
+
+impl Default for WatchdogDefault {
+    fn default() -> Self {
+        Self {
+            hold_timeout_ms: 0,
+            policy: WatchdogPolicy::Hold,
+        }
+    }
+}
+
+/// A joint, by bus and id.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+pub struct JointRef {
+    pub bus: String,
+    pub dev_id: u8,
+}
+
+/// Sent to every connection when one connection's stream stopped.
+#[derive(Debug, Clone, Serialize)]
+pub struct WatchdogEvent {
+    /// Always `"watchdog"`.
+    pub event: &'static str,
+    /// The connection whose stream stopped.
+    pub client: u64,
+    pub policy: WatchdogPolicy,
+    /// `why`: `timeout` or `closed`.
+    pub why: &'static str,
+    pub joints: Vec<JointRef>,
+}
