@@ -244,47 +244,11 @@ fn group_name(what: &str, g: Group) -> String {
     }
 }
 
-/// The vendor's name of a config index, without the `CONFIG_` prefix.
+/// The vendor's name of a config index, without the `CONFIG_` prefix
+/// (`"UNKNOWN"` for an index the parameter table has no row for).
 pub fn index_name(idx: u8) -> &'static str {
-    INDEX_NAMES
-        .iter()
-        .find(|(i, _)| *i == idx)
-        .map_or("UNKNOWN", |(_, n)| n)
+    crate::protocol::params::name_of(idx)
 }
-
-const INDEX_NAMES: [(u8, &str); 31] = [
-    (index::REBOOT, "REBOOT"),
-    (index::INFO_01_R, "INFO_01_R"),
-    (index::INFO_02_R, "INFO_02_R"),
-    (index::UPDATE_FIN_ZERO, "UPDATE_FIN_ZERO"),
-    (index::SET_ID, "SET_ID"),
-    (index::UPDATE_ENC_ZERO, "UPDATE_ENC_ZERO"),
-    (index::COMM_SILENT, "COMM_SILENT"),
-    (index::CTRL_MODE_SW, "CTRL_MODE_SW"),
-    (index::SET_POS_KP, "SET_POS_KP"),
-    (index::SET_POS_KD, "SET_POS_KD"),
-    (index::SET_SPD_KP, "SET_SPD_KP"),
-    (index::SET_SPD_KI, "SET_SPD_KI"),
-    (index::INFO_03_R, "INFO_03_R"),
-    (index::WRITE_FLASH, "WRITE_FLASH"),
-    (index::READ_FLASH, "READ_FLASH"),
-    (index::BAUD_RATE, "BUAD_RATE"),
-    (index::POS_LPF_LV, "POS_LPF_LV"),
-    (index::INFO_04_R, "INFO_04_R"),
-    (index::MAX_CUR, "MAX_CUR"),
-    (index::PROTECT_CUR_LIMIT, "PROTECT_CUR_LIMIT"),
-    (index::PROTECT_CUR_LV1, "PROTECT_CUR_LV1"),
-    (index::CUR_LV1_DELAY, "CUR_LV1_DELAY"),
-    (index::RECV_CUR, "RECV_CUR"),
-    (index::CUR_RECV_WIN, "CUR_RECV_WIN"),
-    (index::INFO_05_R, "INFO_05_R"),
-    (index::INFO_06_R, "INFO_06_R"),
-    (index::COLD_TIME, "COLD_TIME"),
-    (index::PLUS_TIME, "PLUS_TIME"),
-    (index::DRV_OT, "DRV_OT"),
-    (index::SPD_LIMIT, "SPD_LIMIT"),
-    (index::SN, "SN"),
-];
 
 // ---------------------------------------------------------------- encoding
 

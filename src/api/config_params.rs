@@ -6,7 +6,8 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::error::{ApiError, ApiResult};
-use crate::protocol::command::{index, MAX_LPF_LEVEL};
+use crate::protocol::command::index;
+use crate::protocol::params;
 use crate::protocol::units;
 use crate::protocol::{ConfigParam, Gains, Info04, Info05, Info06};
 
@@ -164,7 +165,7 @@ fn checked<T>(field: &str, r: Result<T, units::UnitError>) -> ApiResult<T> {
 
 /// Smoothing levels are whole numbers 0..=5.
 fn lpf_level(value: f64) -> ApiResult<u8> {
-    let max = f64::from(MAX_LPF_LEVEL);
+    let max = params::by_index(index::POS_LPF_LV).map_or(0.0, |r| f64::from(r.range.1));
     if !(0.0..=max).contains(&value) {
         return Err(ApiError::out_of_range("lpf_level", value, (0.0, max), ""));
     }

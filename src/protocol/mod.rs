@@ -10,6 +10,7 @@
 //! - [`frame`]: 20-byte standard and broadcast frames, encode/decode with CRC check.
 //! - [`command`]: typed host→device commands (control, jog, config, broadcasts).
 //! - [`reply`]: typed device→host replies (INFO_01..07, RES), raw bytes always kept.
+//! - [`params`]: the parameter table: one row per config/INFO index, everything else derives from it.
 //! - [`message`]: classifies a decoded standard frame as a command or a reply.
 //! - [`units`]: every raw ↔ physical conversion, range-checked.
 //! - [`stream`]: finds frames in a byte stream, resyncing past garbage.
@@ -20,6 +21,7 @@ pub mod command;
 pub mod error;
 pub mod frame;
 pub mod message;
+pub mod params;
 pub mod reply;
 pub mod stream;
 pub mod units;

@@ -5,6 +5,7 @@
 
 use super::command::index;
 use super::frame::{Frame, FrameBytes, StandardFrame};
+use super::params::{self, ReplyKind};
 use super::units::{self, FirmwareVersion};
 
 /// A reply frame: `can_id = (index << 16) | (dev_id << 8)`.
@@ -110,13 +111,10 @@ pub struct Info06 {
 pub const RES_SUCCESS: u8 = 1;
 pub const RES_FAILURE: u8 = 0;
 
-/// Indices whose reply is a RES byte.
-pub const RES_INDICES: [u8; 4] = [
-    index::SET_ID,
-    index::UPDATE_ENC_ZERO,
-    index::WRITE_FLASH,
-    index::BAUD_RATE,
-];
+/// True for an index whose reply is a RES byte (the table's reply kind).
+pub fn is_res_index(index: u8) -> bool {
+    params::by_index(index).is_some_and(|r| r.reply == ReplyKind::Res)
+}
 
 fn le_i16(d: &[u8; 8], at: usize) -> i16 {
     i16::from_le_bytes([d[at], d[at + 1]])
@@ -178,7 +176,7 @@ impl Reply {
             index::INFO_05_R => ReplyBody::Info05(Info05::from_bytes(d)),
             index::INFO_06_R => ReplyBody::Info06(Info06::from_bytes(d)),
             index::INFO_07_R => ReplyBody::Info07(*d),
-            i if RES_INDICES.contains(&i) => ReplyBody::Res {
+            i if is_res_index(i) => ReplyBody::Res {
                 index: i,
                 code: d[0],
             },
