@@ -117,10 +117,30 @@ pub enum CtrlMode {
 }
 
 impl CtrlMode {
+    pub const ALL: [CtrlMode; 4] = [Self::None, Self::Speed, Self::Position, Self::Current];
+
     pub fn from_raw(raw: u8) -> Option<Self> {
-        [Self::None, Self::Speed, Self::Position, Self::Current]
-            .into_iter()
-            .find(|m| *m as u8 == raw)
+        Self::ALL.into_iter().find(|m| *m as u8 == raw)
+    }
+
+    /// The name every interface uses (`"position"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Speed => "speed",
+            Self::Position => "position",
+            Self::Current => "current",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+impl std::fmt::Display for CtrlMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 

@@ -8,10 +8,10 @@
 use serde_json::{json, Map, Value};
 use thiserror::Error;
 
-use crate::protocol::command::index;
-use crate::protocol::reply::{fault_name, fsm_name};
-use crate::protocol::units::{self, FirmwareVersion};
-use crate::protocol::{
+use super::command::index;
+use super::status::{active_fault, fault_history, fault_name, fsm_name};
+use super::units::{self, FirmwareVersion};
+use super::{
     BaudLevel, BroadcastEnable, BroadcastPos, BroadcastSpd, Command, Config, ConfigParam, Control,
     ControlOp, CtrlMode, Frame, Group, Jog, JogDir, Message, ProtocolError, Reply, ReplyBody,
 };
@@ -105,8 +105,8 @@ pub fn reply_json(r: &Reply) -> Map<String, Value> {
     let body = match r.body() {
         ReplyBody::Info01(i) => json!({
             "fsm": i.fsm, "fsm_name": fsm_name(i.fsm),
-            "err_code": i.err_code, "fault": fault_name(i.err_code & 0x0F),
-            "fault_history": fault_name(i.err_code >> 4),
+            "err_code": i.err_code, "fault": fault_name(active_fault(i.err_code)),
+            "fault_history": fault_name(fault_history(i.err_code)),
             "soft_ver": i.soft_ver, "firmware": i.firmware().dotted(),
             "temp_raw": i.temp_raw, "temp_c": i.temp_c(),
             "angle_raw": i.angle, "angle_deg": i.angle_deg(),
@@ -191,7 +191,7 @@ fn config_json(c: &Config) -> Map<String, Value> {
     let extra = match c.param {
         ConfigParam::SetId { new_id } => json!({"new_id": new_id}),
         ConfigParam::BaudRate(l) => json!({"baud": l.baud()}),
-        ConfigParam::CtrlMode(mode) => json!({"mode": mode_name(mode)}),
+        ConfigParam::CtrlMode(mode) => json!({"mode": mode.name()}),
         ConfigParam::PosKp(v) | ConfigParam::PosKd(v) | ConfigParam::SpdKp(v) => {
             json!({"gain": units::gain_q12(v)})
         }
@@ -228,15 +228,6 @@ fn dir_name(d: JogDir) -> &'static str {
     }
 }
 
-fn mode_name(m: CtrlMode) -> &'static str {
-    match m {
-        CtrlMode::None => "none",
-        CtrlMode::Speed => "speed",
-        CtrlMode::Position => "position",
-        CtrlMode::Current => "current",
-    }
-}
-
 fn group_name(what: &str, g: Group) -> String {
     match g {
         Group::Low => format!("{what} 1-8"),
@@ -247,7 +238,7 @@ fn group_name(what: &str, g: Group) -> String {
 /// The vendor's name of a config index, without the `CONFIG_` prefix
 /// (`"UNKNOWN"` for an index the parameter table has no row for).
 pub fn index_name(idx: u8) -> &'static str {
-    crate::protocol::params::name_of(idx)
+    super::params::name_of(idx)
 }
 
 // ---------------------------------------------------------------- encoding
@@ -354,7 +345,7 @@ pub fn command_from_json(v: &Value) -> Result<Command, FrameJsonError> {
 fn dev_id(f: &Fields) -> Result<u8, FrameJsonError> {
     let id = f.int("dev_id")?.ok_or(FrameJsonError::Missing("dev_id"))?;
     let id: u8 = in_range("dev_id", id, "a device id (1..=159 or 255)")?;
-    if !crate::protocol::is_address(id) {
+    if !super::is_address(id) {
         return Err(ProtocolError::BadAddress(id).into());
     }
     Ok(id)
@@ -489,16 +480,15 @@ fn config_value(f: &Fields, idx: u8) -> Result<u16, FrameJsonError> {
 fn mode_value(f: &Fields) -> Result<Option<i64>, FrameJsonError> {
     let named = match f.map.get("mode").and_then(Value::as_str) {
         None => None,
-        Some("none") => Some(CtrlMode::None as i64),
-        Some("speed") => Some(CtrlMode::Speed as i64),
-        Some("position") => Some(CtrlMode::Position as i64),
-        Some("current") => Some(CtrlMode::Current as i64),
-        Some(_) => {
-            return Err(bad(
-                "mode",
-                "\"speed\", \"position\", \"current\" or \"none\"",
-            ))
-        }
+        Some(name) => match CtrlMode::from_name(name) {
+            Some(mode) => Some(mode as i64),
+            None => {
+                return Err(bad(
+                    "mode",
+                    "\"speed\", \"position\", \"current\" or \"none\"",
+                ))
+            }
+        },
     };
     match (f.int("value")?, named) {
         (Some(given), Some(from_physical)) if given != from_physical => {
