@@ -16,6 +16,7 @@ pub mod auth;
 pub mod buses;
 pub mod config;
 pub mod config_params;
+pub mod config_schema;
 pub mod control;
 pub mod devices;
 pub mod error;

@@ -204,7 +204,7 @@ fn physical_json(row: &ParamRow, value: u16) -> Option<(&'static str, Value)> {
     }
     let v = match row.scale {
         Scale::CtrlMode => json!(CtrlMode::from_raw(value as u8).map(CtrlMode::name)),
-        s if s.step().is_some() => json!(row.physical(value) as i64),
+        s if s.is_whole() => json!(row.physical(value) as i64),
         _ => json!(row.physical(value)),
     };
     Some((field, v))

@@ -88,6 +88,15 @@ pub enum Access {
     Write,
 }
 
+impl Access {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Read => "read",
+            Self::Write => "write",
+        }
+    }
+}
+
 /// What the value bytes `data[4..6]` of the config frame carry.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum RawType {
@@ -187,14 +196,22 @@ impl Scale {
         }
     }
 
-    /// Steps a physical value must be a multiple of, if not any real number.
+    /// The step a physical value must be a multiple of (values between steps
+    /// are refused); `None` when any value is rounded to the nearest step.
     pub fn step(self) -> Option<f64> {
         match self {
             Self::Plain | Self::Celsius | Self::DeviceIdQ7 | Self::CtrlMode => Some(1.0),
-            Self::Millis => Some(1.0),
             Self::Burst25Ms => Some(f64::from(units::BURST_STEP_MS)),
             _ => None,
         }
+    }
+
+    /// True when every physical value is a whole number (printed as an integer).
+    pub fn is_whole(self) -> bool {
+        !matches!(
+            self,
+            Self::GainQ12 | Self::GainQ15 | Self::CurrentQ15 | Self::SpeedQ15
+        )
     }
 
     /// Raw → physical. Mode is its number; a baud level its baud (0 if unknown).
