@@ -160,3 +160,60 @@ fn spec_rows_carry_their_revision() {
         .count();
     assert_eq!(spec_rows, 32, "SPEC §4.3 lists indices 0..=28 and 30..=32");
 }
+
+// ---- the fictitious row, seen by every user of the table ----
+
+#[test]
+fn fictitious_row_is_decoded_and_shown_as_json() {
+    use crate::protocol::frame_json::{command_from_json, frame_to_json};
+    use serde_json::json;
+    let described = json!({"kind": "config", "dev_id": 3, "index": 40, "value": 7});
+    let cmd = command_from_json(&described).expect("encodes");
+    let decoded = frame_to_json(&cmd.to_frame());
+    assert_eq!(decoded["name"], "TEST_LEVEL");
+    assert_eq!(decoded["value"], 7);
+    let too_high = json!({"kind": "config", "dev_id": 3, "index": 40, "value": 10});
+    assert!(
+        command_from_json(&too_high).is_err(),
+        "the row's range 0..=9 holds"
+    );
+}
+
+#[test]
+fn fictitious_row_is_offered_by_the_rest_surface_and_its_schema() {
+    use crate::api::config_params::{api_keys, to_config, ConfigPatch};
+    use crate::api::config_schema::{ConfigView, ParamTable};
+    use utoipa::PartialSchema;
+    assert!(api_keys().contains(&"test_level"));
+    let patch: ConfigPatch = serde_json::from_str(r#"{"test_level": 4}"#).expect("accepted");
+    let (row, value) = patch.entries()[0];
+    let write = to_config(row, value).expect("in range");
+    assert_eq!(write.index_value(), (40, 4));
+    assert_eq!(to_config(row, 12.0).map_err(|e| e.problem.status), Err(422));
+    let schema = serde_json::to_value(ConfigPatch::schema()).expect("schema");
+    assert_eq!(schema["properties"]["test_level"]["maximum"], 9.0);
+    let view = serde_json::to_value(ConfigView::schema()).expect("schema");
+    assert!(view["required"]
+        .as_array()
+        .is_some_and(|r| r.contains(&"test_level".into())));
+    assert!(ParamTable::new()
+        .params
+        .iter()
+        .any(|p| p.name == "TEST_LEVEL"));
+}
+
+#[test]
+fn fictitious_row_is_stored_and_reported_by_the_simulator() {
+    use crate::bus::verify::{confirmation, Confirm};
+    use crate::protocol::ConfigParam;
+    use crate::sim::Params;
+    let write = ConfigParam::from_index_value(40, 6).expect("valid");
+    let mut p = Params::factory(BaudLevel::B500000);
+    assert!(p.apply(&write), "a RAM setting is stored");
+    let data = p.block(InfoBlock::Info04);
+    assert_eq!(data[3], 6, "reported at its read-back field");
+    let Ok(Confirm::ReadBack { block, field }) = confirmation(&write) else {
+        panic!("the bus verifies it by read-back");
+    };
+    assert_eq!((block, field.read(&data)), (InfoBlock::Info04, 6));
+}
