@@ -15,7 +15,7 @@
 //!    Set `api: true` if `GET/PATCH …/config` should offer it.
 //! 2. Run `cargo test --lib protocol::params`: the consistency tests check
 //!    the new row (unique index and names, range within its raw type, scale
-//!    round-trips, read-back field inside its block). `params_tests` shows a
+//!    round-trips, read-back field inside its block). `tests` shows a
 //!    fictitious row being decoded, shown as JSON, offered by the REST schema
 //!    and stored by the simulator with no other code changed.
 //! 3. Regenerate `openapi/openapi.json` if the row is `api: true`
@@ -26,8 +26,13 @@
 //! without one the index travels as `ConfigParam::Other` and every generic
 //! path above still works.
 
+mod row;
+mod scale;
+
+pub use row::{Access, Field, Guard, ParamRow, RawType, ReplyKind, Revision, Storage};
+pub use scale::Scale;
+
 use super::command::{BaudLevel, CtrlMode, InfoBlock};
-use super::units::{self, FirmwareVersion, UnitError};
 
 /// Index constants of SPEC §4.3, named as the vendor names them.
 pub mod index {
@@ -63,366 +68,6 @@ pub mod index {
     pub const SPD_LIMIT: u8 = 30;
     pub const SN: u8 = 31;
     pub const INFO_07_R: u8 = 32;
-}
-
-/// The protocol revision that introduced a row (SPEC marks rev 2.0.8 facts).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum Revision {
-    V2_0_1,
-    V2_0_8,
-}
-
-impl Revision {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::V2_0_1 => "2.0.1",
-            Self::V2_0_8 => "2.0.8",
-        }
-    }
-}
-
-/// Whether the host reads an INFO block with the index or writes a value.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Access {
-    Read,
-    Write,
-}
-
-impl Access {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Read => "read",
-            Self::Write => "write",
-        }
-    }
-}
-
-/// What the value bytes `data[4..6]` of the config frame carry.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum RawType {
-    /// No value: the index alone is the request.
-    None,
-    U8,
-    U16,
-}
-
-impl RawType {
-    /// The largest raw value the type carries.
-    pub const fn max(self) -> u16 {
-        match self {
-            Self::None => 0,
-            Self::U8 => u8::MAX as u16,
-            Self::U16 => u16::MAX,
-        }
-    }
-
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::None => "none",
-            Self::U8 => "u8",
-            Self::U16 => "u16",
-        }
-    }
-}
-
-/// How a raw value maps to a physical one (SPEC §6); the arithmetic is
-/// [`super::units`]'s, this only says which conversion a row uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Scale {
-    /// The raw integer is the value (levels, keys, plain numbers).
-    Plain,
-    /// Q12 gain: `raw / 4096`.
-    GainQ12,
-    /// Q15 gain (speed KI): `raw / 32768`.
-    GainQ15,
-    /// Q15 current magnitude: `raw / 32767 × 5.625` A.
-    CurrentQ15,
-    /// Milliseconds, 1 ms per step.
-    Millis,
-    /// Burst times: `raw × 25` ms.
-    Burst25Ms,
-    /// Degrees Celsius, 1 °C per step.
-    Celsius,
-    /// Q15 rotor speed limit, rpm at the 50000 rpm base (firmware ≥ 1.2.4).
-    SpeedQ15,
-    /// A device id sent as `new_id << 7`.
-    DeviceIdQ7,
-    /// A baud level of SPEC §1 (0 = 500000 … 4 = 19200).
-    BaudLevel,
-    /// A control mode (0 none, 1 speed, 2 position, 3 current).
-    CtrlMode,
-}
-
-impl Scale {
-    /// Unit of the physical value (empty for gains, levels and plain numbers).
-    pub fn unit(self) -> &'static str {
-        match self {
-            Self::CurrentQ15 => "A",
-            Self::Millis | Self::Burst25Ms => "ms",
-            Self::Celsius => "°C",
-            Self::SpeedQ15 => "rpm",
-            Self::BaudLevel => "baud",
-            _ => "",
-        }
-    }
-
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Plain => "plain",
-            Self::GainQ12 => "q12",
-            Self::GainQ15 => "q15_gain",
-            Self::CurrentQ15 => "q15_current",
-            Self::Millis => "ms",
-            Self::Burst25Ms => "x25ms",
-            Self::Celsius => "celsius",
-            Self::SpeedQ15 => "q15_speed",
-            Self::DeviceIdQ7 => "id_q7",
-            Self::BaudLevel => "baud_level",
-            Self::CtrlMode => "mode",
-        }
-    }
-
-    /// The physical twin of `value` in frame JSON (`"amps"` beside the raw value).
-    pub fn json_field(self) -> Option<&'static str> {
-        match self {
-            Self::GainQ12 | Self::GainQ15 => Some("gain"),
-            Self::CurrentQ15 => Some("amps"),
-            Self::Millis | Self::Burst25Ms => Some("ms"),
-            Self::SpeedQ15 => Some("rpm"),
-            Self::DeviceIdQ7 => Some("new_id"),
-            Self::BaudLevel => Some("baud"),
-            Self::CtrlMode => Some("mode"),
-            Self::Plain | Self::Celsius => None,
-        }
-    }
-
-    /// The step a physical value must be a multiple of (values between steps
-    /// are refused); `None` when any value is rounded to the nearest step.
-    pub fn step(self) -> Option<f64> {
-        match self {
-            Self::Plain | Self::Celsius | Self::DeviceIdQ7 | Self::CtrlMode => Some(1.0),
-            Self::Burst25Ms => Some(f64::from(units::BURST_STEP_MS)),
-            _ => None,
-        }
-    }
-
-    /// True when every physical value is a whole number (printed as an integer).
-    pub fn is_whole(self) -> bool {
-        !matches!(
-            self,
-            Self::GainQ12 | Self::GainQ15 | Self::CurrentQ15 | Self::SpeedQ15
-        )
-    }
-
-    /// Raw → physical. Mode is its number; a baud level its baud (0 if unknown).
-    pub fn physical(self, raw: u16) -> f64 {
-        match self {
-            Self::GainQ12 => units::gain_q12(raw),
-            Self::GainQ15 => units::gain_ki(raw),
-            Self::CurrentQ15 => units::current_limit_a(raw),
-            Self::Burst25Ms => f64::from(units::burst_ms(saturate_u8(raw))),
-            Self::SpeedQ15 => units::speed_rpm(
-                i16::try_from(raw).unwrap_or(i16::MAX),
-                FirmwareVersion::SPEED_BASE_50K,
-            ),
-            Self::DeviceIdQ7 => f64::from(raw >> 7),
-            Self::BaudLevel => {
-                BaudLevel::from_raw(saturate_u8(raw)).map_or(0.0, |l| l.baud().into())
-            }
-            Self::Plain | Self::Millis | Self::Celsius | Self::CtrlMode => f64::from(raw),
-        }
-    }
-
-    /// Physical → raw, refusing values outside `range` (raw) or between steps.
-    pub fn to_raw(
-        self,
-        quantity: &'static str,
-        value: f64,
-        range: (u16, u16),
-    ) -> Result<u16, UnitError> {
-        match self {
-            Self::GainQ12 => units::gain_q12_to_raw(value),
-            Self::GainQ15 => units::gain_ki_to_raw(value),
-            Self::CurrentQ15 => units::current_limit_to_raw(value),
-            Self::Millis => units::duration_ms_to_raw(value),
-            Self::Burst25Ms => units::burst_ms_to_raw(value).map(u16::from),
-            Self::SpeedQ15 => {
-                units::speed_limit_to_raw(value, FirmwareVersion::SPEED_BASE_50K).map(|r| r as u16)
-            }
-            Self::DeviceIdQ7 => {
-                let shifted = (range.0 >> 7, range.1 >> 7);
-                units::whole_to_raw(quantity, self.unit(), value, shifted).map(|id| id << 7)
-            }
-            Self::BaudLevel => baud_to_level(quantity, value),
-            Self::Plain | Self::Celsius | Self::CtrlMode => {
-                units::whole_to_raw(quantity, self.unit(), value, range)
-            }
-        }
-    }
-}
-
-fn saturate_u8(raw: u16) -> u8 {
-    u8::try_from(raw).unwrap_or(u8::MAX)
-}
-
-fn baud_to_level(quantity: &'static str, baud: f64) -> Result<u16, UnitError> {
-    let level = BaudLevel::ALL
-        .into_iter()
-        .find(|l| f64::from(l.baud()) == baud);
-    level.map(|l| l as u16).ok_or(UnitError::NotOneOf {
-        quantity,
-        value: baud,
-        allowed: "500000, 230400, 115200, 38400, 19200",
-    })
-}
-
-/// What the device answers to a config frame with this index.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum ReplyKind {
-    /// Nothing: only a read-back (if any) shows the write took effect.
-    None,
-    /// A RES byte (1 success, 0 failure) with the request's index.
-    Res,
-    /// The INFO block of this index.
-    Info,
-}
-
-impl ReplyKind {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::None => "none",
-            Self::Res => "res",
-            Self::Info => "info",
-        }
-    }
-}
-
-/// Where a written value shows in an INFO block: the read-back a write is
-/// verified by and the bytes the simulator reports it in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub struct Field {
-    pub block: InfoBlock,
-    /// Offset in the block's 8 data bytes.
-    pub at: usize,
-    /// `U8` or `U16` (little-endian).
-    pub width: RawType,
-}
-
-impl Field {
-    /// The field's raw value in a block's data bytes.
-    pub fn read(&self, data: &[u8; 8]) -> u16 {
-        match self.width {
-            RawType::U8 => u16::from(data[self.at]),
-            RawType::U16 => u16::from_le_bytes([data[self.at], data[self.at + 1]]),
-            RawType::None => 0,
-        }
-    }
-
-    /// Stores `raw` at the field (an 8-bit field keeps the low byte).
-    pub fn write(&self, data: &mut [u8; 8], raw: u16) {
-        match self.width {
-            RawType::U8 => data[self.at] = saturate_u8(raw),
-            RawType::U16 => data[self.at..self.at + 2].copy_from_slice(&raw.to_le_bytes()),
-            RawType::None => {}
-        }
-    }
-}
-
-/// Whether and where a written value is kept.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Storage {
-    /// A read or an action: nothing is kept.
-    None,
-    /// RAM; kept over a power cycle only after WRITE_FLASH.
-    Ram,
-    /// RAM and never saved (the control mode: every power-up starts in position mode).
-    Volatile,
-    /// Stored to flash at once (the id).
-    Flash,
-}
-
-impl Storage {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::None => "none",
-            Self::Ram => "ram",
-            Self::Volatile => "volatile",
-            Self::Flash => "flash",
-        }
-    }
-}
-
-/// Writes the bus's generic `write_config` must not send, and why.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Guard {
-    None,
-    /// Another bus operation sends it (it has effects beyond the device).
-    Routed(&'static str),
-    /// Not offered at all.
-    Dangerous(&'static str),
-}
-
-/// One row of the table.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ParamRow {
-    pub index: u8,
-    /// The vendor's name without `CONFIG_` (`BUAD_RATE` as the vendor spells it).
-    pub name: &'static str,
-    /// snake_case name: the REST field of an `api` row, the simulator's storage key.
-    pub key: &'static str,
-    pub access: Access,
-    pub raw: RawType,
-    pub scale: Scale,
-    /// Allowed raw values, inclusive.
-    pub range: (u16, u16),
-    pub reply: ReplyKind,
-    /// Where an INFO block shows the value (SPEC §5), if it does.
-    pub read_back: Option<Field>,
-    pub storage: Storage,
-    pub guard: Guard,
-    /// Offered by `GET`/`PATCH …/config`.
-    pub api: bool,
-    /// Factory raw value (what the simulator boots with).
-    pub default: u16,
-    pub since: Revision,
-    pub doc: &'static str,
-}
-
-impl ParamRow {
-    /// The vendor's full name (`CONFIG_MAX_CUR`).
-    pub fn vendor_name(&self) -> String {
-        format!("CONFIG_{}", self.name)
-    }
-
-    pub fn unit(&self) -> &'static str {
-        self.scale.unit()
-    }
-
-    pub fn physical(&self, raw: u16) -> f64 {
-        self.scale.physical(raw)
-    }
-
-    /// Physical → raw within the row's range.
-    pub fn to_raw(&self, value: f64) -> Result<u16, UnitError> {
-        self.scale.to_raw(self.key, value, self.range)
-    }
-
-    /// The physical range (what a REST client may send).
-    pub fn physical_range(&self) -> (f64, f64) {
-        (self.physical(self.range.0), self.physical(self.range.1))
-    }
-
-    /// True if the row stores a value the device keeps in RAM (and in flash after WRITE_FLASH).
-    pub fn is_setting(&self) -> bool {
-        self.access == Access::Write && self.storage == Storage::Ram
-    }
-
-    /// The INFO block a read row asks for.
-    pub fn info_block(&self) -> Option<InfoBlock> {
-        (self.access == Access::Read)
-            .then(|| InfoBlock::from_index(self.index))
-            .flatten()
-    }
 }
 
 const fn f(block: InfoBlock, at: usize, width: RawType) -> Option<Field> {
@@ -649,7 +294,7 @@ pub const PARAMS: &[ParamRow] = &[
     extension(i::SN, "SN", "sn", U16, Scale::Plain, 0, "Serial number (undocumented layout)."),
     read(i::INFO_07_R, "INFO_07_R", "info_07", Revision::V2_0_8, "Read INFO_07: serial number bytes (layout unpublished)."),
     #[cfg(test)]
-    params_tests::FICTITIOUS,
+    tests::FICTITIOUS,
 ];
 
 /// The row of a config index.
@@ -691,5 +336,4 @@ pub fn fields_of(block: InfoBlock) -> impl Iterator<Item = (&'static ParamRow, F
 }
 
 #[cfg(test)]
-#[path = "params_tests.rs"]
-pub(crate) mod params_tests;
+pub(crate) mod tests;
