@@ -217,3 +217,40 @@ fn fictitious_row_is_stored_and_reported_by_the_simulator() {
     };
     assert_eq!((block, field.read(&data)), (InfoBlock::Info04, 6));
 }
+
+#[test]
+fn read_back_fields_agree_with_the_typed_info_blocks() {
+    use crate::protocol::reply::{Gains, Info04, Info05, Info06};
+    let mut blocks = [[0u8; 8]; 4];
+    let order = [B::Info03, B::Info04, B::Info05, B::Info06];
+    // A distinct value per row, small enough for an 8-bit field.
+    let value = |r: &ParamRow| u16::from(r.index) + 1;
+    for (slot, block) in order.iter().enumerate() {
+        for (row, field) in fields_of(*block) {
+            field.write(&mut blocks[slot], value(row));
+        }
+    }
+    let g = Gains::from_bytes(&blocks[0]);
+    let i4 = Info04::from_bytes(&blocks[1]);
+    let i5 = Info05::from_bytes(&blocks[2]);
+    let i6 = Info06::from_bytes(&blocks[3]);
+    let typed = [
+        (index::SET_POS_KP, g.pos_kp),
+        (index::SET_POS_KD, g.pos_kd),
+        (index::SET_SPD_KP, g.spd_kp),
+        (index::SET_SPD_KI, g.spd_ki),
+        (index::POS_LPF_LV, i4.lpf_level.into()),
+        (index::BAUD_RATE, i4.baud_level.into()),
+        (index::MAX_CUR, i4.max_current),
+        (index::PROTECT_CUR_LIMIT, i4.protect_limit),
+        (index::PROTECT_CUR_LV1, i5.protect_cur_lv1),
+        (index::CUR_LV1_DELAY, i5.protect_delay_lv1_ms),
+        (index::RECV_CUR, i5.recv_cur),
+        (index::CUR_RECV_WIN, i5.recover_delay_ms),
+        (index::COLD_TIME, i6.cold_dt.into()),
+        (index::PLUS_TIME, i6.plus_t.into()),
+    ];
+    for (idx, got) in typed {
+        assert_eq!(got, u16::from(idx) + 1, "{}", name_of(idx));
+    }
+}
