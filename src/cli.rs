@@ -3,7 +3,7 @@
 
 use std::fmt;
 
-use crate::frame_json::{command_from_json, frame_to_json, FrameJsonError};
+use crate::protocol::frame_json::{command_from_json, frame_to_json, FrameJsonError};
 use crate::protocol::{DecoderStats, StreamDecoder};
 
 /// Why a `frame` command could not do what was asked; printed on stderr, exit 2.
@@ -81,7 +81,7 @@ pub fn encode_json(json: &str) -> Result<String, FrameCliError> {
     let value: serde_json::Value =
         serde_json::from_str(json).map_err(|e| FrameCliError::Json(e.into()))?;
     let cmd = command_from_json(&value).map_err(FrameCliError::Json)?;
-    Ok(crate::frame_json::hex(&cmd.encode()))
+    Ok(crate::protocol::frame_json::hex(&cmd.encode()))
 }
 
 #[cfg(test)]

@@ -1,8 +1,8 @@
 //! jointd: a gateway daemon for RS-485 servo joint modules.
 //!
 //! # Layout
-//! - [`protocol`]: pure wire protocol: frames, CRC, typed commands/replies, units, stream decoder.
-//! - [`frame_json`]: frames ↔ JSON with the field names of `vectors.json` (CLI, API, tests).
+//! - [`protocol`]: pure wire protocol: frames, CRC, typed commands/replies, units, the
+//!   parameter table, stream decoder, frames ↔ JSON.
 //! - [`cli`]: the `jointd frame …` tools for reading a serial capture by hand.
 //! - [`http`]: the HTTP layer: `app(state)`, REST API + OpenAPI, WebSocket, dashboard, auth, errors.
 //! - [`daemon`]: `jointd [run]`: config, buses, the HTTP server, graceful shutdown.
@@ -16,7 +16,6 @@ pub mod bench;
 pub mod bus;
 pub mod cli;
 pub mod daemon;
-pub mod frame_json;
 pub mod http;
 pub mod protocol;
 pub mod sim;

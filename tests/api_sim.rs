@@ -4,6 +4,7 @@
 mod api_support;
 
 use api_support::sim_bus::{start, BUS};
+use jointd::protocol::params::index;
 use jointd::protocol::reply::fsm;
 use jointd::sim::Fault;
 use serde_json::json;
@@ -151,8 +152,8 @@ async fn configuration_read_change_persist_and_id() {
         .problem(422);
     s.post_empty(&format!("{DEV}/2/config/persist")).await.ok();
     assert_eq!(
-        b.sim.device(2).unwrap().flash.max_cur,
-        b.sim.device(2).unwrap().params.max_cur
+        b.sim.device(2).unwrap().flash.raw(index::MAX_CUR),
+        b.sim.device(2).unwrap().params.raw(index::MAX_CUR)
     );
     s.put(&format!("{DEV}/3/id"), json!({"new_id": 1}))
         .await

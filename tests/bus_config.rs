@@ -6,6 +6,7 @@ mod bus_support;
 use bus_support::*;
 use jointd::bus::handle::BusEvent;
 use jointd::bus::BusError;
+use jointd::protocol::params::index;
 use jointd::protocol::{ConfigParam, Info04, InfoBlock};
 use jointd::sim::Fault;
 
@@ -22,7 +23,7 @@ async fn writes_are_verified_by_read_back_and_res() {
         (out.index, out.value, out.verified_by),
         (16, 3, "read_back")
     );
-    assert_eq!(rig.sim.device(1).unwrap().params.lpf_level, 3);
+    assert_eq!(rig.sim.device(1).unwrap().params.raw(index::POS_LPF_LV), 3);
 
     // A RES failure is the device saying no: the wrong flash key.
     let refused = rig
@@ -42,7 +43,7 @@ async fn writes_are_verified_by_read_back_and_res() {
     );
     let out = rig.bus.write_flash(1).await.unwrap();
     assert_eq!(out.verified_by, "res");
-    assert_eq!(rig.sim.device(1).unwrap().flash.lpf_level, 3);
+    assert_eq!(rig.sim.device(1).unwrap().flash.raw(index::POS_LPF_LV), 3);
 
     let silent = rig.bus.write_config(1, ConfigParam::CommSilent(1)).await;
     assert!(matches!(silent, Err(BusError::Invalid(_))));
@@ -65,12 +66,15 @@ async fn a_write_that_did_not_take_effect_is_a_verification_error() {
     for i in 0..300u16 {
         let value = 4000 + i;
         match rig.bus.write_config(1, ConfigParam::MaxCur(value)).await {
-            Ok(out) => assert_eq!(rig.sim.device(1).unwrap().params.max_cur, out.value),
+            Ok(out) => assert_eq!(
+                rig.sim.device(1).unwrap().params.raw(index::MAX_CUR),
+                out.value
+            ),
             Err(BusError::VerifyMismatch {
                 expected, found, ..
             }) => {
                 assert_eq!(expected, value);
-                assert_eq!(rig.sim.device(1).unwrap().params.max_cur, found);
+                assert_eq!(rig.sim.device(1).unwrap().params.raw(index::MAX_CUR), found);
                 mismatch = Some(found);
                 break;
             }

@@ -97,3 +97,15 @@ fn encode_refuses_set_ref_without_a_target_and_unknown_fields() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("unknown field `speed`"));
 }
+
+#[test]
+fn decode_names_every_index_of_the_table() {
+    // INFO_07_R (rev 2.0.8) used to decode as "UNKNOWN": the names now come
+    // from the parameter table.
+    let hex = "55 AA 00 14 A0 00 00 00 02 20 00 00 00 00 00 00 A8 A1 00 00";
+    let o = jointd(&["frame", "decode", hex]);
+    assert!(o.status.success(), "{o:?}");
+    let json: serde_json::Value = serde_json::from_str(stdout(&o).trim()).expect("JSON");
+    assert_eq!(json["name"], "INFO_07_R");
+    assert_eq!(json["index"], 32);
+}

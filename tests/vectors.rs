@@ -6,8 +6,8 @@
 use std::path::PathBuf;
 
 use jointd::cli::parse_hex;
-use jointd::frame_json::{command_from_json, frame_to_json};
 use jointd::protocol::checksum::crc16;
+use jointd::protocol::frame_json::{command_from_json, frame_to_json};
 use jointd::protocol::{Frame, FrameBytes, Message, Reply, StreamDecoder};
 use serde_json::Value;
 

@@ -307,29 +307,40 @@ $("#target-slider").onchange = (e) => sendTarget(Number(e.target.value));
 
 // ---------------------------------------------------------------- configuration
 
-const PARAMS = [
-  ["pos_kp", "position KP"], ["pos_kd", "position KD"], ["spd_kp", "speed KP"], ["spd_ki", "speed KI"],
-  ["lpf_level", "position smoothing (0–5)"], ["max_current_a", "max current"],
-  ["protect_current_limit_a", "current cap while protected"], ["protect_current_lv1_a", "protection threshold"],
-  ["protect_delay_ms", "time above threshold"], ["recover_current_a", "recovery threshold"],
-  ["recover_window_ms", "time below recovery"], ["burst_cold_ms", "burst cool-down"], ["burst_plus_ms", "burst duration"],
-];
+// Which parameters exist, their labels, units and ranges come from the
+// daemon's parameter table (GET /api/v1/params), not from a copy here.
+let paramTable = null;
+
+/** The rows the configuration form offers, in table order (fetched once). */
+async function offeredParams() {
+  if (!paramTable) {
+    const table = await api("GET", "params");
+    paramTable = table.params.filter((p) => p.api);
+  }
+  return paramTable;
+}
 
 /** A parameter as a person reads it: at most 4 decimals, no float noise. */
 const shown = (v) => String(Number(Number(v).toFixed(4)));
 
 async function loadConfig() {
-  const cfg = await act(null, () => api("GET", dev("/config")));
+  const rows = await act(null, offeredParams);
+  const cfg = rows && await act(null, () => api("GET", dev("/config")));
   if (!cfg) return;
   state.config = cfg;
   const tbody = $("#config tbody");
   tbody.innerHTML = "";
-  for (const [name, label] of PARAMS) {
+  for (const row of rows) {
+    const name = row.key;
     const p = cfg[name];
     if (!p) continue;
     const tr = document.createElement("tr");
-    tr.innerHTML = `<td>${label}</td><td><input data-param="${name}" data-testid="param-${name}" type="number" step="any"></td><td>${p.unit}</td><td>${p.raw}</td>`;
+    tr.innerHTML = `<td></td><td><input data-param="${name}" data-testid="param-${name}" type="number"></td><td></td><td>${p.raw}</td>`;
+    tr.children[0].textContent = row.description;
+    tr.children[0].title = `${row.name} (index ${row.index}), ${shown(row.min)}..${shown(row.max)} ${row.unit}`;
+    tr.children[2].textContent = p.unit;
     const input = tr.querySelector("input");
+    input.min = row.min; input.max = row.max; input.step = row.step ?? "any";
     // Shown rounded (Q12/Q15 steps print as 0.9997558…); "changed" compares
     // with what was shown, so an untouched field is never written back.
     input.value = shown(p.value);

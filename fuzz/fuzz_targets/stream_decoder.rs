@@ -2,7 +2,7 @@
 //! everything downstream of a decoded frame (typed message, JSON view).
 #![no_main]
 
-use jointd::frame_json::frame_to_json;
+use jointd::protocol::frame_json::frame_to_json;
 use jointd::protocol::{Frame, Message, StreamDecoder, FRAME_LEN};
 use libfuzzer_sys::fuzz_target;
 

@@ -260,7 +260,7 @@ impl Owner {
             }
             Confirm::ReadBack { block, field } => {
                 self.job_send(&[Command::Config(cmd)])?;
-                let found = field(&self.read_info(dev_id, block)?.data);
+                let found = field.read(&self.read_info(dev_id, block)?.data);
                 if found != value {
                     return Err(BusError::VerifyMismatch {
                         dev_id,

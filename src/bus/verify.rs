@@ -1,11 +1,10 @@
-//! How a config write is confirmed (SPEC §4.3): RES replies for the indices
-//! that answer, a read-back of the matching INFO block for the RAM
-//! parameters that do not, and an honest "unverifiable" for the rest.
+//! How a config write is confirmed (SPEC §4.3), read from the parameter
+//! table: a RES reply for the rows that answer, a read-back of the row's
+//! INFO field for the settings that do not, and an honest "unverifiable"
+//! for the rest. Rows the table guards are refused with the row's reason.
 
-use crate::protocol::{ConfigParam, Gains, Info04, Info05, Info06, InfoBlock};
-
-/// Reads one field of an INFO block's data bytes.
-pub type Field = fn(&[u8; 8]) -> u16;
+use crate::protocol::params::{self, Access, Field, Guard, ReplyKind};
+use crate::protocol::{ConfigParam, InfoBlock};
 
 /// The way a write of one parameter is confirmed.
 #[derive(Debug, Clone, Copy)]
@@ -20,57 +19,31 @@ pub enum Confirm {
 
 /// How `param` is confirmed, or why `write_config` refuses it.
 pub fn confirmation(param: &ConfigParam) -> Result<Confirm, &'static str> {
-    use ConfigParam as P;
-    let read = |block, field| Ok(Confirm::ReadBack { block, field });
-    match param {
-        P::ReadInfo(_) => Err("a read is not a write: use read_info"),
-        P::SetId { .. } => Err("an id change must go through set_id (the registry follows it)"),
-        P::BaudRate(_) => {
-            Err("a baud change must go through set_baud (every device, then the port)")
-        }
-        P::CommSilent(_) => Err("COMM_SILENT makes the device stop answering: not offered"),
-        P::UpdateEncZero => Err("UPDATE_ENC_ZERO recalibrates the rotor encoder: not offered"),
-        P::WriteFlash { .. } => Ok(Confirm::Res),
-        P::PosKp(_) => read(InfoBlock::Info03, |d| Gains::from_bytes(d).pos_kp),
-        P::PosKd(_) => read(InfoBlock::Info03, |d| Gains::from_bytes(d).pos_kd),
-        P::SpdKp(_) => read(InfoBlock::Info03, |d| Gains::from_bytes(d).spd_kp),
-        P::SpdKi(_) => read(InfoBlock::Info03, |d| Gains::from_bytes(d).spd_ki),
-        P::PosLpf(_) => read(InfoBlock::Info04, |d| {
-            u16::from(Info04::from_bytes(d).lpf_level)
-        }),
-        P::MaxCur(_) => read(InfoBlock::Info04, |d| Info04::from_bytes(d).max_current),
-        P::ProtectCurLimit(_) => read(InfoBlock::Info04, |d| Info04::from_bytes(d).protect_limit),
-        P::ProtectCurLv1(_) => read(InfoBlock::Info05, |d| Info05::from_bytes(d).protect_cur_lv1),
-        P::CurLv1DelayMs(_) => read(InfoBlock::Info05, |d| {
-            Info05::from_bytes(d).protect_delay_lv1_ms
-        }),
-        P::RecvCur(_) => read(InfoBlock::Info05, |d| Info05::from_bytes(d).recv_cur),
-        P::CurRecvWinMs(_) => read(InfoBlock::Info05, |d| {
-            Info05::from_bytes(d).recover_delay_ms
-        }),
-        P::ColdTime(_) => read(InfoBlock::Info06, |d| {
-            u16::from(Info06::from_bytes(d).cold_dt)
-        }),
-        P::PlusTime(_) => read(InfoBlock::Info06, |d| {
-            u16::from(Info06::from_bytes(d).plus_t)
-        }),
-        // Mode, zeroing, reboot, flash reload and the rev 2.0.8 extensions
-        // (whose INFO_06 offsets are unpublished) show in no readable field.
-        P::CtrlMode(_)
-        | P::UpdateFinZero
-        | P::Reboot(_)
-        | P::ReadFlash
-        | P::DrvOtC(_)
-        | P::SpdLimit(_)
-        | P::Sn(_)
-        | P::Other { .. } => Ok(Confirm::Unverifiable),
+    let (index, _) = param.index_value();
+    let Some(row) = params::by_index(index) else {
+        return Ok(Confirm::Unverifiable); // an index the table does not know
+    };
+    if row.access == Access::Read {
+        return Err("a read is not a write: use read_info");
     }
+    match row.guard {
+        Guard::Routed(why) | Guard::Dangerous(why) => return Err(why),
+        Guard::None => {}
+    }
+    Ok(match (row.reply, row.read_back) {
+        (ReplyKind::Res, _) => Confirm::Res,
+        (_, Some(field)) => Confirm::ReadBack {
+            block: field.block,
+            field,
+        },
+        _ => Confirm::Unverifiable,
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::protocol::{Reply, ReplyBody};
+    use crate::protocol::{Gains, Info05, Reply, ReplyBody};
 
     #[test]
     fn ram_parameters_read_back_the_field_they_wrote() {
@@ -86,7 +59,7 @@ mod tests {
             panic!("expected a read-back");
         };
         assert_eq!(block, InfoBlock::Info05);
-        assert_eq!(field(&reply.data), 600);
+        assert_eq!(field.read(&reply.data), 600);
     }
 
     #[test]
@@ -107,18 +80,39 @@ mod tests {
             let Ok(Confirm::ReadBack { field, .. }) = confirmation(&param) else {
                 panic!("{param:?}")
             };
-            assert_eq!(field(&d), want, "{param:?}");
+            assert_eq!(field.read(&d), want, "{param:?}");
         }
     }
 
     #[test]
     fn dangerous_and_routed_writes_are_refused() {
         assert!(confirmation(&ConfigParam::CommSilent(1)).is_err());
+        assert!(confirmation(&ConfigParam::UpdateEncZero).is_err());
         assert!(confirmation(&ConfigParam::SetId { new_id: 3 }).is_err());
+        assert!(confirmation(&ConfigParam::BaudRate(crate::protocol::BaudLevel::B500000)).is_err());
         assert!(confirmation(&ConfigParam::ReadInfo(InfoBlock::Info01)).is_err());
         assert!(matches!(
             confirmation(&ConfigParam::WriteFlash { key: 0xA5 }),
             Ok(Confirm::Res)
         ));
+    }
+
+    #[test]
+    fn writes_without_reply_or_field_are_unverifiable() {
+        for p in [
+            ConfigParam::CtrlMode(crate::protocol::CtrlMode::Speed),
+            ConfigParam::UpdateFinZero,
+            ConfigParam::DrvOtC(80),
+            ConfigParam::SpdLimit(100),
+            ConfigParam::Other {
+                index: 29,
+                value: 1,
+            },
+        ] {
+            assert!(
+                matches!(confirmation(&p), Ok(Confirm::Unverifiable)),
+                "{p:?}"
+            );
+        }
     }
 }

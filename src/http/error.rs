@@ -197,6 +197,7 @@ impl ApiError {
                 field,
                 format!("{field} = {value} ms is not a multiple of {step} ms"),
             ),
+            UnitError::NotOneOf { .. } => Self::invalid(field, err.to_string()),
         }
     }
 

@@ -8,13 +8,9 @@ use utoipa::ToSchema;
 
 use crate::bus::handle::DeviceState;
 use crate::bus::Setpoint;
-use crate::protocol::reply::{fault_name, fsm, fsm_name};
+use crate::protocol::status::{active_fault, fault_history, fault_name, fsm, fsm_name};
 use crate::protocol::units::{self, FirmwareVersion};
-use crate::protocol::{CtrlMode, Info01, Info02};
-
-/// Low nibble of err_code: the active fault; high nibble: latched history (SPEC §5).
-const FAULT_ACTIVE_MASK: u8 = 0x0F;
-const FAULT_HISTORY_SHIFT: u8 = 4;
+use crate::protocol::{Info01, Info02};
 
 /// The speed base to assume before a device has reported its firmware: the
 /// newer 50000 rpm base, so an rpm request maps to at most the asked speed
@@ -35,15 +31,6 @@ pub fn is_enabled(info: &Info01) -> bool {
     info.fsm == fsm::RUN || info.fsm == fsm::ALIGN
 }
 
-pub fn mode_name(mode: CtrlMode) -> &'static str {
-    match mode {
-        CtrlMode::None => "none",
-        CtrlMode::Speed => "speed",
-        CtrlMode::Position => "position",
-        CtrlMode::Current => "current",
-    }
-}
-
 /// A fault code decoded to names.
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct FaultView {
@@ -62,8 +49,8 @@ impl FaultView {
     pub fn new(code: u8) -> Self {
         Self {
             code,
-            active: fault_name(code & FAULT_ACTIVE_MASK),
-            history: fault_name(code >> FAULT_HISTORY_SHIFT),
+            active: fault_name(active_fault(code)),
+            history: fault_name(fault_history(code)),
         }
     }
 }
@@ -140,7 +127,7 @@ impl TargetView {
     }
 }
 
-pub use crate::frame_json::hex;
+pub use crate::protocol::frame_json::hex;
 
 fn age_ms(at: Instant, now: Instant) -> f64 {
     now.saturating_duration_since(at).as_secs_f64() * 1000.0

@@ -5,7 +5,8 @@
 
 use super::error::ProtocolError;
 use super::frame::{BroadcastFrame, BroadcastKind, Frame, FrameBytes, StandardFrame};
-use super::{is_address, is_device_id};
+use super::is_address;
+use super::params::{self, ParamRow, RawType, Scale};
 
 /// can_id of a jog command.
 pub const CAN_ID_JOG: u32 = 0xF0;
@@ -116,10 +117,30 @@ pub enum CtrlMode {
 }
 
 impl CtrlMode {
+    pub const ALL: [CtrlMode; 4] = [Self::None, Self::Speed, Self::Position, Self::Current];
+
     pub fn from_raw(raw: u8) -> Option<Self> {
-        [Self::None, Self::Speed, Self::Position, Self::Current]
-            .into_iter()
-            .find(|m| *m as u8 == raw)
+        Self::ALL.into_iter().find(|m| *m as u8 == raw)
+    }
+
+    /// The name every interface uses (`"position"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Speed => "speed",
+            Self::Position => "position",
+            Self::Current => "current",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+impl std::fmt::Display for CtrlMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
@@ -162,41 +183,8 @@ impl BaudLevel {
     }
 }
 
-/// Index constants of SPEC §4.3, named as the vendor names them.
-pub mod index {
-    pub const REBOOT: u8 = 0;
-    pub const INFO_01_R: u8 = 1;
-    pub const INFO_02_R: u8 = 2;
-    pub const UPDATE_FIN_ZERO: u8 = 3;
-    pub const SET_ID: u8 = 4;
-    pub const UPDATE_ENC_ZERO: u8 = 5;
-    pub const COMM_SILENT: u8 = 6;
-    pub const CTRL_MODE_SW: u8 = 7;
-    pub const SET_POS_KP: u8 = 8;
-    pub const SET_POS_KD: u8 = 9;
-    pub const SET_SPD_KP: u8 = 10;
-    pub const SET_SPD_KI: u8 = 11;
-    pub const INFO_03_R: u8 = 12;
-    pub const WRITE_FLASH: u8 = 13;
-    pub const READ_FLASH: u8 = 14;
-    pub const BAUD_RATE: u8 = 15;
-    pub const POS_LPF_LV: u8 = 16;
-    pub const INFO_04_R: u8 = 17;
-    pub const MAX_CUR: u8 = 18;
-    pub const PROTECT_CUR_LIMIT: u8 = 19;
-    pub const PROTECT_CUR_LV1: u8 = 20;
-    pub const CUR_LV1_DELAY: u8 = 21;
-    pub const RECV_CUR: u8 = 22;
-    pub const CUR_RECV_WIN: u8 = 23;
-    pub const INFO_05_R: u8 = 24;
-    pub const INFO_06_R: u8 = 25;
-    pub const COLD_TIME: u8 = 26;
-    pub const PLUS_TIME: u8 = 27;
-    pub const DRV_OT: u8 = 28;
-    pub const SPD_LIMIT: u8 = 30;
-    pub const SN: u8 = 31;
-    pub const INFO_07_R: u8 = 32;
-}
+/// Index constants, defined beside the parameter table.
+pub use super::params::index;
 
 /// One parameter of SPEC §4.3 with its raw value.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -278,47 +266,51 @@ impl ConfigParam {
         }
     }
 
-    /// The typed parameter for an index and raw value. Values that cannot be
-    /// what the index carries (a 9-bit LPF level, an id not shifted by 7) are errors.
+    /// The typed parameter for an index and raw value. A value outside what
+    /// the index's row allows (a 9-bit LPF level, an id not shifted by 7) is
+    /// an error; an index without a row is kept as [`ConfigParam::Other`].
     pub fn from_index_value(idx: u8, value: u16) -> Result<Self, ProtocolError> {
         use index::*;
         if let Some(block) = InfoBlock::from_index(idx) {
             return Ok(Self::ReadInfo(block));
         }
+        if let Some(row) = params::by_index(idx) {
+            check_value(row, value)?;
+        }
+        // Checked above: an 8-bit row's value fits a byte.
+        let byte = value as u8;
         let param = match idx {
             REBOOT => Self::Reboot(value),
             UPDATE_FIN_ZERO => Self::UpdateFinZero,
             SET_ID => Self::SetId {
-                new_id: decode_set_id(value)?,
+                new_id: (value >> 7) as u8,
             },
             UPDATE_ENC_ZERO => Self::UpdateEncZero,
             COMM_SILENT => Self::CommSilent(value),
             CTRL_MODE_SW => Self::CtrlMode(
-                CtrlMode::from_raw(byte_value("mode", value)?)
+                CtrlMode::from_raw(byte)
                     .ok_or_else(|| bad("mode", value, "0 none, 1 speed, 2 position, 3 current"))?,
             ),
             SET_POS_KP => Self::PosKp(value),
             SET_POS_KD => Self::PosKd(value),
             SET_SPD_KP => Self::SpdKp(value),
             SET_SPD_KI => Self::SpdKi(value),
-            WRITE_FLASH => Self::WriteFlash {
-                key: byte_value("flash key", value)?,
-            },
+            WRITE_FLASH => Self::WriteFlash { key: byte },
             READ_FLASH => Self::ReadFlash,
             BAUD_RATE => Self::BaudRate(
-                BaudLevel::from_raw(byte_value("baud level", value)?)
+                BaudLevel::from_raw(byte)
                     .ok_or_else(|| bad("baud level", value, "levels are 0..=4"))?,
             ),
-            POS_LPF_LV => Self::PosLpf(lpf_level(value)?),
+            POS_LPF_LV => Self::PosLpf(byte),
             MAX_CUR => Self::MaxCur(value),
             PROTECT_CUR_LIMIT => Self::ProtectCurLimit(value),
             PROTECT_CUR_LV1 => Self::ProtectCurLv1(value),
             CUR_LV1_DELAY => Self::CurLv1DelayMs(value),
             RECV_CUR => Self::RecvCur(value),
             CUR_RECV_WIN => Self::CurRecvWinMs(value),
-            COLD_TIME => Self::ColdTime(byte_value("cold time", value)?),
-            PLUS_TIME => Self::PlusTime(byte_value("plus time", value)?),
-            DRV_OT => Self::DrvOtC(byte_value("driver over-temperature", value)?),
+            COLD_TIME => Self::ColdTime(byte),
+            PLUS_TIME => Self::PlusTime(byte),
+            DRV_OT => Self::DrvOtC(byte),
             SPD_LIMIT => Self::SpdLimit(value),
             SN => Self::Sn(value),
             _ => Self::Other { index: idx, value },
@@ -332,30 +324,25 @@ impl ConfigParam {
     }
 }
 
-/// The largest position smoothing level (index 16).
-pub const MAX_LPF_LEVEL: u8 = 5;
-
-fn lpf_level(value: u16) -> Result<u8, ProtocolError> {
-    let level = byte_value("lpf level", value)?;
-    if level > MAX_LPF_LEVEL {
-        return Err(bad("lpf level", value, "levels are 0..=5"));
+/// Refuses a value its row does not allow: wider than the raw type, outside
+/// the range, or (for an id) not shifted by 7.
+fn check_value(row: &ParamRow, value: u16) -> Result<(), ProtocolError> {
+    if row.raw == RawType::None {
+        return Ok(()); // the index alone is the request; the value is ignored
     }
-    Ok(level)
-}
-
-fn decode_set_id(value: u16) -> Result<u8, ProtocolError> {
-    if value & 0x7F != 0 {
+    if row.scale == Scale::DeviceIdQ7 && value & 0x7F != 0 {
         return Err(bad("set_id value", value, "must be new_id << 7 (Q7)"));
     }
-    let id = value >> 7;
-    match u8::try_from(id) {
-        Ok(id) if is_device_id(id) => Ok(id),
-        _ => Err(bad("new_id", id, "device ids are 1..=159")),
+    let (min, max) = row.range;
+    if !(min..=max).contains(&value) {
+        return Err(ProtocolError::OutOfTable {
+            name: row.name,
+            value,
+            min,
+            max,
+        });
     }
-}
-
-fn byte_value(field: &'static str, value: u16) -> Result<u8, ProtocolError> {
-    u8::try_from(value).map_err(|_| bad(field, value, "an 8-bit field (0..=255)"))
+    Ok(())
 }
 
 fn bad(field: &'static str, value: impl Into<i64>, why: &'static str) -> ProtocolError {

@@ -25,6 +25,13 @@ pub enum ProtocolError {
         value: i64,
         why: &'static str,
     },
+    #[error("{name} = {value} is outside the range its index allows ({min}..={max})")]
+    OutOfTable {
+        name: &'static str,
+        value: u16,
+        min: u16,
+        max: u16,
+    },
     #[error(transparent)]
     Unit(#[from] UnitError),
 }

@@ -8,10 +8,13 @@
 //! # Layout
 //! - [`checksum`]: the CRC-16/IBM-3740 used by both frame kinds.
 //! - [`frame`]: 20-byte standard and broadcast frames, encode/decode with CRC check.
+//! - [`frame_json`]: frames ↔ JSON with the field names of `vectors.json` (CLI, API, tests).
 //! - [`command`]: typed host→device commands (control, jog, config, broadcasts).
 //! - [`reply`]: typed device→host replies (INFO_01..07, RES), raw bytes always kept.
+//! - [`params`]: the parameter table: one row per config/INFO index, everything else derives from it.
 //! - [`message`]: classifies a decoded standard frame as a command or a reply.
 //! - [`units`]: every raw ↔ physical conversion, range-checked.
+//! - [`status`]: names of fsm states and fault codes, defined once.
 //! - [`stream`]: finds frames in a byte stream, resyncing past garbage.
 //! - [`error`]: the typed errors of this layer.
 
@@ -19,8 +22,11 @@ pub mod checksum;
 pub mod command;
 pub mod error;
 pub mod frame;
+pub mod frame_json;
 pub mod message;
+pub mod params;
 pub mod reply;
+pub mod status;
 pub mod stream;
 pub mod units;
 

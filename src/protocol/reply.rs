@@ -5,6 +5,7 @@
 
 use super::command::index;
 use super::frame::{Frame, FrameBytes, StandardFrame};
+use super::params::{self, ReplyKind};
 use super::units::{self, FirmwareVersion};
 
 /// A reply frame: `can_id = (index << 16) | (dev_id << 8)`.
@@ -110,13 +111,10 @@ pub struct Info06 {
 pub const RES_SUCCESS: u8 = 1;
 pub const RES_FAILURE: u8 = 0;
 
-/// Indices whose reply is a RES byte.
-pub const RES_INDICES: [u8; 4] = [
-    index::SET_ID,
-    index::UPDATE_ENC_ZERO,
-    index::WRITE_FLASH,
-    index::BAUD_RATE,
-];
+/// True for an index whose reply is a RES byte (the table's reply kind).
+pub fn is_res_index(index: u8) -> bool {
+    params::by_index(index).is_some_and(|r| r.reply == ReplyKind::Res)
+}
 
 fn le_i16(d: &[u8; 8], at: usize) -> i16 {
     i16::from_le_bytes([d[at], d[at + 1]])
@@ -178,7 +176,7 @@ impl Reply {
             index::INFO_05_R => ReplyBody::Info05(Info05::from_bytes(d)),
             index::INFO_06_R => ReplyBody::Info06(Info06::from_bytes(d)),
             index::INFO_07_R => ReplyBody::Info07(*d),
-            i if RES_INDICES.contains(&i) => ReplyBody::Res {
+            i if is_res_index(i) => ReplyBody::Res {
                 index: i,
                 code: d[0],
             },
@@ -365,59 +363,9 @@ impl Info06 {
     }
 }
 
-/// Name of an fsm state (SPEC §5).
-pub fn fsm_name(fsm: u8) -> &'static str {
-    match fsm {
-        0 => "ready",
-        1 => "init",
-        2 => "precharge",
-        5 => "align",
-        6 => "start",
-        7 => "run",
-        8 => "stop",
-        9 => "fault",
-        10 => "brake",
-        _ => "reserved",
-    }
-}
-
-/// Name of a fault code; pass `err_code & 0x0F` for the active fault (rev 2.0.8).
-pub fn fault_name(code: u8) -> &'static str {
-    match code {
-        0 => "none",
-        1 => "hw_over_current",
-        2 => "sw_over_current",
-        3 => "hw_over_voltage",
-        4 => "sw_over_voltage",
-        5 => "hw_under_voltage",
-        6 => "sw_under_voltage",
-        7 => "phase_loss",
-        8 => "stall",
-        9 => "over_temperature",
-        10 => "communication_lost",
-        11 => "self_test_failed",
-        _ => "unknown",
-    }
-}
-
-/// fsm values of SPEC §5 this project relies on.
-pub mod fsm {
-    pub const READY: u8 = 0;
-    pub const ALIGN: u8 = 5;
-    pub const RUN: u8 = 7;
-    pub const FAULT: u8 = 9;
-}
-
-/// err_code values of SPEC §5.
-pub mod fault {
-    pub const NONE: u8 = 0;
-    pub const HW_OVER_CURRENT: u8 = 1;
-    pub const SW_OVER_CURRENT: u8 = 2;
-    pub const HW_UNDER_VOLTAGE: u8 = 5;
-    pub const SW_UNDER_VOLTAGE: u8 = 6;
-    pub const STALL: u8 = 8;
-    pub const OVER_TEMPERATURE: u8 = 9;
-}
+// The state and fault names moved to `status`; re-exported here so callers
+// that import them from `reply` keep working.
+pub use super::status::{fault, fault_name, fsm, fsm_name};
 
 #[cfg(test)]
 mod tests {

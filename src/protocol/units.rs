@@ -38,11 +38,18 @@ pub enum UnitError {
     },
     #[error("{quantity} is not a finite number")]
     NotFinite { quantity: &'static str },
-    #[error("{quantity} = {value} ms is not a multiple of {step} ms")]
+    #[error("{quantity} = {value} {unit} is not a multiple of {step} {unit}")]
     NotMultiple {
         quantity: &'static str,
         value: f64,
         step: u32,
+        unit: &'static str,
+    },
+    #[error("{quantity} = {value} is not one of {allowed}")]
+    NotOneOf {
+        quantity: &'static str,
+        value: f64,
+        allowed: &'static str,
     },
 }
 
@@ -217,9 +224,71 @@ pub fn burst_ms_to_raw(ms: f64) -> Result<u8, UnitError> {
             quantity: "burst time",
             value: ms,
             step: BURST_STEP_MS,
+            unit: "ms",
         });
     }
     Ok(raw as u8)
+}
+
+// ---- whole numbers (levels, modes, ids) ----
+
+/// A whole number within `min..=max` (a smoothing level, a mode, an id).
+pub fn whole_to_raw(
+    quantity: &'static str,
+    unit: &'static str,
+    value: f64,
+    (min, max): (u16, u16),
+) -> Result<u16, UnitError> {
+    let raw = to_raw(quantity, unit, value, (f64::from(min), f64::from(max)), 1.0)?;
+    if value.fract() != 0.0 {
+        return Err(UnitError::NotMultiple {
+            quantity,
+            value,
+            step: 1,
+            unit,
+        });
+    }
+    Ok(raw as u16)
+}
+
+// ---- saturating encoders: a simulated sensor reports the nearest raw value ----
+
+/// Q7 degrees, clamped to the i16 range.
+pub fn angle_raw_saturating(deg: f64) -> i16 {
+    saturate_i16(deg * Q7)
+}
+
+/// Q15 current, clamped to ±full scale.
+pub fn current_raw_saturating(amps: f64) -> i16 {
+    saturate_q15(amps / CURRENT_FULL_SCALE_A * Q15_MAX)
+}
+
+/// Q15 rotor speed of the firmware's base, clamped to ±full scale.
+pub fn speed_raw_saturating(rpm: f64, fw: FirmwareVersion) -> i16 {
+    saturate_q15(rpm / fw.speed_base_rpm() * Q15_MAX)
+}
+
+/// Q7 volts, clamped to the u16 range.
+pub fn volts_raw_saturating(v: f64) -> u16 {
+    (v * Q7).round().clamp(0.0, f64::from(u16::MAX)) as u16
+}
+
+/// `°C + 50`, clamped to the u8 range.
+pub fn temp_raw_saturating(c: f64) -> u8 {
+    (c + TEMP_OFFSET_C).round().clamp(0.0, f64::from(u8::MAX)) as u8
+}
+
+/// Rotor speed for an output-shaft speed (the inverse of [`output_deg_per_s`]).
+pub fn rotor_rpm(output_deg_per_s: f64) -> f64 {
+    output_deg_per_s * GEAR_RATIO / 6.0
+}
+
+fn saturate_i16(x: f64) -> i16 {
+    x.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+}
+
+fn saturate_q15(x: f64) -> i16 {
+    x.round().clamp(-Q15_MAX, Q15_MAX) as i16
 }
 
 /// Time one 20-byte frame occupies on the wire: 10 bit times per byte (SPEC §1).

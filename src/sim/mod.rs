@@ -10,7 +10,8 @@
 //! - [`engine`]: the whole bus as a function of timestamps (wire + devices + faults).
 //! - [`device`]: one module's state machine and SPEC behaviour, pure.
 //! - [`physics`]: angle, speed, current, protection, burst, temperature.
-//! - [`params`]: RAM/flash parameters and the JSON state file.
+//! - [`params`]: RAM/flash parameters (storage, defaults and INFO layout from
+//!   [`crate::protocol::params`]) and the JSON state file.
 //! - [`faults`]: run-time fault injection ([`Fault`]).
 //! - [`line`], [`pty`]: the device end of an in-memory pipe or a pseudo-terminal.
 //! - [`runner`]: the dedicated thread that moves bytes at their modelled instants.

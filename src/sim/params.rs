@@ -2,161 +2,140 @@
 //! copy it boots from) and the optional JSON state file that keeps flash
 //! across simulator restarts.
 
+use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-use crate::protocol::reply::{Gains, Info04, Info05, Info06};
-use crate::protocol::{BaudLevel, ConfigParam};
+use crate::protocol::params::{self, index, ParamRow};
+use crate::protocol::{BaudLevel, ConfigParam, InfoBlock};
 
 use super::config::SimError;
 
-/// Factory values, from the INFO_03/04/05 a real module reported (vectors.json).
-pub mod factory {
-    pub const POS_KP: u16 = 4095;
-    pub const POS_KD: u16 = 4095;
-    pub const SPD_KP: u16 = 1023;
-    pub const SPD_KI: u16 = 81;
-    pub const LPF_LEVEL: u8 = 1;
-    pub const PARAM_VER: u8 = 3;
-    /// 0.75 A.
-    pub const MAX_CUR: u16 = 4368;
-    /// 0.15 A.
-    pub const PROTECT_LIMIT: u16 = 873;
-    /// 0.5 A.
-    pub const PROTECT_LV1: u16 = 2912;
-    pub const LV1_DELAY_MS: u16 = 600;
-    /// 0.1 A.
-    pub const RECV_CUR: u16 = 582;
-    pub const RECV_WIN_MS: u16 = 400;
-    /// × 25 ms.
-    pub const COLD_TIME: u8 = 20;
-    pub const PLUS_TIME: u8 = 4;
-    /// °C.
-    pub const DRV_OT: u8 = 90;
-    /// Q15: no limit below the base speed.
-    pub const SPD_LIMIT: u16 = 32767;
-}
+/// INFO_04's parameter version: not a config index, what the captured module reports.
+pub const PARAM_VER: u8 = 3;
+/// Where INFO_04 carries the parameter version.
+const PARAM_VER_AT: usize = 2;
+/// Config indices are below this (the table's tests keep it so).
+const SLOTS: usize = 64;
 
-/// Every writable parameter, raw as the wire carries it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+/// Names the state file used before the parameter table (version 1), so a
+/// flash image saved by an older simulator still loads.
+const LEGACY_KEYS: [(&str, u8); 11] = [
+    ("max_cur", index::MAX_CUR),
+    ("protect_limit", index::PROTECT_CUR_LIMIT),
+    ("protect_lv1", index::PROTECT_CUR_LV1),
+    ("lv1_delay_ms", index::CUR_LV1_DELAY),
+    ("recv_cur", index::RECV_CUR),
+    ("recv_win_ms", index::CUR_RECV_WIN),
+    ("cold_time", index::COLD_TIME),
+    ("plus_time", index::PLUS_TIME),
+    ("drv_ot", index::DRV_OT),
+    ("spd_limit", index::SPD_LIMIT),
+    ("baud_level", index::BAUD_RATE),
+];
+
+/// Every setting of the parameter table (its RAM rows), raw as the wire
+/// carries it, by config index. Defaults, storage and the INFO bytes that
+/// report them all come from the table: a new row is stored and reported
+/// with no change here.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Params {
-    pub pos_kp: u16,
-    pub pos_kd: u16,
-    pub spd_kp: u16,
-    pub spd_ki: u16,
-    pub lpf_level: u8,
-    pub baud_level: u8,
+    raw: [u16; SLOTS],
     pub param_ver: u8,
-    pub max_cur: u16,
-    pub protect_limit: u16,
-    pub protect_lv1: u16,
-    pub lv1_delay_ms: u16,
-    pub recv_cur: u16,
-    pub recv_win_ms: u16,
-    pub cold_time: u8,
-    pub plus_time: u8,
-    pub drv_ot: u8,
-    pub spd_limit: u16,
-    pub sn: u16,
 }
 
 impl Params {
-    /// Factory parameters, talking at `baud`.
+    /// Factory parameters (the table's defaults), talking at `baud`.
     pub fn factory(baud: BaudLevel) -> Self {
-        use factory::*;
-        Self {
-            pos_kp: POS_KP,
-            pos_kd: POS_KD,
-            spd_kp: SPD_KP,
-            spd_ki: SPD_KI,
-            lpf_level: LPF_LEVEL,
-            baud_level: baud as u8,
+        let mut p = Self {
+            raw: [0; SLOTS],
             param_ver: PARAM_VER,
-            max_cur: MAX_CUR,
-            protect_limit: PROTECT_LIMIT,
-            protect_lv1: PROTECT_LV1,
-            lv1_delay_ms: LV1_DELAY_MS,
-            recv_cur: RECV_CUR,
-            recv_win_ms: RECV_WIN_MS,
-            cold_time: COLD_TIME,
-            plus_time: PLUS_TIME,
-            drv_ot: DRV_OT,
-            spd_limit: SPD_LIMIT,
-            sn: 0,
+        };
+        for row in params::settings() {
+            p.set(row.index, row.default);
+        }
+        p.set(index::BAUD_RATE, baud as u16);
+        p
+    }
+
+    /// The raw value of a setting (0 for an index that is not one).
+    pub fn raw(&self, index: u8) -> u16 {
+        self.raw.get(usize::from(index)).copied().unwrap_or(0)
+    }
+
+    /// A setting in physical units, through its row's scale (amps, ms, …).
+    pub fn physical(&self, index: u8) -> f64 {
+        params::by_index(index).map_or(0.0, |row| row.physical(self.raw(index)))
+    }
+
+    fn set(&mut self, index: u8, raw: u16) {
+        if let Some(slot) = self.raw.get_mut(usize::from(index)) {
+            *slot = raw;
         }
     }
 
     /// The baud these parameters select (a corrupt level falls back to the factory one).
     pub fn baud(&self) -> u32 {
-        BaudLevel::from_raw(self.baud_level)
+        u8::try_from(self.raw(index::BAUD_RATE))
+            .ok()
+            .and_then(BaudLevel::from_raw)
             .unwrap_or(BaudLevel::B230400)
             .baud()
     }
 
-    /// Stores a RAM parameter write. Returns false for params that are not
+    /// Stores a write of a setting. Returns false for params that are not
     /// plain values (commands like SET_ID, reads), which the device handles.
     pub fn apply(&mut self, p: &ConfigParam) -> bool {
-        match *p {
-            ConfigParam::PosKp(v) => self.pos_kp = v,
-            ConfigParam::PosKd(v) => self.pos_kd = v,
-            ConfigParam::SpdKp(v) => self.spd_kp = v,
-            ConfigParam::SpdKi(v) => self.spd_ki = v,
-            ConfigParam::PosLpf(v) => self.lpf_level = v,
-            ConfigParam::MaxCur(v) => self.max_cur = v,
-            ConfigParam::ProtectCurLimit(v) => self.protect_limit = v,
-            ConfigParam::ProtectCurLv1(v) => self.protect_lv1 = v,
-            ConfigParam::CurLv1DelayMs(v) => self.lv1_delay_ms = v,
-            ConfigParam::RecvCur(v) => self.recv_cur = v,
-            ConfigParam::CurRecvWinMs(v) => self.recv_win_ms = v,
-            ConfigParam::ColdTime(v) => self.cold_time = v,
-            ConfigParam::PlusTime(v) => self.plus_time = v,
-            ConfigParam::DrvOtC(v) => self.drv_ot = v,
-            ConfigParam::SpdLimit(v) => self.spd_limit = v,
-            ConfigParam::Sn(v) => self.sn = v,
-            _ => return false,
+        let (index, value) = p.index_value();
+        let setting = params::by_index(index).is_some_and(ParamRow::is_setting);
+        if setting {
+            self.set(index, value);
         }
-        true
+        setting
     }
 
-    pub fn gains(&self) -> Gains {
-        Gains {
-            pos_kp: self.pos_kp,
-            pos_kd: self.pos_kd,
-            spd_kp: self.spd_kp,
-            spd_ki: self.spd_ki,
+    /// The data bytes of INFO_03..06: every setting at its row's read-back
+    /// field (INFO_06's rev 2.0.8 tail stays zero: its offsets are unpublished).
+    pub fn block(&self, block: InfoBlock) -> [u8; 8] {
+        let mut data = [0u8; 8];
+        if block == InfoBlock::Info04 {
+            data[PARAM_VER_AT] = self.param_ver;
         }
+        for (row, field) in params::fields_of(block) {
+            field.write(&mut data, self.raw(row.index));
+        }
+        data
     }
+}
 
-    pub fn info04(&self) -> Info04 {
-        Info04 {
-            lpf_level: self.lpf_level,
-            baud_level: self.baud_level,
-            param_ver: self.param_ver,
-            reserved: 0,
-            max_current: self.max_cur,
-            protect_limit: self.protect_limit,
-        }
+impl Serialize for Params {
+    /// `{"pos_kp": 4095, …, "param_ver": 3}`: settings by their table key.
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut map: BTreeMap<&str, u16> = params::settings()
+            .map(|r| (r.key, self.raw(r.index)))
+            .collect();
+        map.insert("param_ver", self.param_ver.into());
+        map.serialize(s)
     }
+}
 
-    pub fn info05(&self) -> Info05 {
-        Info05 {
-            protect_cur_lv1: self.protect_lv1,
-            protect_delay_lv1_ms: self.lv1_delay_ms,
-            recv_cur: self.recv_cur,
-            recover_delay_ms: self.recv_win_ms,
+impl<'de> Deserialize<'de> for Params {
+    /// Table keys or the version-1 names; a missing setting gets its factory value.
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let map = BTreeMap::<String, u16>::deserialize(d)?;
+        let mut p = Self::factory(BaudLevel::B230400);
+        for (key, value) in map {
+            if key == "param_ver" {
+                p.param_ver = u8::try_from(value).unwrap_or(PARAM_VER);
+            } else if let Some(row) = params::by_key(&key).filter(|r| r.is_setting()) {
+                p.set(row.index, value);
+            } else if let Some((_, index)) = LEGACY_KEYS.iter().find(|(k, _)| *k == key) {
+                p.set(*index, value);
+            }
         }
-    }
-
-    /// INFO_06: burst timing; the rev 2.0.8 tail's offsets are unpublished, so
-    /// the simulator sends zeros there rather than invent a layout.
-    pub fn info06(&self) -> Info06 {
-        Info06 {
-            cold_dt: self.cold_time,
-            plus_t: self.plus_time,
-            extra: [0; 6],
-        }
+        Ok(p)
     }
 }
 
@@ -232,14 +211,18 @@ mod tests {
     fn factory_blocks_match_the_captured_device() {
         let p = Params::factory(BaudLevel::B230400);
         assert_eq!(
-            p.gains().to_bytes(),
+            p.block(InfoBlock::Info03),
             [0xFF, 0x0F, 0xFF, 0x0F, 0xFF, 0x03, 0x51, 0x00]
         );
-        assert_eq!(p.info04().to_bytes(), [1, 1, 3, 0, 0x10, 0x11, 0x69, 0x03]);
         assert_eq!(
-            p.info05().to_bytes(),
+            p.block(InfoBlock::Info04),
+            [1, 1, 3, 0, 0x10, 0x11, 0x69, 0x03]
+        );
+        assert_eq!(
+            p.block(InfoBlock::Info05),
             [0x60, 0x0B, 0x58, 0x02, 0x46, 0x02, 0x90, 0x01]
         );
+        assert_eq!(p.block(InfoBlock::Info06), [20, 4, 0, 0, 0, 0, 0, 0]);
     }
 
     #[test]
@@ -254,5 +237,41 @@ mod tests {
         store.save(&images).unwrap();
         assert_eq!(store.load().unwrap(), images);
         fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn version_1_state_files_still_load() {
+        let old = r#"{"pos_kp":1,"pos_kd":2,"spd_kp":3,"spd_ki":4,"lpf_level":5,"baud_level":0,
+            "param_ver":3,"max_cur":6,"protect_limit":7,"protect_lv1":8,"lv1_delay_ms":9,
+            "recv_cur":10,"recv_win_ms":11,"cold_time":12,"plus_time":13,"drv_ot":80,
+            "spd_limit":14,"sn":15}"#;
+        let p: Params = serde_json::from_str(old).unwrap();
+        assert_eq!(p.raw(index::MAX_CUR), 6);
+        assert_eq!(p.raw(index::CUR_RECV_WIN), 11);
+        assert_eq!(p.raw(index::DRV_OT), 80);
+        assert_eq!(p.baud(), 500_000);
+        let again: Params = serde_json::from_value(serde_json::to_value(p).unwrap()).unwrap();
+        assert_eq!(again, p);
+    }
+
+    #[test]
+    fn every_setting_of_the_table_is_stored_and_survives_the_state_file() {
+        let mut p = Params::factory(BaudLevel::B500000);
+        for row in params::settings() {
+            assert_eq!(
+                p.raw(row.index),
+                if row.index == index::BAUD_RATE {
+                    0
+                } else {
+                    row.default
+                }
+            );
+            let value = row.range.1;
+            let write = ConfigParam::from_index_value(row.index, value).unwrap();
+            assert!(p.apply(&write), "{}", row.name);
+            assert_eq!(p.raw(row.index), value, "{}", row.name);
+        }
+        let again: Params = serde_json::from_value(serde_json::to_value(p).unwrap()).unwrap();
+        assert_eq!(again, p);
     }
 }

@@ -7,7 +7,7 @@
 //! All angles here are *physical* output degrees (before the device's zero
 //! offset); speeds are output °/s.
 
-use crate::protocol::units::{burst_ms, current_limit_a};
+use crate::protocol::params::index;
 
 use super::params::Params;
 
@@ -198,9 +198,9 @@ impl Joint {
     /// during a burst).
     pub fn current_cap(&self, p: &Params) -> f64 {
         if self.prot.active && !self.prot.bursting() {
-            current_limit_a(p.protect_limit)
+            p.physical(index::PROTECT_CUR_LIMIT)
         } else {
-            current_limit_a(p.max_cur)
+            p.physical(index::MAX_CUR)
         }
     }
 
@@ -210,22 +210,22 @@ impl Joint {
         pr.burst_left_s = (pr.burst_left_s - dt).max(0.0);
         pr.cool_left_s = (pr.cool_left_s - dt).max(0.0);
         if !pr.active {
-            pr.above_s = if i > current_limit_a(p.protect_lv1) {
+            pr.above_s = if i > p.physical(index::PROTECT_CUR_LV1) {
                 pr.above_s + dt
             } else {
                 0.0
             };
-            if pr.above_s * MS_PER_S >= f64::from(p.lv1_delay_ms) && pr.above_s > 0.0 {
+            if pr.above_s * MS_PER_S >= p.physical(index::CUR_LV1_DELAY) && pr.above_s > 0.0 {
                 pr.active = true;
                 pr.below_s = 0.0;
             }
         } else {
-            pr.below_s = if i < current_limit_a(p.recv_cur) {
+            pr.below_s = if i < p.physical(index::RECV_CUR) {
                 pr.below_s + dt
             } else {
                 0.0
             };
-            if pr.below_s * MS_PER_S >= f64::from(p.recv_win_ms) && pr.below_s > 0.0 {
+            if pr.below_s * MS_PER_S >= p.physical(index::CUR_RECV_WIN) && pr.below_s > 0.0 {
                 pr.active = false;
                 pr.above_s = 0.0;
             }
@@ -236,15 +236,15 @@ impl Joint {
     /// PLUS_TIME, then no other burst until COLD_TIME has passed.
     pub fn command_burst(&mut self, p: &Params) {
         let pr = &mut self.prot;
-        if pr.active && pr.cool_left_s <= 0.0 && p.plus_time > 0 {
-            pr.burst_left_s = f64::from(burst_ms(p.plus_time)) / MS_PER_S;
-            pr.cool_left_s = pr.burst_left_s + f64::from(burst_ms(p.cold_time)) / MS_PER_S;
+        if pr.active && pr.cool_left_s <= 0.0 && p.raw(index::PLUS_TIME) > 0 {
+            pr.burst_left_s = p.physical(index::PLUS_TIME) / MS_PER_S;
+            pr.cool_left_s = pr.burst_left_s + p.physical(index::COLD_TIME) / MS_PER_S;
         }
     }
 }
 
 fn lpf_tau(p: &Params) -> f64 {
-    LPF_TAU_S[usize::from(p.lpf_level).min(LPF_TAU_S.len() - 1)]
+    LPF_TAU_S[usize::from(p.raw(index::POS_LPF_LV)).min(LPF_TAU_S.len() - 1)]
 }
 
 #[cfg(test)]
@@ -296,12 +296,12 @@ mod tests {
         assert!(j.blocked);
         j.advance(1.0, d, &p, BOUNDS);
         assert!(j.prot.active, "current {}", j.current);
-        assert!(j.current.abs() <= current_limit_a(p.protect_limit) + 1e-9);
+        assert!(j.current.abs() <= p.physical(index::PROTECT_CUR_LIMIT) + 1e-9);
         j.command_burst(&p);
         j.advance(0.05, d, &p, BOUNDS);
-        assert!(j.current.abs() > current_limit_a(p.protect_limit));
+        assert!(j.current.abs() > p.physical(index::PROTECT_CUR_LIMIT));
         j.advance(0.1, d, &p, BOUNDS);
-        assert!(j.current.abs() <= current_limit_a(p.protect_limit) + 1e-9);
+        assert!(j.current.abs() <= p.physical(index::PROTECT_CUR_LIMIT) + 1e-9);
         assert!(j.blocked_s > 1.0);
     }
 

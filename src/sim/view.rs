@@ -16,7 +16,7 @@ pub struct DeviceView {
     /// SPEC §5 fsm (0 ready, 5 align, 7 run, 9 fault).
     pub fsm: u8,
     pub err_code: u8,
-    #[serde(serialize_with = "mode_name")]
+    #[serde(serialize_with = "as_name")]
     pub mode: CtrlMode,
     /// In align or run: the motor is powered.
     pub enabled: bool,
@@ -46,11 +46,7 @@ pub struct DeviceView {
     pub flash: Params,
 }
 
-fn mode_name<S: serde::Serializer>(mode: &CtrlMode, s: S) -> Result<S::Ok, S::Error> {
-    s.serialize_str(match mode {
-        CtrlMode::None => "none",
-        CtrlMode::Speed => "speed",
-        CtrlMode::Position => "position",
-        CtrlMode::Current => "current",
-    })
+/// The mode by its one name ([`CtrlMode`]'s `Display`).
+fn as_name<S: serde::Serializer>(mode: &CtrlMode, s: S) -> Result<S::Ok, S::Error> {
+    s.collect_str(mode)
 }

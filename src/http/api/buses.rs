@@ -13,10 +13,10 @@ use super::health::link_name;
 use super::openapi::{ErrorResponses, TAG_BUSES};
 use crate::bus::handle::{LinkState, FRAME_LOG_LEN};
 use crate::bus::BusSnapshot;
-use crate::frame_json::frame_to_json;
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath, ApiQuery};
 use crate::http::state::{device_id, AppState, BusPath};
+use crate::protocol::frame_json::frame_to_json;
 use crate::protocol::{BaudLevel, Frame, MAX_DEVICE_ID};
 
 /// Ids per bus scan request (16 absent ids at 19200 baud take well under

@@ -1,6 +1,8 @@
 //! Configuration: read every parameter (INFO_03..06) in physical units with
 //! the raw values beside them, change any subset in one request (each write
-//! verified by the bus engine), persist to flash, change a device's id.
+//! verified by the bus engine), persist to flash, change a device's id, and
+//! serve the parameter table itself. Which parameters exist comes from
+//! [`crate::protocol::params`].
 
 use axum::extract::State;
 use axum::Json;
@@ -8,7 +10,8 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
-use super::config_params::{Blocks, ConfigPatch, Param, ParamValue};
+use super::config_params::{blocks_to_read, to_config, Blocks, ConfigPatch, Param, ParamValues};
+use super::config_schema::{ConfigDevice, ConfigView, ParamTable};
 use super::openapi::{ErrorResponses, TAG_CONFIG};
 use crate::bus::handle::WriteOutcome;
 use crate::bus::{BusError, BusHandle};
@@ -16,47 +19,15 @@ use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::state::{device_id, known_device, AppState, DevicePath};
 use crate::http::telemetry::hex;
-use crate::protocol::{BaudLevel, InfoBlock, ReplyBody};
+use crate::protocol::params;
+use crate::protocol::{BaudLevel, Info04, InfoBlock};
 
 pub fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
         .routes(routes!(read_config, patch_config))
         .routes(routes!(persist))
         .routes(routes!(change_id))
-}
-
-/// Every parameter of a device, read from it now.
-#[derive(Debug, Serialize, ToSchema)]
-pub struct ConfigView {
-    #[schema(example = "sim0")]
-    pub bus: String,
-    #[schema(example = 1)]
-    pub id: u8,
-    pub pos_kp: ParamValue,
-    pub pos_kd: ParamValue,
-    pub spd_kp: ParamValue,
-    pub spd_ki: ParamValue,
-    pub lpf_level: ParamValue,
-    pub max_current_a: ParamValue,
-    pub protect_current_limit_a: ParamValue,
-    pub protect_current_lv1_a: ParamValue,
-    pub protect_delay_ms: ParamValue,
-    pub recover_current_a: ParamValue,
-    pub recover_window_ms: ParamValue,
-    pub burst_cold_ms: ParamValue,
-    pub burst_plus_ms: ParamValue,
-    /// The device's baud from INFO_04 (absent if its level is unknown); change it on the bus.
-    #[schema(example = 500000)]
-    pub baud: Option<u32>,
-    #[schema(example = 1)]
-    pub baud_level: u8,
-    #[schema(example = 3)]
-    pub param_ver: u8,
-    /// The raw data bytes of each block, hex (INFO_06 carries bytes whose
-    /// layout is unpublished).
-    #[schema(example = json!({"info03": "FF 0F 00 00 00 10 00 01", "info04": "02 01 03 00 10 11 69 03",
-        "info05": "60 0B 58 02 46 02 90 01", "info06": "04 02 00 00 00 00 00 00"}))]
-    pub raw: std::collections::BTreeMap<&'static str, String>,
+        .routes(routes!(param_table))
 }
 
 /// One verified write.
@@ -117,37 +88,28 @@ pub struct IdResult {
     pub verified_by: &'static str,
 }
 
-async fn read_blocks(bus: &BusHandle, id: u8) -> ApiResult<(Blocks, [[u8; 8]; 4])> {
-    let mut raw = [[0u8; 8]; 4];
-    let blocks = [
-        InfoBlock::Info03,
-        InfoBlock::Info04,
-        InfoBlock::Info05,
-        InfoBlock::Info06,
-    ];
-    let mut bodies = Vec::with_capacity(blocks.len());
-    for (i, block) in blocks.into_iter().enumerate() {
+/// Reads every INFO block a config read needs, in SPEC order.
+async fn read_blocks(bus: &BusHandle, id: u8) -> ApiResult<Blocks> {
+    let mut blocks = Blocks::default();
+    for block in blocks_to_read() {
         let reply = bus.read_info(id, block).await?;
-        raw[i] = reply.data;
-        bodies.push(reply.body());
-    }
-    match bodies[..] {
-        [ReplyBody::Info03(gains), ReplyBody::Info04(info04), ReplyBody::Info05(info05), ReplyBody::Info06(info06)] => {
-            Ok((
-                Blocks {
-                    gains,
-                    info04,
-                    info05,
-                    info06,
-                },
-                raw,
+        if reply.index != block.index() {
+            return Err(BusError::UnexpectedReply(format!(
+                "device {id} answered a parameter read with another block"
             ))
+            .into());
         }
-        _ => Err(BusError::UnexpectedReply(format!(
-            "device {id} answered a parameter read with another block"
-        ))
-        .into()),
+        blocks.0.push((block, reply.data));
     }
+    Ok(blocks)
+}
+
+/// `info04` for INFO_04: the key the table gives the read, without underscores.
+fn block_label(block: InfoBlock) -> String {
+    params::by_index(block.index()).map_or_else(
+        || format!("info{}", block.index()),
+        |r| r.key.replace('_', ""),
+    )
 }
 
 /// Read every parameter (INFO_03..06) in physical units, raw values beside them.
@@ -159,29 +121,22 @@ async fn read_config(
 ) -> ApiResult<Json<ConfigView>> {
     let (bus, id) = p.resolve(&state)?;
     known_device(&bus.snapshot(), id)?;
-    let (b, raw) = read_blocks(bus, id).await?;
-    let v = |p: Param| ParamValue::new(p, p.raw_in(&b));
-    let names = ["info03", "info04", "info05", "info06"];
+    let blocks = read_blocks(bus, id).await?;
+    let info04 = blocks
+        .data(InfoBlock::Info04)
+        .map(Info04::from_bytes)
+        .unwrap_or_default();
+    let raw = blocks.0.iter().map(|(b, d)| (block_label(*b), hex(d)));
     Ok(Json(ConfigView {
-        bus: bus.name().to_owned(),
-        id,
-        pos_kp: v(Param::PosKp),
-        pos_kd: v(Param::PosKd),
-        spd_kp: v(Param::SpdKp),
-        spd_ki: v(Param::SpdKi),
-        lpf_level: v(Param::LpfLevel),
-        max_current_a: v(Param::MaxCurrent),
-        protect_current_limit_a: v(Param::ProtectCurrentLimit),
-        protect_current_lv1_a: v(Param::ProtectCurrentLv1),
-        protect_delay_ms: v(Param::ProtectDelay),
-        recover_current_a: v(Param::RecoverCurrent),
-        recover_window_ms: v(Param::RecoverWindow),
-        burst_cold_ms: v(Param::BurstCold),
-        burst_plus_ms: v(Param::BurstPlus),
-        baud: BaudLevel::from_raw(b.info04.baud_level).map(BaudLevel::baud),
-        baud_level: b.info04.baud_level,
-        param_ver: b.info04.param_ver,
-        raw: names.into_iter().zip(raw.iter().map(|d| hex(d))).collect(),
+        device: ConfigDevice {
+            bus: bus.name().to_owned(),
+            id,
+            baud: BaudLevel::from_raw(info04.baud_level).map(BaudLevel::baud),
+            baud_level: info04.baud_level,
+            param_ver: info04.param_ver,
+            raw: raw.collect(),
+        },
+        params: ParamValues::from_blocks(&blocks),
     }))
 }
 
@@ -200,7 +155,7 @@ async fn patch_config(
     known_device(&bus.snapshot(), id)?;
     let mut writes = Vec::new();
     for (param, value) in patch.entries() {
-        writes.push((param, value, param.to_config(value)?));
+        writes.push((param, value, to_config(param, value)?));
     }
     let mut written = Vec::with_capacity(writes.len());
     for (param, value, config) in writes {
@@ -209,9 +164,9 @@ async fn patch_config(
             Err(e) => {
                 let done = serde_json::to_value(&written).unwrap_or_default();
                 let failed = ApiError::from(e);
-                let detail = format!("{}: {}", param.name(), failed.problem.detail);
+                let detail = format!("{}: {}", param.key, failed.problem.detail);
                 let mut err = failed
-                    .with_field(param.name())
+                    .with_field(param.key)
                     .with_partial(serde_json::json!({"written": done}));
                 err.problem.detail = detail;
                 return Err(err);
@@ -227,7 +182,7 @@ async fn patch_config(
 
 fn written_entry(param: Param, value: f64, outcome: &WriteOutcome) -> Written {
     Written {
-        param: param.name(),
+        param: param.key,
         value,
         raw: outcome.value,
         index: outcome.index,
@@ -290,4 +245,13 @@ async fn change_id(
         new_id,
         verified_by: outcome.verified_by,
     }))
+}
+
+/// The parameter table: every config index of SPEC §4.3 with its raw type,
+/// scale, range, reply, read-back field, storage and revision. The dashboard
+/// builds its configuration form from it.
+#[utoipa::path(get, path = "/api/v1/params", tag = TAG_CONFIG,
+    responses((status = 200, description = "The parameter table, one row per index", body = ParamTable), ErrorResponses))]
+async fn param_table() -> Json<ParamTable> {
+    Json(ParamTable::new())
 }

@@ -16,7 +16,7 @@ use crate::http::state::{device_id, known_device, AppState, BusPath, DevicePath}
 use crate::http::targets::{
     ensure_enabled, setpoint, wait_on_wire, JointTarget, TargetAck, TargetRequest,
 };
-use crate::http::telemetry::{firmware_of, mode_name, TargetView};
+use crate::http::telemetry::{firmware_of, TargetView};
 use crate::protocol::{CtrlMode, JogDir};
 
 pub fn router() -> OpenApiRouter<AppState> {
@@ -256,7 +256,7 @@ async fn mode_one(
     known_device(&bus.snapshot(), id)?;
     let mode = CtrlMode::from(req.mode);
     bus.set_mode(id, mode).await?;
-    Ok(done(bus, "mode", Some(vec![id]), Some(mode_name(mode))))
+    Ok(done(bus, "mode", Some(vec![id]), Some(mode.name())))
 }
 
 /// Jog an enabled device: `cw` +5°, `ccw` −3°; it re-zeroes afterwards. 409 while disabled.
@@ -391,5 +391,5 @@ async fn mode_group(
     for id in each {
         bus.set_mode(id, mode).await?;
     }
-    Ok(done(bus, "mode", ids, Some(mode_name(mode))))
+    Ok(done(bus, "mode", ids, Some(mode.name())))
 }

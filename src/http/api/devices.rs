@@ -17,9 +17,9 @@ use crate::http::extract::{ApiPath, ApiQuery};
 use crate::http::limits::JointLimits;
 use crate::http::state::{known_device, AppState, BusPath, DevicePath};
 use crate::http::telemetry::{
-    firmware_of, mode_name, motion_view, status_view, FaultView, MotionView, StatusView, TargetView,
+    firmware_of, motion_view, status_view, FaultView, MotionView, StatusView, TargetView,
 };
-use crate::protocol::{InfoBlock, ReplyBody};
+use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
 
 pub fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
@@ -134,7 +134,7 @@ fn summary(dev: &DeviceState, name: Option<&str>, now: Instant) -> DeviceSummary
         online: dev.online,
         state: status.as_ref().map(|s| s.state),
         fault: status.as_ref().map(|s| s.fault.clone()),
-        mode: dev.mode.map(mode_name),
+        mode: dev.mode.map(CtrlMode::name),
         angle_deg: motion
             .as_ref()
             .map(|m| m.angle_deg)
@@ -193,7 +193,7 @@ async fn get_device(
         name: state.joint_name(&snap.name, id).map(str::to_owned),
         online: dev.online,
         firmware: dev.info01.as_ref().map(|(i, _)| i.firmware().dotted()),
-        mode: dev.mode.map(mode_name),
+        mode: dev.mode.map(CtrlMode::name),
         status: dev.info01.as_ref().map(|(i, at)| status_view(i, *at, now)),
         motion: dev
             .info02

@@ -10,6 +10,7 @@
 pub mod buses;
 pub mod config;
 pub mod config_params;
+pub mod config_schema;
 pub mod control;
 pub mod devices;
 pub mod estop;

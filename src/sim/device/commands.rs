@@ -176,7 +176,7 @@ impl Device {
             ConfigParam::BaudRate(level) => {
                 // The RES goes out at the old baud (the engine times it by the
                 // request); from now on the device listens at the new one.
-                self.ram.baud_level = level as u8;
+                self.ram.apply(&ConfigParam::BaudRate(level));
                 return Outcome::reply(self.res(index::BAUD_RATE, true));
             }
             ref other => {

@@ -11,6 +11,7 @@ mod report;
 
 use std::time::{Duration, Instant};
 
+use crate::protocol::params::index;
 use crate::protocol::reply::{fault, fsm};
 use crate::protocol::units::{output_deg_per_s, speed_rpm, MAX_ANGLE_DEG, Q15_MAX};
 use crate::protocol::{CtrlMode, FirmwareVersion, InfoBlock, Reply};
@@ -252,7 +253,7 @@ impl Device {
             };
         }
         let limit = self
-            .rpm_of(self.ram.spd_limit.min(Q15_MAX as u16) as i16)
+            .rpm_of(self.ram.raw(index::SPD_LIMIT).min(Q15_MAX as u16) as i16)
             .abs();
         let rpm = self.rpm_of(self.spd_ref).clamp(-limit, limit);
         match self.mode {
@@ -290,7 +291,7 @@ impl Device {
         }
         if self.joint.blocked_s >= self.timing.stall_fault_after.as_secs_f64() {
             self.enter_fault(fault::STALL);
-        } else if self.joint.temp_c > f64::from(self.ram.drv_ot) {
+        } else if self.joint.temp_c > self.ram.physical(index::DRV_OT) {
             self.enter_fault(fault::OVER_TEMPERATURE);
         }
     }

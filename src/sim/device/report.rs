@@ -1,8 +1,13 @@
-//! What a device reports: INFO blocks from its state (SPEC §5, §6 units),
-//! with plausible sensor noise, and the observer's [`DeviceView`].
+//! What a device reports: INFO blocks from its state (SPEC §5), with
+//! plausible sensor noise, and the observer's [`DeviceView`]. Physical →
+//! raw goes through [`crate::protocol::units`]; the parameter blocks
+//! (INFO_03..06) are laid out by the parameter table ([`Params::block`]).
+//!
+//! [`Params::block`]: super::super::params::Params::block
 
+use crate::protocol::params::index;
 use crate::protocol::reply::{fsm, Info01, Info02};
-use crate::protocol::units::{GEAR_RATIO, Q15_MAX};
+use crate::protocol::units;
 use crate::protocol::{InfoBlock, Reply, ReplyBody};
 
 use super::super::view::DeviceView;
@@ -17,11 +22,6 @@ const VBUS_UNDER_V: f64 = 6.0;
 const CURRENT_NOISE_A: f64 = 0.004;
 /// Encoder noise on reported angles, degrees.
 const ANGLE_NOISE_DEG: f64 = 0.004;
-const Q7: f64 = 128.0;
-const TEMP_OFFSET_C: f64 = 50.0;
-const CURRENT_FULL_SCALE_A: f64 = 5.625;
-const SECS_PER_MIN: f64 = 60.0;
-const DEG_PER_TURN: f64 = 360.0;
 
 impl Device {
     /// The INFO block a read asks for, from the current state.
@@ -29,14 +29,18 @@ impl Device {
         let body = match block {
             InfoBlock::Info01 => ReplyBody::Info01(self.info01()),
             InfoBlock::Info02 => ReplyBody::Info02(self.info02()),
-            InfoBlock::Info03 => ReplyBody::Info03(self.ram.gains()),
-            InfoBlock::Info04 => ReplyBody::Info04(self.ram.info04()),
-            InfoBlock::Info05 => ReplyBody::Info05(self.ram.info05()),
-            InfoBlock::Info06 => ReplyBody::Info06(self.ram.info06()),
             InfoBlock::Info07 => {
+                // The layout is unpublished: the simulator puts SN's u16 first.
                 let mut sn = [0u8; 8];
-                sn[..2].copy_from_slice(&self.ram.sn.to_le_bytes());
+                sn[..2].copy_from_slice(&self.ram.raw(index::SN).to_le_bytes());
                 ReplyBody::Info07(sn)
+            }
+            parameters => {
+                return Reply {
+                    dev_id: self.id,
+                    index: parameters.index(),
+                    data: self.ram.block(parameters),
+                }
             }
         };
         Reply::new(self.id, body)
@@ -57,28 +61,23 @@ impl Device {
             fsm: self.fsm,
             err_code: self.err_code,
             soft_ver: self.timing.soft_ver,
-            temp_raw: (self.joint.temp_c + TEMP_OFFSET_C)
-                .round()
-                .clamp(0.0, 255.0) as u8,
-            angle: q7(angle),
-            vbus: (self.vbus() * Q7).round().clamp(0.0, f64::from(u16::MAX)) as u16,
+            temp_raw: units::temp_raw_saturating(self.joint.temp_c),
+            angle: units::angle_raw_saturating(angle),
+            vbus: units::volts_raw_saturating(self.vbus()),
         }
     }
 
     fn info02(&mut self) -> Info02 {
-        let rotor_rpm = self.joint.vel * GEAR_RATIO * SECS_PER_MIN / DEG_PER_TURN;
-        let base = self.firmware().speed_base_rpm();
+        let rotor_rpm = units::rotor_rpm(self.joint.vel);
         let powered = self.fsm == fsm::RUN || self.fsm == fsm::ALIGN;
         let noise = if powered { CURRENT_NOISE_A } else { 0.0 };
         let d = self.rng.noise(noise);
         let q = self.joint.current + self.rng.noise(noise);
         Info02 {
-            d_cur: q15_current(d),
-            q_cur: q15_current(q),
-            speed: (rotor_rpm / base * Q15_MAX)
-                .round()
-                .clamp(-Q15_MAX, Q15_MAX) as i16,
-            angle: q7(self.angle() + self.rng.noise(ANGLE_NOISE_DEG)),
+            d_cur: units::current_raw_saturating(d),
+            q_cur: units::current_raw_saturating(q),
+            speed: units::speed_raw_saturating(rotor_rpm, self.firmware()),
+            angle: units::angle_raw_saturating(self.angle() + self.rng.noise(ANGLE_NOISE_DEG)),
         }
     }
 
@@ -116,16 +115,4 @@ impl Device {
             flash: self.flash,
         }
     }
-}
-
-fn q7(deg: f64) -> i16 {
-    (deg * Q7)
-        .round()
-        .clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
-}
-
-fn q15_current(a: f64) -> i16 {
-    (a / CURRENT_FULL_SCALE_A * Q15_MAX)
-        .round()
-        .clamp(-Q15_MAX, Q15_MAX) as i16
 }

@@ -8,10 +8,10 @@
 use serde_json::{json, Map, Value};
 use thiserror::Error;
 
-use crate::protocol::command::index;
-use crate::protocol::reply::{fault_name, fsm_name};
-use crate::protocol::units::{self, FirmwareVersion};
-use crate::protocol::{
+use super::params::{self, Access, ParamRow, Scale};
+use super::status::{active_fault, fault_history, fault_name, fsm_name};
+use super::units::{self, FirmwareVersion};
+use super::{
     BaudLevel, BroadcastEnable, BroadcastPos, BroadcastSpd, Command, Config, ConfigParam, Control,
     ControlOp, CtrlMode, Frame, Group, Jog, JogDir, Message, ProtocolError, Reply, ReplyBody,
 };
@@ -105,8 +105,8 @@ pub fn reply_json(r: &Reply) -> Map<String, Value> {
     let body = match r.body() {
         ReplyBody::Info01(i) => json!({
             "fsm": i.fsm, "fsm_name": fsm_name(i.fsm),
-            "err_code": i.err_code, "fault": fault_name(i.err_code & 0x0F),
-            "fault_history": fault_name(i.err_code >> 4),
+            "err_code": i.err_code, "fault": fault_name(active_fault(i.err_code)),
+            "fault_history": fault_name(fault_history(i.err_code)),
             "soft_ver": i.soft_ver, "firmware": i.firmware().dotted(),
             "temp_raw": i.temp_raw, "temp_c": i.temp_c(),
             "angle_raw": i.angle, "angle_deg": i.angle_deg(),
@@ -188,28 +188,26 @@ fn config_json(c: &Config) -> Map<String, Value> {
     let mut m = obj(json!({
         "kind": "config", "dev_id": c.dev_id, "index": idx, "name": index_name(idx), "value": value,
     }));
-    let extra = match c.param {
-        ConfigParam::SetId { new_id } => json!({"new_id": new_id}),
-        ConfigParam::BaudRate(l) => json!({"baud": l.baud()}),
-        ConfigParam::CtrlMode(mode) => json!({"mode": mode_name(mode)}),
-        ConfigParam::PosKp(v) | ConfigParam::PosKd(v) | ConfigParam::SpdKp(v) => {
-            json!({"gain": units::gain_q12(v)})
-        }
-        ConfigParam::SpdKi(v) => json!({"gain": units::gain_ki(v)}),
-        ConfigParam::MaxCur(v)
-        | ConfigParam::ProtectCurLimit(v)
-        | ConfigParam::ProtectCurLv1(v)
-        | ConfigParam::RecvCur(v) => json!({"amps": units::current_limit_a(v)}),
-        ConfigParam::SpdLimit(v) => {
-            let raw = i16::try_from(v).unwrap_or(i16::MAX);
-            json!({"rpm": units::speed_rpm(raw, FirmwareVersion::SPEED_BASE_50K)})
-        }
-        ConfigParam::CurLv1DelayMs(v) | ConfigParam::CurRecvWinMs(v) => json!({"ms": v}),
-        ConfigParam::ColdTime(v) | ConfigParam::PlusTime(v) => json!({"ms": units::burst_ms(v)}),
-        _ => json!({}),
-    };
-    extend(&mut m, extra);
+    if let Some((field, physical)) = params::by_index(idx).and_then(|row| physical_json(row, value))
+    {
+        m.insert(field.into(), physical);
+    }
     m
+}
+
+/// The physical twin of a config value, named by the row's scale (`"amps"`).
+/// Whole-step scales (ms, ids, bauds) print integers, the rest decimals.
+fn physical_json(row: &ParamRow, value: u16) -> Option<(&'static str, Value)> {
+    let field = row.scale.json_field()?;
+    if row.access == Access::Read {
+        return None;
+    }
+    let v = match row.scale {
+        Scale::CtrlMode => json!(CtrlMode::from_raw(value as u8).map(CtrlMode::name)),
+        s if s.is_whole() => json!(row.physical(value) as i64),
+        _ => json!(row.physical(value)),
+    };
+    Some((field, v))
 }
 
 fn op_name(op: ControlOp) -> &'static str {
@@ -228,15 +226,6 @@ fn dir_name(d: JogDir) -> &'static str {
     }
 }
 
-fn mode_name(m: CtrlMode) -> &'static str {
-    match m {
-        CtrlMode::None => "none",
-        CtrlMode::Speed => "speed",
-        CtrlMode::Position => "position",
-        CtrlMode::Current => "current",
-    }
-}
-
 fn group_name(what: &str, g: Group) -> String {
     match g {
         Group::Low => format!("{what} 1-8"),
@@ -244,47 +233,11 @@ fn group_name(what: &str, g: Group) -> String {
     }
 }
 
-/// The vendor's name of a config index, without the `CONFIG_` prefix.
+/// The vendor's name of a config index, without the `CONFIG_` prefix
+/// (`"UNKNOWN"` for an index the parameter table has no row for).
 pub fn index_name(idx: u8) -> &'static str {
-    INDEX_NAMES
-        .iter()
-        .find(|(i, _)| *i == idx)
-        .map_or("UNKNOWN", |(_, n)| n)
+    super::params::name_of(idx)
 }
-
-const INDEX_NAMES: [(u8, &str); 31] = [
-    (index::REBOOT, "REBOOT"),
-    (index::INFO_01_R, "INFO_01_R"),
-    (index::INFO_02_R, "INFO_02_R"),
-    (index::UPDATE_FIN_ZERO, "UPDATE_FIN_ZERO"),
-    (index::SET_ID, "SET_ID"),
-    (index::UPDATE_ENC_ZERO, "UPDATE_ENC_ZERO"),
-    (index::COMM_SILENT, "COMM_SILENT"),
-    (index::CTRL_MODE_SW, "CTRL_MODE_SW"),
-    (index::SET_POS_KP, "SET_POS_KP"),
-    (index::SET_POS_KD, "SET_POS_KD"),
-    (index::SET_SPD_KP, "SET_SPD_KP"),
-    (index::SET_SPD_KI, "SET_SPD_KI"),
-    (index::INFO_03_R, "INFO_03_R"),
-    (index::WRITE_FLASH, "WRITE_FLASH"),
-    (index::READ_FLASH, "READ_FLASH"),
-    (index::BAUD_RATE, "BUAD_RATE"),
-    (index::POS_LPF_LV, "POS_LPF_LV"),
-    (index::INFO_04_R, "INFO_04_R"),
-    (index::MAX_CUR, "MAX_CUR"),
-    (index::PROTECT_CUR_LIMIT, "PROTECT_CUR_LIMIT"),
-    (index::PROTECT_CUR_LV1, "PROTECT_CUR_LV1"),
-    (index::CUR_LV1_DELAY, "CUR_LV1_DELAY"),
-    (index::RECV_CUR, "RECV_CUR"),
-    (index::CUR_RECV_WIN, "CUR_RECV_WIN"),
-    (index::INFO_05_R, "INFO_05_R"),
-    (index::INFO_06_R, "INFO_06_R"),
-    (index::COLD_TIME, "COLD_TIME"),
-    (index::PLUS_TIME, "PLUS_TIME"),
-    (index::DRV_OT, "DRV_OT"),
-    (index::SPD_LIMIT, "SPD_LIMIT"),
-    (index::SN, "SN"),
-];
 
 // ---------------------------------------------------------------- encoding
 
@@ -390,7 +343,7 @@ pub fn command_from_json(v: &Value) -> Result<Command, FrameJsonError> {
 fn dev_id(f: &Fields) -> Result<u8, FrameJsonError> {
     let id = f.int("dev_id")?.ok_or(FrameJsonError::Missing("dev_id"))?;
     let id: u8 = in_range("dev_id", id, "a device id (1..=159 or 255)")?;
-    if !crate::protocol::is_address(id) {
+    if !super::is_address(id) {
         return Err(ProtocolError::BadAddress(id).into());
     }
     Ok(id)
@@ -468,9 +421,13 @@ fn jog_from(f: &Fields) -> Result<Command, FrameJsonError> {
 }
 
 fn config_from(f: &Fields) -> Result<Command, FrameJsonError> {
-    f.check_known(&[
-        "dev_id", "index", "value", "new_id", "baud", "amps", "gain", "ms", "mode",
-    ])?;
+    let mut allowed = vec!["dev_id", "index", "value"];
+    for field in params::PARAMS.iter().filter_map(|r| r.scale.json_field()) {
+        if !allowed.contains(&field) {
+            allowed.push(field);
+        }
+    }
+    f.check_known(&allowed)?;
     let dev_id = dev_id(f)?;
     let idx = f.int("index")?.ok_or(FrameJsonError::Missing("index"))?;
     let idx: u8 = in_range("index", idx, "an index (0..=255)")?;
@@ -479,45 +436,14 @@ fn config_from(f: &Fields) -> Result<Command, FrameJsonError> {
     Ok(Command::Config(Config { dev_id, param }))
 }
 
-/// The raw value of a config command, from `value` or the physical field the index takes.
+/// The raw value of a config command, from `value` or the physical field
+/// the index's row names (`amps`, `gain`, `ms`, …).
 fn config_value(f: &Fields, idx: u8) -> Result<u16, FrameJsonError> {
-    use index::*;
-    let physical = match idx {
-        SET_ID => raw_or_physical(f, "value", "new_id", |id| Ok((id as i64) << 7))?,
-        BAUD_RATE => raw_or_physical(f, "value", "baud", |b| {
-            BaudLevel::from_baud(b as u32)
-                .map(|l| l as i64)
-                .ok_or_else(|| bad("baud", "one of 500000, 230400, 115200, 38400, 19200"))
-        })?,
-        MAX_CUR | PROTECT_CUR_LIMIT | PROTECT_CUR_LV1 | RECV_CUR => {
-            raw_or_physical(f, "value", "amps", |a| {
-                Ok(units::current_limit_to_raw(a)?.into())
-            })?
-        }
-        SET_POS_KP | SET_POS_KD | SET_SPD_KP => {
-            raw_or_physical(
-                f,
-                "value",
-                "gain",
-                |g| Ok(units::gain_q12_to_raw(g)?.into()),
-            )?
-        }
-        SET_SPD_KI => {
-            raw_or_physical(f, "value", "gain", |g| Ok(units::gain_ki_to_raw(g)?.into()))?
-        }
-        CUR_LV1_DELAY | CUR_RECV_WIN => raw_or_physical(f, "value", "ms", |ms| {
-            Ok(units::duration_ms_to_raw(ms)?.into())
-        })?,
-        COLD_TIME | PLUS_TIME => {
-            raw_or_physical(
-                f,
-                "value",
-                "ms",
-                |ms| Ok(units::burst_ms_to_raw(ms)?.into()),
-            )?
-        }
-        CTRL_MODE_SW => mode_value(f)?,
-        _ => f.int("value")?,
+    let row = params::by_index(idx).filter(|r| r.access == Access::Write);
+    let physical = match row.and_then(|r| r.scale.json_field().map(|field| (r, field))) {
+        Some((row, _)) if row.scale == Scale::CtrlMode => mode_value(f)?,
+        Some((row, field)) => raw_or_physical(f, "value", field, |v| Ok(row.to_raw(v)?.into()))?,
+        None => f.int("value")?,
     };
     in_range("value", physical.unwrap_or(0), "a u16 (0..=65535)")
 }
@@ -525,16 +451,15 @@ fn config_value(f: &Fields, idx: u8) -> Result<u16, FrameJsonError> {
 fn mode_value(f: &Fields) -> Result<Option<i64>, FrameJsonError> {
     let named = match f.map.get("mode").and_then(Value::as_str) {
         None => None,
-        Some("none") => Some(CtrlMode::None as i64),
-        Some("speed") => Some(CtrlMode::Speed as i64),
-        Some("position") => Some(CtrlMode::Position as i64),
-        Some("current") => Some(CtrlMode::Current as i64),
-        Some(_) => {
-            return Err(bad(
-                "mode",
-                "\"speed\", \"position\", \"current\" or \"none\"",
-            ))
-        }
+        Some(name) => match CtrlMode::from_name(name) {
+            Some(mode) => Some(mode as i64),
+            None => {
+                return Err(bad(
+                    "mode",
+                    "\"speed\", \"position\", \"current\" or \"none\"",
+                ))
+            }
+        },
     };
     match (f.int("value")?, named) {
         (Some(given), Some(from_physical)) if given != from_physical => {
@@ -692,4 +617,31 @@ fn values8(
         (None, None) => return Err(FrameJsonError::Missing("values_raw")),
     };
     list_to_array(list, "values_raw", "an i16")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::params::PARAMS;
+
+    /// Every written value of every row survives decode → JSON → encode,
+    /// through its physical twin alone (SPD_LIMIT's `rpm` used to be printed
+    /// but refused on encode).
+    #[test]
+    fn every_row_round_trips_through_its_physical_twin() {
+        for row in PARAMS.iter().filter(|r| r.access == Access::Write) {
+            let value = row.default.clamp(row.range.0, row.range.1);
+            let Ok(param) = ConfigParam::from_index_value(row.index, value) else {
+                panic!("{}: default {value} refused", row.name)
+            };
+            let cmd = Command::Config(Config { dev_id: 3, param });
+            let mut json = frame_to_json(&cmd.to_frame());
+            assert_eq!(json["name"], row.name);
+            if row.scale.json_field().is_some() {
+                json.as_object_mut().map(|m| m.remove("value"));
+            }
+            let back = command_from_json(&json).unwrap_or_else(|e| panic!("{}: {e}", row.name));
+            assert_eq!(back, cmd, "{}", row.name);
+        }
+    }
 }

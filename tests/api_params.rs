@@ -1,0 +1,32 @@
+//! `GET /api/v1/params` serves the parameter table the dashboard builds its
+//! configuration form from, and it agrees with the config surface.
+
+mod api_support;
+
+use api_support::serve;
+use jointd::http::state_for;
+use jointd::protocol::params::PARAMS;
+
+#[tokio::test]
+async fn the_table_is_served_row_by_row() {
+    let server = serve(state_for(Vec::new())).await;
+    let r = server.get("/api/v1/params").await;
+    assert!(r.status.is_success(), "{}", r.status);
+    let rows = r.body["params"].as_array().expect("params array");
+    assert_eq!(rows.len(), PARAMS.len());
+    let max_cur = rows.iter().find(|r| r["index"] == 18).expect("MAX_CUR");
+    assert_eq!(max_cur["name"], "MAX_CUR");
+    assert_eq!(max_cur["key"], "max_current_a");
+    assert_eq!(max_cur["unit"], "A");
+    assert_eq!(max_cur["max"], 5.625);
+    assert_eq!(max_cur["read_back"]["block"], "INFO_04_R");
+    assert_eq!(max_cur["read_back"]["offset"], 4);
+    assert_eq!(max_cur["api"], true);
+    let info07 = rows.iter().find(|r| r["index"] == 32).expect("INFO_07_R");
+    assert_eq!(
+        (info07["name"].as_str(), info07["since"].as_str()),
+        (Some("INFO_07_R"), Some("2.0.8"))
+    );
+    let offered: Vec<_> = rows.iter().filter(|r| r["api"] == true).collect();
+    assert_eq!(offered.len(), 13, "the keys PATCH …/config accepts");
+}
