@@ -1,15 +1,15 @@
 //! The API over HTTP against a scripted bus owner: every error status, auth
 //! on and off, soft limits, and what each endpoint asks of the bus.
 
-mod api_support;
+mod support;
 
 use std::time::Duration;
 
-use api_support::fake_bus::FakeBus;
-use api_support::{serve, Server};
 use jointd::http::limits::{LimitRule, SoftLimits};
 use jointd::http::AppState;
 use serde_json::json;
+use support::fake_bus::FakeBus;
+use support::http::{serve, Server};
 
 const DEV: &str = "/api/v1/buses/fake/devices";
 

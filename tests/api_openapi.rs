@@ -1,12 +1,12 @@
 //! The checked-in OpenAPI document equals the one the daemon serves, and
 //! the document keeps the promises the API makes (examples, problem shape).
 
-mod api_support;
+mod support;
 
-use api_support::serve;
 use jointd::http::api;
 use jointd::http::state_for;
 use serde_json::Value;
+use support::http::serve;
 
 const CHECKED_IN: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/openapi/openapi.json");
 

@@ -1,11 +1,11 @@
 //! `GET /api/v1/params` serves the parameter table the dashboard builds its
 //! configuration form from, and it agrees with the config surface.
 
-mod api_support;
+mod support;
 
-use api_support::serve;
 use jointd::http::state_for;
 use jointd::protocol::params::PARAMS;
+use support::http::serve;
 
 #[tokio::test]
 async fn the_table_is_served_row_by_row() {

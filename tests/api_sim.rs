@@ -1,13 +1,13 @@
 //! Every endpoint over HTTP against the real bus engine and the simulator on
 //! a pty: what a user does, and each error status the wire can cause.
 
-mod api_support;
+mod support;
 
-use api_support::sim_bus::{start, BUS};
 use jointd::protocol::params::index;
 use jointd::protocol::reply::fsm;
 use jointd::sim::Fault;
 use serde_json::json;
+use support::sim_bus::{start, BUS};
 
 const DEV: &str = "/api/v1/buses/sim0/devices";
 /// Rotor speed (raw Q15) below which a joint counts as settled (~15 rpm).
@@ -249,7 +249,7 @@ async fn estop_preempts_a_busy_bus() {
 async fn buses_frames_scan_metrics_and_auth() {
     let b = start(3, Some("tok")).await;
     let s = &b.server;
-    let anon = api_support::Server {
+    let anon = support::http::Server {
         token: None,
         base: s.base.clone(),
         client: s.client.clone(),
@@ -315,7 +315,7 @@ async fn stopping_the_bus_disables_every_joint() {
     tokio::task::spawn_blocking(move || thread.stop())
         .await
         .unwrap();
-    let deadline = std::time::Instant::now() + api_support::sim_bus::WAIT;
+    let deadline = std::time::Instant::now() + support::sim_bus::WAIT;
     while b.sim.devices().iter().any(|d| d.enabled) {
         assert!(
             std::time::Instant::now() < deadline,

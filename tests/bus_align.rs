@@ -1,13 +1,13 @@
 //! A target sent while a joint aligns after its first enable must still be
 //! reached once it runs (the README's walkthrough enables and moves at once).
 
-mod bus_support;
+mod support;
 
 use std::time::Duration;
 
-use bus_support::{rig_with, sim_config, target, BAUD};
 use jointd::bus::Targets;
 use jointd::protocol::reply::fsm;
+use support::bus::{rig_with, sim_config, target, BAUD};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_target_sent_during_align_is_reached() {

@@ -1,14 +1,14 @@
 //! Config writes verified by read-back or RES, a failed verification
 //! reported, and an id change and a baud change end to end.
 
-mod bus_support;
+mod support;
 
-use bus_support::*;
 use jointd::bus::handle::BusEvent;
 use jointd::bus::BusError;
 use jointd::protocol::params::index;
 use jointd::protocol::{ConfigParam, Info04, InfoBlock};
 use jointd::sim::Fault;
+use support::bus::*;
 
 #[tokio::test]
 async fn writes_are_verified_by_read_back_and_res() {

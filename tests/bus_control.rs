@@ -1,13 +1,13 @@
 //! Setpoints on the wire and the e-stop, against the simulator.
 
-mod bus_support;
+mod support;
 
 use std::time::{Duration, Instant};
 
-use bus_support::*;
 use jointd::bus::{BusError, Setpoint, Targets};
 use jointd::protocol::{Command, Control, ControlOp, Frame, Group, InfoBlock};
 use jointd::sim::{Fault, WireFrame};
+use support::bus::*;
 
 fn command(f: &WireFrame) -> Option<Command> {
     Frame::decode(&f.bytes)

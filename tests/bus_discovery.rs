@@ -1,12 +1,12 @@
 //! Discovery against the simulator: power-up announcements and an active
 //! scan each find every device, telemetry flows, nothing collides.
 
-mod bus_support;
+mod support;
 
 use std::time::Duration;
 
-use bus_support::*;
 use jointd::sim::Fault;
+use support::bus::*;
 
 fn sixteen() -> Vec<u8> {
     (1..=16).collect()

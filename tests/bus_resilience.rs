@@ -1,16 +1,16 @@
 //! A device power cycle, an unplugged bus, and a long mixed run: the bus
 //! recovers by itself and nothing ever collides.
 
-mod bus_support;
+mod support;
 
 use std::time::{Duration, Instant};
 
-use bus_support::*;
 use jointd::bus::handle::{BusEvent, LinkState};
 use jointd::bus::{spawn_bus_on, BusConfig, BusError};
 use jointd::protocol::{Command, ConfigParam, Frame, InfoBlock};
 use jointd::sim::{Fault, Simulator};
 use jointd::transport::Transport;
+use support::bus::*;
 
 #[tokio::test]
 async fn a_power_cycled_device_goes_offline_and_comes_back_by_itself() {

@@ -1,11 +1,11 @@
 //! The safe state a stopping bus leaves its joints in (`on_shutdown`):
 //! disabled by default, or still enabled holding their target.
 
-mod bus_support;
+mod support;
 
-use bus_support::{rig_with, sim_config, target, BAUD};
 use jointd::bus::ShutdownState;
 use jointd::protocol::reply::fsm;
+use support::bus::{rig_with, sim_config, target, BAUD};
 
 async fn stop_with(state: ShutdownState) -> Vec<u8> {
     let ids = [1u8, 2];

@@ -1,7 +1,7 @@
 //! `jointd sim` as a user runs it: the device path is the first line of
 //! stdout, the tty answers, stdin switches faults, Ctrl-C stops it cleanly.
 
-mod sim_support;
+mod support;
 
 use std::io::{BufRead, BufReader, Write};
 use std::path::PathBuf;
@@ -11,7 +11,7 @@ use jointd::protocol::InfoBlock;
 use jointd::transport::tty::TtyPort;
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
-use sim_support::*;
+use support::sim::*;
 
 #[test]
 fn sim_prints_its_path_answers_takes_faults_and_stops_on_sigint() {

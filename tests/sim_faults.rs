@@ -1,7 +1,7 @@
 //! Fault injection and the less common SPEC behaviours, mostly over the fast
 //! in-memory line (the unplug test also runs over a pty).
 
-mod sim_support;
+mod support;
 
 use std::time::Duration;
 
@@ -14,7 +14,7 @@ use jointd::protocol::{
 use jointd::sim::{Fault, SimHandle};
 use jointd::transport::is_hangup;
 use jointd::transport::tty::TtyPort;
-use sim_support::*;
+use support::sim::*;
 
 const FW: FirmwareVersion = FirmwareVersion(128);
 

@@ -2,7 +2,7 @@
 //! host: power-up, every read, enable/align/run, motion, jog and re-zero,
 //! flash across a restart, id change, baud change.
 
-mod sim_support;
+mod support;
 
 use std::time::{Duration, Instant};
 
@@ -12,7 +12,7 @@ use jointd::protocol::{
     BaudLevel, Command, ConfigParam, Control, FirmwareVersion, InfoBlock, Jog, JogDir, ReplyBody,
 };
 use jointd::sim::SimHandle;
-use sim_support::*;
+use support::sim::*;
 
 /// Enables `id` and waits for it to run.
 fn enable(sim: &SimHandle, host: &mut Host, id: u8) {

@@ -1,7 +1,7 @@
 //! The line referee over a real pty: collisions, queueing, duplicate ids,
 //! occupancy, and the modelled timing of a poll.
 
-mod sim_support;
+mod support;
 
 use std::time::Duration;
 
@@ -10,7 +10,7 @@ use jointd::protocol::{BroadcastPos, Command, Config, Control, Group, InfoBlock}
 use jointd::sim::SimStats;
 use jointd::transport::tty::TtyPort;
 use jointd::transport::Transport;
-use sim_support::*;
+use support::sim::*;
 
 fn read(id: u8) -> Command {
     Command::Config(Config::read(id, InfoBlock::Info01))

@@ -3,7 +3,7 @@
 //! The stalled side drives the session through its generic Sink/Stream
 //! interface, so "stops reading" is exact rather than a TCP buffer guess.
 
-mod api_support;
+mod support;
 
 use std::convert::Infallible;
 use std::sync::Arc;
@@ -16,7 +16,7 @@ use tokio::sync::{mpsc, Semaphore};
 use tokio_stream::wrappers::UnboundedReceiverStream;
 use tokio_tungstenite::connect_async;
 
-use api_support::sim_bus::{self, WAIT};
+use support::sim_bus::{self, WAIT};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn stalled_client_does_not_delay_another() {

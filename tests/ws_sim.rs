@@ -3,7 +3,7 @@
 //! moving joints, acks, every error, the watchdog's two policies, auth, and
 //! a stalled client not delaying another.
 
-mod api_support;
+mod support;
 
 use std::time::Duration;
 
@@ -14,8 +14,8 @@ use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::{connect_async, MaybeTlsStream, WebSocketStream};
 
-use api_support::sim_bus::{self, SimBus, WAIT};
 use jointd::protocol::reply::fsm;
+use support::sim_bus::{self, SimBus, WAIT};
 
 struct Client {
     ws: WebSocketStream<MaybeTlsStream<TcpStream>>,

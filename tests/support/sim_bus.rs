@@ -9,7 +9,7 @@ use jointd::http::limits::{LimitRule, SoftLimits};
 use jointd::http::AppState;
 use jointd::sim::{SimConfig, SimHandle, Simulator};
 
-use super::{serve, Server};
+use super::http::{serve, Server};
 
 /// Generous: the machine is loaded; every wait ends on its event.
 pub const WAIT: Duration = Duration::from_secs(10);

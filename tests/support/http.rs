@@ -1,9 +1,6 @@
 //! Serves the API on 127.0.0.1:0 and talks to it over real HTTP.
 #![allow(dead_code)]
 
-pub mod fake_bus;
-pub mod sim_bus;
-
 use reqwest::{Method, StatusCode};
 use serde_json::Value;
 
