@@ -23,17 +23,17 @@
 //! - [`hub`]: what all WebSocket connections share (the state holds it).
 
 pub mod api;
-pub mod auth;
-pub mod error;
-pub mod extract;
-pub mod hub;
+pub(crate) mod auth;
+pub(crate) mod error;
+pub(crate) mod extract;
+pub(crate) mod hub;
 pub mod limits;
-pub mod paths;
+pub(crate) mod paths;
 pub mod state;
-pub mod targets;
-pub mod telemetry;
+pub(crate) mod targets;
+pub(crate) mod telemetry;
 pub mod teleop;
-pub mod web;
+pub(crate) mod web;
 pub mod ws;
 
 use axum::Router;

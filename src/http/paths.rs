@@ -2,8 +2,6 @@
 //! them need no token. Kept apart so auth, the WebSocket and the dashboard
 //! agree on them without importing each other.
 
-/// Prefix of every versioned resource.
-pub const API_PREFIX: &str = "/api/v1";
 /// The WebSocket endpoint.
 pub const WS_PATH: &str = "/api/v1/ws";
 /// Liveness: public even when the daemon has a token.

@@ -55,24 +55,24 @@
 //! # Ok::<(), jointd::sim::SimError>(())
 //! ```
 
-pub mod busy;
+pub(crate) mod busy;
 pub mod cli;
-pub mod config;
-pub mod console;
-pub mod device;
-pub mod engine;
-pub mod faults;
-pub mod line;
-pub mod log;
-pub mod measure;
-pub mod params;
-pub mod physics;
-pub mod pty;
+pub(crate) mod config;
+pub(crate) mod console;
+pub(crate) mod device;
+pub(crate) mod engine;
+pub(crate) mod faults;
+pub(crate) mod line;
+pub(crate) mod log;
+pub(crate) mod measure;
+pub(crate) mod params;
+pub(crate) mod physics;
+pub(crate) mod pty;
 mod rng;
-pub mod runner;
-pub mod stats;
-pub mod view;
-pub mod wire;
+pub(crate) mod runner;
+pub(crate) mod stats;
+pub(crate) mod view;
+pub(crate) mod wire;
 
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};

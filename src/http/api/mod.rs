@@ -7,15 +7,15 @@
 //!   [`estop`], [`health`]: one router per area.
 //! - [`openapi`]: the document's head, the shared failure responses, the docs page.
 
-pub mod buses;
-pub mod config;
-pub mod config_params;
-pub mod config_schema;
-pub mod control;
-pub mod devices;
-pub mod estop;
-pub mod health;
-pub mod openapi;
+pub(crate) mod buses;
+pub(crate) mod config;
+pub(crate) mod config_params;
+pub(crate) mod config_schema;
+pub(crate) mod control;
+pub(crate) mod devices;
+pub(crate) mod estop;
+pub(crate) mod health;
+pub(crate) mod openapi;
 
 use utoipa_axum::router::OpenApiRouter;
 

@@ -10,12 +10,12 @@
 //! - [`telemetry`]: snapshot → joint fields in physical units.
 //! - [`watchdog`]: the teleop hold-timeout state machine.
 
-pub mod messages;
+pub(crate) mod messages;
 pub mod session;
-pub mod setpoints;
-pub mod telemetry;
-pub mod watchdog;
-pub mod writer;
+pub(crate) mod setpoints;
+pub(crate) mod telemetry;
+pub(crate) mod watchdog;
+pub(crate) mod writer;
 
 use axum::extract::{State, WebSocketUpgrade};
 use axum::response::Response;
