@@ -14,6 +14,7 @@
 //! - [`params`]: the parameter table: one row per config/INFO index, everything else derives from it.
 //! - [`message`]: classifies a decoded standard frame as a command or a reply.
 //! - [`units`]: every raw ↔ physical conversion, range-checked.
+//! - [`values`]: the enumerated values frames and parameters carry (INFO block, mode, baud level).
 //! - [`status`]: names of fsm states and fault codes, defined once.
 //! - [`stream`]: finds frames in a byte stream, resyncing past garbage.
 //! - [`error`]: the typed errors of this layer.
@@ -29,6 +30,7 @@ pub mod reply;
 pub mod status;
 pub mod stream;
 pub mod units;
+pub mod values;
 
 pub use command::{
     BaudLevel, BroadcastEnable, BroadcastPos, BroadcastSpd, Command, Config, ConfigParam, Control,

@@ -10,8 +10,10 @@
 //! - [`memory`]: an in-memory duplex pipe with a shared "baud" and hang-up.
 //! - [`tty`]: a tty opened raw at a baud rate (real adapter or pty slave).
 //! - [`rs485`]: the kernel's RS-485 direction control on a tty, where it exists.
+//! - [`note`]: what opening a port found worth telling ([`note::PortNote`]).
 
 pub mod memory;
+pub mod note;
 pub mod rs485;
 pub mod tty;
 

@@ -8,7 +8,7 @@ use std::fs::File;
 use std::io;
 use std::os::fd::AsRawFd;
 
-use super::tty::PortNote;
+use super::note::PortNote;
 
 /// Linux `struct serial_rs485` (include/uapi/linux/serial.h): 32 bytes.
 #[repr(C)]

@@ -101,16 +101,7 @@ pub struct TtyPort {
     baud: u32,
 }
 
-/// Something worth telling the user about a freshly opened port.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum PortNote {
-    /// `ASYNC_LOW_LATENCY` or RS-485 mode could not be set (normal on a pty).
-    IoctlUnsupported { what: &'static str, error: String },
-    /// RS-485 direction control: what the driver was left doing.
-    Rs485(String),
-    /// An FTDI adapter whose latency timer delays every reply.
-    FtdiLatency { ms: u32, fix: String },
-}
+pub use super::note::PortNote;
 
 /// What to ask of a port besides raw mode and its baud.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

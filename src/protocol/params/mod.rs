@@ -32,7 +32,7 @@ mod scale;
 pub use row::{Access, Field, Guard, ParamRow, RawType, ReplyKind, Revision, Storage};
 pub use scale::Scale;
 
-use super::command::{BaudLevel, CtrlMode, InfoBlock};
+use super::values::{BaudLevel, CtrlMode, InfoBlock};
 
 /// Index constants of SPEC §4.3, named as the vendor names them.
 pub mod index {

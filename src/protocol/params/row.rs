@@ -2,8 +2,8 @@
 //! describe an index, and [`ParamRow`] itself.
 
 use super::scale::Scale;
-use crate::protocol::command::InfoBlock;
 use crate::protocol::units::UnitError;
+use crate::protocol::values::InfoBlock;
 
 /// The protocol revision that introduced a row (SPEC marks rev 2.0.8 facts).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]

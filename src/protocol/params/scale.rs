@@ -2,8 +2,8 @@
 //! arithmetic is [`crate::protocol::units`]'s; a scale only picks it, names
 //! its unit and its physical twin in frame JSON.
 
-use crate::protocol::command::BaudLevel;
 use crate::protocol::units::{self, FirmwareVersion, UnitError};
+use crate::protocol::values::BaudLevel;
 
 /// How a raw value maps to a physical one (SPEC §6); the arithmetic is
 /// [`crate::protocol::units`]'s, this only says which conversion a row uses.
