@@ -11,6 +11,7 @@
 //! - [`ws`]: the WebSocket endpoint: telemetry streams, batch setpoints, teleop watchdog.
 //! - [`web`]: the embedded dashboard (or `--web-dir` while developing).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory).
+//! - [`rt`]: real-time thread helpers (timer slack, FIFO class) for the bus owner and the simulator.
 //! - [`bench`]: `jointd bench`: the bus engine against the simulator, measured.
 
 pub mod api;
@@ -20,6 +21,7 @@ pub mod cli;
 pub mod daemon;
 pub mod frame_json;
 pub mod protocol;
+pub mod rt;
 pub mod sim;
 pub mod transport;
 pub mod web;

@@ -24,7 +24,7 @@ use super::poll::{ControlBudget, PollPlanner};
 use super::recovery::BACKOFF_FIRST;
 use super::registry::Registry;
 use super::stats::Stats;
-use super::wire::{precise_timers, set_fifo};
+use crate::rt::{precise_timers, set_fifo};
 
 /// How long the owner listens when there is nothing to send. Bounds how
 /// late it notices a request or setpoint on an idle bus.
