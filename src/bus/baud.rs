@@ -25,7 +25,7 @@ impl Owner {
         }
         let old_level = BaudLevel::from_baud(old)
             .ok_or_else(|| BusError::Invalid(format!("the port runs at {old}, not a SPEC baud")))?;
-        let ids = self.reg.online_ids();
+        let ids = self.sched.registry().online_ids();
         if ids.is_empty() {
             return Err(BusError::WrongState(format!(
                 "no device is online on bus {} to change its baud",
@@ -34,12 +34,12 @@ impl Owner {
         }
         // Until every device and the port agree, an e-stop would not reach
         // all of them: this phase (a few ms) runs to its end, then the e-stop.
-        self.exclusive = true;
+        self.sched.set_exclusive(true);
         let switched = self.switch_all(&ids, level, old_level, baud, old);
-        self.exclusive = false;
+        self.sched.set_exclusive(false);
         switched?;
         self.confirm_level(&ids, level)?;
-        self.events.push(BusEvent::BaudChanged {
+        self.sched.push_event(BusEvent::BaudChanged {
             bus: self.cfg.name.clone(),
             baud,
         });
@@ -102,10 +102,10 @@ impl Owner {
 
     fn switch_port(&mut self, baud: u32) -> Result<(), BusError> {
         // Host frames still queued would go out at the wrong speed.
-        self.wait_until(self.link.clock.free_at())?;
+        self.wait_until(self.sched.clock().free_at())?;
         self.link.set_baud(baud).map_err(|e| self.lost(e))?;
         self.cfg.baud = baud;
-        self.budget.set_frame(self.link.clock.frame_time());
+        self.sched.set_baud(baud);
         Ok(())
     }
 

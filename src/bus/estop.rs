@@ -4,7 +4,6 @@
 //! and read once more; what could not be confirmed is reported, never
 //! assumed.
 
-use std::sync::atomic::Ordering;
 use std::time::Instant;
 
 use crate::protocol::reply::fsm;
@@ -32,9 +31,7 @@ impl Owner {
     /// Disables every device ahead of everything queued (SPEC errata 3:
     /// standard control frames, `0xFF` first, then each known device), then
     /// confirms it device by device.
-    pub(super) fn estop(&mut self) {
-        let generation = self.shared.estop_generation.load(Ordering::SeqCst);
-        self.estop_seen = generation;
+    pub(super) fn estop(&mut self, generation: u64) {
         let called = self
             .shared
             .estop_called
@@ -61,7 +58,7 @@ impl Owner {
                 tracing::error!(bus = %self.cfg.name, "e-stop: {:?} still enabled after a second disable", r.still_enabled);
             }
         }
-        self.events.push(BusEvent::Estop {
+        self.sched.push_event(BusEvent::Estop {
             bus: self.cfg.name.clone(),
         });
         self.shared
@@ -74,9 +71,9 @@ impl Owner {
     /// frame count and when they were handed to the port.
     pub(super) fn disable_everything(&mut self) -> Result<(u32, Instant), BusError> {
         self.shared.setpoints.clear(None);
-        self.drop_setpoints();
-        for id in self.reg.ids() {
-            self.reg.forget_target(id);
+        self.sched.drop_setpoints(&self.shared.setpoints);
+        for id in self.sched.registry().ids() {
+            self.sched.registry_mut().forget_target(id);
         }
         if !self.link.is_up() {
             return Err(self.down_error());
@@ -86,12 +83,12 @@ impl Owner {
         // (0xFF and device 1's); it cannot reach both ends of the sequence,
         // so every device hears at least one disable.
         let cmds: Vec<Command> = std::iter::once(ALL_DEVICES)
-            .chain(self.reg.ids())
+            .chain(self.sched.registry().ids())
             .chain(std::iter::once(ALL_DEVICES))
             .map(|id| Command::Control(Control::disable(id)))
             .collect();
         let handed = Instant::now();
-        self.link.send(&cmds).map_err(|e| self.lost(e))?;
+        self.send(&cmds)?;
         Ok((cmds.len() as u32, handed))
     }
 
@@ -99,10 +96,10 @@ impl Owner {
     /// Offline devices, silent ones and those left when a newer e-stop or a
     /// lost port cut the check short are `unconfirmed`.
     fn confirm_stopped(&mut self, report: &mut EstopReport) {
-        self.job_frames = 0;
-        let ids = self.reg.ids();
+        self.sched.job_start();
+        let ids = self.sched.registry().ids();
         for (n, &id) in ids.iter().enumerate() {
-            if !self.reg.is_online(id) {
+            if !self.sched.registry().is_online(id) {
                 report.unconfirmed.push(id);
                 continue;
             }

@@ -14,7 +14,6 @@ use crate::protocol::{
     Reply, ReplyBody, ALL_DEVICES,
 };
 
-use super::coalesce::Pending;
 use super::error::BusError;
 use super::handle::{BusEvent, Request, Targets, WriteOutcome};
 use super::link::Want;
@@ -56,7 +55,6 @@ pub(super) fn fail(req: Request, err: BusError) {
 
 impl Owner {
     pub(super) fn run_request(&mut self, req: Request) {
-        self.job_frames = 0;
         match req {
             Request::Enable { targets, reply } => drop(reply.send(self.enable(targets))),
             Request::Disable { targets, reply } => drop(reply.send(self.disable(targets))),
@@ -92,7 +90,7 @@ impl Owner {
     }
 
     pub(super) fn known(&self, id: u8) -> Result<(), BusError> {
-        match self.reg.get(id) {
+        match self.sched.registry().get(id) {
             Some(_) => Ok(()),
             None => Err(BusError::UnknownDevice {
                 bus: self.cfg.name.clone(),
@@ -104,7 +102,7 @@ impl Owner {
     /// The ids a control request addresses, each known.
     fn resolve(&self, targets: &Targets) -> Result<Vec<u8>, BusError> {
         match targets {
-            Targets::All => Ok(self.reg.online_ids()),
+            Targets::All => Ok(self.sched.registry().online_ids()),
             Targets::Ids(ids) => {
                 ids.iter().try_for_each(|id| self.known(*id))?;
                 Ok(ids.clone())
@@ -125,10 +123,9 @@ impl Owner {
         self.job_send(&Self::control_frames(&targets, &ids, Control::enable))?;
         for &id in &ids {
             // It holds where it is; a target set before the enable goes out again.
-            self.reg.forget_target(id);
+            self.sched.registry_mut().forget_target(id);
             if let Some(setpoint) = self.shared.setpoints.get(id) {
-                let since = setpoint.accepted;
-                self.pending.insert(id, Pending { setpoint, since });
+                self.sched.requeue(id, setpoint);
             }
         }
         for &id in &ids {
@@ -142,13 +139,13 @@ impl Owner {
         self.job_send(&Self::control_frames(&targets, &ids, Control::disable))?;
         // `0xFF` reached offline devices too: every target goes.
         let cleared = match targets {
-            Targets::All => self.reg.ids(),
+            Targets::All => self.sched.registry().ids(),
             Targets::Ids(_) => ids.clone(),
         };
         self.shared.setpoints.clear(Some(&cleared));
         for &id in &cleared {
-            self.pending.remove(&id);
-            self.reg.forget_target(id);
+            self.sched.forget_setpoint(id);
+            self.sched.registry_mut().forget_target(id);
         }
         for &id in &ids {
             self.await_fsm(id, "disable", |f| f == fsm::READY || f == fsm::FAULT)?;
@@ -228,9 +225,9 @@ impl Owner {
 
     /// The device's zero moved: targets and angles from before are void.
     fn zero_moved(&mut self, id: u8) {
-        self.reg.zero_moved(id);
+        self.sched.registry_mut().zero_moved(id);
         self.shared.setpoints.clear(Some(&[id]));
-        self.pending.remove(&id);
+        self.sched.forget_setpoint(id);
     }
 
     fn set_mode(&mut self, dev_id: u8, mode: CtrlMode) -> Result<(), BusError> {
@@ -288,9 +285,9 @@ impl Owner {
     fn after_unverifiable(&mut self, dev_id: u8, param: &ConfigParam) {
         match param {
             ConfigParam::CtrlMode(mode) => {
-                self.reg.set_mode(dev_id, *mode);
+                self.sched.registry_mut().set_mode(dev_id, *mode);
                 self.shared.setpoints.clear(Some(&[dev_id]));
-                self.pending.remove(&dev_id);
+                self.sched.forget_setpoint(dev_id);
             }
             ConfigParam::UpdateFinZero => self.zero_moved(dev_id),
             _ => {}
@@ -304,7 +301,7 @@ impl Owner {
                 "new id {new_id} must be in 1..=159 and differ from {dev_id}"
             )));
         }
-        if self.reg.get(new_id).is_some() {
+        if self.sched.registry().get(new_id).is_some() {
             return Err(BusError::WrongState(format!(
                 "id {new_id} is already taken on bus {}",
                 self.cfg.name
@@ -354,12 +351,9 @@ impl Owner {
     /// The registry entry and the setpoint slot follow the device. An entry
     /// the read-back made for the new id is replaced by the old one's history.
     fn rename(&mut self, old: u8, new: u8) {
-        self.reg.rename(old, new);
+        self.sched.rename(old, new);
         self.shared.setpoints.rename(old, new);
-        if let Some(sp) = self.pending.remove(&old) {
-            self.pending.insert(new, sp);
-        }
-        self.events.push(BusEvent::IdChanged {
+        self.sched.push_event(BusEvent::IdChanged {
             bus: self.cfg.name.clone(),
             old,
             new,

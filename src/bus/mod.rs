@@ -40,6 +40,7 @@ mod recovery;
 pub mod registry;
 mod scan;
 mod schedule;
+pub mod scheduler;
 pub mod setpoints;
 pub mod state;
 mod stats;

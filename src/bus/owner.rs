@@ -8,27 +8,19 @@
 //! retries with backoff, failing requests with `Down` meanwhile, and resumes
 //! when the port is back. Nothing here can take another bus down.
 
-use std::collections::BTreeMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::Receiver;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
-use super::coalesce::Pending;
 use super::config::BusConfig;
 use super::error::BusError;
-use super::handle::{BusEvent, BusShared, LinkState, Request};
+use super::handle::{BusShared, LinkState, Request};
 use super::link::Link;
-use super::poll::{ControlBudget, PollPlanner};
-use super::recovery::BACKOFF_FIRST;
-use super::registry::Registry;
+use super::scheduler::{Scheduler, Slot, Work};
 use super::stats::Stats;
 use crate::rt::{precise_timers, set_fifo};
-
-/// How long the owner listens when there is nothing to send. Bounds how
-/// late it notices a request or setpoint on an idle bus.
-const IDLE_TICK: Duration = Duration::from_millis(1);
 
 pub(super) struct Owner {
     pub(super) cfg: BusConfig,
@@ -36,38 +28,15 @@ pub(super) struct Owner {
     pub(super) requests: Receiver<Request>,
     stop: Arc<AtomicBool>,
     pub(super) link: Link,
-    pub(super) reg: Registry,
-    pub(super) planner: PollPlanner,
-    pub(super) budget: ControlBudget,
-    /// Setpoints taken from the store and not yet on the wire.
-    pub(super) pending: BTreeMap<u8, Pending>,
-    /// Highest store sequence number taken into `pending`.
-    pub(super) seen_seq: u64,
-    pub(super) acked_seq: u64,
-    pub(super) estop_seen: u64,
-    pub(super) events: Vec<BusEvent>,
+    /// Every decision: what goes on the wire next.
+    pub(super) sched: Scheduler,
     pub(super) stats: Stats,
     pub(super) link_state: LinkState,
     pub(super) port_notes: Vec<String>,
     /// What starting the thread found worth telling (no real-time priority).
     pub(super) thread_notes: Vec<String>,
-    /// A control frame planned while a reply was on the wire, and the store
-    /// sequence number it was planned at.
-    pub(super) prepared: Option<(super::coalesce::Planned, u64)>,
-    /// The configured range still has to be scanned (no expected ids given).
-    pub(super) needs_scan: bool,
-    /// Frames the current one-shot request has written (setpoints may
-    /// interleave after its first).
-    pub(super) job_frames: u32,
-    /// The request is in a phase nothing may interrupt: devices and port at
-    /// different bauds, where an e-stop's frames would not reach everyone.
-    pub(super) exclusive: bool,
-    /// The last read that timed out and when its reply was due: the reply
-    /// may still come, late, and must not be taken for an announcement.
-    pub(super) overdue: Option<(super::link::Want, Instant)>,
-    pub(super) backoff: Duration,
-    pub(super) next_open: Instant,
-    pub(super) ever_up: bool,
+    /// A request taken from the queue, waiting for its slot.
+    held: Option<Request>,
 }
 
 impl Owner {
@@ -79,37 +48,18 @@ impl Owner {
         link: Link,
     ) -> Self {
         let now = Instant::now();
-        let mut reg = Registry::new(&cfg.name, cfg.poll.offline_after);
-        cfg.ids.iter().for_each(|id| reg.expect(*id));
         Self {
-            planner: PollPlanner::new(
-                cfg.poll.info01_every,
-                Duration::from_millis(cfg.poll.offline_poll_ms),
-            ),
-            budget: ControlBudget::new(cfg.poll.control_share, cfg.frame_time(), now),
-            stats: Stats::new(Duration::from_millis(cfg.poll.snapshot_ms), now),
-            needs_scan: cfg.ids.is_empty(),
+            sched: Scheduler::new(&cfg, now),
+            stats: Stats::new(std::time::Duration::from_millis(cfg.poll.snapshot_ms), now),
             cfg,
             shared,
             requests,
             stop,
             link,
-            reg,
-            pending: BTreeMap::new(),
-            seen_seq: 0,
-            acked_seq: 0,
-            estop_seen: 0,
-            events: Vec::new(),
             link_state: LinkState::Opening,
             port_notes: Vec::new(),
             thread_notes: Vec::new(),
-            job_frames: 0,
-            exclusive: false,
-            overdue: None,
-            prepared: None,
-            backoff: BACKOFF_FIRST,
-            next_open: now,
-            ever_up: false,
+            held: None,
         }
     }
 
@@ -121,13 +71,7 @@ impl Owner {
             // A bug must not leave the joints with a dead owner and a stale
             // "up" snapshot: the owner catches it and starts over like after
             // an unplug (its state is rebuilt from the wire).
-            let step = catch_unwind(AssertUnwindSafe(|| {
-                if self.link.is_up() {
-                    self.turn();
-                } else {
-                    self.while_down();
-                }
-            }));
+            let step = catch_unwind(AssertUnwindSafe(|| self.turn()));
             if let Err(panic) = step {
                 self.recover_from_panic(panic.as_ref());
             }
@@ -143,15 +87,13 @@ impl Owner {
             .unwrap_or_else(|| "unknown panic".into());
         tracing::error!(bus = %self.cfg.name, "bus owner caught a panic ({what}); reopening the port");
         self.link.counters.owner_panics += 1;
-        self.exclusive = false;
-        self.job_frames = 0;
+        self.sched.job_abort();
         let err = self.lost(std::io::Error::other(format!("internal error: {what}")));
         // An e-stop cut short says so now rather than at its caller's timeout.
         let answered = self.shared.estop_done.borrow().0;
-        if self.estop_seen > answered {
-            self.shared
-                .estop_done
-                .send_replace((self.estop_seen, Some(Err(err))));
+        let seen = self.sched.estop_seen();
+        if seen > answered {
+            self.shared.estop_done.send_replace((seen, Some(Err(err))));
         }
         self.publish(Instant::now());
     }
@@ -170,55 +112,73 @@ impl Owner {
         }
     }
 
-    /// One decision at the moment the line can take the next host frame.
+    /// Asks the scheduler for the next slot and does what it names.
     fn turn(&mut self) {
+        let now = Instant::now();
+        if self.held.is_none() && self.sched.link_is_up() {
+            self.held = self.next_request();
+        }
+        let work = Work {
+            estop_generation: self.estop_generation(),
+            request_queued: self.held.is_some(),
+            setpoints: &self.shared.setpoints,
+        };
+        let slot = self.sched.next(now, &work);
+        self.after_decision();
         // Bookkeeping goes where the line leaves slack, not between a reply
         // and the next frame (unless it has waited too long).
-        let (now, write_at) = (Instant::now(), self.link.clock.write_at());
-        if write_at > now || self.stats.overdue(now) {
+        if matches!(slot, Slot::Listen { .. }) || self.stats.overdue(now) {
             self.housekeeping(now);
         }
-        if self.wait_until(write_at).is_err() {
-            return;
-        }
-        if self.estop_pending() || self.needs_scan {
-            self.prepared = None;
-        }
-        if self.estop_pending() {
-            return self.estop();
-        }
-        if let Some(req) = self.next_request() {
-            self.prepared = None;
-            return self.run_request(req);
-        }
-        if self.needs_scan {
-            return self.startup_scan();
-        }
-        // Errors have already marked the bus down; the loop sees it.
-        let _ = self.schedule_wire(Instant::now());
+        self.do_slot(slot, now);
     }
 
-    /// Setpoints within budget, else a poll, else setpoints, else listen.
-    fn schedule_wire(&mut self, now: Instant) -> Result<(), BusError> {
-        let sent_prepared =
-            self.prepared.is_some() && self.budget.allows(now) && self.send_control()?;
-        // A prepared frame is good for this decision only.
-        self.prepared = None;
-        if sent_prepared {
-            return Ok(());
+    /// Errors have already marked the bus down; the next slot says so.
+    fn do_slot(&mut self, slot: Slot, now: Instant) {
+        let _ = match slot {
+            Slot::Listen { until } => self.wait_until(until),
+            Slot::Control(frame) => self.send_planned(frame),
+            Slot::Poll { dev_id, block } => self.poll(dev_id, block),
+            Slot::EStop { generation } => {
+                self.estop(generation);
+                Ok(())
+            }
+            Slot::Request => {
+                if let Some(req) = self.held.take() {
+                    self.run_request(req);
+                }
+                Ok(())
+            }
+            Slot::Scan => {
+                self.startup_scan();
+                Ok(())
+            }
+            Slot::Reopen { at } => {
+                self.while_down(now, at);
+                Ok(())
+            }
+        };
+    }
+
+    /// What a decision left to hand on: a wire ack, dropped setpoints.
+    pub(super) fn after_decision(&mut self) {
+        self.link.counters.setpoints_dropped += self.sched.take_dropped();
+        if let Some(ack) = self.sched.take_ack() {
+            self.shared.wire_acks.send_replace(ack);
         }
-        self.collect_setpoints();
-        if !self.pending.is_empty() && self.budget.allows(now) && self.send_control()? {
-            return Ok(());
-        }
-        if self.poll_once()? || self.send_control()? {
-            return Ok(());
-        }
-        self.wait_until(now + IDLE_TICK)
+    }
+
+    pub(super) fn estop_generation(&self) -> u64 {
+        self.shared.estop_generation.load(Ordering::SeqCst)
     }
 
     pub(super) fn estop_pending(&self) -> bool {
-        self.shared.estop_generation.load(Ordering::SeqCst) > self.estop_seen
+        self.sched.estop_pending(self.estop_generation())
+    }
+
+    /// A request taken from the queue (the held one first).
+    pub(super) fn take_request(&mut self) -> Option<Request> {
+        self.held.take().or_else(|| self.next_request())
     }
 
     fn next_request(&mut self) -> Option<Request> {
@@ -231,19 +191,11 @@ impl Owner {
     /// Fails every queued request with `err`; returns how many.
     pub(super) fn fail_queued(&mut self, err: &BusError) -> u32 {
         let mut n = 0;
-        while let Some(req) = self.next_request() {
+        while let Some(req) = self.take_request() {
             super::jobs::fail(req, err.clone());
             n += 1;
         }
         n
-    }
-
-    /// Forgets pending setpoints and skips what the store holds now.
-    pub(super) fn drop_setpoints(&mut self) {
-        self.prepared = None;
-        self.collect_setpoints();
-        self.pending.clear();
-        self.acked_seq = self.seen_seq;
     }
 
     /// Brings the joints to the configured safe state and closes the port.
@@ -251,7 +203,7 @@ impl Owner {
         let disable = self.cfg.on_shutdown == super::config::ShutdownState::Disable;
         if disable && self.disable_everything().is_ok() {
             // Let the disable frames leave the wire before the port closes.
-            let _ = self.wait_until(self.link.clock.free_at());
+            let _ = self.wait_until(self.sched.clock().free_at());
         }
         if !disable {
             tracing::warn!(bus = %self.cfg.name, "stopping with the joints left enabled (on_shutdown = \"hold\")");

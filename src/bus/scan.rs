@@ -39,7 +39,8 @@ impl Owner {
         found: &mut Vec<u8>,
     ) {
         let answered = |id: u8| {
-            self.reg
+            self.sched
+                .registry()
                 .get(id)
                 .and_then(|e| e.state.info01)
                 .is_some_and(|(_, at)| at >= since)
@@ -81,12 +82,12 @@ impl Owner {
 
     /// The scan of the configured range when no ids were given.
     pub(super) fn startup_scan(&mut self) {
-        self.job_frames = 0;
+        self.sched.job_start();
         let (first, last) = (self.cfg.scan_first, self.cfg.scan_last);
         match self.scan(first, last) {
             Ok(found) => {
                 tracing::info!(bus = %self.cfg.name, ?found, "scan {first}..={last} done");
-                self.needs_scan = false;
+                self.sched.scan_done();
             }
             // Preempted or down: scan again once the bus runs.
             Err(e) => tracing::info!(bus = %self.cfg.name, "scan interrupted: {e}"),

@@ -8,17 +8,14 @@
 
 use std::time::{Duration, Instant};
 
-use crate::protocol::{Command, Config, ConfigParam, Reply, ReplyBody};
+use crate::protocol::{Command, Config, ConfigParam, InfoBlock, Reply};
 
-use super::coalesce::{self, Pending, Planned};
+use super::coalesce::Planned;
 use super::error::BusError;
-use super::handle::WireAck;
 use super::link::Want;
 use super::owner::Owner;
+use super::registry::ReplyEffect;
 
-/// Setpoint frames that may go out between two frames of a one-shot
-/// request, so a long scan does not freeze the joints.
-const MAX_INTERLEAVED: u32 = 2;
 /// How long before a reply is due the next control frame is planned:
 /// ample for planning, short enough that the setpoints it samples are fresh.
 const PREPARE_LEAD: Duration = Duration::from_micros(100);
@@ -40,21 +37,10 @@ impl Owner {
         let inbox = std::mem::take(&mut self.link.inbox);
         for (reply, at) in &inbox {
             self.link.counters.unsolicited += 1;
-            let late = self
-                .overdue
-                .take_if(|(w, _)| w.dev_id == reply.dev_id && w.index == reply.index);
-            if let Some((_, due)) = late {
-                self.link.clock.observe_reply(due, *at);
-            }
-            let effect = self
-                .reg
-                .on_reply(reply, *at, late.is_some(), &mut self.events);
+            let effect = self.sched.unsolicited(reply, *at);
             if effect.rebooted {
-                // A rebooted device is disabled and forgot its target:
-                // whatever was waiting for it is stale.
+                // A rebooted device is disabled and forgot its target.
                 self.shared.setpoints.clear(Some(&[reply.dev_id]));
-                self.pending.remove(&reply.dev_id);
-                self.prepared = None;
             }
             self.resend_if_aligned(reply.dev_id, effect);
         }
@@ -62,143 +48,61 @@ impl Owner {
         self.link.inbox.clear();
     }
 
-    /// Takes what changed in the setpoint store into `pending`.
-    pub(super) fn collect_setpoints(&mut self) {
-        for (id, setpoint) in self.shared.setpoints.changed_since(self.seen_seq) {
-            self.seen_seq = self.seen_seq.max(setpoint.seq);
-            let since = self.pending.get(&id).map_or(setpoint.accepted, |p| p.since);
-            self.pending.insert(id, Pending { setpoint, since });
-        }
+    /// Hands host frames to the port; returns when the last one leaves the wire.
+    pub(super) fn send(&mut self, cmds: &[Command]) -> Result<Instant, BusError> {
+        let handed = self.link.send(cmds).map_err(|e| self.lost(e))?;
+        Ok(self.sched.sent(handed, cmds.len() as u32))
     }
 
-    /// Writes the frame carrying the oldest pending setpoint; false when
-    /// nothing needs a frame. A frame prepared while the last reply was on
-    /// the wire is used if no setpoint came in since.
-    pub(super) fn send_control(&mut self) -> Result<bool, BusError> {
-        let prepared = self.prepared.take();
-        let planned = match prepared {
-            Some((frame, seq)) if seq == self.shared.setpoints.latest_seq() => Some(frame),
-            _ => {
-                self.collect_setpoints();
-                self.plan_control()
-            }
-        };
-        match planned {
-            Some(frame) => self.send_planned(frame).map(|()| true),
-            None => Ok(false),
-        }
-    }
-
-    /// The frame carrying the oldest pending setpoint; drops what needs none.
-    fn plan_control(&mut self) -> Option<Planned> {
-        if self.pending.is_empty() {
-            return None;
-        }
-        let plan = coalesce::plan(&self.pending, |id| self.reg.slot_info(id));
-        for (id, sp) in &plan.settled {
-            self.settle(*id, sp.seq);
-        }
-        for id in &plan.unknown {
-            self.pending.remove(id);
-            self.link.counters.setpoints_dropped += 1;
-        }
-        let first = plan.frames.into_iter().next();
-        if first.is_none() {
-            self.publish_ack(Instant::now());
-        }
-        first
-    }
-
-    /// While a reply is on the wire: sample the setpoints and plan the frame
-    /// that follows it, so the line idles no longer than needed after the
-    /// reply (planning takes µs a cold cache makes tens of).
-    fn prepare_control(&mut self, at: Instant) {
-        self.collect_setpoints();
-        let latest = self.shared.setpoints.latest_seq();
-        self.prepared = if !self.pending.is_empty() && self.budget.allows(at) {
-            self.plan_control().map(|frame| (frame, latest))
-        } else {
-            None
-        };
-    }
-
-    fn send_planned(&mut self, frame: Planned) -> Result<(), BusError> {
-        let end = self.link.send(&[frame.command]).map_err(|e| self.lost(e))?;
-        self.budget.spend(self.link.clock.frame_time());
-        for (id, sp) in frame.carries {
-            self.reg.record_sent(id, sp.setpoint, end);
-            self.settle(id, sp.seq);
+    /// Writes a control frame the scheduler planned.
+    pub(super) fn send_planned(&mut self, frame: Planned) -> Result<(), BusError> {
+        let end = self.send(&[frame.command])?;
+        for (_, sp) in &frame.carries {
             self.stats
                 .setpoint_age(end.saturating_duration_since(sp.accepted));
             self.link.counters.setpoints_sent += 1;
         }
-        self.publish_ack(end);
+        self.sched.control_sent(&frame, end);
+        self.after_decision();
         Ok(())
     }
 
-    /// Drops `id` from pending unless a newer setpoint replaced it meanwhile.
-    fn settle(&mut self, id: u8, seq: u64) {
-        if self.pending.get(&id).is_some_and(|p| p.setpoint.seq <= seq) {
-            self.pending.remove(&id);
-        }
-    }
-
-    /// Publishes the highest sequence number all of whose joints are on the wire.
-    fn publish_ack(&mut self, at: Instant) {
-        let oldest_pending = self.pending.values().map(|p| p.setpoint.seq).min();
-        let seq = oldest_pending.map_or(self.seen_seq, |s| s.saturating_sub(1));
-        if seq > self.acked_seq {
-            self.acked_seq = seq;
-            self.shared
-                .wire_acks
-                .send_replace(WireAck { seq, at: Some(at) });
-        }
-    }
-
-    /// One telemetry poll; false when there is nobody to poll.
-    pub(super) fn poll_once(&mut self) -> Result<bool, BusError> {
-        let now = Instant::now();
-        let timeout = self.link.clock.reply_deadline(now) - now;
-        let Some(poll) = self.planner.next(self.reg.poll_states(), now, timeout) else {
-            return Ok(false);
-        };
+    /// One telemetry poll the scheduler picked.
+    pub(super) fn poll(&mut self, dev_id: u8, block: InfoBlock) -> Result<(), BusError> {
         self.link.counters.polls += 1;
         let want = Want {
-            dev_id: poll.dev_id,
-            index: poll.block.index(),
+            dev_id,
+            index: block.index(),
         };
-        self.exchange(Config::read(poll.dev_id, poll.block), want, true)?;
-        Ok(true)
+        self.exchange(Config::read(dev_id, block), want, true)?;
+        Ok(())
     }
 
     /// Writes one config/read frame and waits for the reply it asks for;
-    /// with `prepare`, plans the next control frame meanwhile. `None` when
-    /// the reply did not come in time (counted as a missed poll).
+    /// with `prepare`, has the next control frame planned meanwhile. `None`
+    /// when the reply did not come in time (counted as a missed poll).
     fn exchange(
         &mut self,
         cmd: Config,
         want: Want,
         prepare: bool,
     ) -> Result<Option<Reply>, BusError> {
-        let end = self
-            .link
-            .send(&[Command::Config(cmd)])
-            .map_err(|e| self.lost(e))?;
-        let due = self.link.clock.reply_due(end);
+        let end = self.send(&[Command::Config(cmd)])?;
+        let window = self.sched.reply_window(end);
         let mut got = Ok(None);
         if prepare {
-            let prepare_at = due.checked_sub(PREPARE_LEAD).unwrap_or(due);
+            let prepare_at = window.due.checked_sub(PREPARE_LEAD).unwrap_or(window.due);
             got = self.link.wait(Some(want), prepare_at);
             if matches!(got, Ok(None)) {
-                self.prepare_control(due);
+                self.sched.prepare(window.due, &self.shared.setpoints);
             }
         }
         if matches!(got, Ok(None)) {
-            got = self.wait_reply(want, due, self.link.clock.reply_deadline(end));
+            got = self.wait_reply(want, window.due, window.deadline);
         }
         self.absorb_inbox();
         let got = got.map_err(|e| self.lost(e))?;
-        Ok(self.settle_exchange(got, want, due))
+        Ok(self.settle_exchange(got, want, window.due))
     }
 
     /// Waits for `want` until `deadline`. Past a frame after the modelled
@@ -210,7 +114,7 @@ impl Owner {
         due: Instant,
         deadline: Instant,
     ) -> std::io::Result<Option<(Reply, Instant)>> {
-        let grace = due + self.link.clock.frame_time();
+        let grace = due + self.sched.clock().frame_time();
         let mut got = self.spin_for_reply(want, due);
         if matches!(got, Ok(None)) {
             got = self.link.wait(Some(want), grace.min(deadline));
@@ -258,33 +162,24 @@ impl Owner {
         due: Instant,
     ) -> Option<Reply> {
         let Some((reply, at)) = got else {
-            self.overdue = Some((want, due));
             self.link.counters.timeouts += 1;
-            self.link.clock.line_free(Instant::now());
-            self.reg.on_missed(want.dev_id, &mut self.events);
+            self.sched.timed_out(want, due, Instant::now());
             return None;
         };
-        self.link.clock.observe_reply(due, at);
-        // A RES from a new id (SET_ID) is not a device yet: the request
-        // renames the old entry itself.
-        let feeds =
-            self.reg.get(reply.dev_id).is_some() || matches!(reply.body(), ReplyBody::Info01(_));
-        if feeds {
-            let effect = self.reg.on_reply(&reply, at, true, &mut self.events);
-            self.resend_if_aligned(reply.dev_id, effect);
-        }
+        let effect = self.sched.reply(&reply, at, due);
+        self.resend_if_aligned(reply.dev_id, effect);
         Some(reply)
     }
 
     /// A joint that just finished aligning gets its latest target again,
     /// through the store like any client write (a newer write wins).
-    fn resend_if_aligned(&mut self, id: u8, effect: super::registry::ReplyEffect) {
+    fn resend_if_aligned(&mut self, id: u8, effect: ReplyEffect) {
         if !effect.now_running {
             return;
         }
         if let Some(latest) = self.shared.setpoints.get(id) {
             // What went out during align does not count as on the device.
-            self.reg.forget_target(id);
+            self.sched.registry_mut().forget_target(id);
             self.shared.setpoints.set(&[(id, latest.setpoint)]);
         }
     }
@@ -317,8 +212,7 @@ impl Owner {
     }
 
     pub(super) fn timeout_error(&self, dev_id: u8, param: &ConfigParam, attempts: u32) -> BusError {
-        let t0 = Instant::now();
-        let timeout = self.link.clock.reply_deadline(t0) - t0;
+        let timeout = self.sched.clock().reply_timeout(Instant::now());
         BusError::Timeout {
             dev_id,
             what: describe(param),
@@ -330,38 +224,33 @@ impl Owner {
     /// Writes frames of a one-shot request that expect no reply.
     pub(super) fn job_send(&mut self, cmds: &[Command]) -> Result<(), BusError> {
         self.before_job_frame()?;
-        self.link.send(cmds).map_err(|e| self.lost(e))?;
+        self.send(cmds)?;
         Ok(())
     }
 
-    /// Before each frame of a one-shot request: let waiting setpoints out
-    /// (after its first frame), wait for the line, and give way to an e-stop.
+    /// Before each frame of a one-shot request: wait for the line, let
+    /// waiting setpoints out if the scheduler allows, and give way to an
+    /// e-stop.
     fn before_job_frame(&mut self) -> Result<(), BusError> {
-        if self.job_frames > 0 && !self.exclusive {
-            self.interleave_control()?;
+        loop {
+            self.wait_until(self.sched.clock().write_at())?;
+            let generation = self.estop_generation();
+            let now = Instant::now();
+            let interleave = self
+                .sched
+                .interleave(now, &self.shared.setpoints, generation);
+            self.after_decision();
+            match interleave {
+                Some(frame) => self.send_planned(frame)?,
+                None => break,
+            }
         }
-        self.job_frames += 1;
-        self.wait_until(self.link.clock.write_at())?;
         self.housekeeping(Instant::now());
-        if self.estop_pending() && !self.exclusive {
+        if self.sched.job_frame(self.estop_generation()).is_err() {
             return Err(BusError::Preempted);
         }
         if !self.link.is_up() {
             return Err(self.down_error());
-        }
-        Ok(())
-    }
-
-    fn interleave_control(&mut self) -> Result<(), BusError> {
-        self.collect_setpoints();
-        for _ in 0..MAX_INTERLEAVED {
-            if self.pending.is_empty() || self.estop_pending() {
-                break;
-            }
-            self.wait_until(self.link.clock.write_at())?;
-            if !self.send_control()? {
-                break;
-            }
         }
         Ok(())
     }

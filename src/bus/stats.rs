@@ -94,11 +94,11 @@ impl Owner {
     /// once when something happened that subscribers should see).
     pub(super) fn housekeeping(&mut self, now: Instant) {
         if let Some(window) = self.stats.roll(now, &self.link.counters) {
-            self.reg.roll_rates(window);
-            let timeout = self.link.clock.reply_deadline(now) - now;
+            self.sched.registry_mut().roll_rates(window);
+            let timeout = self.sched.clock().reply_timeout(now);
             self.stats.rates.reply_timeout_us = timeout.as_micros() as u64;
         }
-        if now >= self.stats.next_publish || !self.events.is_empty() {
+        if now >= self.stats.next_publish || self.sched.has_events() {
             self.publish(now);
         }
     }
@@ -111,7 +111,7 @@ impl Owner {
             path: self.cfg.path.display().to_string(),
             baud: self.link.baud(),
             link: self.link_state.clone(),
-            devices: self.reg.device_states(),
+            devices: self.sched.registry().device_states(),
             counters: self.link.counters.clone(),
             queue_depth: self.shared.queued.load(Ordering::Relaxed),
             published_at: now,
@@ -125,7 +125,7 @@ impl Owner {
                 .collect(),
         };
         self.shared.snapshot.send_replace(Arc::new(snapshot));
-        for event in self.events.drain(..) {
+        for event in self.sched.drain_events() {
             self.shared.emit(event);
         }
         self.stats.next_publish = now + self.stats.publish_every;

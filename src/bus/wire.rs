@@ -12,6 +12,21 @@ use std::time::{Duration, Instant};
 
 use super::config::{frame_time, Timing};
 
+/// The reply a transaction waits for: matched by device id and index.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Want {
+    pub dev_id: u8,
+    pub index: u8,
+}
+
+/// When the reply to a request is expected (`due`, the model) and when it
+/// counts as missing (`deadline`, the model plus margins).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReplyWindow {
+    pub due: Instant,
+    pub deadline: Instant,
+}
+
 /// The line as the owner believes it to be.
 #[derive(Debug, Clone)]
 pub struct WireClock {
@@ -99,6 +114,19 @@ impl WireClock {
     pub fn reply_deadline(&self, request_end: Instant) -> Instant {
         let allowance = (self.late_now(request_end) * LATE_FACTOR).min(MAX_LATE_ALLOWANCE);
         self.reply_due(request_end) + self.reply_margin + allowance
+    }
+
+    /// Both ends of the reply window of a request ending at `request_end`.
+    pub fn reply_window(&self, request_end: Instant) -> ReplyWindow {
+        ReplyWindow {
+            due: self.reply_due(request_end),
+            deadline: self.reply_deadline(request_end),
+        }
+    }
+
+    /// How long an unanswered request holds the line, if it ended `now`.
+    pub fn reply_timeout(&self, now: Instant) -> Duration {
+        self.reply_deadline(now) - now
     }
 
     /// A reply due at `due` arrived at `arrived`.
