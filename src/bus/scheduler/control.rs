@@ -38,6 +38,16 @@ impl Control {
         !self.pending.is_empty()
     }
 
+    #[cfg(test)]
+    pub(super) fn seen_seq(&self) -> u64 {
+        self.seen_seq
+    }
+
+    #[cfg(test)]
+    pub(super) fn peek_prepared(&self) -> Option<&Planned> {
+        self.prepared.as_ref().map(|(frame, _)| frame)
+    }
+
     pub(super) fn take_ack(&mut self) -> Option<WireAck> {
         self.ack.take()
     }

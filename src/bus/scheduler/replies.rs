@@ -69,9 +69,8 @@ impl Scheduler {
     }
 
     /// The port was lost at `now`: every device offline, pending setpoints
-    /// forgotten (what the store still holds, and any later write, goes out
-    /// once the bus is back... after the down spell drops it as stale), the
-    /// running request's phase over. Returns the wait before the first retry.
+    /// forgotten (and, while the bus is down, every new write skipped as
+    /// stale: see [`Scheduler::next`]). Returns the wait before the first retry.
     pub fn link_lost(&mut self, now: Instant) -> Duration {
         self.control.clear_prepared();
         self.control.clear_pending();
