@@ -26,24 +26,17 @@
 //! - `link`: the port: writes, reads, reply matching, frame log, reopen.
 //! - `stats`: rate windows and snapshot publication.
 
-mod baud;
 pub mod coalesce;
 pub mod config;
 pub mod error;
-mod estop;
 pub mod handle;
-mod jobs;
 mod link;
 mod owner;
 pub mod poll;
-mod recovery;
 pub mod registry;
-mod scan;
-mod schedule;
 pub mod scheduler;
 pub mod setpoints;
 pub mod state;
-mod stats;
 pub mod verify;
 pub mod wire;
 

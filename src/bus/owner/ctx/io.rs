@@ -1,20 +1,22 @@
-//! The owner's wire primitives: waiting for the line, putting setpoints on
-//! it (coalesced, acknowledged), telemetry polls, and the request/response
-//! transactions one-shot requests are made of.
+//! The owner's wire primitives: listening, writing the frames the
+//! scheduler planned, telemetry polls, and the request/response
+//! transactions one-shot requests are made of. Each feeds the scheduler
+//! what happened (frames sent, replies, timeouts, the port lost).
 //!
-//! Every frame is handed to the port when the [`super::wire::WireClock`]
-//! says the line is about to free; after a request that expects a reply,
+//! Every frame is handed to the port when the scheduler's line model says
+//! the line is about to free; after a request that expects a reply,
 //! nothing is written until the reply arrives or its deadline passes.
 
 use std::time::{Duration, Instant};
 
-use crate::protocol::{Command, Config, ConfigParam, InfoBlock, Reply};
+use crate::protocol::reply::RES_SUCCESS;
+use crate::protocol::{Command, Config, ConfigParam, InfoBlock, Reply, ReplyBody};
 
-use super::coalesce::Planned;
-use super::error::BusError;
-use super::link::Want;
-use super::owner::Owner;
-use super::registry::ReplyEffect;
+use super::Ctx;
+use crate::bus::coalesce::Planned;
+use crate::bus::error::BusError;
+use crate::bus::link::Want;
+use crate::bus::registry::ReplyEffect;
 
 /// How long before a reply is due the next control frame is planned:
 /// ample for planning, short enough that the setpoints it samples are fresh.
@@ -24,16 +26,16 @@ const LATE_WAIT_SLICE: Duration = Duration::from_millis(1);
 /// How long before a reply is due the owner stops sleeping.
 const SPIN_BEFORE_DUE: Duration = Duration::from_micros(10);
 
-impl Owner {
+impl Ctx {
     /// Listens until `at`; replies nobody waited for are taken in.
-    pub(super) fn wait_until(&mut self, at: Instant) -> Result<(), BusError> {
+    pub(crate) fn wait_until(&mut self, at: Instant) -> Result<(), BusError> {
         let waited = self.link.wait(None, at);
         self.absorb_inbox();
         waited.map(|_| ()).map_err(|e| self.lost(e))
     }
 
     /// Unsolicited replies: power-up announcements, late replies.
-    pub(super) fn absorb_inbox(&mut self) {
+    pub(crate) fn absorb_inbox(&mut self) {
         let inbox = std::mem::take(&mut self.link.inbox);
         for (reply, at) in &inbox {
             self.link.counters.unsolicited += 1;
@@ -49,13 +51,13 @@ impl Owner {
     }
 
     /// Hands host frames to the port; returns when the last one leaves the wire.
-    pub(super) fn send(&mut self, cmds: &[Command]) -> Result<Instant, BusError> {
+    pub(crate) fn send(&mut self, cmds: &[Command]) -> Result<Instant, BusError> {
         let handed = self.link.send(cmds).map_err(|e| self.lost(e))?;
         Ok(self.sched.sent(handed, cmds.len() as u32))
     }
 
     /// Writes a control frame the scheduler planned.
-    pub(super) fn send_planned(&mut self, frame: Planned) -> Result<(), BusError> {
+    pub(crate) fn send_planned(&mut self, frame: Planned) -> Result<(), BusError> {
         let end = self.send(&[frame.command])?;
         for (_, sp) in &frame.carries {
             self.stats
@@ -68,7 +70,7 @@ impl Owner {
     }
 
     /// One telemetry poll the scheduler picked.
-    pub(super) fn poll(&mut self, dev_id: u8, block: InfoBlock) -> Result<(), BusError> {
+    pub(crate) fn poll(&mut self, dev_id: u8, block: InfoBlock) -> Result<(), BusError> {
         self.link.counters.polls += 1;
         let want = Want {
             dev_id,
@@ -186,7 +188,7 @@ impl Owner {
 
     /// A request/response transaction of a one-shot request, retried
     /// `attempts` times in all. `None` after the last timeout.
-    pub(super) fn try_transact(
+    pub(crate) fn try_transact(
         &mut self,
         cmd: Config,
         want: Want,
@@ -205,13 +207,13 @@ impl Owner {
     }
 
     /// [`Self::try_transact`] with the configured retries; a timeout is an error.
-    pub(super) fn transact(&mut self, cmd: Config, want: Want) -> Result<Reply, BusError> {
+    pub(crate) fn transact(&mut self, cmd: Config, want: Want) -> Result<Reply, BusError> {
         let attempts = 1 + self.cfg.timing.retries;
         self.try_transact(cmd, want, attempts)?
             .ok_or_else(|| self.timeout_error(want.dev_id, &cmd.param, attempts))
     }
 
-    pub(super) fn timeout_error(&self, dev_id: u8, param: &ConfigParam, attempts: u32) -> BusError {
+    pub(crate) fn timeout_error(&self, dev_id: u8, param: &ConfigParam, attempts: u32) -> BusError {
         let timeout = self.sched.clock().reply_timeout(Instant::now());
         BusError::Timeout {
             dev_id,
@@ -222,7 +224,7 @@ impl Owner {
     }
 
     /// Writes frames of a one-shot request that expect no reply.
-    pub(super) fn job_send(&mut self, cmds: &[Command]) -> Result<(), BusError> {
+    pub(crate) fn job_send(&mut self, cmds: &[Command]) -> Result<(), BusError> {
         self.before_job_frame()?;
         self.send(cmds)?;
         Ok(())
@@ -257,10 +259,28 @@ impl Owner {
 }
 
 /// What a config frame does, for error messages.
-pub(super) fn describe(param: &ConfigParam) -> String {
+fn describe(param: &ConfigParam) -> String {
     let (index, value) = param.index_value();
     match param {
         ConfigParam::ReadInfo(block) => format!("read {block:?}"),
         _ => format!("write index {index} = {value}"),
+    }
+}
+
+/// Checks a RES reply: 1 is success.
+pub(crate) fn check_res(reply: &Reply, param: &ConfigParam) -> Result<(), BusError> {
+    match reply.body() {
+        ReplyBody::Res { code, .. } if code == RES_SUCCESS => Ok(()),
+        ReplyBody::Res { code, .. } => Err(BusError::Refused {
+            dev_id: reply.dev_id,
+            what: describe(param),
+            code,
+        }),
+        _ => Err(BusError::Invalid(format!(
+            "device {} answered {} with index {} instead of RES",
+            reply.dev_id,
+            describe(param),
+            reply.index
+        ))),
     }
 }

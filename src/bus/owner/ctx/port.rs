@@ -9,16 +9,16 @@ use std::time::{Duration, Instant};
 
 use crate::transport::tty::PortNote;
 
-use super::error::BusError;
-use super::handle::{BusEvent, LinkState};
-use super::owner::Owner;
+use super::Ctx;
+use crate::bus::error::BusError;
+use crate::bus::handle::{BusEvent, LinkState};
 
 /// How often a down bus looks at its requests and e-stops.
 const DOWN_TICK: Duration = Duration::from_millis(10);
 
-impl Owner {
+impl Ctx {
     /// A down bus: reopens the port at `open_at`, failing requests meanwhile.
-    pub(super) fn while_down(&mut self, now: Instant, open_at: Instant) {
+    pub(crate) fn while_down(&mut self, now: Instant, open_at: Instant) {
         self.housekeeping(now);
         if now >= open_at {
             self.try_open();
@@ -28,14 +28,14 @@ impl Owner {
         match self.requests.recv_timeout(wait) {
             Ok(req) => {
                 self.shared.queued.fetch_sub(1, Ordering::Relaxed);
-                super::jobs::fail(req, self.down_error());
+                req.fail(self.down_error());
             }
             Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => {}
         }
     }
 
     /// Opens the port; the scheduler then listens a while before writing.
-    pub(super) fn try_open(&mut self) {
+    pub(crate) fn try_open(&mut self) {
         match self.link.open() {
             Ok(notes) => {
                 self.note_port(notes);
@@ -60,7 +60,7 @@ impl Owner {
     }
 
     /// The port failed: the bus is down until it reopens.
-    pub(super) fn lost(&mut self, e: io::Error) -> BusError {
+    pub(crate) fn lost(&mut self, e: io::Error) -> BusError {
         self.link.close();
         let retry = self.sched.link_lost(Instant::now());
         self.mark_down(format!("port lost: {e}"), retry);
@@ -82,7 +82,7 @@ impl Owner {
         };
     }
 
-    pub(super) fn down_error(&self) -> BusError {
+    pub(crate) fn down_error(&self) -> BusError {
         let reason = match &self.link_state {
             LinkState::Down { reason, .. } => reason.clone(),
             LinkState::Opening => "port not open yet".into(),
@@ -119,5 +119,33 @@ impl Owner {
             };
             self.port_notes.push(text);
         }
+    }
+}
+
+impl Ctx {
+    /// The port's speed now.
+    pub(crate) fn baud(&self) -> u32 {
+        self.link.baud()
+    }
+
+    /// Switches the port to `baud` once every host frame queued has left
+    /// (it would go out at the wrong speed); frames take another time from now.
+    pub(crate) fn switch_port(&mut self, baud: u32) -> Result<(), BusError> {
+        self.wait_until(self.sched.clock().free_at())?;
+        self.link.set_baud(baud).map_err(|e| self.lost(e))?;
+        self.cfg.baud = baud;
+        self.sched.set_baud(baud);
+        Ok(())
+    }
+
+    /// Forgets every setpoint, in the store and on their way (e-stop, shutdown).
+    pub(crate) fn drop_all_setpoints(&mut self) {
+        self.shared.setpoints.clear(None);
+        self.sched.drop_setpoints(&self.shared.setpoints);
+    }
+
+    /// True while the port is open.
+    pub(crate) fn link_is_up(&self) -> bool {
+        self.link.is_up()
     }
 }
