@@ -13,7 +13,7 @@ use crate::transport::Transport;
 
 use super::config::{frame_time, Timing};
 use super::handle::{BusCounters, BusShared, LoggedFrame};
-pub use super::wire::Want;
+use super::wire::Want;
 
 /// Opens the port at a baud: a tty by path for real buses.
 pub type Opener =

@@ -3,13 +3,14 @@
 //! the new one), then the port; each device is then read back at the new
 //! baud. If a device refuses, the ones already switched are switched back.
 
+use crate::bus::error::BusError;
+use crate::bus::handle::BusEvent;
+use crate::bus::wire::Want;
 use crate::protocol::command::index;
 use crate::protocol::{BaudLevel, Config, ConfigParam, Info04, InfoBlock};
 
-use super::ctx::{check_res, Ctx};
-use crate::bus::error::BusError;
-use crate::bus::handle::BusEvent;
-use crate::bus::link::Want;
+use super::confirm::check_res;
+use super::ctx::Ctx;
 
 pub(super) fn set_baud(ctx: &mut Ctx, baud: u32) -> Result<(), BusError> {
     let level = BaudLevel::from_baud(baud).ok_or_else(|| {

@@ -6,12 +6,12 @@
 
 use std::time::Instant;
 
+use crate::bus::error::BusError;
+use crate::bus::handle::{BusEvent, EstopReport};
 use crate::protocol::reply::fsm;
 use crate::protocol::{Command, Control, ALL_DEVICES};
 
 use super::ctx::Ctx;
-use crate::bus::error::BusError;
-use crate::bus::handle::{BusEvent, EstopReport};
 
 /// States in which a joint module powers its motor (SPEC §5 fsm; rev 2.0.8's
 /// `6 start` included).

@@ -3,10 +3,14 @@
 //! - Enable/disable use standard control frames (SPEC errata 3) and are
 //!   confirmed by the fsm in a fresh INFO_01.
 //! - Config writes are confirmed by RES or by reading the INFO block back
-//!   (see [`super::verify`]); a mismatch is an error to the caller.
+//!   (see [`crate::bus::verify`]); a mismatch is an error to the caller.
 //! - An id change moves the registry entry and the setpoint slot; a baud
 //!   change switches every device first, then the port.
 
+use crate::bus::error::BusError;
+use crate::bus::handle::{BusEvent, Targets, WriteOutcome};
+use crate::bus::verify::{confirmation, Confirm};
+use crate::bus::wire::Want;
 use crate::protocol::command::index;
 use crate::protocol::reply::{fault_name, fsm, fsm_name};
 use crate::protocol::{
@@ -14,12 +18,8 @@ use crate::protocol::{
     Reply, ReplyBody, ALL_DEVICES,
 };
 
-use super::ctx::check_res;
+use super::confirm::check_res;
 use super::ctx::Ctx;
-use crate::bus::error::BusError;
-use crate::bus::handle::{BusEvent, Targets, WriteOutcome};
-use crate::bus::link::Want;
-use crate::bus::verify::{confirmation, Confirm};
 
 /// INFO_01 reads that may pass before an enable/disable shows in the fsm.
 const FSM_CHECKS: u32 = 3;

@@ -10,9 +10,11 @@
 //!
 //! - `ctx`: what the owner's code works with (port, scheduler, publication).
 //! - `jobs`, `estop`, `scan`, `baud`: one-shot requests, functions of a `&mut Ctx`.
+//! - `confirm`: reading a RES, naming a config frame in errors.
 //! - `stats`: rate windows.
 
 mod baud;
+mod confirm;
 mod ctx;
 mod estop;
 mod jobs;

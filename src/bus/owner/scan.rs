@@ -5,12 +5,12 @@
 
 use std::time::Instant;
 
+use crate::bus::error::BusError;
+use crate::bus::wire::Want;
 use crate::protocol::command::index;
 use crate::protocol::{is_device_id, Config, InfoBlock};
 
 use super::ctx::Ctx;
-use crate::bus::error::BusError;
-use crate::bus::link::Want;
 
 pub(super) fn scan(ctx: &mut Ctx, first: u8, last: u8) -> Result<Vec<u8>, BusError> {
     if !is_device_id(first) || !is_device_id(last) || first > last {

@@ -1,5 +1,5 @@
 //! How one-shot requests share the wire: setpoints may go out between two
-//! frames of a request (at most [`MAX_INTERLEAVED`], so a long scan does not
+//! frames of a request (at most [`MAX_INTERLEAVED`](super::MAX_INTERLEAVED), so a long scan does not
 //! freeze the joints), an e-stop preempts a request before its next frame,
 //! and in an exclusive phase (devices and port at different bauds) neither
 //! happens: an e-stop's frames would not reach everyone.
@@ -9,14 +9,7 @@ use std::time::Instant;
 use crate::bus::coalesce::Planned;
 use crate::bus::setpoints::SetpointStore;
 
-use super::{JobPhase, Scheduler};
-
-/// Setpoint frames that may go out between two frames of a one-shot request.
-pub const MAX_INTERLEAVED: u32 = 2;
-
-/// An e-stop is waiting: the request must give way before its next frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Preempted;
+use super::{JobPhase, Preempted, Scheduler, MAX_INTERLEAVED};
 
 impl Scheduler {
     /// A one-shot request starts outside [`Scheduler::next`] (the e-stop's

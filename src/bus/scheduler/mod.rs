@@ -11,7 +11,7 @@
 //!
 //! Its parts are the pure pieces beside it: the [`WireClock`] (when the line
 //! frees, reply windows), the [`ControlBudget`] and [`PollPlanner`], the
-//! coalescer (through [`control`]) and the [`Registry`].
+//! coalescer (through `control`) and the [`Registry`].
 
 mod control;
 mod jobs;
@@ -31,8 +31,15 @@ use crate::bus::state::{BusEvent, WireAck};
 use crate::bus::wire::{ReplyWindow, Want, WireClock};
 use crate::protocol::InfoBlock;
 
-pub use jobs::{Preempted, MAX_INTERLEAVED};
 pub use reopen::{BACKOFF_FIRST, BACKOFF_MAX, LISTEN_ON_OPEN};
+
+/// Setpoint frames that may go out between two frames of a one-shot
+/// request, so a long scan does not freeze the joints.
+pub const MAX_INTERLEAVED: u32 = 2;
+
+/// An e-stop is waiting: the request must give way before its next frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Preempted;
 
 /// How long the owner listens when there is nothing to send. Bounds how
 /// late it notices a request or setpoint on an idle bus.

@@ -9,14 +9,14 @@
 
 use std::time::{Duration, Instant};
 
-use crate::protocol::reply::RES_SUCCESS;
-use crate::protocol::{Command, Config, ConfigParam, InfoBlock, Reply, ReplyBody};
-
-use super::Ctx;
 use crate::bus::coalesce::Planned;
 use crate::bus::error::BusError;
-use crate::bus::link::Want;
+use crate::bus::owner::confirm::describe;
 use crate::bus::registry::ReplyEffect;
+use crate::bus::wire::Want;
+use crate::protocol::{Command, Config, ConfigParam, InfoBlock, Reply};
+
+use super::Ctx;
 
 /// How long before a reply is due the next control frame is planned:
 /// ample for planning, short enough that the setpoints it samples are fresh.
@@ -255,32 +255,5 @@ impl Ctx {
             return Err(self.down_error());
         }
         Ok(())
-    }
-}
-
-/// What a config frame does, for error messages.
-fn describe(param: &ConfigParam) -> String {
-    let (index, value) = param.index_value();
-    match param {
-        ConfigParam::ReadInfo(block) => format!("read {block:?}"),
-        _ => format!("write index {index} = {value}"),
-    }
-}
-
-/// Checks a RES reply: 1 is success.
-pub(crate) fn check_res(reply: &Reply, param: &ConfigParam) -> Result<(), BusError> {
-    match reply.body() {
-        ReplyBody::Res { code, .. } if code == RES_SUCCESS => Ok(()),
-        ReplyBody::Res { code, .. } => Err(BusError::Refused {
-            dev_id: reply.dev_id,
-            what: describe(param),
-            code,
-        }),
-        _ => Err(BusError::Invalid(format!(
-            "device {} answered {} with index {} instead of RES",
-            reply.dev_id,
-            describe(param),
-            reply.index
-        ))),
     }
 }

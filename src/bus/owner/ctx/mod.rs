@@ -25,8 +25,6 @@ use crate::bus::setpoints::SetpointStore;
 
 use super::stats::Stats;
 
-pub(crate) use io::check_res;
-
 pub(crate) struct Ctx {
     cfg: BusConfig,
     shared: Arc<BusShared>,

@@ -7,11 +7,11 @@ use std::sync::atomic::Ordering;
 use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
+use crate::bus::error::BusError;
+use crate::bus::handle::{BusEvent, LinkState};
 use crate::transport::tty::PortNote;
 
 use super::Ctx;
-use crate::bus::error::BusError;
-use crate::bus::handle::{BusEvent, LinkState};
 
 /// How often a down bus looks at its requests and e-stops.
 const DOWN_TICK: Duration = Duration::from_millis(10);
