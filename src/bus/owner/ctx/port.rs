@@ -20,6 +20,11 @@ impl Ctx {
     /// A down bus: reopens the port at `open_at`, failing requests meanwhile.
     pub(crate) fn while_down(&mut self, now: Instant, open_at: Instant) {
         self.housekeeping(now);
+        // Taken while the port was up, its slot never came: it fails like
+        // every request that meets a down bus.
+        if let Some(req) = self.held.take() {
+            req.fail(self.down_error());
+        }
         if now >= open_at {
             self.try_open();
             return;
