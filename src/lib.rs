@@ -9,6 +9,7 @@
 //! - [`bus`]: one owner thread per bus, its scheduler, and the handle the API uses.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty, in-memory pipe).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory).
+//! - [`rt`]: real-time thread helpers (timer slack, FIFO class) for the bus owner and the simulator.
 //! - `bench` (feature `bench`): `jointd bench`: the bus engine against the simulator, measured.
 
 #[cfg(feature = "bench")]
@@ -18,5 +19,6 @@ pub mod cli;
 pub mod daemon;
 pub mod http;
 pub mod protocol;
+pub mod rt;
 pub mod sim;
 pub mod transport;

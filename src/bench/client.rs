@@ -56,7 +56,7 @@ impl Client {
             .spawn(move || {
                 if priority > 0 {
                     // Best effort: the bench reports whether it got it.
-                    let _ = crate::bus::wire::set_fifo(0, priority);
+                    let _ = crate::rt::set_fifo(0, priority);
                 }
                 stream(&bus, &ids, period, &flag)
             })?;
@@ -71,7 +71,7 @@ impl Client {
 }
 
 fn stream(bus: &BusHandle, ids: &[u8], period: Duration, stop: &AtomicBool) -> Vec<Write> {
-    crate::bus::wire::precise_timers();
+    crate::rt::precise_timers();
     let mut writes = Vec::new();
     let mut pacer = Pacer::new(period);
     let mut targets: Vec<(u8, Setpoint)> = Vec::with_capacity(ids.len());

@@ -258,7 +258,7 @@ fn referee_realtime() -> Result<(), BenchError> {
         tids = cpu::tids(SIM_THREAD);
     }
     for tid in tids {
-        crate::bus::wire::set_fifo(tid, SIM_PRIORITY).map_err(|e| {
+        crate::rt::set_fifo(tid, SIM_PRIORITY).map_err(|e| {
             BenchError::Setup(format!(
                 "real-time priority for the simulator refused ({e}); run with --no-rt"
             ))

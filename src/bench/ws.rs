@@ -265,7 +265,7 @@ fn batch(ids: &[u8], n: u64) -> String {
 }
 
 fn stream(mut ws: Socket, ids: &[u8], period: Duration, stop: &AtomicBool) -> Vec<Write> {
-    crate::bus::wire::precise_timers();
+    crate::rt::precise_timers();
     let mut writes = Vec::new();
     let mut pacer = Pacer::new(period);
     while !stop.load(Ordering::Acquire) {

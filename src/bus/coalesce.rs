@@ -23,7 +23,7 @@ use std::time::Instant;
 
 use crate::protocol::{BroadcastPos, BroadcastSpd, Command, Control, Group};
 
-use super::handle::{Setpoint, StoredSetpoint};
+use super::setpoints::{Setpoint, StoredSetpoint};
 
 /// What the planner needs to know about one device on the bus.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

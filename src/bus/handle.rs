@@ -128,6 +128,26 @@ pub enum Request {
     },
 }
 
+impl Request {
+    /// Answers the request with `err` without running it (bus down, e-stop,
+    /// stop). A caller that gave up has dropped its receiver: nothing to tell.
+    pub(crate) fn fail(self, err: BusError) {
+        match self {
+            Request::Enable { reply, .. }
+            | Request::Disable { reply, .. }
+            | Request::Jog { reply, .. }
+            | Request::Rezero { reply, .. }
+            | Request::SetMode { reply, .. }
+            | Request::SetBaud { reply, .. } => drop(reply.send(Err(err))),
+            Request::ReadInfo { reply, .. } => drop(reply.send(Err(err))),
+            Request::WriteConfig { reply, .. }
+            | Request::WriteFlash { reply, .. }
+            | Request::SetId { reply, .. } => drop(reply.send(Err(err))),
+            Request::Scan { reply, .. } => drop(reply.send(Err(err))),
+        }
+    }
+}
+
 /// How long a request may wait for the owner before the caller gives up.
 pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
 

@@ -1,19 +1,19 @@
-//! The port and the only code that touches it: writes host frames (paced by
-//! the [`WireClock`]), reads and decodes what comes back, matches the reply
-//! a transaction waits for and keeps the rest for the owner, counts and logs
-//! every frame, and reopens the port after it was lost.
+//! The port and the only code that touches it: writes host frames (when the
+//! scheduler's line model says so), reads and decodes what comes back,
+//! matches the reply a transaction waits for and keeps the rest for the
+//! owner, counts and logs every frame, and reopens the port after it was lost.
 
 use std::io;
 use std::sync::Arc;
-use std::time::{Instant, SystemTime};
+use std::time::{Duration, Instant, SystemTime};
 
 use crate::protocol::{Command, FrameBytes, Message, Reply, StreamDecoder, FRAME_LEN};
 use crate::transport::tty::{PortNote, PortSetup, TtyPort};
 use crate::transport::Transport;
 
-use super::config::Timing;
+use super::config::{frame_time, Timing};
 use super::handle::{BusCounters, BusShared, LoggedFrame};
-use super::wire::WireClock;
+use super::wire::Want;
 
 /// Opens the port at a baud: a tty by path for real buses.
 pub type Opener =
@@ -29,13 +29,6 @@ pub fn tty_opener(path: std::path::PathBuf, rs485: bool) -> Opener {
     })
 }
 
-/// The reply a transaction waits for: matched by device id and index.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Want {
-    pub dev_id: u8,
-    pub index: u8,
-}
-
 /// Bytes read per system call; a few frames.
 const READ_BUF: usize = 256;
 
@@ -49,7 +42,10 @@ pub struct Link {
     decoder: StreamDecoder,
     buf: [u8; READ_BUF],
     tx: Vec<u8>,
-    pub clock: WireClock,
+    /// Wire time of one frame and of one reply (turnaround included), for
+    /// the busy-time counter.
+    frame: Duration,
+    turnaround: Duration,
     pub counters: BusCounters,
     shared: Arc<BusShared>,
     /// Replies nobody was waiting for (power-up announcements, late replies).
@@ -76,7 +72,8 @@ impl Link {
             decoder: StreamDecoder::new(),
             buf: [0; READ_BUF],
             tx: Vec::with_capacity(FRAME_LEN * 32),
-            clock: WireClock::new(baud, timing, Instant::now()),
+            frame: frame_time(baud),
+            turnaround: Duration::from_micros(timing.turnaround_us),
             counters: BusCounters::default(),
             shared,
             inbox: Vec::new(),
@@ -111,7 +108,6 @@ impl Link {
         }
         self.decoder.clear();
         self.up = true;
-        self.clock.line_free(Instant::now());
         Ok(notes)
     }
 
@@ -130,8 +126,7 @@ impl Link {
         }
     }
 
-    /// Hands `cmds` to the port back to back; returns when the last one's
-    /// last byte leaves the wire.
+    /// Hands `cmds` to the port back to back; returns when it handed them.
     pub fn send(&mut self, cmds: &[Command]) -> io::Result<Instant> {
         self.tx.clear();
         for cmd in cmds {
@@ -141,17 +136,16 @@ impl Link {
             (true, Some(port)) => port.write_all(&self.tx)?,
             _ => return Err(not_open()),
         }
-        let now = Instant::now();
+        let handed = Instant::now();
         let n = cmds.len() as u32;
-        let end = self.clock.host_frames(now, n);
-        self.counters.wire_busy_us += (self.clock.frame_time() * n).as_micros() as u64;
+        self.counters.wire_busy_us += (self.frame * n).as_micros() as u64;
         for (cmd, bytes) in cmds.iter().zip(self.tx.chunks_exact(FRAME_LEN)) {
             count_tx(&mut self.counters, cmd);
             if let Ok(bytes) = bytes.try_into() {
                 self.log(true, bytes);
             }
         }
-        Ok(end)
+        Ok(handed)
     }
 
     /// Reads until `want` arrives or `deadline` passes. Other replies go to
@@ -198,8 +192,7 @@ impl Link {
             let Ok(Message::Reply(reply)) = Message::from_frame(&frame) else {
                 continue;
             };
-            self.clock.line_free(at);
-            self.counters.wire_busy_us += self.clock.reply_cost().as_micros() as u64;
+            self.counters.wire_busy_us += (self.turnaround + self.frame).as_micros() as u64;
             let wanted = want.is_some_and(|w| w.dev_id == reply.dev_id && w.index == reply.index);
             if wanted && found.is_none() {
                 found = Some((reply, at));
@@ -221,7 +214,7 @@ impl Link {
         port.discard_input()?;
         self.decoder.clear();
         self.baud = baud;
-        self.clock.set_baud(baud);
+        self.frame = frame_time(baud);
         Ok(())
     }
 
@@ -250,7 +243,6 @@ mod tests {
     use crate::bus::handle::BusSnapshot;
     use crate::protocol::{Config, InfoBlock, ReplyBody};
     use crate::transport::memory;
-    use std::time::Duration;
 
     fn link_pair() -> (Link, memory::MemoryPort) {
         let (host, dev) = memory::pair(500_000);
@@ -269,8 +261,7 @@ mod tests {
     #[test]
     fn the_wanted_reply_is_returned_and_others_kept() {
         let (mut link, mut dev) = link_pair();
-        let end = link
-            .send(&[Command::Config(Config::read(3, InfoBlock::Info02))])
+        link.send(&[Command::Config(Config::read(3, InfoBlock::Info02))])
             .unwrap();
         let other = Reply::new(9, ReplyBody::Res { index: 13, code: 1 });
         let wanted = Reply::new(3, ReplyBody::Unknown { index: 2 });
@@ -283,7 +274,7 @@ mod tests {
             index: 2,
         };
         let got = link
-            .wait(Some(want), link.clock.reply_deadline(end))
+            .wait(Some(want), Instant::now() + Duration::from_millis(50))
             .unwrap();
         assert_eq!(got.map(|(r, _)| r), Some(wanted));
         assert_eq!(link.inbox.len(), 1);

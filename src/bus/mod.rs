@@ -8,41 +8,41 @@
 //! channels and watches.
 //!
 //! # Layout
-//! - [`handle`]: the cloneable handle and the requests it sends (the API's contract).
-//! - [`setpoints`]: the latest-value store of joint targets.
-//! - [`state`]: what the owner publishes: snapshot, events, frame log, wire acks.
+//! One-way layers: each room imports only from the rooms listed above it.
+//!
+//! The contract and pure data:
 //! - [`error`]: the bus errors, one HTTP status each.
 //! - [`config`]: [`BusConfig`]: port, baud, expected ids, poll plan, timing.
-//! - `owner`: the thread: priorities, the order of work, shutdown.
-//! - `estop`: the e-stop: disable frames first, then a read-back of every device.
-//! - `recovery`: a lost port: bus down, devices offline, reopen with backoff.
-//! - `schedule`: wire primitives: setpoints out, polls, transactions.
-//! - `jobs`, `baud`, `scan`: one-shot requests (enable, verified writes, id and baud change, scan).
-//! - [`coalesce`]: pending setpoints → cheapest correct frames (pure).
-//! - [`poll`]: control budget and poll plan (pure).
-//! - [`wire`]: the line model: when frames leave, when a reply is overdue (pure).
-//! - [`verify`]: how each config write is confirmed (pure).
+//! - [`setpoints`]: the latest-value store of joint targets.
+//! - [`state`]: what the owner publishes: snapshot, events, frame log, wire acks.
+//! - [`handle`]: the cloneable handle and the requests it sends (the API's contract).
+//!
+//! The pure parts the scheduler is made of:
+//! - [`wire`]: the line model: when frames leave, when a reply is due or overdue.
+//! - [`poll`]: control budget and poll plan.
+//! - [`coalesce`]: pending setpoints → cheapest correct frames.
 //! - [`registry`]: per-device state, online/offline, rates.
+//! - [`verify`]: how each config write is confirmed.
+//!
+//! Decisions, then I/O:
+//! - [`scheduler`]: what goes on the wire next: `next(now, work) -> Slot`,
+//!   fed with what happened (pure, no I/O, no clock; unit-tested alone).
 //! - `link`: the port: writes, reads, reply matching, frame log, reopen.
-//! - `stats`: rate windows and snapshot publication.
+//! - `owner`: the thread: asks the scheduler, does the slot's I/O; its
+//!   `ctx` (port + scheduler + publication) is all one-shot requests
+//!   (`jobs`, `estop`, `scan`, `baud`) get to work with.
 
-mod baud;
 pub mod coalesce;
 pub mod config;
 pub mod error;
-mod estop;
 pub mod handle;
-mod jobs;
 mod link;
 mod owner;
 pub mod poll;
-mod recovery;
 pub mod registry;
-mod scan;
-mod schedule;
+pub mod scheduler;
 pub mod setpoints;
 pub mod state;
-mod stats;
 pub mod verify;
 pub mod wire;
 

@@ -11,8 +11,9 @@ use crate::protocol::reply::{fault_name, fsm};
 use crate::protocol::{CtrlMode, Info01, Reply, ReplyBody};
 
 use super::coalesce::SlotInfo;
-use super::handle::{BusEvent, DeviceState, Setpoint};
 use super::poll::PollState;
+use super::setpoints::Setpoint;
+use super::state::{BusEvent, DeviceState};
 
 /// One device as the owner tracks it.
 #[derive(Debug, Clone)]

@@ -176,7 +176,7 @@ pub struct LoggedFrame {
 /// The latest setpoint write that reached the wire, for acknowledgements.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct WireAck {
-    /// Highest [`SetpointStore`] sequence number whose frame has been written
+    /// Highest [`SetpointStore`](super::setpoints::SetpointStore) sequence number whose frame has been written
     /// (every joint of that write is on the wire).
     pub seq: u64,
     /// When the last byte of that frame is due on the wire.

@@ -12,6 +12,21 @@ use std::time::{Duration, Instant};
 
 use super::config::{frame_time, Timing};
 
+/// The reply a transaction waits for: matched by device id and index.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Want {
+    pub dev_id: u8,
+    pub index: u8,
+}
+
+/// When the reply to a request is expected (`due`, the model) and when it
+/// counts as missing (`deadline`, the model plus margins).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReplyWindow {
+    pub due: Instant,
+    pub deadline: Instant,
+}
+
 /// The line as the owner believes it to be.
 #[derive(Debug, Clone)]
 pub struct WireClock {
@@ -101,6 +116,19 @@ impl WireClock {
         self.reply_due(request_end) + self.reply_margin + allowance
     }
 
+    /// Both ends of the reply window of a request ending at `request_end`.
+    pub fn reply_window(&self, request_end: Instant) -> ReplyWindow {
+        ReplyWindow {
+            due: self.reply_due(request_end),
+            deadline: self.reply_deadline(request_end),
+        }
+    }
+
+    /// How long an unanswered request holds the line, if it ended `now`.
+    pub fn reply_timeout(&self, now: Instant) -> Duration {
+        self.reply_deadline(now) - now
+    }
+
     /// A reply due at `due` arrived at `arrived`.
     pub fn observe_reply(&mut self, due: Instant, arrived: Instant) {
         let late = arrived.saturating_duration_since(due);
@@ -124,35 +152,6 @@ impl WireClock {
     pub fn reply_cost(&self) -> Duration {
         self.turnaround + self.frame
     }
-}
-
-/// Makes this thread's timed waits precise: Linux otherwise lets a timer fire
-/// up to 50 µs late (timer slack), an eighth of a frame at 500000 baud.
-pub fn precise_timers() {
-    /// The smallest slack the kernel accepts (0 would mean "reset to default").
-    const SLACK_NS: libc::c_ulong = 1;
-    // SAFETY: PR_SET_TIMERSLACK takes one integer argument and touches no memory.
-    let rc = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, SLACK_NS, 0, 0, 0) };
-    if rc != 0 {
-        tracing::debug!(
-            "PR_SET_TIMERSLACK failed: {}",
-            std::io::Error::last_os_error()
-        );
-    }
-}
-
-/// Puts thread `tid` (0: the calling thread) in the real-time FIFO class at
-/// `priority` (1..=99), so other work on the machine cannot hold it back for
-/// milliseconds while the wire waits. Needs CAP_SYS_NICE or an RTPRIO limit.
-pub fn set_fifo(tid: libc::pid_t, priority: u8) -> std::io::Result<()> {
-    let param = libc::sched_param {
-        sched_priority: libc::c_int::from(priority),
-    };
-    // SAFETY: a valid sched_param; on Linux the pid argument names a thread.
-    if unsafe { libc::sched_setscheduler(tid, libc::SCHED_FIFO, &param) } != 0 {
-        return Err(std::io::Error::last_os_error());
-    }
-    Ok(())
 }
 
 #[cfg(test)]

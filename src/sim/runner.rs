@@ -84,29 +84,13 @@ pub fn lock_engine(engine: &Mutex<Engine>) -> MutexGuard<'_, Engine> {
     engine.lock().unwrap_or_else(|p| p.into_inner())
 }
 
-/// Lets `sleep`/`ppoll` wake on time instead of up to 50 µs late.
-fn set_timer_slack() {
-    // SAFETY: PR_SET_TIMERSLACK takes one integer argument and touches only this thread.
-    unsafe {
-        libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0);
-    }
-}
-
 /// A low real-time priority: above every normal thread, below the kernel's own.
-const REALTIME_PRIORITY: libc::c_int = 10;
+const REALTIME_PRIORITY: u8 = 10;
 
 /// Moves this thread to SCHED_FIFO; a refusal (no privilege) is only logged.
 fn set_realtime() {
-    let param = libc::sched_param {
-        sched_priority: REALTIME_PRIORITY,
-    };
-    // SAFETY: pid 0 is this thread; `param` is a valid sched_param.
-    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
-    if rc != 0 {
-        tracing::warn!(
-            "simulator: no real-time scheduling: {}",
-            std::io::Error::last_os_error()
-        );
+    if let Err(e) = crate::rt::set_fifo(0, REALTIME_PRIORITY) {
+        tracing::warn!("simulator: no real-time scheduling: {e}");
     }
 }
 
@@ -119,7 +103,7 @@ struct Runner {
 
 /// The thread body: runs until shutdown is requested.
 pub fn run(engine: Arc<Mutex<Engine>>, line: Box<dyn Line>, ctl: Arc<Control>, realtime: bool) {
-    set_timer_slack();
+    crate::rt::precise_timers();
     if realtime {
         set_realtime();
     }

@@ -2,19 +2,16 @@
 //! wire utilisation as the daemon sees it, timeouts, setpoint age) and the
 //! periodic snapshot the API reads.
 
-use std::sync::atomic::Ordering;
-use std::sync::Arc;
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant};
 
-use super::handle::{BusCounters, BusRates, BusSnapshot};
-use super::owner::Owner;
+use crate::bus::handle::{BusCounters, BusRates};
 
 /// Length of the window rates are computed over.
 const WINDOW: Duration = Duration::from_secs(1);
 /// Setpoint ages kept per window (16 joints at ~500 updates/s fit easily).
 const MAX_AGE_SAMPLES: usize = 50_000;
 
-pub(super) struct Stats {
+pub(crate) struct Stats {
     window_start: Instant,
     base: BusCounters,
     ages_us: Vec<u64>,
@@ -24,7 +21,7 @@ pub(super) struct Stats {
 }
 
 impl Stats {
-    pub(super) fn new(publish_every: Duration, now: Instant) -> Self {
+    pub(crate) fn new(publish_every: Duration, now: Instant) -> Self {
         Self {
             window_start: now,
             base: BusCounters::default(),
@@ -36,19 +33,38 @@ impl Stats {
     }
 
     /// Age of a setpoint when the last byte of its frame is due on the wire.
-    pub(super) fn setpoint_age(&mut self, age: Duration) {
+    pub(crate) fn setpoint_age(&mut self, age: Duration) {
         if self.ages_us.len() < MAX_AGE_SAMPLES {
             self.ages_us.push(age.as_micros() as u64);
         }
     }
 
     /// The snapshot is more than one period late.
-    pub(super) fn overdue(&self, now: Instant) -> bool {
+    pub(crate) fn overdue(&self, now: Instant) -> bool {
         now > self.next_publish + self.publish_every
     }
 
+    /// The snapshot is due (or overdue).
+    pub(crate) fn due(&self, now: Instant) -> bool {
+        now >= self.next_publish
+    }
+
+    /// A snapshot went out at `now`: the next is due a period later.
+    pub(crate) fn published(&mut self, now: Instant) {
+        self.next_publish = now + self.publish_every;
+    }
+
+    pub(crate) fn rates(&self) -> &BusRates {
+        &self.rates
+    }
+
+    /// The reply timeout as of the last window (shown with the rates).
+    pub(crate) fn set_reply_timeout(&mut self, timeout: Duration) {
+        self.rates.reply_timeout_us = timeout.as_micros() as u64;
+    }
+
     /// Closes the window if it is over; returns its length when it did.
-    fn roll(&mut self, now: Instant, counters: &BusCounters) -> Option<Duration> {
+    pub(crate) fn roll(&mut self, now: Instant, counters: &BusCounters) -> Option<Duration> {
         let window = now.saturating_duration_since(self.window_start);
         if window < WINDOW {
             return None;
@@ -86,49 +102,6 @@ fn rates(base: &BusCounters, now: &BusCounters, window: Duration, ages: &mut [u6
         setpoint_age_p99_us: pct(0.99),
         setpoint_age_max_us: ages.last().copied().unwrap_or(0),
         reply_timeout_us: 0,
-    }
-}
-
-impl Owner {
-    /// Rolls the rate window and publishes the snapshot when due (or at
-    /// once when something happened that subscribers should see).
-    pub(super) fn housekeeping(&mut self, now: Instant) {
-        if let Some(window) = self.stats.roll(now, &self.link.counters) {
-            self.reg.roll_rates(window);
-            let timeout = self.link.clock.reply_deadline(now) - now;
-            self.stats.rates.reply_timeout_us = timeout.as_micros() as u64;
-        }
-        if now >= self.stats.next_publish || !self.events.is_empty() {
-            self.publish(now);
-        }
-    }
-
-    /// Publishes the snapshot, then the events (so a subscriber who hears
-    /// of a change finds it in the snapshot).
-    pub(super) fn publish(&mut self, now: Instant) {
-        let snapshot = BusSnapshot {
-            name: self.cfg.name.clone(),
-            path: self.cfg.path.display().to_string(),
-            baud: self.link.baud(),
-            link: self.link_state.clone(),
-            devices: self.reg.device_states(),
-            counters: self.link.counters.clone(),
-            queue_depth: self.shared.queued.load(Ordering::Relaxed),
-            published_at: now,
-            published_wall: SystemTime::now(),
-            rates: self.stats.rates.clone(),
-            port_notes: self
-                .thread_notes
-                .iter()
-                .chain(&self.port_notes)
-                .cloned()
-                .collect(),
-        };
-        self.shared.snapshot.send_replace(Arc::new(snapshot));
-        for event in self.events.drain(..) {
-            self.shared.emit(event);
-        }
-        self.stats.next_publish = now + self.stats.publish_every;
     }
 }
 

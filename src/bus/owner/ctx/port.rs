@@ -7,65 +7,54 @@ use std::sync::atomic::Ordering;
 use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
+use crate::bus::error::BusError;
+use crate::bus::handle::{BusEvent, LinkState};
 use crate::transport::tty::PortNote;
 
-use super::error::BusError;
-use super::handle::{BusEvent, LinkState};
-use super::owner::Owner;
+use super::Ctx;
 
 /// How often a down bus looks at its requests and e-stops.
 const DOWN_TICK: Duration = Duration::from_millis(10);
-/// First and longest wait between attempts to reopen a lost port.
-pub(super) const BACKOFF_FIRST: Duration = Duration::from_millis(20);
-const BACKOFF_MAX: Duration = Duration::from_secs(1);
-/// How long a freshly opened port is only listened to: devices powered up
-/// with the daemon announce themselves (INFO_01) within a few ms, and a
-/// frame written meanwhile would collide with their announcements.
-const LISTEN_ON_OPEN: Duration = Duration::from_millis(20);
 
-impl Owner {
-    pub(super) fn while_down(&mut self) {
-        let now = Instant::now();
+impl Ctx {
+    /// A down bus: reopens the port at `open_at`, failing requests meanwhile.
+    pub(crate) fn while_down(&mut self, now: Instant, open_at: Instant) {
         self.housekeeping(now);
-        if self.estop_pending() {
-            self.estop();
+        // Taken while the port was up, its slot never came: it fails like
+        // every request that meets a down bus.
+        if let Some(req) = self.held.take() {
+            req.fail(self.down_error());
         }
-        // A setpoint sent while the bus was down is stale when it comes back.
-        self.drop_setpoints();
-        if now >= self.next_open {
+        if now >= open_at {
             self.try_open();
             return;
         }
-        let wait = DOWN_TICK.min(self.next_open - now);
+        let wait = DOWN_TICK.min(open_at - now);
         match self.requests.recv_timeout(wait) {
             Ok(req) => {
                 self.shared.queued.fetch_sub(1, Ordering::Relaxed);
-                super::jobs::fail(req, self.down_error());
+                req.fail(self.down_error());
             }
             Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => {}
         }
     }
 
-    pub(super) fn try_open(&mut self) {
+    /// Opens the port; the scheduler then listens a while before writing.
+    pub(crate) fn try_open(&mut self) {
         match self.link.open() {
             Ok(notes) => {
                 self.note_port(notes);
-                if self.ever_up {
+                if self.sched.link_up(Instant::now()) {
                     self.link.counters.reconnects += 1;
                 }
-                self.ever_up = true;
-                self.backoff = BACKOFF_FIRST;
                 self.link_state = LinkState::Up;
                 tracing::info!(bus = %self.cfg.name, path = %self.cfg.path.display(), "bus up");
-                self.events.push(BusEvent::BusUp {
+                self.sched.push_event(BusEvent::BusUp {
                     bus: self.cfg.name.clone(),
                 });
-                let _ = self.wait_until(Instant::now() + LISTEN_ON_OPEN);
             }
             Err(e) => {
-                let retry = self.backoff;
-                self.next_open = Instant::now() + retry;
-                self.backoff = (self.backoff * 2).min(BACKOFF_MAX);
+                let retry = self.sched.open_failed(Instant::now());
                 self.mark_down(
                     format!("cannot open {}: {e}", self.cfg.path.display()),
                     retry,
@@ -76,14 +65,10 @@ impl Owner {
     }
 
     /// The port failed: the bus is down until it reopens.
-    pub(super) fn lost(&mut self, e: io::Error) -> BusError {
+    pub(crate) fn lost(&mut self, e: io::Error) -> BusError {
         self.link.close();
-        self.prepared = None;
-        self.reg.all_offline(&mut self.events);
-        self.pending.clear();
-        self.backoff = BACKOFF_FIRST;
-        self.next_open = Instant::now() + BACKOFF_FIRST;
-        self.mark_down(format!("port lost: {e}"), BACKOFF_FIRST);
+        let retry = self.sched.link_lost(Instant::now());
+        self.mark_down(format!("port lost: {e}"), retry);
         self.down_error()
     }
 
@@ -91,7 +76,7 @@ impl Owner {
         let was_down = matches!(self.link_state, LinkState::Down { .. });
         if !was_down {
             tracing::warn!(bus = %self.cfg.name, %reason, "bus down");
-            self.events.push(BusEvent::BusDown {
+            self.sched.push_event(BusEvent::BusDown {
                 bus: self.cfg.name.clone(),
                 reason: reason.clone(),
             });
@@ -102,7 +87,7 @@ impl Owner {
         };
     }
 
-    pub(super) fn down_error(&self) -> BusError {
+    pub(crate) fn down_error(&self) -> BusError {
         let reason = match &self.link_state {
             LinkState::Down { reason, .. } => reason.clone(),
             LinkState::Opening => "port not open yet".into(),
@@ -129,8 +114,7 @@ impl Owner {
                     text
                 }
                 PortNote::FtdiLatency { ms, fix } => {
-                    self.link
-                        .clock
+                    self.sched
                         .add_reply_margin(Duration::from_millis(u64::from(ms)));
                     let text =
                         format!("FTDI latency timer is {ms} ms (delays every reply); fix: {fix}");
@@ -140,5 +124,33 @@ impl Owner {
             };
             self.port_notes.push(text);
         }
+    }
+}
+
+impl Ctx {
+    /// The port's speed now.
+    pub(crate) fn baud(&self) -> u32 {
+        self.link.baud()
+    }
+
+    /// Switches the port to `baud` once every host frame queued has left
+    /// (it would go out at the wrong speed); frames take another time from now.
+    pub(crate) fn switch_port(&mut self, baud: u32) -> Result<(), BusError> {
+        self.wait_until(self.sched.clock().free_at())?;
+        self.link.set_baud(baud).map_err(|e| self.lost(e))?;
+        self.cfg.baud = baud;
+        self.sched.set_baud(baud);
+        Ok(())
+    }
+
+    /// Forgets every setpoint, in the store and on their way (e-stop, shutdown).
+    pub(crate) fn drop_all_setpoints(&mut self) {
+        self.shared.setpoints.clear(None);
+        self.sched.drop_setpoints(&self.shared.setpoints);
+    }
+
+    /// True while the port is open.
+    pub(crate) fn link_is_up(&self) -> bool {
+        self.link.is_up()
     }
 }

@@ -1,0 +1,259 @@
+//! The owner's wire primitives: listening, writing the frames the
+//! scheduler planned, telemetry polls, and the request/response
+//! transactions one-shot requests are made of. Each feeds the scheduler
+//! what happened (frames sent, replies, timeouts, the port lost).
+//!
+//! Every frame is handed to the port when the scheduler's line model says
+//! the line is about to free; after a request that expects a reply,
+//! nothing is written until the reply arrives or its deadline passes.
+
+use std::time::{Duration, Instant};
+
+use crate::bus::coalesce::Planned;
+use crate::bus::error::BusError;
+use crate::bus::owner::confirm::describe;
+use crate::bus::registry::ReplyEffect;
+use crate::bus::wire::Want;
+use crate::protocol::{Command, Config, ConfigParam, InfoBlock, Reply};
+
+use super::Ctx;
+
+/// How long before a reply is due the next control frame is planned:
+/// ample for planning, short enough that the setpoints it samples are fresh.
+const PREPARE_LEAD: Duration = Duration::from_micros(100);
+/// How often a reply wait past its modelled time looks for an e-stop.
+const LATE_WAIT_SLICE: Duration = Duration::from_millis(1);
+/// How long before a reply is due the owner stops sleeping.
+const SPIN_BEFORE_DUE: Duration = Duration::from_micros(10);
+
+impl Ctx {
+    /// Listens until `at`; replies nobody waited for are taken in.
+    pub(crate) fn wait_until(&mut self, at: Instant) -> Result<(), BusError> {
+        let waited = self.link.wait(None, at);
+        self.absorb_inbox();
+        waited.map(|_| ()).map_err(|e| self.lost(e))
+    }
+
+    /// Unsolicited replies: power-up announcements, late replies.
+    pub(crate) fn absorb_inbox(&mut self) {
+        let inbox = std::mem::take(&mut self.link.inbox);
+        for (reply, at) in &inbox {
+            self.link.counters.unsolicited += 1;
+            let effect = self.sched.unsolicited(reply, *at);
+            if effect.rebooted {
+                // A rebooted device is disabled and forgot its target.
+                self.shared.setpoints.clear(Some(&[reply.dev_id]));
+            }
+            self.resend_if_aligned(reply.dev_id, effect);
+        }
+        self.link.inbox = inbox;
+        self.link.inbox.clear();
+    }
+
+    /// Hands host frames to the port; returns when the last one leaves the wire.
+    pub(crate) fn send(&mut self, cmds: &[Command]) -> Result<Instant, BusError> {
+        let handed = self.link.send(cmds).map_err(|e| self.lost(e))?;
+        Ok(self.sched.sent(handed, cmds.len() as u32))
+    }
+
+    /// Writes a control frame the scheduler planned.
+    pub(crate) fn send_planned(&mut self, frame: Planned) -> Result<(), BusError> {
+        let end = self.send(&[frame.command])?;
+        for (_, sp) in &frame.carries {
+            self.stats
+                .setpoint_age(end.saturating_duration_since(sp.accepted));
+            self.link.counters.setpoints_sent += 1;
+        }
+        self.sched.control_sent(&frame, end);
+        self.after_decision();
+        Ok(())
+    }
+
+    /// One telemetry poll the scheduler picked.
+    pub(crate) fn poll(&mut self, dev_id: u8, block: InfoBlock) -> Result<(), BusError> {
+        self.link.counters.polls += 1;
+        let want = Want {
+            dev_id,
+            index: block.index(),
+        };
+        self.exchange(Config::read(dev_id, block), want, true)?;
+        Ok(())
+    }
+
+    /// Writes one config/read frame and waits for the reply it asks for;
+    /// with `prepare`, has the next control frame planned meanwhile. `None`
+    /// when the reply did not come in time (counted as a missed poll).
+    fn exchange(
+        &mut self,
+        cmd: Config,
+        want: Want,
+        prepare: bool,
+    ) -> Result<Option<Reply>, BusError> {
+        let end = self.send(&[Command::Config(cmd)])?;
+        let window = self.sched.reply_window(end);
+        let mut got = Ok(None);
+        if prepare {
+            let prepare_at = window.due.checked_sub(PREPARE_LEAD).unwrap_or(window.due);
+            got = self.link.wait(Some(want), prepare_at);
+            if matches!(got, Ok(None)) {
+                self.sched.prepare(window.due, &self.shared.setpoints);
+            }
+        }
+        if matches!(got, Ok(None)) {
+            got = self.wait_reply(want, window.due, window.deadline);
+        }
+        self.absorb_inbox();
+        let got = got.map_err(|e| self.lost(e))?;
+        Ok(self.settle_exchange(got, want, window.due))
+    }
+
+    /// Waits for `want` until `deadline`. Past a frame after the modelled
+    /// reply the wait goes in short slices: a late or missing reply must not
+    /// hold an e-stop back, nor the snapshot.
+    fn wait_reply(
+        &mut self,
+        want: Want,
+        due: Instant,
+        deadline: Instant,
+    ) -> std::io::Result<Option<(Reply, Instant)>> {
+        let grace = due + self.sched.clock().frame_time();
+        let mut got = self.spin_for_reply(want, due);
+        if matches!(got, Ok(None)) {
+            got = self.link.wait(Some(want), grace.min(deadline));
+        }
+        while matches!(got, Ok(None)) && !self.estop_pending() {
+            let now = Instant::now();
+            if now >= deadline {
+                break;
+            }
+            self.housekeeping(now);
+            got = self
+                .link
+                .wait(Some(want), deadline.min(now + LATE_WAIT_SLICE));
+        }
+        got
+    }
+
+    /// Blocks until shortly before the reply is due, then looks at the port
+    /// without sleeping for `reply_spin_us`: a thread woken from sleep (on a
+    /// VM, a halted virtual CPU woken too) reacts tens of µs later, and every
+    /// poll's reply is followed by such a gap on the line.
+    fn spin_for_reply(
+        &mut self,
+        want: Want,
+        due: Instant,
+    ) -> std::io::Result<Option<(Reply, Instant)>> {
+        let spin = Duration::from_micros(self.cfg.timing.reply_spin_us);
+        if spin.is_zero() {
+            return Ok(None);
+        }
+        let spin_from = due.checked_sub(SPIN_BEFORE_DUE).unwrap_or(due);
+        let mut got = self.link.wait(Some(want), spin_from);
+        while matches!(got, Ok(None)) && Instant::now() < due + spin {
+            std::hint::spin_loop();
+            got = self.link.poll_now(Some(want));
+        }
+        got
+    }
+
+    /// Takes in the reply of an exchange, or counts it missing.
+    fn settle_exchange(
+        &mut self,
+        got: Option<(Reply, Instant)>,
+        want: Want,
+        due: Instant,
+    ) -> Option<Reply> {
+        let Some((reply, at)) = got else {
+            self.link.counters.timeouts += 1;
+            self.sched.timed_out(want, due, Instant::now());
+            return None;
+        };
+        let effect = self.sched.reply(&reply, at, due);
+        self.resend_if_aligned(reply.dev_id, effect);
+        Some(reply)
+    }
+
+    /// A joint that just finished aligning gets its latest target again,
+    /// through the store like any client write (a newer write wins).
+    fn resend_if_aligned(&mut self, id: u8, effect: ReplyEffect) {
+        if !effect.now_running {
+            return;
+        }
+        if let Some(latest) = self.shared.setpoints.get(id) {
+            // What went out during align does not count as on the device.
+            self.sched.registry_mut().forget_target(id);
+            self.shared.setpoints.set(&[(id, latest.setpoint)]);
+        }
+    }
+
+    /// A request/response transaction of a one-shot request, retried
+    /// `attempts` times in all. `None` after the last timeout.
+    pub(crate) fn try_transact(
+        &mut self,
+        cmd: Config,
+        want: Want,
+        attempts: u32,
+    ) -> Result<Option<Reply>, BusError> {
+        for attempt in 0..attempts.max(1) {
+            if attempt > 0 {
+                self.link.counters.retries += 1;
+            }
+            self.before_job_frame()?;
+            if let Some(reply) = self.exchange(cmd, want, false)? {
+                return Ok(Some(reply));
+            }
+        }
+        Ok(None)
+    }
+
+    /// [`Self::try_transact`] with the configured retries; a timeout is an error.
+    pub(crate) fn transact(&mut self, cmd: Config, want: Want) -> Result<Reply, BusError> {
+        let attempts = 1 + self.cfg.timing.retries;
+        self.try_transact(cmd, want, attempts)?
+            .ok_or_else(|| self.timeout_error(want.dev_id, &cmd.param, attempts))
+    }
+
+    pub(crate) fn timeout_error(&self, dev_id: u8, param: &ConfigParam, attempts: u32) -> BusError {
+        let timeout = self.sched.clock().reply_timeout(Instant::now());
+        BusError::Timeout {
+            dev_id,
+            what: describe(param),
+            attempts,
+            timeout_us: timeout.as_micros() as u64,
+        }
+    }
+
+    /// Writes frames of a one-shot request that expect no reply.
+    pub(crate) fn job_send(&mut self, cmds: &[Command]) -> Result<(), BusError> {
+        self.before_job_frame()?;
+        self.send(cmds)?;
+        Ok(())
+    }
+
+    /// Before each frame of a one-shot request: wait for the line, let
+    /// waiting setpoints out if the scheduler allows, and give way to an
+    /// e-stop.
+    fn before_job_frame(&mut self) -> Result<(), BusError> {
+        loop {
+            self.wait_until(self.sched.clock().write_at())?;
+            let generation = self.estop_generation();
+            let now = Instant::now();
+            let interleave = self
+                .sched
+                .interleave(now, &self.shared.setpoints, generation);
+            self.after_decision();
+            match interleave {
+                Some(frame) => self.send_planned(frame)?,
+                None => break,
+            }
+        }
+        self.housekeeping(Instant::now());
+        if self.sched.job_frame(self.estop_generation()).is_err() {
+            return Err(BusError::Preempted);
+        }
+        if !self.link.is_up() {
+            return Err(self.down_error());
+        }
+        Ok(())
+    }
+}

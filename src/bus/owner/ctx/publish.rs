@@ -1,0 +1,53 @@
+//! Publication: rolls the rate window and publishes the snapshot (then the
+//! events, so a subscriber who hears of a change finds it in the snapshot).
+
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::{Instant, SystemTime};
+
+use crate::bus::handle::BusSnapshot;
+
+use super::Ctx;
+
+impl Ctx {
+    /// Rolls the rate window and publishes the snapshot when due (or at
+    /// once when something happened that subscribers should see).
+    pub(crate) fn housekeeping(&mut self, now: Instant) {
+        if let Some(window) = self.stats.roll(now, &self.link.counters) {
+            self.sched.registry_mut().roll_rates(window);
+            let timeout = self.sched.clock().reply_timeout(now);
+            self.stats.set_reply_timeout(timeout);
+        }
+        if self.stats.due(now) || self.sched.has_events() {
+            self.publish(now);
+        }
+    }
+
+    /// Publishes the snapshot, then the events (so a subscriber who hears
+    /// of a change finds it in the snapshot).
+    pub(crate) fn publish(&mut self, now: Instant) {
+        let snapshot = BusSnapshot {
+            name: self.cfg.name.clone(),
+            path: self.cfg.path.display().to_string(),
+            baud: self.link.baud(),
+            link: self.link_state.clone(),
+            devices: self.sched.registry().device_states(),
+            counters: self.link.counters.clone(),
+            queue_depth: self.shared.queued.load(Ordering::Relaxed),
+            published_at: now,
+            published_wall: SystemTime::now(),
+            rates: self.stats.rates().clone(),
+            port_notes: self
+                .thread_notes
+                .iter()
+                .chain(&self.port_notes)
+                .cloned()
+                .collect(),
+        };
+        self.shared.snapshot.send_replace(Arc::new(snapshot));
+        for event in self.sched.drain_events() {
+            self.shared.emit(event);
+        }
+        self.stats.published(now);
+    }
+}

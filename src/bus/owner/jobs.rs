@@ -1,0 +1,307 @@
+//! One-shot requests: what each does on the wire and how it is confirmed.
+//!
+//! - Enable/disable use standard control frames (SPEC errata 3) and are
+//!   confirmed by the fsm in a fresh INFO_01.
+//! - Config writes are confirmed by RES or by reading the INFO block back
+//!   (see [`crate::bus::verify`]); a mismatch is an error to the caller.
+//! - An id change moves the registry entry and the setpoint slot; a baud
+//!   change switches every device first, then the port.
+
+use crate::bus::error::BusError;
+use crate::bus::handle::{BusEvent, Targets, WriteOutcome};
+use crate::bus::verify::{confirmation, Confirm};
+use crate::bus::wire::Want;
+use crate::protocol::command::index;
+use crate::protocol::reply::{fault_name, fsm, fsm_name};
+use crate::protocol::{
+    is_device_id, Command, Config, ConfigParam, Control, CtrlMode, Info01, InfoBlock, Jog, JogDir,
+    Reply, ReplyBody, ALL_DEVICES,
+};
+
+use super::confirm::check_res;
+use super::ctx::Ctx;
+
+/// INFO_01 reads that may pass before an enable/disable shows in the fsm.
+const FSM_CHECKS: u32 = 3;
+/// How close to 0° a re-zeroed angle must read when the joint stands still.
+const REZERO_TOLERANCE_DEG: f64 = 0.5;
+/// Fastest a joint's output turns (50000 rpm rotor through the gearbox,
+/// ~527 °/s): a joint moving while it is re-zeroed has left 0° by the time
+/// the read-back answers, by at most this speed times the time between.
+const MAX_OUTPUT_DEG_PER_S: f64 = 50_000.0 * 6.0 / crate::protocol::units::GEAR_RATIO;
+
+/// How far from 0° a joint re-zeroed `elapsed` before the read-back may be.
+fn rezero_tolerance_deg(elapsed: std::time::Duration) -> f64 {
+    REZERO_TOLERANCE_DEG + MAX_OUTPUT_DEG_PER_S * elapsed.as_secs_f64()
+}
+
+pub(super) fn known(ctx: &Ctx, id: u8) -> Result<(), BusError> {
+    match ctx.sched().registry().get(id) {
+        Some(_) => Ok(()),
+        None => Err(BusError::UnknownDevice {
+            bus: ctx.name().to_string(),
+            dev_id: id,
+        }),
+    }
+}
+
+/// The ids a control request addresses, each known.
+fn resolve(ctx: &Ctx, targets: &Targets) -> Result<Vec<u8>, BusError> {
+    match targets {
+        Targets::All => Ok(ctx.sched().registry().online_ids()),
+        Targets::Ids(ids) => {
+            ids.iter().try_for_each(|id| known(ctx, *id))?;
+            Ok(ids.clone())
+        }
+    }
+}
+
+/// Control frames for `op` to `targets`: one `0xFF` frame for all.
+fn control_frames(targets: &Targets, ids: &[u8], make: fn(u8) -> Control) -> Vec<Command> {
+    match targets {
+        Targets::All => vec![Command::Control(make(ALL_DEVICES))],
+        Targets::Ids(_) => ids.iter().map(|id| Command::Control(make(*id))).collect(),
+    }
+}
+
+pub(super) fn enable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
+    let ids = resolve(ctx, &targets)?;
+    ctx.job_send(&control_frames(&targets, &ids, Control::enable))?;
+    for &id in &ids {
+        // It holds where it is; a target set before the enable goes out again.
+        ctx.sched_mut().registry_mut().forget_target(id);
+        if let Some(setpoint) = ctx.setpoints().get(id) {
+            ctx.sched_mut().requeue(id, setpoint);
+        }
+    }
+    for &id in &ids {
+        await_fsm(ctx, id, "enable", |f| f == fsm::ALIGN || f == fsm::RUN)?;
+    }
+    Ok(())
+}
+
+pub(super) fn disable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
+    let ids = resolve(ctx, &targets)?;
+    ctx.job_send(&control_frames(&targets, &ids, Control::disable))?;
+    // `0xFF` reached offline devices too: every target goes.
+    let cleared = match targets {
+        Targets::All => ctx.sched().registry().ids(),
+        Targets::Ids(_) => ids.clone(),
+    };
+    ctx.setpoints().clear(Some(&cleared));
+    for &id in &cleared {
+        ctx.sched_mut().forget_setpoint(id);
+        ctx.sched_mut().registry_mut().forget_target(id);
+    }
+    for &id in &ids {
+        await_fsm(ctx, id, "disable", |f| f == fsm::READY || f == fsm::FAULT)?;
+    }
+    Ok(())
+}
+
+/// Reads INFO_01 until the fsm satisfies `ok`; a fault is reported by name.
+fn await_fsm(ctx: &mut Ctx, id: u8, what: &str, ok: fn(u8) -> bool) -> Result<Info01, BusError> {
+    let mut last = None;
+    for _ in 0..FSM_CHECKS {
+        let info = read_info01(ctx, id)?;
+        if ok(info.fsm) {
+            return Ok(info);
+        }
+        if info.fsm == fsm::FAULT {
+            return Err(BusError::WrongState(format!(
+                "device {id} is in fault: {}",
+                fault_name(info.err_code & 0x0F)
+            )));
+        }
+        last = Some(info.fsm);
+    }
+    Err(BusError::WrongState(format!(
+        "device {id} did not {what}: its state is {}",
+        last.map_or("unknown", fsm_name)
+    )))
+}
+
+pub(super) fn read_info01(ctx: &mut Ctx, id: u8) -> Result<Info01, BusError> {
+    match read_info(ctx, id, InfoBlock::Info01)?.body() {
+        ReplyBody::Info01(info) => Ok(info),
+        _ => Err(BusError::UnexpectedReply(
+            "INFO_01 read returned another block".into(),
+        )),
+    }
+}
+
+pub(super) fn jog(ctx: &mut Ctx, dev_id: u8, dir: JogDir) -> Result<(), BusError> {
+    known(ctx, dev_id)?;
+    let info = read_info01(ctx, dev_id)?;
+    if info.fsm != fsm::RUN {
+        return Err(BusError::WrongState(format!(
+            "jog needs an enabled joint; device {dev_id} is {}",
+            fsm_name(info.fsm)
+        )));
+    }
+    ctx.job_send(&[Command::Jog(Jog { dev_id, dir })])?;
+    zero_moved(ctx, dev_id);
+    Ok(())
+}
+
+pub(super) fn rezero(ctx: &mut Ctx, dev_id: u8) -> Result<(), BusError> {
+    known(ctx, dev_id)?;
+    let cmd = Config {
+        dev_id,
+        param: ConfigParam::UpdateFinZero,
+    };
+    ctx.job_send(&[Command::Config(cmd)])?;
+    // Handed to the port now, on the wire a little later: measuring from
+    // here bounds the joint's travel since from above.
+    let sent = std::time::Instant::now();
+    zero_moved(ctx, dev_id);
+    let angle = read_info01(ctx, dev_id)?.angle;
+    let within =
+        crate::protocol::units::angle_deg(angle).abs() <= rezero_tolerance_deg(sent.elapsed());
+    if !within {
+        return Err(BusError::VerifyMismatch {
+            dev_id,
+            index: index::UPDATE_FIN_ZERO,
+            expected: 0,
+            found: angle as u16,
+        });
+    }
+    Ok(())
+}
+
+/// The device's zero moved: targets and angles from before are void.
+fn zero_moved(ctx: &mut Ctx, id: u8) {
+    ctx.sched_mut().registry_mut().zero_moved(id);
+    ctx.setpoints().clear(Some(&[id]));
+    ctx.sched_mut().forget_setpoint(id);
+}
+
+pub(super) fn set_mode(ctx: &mut Ctx, dev_id: u8, mode: CtrlMode) -> Result<(), BusError> {
+    write_config(ctx, dev_id, ConfigParam::CtrlMode(mode)).map(|_| ())
+}
+
+pub(super) fn read_info(ctx: &mut Ctx, dev_id: u8, block: InfoBlock) -> Result<Reply, BusError> {
+    known(ctx, dev_id)?;
+    let want = Want {
+        dev_id,
+        index: block.index(),
+    };
+    ctx.transact(Config::read(dev_id, block), want)
+}
+
+pub(super) fn write_config(
+    ctx: &mut Ctx,
+    dev_id: u8,
+    param: ConfigParam,
+) -> Result<WriteOutcome, BusError> {
+    known(ctx, dev_id)?;
+    let how = confirmation(&param).map_err(|why| BusError::Invalid(why.to_string()))?;
+    let (idx, value) = param.index_value();
+    let cmd = Config { dev_id, param };
+    let verified_by = match how {
+        Confirm::Res => {
+            let reply = ctx.transact(cmd, Want { dev_id, index: idx })?;
+            check_res(&reply, &param)?;
+            "res"
+        }
+        Confirm::ReadBack { block, field } => {
+            ctx.job_send(&[Command::Config(cmd)])?;
+            let found = field.read(&read_info(ctx, dev_id, block)?.data);
+            if found != value {
+                return Err(BusError::VerifyMismatch {
+                    dev_id,
+                    index: idx,
+                    expected: value,
+                    found,
+                });
+            }
+            "read_back"
+        }
+        Confirm::Unverifiable => {
+            ctx.job_send(&[Command::Config(cmd)])?;
+            after_unverifiable(ctx, dev_id, &param);
+            "unverifiable"
+        }
+    };
+    Ok(WriteOutcome {
+        dev_id,
+        index: idx,
+        value,
+        verified_by,
+    })
+}
+
+fn after_unverifiable(ctx: &mut Ctx, dev_id: u8, param: &ConfigParam) {
+    match param {
+        ConfigParam::CtrlMode(mode) => {
+            ctx.sched_mut().registry_mut().set_mode(dev_id, *mode);
+            ctx.setpoints().clear(Some(&[dev_id]));
+            ctx.sched_mut().forget_setpoint(dev_id);
+        }
+        ConfigParam::UpdateFinZero => zero_moved(ctx, dev_id),
+        _ => {}
+    }
+}
+
+pub(super) fn set_id(ctx: &mut Ctx, dev_id: u8, new_id: u8) -> Result<WriteOutcome, BusError> {
+    known(ctx, dev_id)?;
+    if !is_device_id(new_id) || new_id == dev_id {
+        return Err(BusError::Invalid(format!(
+            "new id {new_id} must be in 1..=159 and differ from {dev_id}"
+        )));
+    }
+    if ctx.sched().registry().get(new_id).is_some() {
+        return Err(BusError::WrongState(format!(
+            "id {new_id} is already taken on bus {}",
+            ctx.name()
+        )));
+    }
+    let param = ConfigParam::SetId { new_id };
+    let cmd = Config { dev_id, param };
+    // No retry to the old id: the device may have changed and its RES got lost.
+    let want = Want {
+        dev_id: new_id,
+        index: index::SET_ID,
+    };
+    let verified_by = match ctx.try_transact(cmd, want, 1)? {
+        Some(reply) => {
+            check_res(&reply, &param)?;
+            "res"
+        }
+        None => confirm_new_id(ctx, dev_id, new_id, &param)?,
+    };
+    rename(ctx, dev_id, new_id);
+    Ok(WriteOutcome {
+        dev_id: new_id,
+        index: index::SET_ID,
+        value: param.index_value().1,
+        verified_by,
+    })
+}
+
+/// The RES of an id change did not come: does the new id answer?
+fn confirm_new_id(
+    ctx: &mut Ctx,
+    dev_id: u8,
+    new_id: u8,
+    param: &ConfigParam,
+) -> Result<&'static str, BusError> {
+    let read = Config::read(new_id, InfoBlock::Info01);
+    let want = Want {
+        dev_id: new_id,
+        index: index::INFO_01_R,
+    };
+    match ctx.try_transact(read, want, 1 + ctx.cfg().timing.retries)? {
+        Some(_) => Ok("read_back"),
+        None => Err(ctx.timeout_error(dev_id, param, 1)),
+    }
+}
+
+/// The registry entry and the setpoint slot follow the device. An entry
+/// the read-back made for the new id is replaced by the old one's history.
+fn rename(ctx: &mut Ctx, old: u8, new: u8) {
+    ctx.sched_mut().rename(old, new);
+    ctx.setpoints().rename(old, new);
+    let bus = ctx.name().to_string();
+    ctx.push_event(BusEvent::IdChanged { bus, old, new });
+}

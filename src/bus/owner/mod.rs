@@ -1,0 +1,192 @@
+//! The bus owner: one OS thread per bus and the only code that touches its
+//! port. It asks the [`Scheduler`](crate::bus::scheduler::Scheduler) for
+//! the next slot (e-stop, a queued one-shot request, setpoints within the
+//! control budget, a telemetry poll, setpoints again, listen, reopen) and
+//! does the I/O the slot names. While a reply is due nothing else is written.
+//!
+//! A lost port marks the bus down and every device offline; the owner then
+//! retries with backoff, failing requests with `Down` meanwhile, and resumes
+//! when the port is back. Nothing here can take another bus down.
+//!
+//! - `ctx`: what the owner's code works with (port, scheduler, publication).
+//! - `jobs`, `estop`, `scan`, `baud`: one-shot requests, functions of a `&mut Ctx`.
+//! - `confirm`: reading a RES, naming a config frame in errors.
+//! - `stats`: rate windows.
+
+mod baud;
+mod confirm;
+mod ctx;
+mod estop;
+mod jobs;
+mod scan;
+mod stats;
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::Receiver;
+use std::sync::Arc;
+use std::time::Instant;
+
+use crate::bus::config::{BusConfig, ShutdownState};
+use crate::bus::error::BusError;
+use crate::bus::handle::{BusShared, Request};
+use crate::bus::link::Link;
+use crate::bus::scheduler::Slot;
+use crate::protocol::ConfigParam;
+use crate::rt::{precise_timers, set_fifo};
+
+use ctx::Ctx;
+
+pub(crate) struct Owner {
+    ctx: Ctx,
+    stop: Arc<AtomicBool>,
+}
+
+impl Owner {
+    pub(crate) fn new(
+        cfg: BusConfig,
+        shared: Arc<BusShared>,
+        requests: Receiver<Request>,
+        stop: Arc<AtomicBool>,
+        link: Link,
+    ) -> Self {
+        Self {
+            ctx: Ctx::new(cfg, shared, requests, link),
+            stop,
+        }
+    }
+
+    /// The thread's body: runs until [`crate::bus::BusThread::stop`].
+    pub(crate) fn run(mut self) {
+        precise_timers();
+        self.realtime();
+        while !self.stop.load(Ordering::Acquire) {
+            // A bug must not leave the joints with a dead owner and a stale
+            // "up" snapshot: the owner catches it and starts over like after
+            // an unplug (its state is rebuilt from the wire).
+            let step = catch_unwind(AssertUnwindSafe(|| self.turn()));
+            if let Err(panic) = step {
+                self.recover_from_panic(panic.as_ref());
+            }
+        }
+        self.shutdown();
+    }
+
+    fn recover_from_panic(&mut self, panic: &(dyn std::any::Any + Send)) {
+        let what = panic
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_owned())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into());
+        let ctx = &mut self.ctx;
+        tracing::error!(bus = %ctx.name(), "bus owner caught a panic ({what}); reopening the port");
+        ctx.counters().owner_panics += 1;
+        ctx.sched_mut().job_abort();
+        let err = ctx.lost(std::io::Error::other(format!("internal error: {what}")));
+        // An e-stop cut short says so now rather than at its caller's timeout.
+        let answered = ctx.shared().estop_done.borrow().0;
+        let seen = ctx.sched().estop_seen();
+        if seen > answered {
+            ctx.shared().estop_done.send_replace((seen, Some(Err(err))));
+        }
+        ctx.publish(Instant::now());
+    }
+
+    fn realtime(&mut self) {
+        let priority = self.ctx.cfg().timing.rt_priority;
+        if priority == 0 {
+            return;
+        }
+        if let Err(e) = set_fifo(0, priority) {
+            let note = format!(
+                "real-time priority {priority} refused ({e}): replies wait for the CPU under load"
+            );
+            tracing::info!(bus = %self.ctx.name(), "{note}");
+            self.ctx.note_thread(note);
+        }
+    }
+
+    /// Asks the scheduler for the next slot and does what it names. Errors
+    /// have already marked the bus down; the next slot says so.
+    fn turn(&mut self) {
+        let now = Instant::now();
+        let ctx = &mut self.ctx;
+        let _ = match ctx.decide(now) {
+            Slot::Listen { until } => ctx.wait_until(until),
+            Slot::Control(frame) => ctx.send_planned(frame),
+            Slot::Poll { dev_id, block } => ctx.poll(dev_id, block),
+            Slot::EStop { generation } => {
+                estop::run(ctx, generation);
+                Ok(())
+            }
+            Slot::Request => {
+                if let Some(req) = ctx.take_held() {
+                    run_request(ctx, req);
+                }
+                Ok(())
+            }
+            Slot::Scan => {
+                scan::startup(ctx);
+                Ok(())
+            }
+            Slot::Reopen { at } => {
+                ctx.while_down(now, at);
+                Ok(())
+            }
+        };
+    }
+
+    /// Brings the joints to the configured safe state and closes the port.
+    fn shutdown(&mut self) {
+        let ctx = &mut self.ctx;
+        let disable = ctx.cfg().on_shutdown == ShutdownState::Disable;
+        if disable && estop::disable_everything(ctx).is_ok() {
+            // Let the disable frames leave the wire before the port closes.
+            let _ = ctx.wait_until(ctx.sched().clock().free_at());
+        }
+        if !disable {
+            tracing::warn!(bus = %ctx.name(), "stopping with the joints left enabled (on_shutdown = \"hold\")");
+        }
+        ctx.fail_queued(&BusError::Stopped);
+        ctx.close();
+        ctx.publish(Instant::now());
+    }
+}
+
+/// Runs one request and answers its caller (who may have given up: a
+/// dropped receiver is nothing to tell).
+fn run_request(ctx: &mut Ctx, req: Request) {
+    match req {
+        Request::Enable { targets, reply } => drop(reply.send(jobs::enable(ctx, targets))),
+        Request::Disable { targets, reply } => drop(reply.send(jobs::disable(ctx, targets))),
+        Request::Jog { dev_id, dir, reply } => drop(reply.send(jobs::jog(ctx, dev_id, dir))),
+        Request::Rezero { dev_id, reply } => drop(reply.send(jobs::rezero(ctx, dev_id))),
+        Request::SetMode {
+            dev_id,
+            mode,
+            reply,
+        } => drop(reply.send(jobs::set_mode(ctx, dev_id, mode))),
+        Request::ReadInfo {
+            dev_id,
+            block,
+            reply,
+        } => drop(reply.send(jobs::read_info(ctx, dev_id, block))),
+        Request::WriteConfig {
+            dev_id,
+            param,
+            reply,
+        } => drop(reply.send(jobs::write_config(ctx, dev_id, param))),
+        Request::WriteFlash { dev_id, reply } => {
+            let key = crate::protocol::command::WRITE_FLASH_KEY;
+            let param = ConfigParam::WriteFlash { key };
+            drop(reply.send(jobs::write_config(ctx, dev_id, param)))
+        }
+        Request::SetId {
+            dev_id,
+            new_id,
+            reply,
+        } => drop(reply.send(jobs::set_id(ctx, dev_id, new_id))),
+        Request::SetBaud { baud, reply } => drop(reply.send(baud::set_baud(ctx, baud))),
+        Request::Scan { first, last, reply } => drop(reply.send(scan::scan(ctx, first, last))),
+    }
+}

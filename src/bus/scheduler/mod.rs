@@ -1,0 +1,344 @@
+//! The bus's decisions, apart from its I/O: what goes on the wire next.
+//!
+//! A state machine in the spirit of rumqttc's `MqttState`: no port, no
+//! thread, no clock of its own. The owner passes the time and the queued
+//! work to [`Scheduler::next`] and gets a [`Slot`]; it does the I/O the slot
+//! names and feeds back what happened (frames sent, replies, timeouts, the
+//! port lost or reopened). The order of work, when the line is free:
+//! e-stop, a queued one-shot request, the startup scan, setpoints (within
+//! the control budget), a telemetry poll, setpoints again (when there is
+//! nothing to poll), else listen.
+//!
+//! Its parts are the pure pieces beside it: the [`WireClock`] (when the line
+//! frees, reply windows), the [`ControlBudget`] and [`PollPlanner`], the
+//! coalescer (through `control`) and the [`Registry`].
+
+mod control;
+mod jobs;
+mod reopen;
+mod replies;
+#[cfg(test)]
+mod tests;
+
+use std::time::{Duration, Instant};
+
+use crate::bus::coalesce::{Pending, Planned};
+use crate::bus::config::BusConfig;
+use crate::bus::poll::{ControlBudget, PollPlanner};
+use crate::bus::registry::Registry;
+use crate::bus::setpoints::{SetpointStore, StoredSetpoint};
+use crate::bus::state::{BusEvent, WireAck};
+use crate::bus::wire::{ReplyWindow, Want, WireClock};
+use crate::protocol::InfoBlock;
+
+pub use reopen::{BACKOFF_FIRST, BACKOFF_MAX, LISTEN_ON_OPEN};
+
+/// Setpoint frames that may go out between two frames of a one-shot
+/// request, so a long scan does not freeze the joints.
+pub const MAX_INTERLEAVED: u32 = 2;
+
+/// An e-stop is waiting: the request must give way before its next frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Preempted;
+
+/// How long the owner listens when there is nothing to send. Bounds how
+/// late it notices a request or setpoint on an idle bus.
+pub const IDLE_TICK: Duration = Duration::from_millis(1);
+
+/// What the owner does next.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Slot {
+    /// Write nothing; listen (take unsolicited replies in) until `until`:
+    /// the line is busy, the port was just opened, or there is nothing to do.
+    Listen { until: Instant },
+    /// Disable every device now (e-stop generation `generation`).
+    EStop { generation: u64 },
+    /// Run the queued one-shot request.
+    Request,
+    /// Scan the configured range (no ids were configured).
+    Scan,
+    /// Write this control frame (coalesced setpoints).
+    Control(Planned),
+    /// Read `block` of `dev_id`; its reply window follows from
+    /// [`Scheduler::sent`] and [`Scheduler::reply_window`].
+    Poll { dev_id: u8, block: InfoBlock },
+    /// The port is down: try to open it at `at` (fail requests meanwhile).
+    Reopen { at: Instant },
+}
+
+/// The work waiting outside the scheduler when it decides.
+#[derive(Debug, Clone, Copy)]
+pub struct Work<'a> {
+    /// The handle's e-stop counter (a press not yet served is above the
+    /// generation the scheduler last handed out).
+    pub estop_generation: u64,
+    /// A one-shot request is waiting.
+    pub request_queued: bool,
+    /// The latest-value store of joint targets.
+    pub setpoints: &'a SetpointStore,
+}
+
+/// Where a one-shot request stands (how its frames and setpoints interleave).
+#[derive(Debug, Clone, Copy, Default)]
+struct JobPhase {
+    /// Frames the current request has written.
+    frames: u32,
+    /// Setpoint frames written since its last frame.
+    interleaved: u32,
+    /// Devices and port at different bauds: nothing may interrupt.
+    exclusive: bool,
+}
+
+/// The decision state of one bus.
+#[derive(Debug)]
+pub struct Scheduler {
+    clock: WireClock,
+    reg: Registry,
+    planner: PollPlanner,
+    budget: ControlBudget,
+    control: control::Control,
+    reopen: reopen::Reopen,
+    job: JobPhase,
+    /// The last e-stop generation handed out as a slot.
+    estop_seen: u64,
+    /// The configured range still has to be scanned.
+    needs_scan: bool,
+    /// The last read that timed out and when its reply was due: the reply
+    /// may still come, late, and must not be taken for an announcement.
+    overdue: Option<(Want, Instant)>,
+    /// What subscribers should hear at the next publication.
+    events: Vec<BusEvent>,
+    /// Setpoints dropped for ids nobody answers to, not yet counted.
+    dropped: u64,
+}
+
+impl Scheduler {
+    /// A bus with its port not open yet (the first slot is `Reopen` now).
+    pub fn new(cfg: &BusConfig, now: Instant) -> Self {
+        let mut reg = Registry::new(&cfg.name, cfg.poll.offline_after);
+        cfg.ids.iter().for_each(|id| reg.expect(*id));
+        Self {
+            clock: WireClock::new(cfg.baud, &cfg.timing, now),
+            reg,
+            planner: PollPlanner::new(
+                cfg.poll.info01_every,
+                Duration::from_millis(cfg.poll.offline_poll_ms),
+            ),
+            budget: ControlBudget::new(cfg.poll.control_share, cfg.frame_time(), now),
+            control: control::Control::default(),
+            reopen: reopen::Reopen::new(now),
+            job: JobPhase::default(),
+            estop_seen: 0,
+            needs_scan: cfg.ids.is_empty(),
+            overdue: None,
+            events: Vec::new(),
+            dropped: 0,
+        }
+    }
+
+    /// The next slot at `now`.
+    pub fn next(&mut self, now: Instant, work: &Work<'_>) -> Slot {
+        if !self.reopen.is_up() {
+            // A setpoint sent while the bus was down is stale when it comes back.
+            self.control.drop_all(work.setpoints);
+            if let Some(slot) = self.estop_slot(work) {
+                return slot;
+            }
+            return Slot::Reopen {
+                at: self.reopen.next_open(),
+            };
+        }
+        let ready = self.clock.write_at().max(self.reopen.quiet_until());
+        if now < ready {
+            return Slot::Listen { until: ready };
+        }
+        if let Some(slot) = self.estop_slot(work) {
+            return slot;
+        }
+        if work.request_queued || self.needs_scan {
+            self.control.clear_prepared();
+            self.job = JobPhase::default();
+            return if work.request_queued {
+                Slot::Request
+            } else {
+                Slot::Scan
+            };
+        }
+        self.wire_slot(now, work.setpoints)
+    }
+
+    fn estop_slot(&mut self, work: &Work<'_>) -> Option<Slot> {
+        if !self.estop_pending(work.estop_generation) {
+            return None;
+        }
+        self.estop_seen = work.estop_generation;
+        self.control.clear_prepared();
+        Some(Slot::EStop {
+            generation: work.estop_generation,
+        })
+    }
+
+    /// Setpoints within budget, else a poll, else setpoints, else listen.
+    /// A prepared frame is good for this decision only, and only if no
+    /// setpoint came in since it was planned.
+    fn wire_slot(&mut self, now: Instant, store: &SetpointStore) -> Slot {
+        if let Some((frame, seq)) = self.control.take_prepared() {
+            if self.budget.allows(now) {
+                if seq == store.latest_seq() {
+                    return Slot::Control(frame);
+                }
+                if let Some(frame) = self.plan_control(now, store) {
+                    return Slot::Control(frame);
+                }
+            }
+        }
+        self.control.collect(store);
+        if self.control.has_pending() && self.budget.allows(now) {
+            if let Some(frame) = self.plan_control(now, store) {
+                return Slot::Control(frame);
+            }
+        }
+        let timeout = self.clock.reply_timeout(now);
+        if let Some(poll) = self.planner.next(self.reg.poll_states(), now, timeout) {
+            return Slot::Poll {
+                dev_id: poll.dev_id,
+                block: poll.block,
+            };
+        }
+        match self.plan_control(now, store) {
+            Some(frame) => Slot::Control(frame),
+            None => Slot::Listen {
+                until: now + IDLE_TICK,
+            },
+        }
+    }
+
+    /// Collects and plans the frame carrying the oldest pending setpoint.
+    fn plan_control(&mut self, now: Instant, store: &SetpointStore) -> Option<Planned> {
+        self.control.collect(store);
+        let (frame, dropped) = self.control.plan(&self.reg, now);
+        self.dropped += u64::from(dropped);
+        frame
+    }
+
+    /// While a reply is on the wire (due at `due`): plan the control frame
+    /// that follows it, so the line idles no longer than needed after the
+    /// reply. The next decision uses it if no setpoint came in meanwhile.
+    pub fn prepare(&mut self, due: Instant, store: &SetpointStore) {
+        self.control.collect(store);
+        let latest = store.latest_seq();
+        let frame = if self.control.has_pending() && self.budget.allows(due) {
+            self.plan_control(due, store).map(|frame| (frame, latest))
+        } else {
+            None
+        };
+        self.control.set_prepared(frame);
+    }
+
+    /// `n` host frames were handed to the port at `handed`; returns when the
+    /// last one's last byte leaves the wire.
+    pub fn sent(&mut self, handed: Instant, n: u32) -> Instant {
+        self.clock.host_frames(handed, n)
+    }
+
+    /// A control frame from [`Slot::Control`] (or an interleave) left for
+    /// the wire, its last byte due at `end`: charged to the budget, its
+    /// setpoints settled.
+    pub fn control_sent(&mut self, frame: &Planned, end: Instant) {
+        self.budget.spend(self.clock.frame_time());
+        self.control.sent(frame, &mut self.reg, end);
+    }
+
+    /// When the reply to a request ending at `end` is due and given up on.
+    pub fn reply_window(&self, end: Instant) -> ReplyWindow {
+        self.clock.reply_window(end)
+    }
+
+    /// True while an e-stop press above the last one served waits.
+    pub fn estop_pending(&self, generation: u64) -> bool {
+        generation > self.estop_seen
+    }
+
+    /// The e-stop generation served last.
+    pub fn estop_seen(&self) -> u64 {
+        self.estop_seen
+    }
+
+    /// The startup scan found what there is: no need to scan again.
+    pub fn scan_done(&mut self) {
+        self.needs_scan = false;
+    }
+
+    pub fn clock(&self) -> &WireClock {
+        &self.clock
+    }
+
+    pub fn registry(&self) -> &Registry {
+        &self.reg
+    }
+
+    pub fn registry_mut(&mut self) -> &mut Registry {
+        &mut self.reg
+    }
+
+    /// Setpoints taken from the store and not yet on the wire.
+    pub fn pending(&self) -> &std::collections::BTreeMap<u8, Pending> {
+        self.control.pending()
+    }
+
+    /// The wire ack to publish, if one came up since the last call.
+    pub fn take_ack(&mut self) -> Option<WireAck> {
+        self.control.take_ack()
+    }
+
+    /// Setpoints dropped (for ids no device answers to) since the last call.
+    pub fn take_dropped(&mut self) -> u64 {
+        std::mem::take(&mut self.dropped)
+    }
+
+    pub fn push_event(&mut self, event: BusEvent) {
+        self.events.push(event);
+    }
+
+    pub fn has_events(&self) -> bool {
+        !self.events.is_empty()
+    }
+
+    /// The events to publish, oldest first.
+    pub fn drain_events(&mut self) -> std::vec::Drain<'_, BusEvent> {
+        self.events.drain(..)
+    }
+
+    /// Forgets pending setpoints and skips what the store holds now
+    /// (e-stop, a bus that was down).
+    pub fn drop_setpoints(&mut self, store: &SetpointStore) {
+        self.control.drop_all(store);
+    }
+
+    /// One joint's pending setpoint is void (disabled, re-zeroed, mode changed).
+    pub fn forget_setpoint(&mut self, id: u8) {
+        self.control.forget(id);
+    }
+
+    /// A joint's stored target goes out again (an enable: it holds where it is).
+    pub fn requeue(&mut self, id: u8, setpoint: StoredSetpoint) {
+        self.control.requeue(id, setpoint);
+    }
+
+    /// After an id change the device's entry and pending setpoint follow it.
+    pub fn rename(&mut self, old: u8, new: u8) {
+        self.reg.rename(old, new);
+        self.control.rename(old, new);
+    }
+
+    /// The port now runs at `baud`: frames take another time.
+    pub fn set_baud(&mut self, baud: u32) {
+        self.clock.set_baud(baud);
+        self.budget.set_frame(self.clock.frame_time());
+    }
+
+    /// An adapter that holds replies back (FTDI latency timer) widens every deadline.
+    pub fn add_reply_margin(&mut self, extra: Duration) {
+        self.clock.add_reply_margin(extra);
+    }
+}

@@ -1,0 +1,85 @@
+//! What comes back from the wire and the port: replies (asked for or not),
+//! missed replies, the port lost and reopened. Each updates the line model,
+//! the registry and the setpoints waiting, and says what the owner must do
+//! with the setpoint store (the scheduler only reads it).
+
+use std::time::{Duration, Instant};
+
+use crate::bus::registry::ReplyEffect;
+use crate::bus::wire::Want;
+use crate::protocol::{Reply, ReplyBody};
+
+use super::Scheduler;
+
+impl Scheduler {
+    /// The reply a transaction waited for arrived at `at` (it was due at
+    /// `due`). A RES from an id nobody has (SET_ID) is not a device yet: the
+    /// request renames the old entry itself.
+    pub fn reply(&mut self, reply: &Reply, at: Instant, due: Instant) -> ReplyEffect {
+        self.clock.line_free(at);
+        self.clock.observe_reply(due, at);
+        let feeds =
+            self.reg.get(reply.dev_id).is_some() || matches!(reply.body(), ReplyBody::Info01(_));
+        if !feeds {
+            return ReplyEffect::default();
+        }
+        self.reg.on_reply(reply, at, true, &mut self.events)
+    }
+
+    /// A reply nobody waited for: a power-up announcement, or the late reply
+    /// of the last read that timed out (which then widens the deadline).
+    /// A rebooted device forgot its target: what waited for it is stale, and
+    /// the owner clears its slot in the store.
+    pub fn unsolicited(&mut self, reply: &Reply, at: Instant) -> ReplyEffect {
+        self.clock.line_free(at);
+        let late = self
+            .overdue
+            .take_if(|(w, _)| w.dev_id == reply.dev_id && w.index == reply.index);
+        if let Some((_, due)) = late {
+            self.clock.observe_reply(due, at);
+        }
+        let effect = self
+            .reg
+            .on_reply(reply, at, late.is_some(), &mut self.events);
+        if effect.rebooted {
+            self.control.forget(reply.dev_id);
+            self.control.clear_prepared();
+        }
+        effect
+    }
+
+    /// The reply to `want`, due at `due`, had not come by `now`: counted
+    /// against the device (offline after the configured misses), and the
+    /// line is free again.
+    pub fn timed_out(&mut self, want: Want, due: Instant, now: Instant) {
+        self.overdue = Some((want, due));
+        self.clock.line_free(now);
+        self.reg.on_missed(want.dev_id, &mut self.events);
+    }
+
+    /// The port opened at `now`; true when it had been up before (a reconnect).
+    pub fn link_up(&mut self, now: Instant) -> bool {
+        self.clock.line_free(now);
+        self.reopen.opened(now)
+    }
+
+    /// Opening the port failed at `now`; returns the wait before the next try.
+    pub fn open_failed(&mut self, now: Instant) -> Duration {
+        self.reopen.open_failed(now)
+    }
+
+    /// The port was lost at `now`: every device offline, pending setpoints
+    /// forgotten (and, while the bus is down, every new write skipped as
+    /// stale: see [`Scheduler::next`]). Returns the wait before the first retry.
+    pub fn link_lost(&mut self, now: Instant) -> Duration {
+        self.control.clear_prepared();
+        self.control.clear_pending();
+        self.reg.all_offline(&mut self.events);
+        self.reopen.lost(now)
+    }
+
+    /// True while the port is believed open.
+    pub fn link_is_up(&self) -> bool {
+        self.reopen.is_up()
+    }
+}
