@@ -4,7 +4,7 @@
 mod support;
 
 use jointd::protocol::params::index;
-use jointd::protocol::reply::fsm;
+use jointd::protocol::status::fsm;
 use jointd::sim::Fault;
 use serde_json::json;
 use support::sim_bus::{start, BUS};

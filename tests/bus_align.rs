@@ -6,7 +6,7 @@ mod support;
 use std::time::Duration;
 
 use jointd::bus::Targets;
-use jointd::protocol::reply::fsm;
+use jointd::protocol::status::fsm;
 use support::bus::{rig_with, sim_config, target, BAUD};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

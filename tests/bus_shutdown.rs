@@ -4,7 +4,7 @@
 mod support;
 
 use jointd::bus::ShutdownState;
-use jointd::protocol::reply::fsm;
+use jointd::protocol::status::fsm;
 use support::bus::{rig_with, sim_config, target, BAUD};
 
 async fn stop_with(state: ShutdownState) -> Vec<u8> {

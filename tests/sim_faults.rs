@@ -5,7 +5,7 @@ mod support;
 
 use std::time::Duration;
 
-use jointd::protocol::reply::{fault, fsm};
+use jointd::protocol::status::{fault, fsm};
 use jointd::protocol::units::{angle_to_raw, speed_limit_to_raw, speed_to_raw};
 use jointd::protocol::{
     BroadcastSpd, Command, ConfigParam, Control, CtrlMode, FirmwareVersion, Group, InfoBlock,

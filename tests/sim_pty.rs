@@ -6,7 +6,7 @@ mod support;
 
 use std::time::{Duration, Instant};
 
-use jointd::protocol::reply::fsm;
+use jointd::protocol::status::fsm;
 use jointd::protocol::units::{angle_to_raw, output_deg_per_s, speed_limit_to_raw};
 use jointd::protocol::{
     BaudLevel, Command, ConfigParam, Control, FirmwareVersion, InfoBlock, Jog, JogDir, ReplyBody,

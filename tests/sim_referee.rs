@@ -5,7 +5,7 @@ mod support;
 
 use std::time::Duration;
 
-use jointd::protocol::reply::fsm;
+use jointd::protocol::status::fsm;
 use jointd::protocol::{BroadcastPos, Command, Config, Control, Group, InfoBlock};
 use jointd::sim::SimStats;
 use jointd::transport::tty::TtyPort;

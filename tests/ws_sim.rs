@@ -14,7 +14,7 @@ use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::{connect_async, MaybeTlsStream, WebSocketStream};
 
-use jointd::protocol::reply::fsm;
+use jointd::protocol::status::fsm;
 use support::sim_bus::{self, SimBus, WAIT};
 
 struct Client {

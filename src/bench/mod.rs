@@ -25,7 +25,7 @@ use clap::Args;
 use thiserror::Error;
 
 use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle, BusThread, Targets, THREAD_PREFIX};
-use crate::protocol::reply::fsm;
+use crate::protocol::status::fsm;
 use crate::sim::{SimConfig, SimError, SimHandle, SimStats, Simulator};
 
 use client::{Client, CLIENT_THREAD};

@@ -7,7 +7,7 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-use crate::protocol::reply::{fault_name, fsm};
+use crate::protocol::status::{active_fault, fault_name, fsm};
 use crate::protocol::{CtrlMode, Info01, Reply, ReplyBody};
 
 use super::coalesce::SlotInfo;
@@ -260,7 +260,7 @@ fn mark_online(bus: &str, entry: &mut Entry, events: &mut Vec<BusEvent>) {
 
 /// Reports a fault when the device enters one (not on every poll while in it).
 fn note_fault(bus: &str, entry: &Entry, info: &Info01, events: &mut Vec<BusEvent>) {
-    let active = |i: &Info01| (i.fsm == fsm::FAULT, i.err_code & 0x0F);
+    let active = |i: &Info01| (i.fsm == fsm::FAULT, active_fault(i.err_code));
     let was = entry.state.info01.as_ref().map(|(i, _)| active(i));
     let now = active(info);
     let faulty = now.0 || now.1 != 0;

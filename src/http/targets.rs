@@ -13,7 +13,7 @@ use super::limits::JointLimits;
 use super::telemetry::{firmware_of, is_enabled, measured_angle_raw, TargetView};
 use crate::bus::handle::DeviceState;
 use crate::bus::{BusError, BusHandle, Setpoint};
-use crate::protocol::reply::fsm_name;
+use crate::protocol::status::fsm_name;
 use crate::protocol::units;
 use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
 

@@ -363,10 +363,6 @@ impl Info06 {
     }
 }
 
-// The state and fault names moved to `status`; re-exported here so callers
-// that import them from `reply` keep working.
-pub use super::status::{fault, fault_name, fsm, fsm_name};
-
 #[cfg(test)]
 mod tests {
     use super::*;

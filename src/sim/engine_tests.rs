@@ -4,7 +4,7 @@
 use std::time::{Duration, Instant};
 
 use super::*;
-use crate::protocol::reply::fsm;
+use crate::protocol::status::fsm;
 use crate::protocol::{BroadcastPos, Config, Control, Group, InfoBlock, Message, Reply};
 
 const BAUD: u32 = 500_000;

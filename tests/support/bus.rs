@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use jointd::bus::handle::BusEvent;
 use jointd::bus::{spawn_bus, BusConfig, BusHandle, BusSnapshot, Setpoint, Targets};
-use jointd::protocol::reply::fsm;
+use jointd::protocol::status::fsm;
 use jointd::sim::{SimConfig, SimHandle, Simulator, WireFrame};
 
 /// Deadline of every wait: they end on the event, this only bounds a failure.

@@ -14,7 +14,7 @@ use jointd::bus::handle::{
     BusShared, DeviceState, EstopReport, LinkState, Request, WriteOutcome, REQUEST_QUEUE_LEN,
 };
 use jointd::bus::{BusHandle, BusSnapshot, Targets};
-use jointd::protocol::reply::fsm;
+use jointd::protocol::status::fsm;
 use jointd::protocol::{
     CtrlMode, Gains, Info01, Info04, Info05, Info06, InfoBlock, Reply, ReplyBody,
 };

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use crate::bus::error::BusError;
 use crate::bus::handle::{BusEvent, EstopReport};
-use crate::protocol::reply::fsm;
+use crate::protocol::status::fsm;
 use crate::protocol::{Command, Control, ALL_DEVICES};
 
 use super::ctx::Ctx;

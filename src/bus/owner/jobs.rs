@@ -12,7 +12,7 @@ use crate::bus::handle::{BusEvent, Targets, WriteOutcome};
 use crate::bus::verify::{confirmation, Confirm};
 use crate::bus::wire::Want;
 use crate::protocol::command::index;
-use crate::protocol::reply::{fault_name, fsm, fsm_name};
+use crate::protocol::status::{active_fault, fault_name, fsm, fsm_name};
 use crate::protocol::{
     is_device_id, Command, Config, ConfigParam, Control, CtrlMode, Info01, InfoBlock, Jog, JogDir,
     Reply, ReplyBody, ALL_DEVICES,
@@ -110,7 +110,7 @@ fn await_fsm(ctx: &mut Ctx, id: u8, what: &str, ok: fn(u8) -> bool) -> Result<In
         if info.fsm == fsm::FAULT {
             return Err(BusError::WrongState(format!(
                 "device {id} is in fault: {}",
-                fault_name(info.err_code & 0x0F)
+                fault_name(active_fault(info.err_code))
             )));
         }
         last = Some(info.fsm);

@@ -3,7 +3,8 @@
 use std::time::{Duration, Instant};
 
 use crate::protocol::command::{index, WRITE_FLASH_KEY};
-use crate::protocol::reply::{fault, fsm, RES_FAILURE, RES_SUCCESS};
+use crate::protocol::reply::{RES_FAILURE, RES_SUCCESS};
+use crate::protocol::status::{fault, fsm};
 use crate::protocol::units::{angle_deg, MAX_ANGLE_DEG};
 use crate::protocol::{
     BroadcastEnable, Command, Config, ConfigParam, Control, ControlOp, CtrlMode, Group, JogDir,

@@ -12,7 +12,7 @@ mod report;
 use std::time::{Duration, Instant};
 
 use crate::protocol::params::index;
-use crate::protocol::reply::{fault, fsm};
+use crate::protocol::status::{fault, fsm};
 use crate::protocol::units::{output_deg_per_s, speed_rpm, MAX_ANGLE_DEG, Q15_MAX};
 use crate::protocol::{CtrlMode, FirmwareVersion, InfoBlock, Reply};
 

@@ -6,7 +6,8 @@
 //! [`Params::block`]: super::super::params::Params::block
 
 use crate::protocol::params::index;
-use crate::protocol::reply::{fsm, Info01, Info02};
+use crate::protocol::reply::{Info01, Info02};
+use crate::protocol::status::fsm;
 use crate::protocol::units;
 use crate::protocol::{InfoBlock, Reply, ReplyBody};
 

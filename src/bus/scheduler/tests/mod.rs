@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use super::*;
 use crate::bus::config::BusConfig;
 use crate::bus::setpoints::Setpoint;
-use crate::protocol::reply::fsm;
+use crate::protocol::status::fsm;
 use crate::protocol::{Command, Info01, Info02, Reply, ReplyBody};
 
 const FRAME: Duration = Duration::from_micros(400);
