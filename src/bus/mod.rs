@@ -32,19 +32,19 @@
 //!   `ctx` (port + scheduler + publication) is all one-shot requests
 //!   (`jobs`, `estop`, `scan`, `baud`) get to work with.
 
-pub mod coalesce;
-pub mod config;
+pub(crate) mod coalesce;
+pub(crate) mod config;
 pub mod error;
 pub mod handle;
 mod link;
 mod owner;
-pub mod poll;
-pub mod registry;
-pub mod scheduler;
-pub mod setpoints;
-pub mod state;
-pub mod verify;
-pub mod wire;
+pub(crate) mod poll;
+pub(crate) mod registry;
+pub(crate) mod scheduler;
+pub(crate) mod setpoints;
+pub(crate) mod state;
+pub(crate) mod verify;
+pub(crate) mod wire;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;

@@ -147,11 +147,6 @@ impl WireClock {
     pub fn line_free(&mut self, at: Instant) {
         self.free_at = self.free_at.max(at);
     }
-
-    /// Wire time a reply costs: the device's turnaround and the frame.
-    pub fn reply_cost(&self) -> Duration {
-        self.turnaround + self.frame
-    }
 }
 
 #[cfg(test)]
@@ -206,7 +201,6 @@ mod tests {
             c.reply_deadline(t0),
             t0 + Duration::from_micros(100 + 400 + 5000)
         );
-        assert_eq!(c.reply_cost(), Duration::from_micros(500));
     }
 
     #[test]

@@ -13,8 +13,8 @@
 //! - [`note`]: what opening a port found worth telling ([`note::PortNote`]).
 
 pub mod memory;
-pub mod note;
-pub mod rs485;
+pub(crate) mod note;
+pub(crate) mod rs485;
 pub mod tty;
 
 use std::io;

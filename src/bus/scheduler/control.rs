@@ -30,6 +30,7 @@ pub(super) struct Control {
 }
 
 impl Control {
+    #[cfg(test)]
     pub(super) fn pending(&self) -> &BTreeMap<u8, Pending> {
         &self.pending
     }

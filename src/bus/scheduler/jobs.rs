@@ -57,10 +57,6 @@ impl Scheduler {
         self.job.exclusive = exclusive;
     }
 
-    pub fn is_exclusive(&self) -> bool {
-        self.job.exclusive
-    }
-
     /// The request ended abnormally (a caught panic): no phase survives it.
     pub fn job_abort(&mut self) {
         self.job = JobPhase::default();

@@ -22,7 +22,9 @@ mod tests;
 
 use std::time::{Duration, Instant};
 
-use crate::bus::coalesce::{Pending, Planned};
+#[cfg(test)]
+use crate::bus::coalesce::Pending;
+use crate::bus::coalesce::Planned;
 use crate::bus::config::BusConfig;
 use crate::bus::poll::{ControlBudget, PollPlanner};
 use crate::bus::registry::Registry;
@@ -31,7 +33,8 @@ use crate::bus::state::{BusEvent, WireAck};
 use crate::bus::wire::{ReplyWindow, Want, WireClock};
 use crate::protocol::InfoBlock;
 
-pub use reopen::{BACKOFF_FIRST, BACKOFF_MAX, LISTEN_ON_OPEN};
+#[cfg(test)]
+use reopen::{BACKOFF_FIRST, BACKOFF_MAX, LISTEN_ON_OPEN};
 
 /// Setpoint frames that may go out between two frames of a one-shot
 /// request, so a long scan does not freeze the joints.
@@ -282,6 +285,7 @@ impl Scheduler {
     }
 
     /// Setpoints taken from the store and not yet on the wire.
+    #[cfg(test)]
     pub fn pending(&self) -> &std::collections::BTreeMap<u8, Pending> {
         self.control.pending()
     }
