@@ -12,6 +12,11 @@
 //! - [`rt`]: real-time thread helpers (timer slack, FIFO class) for the bus owner and the simulator.
 //! - `bench` (feature `bench`): `jointd bench`: the bus engine against the simulator, measured.
 
+// Visibility says who may use an item: `pub` only where it is reachable from
+// outside the crate, `pub(crate)` for the rest; every public type prints in
+// a log or a test failure.
+#![warn(unreachable_pub, missing_debug_implementations)]
+
 #[cfg(feature = "bench")]
 pub mod bench;
 pub mod bus;

@@ -35,6 +35,7 @@ pub struct Write {
     pub at: Instant,
 }
 
+#[derive(Debug)]
 pub struct Client {
     stop: Arc<AtomicBool>,
     join: JoinHandle<Vec<Write>>,
@@ -93,6 +94,7 @@ fn stream(bus: &BusHandle, ids: &[u8], period: Duration, stop: &AtomicBool) -> V
 
 /// Paces a loop to absolute deadlines one period apart; a late iteration
 /// starts the schedule over instead of bursting to catch up.
+#[derive(Debug)]
 pub struct Pacer {
     period: Duration,
     next: Instant,

@@ -16,6 +16,7 @@ const MIN_TELEMETRY_HZ: f64 = 40.0;
 const MAX_P99_US: u64 = 3_000;
 const MAX_DAEMON_CPU: f64 = 0.15;
 
+#[derive(Debug)]
 pub struct Report {
     pub baud: u32,
     pub joints: usize,

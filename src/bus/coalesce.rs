@@ -27,7 +27,7 @@ use super::setpoints::{Setpoint, StoredSetpoint};
 
 /// What the planner needs to know about one device on the bus.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct SlotInfo {
+pub(crate) struct SlotInfo {
     /// The device was put in speed mode (power-up is position mode).
     pub speed_mode: bool,
     /// The target it was last sent (position and speed limit).
@@ -42,14 +42,14 @@ pub struct SlotInfo {
 /// (a newer setpoint replacing it does not reset the wait: a joint whose
 /// target keeps changing must not be starved by the others).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Pending {
+pub(crate) struct Pending {
     pub setpoint: StoredSetpoint,
     pub since: Instant,
 }
 
 /// One frame and the setpoints it delivers.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Planned {
+pub(crate) struct Planned {
     pub command: Command,
     /// Joints whose new setpoint this frame completes.
     pub carries: Vec<(u8, StoredSetpoint)>,
@@ -57,7 +57,7 @@ pub struct Planned {
 
 /// What to do with the pending setpoints.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct Plan {
+pub(crate) struct Plan {
     /// Frames, the one whose joints waited longest first.
     pub frames: Vec<Planned>,
     /// Setpoints equal to what the device already has: nothing to send.
@@ -69,7 +69,7 @@ pub struct Plan {
 const SLOTS: usize = 8;
 
 /// Plans frames for `pending`; `view(id)` is `None` for an id with no device.
-pub fn plan(pending: &BTreeMap<u8, Pending>, view: impl Fn(u8) -> Option<SlotInfo>) -> Plan {
+pub(crate) fn plan(pending: &BTreeMap<u8, Pending>, view: impl Fn(u8) -> Option<SlotInfo>) -> Plan {
     let mut out = Plan::default();
     let mut left: BTreeMap<u8, (StoredSetpoint, SlotInfo)> = BTreeMap::new();
     for (&id, p) in pending {

@@ -16,10 +16,10 @@ use super::error::BusError;
 
 /// Low among real-time priorities: above every normal thread, below the
 /// kernel's own real-time work.
-pub const DEFAULT_RT_PRIORITY: u8 = 10;
+pub(crate) const DEFAULT_RT_PRIORITY: u8 = 10;
 
 /// The factory baud of the modules (SPEC §1, level 1).
-pub const FACTORY_BAUD: u32 = 230_400;
+pub(crate) const FACTORY_BAUD: u32 = 230_400;
 
 /// One serial bus and how the owner drives it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -254,7 +254,7 @@ fn parse_baud(text: &str) -> Result<u32, BusError> {
 
 /// Time one 20-byte frame occupies the wire (SPEC §1: 200 bit times),
 /// to the nearest nanosecond.
-pub fn frame_time(baud: u32) -> Duration {
+pub(crate) fn frame_time(baud: u32) -> Duration {
     const BIT_NS_PER_FRAME: u64 = 200 * 1_000_000_000;
     let baud = u64::from(baud.max(1));
     Duration::from_nanos((BIT_NS_PER_FRAME + baud / 2) / baud)

@@ -373,3 +373,20 @@ impl BusHandle {
             .await
     }
 }
+
+/// Names the bus; the channels and watches behind a handle say nothing useful.
+impl std::fmt::Debug for BusShared {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BusShared")
+            .field("name", &self.name)
+            .finish_non_exhaustive()
+    }
+}
+
+impl std::fmt::Debug for BusHandle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BusHandle")
+            .field("bus", &self.name())
+            .finish_non_exhaustive()
+    }
+}

@@ -16,12 +16,12 @@ use super::handle::{BusCounters, BusShared, LoggedFrame};
 use super::wire::Want;
 
 /// Opens the port at a baud: a tty by path for real buses.
-pub type Opener =
+pub(super) type Opener =
     Box<dyn FnMut(u32) -> io::Result<(Box<dyn Transport>, Vec<PortNote>)> + Send + 'static>;
 
 /// An opener for a tty path (USB adapter, pty, `/dev/serial/by-id` link);
 /// `rs485`: ask for the kernel's RS-485 direction control.
-pub fn tty_opener(path: std::path::PathBuf, rs485: bool) -> Opener {
+pub(super) fn tty_opener(path: std::path::PathBuf, rs485: bool) -> Opener {
     Box::new(move |baud| {
         let setup = PortSetup { rs485 };
         let (port, notes) = TtyPort::open_with(&path, baud, setup)?;
@@ -32,7 +32,7 @@ pub fn tty_opener(path: std::path::PathBuf, rs485: bool) -> Opener {
 /// Bytes read per system call; a few frames.
 const READ_BUF: usize = 256;
 
-pub struct Link {
+pub(super) struct Link {
     port: Option<Box<dyn Transport>>,
     /// Reopens a lost port; `None` when the transport was handed in, which
     /// is then probed until it answers again.
@@ -57,7 +57,7 @@ fn not_open() -> io::Error {
 }
 
 impl Link {
-    pub fn new(
+    pub(super) fn new(
         port: Option<Box<dyn Transport>>,
         opener: Option<Opener>,
         baud: u32,
@@ -80,16 +80,16 @@ impl Link {
         }
     }
 
-    pub fn is_up(&self) -> bool {
+    pub(super) fn is_up(&self) -> bool {
         self.up
     }
 
-    pub fn baud(&self) -> u32 {
+    pub(super) fn baud(&self) -> u32 {
         self.baud
     }
 
     /// Opens (or, for a handed-in transport, probes) the port.
-    pub fn open(&mut self) -> io::Result<Vec<PortNote>> {
+    pub(super) fn open(&mut self) -> io::Result<Vec<PortNote>> {
         let notes = match self.opener.as_mut() {
             Some(open) => {
                 let (port, notes) = open(self.baud)?;
@@ -112,7 +112,7 @@ impl Link {
     }
 
     /// Marks the port lost; a reopenable port is closed.
-    pub fn close(&mut self) {
+    pub(super) fn close(&mut self) {
         self.up = false;
         if self.opener.is_some() {
             self.port = None;
@@ -127,7 +127,7 @@ impl Link {
     }
 
     /// Hands `cmds` to the port back to back; returns when it handed them.
-    pub fn send(&mut self, cmds: &[Command]) -> io::Result<Instant> {
+    pub(super) fn send(&mut self, cmds: &[Command]) -> io::Result<Instant> {
         self.tx.clear();
         for cmd in cmds {
             self.tx.extend_from_slice(&cmd.encode());
@@ -150,7 +150,7 @@ impl Link {
 
     /// Reads until `want` arrives or `deadline` passes. Other replies go to
     /// the inbox. With `want` = `None` this is an idle wait that listens.
-    pub fn wait(
+    pub(super) fn wait(
         &mut self,
         want: Option<Want>,
         deadline: Instant,
@@ -172,7 +172,7 @@ impl Link {
     }
 
     /// One look at the port without waiting.
-    pub fn poll_now(&mut self, want: Option<Want>) -> io::Result<Option<(Reply, Instant)>> {
+    pub(super) fn poll_now(&mut self, want: Option<Want>) -> io::Result<Option<(Reply, Instant)>> {
         let n = match (self.up, self.port.as_mut()) {
             (true, Some(port)) => port.read_timeout(&mut self.buf, std::time::Duration::ZERO)?,
             _ => return Err(not_open()),
@@ -208,7 +208,7 @@ impl Link {
 
     /// Changes the port's speed (after the devices switched), dropping what
     /// was read at the old one.
-    pub fn set_baud(&mut self, baud: u32) -> io::Result<()> {
+    pub(super) fn set_baud(&mut self, baud: u32) -> io::Result<()> {
         let port = self.port()?;
         port.set_baud(baud)?;
         port.discard_input()?;

@@ -65,6 +65,7 @@ pub const THREAD_PREFIX: &str = "bus-";
 const THREAD_NAME_MAX: usize = 15;
 
 /// The running owner of one bus. Dropping it stops the owner too.
+#[derive(Debug)]
 pub struct BusThread {
     stop: Arc<AtomicBool>,
     join: Option<JoinHandle<()>>,

@@ -15,7 +15,7 @@ use crate::protocol::InfoBlock;
 /// its frame time. Capped at a few frames so an idle client cannot save up
 /// a burst that starves telemetry.
 #[derive(Debug, Clone)]
-pub struct ControlBudget {
+pub(crate) struct ControlBudget {
     share: f64,
     /// Wire time control may still use, seconds (negative: in debt).
     credit: f64,
@@ -27,7 +27,7 @@ pub struct ControlBudget {
 const CREDIT_CAP_FRAMES: f64 = 2.0;
 
 impl ControlBudget {
-    pub fn new(share: f64, frame: Duration, now: Instant) -> Self {
+    pub(crate) fn new(share: f64, frame: Duration, now: Instant) -> Self {
         let cap = CREDIT_CAP_FRAMES * frame.as_secs_f64();
         Self {
             share,
@@ -38,7 +38,7 @@ impl ControlBudget {
     }
 
     /// After a baud change the cap follows the frame time.
-    pub fn set_frame(&mut self, frame: Duration) {
+    pub(crate) fn set_frame(&mut self, frame: Duration) {
         self.cap = CREDIT_CAP_FRAMES * frame.as_secs_f64();
         self.credit = self.credit.min(self.cap);
     }
@@ -50,20 +50,20 @@ impl ControlBudget {
     }
 
     /// True when a control frame may go out now.
-    pub fn allows(&mut self, now: Instant) -> bool {
+    pub(crate) fn allows(&mut self, now: Instant) -> bool {
         self.refill(now);
         self.credit >= 0.0
     }
 
     /// Charges `wire` time of control frames.
-    pub fn spend(&mut self, wire: Duration) {
+    pub(crate) fn spend(&mut self, wire: Duration) {
         self.credit -= wire.as_secs_f64();
     }
 }
 
 /// What the poll plan remembers per device.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct PollState {
+pub(crate) struct PollState {
     /// Polls sent to this device (INFO_01 on every Nth).
     pub polls: u32,
     /// For an offline device: when to ask it again.
@@ -75,14 +75,14 @@ const OFFLINE_COST_INV: u32 = 20;
 
 /// One telemetry read to send.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Poll {
+pub(crate) struct Poll {
     pub dev_id: u8,
     pub block: InfoBlock,
 }
 
 /// The round-robin cursor and the plan's parameters.
 #[derive(Debug, Clone)]
-pub struct PollPlanner {
+pub(crate) struct PollPlanner {
     info01_every: u32,
     offline_interval: Duration,
     /// The id polled last; the next online id above it goes next.
@@ -90,7 +90,7 @@ pub struct PollPlanner {
 }
 
 impl PollPlanner {
-    pub fn new(info01_every: u32, offline_interval: Duration) -> Self {
+    pub(crate) fn new(info01_every: u32, offline_interval: Duration) -> Self {
         Self {
             info01_every: info01_every.max(1),
             offline_interval,
@@ -104,7 +104,7 @@ impl PollPlanner {
     /// Counts the poll in the device's state. `timeout` is what an
     /// unanswered poll costs: offline devices are asked no more often than
     /// keeps each one's cost within a small share of the wire.
-    pub fn next<'a>(
+    pub(crate) fn next<'a>(
         &mut self,
         devices: impl Iterator<Item = (u8, bool, &'a mut PollState)>,
         now: Instant,

@@ -17,7 +17,7 @@ use super::state::{BusEvent, DeviceState};
 
 /// One device as the owner tracks it.
 #[derive(Debug, Clone)]
-pub struct Entry {
+pub(crate) struct Entry {
     /// What snapshots publish.
     pub state: DeviceState,
     pub poll: PollState,
@@ -47,7 +47,7 @@ impl Entry {
 
 /// What a reply changed that the owner must act on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct ReplyEffect {
+pub(crate) struct ReplyEffect {
     /// A known device announced itself again: it rebooted, lost its mode,
     /// its target and its enable.
     pub rebooted: bool,
@@ -60,14 +60,14 @@ pub struct ReplyEffect {
 
 /// Every device of one bus, by id.
 #[derive(Debug)]
-pub struct Registry {
+pub(crate) struct Registry {
     bus: String,
     offline_after: u32,
     entries: BTreeMap<u8, Entry>,
 }
 
 impl Registry {
-    pub fn new(bus: &str, offline_after: u32) -> Self {
+    pub(crate) fn new(bus: &str, offline_after: u32) -> Self {
         Self {
             bus: bus.to_string(),
             offline_after: offline_after.max(1),
@@ -76,23 +76,23 @@ impl Registry {
     }
 
     /// Adds a device expected on the bus (offline until it answers).
-    pub fn expect(&mut self, id: u8) {
+    pub(crate) fn expect(&mut self, id: u8) {
         self.entries.entry(id).or_insert_with(|| Entry::new(id));
     }
 
-    pub fn ids(&self) -> Vec<u8> {
+    pub(crate) fn ids(&self) -> Vec<u8> {
         self.entries.keys().copied().collect()
     }
 
-    pub fn get(&self, id: u8) -> Option<&Entry> {
+    pub(crate) fn get(&self, id: u8) -> Option<&Entry> {
         self.entries.get(&id)
     }
 
-    pub fn is_online(&self, id: u8) -> bool {
+    pub(crate) fn is_online(&self, id: u8) -> bool {
         self.entries.get(&id).is_some_and(|e| e.state.online)
     }
 
-    pub fn online_ids(&self) -> Vec<u8> {
+    pub(crate) fn online_ids(&self) -> Vec<u8> {
         self.entries
             .values()
             .filter(|e| e.state.online)
@@ -101,14 +101,14 @@ impl Registry {
     }
 
     /// `(id, online, poll state)` of every device, for the poll planner.
-    pub fn poll_states(&mut self) -> impl Iterator<Item = (u8, bool, &mut PollState)> {
+    pub(crate) fn poll_states(&mut self) -> impl Iterator<Item = (u8, bool, &mut PollState)> {
         self.entries
             .iter_mut()
             .map(|(id, e)| (*id, e.state.online, &mut e.poll))
     }
 
     /// What the coalescer needs to fill a broadcast slot.
-    pub fn slot_info(&self, id: u8) -> Option<SlotInfo> {
+    pub(crate) fn slot_info(&self, id: u8) -> Option<SlotInfo> {
         self.entries.get(&id).map(|e| SlotInfo {
             speed_mode: e.state.mode == Some(CtrlMode::Speed),
             target: e.state.target_sent,
@@ -119,7 +119,7 @@ impl Registry {
 
     /// Takes in a reply. `solicited` is false for a frame nobody asked for:
     /// a power-up INFO_01.
-    pub fn on_reply(
+    pub(crate) fn on_reply(
         &mut self,
         reply: &Reply,
         now: Instant,
@@ -158,7 +158,7 @@ impl Registry {
     }
 
     /// A poll or read of `id` went unanswered.
-    pub fn on_missed(&mut self, id: u8, events: &mut Vec<BusEvent>) {
+    pub(crate) fn on_missed(&mut self, id: u8, events: &mut Vec<BusEvent>) {
         let Some(entry) = self.entries.get_mut(&id) else {
             return;
         };
@@ -174,7 +174,7 @@ impl Registry {
     }
 
     /// The port is gone: nobody can be heard.
-    pub fn all_offline(&mut self, events: &mut Vec<BusEvent>) {
+    pub(crate) fn all_offline(&mut self, events: &mut Vec<BusEvent>) {
         for (id, entry) in &mut self.entries {
             if entry.state.online {
                 entry.state.online = false;
@@ -188,7 +188,7 @@ impl Registry {
     }
 
     /// A frame carrying `setpoint` to `id` was written at `at`.
-    pub fn record_sent(&mut self, id: u8, setpoint: Setpoint, at: Instant) {
+    pub(crate) fn record_sent(&mut self, id: u8, setpoint: Setpoint, at: Instant) {
         if let Some(e) = self.entries.get_mut(&id) {
             e.state.target_sent = Some(setpoint);
             e.last_sent = Some(at);
@@ -197,7 +197,7 @@ impl Registry {
     }
 
     /// The device holds no target of ours any more (disabled, mode change).
-    pub fn forget_target(&mut self, id: u8) {
+    pub(crate) fn forget_target(&mut self, id: u8) {
         if let Some(e) = self.entries.get_mut(&id) {
             e.state.target_sent = None;
         }
@@ -205,14 +205,14 @@ impl Registry {
 
     /// The device's zero moved (jog, re-zero): old angles and targets mean
     /// something else now.
-    pub fn zero_moved(&mut self, id: u8) {
+    pub(crate) fn zero_moved(&mut self, id: u8) {
         if let Some(e) = self.entries.get_mut(&id) {
             e.state.target_sent = None;
             e.measured = None;
         }
     }
 
-    pub fn set_mode(&mut self, id: u8, mode: CtrlMode) {
+    pub(crate) fn set_mode(&mut self, id: u8, mode: CtrlMode) {
         if let Some(e) = self.entries.get_mut(&id) {
             e.state.mode = Some(mode);
             e.state.target_sent = None;
@@ -220,7 +220,7 @@ impl Registry {
     }
 
     /// After an id change the entry moves with the device.
-    pub fn rename(&mut self, old: u8, new: u8) {
+    pub(crate) fn rename(&mut self, old: u8, new: u8) {
         if let Some(mut e) = self.entries.remove(&old) {
             e.state.dev_id = new;
             self.entries.insert(new, e);
@@ -228,7 +228,7 @@ impl Registry {
     }
 
     /// Turns the counts of the window just ended into rates.
-    pub fn roll_rates(&mut self, window: Duration) {
+    pub(crate) fn roll_rates(&mut self, window: Duration) {
         let secs = window.as_secs_f64().max(f64::EPSILON);
         for e in self.entries.values_mut() {
             e.state.control_hz = f64::from(e.control_updates) / secs;
@@ -238,7 +238,7 @@ impl Registry {
         }
     }
 
-    pub fn device_states(&self) -> BTreeMap<u8, DeviceState> {
+    pub(crate) fn device_states(&self) -> BTreeMap<u8, DeviceState> {
         self.entries
             .iter()
             .map(|(id, e)| (*id, e.state.clone()))

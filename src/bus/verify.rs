@@ -8,7 +8,7 @@ use crate::protocol::{ConfigParam, InfoBlock};
 
 /// The way a write of one parameter is confirmed.
 #[derive(Debug, Clone, Copy)]
-pub enum Confirm {
+pub(crate) enum Confirm {
     /// The device answers RES (1 success, 0 failure).
     Res,
     /// Read `block` back and compare `field` with the value written.
@@ -18,7 +18,7 @@ pub enum Confirm {
 }
 
 /// How `param` is confirmed, or why `write_config` refuses it.
-pub fn confirmation(param: &ConfigParam) -> Result<Confirm, &'static str> {
+pub(crate) fn confirmation(param: &ConfigParam) -> Result<Confirm, &'static str> {
     let (index, _) = param.index_value();
     let Some(row) = params::by_index(index) else {
         return Ok(Confirm::Unverifiable); // an index the table does not know

@@ -14,7 +14,7 @@ use super::config::{frame_time, Timing};
 
 /// The reply a transaction waits for: matched by device id and index.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Want {
+pub(crate) struct Want {
     pub dev_id: u8,
     pub index: u8,
 }
@@ -22,14 +22,14 @@ pub struct Want {
 /// When the reply to a request is expected (`due`, the model) and when it
 /// counts as missing (`deadline`, the model plus margins).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ReplyWindow {
+pub(crate) struct ReplyWindow {
     pub due: Instant,
     pub deadline: Instant,
 }
 
 /// The line as the owner believes it to be.
 #[derive(Debug, Clone)]
-pub struct WireClock {
+pub(crate) struct WireClock {
     frame: Duration,
     turnaround: Duration,
     reply_margin: Duration,
@@ -53,7 +53,7 @@ const LATE_FACTOR: u32 = 2;
 const MAX_LATE_ALLOWANCE: Duration = Duration::from_millis(20);
 
 impl WireClock {
-    pub fn new(baud: u32, timing: &Timing, now: Instant) -> Self {
+    pub(crate) fn new(baud: u32, timing: &Timing, now: Instant) -> Self {
         Self {
             frame: frame_time(baud),
             turnaround: Duration::from_micros(timing.turnaround_us),
@@ -66,21 +66,21 @@ impl WireClock {
     }
 
     /// After a baud change: frames take another time from now on.
-    pub fn set_baud(&mut self, baud: u32) {
+    pub(crate) fn set_baud(&mut self, baud: u32) {
         self.frame = frame_time(baud);
     }
 
     /// Extra margin for an adapter that holds replies back (FTDI latency timer).
-    pub fn add_reply_margin(&mut self, extra: Duration) {
+    pub(crate) fn add_reply_margin(&mut self, extra: Duration) {
         self.reply_margin += extra;
     }
 
-    pub fn frame_time(&self) -> Duration {
+    pub(crate) fn frame_time(&self) -> Duration {
         self.frame
     }
 
     /// When the line is free of every host frame handed over so far.
-    pub fn free_at(&self) -> Instant {
+    pub(crate) fn free_at(&self) -> Instant {
         self.free_at
     }
 
@@ -90,20 +90,20 @@ impl WireClock {
     ///
     /// The lead stays below ¾ of a frame time, so at most one frame waits in
     /// the port's queue and an e-stop is never behind more than one frame.
-    pub fn write_at(&self) -> Instant {
+    pub(crate) fn write_at(&self) -> Instant {
         let lead = self.lead.min(self.frame * 3 / 4);
         self.free_at.checked_sub(lead).unwrap_or(self.free_at)
     }
 
     /// Accounts `n` host frames handed to the port at `now`; returns when the
     /// last byte of the last one leaves the wire.
-    pub fn host_frames(&mut self, now: Instant, n: u32) -> Instant {
+    pub(crate) fn host_frames(&mut self, now: Instant, n: u32) -> Instant {
         self.free_at = self.free_at.max(now) + self.frame * n;
         self.free_at
     }
 
     /// When a reply to a request ending at `request_end` should complete.
-    pub fn reply_due(&self, request_end: Instant) -> Instant {
+    pub(crate) fn reply_due(&self, request_end: Instant) -> Instant {
         request_end + self.turnaround + self.frame
     }
 
@@ -111,13 +111,13 @@ impl WireClock {
     /// complete: the model, the configured margin, and twice the lateness
     /// the host path has shown lately (like TCP's retransmission timeout,
     /// the allowance follows what is measured).
-    pub fn reply_deadline(&self, request_end: Instant) -> Instant {
+    pub(crate) fn reply_deadline(&self, request_end: Instant) -> Instant {
         let allowance = (self.late_now(request_end) * LATE_FACTOR).min(MAX_LATE_ALLOWANCE);
         self.reply_due(request_end) + self.reply_margin + allowance
     }
 
     /// Both ends of the reply window of a request ending at `request_end`.
-    pub fn reply_window(&self, request_end: Instant) -> ReplyWindow {
+    pub(crate) fn reply_window(&self, request_end: Instant) -> ReplyWindow {
         ReplyWindow {
             due: self.reply_due(request_end),
             deadline: self.reply_deadline(request_end),
@@ -125,12 +125,12 @@ impl WireClock {
     }
 
     /// How long an unanswered request holds the line, if it ended `now`.
-    pub fn reply_timeout(&self, now: Instant) -> Duration {
+    pub(crate) fn reply_timeout(&self, now: Instant) -> Duration {
         self.reply_deadline(now) - now
     }
 
     /// A reply due at `due` arrived at `arrived`.
-    pub fn observe_reply(&mut self, due: Instant, arrived: Instant) {
+    pub(crate) fn observe_reply(&mut self, due: Instant, arrived: Instant) {
         let late = arrived.saturating_duration_since(due);
         if late > self.late_now(arrived) {
             self.late = late;
@@ -144,7 +144,7 @@ impl WireClock {
     }
 
     /// A reply arrived (or its time ran out) at `at`: the line is free from then.
-    pub fn line_free(&mut self, at: Instant) {
+    pub(crate) fn line_free(&mut self, at: Instant) {
         self.free_at = self.free_at.max(at);
     }
 }

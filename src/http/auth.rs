@@ -14,7 +14,11 @@ use super::state::AppState;
 
 const BEARER: &str = "Bearer ";
 
-pub async fn require_token(State(state): State<AppState>, req: Request, next: Next) -> Response {
+pub(crate) async fn require_token(
+    State(state): State<AppState>,
+    req: Request,
+    next: Next,
+) -> Response {
     let Some(token) = state.token() else {
         return next.run(req).await;
     };

@@ -28,7 +28,7 @@ use crate::bus::BusError;
 use crate::protocol::units::UnitError;
 
 /// Media type of every error body.
-pub const PROBLEM_JSON: &str = "application/problem+json";
+pub(crate) const PROBLEM_JSON: &str = "application/problem+json";
 /// Prefix of every problem `type` (a URN: no documentation host is implied).
 const TYPE_PREFIX: &str = "urn:jointd:problem:";
 /// Seconds a client should wait before retrying a full request queue.
@@ -347,7 +347,7 @@ impl From<QueryRejection> for ApiError {
 
 /// Every failure status an operation may answer with, and what it means:
 /// the OpenAPI document's shared responses.
-pub const DOCUMENTED_STATUSES: [(&str, &str); 10] = [
+pub(crate) const DOCUMENTED_STATUSES: [(&str, &str); 10] = [
     (
         "400",
         "Malformed request (JSON syntax, unparsable path or query)",
@@ -393,7 +393,7 @@ impl IntoResponse for ApiError {
     }
 }
 
-pub type ApiResult<T> = Result<T, ApiError>;
+pub(crate) type ApiResult<T> = Result<T, ApiError>;
 
 #[cfg(test)]
 mod tests {

@@ -3,17 +3,17 @@
 //! agree on them without importing each other.
 
 /// The WebSocket endpoint.
-pub const WS_PATH: &str = "/api/v1/ws";
+pub(crate) const WS_PATH: &str = "/api/v1/ws";
 /// Liveness: public even when the daemon has a token.
-pub const HEALTHZ_PATH: &str = "/healthz";
+pub(crate) const HEALTHZ_PATH: &str = "/healthz";
 /// The OpenAPI document and its docs page.
-pub const OPENAPI_PATH: &str = "/openapi.json";
-pub const DOCS_PATH: &str = "/docs";
+pub(crate) const OPENAPI_PATH: &str = "/openapi.json";
+pub(crate) const DOCS_PATH: &str = "/docs";
 /// The dashboard's files (`web/`): the page, its script, its style.
-pub const DASHBOARD_PAGE: &str = "/";
-pub const DASHBOARD_INDEX: &str = "/index.html";
-pub const DASHBOARD_SCRIPT: &str = "/app.js";
-pub const DASHBOARD_STYLE: &str = "/style.css";
+pub(crate) const DASHBOARD_PAGE: &str = "/";
+pub(crate) const DASHBOARD_INDEX: &str = "/index.html";
+pub(crate) const DASHBOARD_SCRIPT: &str = "/app.js";
+pub(crate) const DASHBOARD_STYLE: &str = "/style.css";
 const DASHBOARD: [&str; 4] = [
     DASHBOARD_PAGE,
     DASHBOARD_INDEX,
@@ -24,7 +24,7 @@ const DASHBOARD: [&str; 4] = [
 /// Paths that need no token: `/healthz` (probes carry none) and the
 /// dashboard's files (they hold no data; the page asks for the token when
 /// the API answers 401).
-pub fn is_public(path: &str) -> bool {
+pub(crate) fn is_public(path: &str) -> bool {
     path == HEALTHZ_PATH || DASHBOARD.contains(&path)
 }
 

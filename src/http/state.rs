@@ -173,3 +173,13 @@ impl DevicePath {
         Ok((bus, device_id("id", self.id)?))
     }
 }
+
+/// Names the buses; the token must never reach a log line.
+impl std::fmt::Debug for AppState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let buses: Vec<&str> = self.buses().map(BusHandle::name).collect();
+        f.debug_struct("AppState")
+            .field("buses", &buses)
+            .finish_non_exhaustive()
+    }
+}

@@ -19,10 +19,10 @@ use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
 
 /// Speed limit of a position target that names none, rotor rpm (≈ 32 °/s at
 /// the output): slow enough to be safe, fast enough to see.
-pub const DEFAULT_SPEED_LIMIT_RPM: f64 = 3000.0;
+pub(crate) const DEFAULT_SPEED_LIMIT_RPM: f64 = 3000.0;
 /// How long a target request waits to see its frame written before
 /// answering 202 instead of 200.
-pub const WIRE_ACK_WAIT: Duration = Duration::from_millis(250);
+pub(crate) const WIRE_ACK_WAIT: Duration = Duration::from_millis(250);
 
 /// A target for one joint. Position mode: `position_deg` (required) and
 /// `speed_rpm` as the speed limit (default 3000 rpm, capped by the soft
@@ -30,7 +30,7 @@ pub const WIRE_ACK_WAIT: Duration = Duration::from_millis(250);
 #[derive(Debug, Clone, Deserialize, Serialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 #[schema(example = json!({"position_deg": 45.0, "speed_rpm": 3000.0}))]
-pub struct TargetRequest {
+pub(crate) struct TargetRequest {
     /// Output angle, degrees (−255..=255, narrowed by soft limits).
     #[schema(example = 45.0, minimum = -255.0, maximum = 255.0)]
     pub position_deg: Option<f64>,
@@ -42,7 +42,7 @@ pub struct TargetRequest {
 
 /// What a target request did.
 #[derive(Debug, Serialize, ToSchema)]
-pub struct TargetAck {
+pub(crate) struct TargetAck {
     #[schema(example = "sim0")]
     pub bus: String,
     /// Sequence number of this write in the bus's setpoint store.
@@ -56,7 +56,7 @@ pub struct TargetAck {
 }
 
 #[derive(Debug, Serialize, ToSchema)]
-pub struct JointTarget {
+pub(crate) struct JointTarget {
     #[schema(example = 1)]
     pub id: u8,
     #[serde(flatten)]
@@ -65,7 +65,7 @@ pub struct JointTarget {
 
 /// Converts one joint's target; `field` prefixes error field names
 /// (`targets[2].` in a group request).
-pub fn setpoint(
+pub(crate) fn setpoint(
     dev: &DeviceState,
     limits: &JointLimits,
     req: &TargetRequest,
@@ -130,7 +130,11 @@ fn speed_setpoint(
 
 /// 409 unless the device runs (or aligns). The cached INFO_01 may predate a
 /// just-made enable, so a "not enabled" answer is confirmed by a fresh read.
-pub async fn ensure_enabled(bus: &BusHandle, dev: &DeviceState, what: &str) -> ApiResult<()> {
+pub(crate) async fn ensure_enabled(
+    bus: &BusHandle,
+    dev: &DeviceState,
+    what: &str,
+) -> ApiResult<()> {
     if dev.info01.as_ref().is_some_and(|(i, _)| is_enabled(i)) {
         return Ok(());
     }
@@ -155,7 +159,7 @@ pub async fn ensure_enabled(bus: &BusHandle, dev: &DeviceState, what: &str) -> A
 }
 
 /// Waits (briefly) until the setpoint write `seq` is on the wire.
-pub async fn wait_on_wire(bus: &BusHandle, seq: u64) -> bool {
+pub(crate) async fn wait_on_wire(bus: &BusHandle, seq: u64) -> bool {
     let mut acks = bus.wire_acks();
     tokio::time::timeout(WIRE_ACK_WAIT, acks.wait_for(|a| a.seq >= seq))
         .await

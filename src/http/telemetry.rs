@@ -15,10 +15,10 @@ use crate::protocol::{Info01, Info02};
 /// The speed base to assume before a device has reported its firmware: the
 /// newer 50000 rpm base, so an rpm request maps to at most the asked speed
 /// on older firmware (40000 rpm base), never more.
-pub const ASSUMED_FIRMWARE: FirmwareVersion = FirmwareVersion::SPEED_BASE_50K;
+pub(crate) const ASSUMED_FIRMWARE: FirmwareVersion = FirmwareVersion::SPEED_BASE_50K;
 
 /// The firmware a device reported in INFO_01, or [`ASSUMED_FIRMWARE`].
-pub fn firmware_of(dev: &DeviceState) -> FirmwareVersion {
+pub(crate) fn firmware_of(dev: &DeviceState) -> FirmwareVersion {
     dev.info01
         .as_ref()
         .map(|(i, _)| i.firmware())
@@ -27,13 +27,13 @@ pub fn firmware_of(dev: &DeviceState) -> FirmwareVersion {
 
 /// Whether the device runs (or is aligning towards running): the states in
 /// which targets and jogs act.
-pub fn is_enabled(info: &Info01) -> bool {
+pub(crate) fn is_enabled(info: &Info01) -> bool {
     info.fsm == fsm::RUN || info.fsm == fsm::ALIGN
 }
 
 /// A fault code decoded to names.
 #[derive(Debug, Clone, Serialize, ToSchema)]
-pub struct FaultView {
+pub(crate) struct FaultView {
     /// err_code as sent.
     #[schema(example = 0)]
     pub code: u8,
@@ -46,7 +46,7 @@ pub struct FaultView {
 }
 
 impl FaultView {
-    pub fn new(code: u8) -> Self {
+    pub(crate) fn new(code: u8) -> Self {
         Self {
             code,
             active: fault_name(active_fault(code)),
@@ -57,7 +57,7 @@ impl FaultView {
 
 /// INFO_01 decoded: state and health.
 #[derive(Debug, Clone, Serialize, ToSchema)]
-pub struct StatusView {
+pub(crate) struct StatusView {
     #[schema(example = 7)]
     pub fsm: u8,
     /// `ready`, `align`, `run`, `fault`, ...
@@ -84,7 +84,7 @@ pub struct StatusView {
 
 /// INFO_02 decoded: fast telemetry.
 #[derive(Debug, Clone, Serialize, ToSchema)]
-pub struct MotionView {
+pub(crate) struct MotionView {
     #[schema(example = 45.5)]
     pub angle_deg: f64,
     /// Rotor speed (before the 568.81:1 gearbox).
@@ -105,7 +105,7 @@ pub struct MotionView {
 
 /// A target in physical units with its raw wire values.
 #[derive(Debug, Clone, Serialize, ToSchema)]
-pub struct TargetView {
+pub(crate) struct TargetView {
     #[schema(example = 45.0)]
     pub position_deg: f64,
     #[schema(example = 3000.0)]
@@ -117,7 +117,7 @@ pub struct TargetView {
 }
 
 impl TargetView {
-    pub fn new(sp: Setpoint, fw: FirmwareVersion) -> Self {
+    pub(crate) fn new(sp: Setpoint, fw: FirmwareVersion) -> Self {
         Self {
             position_deg: units::angle_deg(sp.pos_ref),
             speed_rpm: units::speed_rpm(sp.spd_ref, fw),
@@ -127,13 +127,13 @@ impl TargetView {
     }
 }
 
-pub use crate::protocol::frame_json::hex;
+pub(crate) use crate::protocol::frame_json::hex;
 
 fn age_ms(at: Instant, now: Instant) -> f64 {
     now.saturating_duration_since(at).as_secs_f64() * 1000.0
 }
 
-pub fn status_view(info: &Info01, at: Instant, now: Instant) -> StatusView {
+pub(crate) fn status_view(info: &Info01, at: Instant, now: Instant) -> StatusView {
     StatusView {
         fsm: info.fsm,
         state: fsm_name(info.fsm),
@@ -148,7 +148,12 @@ pub fn status_view(info: &Info01, at: Instant, now: Instant) -> StatusView {
     }
 }
 
-pub fn motion_view(info: &Info02, fw: FirmwareVersion, at: Instant, now: Instant) -> MotionView {
+pub(crate) fn motion_view(
+    info: &Info02,
+    fw: FirmwareVersion,
+    at: Instant,
+    now: Instant,
+) -> MotionView {
     let rpm = info.speed_rpm(fw);
     MotionView {
         angle_deg: info.angle_deg(),
@@ -162,7 +167,7 @@ pub fn motion_view(info: &Info02, fw: FirmwareVersion, at: Instant, now: Instant
 }
 
 /// Latest angle the daemon knows: INFO_02 if fresher than INFO_01.
-pub fn measured_angle_raw(dev: &DeviceState) -> Option<i16> {
+pub(crate) fn measured_angle_raw(dev: &DeviceState) -> Option<i16> {
     match (&dev.info01, &dev.info02) {
         (Some((a, ta)), Some((b, tb))) => Some(if tb >= ta { b.angle } else { a.angle }),
         (Some((a, _)), None) => Some(a.angle),

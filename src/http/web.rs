@@ -46,7 +46,7 @@ const ASSETS: [Asset; 4] = [
 
 /// One route per file; each handler knows its file, so no request can ask
 /// for one that is not there. (They need no token: `paths::is_public`.)
-pub fn router() -> Router<AppState> {
+pub(crate) fn router() -> Router<AppState> {
     ASSETS.iter().fold(Router::new(), |r, a| {
         r.route(a.0, get(move |State(state)| asset(state, *a)))
     })

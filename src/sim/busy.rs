@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 const FOLD_LAG: Duration = Duration::from_millis(50);
 
 #[derive(Debug, Clone)]
-pub struct BusyMeter {
+pub(crate) struct BusyMeter {
     /// Busy time of everything before `horizon`.
     folded: Duration,
     horizon: Option<Instant>,
@@ -21,7 +21,7 @@ pub struct BusyMeter {
 }
 
 impl BusyMeter {
-    pub fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Self {
             folded: Duration::ZERO,
             horizon: None,
@@ -30,7 +30,7 @@ impl BusyMeter {
     }
 
     /// Marks `[start, end)` busy (merged with what overlaps it).
-    pub fn add(&mut self, start: Instant, end: Instant) {
+    pub(crate) fn add(&mut self, start: Instant, end: Instant) {
         let start = self.horizon.map_or(start, |h| start.max(h));
         if end <= start {
             return;
@@ -49,7 +49,7 @@ impl BusyMeter {
     }
 
     /// Busy time from the first interval up to `at`.
-    pub fn busy_until(&self, at: Instant) -> Duration {
+    pub(crate) fn busy_until(&self, at: Instant) -> Duration {
         let open: Duration = self
             .segs
             .iter()
@@ -60,7 +60,7 @@ impl BusyMeter {
     }
 
     /// Folds intervals that ended well before `now` into the total.
-    pub fn fold(&mut self, now: Instant) {
+    pub(crate) fn fold(&mut self, now: Instant) {
         let Some(cut) = now.checked_sub(FOLD_LAG) else {
             return;
         };

@@ -9,19 +9,19 @@ use thiserror::Error;
 use crate::protocol::{is_device_id, BaudLevel};
 
 /// SPEC §1 leaves the turnaround undocumented; the simulator's default.
-pub const DEFAULT_TURNAROUND: Duration = Duration::from_micros(100);
+pub(crate) const DEFAULT_TURNAROUND: Duration = Duration::from_micros(100);
 /// SPEC §4.1: "about 1 s" of encoder alignment after the first enable.
-pub const DEFAULT_ALIGN_TIME: Duration = Duration::from_secs(1);
+pub(crate) const DEFAULT_ALIGN_TIME: Duration = Duration::from_secs(1);
 /// Power-up to the spontaneous INFO_01 (a few ms of firmware start-up).
-pub const DEFAULT_BOOT_DELAY: Duration = Duration::from_millis(5);
+pub(crate) const DEFAULT_BOOT_DELAY: Duration = Duration::from_millis(5);
 /// How long a blocked joint pushes before the device latches a stall fault.
-pub const DEFAULT_STALL_FAULT_AFTER: Duration = Duration::from_secs(3);
+pub(crate) const DEFAULT_STALL_FAULT_AFTER: Duration = Duration::from_secs(3);
 /// Firmware the simulated modules report (≥ 124: 50000 rpm speed base).
-pub const DEFAULT_SOFT_VER: u8 = 128;
+pub(crate) const DEFAULT_SOFT_VER: u8 = 128;
 /// Frame log ring size.
-pub const DEFAULT_LOG_CAPACITY: usize = 100_000;
+pub(crate) const DEFAULT_LOG_CAPACITY: usize = 100_000;
 /// Seed of the simulator's noise and fault dice (reproducible by default).
-pub const DEFAULT_SEED: u64 = 0x5EED_1D0C;
+pub(crate) const DEFAULT_SEED: u64 = 0x5EED_1D0C;
 
 /// Everything a simulated bus is built from.
 #[derive(Debug, Clone, PartialEq)]

@@ -14,12 +14,12 @@ use std::time::Duration;
 
 use super::{Fault, SimHandle};
 
-pub const HELP: &str = "commands: unplug | replug | clear | stats | devices | help | \
+pub(crate) const HELP: &str = "commands: unplug | replug | clear | stats | devices | help | \
 power-cycle ID | under-voltage ID on|off | stall ID [DEG] | corrupt RATE | \
 drop RATE [ID] | extra-turnaround MICROS | miss-control ID COUNT";
 
 #[derive(Debug, Clone, PartialEq)]
-pub enum ConsoleCmd {
+pub(crate) enum ConsoleCmd {
     Fault(Fault),
     Stats,
     Devices,
@@ -33,7 +33,7 @@ fn num<T: std::str::FromStr>(word: Option<&str>, what: &str) -> Result<T, String
 }
 
 /// Parses one console line.
-pub fn parse(line: &str) -> Result<ConsoleCmd, String> {
+pub(crate) fn parse(line: &str) -> Result<ConsoleCmd, String> {
     let mut words = line.split_whitespace();
     let cmd = words.next().unwrap_or("help");
     let fault = match cmd {
@@ -79,7 +79,7 @@ pub fn parse(line: &str) -> Result<ConsoleCmd, String> {
 }
 
 /// Executes one line against the simulator; the answer to print.
-pub fn execute(sim: &SimHandle, line: &str) -> String {
+pub(crate) fn execute(sim: &SimHandle, line: &str) -> String {
     match parse(line) {
         Ok(ConsoleCmd::Fault(f)) => {
             sim.inject(f);
@@ -93,7 +93,7 @@ pub fn execute(sim: &SimHandle, line: &str) -> String {
 }
 
 /// Serves stdin in a background thread until it closes.
-pub fn spawn(sim: SimHandle) {
+pub(crate) fn spawn(sim: SimHandle) {
     let spawned = std::thread::Builder::new()
         .name("jointd-sim-console".into())
         .spawn(move || {

@@ -28,13 +28,13 @@ const TICK: Duration = Duration::from_millis(20);
 
 /// Reply bytes due at the host at `due`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Delivery {
+pub(crate) struct Delivery {
     pub due: Instant,
     pub bytes: FrameBytes,
 }
 
 #[derive(Debug)]
-pub struct Engine {
+pub(crate) struct Engine {
     turnaround: Duration,
     default_baud: u32,
     devices: Vec<Device>,
@@ -56,7 +56,7 @@ pub struct Engine {
 
 impl Engine {
     /// Powers the bus up at `now` (flash from the state file, if any).
-    pub fn new(cfg: &SimConfig, now: Instant) -> Result<Self, SimError> {
+    pub(crate) fn new(cfg: &SimConfig, now: Instant) -> Result<Self, SimError> {
         cfg.validate()?;
         let level = BaudLevel::from_baud(cfg.baud).ok_or(SimError::BadBaud(cfg.baud))?;
         let flash = FlashStore::new(cfg.state_file.clone());
@@ -82,7 +82,7 @@ impl Engine {
     }
 
     /// Bytes the host wrote, read at `at`, while its port was set to `host_baud`.
-    pub fn on_host_bytes(&mut self, bytes: &[u8], at: Instant, host_baud: Option<u32>) {
+    pub(crate) fn on_host_bytes(&mut self, bytes: &[u8], at: Instant, host_baud: Option<u32>) {
         self.decoder.push(bytes);
         while let Some((_, fb)) = self.decoder.next_frame_with_bytes() {
             let dur = frame_time(host_baud.unwrap_or(self.default_baud));
@@ -93,7 +93,7 @@ impl Engine {
     }
 
     /// When something next happens on the line.
-    pub fn next_event(&self) -> Option<Instant> {
+    pub(crate) fn next_event(&self) -> Option<Instant> {
         let announce = self.devices.iter().filter_map(Device::announce_at).min();
         match (self.wire.next_event(), announce) {
             (Some(a), Some(b)) => Some(a.min(b)),
@@ -102,12 +102,12 @@ impl Engine {
     }
 
     /// When bytes are next due at the host (the instant that needs precision).
-    pub fn next_delivery(&self) -> Option<Instant> {
+    pub(crate) fn next_delivery(&self) -> Option<Instant> {
         self.wire.next_device_end()
     }
 
     /// Runs every device's physics up to `now` if it has not run for a while.
-    pub fn tick(&mut self, now: Instant) {
+    pub(crate) fn tick(&mut self, now: Instant) {
         if now.saturating_duration_since(self.last_tick) >= TICK {
             self.devices.iter_mut().for_each(|d| d.advance_to(now));
             self.last_tick = now;
@@ -115,13 +115,13 @@ impl Engine {
     }
 
     /// Host frames waiting for or on the line.
-    pub fn host_backlog(&self) -> usize {
+    pub(crate) fn host_backlog(&self) -> usize {
         self.wire.host_backlog()
     }
 
     /// Runs everything due by `now`; returns the bytes due at the host, in order.
     /// `host_baud` is the host port's setting now (replies at another baud are garbage to it).
-    pub fn advance(&mut self, now: Instant, host_baud: Option<u32>) -> Vec<Delivery> {
+    pub(crate) fn advance(&mut self, now: Instant, host_baud: Option<u32>) -> Vec<Delivery> {
         let mut out = Vec::new();
         loop {
             let wire_t = self.wire.next_event().filter(|t| *t <= now);
@@ -285,7 +285,7 @@ impl Engine {
     }
 
     /// Counters and line busy time as of `now`.
-    pub fn stats(&self, now: Instant) -> SimStats {
+    pub(crate) fn stats(&self, now: Instant) -> SimStats {
         let dec = self.decoder.stats();
         SimStats {
             at: now,
@@ -298,7 +298,7 @@ impl Engine {
     }
 
     /// Every device's state, physics run up to `now`.
-    pub fn views(&mut self, now: Instant) -> Vec<DeviceView> {
+    pub(crate) fn views(&mut self, now: Instant) -> Vec<DeviceView> {
         self.devices
             .iter_mut()
             .map(|d| {
@@ -308,16 +308,16 @@ impl Engine {
             .collect()
     }
 
-    pub fn frame_log(&self) -> Vec<WireFrame> {
+    pub(crate) fn frame_log(&self) -> Vec<WireFrame> {
         self.log.snapshot()
     }
 
-    pub fn clear_frame_log(&mut self) {
+    pub(crate) fn clear_frame_log(&mut self) {
         self.log.clear();
     }
 
     /// Applies a device or line fault (unplugging itself is the runner's job).
-    pub fn inject(&mut self, fault: Fault, now: Instant) {
+    pub(crate) fn inject(&mut self, fault: Fault, now: Instant) {
         match fault {
             Fault::CorruptRate(r) => self.faults.corrupt_rate = r.clamp(0.0, 1.0),
             Fault::DropReplies { dev_id, rate } => self.faults.set_drop(dev_id, rate),
@@ -346,7 +346,7 @@ impl Engine {
     }
 
     /// The line was unplugged (in-flight frames are lost) or plugged back.
-    pub fn set_unplugged(&mut self, unplugged: bool) {
+    pub(crate) fn set_unplugged(&mut self, unplugged: bool) {
         self.unplugged = unplugged;
         if unplugged {
             self.wire.clear_in_flight();
@@ -354,7 +354,7 @@ impl Engine {
         self.decoder.clear();
     }
 
-    pub fn record_delivery(&mut self, due: Instant, written: Instant) {
+    pub(crate) fn record_delivery(&mut self, due: Instant, written: Instant) {
         let err = if written >= due {
             i64::try_from((written - due).as_nanos()).unwrap_or(i64::MAX)
         } else {
@@ -366,11 +366,11 @@ impl Engine {
         self.delivery_errors_ns.push_back(err);
     }
 
-    pub fn delivery_errors_ns(&self) -> Vec<i64> {
+    pub(crate) fn delivery_errors_ns(&self) -> Vec<i64> {
         self.delivery_errors_ns.iter().copied().collect()
     }
 
-    pub fn count_overrun(&mut self, bytes: usize) {
+    pub(crate) fn count_overrun(&mut self, bytes: usize) {
         self.stats.host_overrun_bytes += bytes as u64;
     }
 }

@@ -50,7 +50,7 @@ pub enum Fault {
 
 /// Line-level fault settings.
 #[derive(Debug, Clone, Default)]
-pub struct LineFaults {
+pub(crate) struct LineFaults {
     pub corrupt_rate: f64,
     /// Drop rate per device id; `None` is every device.
     pub drop_rates: BTreeMap<Option<u8>, f64>,
@@ -60,7 +60,7 @@ pub struct LineFaults {
 }
 
 impl LineFaults {
-    pub fn set_drop(&mut self, dev_id: Option<u8>, rate: f64) {
+    pub(crate) fn set_drop(&mut self, dev_id: Option<u8>, rate: f64) {
         if rate > 0.0 {
             self.drop_rates.insert(dev_id, rate.min(1.0));
         } else {
@@ -69,7 +69,7 @@ impl LineFaults {
     }
 
     /// Whether device `dev_id` misses this control frame (counting it down).
-    pub fn misses_control(&mut self, dev_id: u8) -> bool {
+    pub(crate) fn misses_control(&mut self, dev_id: u8) -> bool {
         match self.miss_control.get_mut(&dev_id) {
             Some(left) if *left > 0 => {
                 *left -= 1;
@@ -80,14 +80,14 @@ impl LineFaults {
     }
 
     /// Whether this device's reply is swallowed this time.
-    pub fn drops(&self, dev_id: u8, rng: &mut Rng) -> bool {
+    pub(crate) fn drops(&self, dev_id: u8, rng: &mut Rng) -> bool {
         let all = self.drop_rates.get(&None).copied().unwrap_or(0.0);
         let one = self.drop_rates.get(&Some(dev_id)).copied().unwrap_or(0.0);
         rng.chance(all.max(one))
     }
 
     /// Garbles bytes at the corruption rate; true if any byte changed.
-    pub fn corrupt(&self, bytes: &mut FrameBytes, rng: &mut Rng) -> bool {
+    pub(crate) fn corrupt(&self, bytes: &mut FrameBytes, rng: &mut Rng) -> bool {
         let mut hit = false;
         for b in bytes.iter_mut() {
             if rng.chance(self.corrupt_rate) {
@@ -103,7 +103,7 @@ impl LineFaults {
 /// What two devices talking at once leave on the line: each bit is pulled
 /// low by whichever driver sends a 0 (open-collector reading), and a frame
 /// that happens to survive that is garbled in its CRC so it never decodes.
-pub fn collide(a: &FrameBytes, b: &FrameBytes) -> FrameBytes {
+pub(crate) fn collide(a: &FrameBytes, b: &FrameBytes) -> FrameBytes {
     let mut out = [0u8; 20];
     for (o, (x, y)) in out.iter_mut().zip(a.iter().zip(b)) {
         *o = x & y;
@@ -115,7 +115,7 @@ pub fn collide(a: &FrameBytes, b: &FrameBytes) -> FrameBytes {
 }
 
 /// What another driver puts on the line during a collision: random bits.
-pub fn noise_frame(rng: &mut Rng) -> FrameBytes {
+pub(crate) fn noise_frame(rng: &mut Rng) -> FrameBytes {
     let mut out = [0u8; 20];
     for chunk in out.chunks_mut(8) {
         let n = chunk.len();
@@ -127,7 +127,7 @@ pub fn noise_frame(rng: &mut Rng) -> FrameBytes {
 /// The bit pattern a UART at another baud makes of a frame: framing errors
 /// and wrong bits. Modelled as the high nibbles stuck (a slower receiver
 /// samples the tail of each byte as stop-bit marks), which never decodes.
-pub fn misframed(bytes: &FrameBytes) -> FrameBytes {
+pub(crate) fn misframed(bytes: &FrameBytes) -> FrameBytes {
     collide(bytes, &[MISFRAMED_MASK; 20])
 }
 
@@ -138,7 +138,7 @@ const CRC_AT: usize = 16;
 const CRC_GARBLE: u8 = 0x5A;
 
 /// Makes a frame fail its CRC check (both layouts).
-pub fn garble_crc(bytes: &mut FrameBytes) {
+pub(crate) fn garble_crc(bytes: &mut FrameBytes) {
     bytes[CRC_AT] ^= CRC_GARBLE;
     bytes[CRC_AT + 1] ^= CRC_GARBLE;
     bytes[CRC_AT + 2] ^= CRC_GARBLE;

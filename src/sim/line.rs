@@ -10,7 +10,7 @@ use crate::transport::memory::MemoryPort;
 use crate::transport::{is_hangup, Transport};
 
 /// What the runner needs from the device end of a line.
-pub trait Line: Send {
+pub(crate) trait Line: Send {
     /// Waits up to `timeout` for host bytes; `Ok(0)` on timeout or while unplugged.
     fn read_timeout(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize>;
     /// Hands bytes to the host without blocking; returns how many it took.
@@ -27,12 +27,12 @@ pub trait Line: Send {
 }
 
 /// The device end of an in-memory pipe.
-pub struct MemoryLine {
+pub(crate) struct MemoryLine {
     port: MemoryPort,
 }
 
 impl MemoryLine {
-    pub fn new(port: MemoryPort) -> Self {
+    pub(crate) fn new(port: MemoryPort) -> Self {
         Self { port }
     }
 }

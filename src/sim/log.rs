@@ -21,7 +21,7 @@ pub struct WireFrame {
 }
 
 /// The id a host command addresses (none for group broadcasts).
-pub fn addressed_id(cmd: &Command) -> Option<u8> {
+pub(crate) fn addressed_id(cmd: &Command) -> Option<u8> {
     match cmd {
         Command::Control(c) => Some(c.dev_id),
         Command::Jog(j) => Some(j.dev_id),
@@ -31,31 +31,31 @@ pub fn addressed_id(cmd: &Command) -> Option<u8> {
 }
 
 #[derive(Debug)]
-pub struct FrameLog {
+pub(crate) struct FrameLog {
     ring: VecDeque<WireFrame>,
     capacity: usize,
 }
 
 impl FrameLog {
-    pub fn new(capacity: usize) -> Self {
+    pub(crate) fn new(capacity: usize) -> Self {
         Self {
             ring: VecDeque::new(),
             capacity: capacity.max(1),
         }
     }
 
-    pub fn push(&mut self, f: WireFrame) {
+    pub(crate) fn push(&mut self, f: WireFrame) {
         if self.ring.len() == self.capacity {
             self.ring.pop_front();
         }
         self.ring.push_back(f);
     }
 
-    pub fn snapshot(&self) -> Vec<WireFrame> {
+    pub(crate) fn snapshot(&self) -> Vec<WireFrame> {
         self.ring.iter().copied().collect()
     }
 
-    pub fn clear(&mut self) {
+    pub(crate) fn clear(&mut self) {
         self.ring.clear();
     }
 }

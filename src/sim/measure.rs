@@ -37,7 +37,7 @@ const IDLE_SPAN: Duration = Duration::from_millis(300);
 
 /// Percentiles of one error, µs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Spread {
+pub(crate) struct Spread {
     pub p50: f64,
     pub p90: f64,
     pub p99: f64,
@@ -46,7 +46,7 @@ pub struct Spread {
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Report {
+pub(crate) struct Report {
     pub baud: u32,
     pub polls: usize,
     pub lost: usize,
@@ -61,7 +61,7 @@ pub struct Report {
 }
 
 /// Percentiles of `samples` (ns) in µs; `None` when there are none.
-pub fn spread(mut samples: Vec<i64>) -> Option<Spread> {
+pub(crate) fn spread(mut samples: Vec<i64>) -> Option<Spread> {
     if samples.is_empty() {
         return None;
     }
@@ -89,7 +89,7 @@ fn signed_ns(later: Instant, earlier: Instant) -> i64 {
 
 /// Runs `polls` INFO_02 polls against the first device over a pty, then the
 /// idle and saturation runs.
-pub fn run(cfg: SimConfig, polls: usize) -> Result<Report, SimError> {
+pub(crate) fn run(cfg: SimConfig, polls: usize) -> Result<Report, SimError> {
     cfg.validate()?;
     let baud = cfg.baud;
     let id = cfg.ids.first().copied().unwrap_or(1);

@@ -93,6 +93,7 @@ use pty::PtyLine;
 use runner::{lock_engine, Control, LineOp};
 
 /// Starts simulated buses.
+#[derive(Debug)]
 pub struct Simulator;
 
 impl Simulator {
@@ -221,5 +222,15 @@ impl Inner {
 impl Drop for Inner {
     fn drop(&mut self) {
         self.stop();
+    }
+}
+
+/// Names the simulator's line; its engine sits behind a lock a log line
+/// should not take.
+impl std::fmt::Debug for SimHandle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SimHandle")
+            .field("device_path", &self.inner.device_path)
+            .finish_non_exhaustive()
     }
 }

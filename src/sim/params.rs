@@ -14,7 +14,7 @@ use crate::protocol::{BaudLevel, ConfigParam, InfoBlock};
 use super::config::SimError;
 
 /// INFO_04's parameter version: not a config index, what the captured module reports.
-pub const PARAM_VER: u8 = 3;
+pub(crate) const PARAM_VER: u8 = 3;
 /// Where INFO_04 carries the parameter version.
 const PARAM_VER_AT: usize = 2;
 /// Config indices are below this (the table's tests keep it so).
@@ -141,7 +141,7 @@ impl<'de> Deserialize<'de> for Params {
 
 /// What one device keeps in flash.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct FlashImage {
+pub(crate) struct FlashImage {
     pub id: u8,
     pub params: Params,
 }
@@ -157,17 +157,17 @@ const STATE_VERSION: u32 = 1;
 
 /// Flash of every device on the bus, optionally backed by a file.
 #[derive(Debug, Clone)]
-pub struct FlashStore {
+pub(crate) struct FlashStore {
     path: Option<PathBuf>,
 }
 
 impl FlashStore {
-    pub fn new(path: Option<PathBuf>) -> Self {
+    pub(crate) fn new(path: Option<PathBuf>) -> Self {
         Self { path }
     }
 
     /// Flash images saved by an earlier run, by slot (missing file: none).
-    pub fn load(&self) -> Result<Vec<FlashImage>, SimError> {
+    pub(crate) fn load(&self) -> Result<Vec<FlashImage>, SimError> {
         let Some(path) = &self.path else {
             return Ok(Vec::new());
         };
@@ -181,7 +181,7 @@ impl FlashStore {
     }
 
     /// Writes all images (atomically: temp file, then rename).
-    pub fn save(&self, images: &[FlashImage]) -> Result<(), SimError> {
+    pub(crate) fn save(&self, images: &[FlashImage]) -> Result<(), SimError> {
         let Some(path) = &self.path else {
             return Ok(());
         };

@@ -12,7 +12,7 @@ use crate::protocol::params::index;
 use super::params::Params;
 
 /// Largest integration step; longer advances are split.
-pub const MAX_STEP_S: f64 = 0.000_5;
+pub(crate) const MAX_STEP_S: f64 = 0.000_5;
 /// Position loop gain: commanded speed per degree of error (1/s).
 const POS_GAIN: f64 = 40.0;
 /// Speed smoothing time constant per LPF level 0..=5 (higher = smoother).
@@ -30,14 +30,14 @@ const BLOCKED_RAMP_A_PER_S: f64 = 4.0;
 /// Closer than this to the obstacle counts as touching it, degrees.
 const CONTACT_DEG: f64 = 1e-6;
 /// Ambient temperature and heating (steady-state rise per A²), °C.
-pub const AMBIENT_C: f64 = 29.0;
+pub(crate) const AMBIENT_C: f64 = 29.0;
 const HEAT_C_PER_A2: f64 = 40.0;
 const THERMAL_TAU_S: f64 = 30.0;
 const MS_PER_S: f64 = 1000.0;
 
 /// What the controller asks of the motor.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Drive {
+pub(crate) enum Drive {
     /// Released: no torque, the joint coasts to rest.
     Off,
     /// Hold or move to `target` (physical °) at up to `vmax` °/s.
@@ -48,7 +48,7 @@ pub enum Drive {
 
 /// Something the joint cannot move past.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Obstacle {
+pub(crate) struct Obstacle {
     /// Physical angle, °.
     pub at: f64,
     /// Which side the joint is on (+1: above `at`); learnt from the first
@@ -57,14 +57,14 @@ pub struct Obstacle {
 }
 
 impl Obstacle {
-    pub fn at(at: f64) -> Self {
+    pub(crate) fn at(at: f64) -> Self {
         Self { at, side: None }
     }
 }
 
 /// Current protection and burst state.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Protection {
+pub(crate) struct Protection {
     pub active: bool,
     above_s: f64,
     below_s: f64,
@@ -73,13 +73,13 @@ pub struct Protection {
 }
 
 impl Protection {
-    pub fn bursting(&self) -> bool {
+    pub(crate) fn bursting(&self) -> bool {
         self.burst_left_s > 0.0
     }
 }
 
 #[derive(Debug, Clone, PartialEq)]
-pub struct Joint {
+pub(crate) struct Joint {
     pub pos: f64,
     pub vel: f64,
     pub acc: f64,
@@ -112,7 +112,7 @@ impl Default for Joint {
 
 impl Joint {
     /// Advances by `dt` seconds (split into small steps).
-    pub fn advance(&mut self, dt: f64, drive: Drive, p: &Params, bounds: (f64, f64)) {
+    pub(crate) fn advance(&mut self, dt: f64, drive: Drive, p: &Params, bounds: (f64, f64)) {
         let mut left = dt;
         while left > 0.0 {
             let h = left.min(MAX_STEP_S);
@@ -196,7 +196,7 @@ impl Joint {
 
     /// Max current, or the protection limit while protection holds (but not
     /// during a burst).
-    pub fn current_cap(&self, p: &Params) -> f64 {
+    pub(crate) fn current_cap(&self, p: &Params) -> f64 {
         if self.prot.active && !self.prot.bursting() {
             p.physical(index::PROTECT_CUR_LIMIT)
         } else {
@@ -234,7 +234,7 @@ impl Joint {
 
     /// A new command while protection holds: a burst of full current for
     /// PLUS_TIME, then no other burst until COLD_TIME has passed.
-    pub fn command_burst(&mut self, p: &Params) {
+    pub(crate) fn command_burst(&mut self, p: &Params) {
         let pr = &mut self.prot;
         if pr.active && pr.cool_left_s <= 0.0 && p.raw(index::PLUS_TIME) > 0 {
             pr.burst_left_s = p.physical(index::PLUS_TIME) / MS_PER_S;

@@ -32,7 +32,7 @@ struct Pty {
     _slave: OwnedFd,
 }
 
-pub struct PtyLine {
+pub(crate) struct PtyLine {
     pty: Option<Pty>,
     dir: PathBuf,
     link: PathBuf,
@@ -41,7 +41,7 @@ pub struct PtyLine {
 
 impl PtyLine {
     /// Opens a pty, raw at `baud`, linked from a fresh temp directory.
-    pub fn open(baud: u32) -> io::Result<PtyLine> {
+    pub(crate) fn open(baud: u32) -> io::Result<PtyLine> {
         let n = INSTANCE.fetch_add(1, Ordering::Relaxed);
         let dir = std::env::temp_dir().join(format!("jointd-sim-{}-{n}", std::process::id()));
         fs::create_dir_all(&dir)?;

@@ -25,7 +25,7 @@ const LINE_OP_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// Unplug and replug act on the line, which only the runner owns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LineOp {
+pub(crate) enum LineOp {
     Unplug,
     Replug,
 }
@@ -39,7 +39,7 @@ struct Ops {
 
 /// What handles share with the runner besides the engine.
 #[derive(Debug, Default)]
-pub struct Control {
+pub(crate) struct Control {
     shutdown: AtomicBool,
     ops: Mutex<Ops>,
     done: Condvar,
@@ -50,7 +50,7 @@ impl Control {
         self.ops.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    pub fn request_shutdown(&self) {
+    pub(crate) fn request_shutdown(&self) {
         self.shutdown.store(true, Ordering::SeqCst);
     }
 
@@ -59,7 +59,7 @@ impl Control {
     }
 
     /// Queues a line operation and waits (bounded) until the runner did it.
-    pub fn line_op(&self, op: LineOp) {
+    pub(crate) fn line_op(&self, op: LineOp) {
         let mut ops = self.lock();
         ops.next_seq += 1;
         let seq = ops.next_seq;
@@ -80,7 +80,7 @@ impl Control {
     }
 }
 
-pub fn lock_engine(engine: &Mutex<Engine>) -> MutexGuard<'_, Engine> {
+pub(crate) fn lock_engine(engine: &Mutex<Engine>) -> MutexGuard<'_, Engine> {
     engine.lock().unwrap_or_else(|p| p.into_inner())
 }
 
@@ -102,7 +102,12 @@ struct Runner {
 }
 
 /// The thread body: runs until shutdown is requested.
-pub fn run(engine: Arc<Mutex<Engine>>, line: Box<dyn Line>, ctl: Arc<Control>, realtime: bool) {
+pub(crate) fn run(
+    engine: Arc<Mutex<Engine>>,
+    line: Box<dyn Line>,
+    ctl: Arc<Control>,
+    realtime: bool,
+) {
     crate::rt::precise_timers();
     if realtime {
         set_realtime();

@@ -27,14 +27,14 @@ const FRAME_BYTES: u64 = 20;
 const NANOS_PER_SEC: u64 = 1_000_000_000;
 
 /// Time one frame occupies the line at `baud` (200/baud s).
-pub fn frame_time(baud: u32) -> Duration {
+pub(crate) fn frame_time(baud: u32) -> Duration {
     let bits = BITS_PER_BYTE * FRAME_BYTES;
     Duration::from_nanos(bits * NANOS_PER_SEC / u64::from(baud.max(1)))
 }
 
 /// A host frame on the line.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct HostTx {
+pub(crate) struct HostTx {
     pub start: Instant,
     pub end: Instant,
     pub bytes: FrameBytes,
@@ -45,7 +45,7 @@ pub struct HostTx {
 
 /// A device transmission (reply or announcement) on the line.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct DeviceTx {
+pub(crate) struct DeviceTx {
     pub start: Instant,
     pub end: Instant,
     /// Index of the sending device in the bus.
@@ -61,14 +61,14 @@ pub struct DeviceTx {
 
 /// A transmission that has left the line.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub enum WireEvent {
+pub(crate) enum WireEvent {
     Host(HostTx),
     Device(DeviceTx),
 }
 
 /// Where a host frame landed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Placement {
+pub(crate) struct Placement {
     pub start: Instant,
     pub end: Instant,
     /// It waited behind the previous host frame.
@@ -78,7 +78,7 @@ pub struct Placement {
 }
 
 #[derive(Debug, Default)]
-pub struct Wire {
+pub(crate) struct Wire {
     /// End of the last host frame placed.
     host_free_at: Option<Instant>,
     /// Host frames not yet off the line, in start (= end) order.
@@ -93,12 +93,12 @@ fn overlaps(a: (Instant, Instant), b: (Instant, Instant)) -> bool {
 }
 
 impl Wire {
-    pub fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Self::default()
     }
 
     /// Puts a host frame whose bytes arrived at `arrival` on the line.
-    pub fn place_host(
+    pub(crate) fn place_host(
         &mut self,
         bytes: FrameBytes,
         arrival: Instant,
@@ -139,7 +139,7 @@ impl Wire {
 
     /// Schedules a device transmission; `lead` is line time it holds before
     /// `start` (the turnaround, counted as busy). Returns collisions found.
-    pub fn schedule_device(&mut self, mut tx: DeviceTx, lead: Duration) -> u64 {
+    pub(crate) fn schedule_device(&mut self, mut tx: DeviceTx, lead: Duration) -> u64 {
         let span = (tx.start, tx.end);
         let mut collisions = 0;
         for h in self
@@ -168,7 +168,7 @@ impl Wire {
     }
 
     /// When the next transmission leaves the line.
-    pub fn next_event(&self) -> Option<Instant> {
+    pub(crate) fn next_event(&self) -> Option<Instant> {
         let h = self.host.front().map(|h| h.end);
         let d = self.device.first().map(|d| d.end);
         match (h, d) {
@@ -178,12 +178,12 @@ impl Wire {
     }
 
     /// When the next device transmission reaches the host.
-    pub fn next_device_end(&self) -> Option<Instant> {
+    pub(crate) fn next_device_end(&self) -> Option<Instant> {
         self.device.first().map(|d| d.end)
     }
 
     /// The earliest transmission that has left the line by `now`.
-    pub fn pop_due(&mut self, now: Instant) -> Option<WireEvent> {
+    pub(crate) fn pop_due(&mut self, now: Instant) -> Option<WireEvent> {
         let h = self.host.front().map(|h| h.end).filter(|e| *e <= now);
         let d = self.device.first().map(|d| d.end).filter(|e| *e <= now);
         match (h, d) {
@@ -195,22 +195,22 @@ impl Wire {
     }
 
     /// Host frames waiting for or on the line (the host's UART FIFO depth).
-    pub fn host_backlog(&self) -> usize {
+    pub(crate) fn host_backlog(&self) -> usize {
         self.host.len()
     }
 
     /// Line busy time up to `at`.
-    pub fn busy_until(&self, at: Instant) -> Duration {
+    pub(crate) fn busy_until(&self, at: Instant) -> Duration {
         self.busy.busy_until(at)
     }
 
     /// Housekeeping: folds old busy intervals.
-    pub fn fold(&mut self, now: Instant) {
+    pub(crate) fn fold(&mut self, now: Instant) {
         self.busy.fold(now);
     }
 
     /// Drops everything in flight (the line was unplugged).
-    pub fn clear_in_flight(&mut self) {
+    pub(crate) fn clear_in_flight(&mut self) {
         self.host.clear();
         self.device.clear();
         self.host_free_at = None;

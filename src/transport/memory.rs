@@ -145,6 +145,14 @@ impl Transport for MemoryPort {
     }
 }
 
+impl std::fmt::Debug for MemoryPort {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MemoryPort")
+            .field("end", &if self.is_host { "host" } else { "device" })
+            .finish_non_exhaustive()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

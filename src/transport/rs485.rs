@@ -47,7 +47,7 @@ fn set(file: &File, conf: &SerialRs485) -> io::Result<()> {
 /// Turns RS-485 direction control on unless the port already has it (a
 /// device-tree or `setserial` setup is kept as it is). Returns what to tell
 /// the user; never fails the open.
-pub fn enable(file: &File) -> Option<PortNote> {
+pub(crate) fn enable(file: &File) -> Option<PortNote> {
     let unsupported = |error: io::Error| PortNote::IoctlUnsupported {
         what: "RS-485 mode (TIOCSRS485)",
         error: error.to_string(),

@@ -95,6 +95,7 @@ pub fn wait_readable(fd: BorrowedFd<'_>, timeout: Duration) -> io::Result<bool> 
 }
 
 /// A serial tty, raw, non-blocking underneath, with timed reads.
+#[derive(Debug)]
 pub struct TtyPort {
     file: File,
     path: PathBuf,

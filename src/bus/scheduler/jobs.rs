@@ -14,7 +14,7 @@ use super::{JobPhase, Preempted, Scheduler, MAX_INTERLEAVED};
 impl Scheduler {
     /// A one-shot request starts outside [`Scheduler::next`] (the e-stop's
     /// read-back): its frame count starts over.
-    pub fn job_start(&mut self) {
+    pub(crate) fn job_start(&mut self) {
         self.job = JobPhase {
             exclusive: self.job.exclusive,
             ..JobPhase::default()
@@ -23,7 +23,7 @@ impl Scheduler {
 
     /// Before the next frame of a request, with the line free at `now`: a
     /// setpoint frame to write first, if one may go out.
-    pub fn interleave(
+    pub(crate) fn interleave(
         &mut self,
         now: Instant,
         store: &SetpointStore,
@@ -43,7 +43,7 @@ impl Scheduler {
     /// The request's next frame is about to be written: counted, unless an
     /// e-stop waits (outside an exclusive phase), which the request must
     /// give way to.
-    pub fn job_frame(&mut self, estop_generation: u64) -> Result<(), Preempted> {
+    pub(crate) fn job_frame(&mut self, estop_generation: u64) -> Result<(), Preempted> {
         self.job.frames += 1;
         self.job.interleaved = 0;
         if self.estop_pending(estop_generation) && !self.job.exclusive {
@@ -53,12 +53,12 @@ impl Scheduler {
     }
 
     /// Enters or leaves a phase nothing may interrupt.
-    pub fn set_exclusive(&mut self, exclusive: bool) {
+    pub(crate) fn set_exclusive(&mut self, exclusive: bool) {
         self.job.exclusive = exclusive;
     }
 
     /// The request ended abnormally (a caught panic): no phase survives it.
-    pub fn job_abort(&mut self) {
+    pub(crate) fn job_abort(&mut self) {
         self.job = JobPhase::default();
     }
 }

@@ -38,19 +38,19 @@ use reopen::{BACKOFF_FIRST, BACKOFF_MAX, LISTEN_ON_OPEN};
 
 /// Setpoint frames that may go out between two frames of a one-shot
 /// request, so a long scan does not freeze the joints.
-pub const MAX_INTERLEAVED: u32 = 2;
+pub(crate) const MAX_INTERLEAVED: u32 = 2;
 
 /// An e-stop is waiting: the request must give way before its next frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Preempted;
+pub(crate) struct Preempted;
 
 /// How long the owner listens when there is nothing to send. Bounds how
 /// late it notices a request or setpoint on an idle bus.
-pub const IDLE_TICK: Duration = Duration::from_millis(1);
+pub(crate) const IDLE_TICK: Duration = Duration::from_millis(1);
 
 /// What the owner does next.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Slot {
+pub(crate) enum Slot {
     /// Write nothing; listen (take unsolicited replies in) until `until`:
     /// the line is busy, the port was just opened, or there is nothing to do.
     Listen { until: Instant },
@@ -71,7 +71,7 @@ pub enum Slot {
 
 /// The work waiting outside the scheduler when it decides.
 #[derive(Debug, Clone, Copy)]
-pub struct Work<'a> {
+pub(crate) struct Work<'a> {
     /// The handle's e-stop counter (a press not yet served is above the
     /// generation the scheduler last handed out).
     pub estop_generation: u64,
@@ -94,7 +94,7 @@ struct JobPhase {
 
 /// The decision state of one bus.
 #[derive(Debug)]
-pub struct Scheduler {
+pub(crate) struct Scheduler {
     clock: WireClock,
     reg: Registry,
     planner: PollPlanner,
@@ -117,7 +117,7 @@ pub struct Scheduler {
 
 impl Scheduler {
     /// A bus with its port not open yet (the first slot is `Reopen` now).
-    pub fn new(cfg: &BusConfig, now: Instant) -> Self {
+    pub(crate) fn new(cfg: &BusConfig, now: Instant) -> Self {
         let mut reg = Registry::new(&cfg.name, cfg.poll.offline_after);
         cfg.ids.iter().for_each(|id| reg.expect(*id));
         Self {
@@ -140,7 +140,7 @@ impl Scheduler {
     }
 
     /// The next slot at `now`.
-    pub fn next(&mut self, now: Instant, work: &Work<'_>) -> Slot {
+    pub(crate) fn next(&mut self, now: Instant, work: &Work<'_>) -> Slot {
         if !self.reopen.is_up() {
             // A setpoint sent while the bus was down is stale when it comes back.
             self.control.drop_all(work.setpoints);
@@ -227,7 +227,7 @@ impl Scheduler {
     /// While a reply is on the wire (due at `due`): plan the control frame
     /// that follows it, so the line idles no longer than needed after the
     /// reply. The next decision uses it if no setpoint came in meanwhile.
-    pub fn prepare(&mut self, due: Instant, store: &SetpointStore) {
+    pub(crate) fn prepare(&mut self, due: Instant, store: &SetpointStore) {
         self.control.collect(store);
         let latest = store.latest_seq();
         let frame = if self.control.has_pending() && self.budget.allows(due) {
@@ -240,109 +240,109 @@ impl Scheduler {
 
     /// `n` host frames were handed to the port at `handed`; returns when the
     /// last one's last byte leaves the wire.
-    pub fn sent(&mut self, handed: Instant, n: u32) -> Instant {
+    pub(crate) fn sent(&mut self, handed: Instant, n: u32) -> Instant {
         self.clock.host_frames(handed, n)
     }
 
     /// A control frame from [`Slot::Control`] (or an interleave) left for
     /// the wire, its last byte due at `end`: charged to the budget, its
     /// setpoints settled.
-    pub fn control_sent(&mut self, frame: &Planned, end: Instant) {
+    pub(crate) fn control_sent(&mut self, frame: &Planned, end: Instant) {
         self.budget.spend(self.clock.frame_time());
         self.control.sent(frame, &mut self.reg, end);
     }
 
     /// When the reply to a request ending at `end` is due and given up on.
-    pub fn reply_window(&self, end: Instant) -> ReplyWindow {
+    pub(crate) fn reply_window(&self, end: Instant) -> ReplyWindow {
         self.clock.reply_window(end)
     }
 
     /// True while an e-stop press above the last one served waits.
-    pub fn estop_pending(&self, generation: u64) -> bool {
+    pub(crate) fn estop_pending(&self, generation: u64) -> bool {
         generation > self.estop_seen
     }
 
     /// The e-stop generation served last.
-    pub fn estop_seen(&self) -> u64 {
+    pub(crate) fn estop_seen(&self) -> u64 {
         self.estop_seen
     }
 
     /// The startup scan found what there is: no need to scan again.
-    pub fn scan_done(&mut self) {
+    pub(crate) fn scan_done(&mut self) {
         self.needs_scan = false;
     }
 
-    pub fn clock(&self) -> &WireClock {
+    pub(crate) fn clock(&self) -> &WireClock {
         &self.clock
     }
 
-    pub fn registry(&self) -> &Registry {
+    pub(crate) fn registry(&self) -> &Registry {
         &self.reg
     }
 
-    pub fn registry_mut(&mut self) -> &mut Registry {
+    pub(crate) fn registry_mut(&mut self) -> &mut Registry {
         &mut self.reg
     }
 
     /// Setpoints taken from the store and not yet on the wire.
     #[cfg(test)]
-    pub fn pending(&self) -> &std::collections::BTreeMap<u8, Pending> {
+    pub(crate) fn pending(&self) -> &std::collections::BTreeMap<u8, Pending> {
         self.control.pending()
     }
 
     /// The wire ack to publish, if one came up since the last call.
-    pub fn take_ack(&mut self) -> Option<WireAck> {
+    pub(crate) fn take_ack(&mut self) -> Option<WireAck> {
         self.control.take_ack()
     }
 
     /// Setpoints dropped (for ids no device answers to) since the last call.
-    pub fn take_dropped(&mut self) -> u64 {
+    pub(crate) fn take_dropped(&mut self) -> u64 {
         std::mem::take(&mut self.dropped)
     }
 
-    pub fn push_event(&mut self, event: BusEvent) {
+    pub(crate) fn push_event(&mut self, event: BusEvent) {
         self.events.push(event);
     }
 
-    pub fn has_events(&self) -> bool {
+    pub(crate) fn has_events(&self) -> bool {
         !self.events.is_empty()
     }
 
     /// The events to publish, oldest first.
-    pub fn drain_events(&mut self) -> std::vec::Drain<'_, BusEvent> {
+    pub(crate) fn drain_events(&mut self) -> std::vec::Drain<'_, BusEvent> {
         self.events.drain(..)
     }
 
     /// Forgets pending setpoints and skips what the store holds now
     /// (e-stop, a bus that was down).
-    pub fn drop_setpoints(&mut self, store: &SetpointStore) {
+    pub(crate) fn drop_setpoints(&mut self, store: &SetpointStore) {
         self.control.drop_all(store);
     }
 
     /// One joint's pending setpoint is void (disabled, re-zeroed, mode changed).
-    pub fn forget_setpoint(&mut self, id: u8) {
+    pub(crate) fn forget_setpoint(&mut self, id: u8) {
         self.control.forget(id);
     }
 
     /// A joint's stored target goes out again (an enable: it holds where it is).
-    pub fn requeue(&mut self, id: u8, setpoint: StoredSetpoint) {
+    pub(crate) fn requeue(&mut self, id: u8, setpoint: StoredSetpoint) {
         self.control.requeue(id, setpoint);
     }
 
     /// After an id change the device's entry and pending setpoint follow it.
-    pub fn rename(&mut self, old: u8, new: u8) {
+    pub(crate) fn rename(&mut self, old: u8, new: u8) {
         self.reg.rename(old, new);
         self.control.rename(old, new);
     }
 
     /// The port now runs at `baud`: frames take another time.
-    pub fn set_baud(&mut self, baud: u32) {
+    pub(crate) fn set_baud(&mut self, baud: u32) {
         self.clock.set_baud(baud);
         self.budget.set_frame(self.clock.frame_time());
     }
 
     /// An adapter that holds replies back (FTDI latency timer) widens every deadline.
-    pub fn add_reply_margin(&mut self, extra: Duration) {
+    pub(crate) fn add_reply_margin(&mut self, extra: Duration) {
         self.clock.add_reply_margin(extra);
     }
 }

@@ -7,12 +7,12 @@
 use std::time::{Duration, Instant};
 
 /// First and longest wait between attempts to reopen a lost port.
-pub const BACKOFF_FIRST: Duration = Duration::from_millis(20);
-pub const BACKOFF_MAX: Duration = Duration::from_secs(1);
+pub(super) const BACKOFF_FIRST: Duration = Duration::from_millis(20);
+pub(super) const BACKOFF_MAX: Duration = Duration::from_secs(1);
 /// How long a freshly opened port is only listened to: devices powered up
 /// with the daemon announce themselves (INFO_01) within a few ms, and a
 /// frame written meanwhile would collide with their announcements.
-pub const LISTEN_ON_OPEN: Duration = Duration::from_millis(20);
+pub(super) const LISTEN_ON_OPEN: Duration = Duration::from_millis(20);
 
 #[derive(Debug, Clone)]
 pub(super) struct Reopen {

@@ -15,7 +15,7 @@ impl Scheduler {
     /// The reply a transaction waited for arrived at `at` (it was due at
     /// `due`). A RES from an id nobody has (SET_ID) is not a device yet: the
     /// request renames the old entry itself.
-    pub fn reply(&mut self, reply: &Reply, at: Instant, due: Instant) -> ReplyEffect {
+    pub(crate) fn reply(&mut self, reply: &Reply, at: Instant, due: Instant) -> ReplyEffect {
         self.clock.line_free(at);
         self.clock.observe_reply(due, at);
         let feeds =
@@ -30,7 +30,7 @@ impl Scheduler {
     /// of the last read that timed out (which then widens the deadline).
     /// A rebooted device forgot its target: what waited for it is stale, and
     /// the owner clears its slot in the store.
-    pub fn unsolicited(&mut self, reply: &Reply, at: Instant) -> ReplyEffect {
+    pub(crate) fn unsolicited(&mut self, reply: &Reply, at: Instant) -> ReplyEffect {
         self.clock.line_free(at);
         let late = self
             .overdue
@@ -51,27 +51,27 @@ impl Scheduler {
     /// The reply to `want`, due at `due`, had not come by `now`: counted
     /// against the device (offline after the configured misses), and the
     /// line is free again.
-    pub fn timed_out(&mut self, want: Want, due: Instant, now: Instant) {
+    pub(crate) fn timed_out(&mut self, want: Want, due: Instant, now: Instant) {
         self.overdue = Some((want, due));
         self.clock.line_free(now);
         self.reg.on_missed(want.dev_id, &mut self.events);
     }
 
     /// The port opened at `now`; true when it had been up before (a reconnect).
-    pub fn link_up(&mut self, now: Instant) -> bool {
+    pub(crate) fn link_up(&mut self, now: Instant) -> bool {
         self.clock.line_free(now);
         self.reopen.opened(now)
     }
 
     /// Opening the port failed at `now`; returns the wait before the next try.
-    pub fn open_failed(&mut self, now: Instant) -> Duration {
+    pub(crate) fn open_failed(&mut self, now: Instant) -> Duration {
         self.reopen.open_failed(now)
     }
 
     /// The port was lost at `now`: every device offline, pending setpoints
     /// forgotten (and, while the bus is down, every new write skipped as
     /// stale: see [`Scheduler::next`]). Returns the wait before the first retry.
-    pub fn link_lost(&mut self, now: Instant) -> Duration {
+    pub(crate) fn link_lost(&mut self, now: Instant) -> Duration {
         self.control.clear_prepared();
         self.control.clear_pending();
         self.reg.all_offline(&mut self.events);
@@ -79,7 +79,7 @@ impl Scheduler {
     }
 
     /// True while the port is believed open.
-    pub fn link_is_up(&self) -> bool {
+    pub(crate) fn link_is_up(&self) -> bool {
         self.reopen.is_up()
     }
 }

@@ -25,7 +25,7 @@ const SCAN_CHUNK: usize = 16;
 /// Frames the log view returns when no `limit` is given.
 const DEFAULT_FRAME_LIMIT: i64 = 50;
 
-pub fn router() -> OpenApiRouter<AppState> {
+pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
         .routes(routes!(list_buses))
         .routes(routes!(get_bus))
@@ -36,7 +36,7 @@ pub fn router() -> OpenApiRouter<AppState> {
 
 /// A bus's state and stats.
 #[derive(Debug, Serialize, ToSchema)]
-pub struct BusView {
+pub(crate) struct BusView {
     #[schema(example = "sim0")]
     pub name: String,
     #[schema(example = "/dev/ttyUSB0")]
@@ -69,7 +69,7 @@ pub struct BusView {
 }
 
 impl BusView {
-    pub fn new(snap: &BusSnapshot) -> Self {
+    pub(crate) fn new(snap: &BusSnapshot) -> Self {
         let (down_reason, retry_in_ms) = match &snap.link {
             LinkState::Down {
                 reason,
@@ -95,14 +95,14 @@ impl BusView {
 }
 
 #[derive(Debug, Serialize, ToSchema)]
-pub struct BusList {
+pub(crate) struct BusList {
     pub buses: Vec<BusView>,
 }
 
 /// An id range to scan, inclusive.
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-pub struct ScanRequest {
+pub(crate) struct ScanRequest {
     #[schema(minimum = 1, maximum = 159, example = 1)]
     pub first: i64,
     #[schema(minimum = 1, maximum = 159, example = 16)]
@@ -110,7 +110,7 @@ pub struct ScanRequest {
 }
 
 #[derive(Debug, Serialize, ToSchema)]
-pub struct ScanResult {
+pub(crate) struct ScanResult {
     #[schema(example = "sim0")]
     pub bus: String,
     /// Ids that answered INFO_01.
@@ -120,7 +120,7 @@ pub struct ScanResult {
 
 #[derive(Debug, Deserialize, Serialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-pub struct BaudRequest {
+pub(crate) struct BaudRequest {
     /// One of the device baud levels.
     #[schema(example = 500000, minimum = 19200, maximum = 500000)]
     pub baud: i64,
@@ -128,7 +128,7 @@ pub struct BaudRequest {
 
 #[derive(Debug, Deserialize, IntoParams)]
 #[into_params(parameter_in = Query)]
-pub struct FramesQuery {
+pub(crate) struct FramesQuery {
     /// How many of the latest frames, 1..=512 (default 50).
     #[param(minimum = 1, maximum = 512, example = 20)]
     pub limit: Option<i64>,
@@ -136,7 +136,7 @@ pub struct FramesQuery {
 
 /// One frame seen on the wire.
 #[derive(Debug, Serialize, ToSchema)]
-pub struct FrameView {
+pub(crate) struct FrameView {
     /// Wall-clock time, seconds since the Unix epoch.
     #[schema(example = 1732200000.123)]
     pub at: f64,
@@ -151,7 +151,7 @@ pub struct FrameView {
 }
 
 #[derive(Debug, Serialize, ToSchema)]
-pub struct FrameLog {
+pub(crate) struct FrameLog {
     pub frames: Vec<FrameView>,
 }
 

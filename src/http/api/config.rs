@@ -22,7 +22,7 @@ use crate::http::telemetry::hex;
 use crate::protocol::params;
 use crate::protocol::{BaudLevel, Info04, InfoBlock};
 
-pub fn router() -> OpenApiRouter<AppState> {
+pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
         .routes(routes!(read_config, patch_config))
         .routes(routes!(persist))
@@ -32,7 +32,7 @@ pub fn router() -> OpenApiRouter<AppState> {
 
 /// One verified write.
 #[derive(Debug, Serialize, ToSchema)]
-pub struct Written {
+pub(crate) struct Written {
     #[schema(example = "max_current_a")]
     pub param: &'static str,
     #[schema(example = 2.0)]
@@ -47,7 +47,7 @@ pub struct Written {
 }
 
 #[derive(Debug, Serialize, ToSchema)]
-pub struct PatchResult {
+pub(crate) struct PatchResult {
     #[schema(example = "sim0")]
     pub bus: String,
     #[schema(example = 1)]
@@ -57,7 +57,7 @@ pub struct PatchResult {
 }
 
 #[derive(Debug, Serialize, ToSchema)]
-pub struct PersistResult {
+pub(crate) struct PersistResult {
     #[schema(example = "sim0")]
     pub bus: String,
     #[schema(example = 1)]
@@ -70,14 +70,14 @@ pub struct PersistResult {
 
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-pub struct IdRequest {
+pub(crate) struct IdRequest {
     /// 1..=159, unused on this bus. Stored to flash by the device at once.
     #[schema(minimum = 1, maximum = 159, example = 5)]
     pub new_id: i64,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
-pub struct IdResult {
+pub(crate) struct IdResult {
     #[schema(example = "sim0")]
     pub bus: String,
     #[schema(example = 1)]

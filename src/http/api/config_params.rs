@@ -19,22 +19,22 @@ use crate::protocol::units::UnitError;
 use crate::protocol::{ConfigParam, InfoBlock};
 
 /// One writable parameter: a row of the table the REST surface offers.
-pub type Param = &'static ParamRow;
+pub(crate) type Param = &'static ParamRow;
 
 /// The parameters `GET`/`PATCH …/config` offer, in table order.
-pub fn api_params() -> impl Iterator<Item = Param> {
+pub(crate) fn api_params() -> impl Iterator<Item = Param> {
     params::api_rows()
 }
 
 /// The REST names of [`api_params`] (serde's list of expected fields).
-pub fn api_keys() -> &'static [&'static str] {
+pub(crate) fn api_keys() -> &'static [&'static str] {
     static KEYS: OnceLock<Vec<&'static str>> = OnceLock::new();
     KEYS.get_or_init(|| api_params().map(|p| p.key).collect())
 }
 
 /// The INFO blocks a config read needs: INFO_04 (baud, parameter version)
 /// and every block an offered parameter is read back from, in SPEC order.
-pub fn blocks_to_read() -> Vec<InfoBlock> {
+pub(crate) fn blocks_to_read() -> Vec<InfoBlock> {
     InfoBlock::ALL
         .into_iter()
         .filter(|b| *b == InfoBlock::Info04 || api_params().any(|p| read_from(p) == Some(*b)))
@@ -47,22 +47,22 @@ fn read_from(p: Param) -> Option<InfoBlock> {
 
 /// The data bytes of the INFO blocks read from a device.
 #[derive(Debug, Clone, Default)]
-pub struct Blocks(pub Vec<(InfoBlock, [u8; 8])>);
+pub(crate) struct Blocks(pub Vec<(InfoBlock, [u8; 8])>);
 
 impl Blocks {
-    pub fn data(&self, block: InfoBlock) -> Option<&[u8; 8]> {
+    pub(crate) fn data(&self, block: InfoBlock) -> Option<&[u8; 8]> {
         self.0.iter().find(|(b, _)| *b == block).map(|(_, d)| d)
     }
 
     /// The raw value of a parameter, from its read-back field.
-    pub fn raw_of(&self, p: Param) -> Option<u16> {
+    pub(crate) fn raw_of(&self, p: Param) -> Option<u16> {
         let field = p.read_back?;
         self.data(field.block).map(|d| field.read(d))
     }
 }
 
 /// Physical → the typed write, range-checked (422 naming field and range).
-pub fn to_config(p: Param, value: f64) -> ApiResult<ConfigParam> {
+pub(crate) fn to_config(p: Param, value: f64) -> ApiResult<ConfigParam> {
     let raw = p.to_raw(value).map_err(|e| unit_error(p, e))?;
     ConfigParam::from_index_value(p.index, raw).map_err(|e| ApiError::invalid(p.key, e.to_string()))
 }
@@ -83,7 +83,7 @@ fn unit_error(p: Param, e: UnitError) -> ApiError {
 
 /// A parameter's value in physical units with the raw value beside it.
 #[derive(Debug, Clone, Serialize, ToSchema)]
-pub struct ParamValue {
+pub(crate) struct ParamValue {
     #[schema(example = 0.5)]
     pub value: f64,
     #[schema(example = 2913)]
@@ -97,7 +97,7 @@ pub struct ParamValue {
 }
 
 impl ParamValue {
-    pub fn new(p: Param, raw: u16) -> Self {
+    pub(crate) fn new(p: Param, raw: u16) -> Self {
         Self {
             value: p.physical(raw),
             raw,
@@ -109,11 +109,11 @@ impl ParamValue {
 
 /// Offered parameters by key, serialized as JSON fields in table order.
 #[derive(Debug, Clone, Default)]
-pub struct ParamValues(pub Vec<(&'static str, ParamValue)>);
+pub(crate) struct ParamValues(pub Vec<(&'static str, ParamValue)>);
 
 impl ParamValues {
     /// Every offered parameter the blocks show.
-    pub fn from_blocks(blocks: &Blocks) -> Self {
+    pub(crate) fn from_blocks(blocks: &Blocks) -> Self {
         let values = api_params()
             .filter_map(|p| blocks.raw_of(p).map(|raw| (p.key, ParamValue::new(p, raw))))
             .collect();
@@ -135,11 +135,11 @@ impl Serialize for ParamValues {
 /// Written to RAM and verified by read-back; `POST .../config/persist` keeps
 /// them over a power cycle. Unknown fields are refused; `null` means "not given".
 #[derive(Debug, Clone, Default)]
-pub struct ConfigPatch(Vec<(Param, f64)>);
+pub(crate) struct ConfigPatch(Vec<(Param, f64)>);
 
 impl ConfigPatch {
     /// The parameters given, in table order (gains, smoothing, currents, protection, burst).
-    pub fn entries(&self) -> Vec<(Param, f64)> {
+    pub(crate) fn entries(&self) -> Vec<(Param, f64)> {
         let mut all = self.0.clone();
         all.sort_by_key(|(p, _)| p.index);
         all

@@ -20,7 +20,7 @@ use crate::protocol::params::{Guard, ParamRow, PARAMS};
 /// Every parameter of a device, read from it now: the device's fields and
 /// one [`ParamValue`] per offered parameter, by its key.
 #[derive(Debug, Serialize)]
-pub struct ConfigView {
+pub(crate) struct ConfigView {
     #[serde(flatten)]
     pub device: ConfigDevice,
     #[serde(flatten)]
@@ -29,7 +29,7 @@ pub struct ConfigView {
 
 /// The fields of a config read that are not parameters.
 #[derive(Debug, Serialize, ToSchema)]
-pub struct ConfigDevice {
+pub(crate) struct ConfigDevice {
     #[schema(example = "sim0")]
     pub bus: String,
     #[schema(example = 1)]
@@ -128,7 +128,7 @@ fn describe(p: &ParamRow) -> String {
 
 /// The parameter table as JSON (`GET /api/v1/params`).
 #[derive(Debug, Serialize, ToSchema)]
-pub struct ParamTable {
+pub(crate) struct ParamTable {
     /// The vendor document revision the table is read from; rows carry their own (`since`).
     #[schema(example = "2.0.1")]
     pub protocol: &'static str,
@@ -138,7 +138,7 @@ pub struct ParamTable {
 
 /// One row of the parameter table.
 #[derive(Debug, Serialize, ToSchema)]
-pub struct ParamInfo {
+pub(crate) struct ParamInfo {
     #[schema(example = 18)]
     pub index: u8,
     /// The vendor's name without `CONFIG_`.
@@ -197,7 +197,7 @@ pub struct ParamInfo {
 
 /// A read-back field: which block, where.
 #[derive(Debug, Serialize, ToSchema)]
-pub struct ReadBackInfo {
+pub(crate) struct ReadBackInfo {
     /// The vendor name of the read (`INFO_04_R`).
     #[schema(example = "INFO_04_R")]
     pub block: &'static str,
@@ -211,7 +211,7 @@ pub struct ReadBackInfo {
 }
 
 impl ParamTable {
-    pub fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Self {
             protocol: "2.0.1",
             params: PARAMS.iter().map(ParamInfo::new).collect(),

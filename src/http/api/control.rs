@@ -19,7 +19,7 @@ use crate::http::targets::{
 use crate::http::telemetry::{firmware_of, TargetView};
 use crate::protocol::{CtrlMode, JogDir};
 
-pub fn router() -> OpenApiRouter<AppState> {
+pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
         .routes(routes!(enable_one))
         .routes(routes!(disable_one))
@@ -35,7 +35,7 @@ pub fn router() -> OpenApiRouter<AppState> {
 
 /// What a control action did.
 #[derive(Debug, Serialize, ToSchema)]
-pub struct ActionDone {
+pub(crate) struct ActionDone {
     #[schema(example = "sim0")]
     pub bus: String,
     /// `enable`, `disable`, `mode`, `jog`, `rezero`.
@@ -52,7 +52,7 @@ pub struct ActionDone {
 /// Devices of a group action; no `ids` = every device on the bus.
 #[derive(Debug, Default, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-pub struct GroupRequest {
+pub(crate) struct GroupRequest {
     #[schema(example = json!([1, 2, 3]), min_items = 1)]
     pub ids: Option<Vec<i64>>,
 }
@@ -75,13 +75,13 @@ impl From<ModeName> for CtrlMode {
 
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-pub struct ModeRequest {
+pub(crate) struct ModeRequest {
     pub mode: ModeName,
 }
 
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-pub struct GroupModeRequest {
+pub(crate) struct GroupModeRequest {
     #[schema(example = json!([1, 2]))]
     pub ids: Option<Vec<i64>>,
     pub mode: ModeName,
@@ -90,21 +90,21 @@ pub struct GroupModeRequest {
 /// `cw` = +5°, `ccw` = −3°; the device re-zeroes afterwards (SPEC §4.2).
 #[derive(Debug, Clone, Copy, Deserialize, ToSchema)]
 #[serde(rename_all = "snake_case")]
-pub enum JogDirection {
+pub(crate) enum JogDirection {
     Cw,
     Ccw,
 }
 
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-pub struct JogRequest {
+pub(crate) struct JogRequest {
     pub direction: JogDirection,
 }
 
 /// One joint of a group target.
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-pub struct GroupTarget {
+pub(crate) struct GroupTarget {
     #[schema(example = 1, minimum = 1, maximum = 159)]
     pub id: i64,
     /// Output angle, degrees (see `TargetRequest`).
@@ -117,7 +117,7 @@ pub struct GroupTarget {
 
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-pub struct GroupTargetRequest {
+pub(crate) struct GroupTargetRequest {
     pub targets: Vec<GroupTarget>,
 }
 

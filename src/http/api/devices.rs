@@ -21,7 +21,7 @@ use crate::http::telemetry::{
 };
 use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
 
-pub fn router() -> OpenApiRouter<AppState> {
+pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
         .routes(routes!(list_devices))
         .routes(routes!(get_device))
@@ -29,7 +29,7 @@ pub fn router() -> OpenApiRouter<AppState> {
 
 /// One row of the device list.
 #[derive(Debug, Serialize, ToSchema)]
-pub struct DeviceSummary {
+pub(crate) struct DeviceSummary {
     #[schema(example = 1)]
     pub id: u8,
     /// The joint's name from the config file (`[[joint]]`), if any.
@@ -66,7 +66,7 @@ pub struct DeviceSummary {
 }
 
 #[derive(Debug, Serialize, ToSchema)]
-pub struct DeviceList {
+pub(crate) struct DeviceList {
     #[schema(example = "sim0")]
     pub bus: String,
     pub devices: Vec<DeviceSummary>,
@@ -74,7 +74,7 @@ pub struct DeviceList {
 
 /// One device's full state.
 #[derive(Debug, Serialize, ToSchema)]
-pub struct DeviceDetail {
+pub(crate) struct DeviceDetail {
     #[schema(example = "sim0")]
     pub bus: String,
     #[schema(example = 1)]
@@ -106,7 +106,7 @@ pub struct DeviceDetail {
 
 #[derive(Debug, Deserialize, IntoParams)]
 #[into_params(parameter_in = Query)]
-pub struct FreshQuery {
+pub(crate) struct FreshQuery {
     /// Read INFO_01 and INFO_02 from the device now instead of answering
     /// from the latest poll (504 if it does not answer).
     #[serde(default)]

@@ -17,7 +17,7 @@ use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::ApiPath;
 use crate::http::state::{AppState, BusPath};
 
-pub fn router() -> OpenApiRouter<AppState> {
+pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
         .routes(routes!(estop_all))
         .routes(routes!(estop_bus))
@@ -25,7 +25,7 @@ pub fn router() -> OpenApiRouter<AppState> {
 
 /// What the e-stop did on one bus.
 #[derive(Debug, Clone, Serialize, ToSchema)]
-pub struct BusStop {
+pub(crate) struct BusStop {
     #[schema(example = "sim0")]
     pub bus: String,
     /// True when every disable frame was written and no device read back
@@ -60,7 +60,7 @@ pub struct BusStop {
 }
 
 #[derive(Debug, Serialize, ToSchema)]
-pub struct EstopResult {
+pub(crate) struct EstopResult {
     #[schema(example = true)]
     pub stopped: bool,
     pub buses: Vec<BusStop>,

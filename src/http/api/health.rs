@@ -21,7 +21,7 @@ use crate::http::state::AppState;
 /// Content type of the Prometheus text exposition format.
 const PROMETHEUS_TEXT: &str = "text/plain; version=0.0.4; charset=utf-8";
 
-pub fn router() -> OpenApiRouter<AppState> {
+pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
         .routes(routes!(healthz))
         .routes(routes!(readyz))
@@ -29,7 +29,7 @@ pub fn router() -> OpenApiRouter<AppState> {
 }
 
 #[derive(Debug, Serialize, ToSchema)]
-pub struct Health {
+pub(crate) struct Health {
     #[schema(example = "ok")]
     pub status: &'static str,
     #[schema(example = "0.1.0")]
@@ -39,7 +39,7 @@ pub struct Health {
 }
 
 #[derive(Debug, Serialize, ToSchema)]
-pub struct BusReadiness {
+pub(crate) struct BusReadiness {
     #[schema(example = "sim0")]
     pub bus: String,
     /// `opening`, `up` or `down`.
@@ -48,13 +48,13 @@ pub struct BusReadiness {
 }
 
 #[derive(Debug, Serialize, ToSchema)]
-pub struct Readiness {
+pub(crate) struct Readiness {
     #[schema(example = true)]
     pub ready: bool,
     pub buses: Vec<BusReadiness>,
 }
 
-pub fn link_name(link: &LinkState) -> &'static str {
+pub(crate) fn link_name(link: &LinkState) -> &'static str {
     match link {
         LinkState::Opening => "opening",
         LinkState::Up => "up",

@@ -16,12 +16,12 @@ use crate::http::error::{Problem, DOCUMENTED_STATUSES, PROBLEM_JSON};
 use crate::http::paths::{DOCS_PATH, OPENAPI_PATH};
 use crate::http::state::AppState;
 
-pub const TAG_BUSES: &str = "buses";
-pub const TAG_DEVICES: &str = "devices";
-pub const TAG_CONTROL: &str = "control";
-pub const TAG_CONFIG: &str = "configuration";
-pub const TAG_ESTOP: &str = "emergency stop";
-pub const TAG_HEALTH: &str = "health";
+pub(crate) const TAG_BUSES: &str = "buses";
+pub(crate) const TAG_DEVICES: &str = "devices";
+pub(crate) const TAG_CONTROL: &str = "control";
+pub(crate) const TAG_CONFIG: &str = "configuration";
+pub(crate) const TAG_ESTOP: &str = "emergency stop";
+pub(crate) const TAG_HEALTH: &str = "health";
 /// Name of the bearer security scheme in the document.
 const BEARER_SCHEME: &str = "bearer";
 
@@ -67,7 +67,7 @@ impl Modify for BearerAuth {
 }
 
 /// The failures any operation may answer with, each a [`Problem`].
-pub struct ErrorResponses;
+pub(crate) struct ErrorResponses;
 
 /// Name of the shared response component of a failure status.
 fn problem_response_name(status: &str) -> String {
@@ -107,18 +107,18 @@ fn add_problem_responses(components: &mut utoipa::openapi::Components) {
 
 /// The document's head (info, tags, security, shared failures), before the
 /// areas add their routes.
-pub fn base() -> OpenApiRouter<AppState> {
+pub(crate) fn base() -> OpenApiRouter<AppState> {
     OpenApiRouter::with_openapi(ApiDoc::openapi())
 }
 
 /// `/openapi.json` and the Swagger UI at `/docs`.
-pub fn docs(mut doc: utoipa::openapi::OpenApi) -> Router<AppState> {
+pub(crate) fn docs(mut doc: utoipa::openapi::OpenApi) -> Router<AppState> {
     doc.info.version = env!("CARGO_PKG_VERSION").to_owned();
     SwaggerUi::new(DOCS_PATH).url(OPENAPI_PATH, doc).into()
 }
 
 /// A document as pretty JSON, as checked in under `openapi/`.
-pub fn to_json(doc: &utoipa::openapi::OpenApi) -> String {
+pub(crate) fn to_json(doc: &utoipa::openapi::OpenApi) -> String {
     let mut text = doc
         .to_pretty_json()
         .unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"));

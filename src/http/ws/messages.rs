@@ -8,11 +8,11 @@ use crate::bus::handle::BusEvent;
 use crate::http::teleop::{WatchdogEvent, WatchdogPolicy};
 
 /// Name and version of this protocol, sent in `welcome`.
-pub const PROTOCOL: &str = "jointd.ws.v1";
+pub(crate) const PROTOCOL: &str = "jointd.ws.v1";
 
 /// A message from the client.
 #[derive(Debug, Clone, PartialEq)]
-pub enum ClientMessage {
+pub(crate) enum ClientMessage {
     Subscribe(Subscribe),
     Unsubscribe { seq: Option<u64> },
     Setpoints(SetpointBatch),
@@ -22,7 +22,7 @@ pub enum ClientMessage {
 
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub struct Subscribe {
+pub(crate) struct Subscribe {
     pub seq: Option<u64>,
     /// Bus names; all buses when absent.
     pub buses: Option<Vec<String>>,
@@ -37,7 +37,7 @@ pub struct Subscribe {
 /// The joint fields a telemetry message can carry.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize, Serialize)]
 #[serde(rename_all = "snake_case")]
-pub enum Field {
+pub(crate) enum Field {
     AngleDeg,
     TargetDeg,
     SpeedRpm,
@@ -49,7 +49,7 @@ pub enum Field {
 }
 
 impl Field {
-    pub const ALL: [Field; 8] = [
+    pub(crate) const ALL: [Field; 8] = [
         Field::AngleDeg,
         Field::TargetDeg,
         Field::SpeedRpm,
@@ -63,7 +63,7 @@ impl Field {
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct SetpointBatch {
+pub(crate) struct SetpointBatch {
     pub seq: Option<u64>,
     /// Answer with an `ack` once every target is on the wire.
     #[serde(default)]
@@ -73,7 +73,7 @@ pub struct SetpointBatch {
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct TargetItem {
+pub(crate) struct TargetItem {
     /// Optional when the daemon has exactly one bus.
     pub bus: Option<String>,
     pub dev_id: i64,
@@ -83,7 +83,7 @@ pub struct TargetItem {
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct WatchdogRequest {
+pub(crate) struct WatchdogRequest {
     pub seq: Option<u64>,
     /// 0 disarms.
     pub hold_timeout_ms: u64,
@@ -103,7 +103,7 @@ struct SeqOnly {
 
 /// Why a client message could not be read.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ParseError {
+pub(crate) struct ParseError {
     pub code: ErrorCode,
     pub message: String,
     /// The `seq` of the message, when it could be read.
@@ -111,7 +111,7 @@ pub struct ParseError {
 }
 
 /// Parses one text frame.
-pub fn parse(text: &str) -> Result<ClientMessage, ParseError> {
+pub(crate) fn parse(text: &str) -> Result<ClientMessage, ParseError> {
     let mut value: Value = serde_json::from_str(text).map_err(|e| ParseError {
         code: ErrorCode::BadJson,
         message: format!("not valid JSON: {e}"),
@@ -157,7 +157,7 @@ pub fn parse(text: &str) -> Result<ClientMessage, ParseError> {
 /// Error codes of docs/websocket.md.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
-pub enum ErrorCode {
+pub(crate) enum ErrorCode {
     BadJson,
     BadMessage,
     UnknownBus,
@@ -173,7 +173,7 @@ pub enum ErrorCode {
 /// shared JSON fragments: `{"type":"telemetry","seq","t_ms","dropped","joints"}`.)
 #[derive(Debug, Clone, Serialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
-pub enum ServerMessage {
+pub(crate) enum ServerMessage {
     Welcome {
         protocol: &'static str,
         buses: Vec<BusInfo>,
@@ -222,14 +222,14 @@ fn is_zero(n: &u64) -> bool {
 }
 
 #[derive(Debug, Clone, Serialize)]
-pub struct BusInfo {
+pub(crate) struct BusInfo {
     pub name: String,
     pub baud: u32,
     pub devices: Vec<u8>,
 }
 
 #[derive(Debug, Clone, Serialize)]
-pub struct Limits {
+pub(crate) struct Limits {
     pub max_rate_hz: f64,
     pub max_batch: usize,
 }
@@ -237,7 +237,7 @@ pub struct Limits {
 /// An event as sent: a bus's own, or one of this layer (the teleop watchdog).
 #[derive(Debug, Clone, Serialize)]
 #[serde(untagged)]
-pub enum EventBody {
+pub(crate) enum EventBody {
     Bus(BusEvent),
     Watchdog(WatchdogEvent),
 }

@@ -16,18 +16,18 @@ use crate::http::telemetry::is_enabled;
 use crate::http::teleop::JointRef;
 
 /// Most targets one batch may carry (16 joints × a few buses, with room).
-pub const MAX_BATCH: usize = 256;
+pub(crate) const MAX_BATCH: usize = 256;
 
 /// A rejected message: code, words, and the field at fault.
 #[derive(Debug, Clone, PartialEq)]
-pub struct WsError {
+pub(crate) struct WsError {
     pub code: ErrorCode,
     pub message: String,
     pub field: Option<String>,
 }
 
 impl WsError {
-    pub fn new(code: ErrorCode, message: impl Into<String>) -> Self {
+    pub(crate) fn new(code: ErrorCode, message: impl Into<String>) -> Self {
         Self {
             code,
             message: message.into(),
@@ -64,7 +64,7 @@ impl From<ApiError> for WsError {
 
 /// What an accepted batch did.
 #[derive(Debug, Clone)]
-pub struct Applied {
+pub(crate) struct Applied {
     pub accepted: Instant,
     /// (bus name, store sequence number) per bus the batch touched.
     pub writes: Vec<(String, u64)>,
@@ -72,7 +72,7 @@ pub struct Applied {
 }
 
 /// Validates and stores a batch.
-pub fn apply(state: &AppState, batch: &SetpointBatch) -> Result<Applied, WsError> {
+pub(crate) fn apply(state: &AppState, batch: &SetpointBatch) -> Result<Applied, WsError> {
     if batch.targets.is_empty() {
         return Err(WsError::new(ErrorCode::BadMessage, "`targets` is empty"));
     }

@@ -16,7 +16,7 @@ use crate::protocol::units;
 
 /// What a client asked to receive.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Subscription {
+pub(crate) struct Subscription {
     pub buses: Vec<String>,
     /// `None`: every device.
     pub devices: Option<Vec<u8>>,
@@ -26,7 +26,7 @@ pub struct Subscription {
 
 /// The joints of one bus snapshot that the subscription selects;
 /// `name_of` gives a joint's configured name.
-pub fn joints<'a>(
+pub(crate) fn joints<'a>(
     sub: &Subscription,
     snap: &BusSnapshot,
     name_of: impl Fn(u8) -> Option<&'a str>,
@@ -82,7 +82,7 @@ fn round3(x: f64) -> f64 {
     (x * 1000.0).round() / 1000.0
 }
 
-pub fn field_name(f: Field) -> &'static str {
+pub(crate) fn field_name(f: Field) -> &'static str {
     match f {
         Field::AngleDeg => "angle_deg",
         Field::TargetDeg => "target_deg",
@@ -117,7 +117,7 @@ fn field_value(f: Field, dev: &DeviceState) -> Value {
 /// cache shared by every connection with the same subscription shape.
 /// `age_ms` in a shared fragment is the age when it was built (at most one
 /// snapshot interval earlier than the message).
-pub fn fragment<'a>(
+pub(crate) fn fragment<'a>(
     cache: &FragmentCache,
     sub: &Subscription,
     snap: &Arc<BusSnapshot>,

@@ -10,7 +10,7 @@ use tokio::time::Instant;
 use crate::http::teleop::{JointRef, WatchdogPolicy};
 
 #[derive(Debug, Default)]
-pub struct Watchdog {
+pub(crate) struct Watchdog {
     /// `None`: disarmed.
     armed: Option<(Duration, WatchdogPolicy)>,
     last_fed: Option<Instant>,
@@ -23,7 +23,7 @@ pub struct Watchdog {
 }
 
 impl Watchdog {
-    pub fn arm(&mut self, hold: Duration, policy: WatchdogPolicy, now: Instant) {
+    pub(crate) fn arm(&mut self, hold: Duration, policy: WatchdogPolicy, now: Instant) {
         self.armed = (!hold.is_zero()).then_some((hold, policy));
         self.last_fed = Some(now);
         self.fired = false;
@@ -32,18 +32,18 @@ impl Watchdog {
 
     /// Whether a watchdog was ever set on this connection (a client's `0`
     /// disarms it for good; the config's default does not override that).
-    pub fn declared(&self) -> bool {
+    pub(crate) fn declared(&self) -> bool {
         self.declared
     }
 
-    pub fn feed(&mut self, joints: &[JointRef], now: Instant) {
+    pub(crate) fn feed(&mut self, joints: &[JointRef], now: Instant) {
         self.joints.extend(joints.iter().cloned());
         self.last_fed = Some(now);
         self.fired = false;
     }
 
     /// When the watchdog fires if nothing feeds it; `None` when it cannot fire.
-    pub fn deadline(&self) -> Option<Instant> {
+    pub(crate) fn deadline(&self) -> Option<Instant> {
         let (hold, _) = self.armed?;
         if self.fired || self.joints.is_empty() {
             return None;
@@ -52,7 +52,7 @@ impl Watchdog {
     }
 
     /// Fires: the policy and the joints it applies to.
-    pub fn fire(&mut self) -> Option<(WatchdogPolicy, Vec<JointRef>)> {
+    pub(crate) fn fire(&mut self) -> Option<(WatchdogPolicy, Vec<JointRef>)> {
         let (_, policy) = self.armed?;
         if self.joints.is_empty() {
             return None;
@@ -61,7 +61,7 @@ impl Watchdog {
         Some((policy, self.joints.iter().cloned().collect()))
     }
 
-    pub fn is_armed(&self) -> bool {
+    pub(crate) fn is_armed(&self) -> bool {
         self.armed.is_some()
     }
 }

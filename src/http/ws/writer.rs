@@ -21,7 +21,7 @@ use crate::http::state::AppState;
 
 /// An ack the writer sends once every bus write of a batch is on the wire.
 #[derive(Debug, Clone)]
-pub struct PendingAck {
+pub(crate) struct PendingAck {
     pub ref_seq: Option<u64>,
     pub joints: usize,
     pub accepted: Instant,
@@ -36,7 +36,7 @@ const ACK_SWEEP: Duration = Duration::from_millis(100);
 type Events = SelectAll<Pin<Box<dyn Stream<Item = Result<EventBody, u64>> + Send>>>;
 type Acks = SelectAll<Pin<Box<dyn Stream<Item = (String, WireAck)> + Send>>>;
 
-pub struct Writer<S> {
+pub(crate) struct Writer<S> {
     state: AppState,
     sink: S,
     telemetry_seq: u64,
@@ -52,7 +52,7 @@ impl<S> Writer<S>
 where
     S: Sink<Message> + Unpin + Send,
 {
-    pub fn new(state: AppState, sink: S) -> Self {
+    pub(crate) fn new(state: AppState, sink: S) -> Self {
         Self {
             state,
             sink,
@@ -67,7 +67,7 @@ where
     }
 
     /// Runs until the reader drops its side of `out` or the socket fails.
-    pub async fn run(
+    pub(crate) async fn run(
         mut self,
         mut out: mpsc::Receiver<ServerMessage>,
         mut sub: watch::Receiver<Option<Subscription>>,

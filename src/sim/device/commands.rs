@@ -15,7 +15,7 @@ use super::{Device, Outcome, JOG_CCW_DEG, JOG_CW_DEG};
 
 impl Device {
     /// Handles one command heard on the line at `now`.
-    pub fn handle(&mut self, cmd: &Command, now: Instant) -> Outcome {
+    pub(crate) fn handle(&mut self, cmd: &Command, now: Instant) -> Outcome {
         self.advance_to(now);
         if self.booting(now) {
             return Outcome::default();

@@ -35,7 +35,7 @@ const ANNOUNCE_GAP: Duration = Duration::from_micros(100);
 
 /// Timing the device takes from the simulator's configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct DeviceTiming {
+pub(crate) struct DeviceTiming {
     pub align_time: Duration,
     pub boot_delay: Duration,
     pub stall_fault_after: Duration,
@@ -44,7 +44,7 @@ pub struct DeviceTiming {
 
 /// What handling a command produced.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct Outcome {
+pub(crate) struct Outcome {
     pub reply: Option<Reply>,
     /// Flash changed: the state file must be written.
     pub persist: bool,
@@ -60,7 +60,7 @@ impl Outcome {
 }
 
 #[derive(Debug, Clone)]
-pub struct Device {
+pub(crate) struct Device {
     pub slot: usize,
     pub id: u8,
     pub ram: Params,
@@ -89,7 +89,7 @@ pub struct Device {
 
 impl Device {
     /// A device powered up at `now`; it announces itself `stagger` after its boot delay.
-    pub fn new(
+    pub(crate) fn new(
         slot: usize,
         image: FlashImage,
         timing: DeviceTiming,
@@ -127,7 +127,12 @@ impl Device {
     /// The devices of a bus powered up at `now`: flash from `saved` by slot,
     /// factory parameters otherwise. Announcements are staggered one frame slot
     /// apart so a healthy bus can be discovered from them.
-    pub fn bus(cfg: &SimConfig, saved: &[FlashImage], factory: Params, now: Instant) -> Vec<Self> {
+    pub(crate) fn bus(
+        cfg: &SimConfig,
+        saved: &[FlashImage],
+        factory: Params,
+        now: Instant,
+    ) -> Vec<Self> {
         let timing = DeviceTiming {
             align_time: cfg.align_time,
             boot_delay: cfg.boot_delay,
@@ -151,7 +156,7 @@ impl Device {
     }
 
     /// Power-up (or reboot): RAM from flash, ready, unaligned, position mode.
-    pub fn power_up(&mut self, now: Instant, stagger: Duration) {
+    pub(crate) fn power_up(&mut self, now: Instant, stagger: Duration) {
         self.advance_to(now);
         self.ram = self.flash;
         self.fsm = fsm::READY;
@@ -174,7 +179,7 @@ impl Device {
         self.announce_at = Some(self.boot_until);
     }
 
-    pub fn flash_image(&self) -> FlashImage {
+    pub(crate) fn flash_image(&self) -> FlashImage {
         FlashImage {
             id: self.id,
             params: self.flash,
@@ -182,7 +187,7 @@ impl Device {
     }
 
     /// The baud the device listens and talks at.
-    pub fn baud(&self) -> u32 {
+    pub(crate) fn baud(&self) -> u32 {
         self.ram.baud()
     }
 
@@ -191,7 +196,7 @@ impl Device {
     }
 
     /// Reported output angle, degrees.
-    pub fn angle(&self) -> f64 {
+    pub(crate) fn angle(&self) -> f64 {
         self.joint.pos - self.zero
     }
 
@@ -200,12 +205,12 @@ impl Device {
     }
 
     /// When the spontaneous power-up INFO_01 is due.
-    pub fn announce_at(&self) -> Option<Instant> {
+    pub(crate) fn announce_at(&self) -> Option<Instant> {
         self.announce_at
     }
 
     /// The power-up INFO_01, once it is due.
-    pub fn take_announcement(&mut self, now: Instant) -> Option<Reply> {
+    pub(crate) fn take_announcement(&mut self, now: Instant) -> Option<Reply> {
         let due = self.announce_at.filter(|t| *t <= now)?;
         self.announce_at = None;
         self.advance_to(due);
@@ -213,7 +218,7 @@ impl Device {
     }
 
     /// Runs the physics and timers up to `now`.
-    pub fn advance_to(&mut self, now: Instant) {
+    pub(crate) fn advance_to(&mut self, now: Instant) {
         while self.last < now {
             let edge = self
                 .align_done_at
@@ -311,19 +316,19 @@ impl Device {
     // ---- fault injection ----
 
     /// Puts an obstacle at `at_deg` (reported degrees), or right where the joint is.
-    pub fn set_obstacle(&mut self, at_deg: Option<f64>, now: Instant) {
+    pub(crate) fn set_obstacle(&mut self, at_deg: Option<f64>, now: Instant) {
         self.advance_to(now);
         let at = at_deg.map_or(self.joint.pos, |a| a + self.zero);
         self.joint.obstacle = Some(Obstacle::at(at));
     }
 
-    pub fn clear_obstacle(&mut self, now: Instant) {
+    pub(crate) fn clear_obstacle(&mut self, now: Instant) {
         self.advance_to(now);
         self.joint.obstacle = None;
         self.joint.blocked_s = 0.0;
     }
 
-    pub fn set_under_voltage(&mut self, on: bool, now: Instant) {
+    pub(crate) fn set_under_voltage(&mut self, on: bool, now: Instant) {
         self.advance_to(now);
         self.under_voltage = on;
         if on {

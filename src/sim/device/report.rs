@@ -26,7 +26,7 @@ const ANGLE_NOISE_DEG: f64 = 0.004;
 
 impl Device {
     /// The INFO block a read asks for, from the current state.
-    pub fn info(&mut self, block: InfoBlock) -> Reply {
+    pub(crate) fn info(&mut self, block: InfoBlock) -> Reply {
         let body = match block {
             InfoBlock::Info01 => ReplyBody::Info01(self.info01()),
             InfoBlock::Info02 => ReplyBody::Info02(self.info02()),
@@ -83,7 +83,7 @@ impl Device {
     }
 
     /// A snapshot for observers.
-    pub fn view(&self) -> DeviceView {
+    pub(crate) fn view(&self) -> DeviceView {
         DeviceView {
             slot: self.slot,
             id: self.id,
