@@ -1,16 +1,44 @@
 //! jointd: a gateway daemon for RS-485 servo joint modules.
 //!
 //! # Layout
-//! - [`protocol`]: pure wire protocol: frames, CRC, typed commands/replies, units, the
-//!   parameter table, stream decoder, frames ↔ JSON.
-//! - [`cli`]: the `jointd frame …` tools for reading a serial capture by hand.
-//! - [`http`]: the HTTP layer: `app(state)`, REST API + OpenAPI, WebSocket, dashboard, auth, errors.
-//! - [`daemon`]: `jointd [run]`: config, buses, the HTTP server, graceful shutdown.
-//! - [`bus`]: one owner thread per bus, its scheduler, and the handle the API uses.
-//! - [`transport`]: the byte lines a bus runs over (tty/pty, in-memory pipe).
-//! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory).
+//! Rooms from the bottom up; each imports only from rooms above it in this
+//! list (no import circles, between rooms or between the files of one).
+//! - [`protocol`]: the wire protocol as pure functions of bytes: frames, CRC,
+//!   typed commands/replies, units, the parameter table (`protocol::params`,
+//!   one row per config/INFO index; everything else derives from it), the
+//!   state and fault names, frames ↔ JSON. No I/O, no runtime.
 //! - [`rt`]: real-time thread helpers (timer slack, FIFO class) for the bus owner and the simulator.
+//! - [`transport`]: the byte lines a bus runs over (tty/pty with RS-485 setup, in-memory pipe).
+//! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory), behaviour from the SPEC.
+//! - [`bus`]: one owner thread per bus: the pure scheduler decides, the owner does the I/O;
+//!   the [`bus::BusHandle`] is everything the rest of the daemon sees.
+//! - [`http`]: one axum application: state, auth, errors (the one place that picks HTTP
+//!   statuses), and below it the REST areas, the WebSocket and the dashboard, which never
+//!   import each other.
+//! - [`cli`]: the `jointd frame …` tools for reading a serial capture by hand.
+//! - [`daemon`]: `jointd [run]`: config file and flags, buses, the HTTP server, graceful shutdown.
 //! - `bench` (feature `bench`): `jointd bench`: the bus engine against the simulator, measured.
+//!
+//! # Where a behaviour lives
+//! | behaviour | room |
+//! |---|---|
+//! | a frame's bytes, CRC, resync in a byte stream | `protocol::frame`, `protocol::checksum`, `protocol::stream` |
+//! | a config/INFO index: name, raw type, scale, range, flash, how a write is confirmed | `protocol::params` (the table) |
+//! | raw ↔ physical units | `protocol::units` |
+//! | what goes on the wire next (e-stop, request, setpoints, polls, reopen) | `bus::scheduler` |
+//! | when a frame leaves, when a reply is due or late | `bus::wire` |
+//! | setpoints → broadcast/control frames | `bus::coalesce` |
+//! | online/offline, per-device state and rates | `bus::registry` |
+//! | enable, verified writes, id/baud change, scan, e-stop on the wire | `bus::owner` (its `jobs`, `baud`, `scan`, `estop`) |
+//! | what a bus error is; which HTTP status it gets | `bus::error`; `http::error` |
+//! | a REST route | `http::api` (one file per area), its OpenAPI in the same handler |
+//! | a WebSocket message | `http::ws::messages`, applied in `http::ws::session` |
+//! | soft limits, target checks (REST and WebSocket) | `http::limits`, `http::targets` |
+//! | the dashboard | `web/` (files), served by `http::web` |
+//! | what a simulated device does with a frame | `sim::device`, `sim::physics`, `sim::faults` |
+//! | collisions and timing on the simulated wire | `sim::wire`, `sim::engine` |
+//! | opening a serial port, RS-485 mode, FTDI latency | `transport::tty`, `transport::rs485` |
+//! | config file keys, command-line flags | `daemon`, `main.rs` |
 
 // Visibility says who may use an item: `pub` only where it is reachable from
 // outside the crate, `pub(crate)` for the rest; every public type prints in
@@ -27,3 +55,6 @@ pub mod protocol;
 pub mod rt;
 pub mod sim;
 pub mod transport;
+
+#[cfg(test)]
+mod params_reach;

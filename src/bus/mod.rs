@@ -11,7 +11,8 @@
 //! One-way layers: each room imports only from the rooms listed above it.
 //!
 //! The contract and pure data:
-//! - [`error`]: the bus errors, one HTTP status each.
+//! - [`error`]: what went wrong, typed (`Timeout`, `Refused`, `UnexpectedReply`,
+//!   `Down`, …); the HTTP status of each is chosen in the HTTP layer (`http::error`).
 //! - [`config`]: [`BusConfig`]: port, baud, expected ids, poll plan, timing.
 //! - [`setpoints`]: the latest-value store of joint targets.
 //! - [`state`]: what the owner publishes: snapshot, events, frame log, wire acks.

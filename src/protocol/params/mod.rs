@@ -15,9 +15,11 @@
 //!    Set `api: true` if `GET/PATCH …/config` should offer it.
 //! 2. Run `cargo test --lib protocol::params`: the consistency tests check
 //!    the new row (unique index and names, range within its raw type, scale
-//!    round-trips, read-back field inside its block). `tests` shows a
-//!    fictitious row being decoded, shown as JSON, offered by the REST schema
-//!    and stored by the simulator with no other code changed.
+//!    round-trips, read-back field inside its block). `tests` adds a
+//!    fictitious row in test builds and shows it decoded and shown as JSON;
+//!    the crate's `params_reach` tests show the same row offered by the REST
+//!    schema, confirmed by the bus and stored by the simulator, with no other
+//!    code changed.
 //! 3. Regenerate `openapi/openapi.json` if the row is `api: true`
 //!    (`JOINTD_BLESS_OPENAPI=1 cargo test --test api_openapi`).
 //!

@@ -7,7 +7,8 @@ use super::*;
 
 /// A row no SPEC has: index 40, an 8-bit level shown in INFO_04's reserved
 /// byte. Only this constant and the `#[cfg(test)]` line in [`PARAMS`] add it;
-/// the tests below find it in the decoder, the frame JSON, the REST schema
+/// the tests below find it in the decoder and the frame JSON, and the
+/// crate's `params_reach` tests in the REST schema, the write verification
 /// and the simulator.
 pub(crate) const FICTITIOUS: ParamRow = ParamRow {
     index: 40,
@@ -177,45 +178,6 @@ fn fictitious_row_is_decoded_and_shown_as_json() {
         command_from_json(&too_high).is_err(),
         "the row's range 0..=9 holds"
     );
-}
-
-#[test]
-fn fictitious_row_is_offered_by_the_rest_surface_and_its_schema() {
-    use crate::http::api::config_params::{api_keys, to_config, ConfigPatch};
-    use crate::http::api::config_schema::{ConfigView, ParamTable};
-    use utoipa::PartialSchema;
-    assert!(api_keys().contains(&"test_level"));
-    let patch: ConfigPatch = serde_json::from_str(r#"{"test_level": 4}"#).expect("accepted");
-    let (row, value) = patch.entries()[0];
-    let write = to_config(row, value).expect("in range");
-    assert_eq!(write.index_value(), (40, 4));
-    assert_eq!(to_config(row, 12.0).map_err(|e| e.problem.status), Err(422));
-    let schema = serde_json::to_value(ConfigPatch::schema()).expect("schema");
-    assert_eq!(schema["properties"]["test_level"]["maximum"], 9.0);
-    let view = serde_json::to_value(ConfigView::schema()).expect("schema");
-    assert!(view["required"]
-        .as_array()
-        .is_some_and(|r| r.contains(&"test_level".into())));
-    assert!(ParamTable::new()
-        .params
-        .iter()
-        .any(|p| p.name == "TEST_LEVEL"));
-}
-
-#[test]
-fn fictitious_row_is_stored_and_reported_by_the_simulator() {
-    use crate::bus::verify::{confirmation, Confirm};
-    use crate::protocol::ConfigParam;
-    use crate::sim::Params;
-    let write = ConfigParam::from_index_value(40, 6).expect("valid");
-    let mut p = Params::factory(BaudLevel::B500000);
-    assert!(p.apply(&write), "a RAM setting is stored");
-    let data = p.block(InfoBlock::Info04);
-    assert_eq!(data[3], 6, "reported at its read-back field");
-    let Ok(Confirm::ReadBack { block, field }) = confirmation(&write) else {
-        panic!("the bus verifies it by read-back");
-    };
-    assert_eq!((block, field.read(&data)), (InfoBlock::Info04, 6));
 }
 
 #[test]
