@@ -20,7 +20,7 @@ use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::state::{device_id, known_device, AppState, DevicePath};
 use crate::http::telemetry::hex;
 use crate::protocol::params;
-use crate::protocol::{BaudLevel, Info04, InfoBlock};
+use crate::protocol::{BaudLevel, ConfigParam, Info04, InfoBlock};
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
@@ -190,8 +190,9 @@ async fn read_config(
 ///
 /// 200 only when every parameter is confirmed. Otherwise a problem whose
 /// `partial` (a `PatchOutcomes`) lists every parameter as `written`,
-/// `unverified` (sent, confirmation lost: the device may have it) or
-/// `not_written`. An unverified parameter does not stop the others; any
+/// `unverified` (sent, confirmation lost: the device may have it; also a
+/// write the bus owner did not answer in time) or `not_written`. An
+/// unverified parameter does not stop the others; any
 /// other failure does (the rest are `not_written`, never sent) and gives
 /// the status (e.g. 502 verify-mismatch, 409 device-refused, 503 bus-down).
 /// When the only failures are unverified: 504 `write-unverified`. A single
@@ -210,6 +211,24 @@ async fn patch_config(
     for (param, value) in patch.entries() {
         writes.push((param, value, to_config(param, value)?));
     }
+    let (out, failed) = write_in_turn(bus, id, writes).await;
+    match patch_problem(failed, &out) {
+        Some(err) => Err(err),
+        None => Ok(Json(PatchResult {
+            bus: bus.name().to_owned(),
+            id,
+            written: out.written,
+        })),
+    }
+}
+
+/// Writes each parameter in turn; an unverified one does not stop the
+/// rest, any other failure does (the rest are never sent).
+async fn write_in_turn(
+    bus: &BusHandle,
+    id: u8,
+    writes: Vec<(Param, f64, ConfigParam)>,
+) -> (PatchOutcomes, Option<ApiError>) {
     let mut out = PatchOutcomes::default();
     let mut failed: Option<ApiError> = None;
     for (param, value, config) in writes {
@@ -221,13 +240,15 @@ async fn patch_config(
         }
         match bus.write_config(id, config).await {
             Ok(outcome) => out.written.push(written_entry(param, value, &outcome)),
-            Err(BusError::Unverified { reason, .. }) => out.unverified.push(Unverified {
-                param: param.key,
-                value,
-                raw,
-                index: param.index,
-                reason,
-            }),
+            Err(BusError::Unverified { reason, .. }) => {
+                out.unverified.push(unverified(param, value, raw, reason));
+            }
+            // The owner may still send it: unknown, and the rest waits no longer.
+            Err(e @ BusError::OwnerTimeout) => {
+                out.unverified
+                    .push(unverified(param, value, raw, e.to_string()));
+                failed = Some(ApiError::from(e).with_field(param.key));
+            }
             Err(e) => {
                 let err = ApiError::from(e);
                 let reason = err.problem.detail.clone();
@@ -236,14 +257,7 @@ async fn patch_config(
             }
         }
     }
-    match patch_problem(failed, &out) {
-        Some(err) => Err(err),
-        None => Ok(Json(PatchResult {
-            bus: bus.name().to_owned(),
-            id,
-            written: out.written,
-        })),
-    }
+    (out, failed)
 }
 
 fn written_entry(param: Param, value: f64, outcome: &WriteOutcome) -> Written {
@@ -253,6 +267,16 @@ fn written_entry(param: Param, value: f64, outcome: &WriteOutcome) -> Written {
         raw: outcome.value,
         index: outcome.index,
         verified_by: outcome.verified_by,
+    }
+}
+
+fn unverified(param: Param, value: f64, raw: u16, reason: String) -> Unverified {
+    Unverified {
+        param: param.key,
+        value,
+        raw,
+        index: param.index,
+        reason,
     }
 }
 
