@@ -425,6 +425,6 @@ fn unverified_write(dev_id: u8, index: u8, value: u16) -> BusError {
         index,
         value,
         what: format!("write index {index} = {value}"),
-        reason: "no read-back answered in 9 attempt(s)".into(),
+        reason: "no read-back answered after 3 send(s)".into(),
     }
 }

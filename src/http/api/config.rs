@@ -58,7 +58,7 @@ pub(crate) struct Unverified {
     pub raw: u16,
     #[schema(example = 18)]
     pub index: u8,
-    #[schema(example = "no read-back answered in 9 attempt(s)")]
+    #[schema(example = "no read-back answered after 3 send(s)")]
     pub reason: String,
 }
 
