@@ -12,8 +12,9 @@ use crate::protocol::command::index;
 use crate::protocol::{BaudLevel, Config, ConfigParam, Info04, InfoBlock};
 
 use super::confirm::check_res;
+use super::confirm::unverified;
 use super::ctx::Ctx;
-use super::write::{config_frames_sent, unverified};
+use super::write::config_frames_sent;
 
 pub(super) fn set_baud(ctx: &mut Ctx, baud: u32) -> Result<(), BusError> {
     let level = BaudLevel::from_baud(baud).ok_or_else(|| {
@@ -78,7 +79,7 @@ fn confirm_level(ctx: &mut Ctx, ids: &[u8], level: BaudLevel) -> Result<(), BusE
         let read = super::jobs::read_info(ctx, id, InfoBlock::Info04).map_err(|e| {
             let param = ConfigParam::BaudRate(level);
             let reason = format!("RES came at the old baud; the read at the new one failed: {e}");
-            unverified(ctx, id, &param, reason)
+            unverified(ctx.counters(), id, &param, reason)
         })?;
         let info = Info04::from_bytes(&read.data);
         if info.baud_level != level as u8 {
@@ -104,9 +105,9 @@ fn switch_device(ctx: &mut Ctx, id: u8, level: BaudLevel) -> Result<(), BusError
     let mark = config_frames_sent(ctx);
     match ctx.try_transact(Config { dev_id: id, param }, want, 1) {
         Ok(Some(reply)) => check_res(&reply, &param),
-        Ok(None) => Err(unverified(ctx, id, &param, "no RES".into())),
+        Ok(None) => Err(unverified(ctx.counters(), id, &param, "no RES".into())),
         Err(e) if config_frames_sent(ctx) == mark => Err(e),
-        Err(e) => Err(unverified(ctx, id, &param, e.to_string())),
+        Err(e) => Err(unverified(ctx.counters(), id, &param, e.to_string())),
     }
 }
 

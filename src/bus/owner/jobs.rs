@@ -14,6 +14,7 @@ use crate::protocol::{
     ALL_DEVICES,
 };
 
+use super::confirm::unverified;
 use super::ctx::Ctx;
 
 /// INFO_01 reads that may pass before an enable/disable shows in the fsm.
@@ -150,7 +151,14 @@ pub(super) fn rezero(ctx: &mut Ctx, dev_id: u8) -> Result<(), BusError> {
     // here bounds the joint's travel since from above.
     let sent = std::time::Instant::now();
     zero_moved(ctx, dev_id);
-    let angle = read_info01(ctx, dev_id)?.angle;
+    // The zero moved or not: a read that fails says nothing about which.
+    let angle = match read_info01(ctx, dev_id) {
+        Ok(info) => info.angle,
+        Err(e) => {
+            let param = ConfigParam::UpdateFinZero;
+            return Err(unverified(ctx.counters(), dev_id, &param, e.to_string()));
+        }
+    };
     let within =
         crate::protocol::units::angle_deg(angle).abs() <= rezero_tolerance_deg(sent.elapsed());
     if !within {

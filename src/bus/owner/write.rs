@@ -16,7 +16,7 @@ use crate::protocol::command::index;
 use crate::protocol::params::Field;
 use crate::protocol::{is_device_id, Command, Config, ConfigParam, CtrlMode, InfoBlock};
 
-use super::confirm::{check_res, describe};
+use super::confirm::{check_res, unverified};
 use super::ctx::Ctx;
 use super::jobs::{known, zero_moved};
 
@@ -68,24 +68,6 @@ pub(super) fn config_frames_sent(ctx: &mut Ctx) -> u64 {
     ctx.counters().frames_tx_config
 }
 
-/// The error of a write that went out and stayed unconfirmed (counted).
-pub(super) fn unverified(
-    ctx: &mut Ctx,
-    dev_id: u8,
-    param: &ConfigParam,
-    reason: String,
-) -> BusError {
-    ctx.counters().writes_unverified += 1;
-    let (index, value) = param.index_value();
-    BusError::Unverified {
-        dev_id,
-        index,
-        value,
-        what: describe(param),
-        reason,
-    }
-}
-
 /// Each send waits for its RES (a RES cannot be asked for again without
 /// sending the write again).
 fn by_res(
@@ -105,11 +87,11 @@ fn by_res(
             Ok(Some(reply)) => return check_res(&reply, &param).map(|()| "res"),
             Ok(None) => {}
             Err(e) if send == 0 && config_frames_sent(ctx) == mark => return Err(e),
-            Err(e) => return Err(unverified(ctx, dev_id, &param, e.to_string())),
+            Err(e) => return Err(unverified(ctx.counters(), dev_id, &param, e.to_string())),
         }
     }
     let reason = format!("no RES after {} send(s)", plan.sends);
-    Err(unverified(ctx, dev_id, &param, reason))
+    Err(unverified(ctx.counters(), dev_id, &param, reason))
 }
 
 /// Sends, reads the field back (again if the answer is lost), and sends
@@ -130,7 +112,7 @@ fn by_read_back(
             // Not sent this time; an earlier send may have taken.
             return Err(match send {
                 0 => e,
-                _ => unverified(ctx, dev_id, &param, e.to_string()),
+                _ => unverified(ctx.counters(), dev_id, &param, e.to_string()),
             });
         }
         last = read_after_send(ctx, dev_id, &param, at, plan.reads_per_send)?;
@@ -155,7 +137,7 @@ fn by_read_back(
         }),
         Seen::Lost => {
             let reason = format!("no read-back answered after {} send(s)", plan.sends);
-            Err(unverified(ctx, dev_id, &param, reason))
+            Err(unverified(ctx.counters(), dev_id, &param, reason))
         }
     }
 }
@@ -170,7 +152,7 @@ fn read_after_send(
     reads: u32,
 ) -> Result<Seen, BusError> {
     read_field(ctx, dev_id, param, at, reads)
-        .map_err(|e| unverified(ctx, dev_id, param, e.to_string()))
+        .map_err(|e| unverified(ctx.counters(), dev_id, param, e.to_string()))
 }
 
 /// Reads `block` until one read answers (at most `reads` times) and
@@ -241,7 +223,7 @@ pub(super) fn set_id(ctx: &mut Ctx, dev_id: u8, new_id: u8) -> Result<WriteOutco
         Ok(Some(reply)) => check_res(&reply, &param).map(|()| "res")?,
         Ok(None) => confirm_new_id(ctx, dev_id, new_id, &param)?,
         Err(e) if config_frames_sent(ctx) == mark => return Err(e),
-        Err(e) => return Err(unverified(ctx, dev_id, &param, e.to_string())),
+        Err(e) => return Err(unverified(ctx.counters(), dev_id, &param, e.to_string())),
     };
     rename(ctx, dev_id, new_id);
     Ok(WriteOutcome {
@@ -269,7 +251,7 @@ fn confirm_new_id(
         let read = Config::read(id, InfoBlock::Info01);
         ctx.try_transact(read, want, attempts).map(|r| r.is_some())
     };
-    let lost = |ctx: &mut Ctx, reason: String| unverified(ctx, dev_id, param, reason);
+    let lost = |ctx: &mut Ctx, reason: String| unverified(ctx.counters(), dev_id, param, reason);
     ctx.counters().verify_retries += 1;
     match answers(ctx, new_id) {
         Ok(true) => return Ok("read_back"),
