@@ -42,6 +42,9 @@ struct Tally {
     written: u32,
     unverified: u32,
     not_written: u32,
+    /// Of `not_written`: failures other than a read-back showing another
+    /// value (a timeout, as before the fix). A write that went out is never one.
+    other_errors: u32,
     contradictions: Vec<String>,
 }
 
@@ -68,10 +71,14 @@ async fn no_write_outcome_contradicts_the_device_under_corruption() {
                 t.unverified += 1;
                 false
             }
-            // A read-back showing another value, or any other failure (a
-            // timeout, as before the fix): "not written".
+            Err(BusError::VerifyMismatch { .. }) => {
+                t.not_written += 1;
+                has
+            }
+            // Any other failure (a timeout, as before the fix) says "not written" too.
             Err(_) => {
                 t.not_written += 1;
+                t.other_errors += 1;
                 has
             }
         };
@@ -85,15 +92,21 @@ async fn no_write_outcome_contradicts_the_device_under_corruption() {
     let stats = rig.sim.stats();
     println!(
         "{WRITES} writes at {CORRUPT_RATE} corruption in {:.1} s: written {}, unverified {}, \
-         not_written {}, contradictions {} (simulator: {} replies corrupted)",
+         not_written {} (of which not a read-back mismatch: {}), contradictions {} \
+         (simulator: {} replies corrupted)",
         started.elapsed().as_secs_f64(),
         t.written,
         t.unverified,
         t.not_written,
+        t.other_errors,
         t.contradictions.len(),
         stats.corrupted_replies,
     );
     assert!(t.contradictions.is_empty(), "{:#?}", t.contradictions);
+    assert_eq!(
+        t.other_errors, 0,
+        "a write that went out failed otherwise: {t:?}"
+    );
     assert_eq!(t.written + t.unverified + t.not_written, u32::from(WRITES));
     assert!(t.written > 0, "the noise left nothing confirmed: {t:?}");
     assert!(stats.corrupted_replies > 0, "the noise never hit a reply");
