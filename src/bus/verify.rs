@@ -58,7 +58,8 @@ pub(crate) fn confirmation(param: &ConfigParam) -> Result<Confirm, &'static str>
 pub(crate) struct RetryPlan {
     /// Times the write may go out (1: never re-sent).
     pub(crate) sends: u32,
-    /// Read-backs (or RES waits) after each send.
+    /// Read-backs after each send (a RES is waited for once per send: it
+    /// cannot be asked for again without sending the write again).
     pub(crate) reads_per_send: u32,
 }
 
