@@ -24,12 +24,13 @@
 //! |---|---|
 //! | a frame's bytes, CRC, resync in a byte stream | `protocol::frame`, `protocol::checksum`, `protocol::stream` |
 //! | a config/INFO index: name, raw type, scale, range, flash, how a write is confirmed | `protocol::params` (the table) |
+//! | when a lost confirmation is retried, when a write is unverified | `bus::verify`, `bus::owner` (its `write`) |
 //! | raw ↔ physical units | `protocol::units` |
 //! | what goes on the wire next (e-stop, request, setpoints, polls, reopen) | `bus::scheduler` |
 //! | when a frame leaves, when a reply is due or late | `bus::wire` |
 //! | setpoints → broadcast/control frames | `bus::coalesce` |
 //! | online/offline, per-device state and rates | `bus::registry` |
-//! | enable, verified writes, id/baud change, scan, e-stop on the wire | `bus::owner` (its `jobs`, `baud`, `scan`, `estop`) |
+//! | enable, verified writes, id/baud change, scan, e-stop on the wire | `bus::owner` (its `jobs`, `write`, `baud`, `scan`, `estop`) |
 //! | what a bus error is; which HTTP status it gets | `bus::error`; `http::error` |
 //! | a REST route | `http::api` (one file per area), its OpenAPI in the same handler |
 //! | a WebSocket message | `http::ws::messages`, applied in `http::ws::session` |

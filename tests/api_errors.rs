@@ -268,6 +268,59 @@ async fn config_reads_in_physical_units_and_writes_are_checked_first() {
     assert_eq!(r.ok()["verified_by"], "res");
 }
 
+/// A PATCH that did not confirm everything lists every parameter as
+/// written, unverified or not written: an unverified one does not stop the
+/// rest (504 when nothing else failed); any other failure does, and gives
+/// the status.
+#[tokio::test]
+async fn a_patch_reports_written_unverified_and_not_written() {
+    let (bus, s) = setup(None).await;
+    bus.script().unverified_at.insert(18);
+    let all = json!({"pos_kp": 1.25, "max_current_a": 2.0, "burst_plus_ms": 100.0});
+    let r = s.patch(&format!("{DEV}/1/config"), all.clone()).await;
+    let p = r.problem(504);
+    assert_eq!(p["type"], "urn:jointd:problem:write-unverified", "{p}");
+    assert_eq!(p["field"], "max_current_a");
+    let keys = |list: &str| -> Vec<String> {
+        let items = p["partial"][list].as_array().unwrap();
+        items
+            .iter()
+            .map(|w| w["param"].as_str().unwrap().to_owned())
+            .collect()
+    };
+    assert_eq!(keys("written"), ["pos_kp", "burst_plus_ms"]);
+    assert_eq!(keys("unverified"), ["max_current_a"]);
+    assert!(keys("not_written").is_empty());
+    assert_eq!(p["partial"]["unverified"][0]["raw"], 11650);
+
+    // pos_kp unverified, max_current_a read back otherwise: that stops the
+    // PATCH (502) and burst_plus_ms is never sent.
+    bus.script().unverified_at = [8].into();
+    bus.script().mismatch_at.insert(18);
+    let r = s.patch(&format!("{DEV}/1/config"), all).await;
+    let p = r.problem(502);
+    assert_eq!(p["type"], "urn:jointd:problem:verify-mismatch", "{p}");
+    assert_eq!(p["field"], "max_current_a");
+    let list = |name: &str| p["partial"][name].as_array().unwrap().clone();
+    assert!(list("written").is_empty());
+    assert_eq!(list("unverified")[0]["param"], "pos_kp");
+    let not_written = list("not_written");
+    assert_eq!(not_written[0]["param"], "max_current_a");
+    assert_eq!(not_written[1]["param"], "burst_plus_ms");
+    assert!(not_written[1]["reason"]
+        .as_str()
+        .unwrap()
+        .contains("not sent"));
+
+    // A flash write whose RES was lost is unverified, not "not persisted".
+    bus.script().unverified_at.insert(13);
+    let r = s.post_empty(&format!("{DEV}/1/config/persist")).await;
+    assert_eq!(
+        r.problem(504)["type"],
+        "urn:jointd:problem:write-unverified"
+    );
+}
+
 /// A device that answers something other than what was asked is the
 /// device's failure: 502 `unexpected-reply` on every route, whether the
 /// handler or the bus owner noticed.
@@ -359,6 +412,10 @@ async fn metrics_readyz_and_bus_views() {
     assert!(m.content_type.starts_with("text/plain"));
     assert!(text.contains("jointd_bus_up{bus=\"fake\"} 1"), "{text}");
     assert!(text.contains("jointd_bus_frames_rx_total{bus=\"fake\"} 0"));
+    for counter in ["verify_retries", "writes_unverified"] {
+        let line = format!("jointd_bus_{counter}_total{{bus=\"fake\"}} 0");
+        assert!(text.contains(&line), "{line} missing: {text}");
+    }
     assert!(text.contains("jointd_device_online{bus=\"fake\",id=\"3\"} 1"));
     assert_eq!(text.matches("# TYPE jointd_device_online gauge").count(), 1);
     s.get("/readyz").await.ok();

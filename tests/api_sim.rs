@@ -324,3 +324,52 @@ async fn stopping_the_bus_disables_every_joint() {
         tokio::time::sleep(std::time::Duration::from_millis(1)).await;
     }
 }
+
+/// Every reply lost (the device hears and acts, the host hears nothing):
+/// each write goes out and is reported unverified (504
+/// `write-unverified`), never "not written": the device has each value.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn writes_whose_answers_are_lost_are_unverified_not_unwritten() {
+    let b = start(1, None).await;
+    let s = &b.server;
+    b.sim.inject(Fault::DropReplies {
+        dev_id: None,
+        rate: 1.0,
+    });
+    let r = s
+        .patch(
+            &format!("{DEV}/1/config"),
+            json!({"max_current_a": 1.5, "burst_plus_ms": 50}),
+        )
+        .await;
+    let p = r.problem(504);
+    assert_eq!(p["type"], "urn:jointd:problem:write-unverified", "{p}");
+    let unverified = p["partial"]["unverified"].as_array().unwrap().clone();
+    assert_eq!(unverified.len(), 2, "{p}");
+    assert!(p["partial"]["written"].as_array().unwrap().is_empty());
+    assert!(p["partial"]["not_written"].as_array().unwrap().is_empty());
+    let dev = b.sim.device(1).unwrap();
+    assert_eq!(
+        u64::from(dev.params.raw(index::MAX_CUR)),
+        unverified[0]["raw"].as_u64().unwrap()
+    );
+    assert_eq!(dev.params.raw(index::PLUS_TIME), 2);
+
+    let r = s.post_empty(&format!("{DEV}/1/config/persist")).await;
+    let p = r.problem(504);
+    assert_eq!(p["type"], "urn:jointd:problem:write-unverified", "{p}");
+    assert_eq!(b.sim.device(1).unwrap().flash.raw(index::PLUS_TIME), 2);
+
+    // Neither the new id nor the old one answers: unverified, and the
+    // device did change.
+    let r = s.put(&format!("{DEV}/1/id"), json!({"new_id": 7})).await;
+    let p = r.problem(504);
+    assert_eq!(p["type"], "urn:jointd:problem:write-unverified", "{p}");
+    assert!(b.sim.device(7).is_some());
+    b.sim.inject(Fault::ClearAll);
+    // Two parameters, the flash write and the id change.
+    b.wait_snapshot("4 unverified writes counted", |s| {
+        s.counters.writes_unverified == 4 && s.counters.verify_retries > 0
+    })
+    .await;
+}

@@ -57,11 +57,16 @@ async fn writes_are_verified_by_read_back_and_res() {
 
 #[tokio::test]
 async fn a_write_that_did_not_take_effect_is_a_verification_error() {
-    let rig = rig(&[1]);
+    // Replies given up on after 20 ms (not the rig's 500): lost read-backs
+    // are retried here, and each costs a timeout.
+    let rig = rig_with(sim_config(&[1], BAUD), |c| {
+        c.timing.reply_margin_us = 20_000
+    });
     rig.online(1).await;
     // Garbled bytes on the line: a corrupted write is not applied, while the
-    // read-back after it may come through and show the old value.
-    rig.sim.inject(Fault::CorruptRate(0.02));
+    // read-back after it may come through and show the old value. Every
+    // send is read back (and re-sent) as often as the bus allows first.
+    rig.sim.inject(Fault::CorruptRate(0.03));
     let mut mismatch = None;
     for i in 0..300u16 {
         let value = 4000 + i;
@@ -78,7 +83,7 @@ async fn a_write_that_did_not_take_effect_is_a_verification_error() {
                 mismatch = Some(found);
                 break;
             }
-            Err(BusError::Timeout { .. }) => {}
+            Err(BusError::Unverified { value: v, .. }) => assert_eq!(v, value),
             Err(e) => panic!("unexpected {e}"),
         }
     }

@@ -33,7 +33,7 @@ function describe(body, status) {
   if (body && typeof body === "object") {
     let text = body.detail || body.title || JSON.stringify(body);
     if (body.allowed) text += ` (allowed ${body.allowed.min}..${body.allowed.max} ${body.allowed.unit})`;
-    if (body.partial) text += ` — already done: ${JSON.stringify(body.partial)}`;
+    if (body.partial) text += ` — outcome so far: ${JSON.stringify(body.partial)}`;
     return text;
   }
   return `HTTP ${status}`;

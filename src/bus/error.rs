@@ -31,6 +31,17 @@ pub enum BusError {
         expected: u16,
         found: u16,
     },
+    /// A write went out, but its confirmation (RES or read-back) never came
+    /// after the retries its parameter allows: the device may or may not
+    /// have taken it. Never "not written".
+    #[error("device {dev_id}: {what} was sent but not confirmed ({reason}); it may or may not have taken effect")]
+    Unverified {
+        dev_id: u8,
+        index: u8,
+        value: u16,
+        what: String,
+        reason: String,
+    },
     /// The device answered, but not what was asked (another block, not a
     /// RES): the device's failure, not the request's.
     #[error("{0}")]

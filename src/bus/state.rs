@@ -61,6 +61,12 @@ pub struct BusCounters {
     /// Times the owner caught a panic of its own (a bug): each one took the
     /// bus down and reopened the port, as after an unplug.
     pub owner_panics: u64,
+    /// Extra attempts to confirm a write: a read-back asked again, or the
+    /// write re-sent (only where that is harmless) after its RES or
+    /// read-back was lost or showed the old value.
+    pub verify_retries: u64,
+    /// Writes that went out but stayed unconfirmed after those retries.
+    pub writes_unverified: u64,
 }
 
 /// Rates over the last statistics window (about one second).

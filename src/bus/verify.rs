@@ -2,8 +2,21 @@
 //! table: a RES reply for the rows that answer, a read-back of the row's
 //! INFO field for the settings that do not, and an honest "unverifiable"
 //! for the rest. Rows the table guards are refused with the row's reason.
+//!
+//! # When a lost confirmation is retried
+//! Noise on the line can eat the write, the read-back request or its
+//! reply, or the RES: a lost confirmation says nothing about the write.
+//! A read-back is read again first (reading is always harmless). Only a
+//! write that is idempotent is then sent again: a RAM setting the table
+//! does not guard (storage `ram` or `volatile`, guard `none`): setting the
+//! same value twice is the same as once. A flash write (WRITE_FLASH, an
+//! action with storage `none`), an id change (storage `flash`, routed) or
+//! anything the table does not know goes out once: flash has a bounded
+//! number of erase cycles and an id change re-sent to the old id would go
+//! to a device that may no longer have it. What stays unconfirmed is
+//! reported unverified, never "not written".
 
-use crate::protocol::params::{self, Access, Field, Guard, ReplyKind};
+use crate::protocol::params::{self, Access, Field, Guard, ReplyKind, Storage};
 use crate::protocol::{ConfigParam, InfoBlock};
 
 /// The way a write of one parameter is confirmed.
@@ -37,6 +50,35 @@ pub(crate) fn confirmation(param: &ConfigParam) -> Result<Confirm, &'static str>
             field,
         },
         _ => Confirm::Unverifiable,
+    })
+}
+
+/// How often a write whose confirmation is lost is tried again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct RetryPlan {
+    /// Times the write may go out (1: never re-sent).
+    pub(crate) sends: u32,
+    /// Read-backs after each send (a RES is waited for once per send: it
+    /// cannot be asked for again without sending the write again).
+    pub(crate) reads_per_send: u32,
+}
+
+/// The plan for `param` with the bus's `retries` (extra attempts after a timeout).
+pub(crate) fn retry_plan(param: &ConfigParam, retries: u32) -> RetryPlan {
+    let again = 1 + retries;
+    RetryPlan {
+        sends: if resend_safe(param) { again } else { 1 },
+        reads_per_send: again,
+    }
+}
+
+/// A write that may be re-sent: an unguarded RAM setting (idempotent).
+pub(crate) fn resend_safe(param: &ConfigParam) -> bool {
+    let (index, _) = param.index_value();
+    params::by_index(index).is_some_and(|row| {
+        row.access == Access::Write
+            && row.guard == Guard::None
+            && matches!(row.storage, Storage::Ram | Storage::Volatile)
     })
 }
 
@@ -95,6 +137,30 @@ mod tests {
             confirmation(&ConfigParam::WriteFlash { key: 0xA5 }),
             Ok(Confirm::Res)
         ));
+    }
+
+    #[test]
+    fn only_unguarded_ram_writes_are_sent_again() {
+        use crate::protocol::BaudLevel;
+        let plan = |p| retry_plan(&p, 2);
+        let twice = RetryPlan {
+            sends: 3,
+            reads_per_send: 3,
+        };
+        assert_eq!(plan(ConfigParam::MaxCur(100)), twice);
+        assert_eq!(plan(ConfigParam::PosKp(100)), twice);
+        for once in [
+            ConfigParam::WriteFlash { key: 0xA5 },
+            ConfigParam::SetId { new_id: 3 },
+            ConfigParam::BaudRate(BaudLevel::B500000),
+            ConfigParam::Other { index: 0, value: 1 },
+            ConfigParam::Other {
+                index: 29,
+                value: 1,
+            },
+        ] {
+            assert_eq!(plan(once).sends, 1, "{once:?}");
+        }
     }
 
     #[test]

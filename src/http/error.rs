@@ -16,7 +16,7 @@
 //! | a bug (handler panicked) | 500 |
 //! | device answered something other than what was asked, or reads back another value than written | 502 |
 //! | bus down, request queue full, bus owner stopped, not ready, e-stop unconfirmed | 503 |
-//! | device did not answer | 504 |
+//! | device did not answer; a write sent whose RES or read-back was lost (`write-unverified`) | 504 |
 
 use axum::extract::rejection::{JsonRejection, PathRejection, QueryRejection};
 use axum::http::{header, HeaderValue, StatusCode};
@@ -245,6 +245,14 @@ impl ApiError {
         )
     }
 
+    /// Writes of one request that all went out, some without confirmation
+    /// (504, like a single unverified write; `partial` lists per parameter
+    /// `written`, `unverified` and `not_written`).
+    pub fn writes_unverified(detail: impl Into<String>) -> Self {
+        let (status, kind, title) = UNVERIFIED;
+        Self::new(status, kind, title, detail)
+    }
+
     /// An e-stop that could not confirm every bus stopped (503; `partial`
     /// carries each bus's result).
     pub fn estop_incomplete(detail: impl Into<String>) -> Self {
@@ -257,6 +265,15 @@ impl ApiError {
     }
 }
 
+/// A write sent whose confirmation was lost (the device may have taken it):
+/// a gateway timeout, as the missing answer is the upstream's, with its own
+/// problem type so a client never reads it as "not written".
+const UNVERIFIED: (StatusCode, &str, &str) = (
+    StatusCode::GATEWAY_TIMEOUT,
+    "write-unverified",
+    "Write sent, confirmation lost",
+);
+
 /// Status, problem type and title of each bus failure: the one table that
 /// turns what the bus reports into HTTP.
 fn bus_problem(err: &BusError) -> (StatusCode, &'static str, &'static str) {
@@ -266,6 +283,8 @@ fn bus_problem(err: &BusError) -> (StatusCode, &'static str, &'static str) {
             "device-timeout",
             "Device did not answer",
         ),
+        // The write went out; only its confirmation did not come back.
+        BusError::Unverified { .. } => UNVERIFIED,
         BusError::Down { .. } => (StatusCode::SERVICE_UNAVAILABLE, "bus-down", "Bus is down"),
         BusError::Refused { .. } => (StatusCode::CONFLICT, "device-refused", "Device refused"),
         // The device answered, but wrongly: the upstream failed, not the request.
@@ -369,7 +388,12 @@ pub(crate) const DOCUMENTED_STATUSES: [(&str, &str); 10] = [
          or a write reads back another value (verify-mismatch)",
     ),
     ("503", "Bus down, request queue full, or bus owner stopped"),
-    ("504", "Device did not answer"),
+    (
+        "504",
+        "Device did not answer (device-timeout), or a write went out and its confirmation \
+         was lost (write-unverified: it may or may not have taken effect; a config PATCH's \
+         `partial` lists `written`, `unverified` and `not_written` per parameter)",
+    ),
     ("500", "Internal error (a bug; never expected)"),
 ];
 
@@ -440,6 +464,16 @@ mod tests {
                 409,
             ),
             (BusError::UnexpectedReply("INFO_07".into()), 502),
+            (
+                BusError::Unverified {
+                    dev_id: 1,
+                    index: 18,
+                    value: 5,
+                    what: "write index 18 = 5".into(),
+                    reason: "no read-back".into(),
+                },
+                504,
+            ),
             (
                 BusError::VerifyMismatch {
                     dev_id: 1,

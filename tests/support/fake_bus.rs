@@ -30,6 +30,11 @@ pub struct Script {
     pub down: bool,
     /// Writes read back another value (502).
     pub mismatch: bool,
+    /// Config indices whose writes read back another value (502).
+    pub mismatch_at: BTreeSet<u8>,
+    /// Config indices whose writes go out but stay unconfirmed (504
+    /// `write-unverified`); 13 is the flash write.
+    pub unverified_at: BTreeSet<u8>,
     /// The device answers every read with INFO_07 and a flash write with
     /// another block than RES, as a confused or misaddressed device would
     /// (502 wherever it shows).
@@ -253,8 +258,16 @@ impl Owner {
                 reply,
             } => {
                 let (index, value) = param.index_value();
-                let mismatch = self.script.lock().unwrap().mismatch;
-                let outcome = if mismatch {
+                let (mismatch, unverified) = {
+                    let s = self.script.lock().unwrap();
+                    (
+                        s.mismatch || s.mismatch_at.contains(&index),
+                        s.unverified_at.contains(&index),
+                    )
+                };
+                let outcome = if unverified {
+                    Err(unverified_write(dev_id, index, value))
+                } else if mismatch {
                     Err(BusError::VerifyMismatch {
                         dev_id,
                         index,
@@ -279,11 +292,15 @@ impl Owner {
                     let _ = reply.send(Err(BusError::UnexpectedReply(what)));
                     return;
                 }
-                let r = self.gate(Some(dev_id)).map(|_| WriteOutcome {
-                    dev_id,
-                    index: 13,
-                    value: 0xA5,
-                    verified_by: "res",
+                let unverified = self.script.lock().unwrap().unverified_at.contains(&13);
+                let r = self.gate(Some(dev_id)).and_then(|_| match unverified {
+                    true => Err(unverified_write(dev_id, 13, 0xA5)),
+                    false => Ok(WriteOutcome {
+                        dev_id,
+                        index: 13,
+                        value: 0xA5,
+                        verified_by: "res",
+                    }),
                 });
                 let _ = reply.send(r);
             }
@@ -398,5 +415,16 @@ fn fail(req: Request, err: BusError) {
         | Request::WriteFlash { reply, .. }
         | Request::SetId { reply, .. } => drop(reply.send(Err(err))),
         Request::Scan { reply, .. } => drop(reply.send(Err(err))),
+    }
+}
+
+/// What the real owner reports of a write whose confirmation was lost.
+fn unverified_write(dev_id: u8, index: u8, value: u16) -> BusError {
+    BusError::Unverified {
+        dev_id,
+        index,
+        value,
+        what: format!("write index {index} = {value}"),
+        reason: "no read-back answered after 3 send(s)".into(),
     }
 }

@@ -2,6 +2,8 @@
 //! switched first (each answers RES at the old baud, then listens only at
 //! the new one), then the port; each device is then read back at the new
 //! baud. If a device refuses, the ones already switched are switched back.
+//! A device whose RES is lost may have switched: that is reported
+//! unverified (and it is switched back with the others), never "not changed".
 
 use crate::bus::error::BusError;
 use crate::bus::handle::BusEvent;
@@ -10,7 +12,9 @@ use crate::protocol::command::index;
 use crate::protocol::{BaudLevel, Config, ConfigParam, Info04, InfoBlock};
 
 use super::confirm::check_res;
+use super::confirm::unverified;
 use super::ctx::Ctx;
+use super::write::config_frames_sent;
 
 pub(super) fn set_baud(ctx: &mut Ctx, baud: u32) -> Result<(), BusError> {
     let level = BaudLevel::from_baud(baud).ok_or_else(|| {
@@ -55,8 +59,8 @@ fn switch_all(
     let mut touched = Vec::new();
     for &id in ids {
         let result = switch_device(ctx, id, level);
-        // A timed-out device may have switched with its RES lost.
-        if result.is_ok() || matches!(result, Err(BusError::Timeout { .. })) {
+        // A device whose RES was lost may have switched.
+        if result.is_ok() || matches!(result, Err(BusError::Unverified { .. })) {
             touched.push(id);
         }
         if let Err(e) = result {
@@ -67,10 +71,17 @@ fn switch_all(
     ctx.switch_port(baud)
 }
 
-/// Every device answers at the new baud and reports the new level.
+/// Every device answers at the new baud and reports the new level. Each
+/// has confirmed by RES already: a read that does not answer leaves the
+/// change unverified, not undone.
 fn confirm_level(ctx: &mut Ctx, ids: &[u8], level: BaudLevel) -> Result<(), BusError> {
     for &id in ids {
-        let info = Info04::from_bytes(&super::jobs::read_info(ctx, id, InfoBlock::Info04)?.data);
+        let read = super::jobs::read_info(ctx, id, InfoBlock::Info04).map_err(|e| {
+            let param = ConfigParam::BaudRate(level);
+            let reason = format!("RES came at the old baud; the read at the new one failed: {e}");
+            unverified(ctx.counters(), id, &param, reason)
+        })?;
+        let info = Info04::from_bytes(&read.data);
         if info.baud_level != level as u8 {
             return Err(BusError::VerifyMismatch {
                 dev_id: id,
@@ -84,16 +95,19 @@ fn confirm_level(ctx: &mut Ctx, ids: &[u8], level: BaudLevel) -> Result<(), BusE
 }
 
 /// One device to `level`; no retry (a retry at the old baud would go
-/// unheard if the first attempt switched it).
+/// unheard if the first attempt switched it). A lost RES is unverified.
 fn switch_device(ctx: &mut Ctx, id: u8, level: BaudLevel) -> Result<(), BusError> {
     let param = ConfigParam::BaudRate(level);
     let want = Want {
         dev_id: id,
         index: index::BAUD_RATE,
     };
-    match ctx.try_transact(Config { dev_id: id, param }, want, 1)? {
-        Some(reply) => check_res(&reply, &param),
-        None => Err(ctx.timeout_error(id, &param, 1)),
+    let mark = config_frames_sent(ctx);
+    match ctx.try_transact(Config { dev_id: id, param }, want, 1) {
+        Ok(Some(reply)) => check_res(&reply, &param),
+        Ok(None) => Err(unverified(ctx.counters(), id, &param, "no RES".into())),
+        Err(e) if config_frames_sent(ctx) == mark => Err(e),
+        Err(e) => Err(unverified(ctx.counters(), id, &param, e.to_string())),
     }
 }
 

@@ -1,7 +1,9 @@
-//! How a device's answer to a one-shot request reads: a RES code, and the
-//! words an error uses for a config frame.
+//! How a device's answer to a one-shot request reads: a RES code, the
+//! words an error uses for a config frame, and the error of a write whose
+//! answer was lost.
 
 use crate::bus::error::BusError;
+use crate::bus::handle::BusCounters;
 use crate::protocol::reply::RES_SUCCESS;
 use crate::protocol::{ConfigParam, Reply, ReplyBody};
 
@@ -29,5 +31,23 @@ pub(super) fn check_res(reply: &Reply, param: &ConfigParam) -> Result<(), BusErr
             describe(param),
             reply.index
         ))),
+    }
+}
+
+/// The error of a write that went out and stayed unconfirmed (counted).
+pub(super) fn unverified(
+    counters: &mut BusCounters,
+    dev_id: u8,
+    param: &ConfigParam,
+    reason: String,
+) -> BusError {
+    counters.writes_unverified += 1;
+    let (index, value) = param.index_value();
+    BusError::Unverified {
+        dev_id,
+        index,
+        value,
+        what: describe(param),
+        reason,
     }
 }

@@ -2,23 +2,19 @@
 //!
 //! - Enable/disable use standard control frames (SPEC errata 3) and are
 //!   confirmed by the fsm in a fresh INFO_01.
-//! - Config writes are confirmed by RES or by reading the INFO block back
-//!   (see [`crate::bus::verify`]); a mismatch is an error to the caller.
-//! - An id change moves the registry entry and the setpoint slot; a baud
-//!   change switches every device first, then the port.
+//! - Config writes and the id change are in `write`; the baud change in `baud`.
 
 use crate::bus::error::BusError;
-use crate::bus::handle::{BusEvent, Targets, WriteOutcome};
-use crate::bus::verify::{confirmation, Confirm};
+use crate::bus::handle::Targets;
 use crate::bus::wire::Want;
 use crate::protocol::command::index;
 use crate::protocol::status::{active_fault, fault_name, fsm, fsm_name};
 use crate::protocol::{
-    is_device_id, Command, Config, ConfigParam, Control, CtrlMode, Info01, InfoBlock, Jog, JogDir,
-    Reply, ReplyBody, ALL_DEVICES,
+    Command, Config, ConfigParam, Control, Info01, InfoBlock, Jog, JogDir, Reply, ReplyBody,
+    ALL_DEVICES,
 };
 
-use super::confirm::check_res;
+use super::confirm::unverified;
 use super::ctx::Ctx;
 
 /// INFO_01 reads that may pass before an enable/disable shows in the fsm.
@@ -155,7 +151,14 @@ pub(super) fn rezero(ctx: &mut Ctx, dev_id: u8) -> Result<(), BusError> {
     // here bounds the joint's travel since from above.
     let sent = std::time::Instant::now();
     zero_moved(ctx, dev_id);
-    let angle = read_info01(ctx, dev_id)?.angle;
+    // The zero moved or not: a read that fails says nothing about which.
+    let angle = match read_info01(ctx, dev_id) {
+        Ok(info) => info.angle,
+        Err(e) => {
+            let param = ConfigParam::UpdateFinZero;
+            return Err(unverified(ctx.counters(), dev_id, &param, e.to_string()));
+        }
+    };
     let within =
         crate::protocol::units::angle_deg(angle).abs() <= rezero_tolerance_deg(sent.elapsed());
     if !within {
@@ -170,14 +173,10 @@ pub(super) fn rezero(ctx: &mut Ctx, dev_id: u8) -> Result<(), BusError> {
 }
 
 /// The device's zero moved: targets and angles from before are void.
-fn zero_moved(ctx: &mut Ctx, id: u8) {
+pub(super) fn zero_moved(ctx: &mut Ctx, id: u8) {
     ctx.sched_mut().registry_mut().zero_moved(id);
     ctx.setpoints().clear(Some(&[id]));
     ctx.sched_mut().forget_setpoint(id);
-}
-
-pub(super) fn set_mode(ctx: &mut Ctx, dev_id: u8, mode: CtrlMode) -> Result<(), BusError> {
-    write_config(ctx, dev_id, ConfigParam::CtrlMode(mode)).map(|_| ())
 }
 
 pub(super) fn read_info(ctx: &mut Ctx, dev_id: u8, block: InfoBlock) -> Result<Reply, BusError> {
@@ -187,121 +186,4 @@ pub(super) fn read_info(ctx: &mut Ctx, dev_id: u8, block: InfoBlock) -> Result<R
         index: block.index(),
     };
     ctx.transact(Config::read(dev_id, block), want)
-}
-
-pub(super) fn write_config(
-    ctx: &mut Ctx,
-    dev_id: u8,
-    param: ConfigParam,
-) -> Result<WriteOutcome, BusError> {
-    known(ctx, dev_id)?;
-    let how = confirmation(&param).map_err(|why| BusError::Invalid(why.to_string()))?;
-    let (idx, value) = param.index_value();
-    let cmd = Config { dev_id, param };
-    let verified_by = match how {
-        Confirm::Res => {
-            let reply = ctx.transact(cmd, Want { dev_id, index: idx })?;
-            check_res(&reply, &param)?;
-            "res"
-        }
-        Confirm::ReadBack { block, field } => {
-            ctx.job_send(&[Command::Config(cmd)])?;
-            let found = field.read(&read_info(ctx, dev_id, block)?.data);
-            if found != value {
-                return Err(BusError::VerifyMismatch {
-                    dev_id,
-                    index: idx,
-                    expected: value,
-                    found,
-                });
-            }
-            "read_back"
-        }
-        Confirm::Unverifiable => {
-            ctx.job_send(&[Command::Config(cmd)])?;
-            after_unverifiable(ctx, dev_id, &param);
-            "unverifiable"
-        }
-    };
-    Ok(WriteOutcome {
-        dev_id,
-        index: idx,
-        value,
-        verified_by,
-    })
-}
-
-fn after_unverifiable(ctx: &mut Ctx, dev_id: u8, param: &ConfigParam) {
-    match param {
-        ConfigParam::CtrlMode(mode) => {
-            ctx.sched_mut().registry_mut().set_mode(dev_id, *mode);
-            ctx.setpoints().clear(Some(&[dev_id]));
-            ctx.sched_mut().forget_setpoint(dev_id);
-        }
-        ConfigParam::UpdateFinZero => zero_moved(ctx, dev_id),
-        _ => {}
-    }
-}
-
-pub(super) fn set_id(ctx: &mut Ctx, dev_id: u8, new_id: u8) -> Result<WriteOutcome, BusError> {
-    known(ctx, dev_id)?;
-    if !is_device_id(new_id) || new_id == dev_id {
-        return Err(BusError::Invalid(format!(
-            "new id {new_id} must be in 1..=159 and differ from {dev_id}"
-        )));
-    }
-    if ctx.sched().registry().get(new_id).is_some() {
-        return Err(BusError::WrongState(format!(
-            "id {new_id} is already taken on bus {}",
-            ctx.name()
-        )));
-    }
-    let param = ConfigParam::SetId { new_id };
-    let cmd = Config { dev_id, param };
-    // No retry to the old id: the device may have changed and its RES got lost.
-    let want = Want {
-        dev_id: new_id,
-        index: index::SET_ID,
-    };
-    let verified_by = match ctx.try_transact(cmd, want, 1)? {
-        Some(reply) => {
-            check_res(&reply, &param)?;
-            "res"
-        }
-        None => confirm_new_id(ctx, dev_id, new_id, &param)?,
-    };
-    rename(ctx, dev_id, new_id);
-    Ok(WriteOutcome {
-        dev_id: new_id,
-        index: index::SET_ID,
-        value: param.index_value().1,
-        verified_by,
-    })
-}
-
-/// The RES of an id change did not come: does the new id answer?
-fn confirm_new_id(
-    ctx: &mut Ctx,
-    dev_id: u8,
-    new_id: u8,
-    param: &ConfigParam,
-) -> Result<&'static str, BusError> {
-    let read = Config::read(new_id, InfoBlock::Info01);
-    let want = Want {
-        dev_id: new_id,
-        index: index::INFO_01_R,
-    };
-    match ctx.try_transact(read, want, 1 + ctx.cfg().timing.retries)? {
-        Some(_) => Ok("read_back"),
-        None => Err(ctx.timeout_error(dev_id, param, 1)),
-    }
-}
-
-/// The registry entry and the setpoint slot follow the device. An entry
-/// the read-back made for the new id is replaced by the old one's history.
-fn rename(ctx: &mut Ctx, old: u8, new: u8) {
-    ctx.sched_mut().rename(old, new);
-    ctx.setpoints().rename(old, new);
-    let bus = ctx.name().to_string();
-    ctx.push_event(BusEvent::IdChanged { bus, old, new });
 }

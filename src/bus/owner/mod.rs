@@ -9,7 +9,7 @@
 //! when the port is back. Nothing here can take another bus down.
 //!
 //! - `ctx`: what the owner's code works with (port, scheduler, publication).
-//! - `jobs`, `estop`, `scan`, `baud`: one-shot requests, functions of a `&mut Ctx`.
+//! - `jobs`, `write`, `estop`, `scan`, `baud`: one-shot requests, functions of a `&mut Ctx`.
 //! - `confirm`: reading a RES, naming a config frame in errors.
 //! - `stats`: rate windows.
 
@@ -20,6 +20,7 @@ mod estop;
 mod jobs;
 mod scan;
 mod stats;
+mod write;
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -165,7 +166,7 @@ fn run_request(ctx: &mut Ctx, req: Request) {
             dev_id,
             mode,
             reply,
-        } => drop(reply.send(jobs::set_mode(ctx, dev_id, mode))),
+        } => drop(reply.send(write::set_mode(ctx, dev_id, mode))),
         Request::ReadInfo {
             dev_id,
             block,
@@ -175,17 +176,17 @@ fn run_request(ctx: &mut Ctx, req: Request) {
             dev_id,
             param,
             reply,
-        } => drop(reply.send(jobs::write_config(ctx, dev_id, param))),
+        } => drop(reply.send(write::write_config(ctx, dev_id, param))),
         Request::WriteFlash { dev_id, reply } => {
             let key = crate::protocol::command::WRITE_FLASH_KEY;
             let param = ConfigParam::WriteFlash { key };
-            drop(reply.send(jobs::write_config(ctx, dev_id, param)))
+            drop(reply.send(write::write_config(ctx, dev_id, param)))
         }
         Request::SetId {
             dev_id,
             new_id,
             reply,
-        } => drop(reply.send(jobs::set_id(ctx, dev_id, new_id))),
+        } => drop(reply.send(write::set_id(ctx, dev_id, new_id))),
         Request::SetBaud { baud, reply } => drop(reply.send(baud::set_baud(ctx, baud))),
         Request::Scan { first, last, reply } => drop(reply.send(scan::scan(ctx, first, last))),
     }

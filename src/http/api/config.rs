@@ -20,7 +20,7 @@ use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::state::{device_id, known_device, AppState, DevicePath};
 use crate::http::telemetry::hex;
 use crate::protocol::params;
-use crate::protocol::{BaudLevel, Info04, InfoBlock};
+use crate::protocol::{BaudLevel, ConfigParam, Info04, InfoBlock};
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
@@ -44,6 +44,50 @@ pub(crate) struct Written {
     /// `res` (the device's RES reply) or `read_back` (the INFO block read back).
     #[schema(example = "read_back")]
     pub verified_by: &'static str,
+}
+
+/// A parameter sent whose confirmation (read-back or RES) was lost after
+/// the retries: the device may or may not have the value.
+#[derive(Debug, Serialize, ToSchema)]
+pub(crate) struct Unverified {
+    #[schema(example = "max_current_a")]
+    pub param: &'static str,
+    #[schema(example = 2.0)]
+    pub value: f64,
+    #[schema(example = 11650)]
+    pub raw: u16,
+    #[schema(example = 18)]
+    pub index: u8,
+    #[schema(example = "no read-back answered after 3 send(s)")]
+    pub reason: String,
+}
+
+/// A parameter the device does not have: refused, read back with another
+/// value, or never sent (an earlier parameter failed, or the bus could not send).
+#[derive(Debug, Serialize, ToSchema)]
+pub(crate) struct NotWritten {
+    #[schema(example = "burst_plus_ms")]
+    pub param: &'static str,
+    #[schema(example = 100.0)]
+    pub value: f64,
+    #[schema(example = 4)]
+    pub raw: u16,
+    #[schema(example = 27)]
+    pub index: u8,
+    #[schema(example = "not sent: an earlier parameter failed")]
+    pub reason: String,
+}
+
+/// Every parameter of a PATCH in one of three lists, each in request
+/// order: the `partial` member of a PATCH that did not confirm everything.
+#[derive(Debug, Default, Serialize, ToSchema)]
+pub(crate) struct PatchOutcomes {
+    /// Confirmed on the device (RAM only until persisted).
+    pub written: Vec<Written>,
+    /// Sent, confirmation lost: the device may or may not have them.
+    pub unverified: Vec<Unverified>,
+    /// Not on the device (refused, read back otherwise, or never sent).
+    pub not_written: Vec<NotWritten>,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -141,11 +185,21 @@ async fn read_config(
 }
 
 /// Change any subset of parameters in one request. Every value is checked
-/// before anything is written; each write is verified by RES or read-back.
-/// On a failure the problem's `partial.written` lists what was already written.
+/// before anything is written; each write is confirmed by read-back (the
+/// read retried, then the write re-sent, as the bus's retries allow).
+///
+/// 200 only when every parameter is confirmed. Otherwise a problem whose
+/// `partial` (a `PatchOutcomes`) lists every parameter as `written`,
+/// `unverified` (sent, confirmation lost: the device may have it; also a
+/// write the bus owner did not answer in time) or `not_written`. An
+/// unverified parameter does not stop the others; any
+/// other failure does (the rest are `not_written`, never sent) and gives
+/// the status (e.g. 502 verify-mismatch, 409 device-refused, 503 bus-down).
+/// When the only failures are unverified: 504 `write-unverified`. A single
+/// write (persist, id) whose confirmation is lost is a 504 `write-unverified` too.
 #[utoipa::path(patch, path = "/api/v1/buses/{bus}/devices/{id}/config", tag = TAG_CONFIG, params(DevicePath),
     request_body(content = ConfigPatch, example = json!({"pos_kp": 1.25, "max_current_a": 2.0, "burst_plus_ms": 100.0})),
-    responses((status = 200, description = "Every parameter written and verified", body = PatchResult), ErrorResponses))]
+    responses((status = 200, description = "Every parameter written and confirmed", body = PatchResult), ErrorResponses))]
 async fn patch_config(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<DevicePath>,
@@ -157,27 +211,53 @@ async fn patch_config(
     for (param, value) in patch.entries() {
         writes.push((param, value, to_config(param, value)?));
     }
-    let mut written = Vec::with_capacity(writes.len());
+    let (out, failed) = write_in_turn(bus, id, writes).await;
+    match patch_problem(failed, &out) {
+        Some(err) => Err(err),
+        None => Ok(Json(PatchResult {
+            bus: bus.name().to_owned(),
+            id,
+            written: out.written,
+        })),
+    }
+}
+
+/// Writes each parameter in turn; an unverified one does not stop the
+/// rest, any other failure does (the rest are never sent).
+async fn write_in_turn(
+    bus: &BusHandle,
+    id: u8,
+    writes: Vec<(Param, f64, ConfigParam)>,
+) -> (PatchOutcomes, Option<ApiError>) {
+    let mut out = PatchOutcomes::default();
+    let mut failed: Option<ApiError> = None;
     for (param, value, config) in writes {
+        let raw = config.index_value().1;
+        if failed.is_some() {
+            out.not_written
+                .push(not_written(param, value, raw, NOT_SENT.into()));
+            continue;
+        }
         match bus.write_config(id, config).await {
-            Ok(outcome) => written.push(written_entry(param, value, &outcome)),
+            Ok(outcome) => out.written.push(written_entry(param, value, &outcome)),
+            Err(BusError::Unverified { reason, .. }) => {
+                out.unverified.push(unverified(param, value, raw, reason));
+            }
+            // The owner may still send it: unknown, and the rest waits no longer.
+            Err(e @ BusError::OwnerTimeout) => {
+                out.unverified
+                    .push(unverified(param, value, raw, e.to_string()));
+                failed = Some(ApiError::from(e).with_field(param.key));
+            }
             Err(e) => {
-                let done = serde_json::to_value(&written).unwrap_or_default();
-                let failed = ApiError::from(e);
-                let detail = format!("{}: {}", param.key, failed.problem.detail);
-                let mut err = failed
-                    .with_field(param.key)
-                    .with_partial(serde_json::json!({"written": done}));
-                err.problem.detail = detail;
-                return Err(err);
+                let err = ApiError::from(e);
+                let reason = err.problem.detail.clone();
+                out.not_written.push(not_written(param, value, raw, reason));
+                failed = Some(err.with_field(param.key));
             }
         }
     }
-    Ok(Json(PatchResult {
-        bus: bus.name().to_owned(),
-        id,
-        written,
-    }))
+    (out, failed)
 }
 
 fn written_entry(param: Param, value: f64, outcome: &WriteOutcome) -> Written {
@@ -188,6 +268,52 @@ fn written_entry(param: Param, value: f64, outcome: &WriteOutcome) -> Written {
         index: outcome.index,
         verified_by: outcome.verified_by,
     }
+}
+
+fn unverified(param: Param, value: f64, raw: u16, reason: String) -> Unverified {
+    Unverified {
+        param: param.key,
+        value,
+        raw,
+        index: param.index,
+        reason,
+    }
+}
+
+/// Why a parameter after a failed one is `not_written`.
+const NOT_SENT: &str = "not sent: an earlier parameter failed";
+
+fn not_written(param: Param, value: f64, raw: u16, reason: String) -> NotWritten {
+    NotWritten {
+        param: param.key,
+        value,
+        raw,
+        index: param.index,
+        reason,
+    }
+}
+
+/// The problem a PATCH answers unless everything was confirmed: the
+/// failure that stopped it, else "unverified"; `partial` lists all three.
+fn patch_problem(failed: Option<ApiError>, out: &PatchOutcomes) -> Option<ApiError> {
+    let unverified: Vec<&str> = out.unverified.iter().map(|u| u.param).collect();
+    let unverified = unverified.join(", ");
+    let mut err = match (failed, out.unverified.first()) {
+        (None, None) => return None,
+        (Some(mut err), _) => {
+            let field = err.problem.field.clone().unwrap_or_default();
+            err.problem.detail = format!("{field}: {}", err.problem.detail);
+            err
+        }
+        (None, Some(first)) => ApiError::writes_unverified(format!(
+            "sent, not confirmed (the device may or may not have them): {unverified}"
+        ))
+        .with_field(first.param),
+    };
+    if !err.problem.kind.ends_with("write-unverified") && !unverified.is_empty() {
+        err.problem.detail = format!("{}; unconfirmed: {unverified}", err.problem.detail);
+    }
+    Some(err.with_partial(serde_json::to_value(out).unwrap_or_default()))
 }
 
 /// Persist the RAM parameters to flash (WRITE_FLASH, key 0xA5), confirmed by RES.

@@ -35,7 +35,8 @@ const BEARER_SCHEME: &str = "bearer";
             daemon has a token, every request but /healthz needs `Authorization: Bearer <token>`."
     ),
     modifiers(&BearerAuth),
-    components(schemas(Problem)),
+    // `PatchOutcomes`: the `partial` of a config PATCH that did not confirm everything.
+    components(schemas(Problem, super::config::PatchOutcomes)),
     tags(
         (name = "buses", description = "Serial buses: state, stats, scan, baud"),
         (name = "devices", description = "Joint modules on a bus and their telemetry"),
