@@ -14,6 +14,8 @@
 //! - [`state`]: [`AppState`]: the bus handles by name, soft limits, token, options; path guards.
 //! - [`error`]: [`ApiError`], RFC 9457 problem details; the one place that picks HTTP statuses.
 //! - [`extract`]: JSON/path/query extractors whose rejections are problems.
+//! - [`guard`]: the request guards before auth: Host (DNS rebinding), body size, browser origin.
+//! - [`policy`]: what the guards decide, as pure functions: allow-lists, same-origin, body limit.
 //! - [`auth`]: the bearer-token middleware (everything but the public paths).
 //! - [`paths`]: the URLs outside the OpenAPI routes, and which need no token.
 //! - [`limits`]: per-joint soft limits from the config.
@@ -26,9 +28,11 @@ pub mod api;
 pub(crate) mod auth;
 pub(crate) mod error;
 pub(crate) mod extract;
+pub(crate) mod guard;
 pub(crate) mod hub;
 pub mod limits;
 pub(crate) mod paths;
+pub mod policy;
 pub mod state;
 pub(crate) mod targets;
 pub(crate) mod telemetry;
@@ -36,6 +40,7 @@ pub mod teleop;
 pub(crate) mod web;
 pub mod ws;
 
+use axum::extract::DefaultBodyLimit;
 use axum::Router;
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::trace::TraceLayer;
@@ -46,7 +51,8 @@ pub use state::AppState;
 use crate::bus::BusHandle;
 
 /// The whole HTTP application. Tests call it with `oneshot` or serve it on
-/// `127.0.0.1:0`; the daemon serves it on `--listen`.
+/// `127.0.0.1:0`; the daemon serves it on `--listen`. Set the state's
+/// options first: the body limit is read here.
 pub fn app(state: AppState) -> Router {
     let (router, doc) = api::router().split_for_parts();
     router
@@ -59,6 +65,12 @@ pub fn app(state: AppState) -> Router {
             state.clone(),
             auth::require_token,
         ))
+        // Outside auth: a foreign page or host learns nothing, not even 401.
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            guard::check,
+        ))
+        .layer(DefaultBodyLimit::max(state.policy().max_body_bytes))
         .layer(CatchPanicLayer::custom(panic_to_problem))
         .layer(TraceLayer::new_for_http())
         .with_state(state)
