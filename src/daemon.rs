@@ -223,7 +223,11 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
 /// file; given twice at one level, empty or unusable: refused.
 fn token(args: &RunArgs, file: &FileConfig) -> Result<Option<String>, DaemonError> {
     if args.token.is_some() || args.token_file.is_some() {
-        return token_from(args.token.as_deref(), args.token_file.as_ref(), "--token");
+        return token_from(
+            args.token.as_deref(),
+            args.token_file.as_ref(),
+            "--token or JOINTD_TOKEN",
+        );
     }
     if file.token.is_some() && file.token_file.is_some() {
         return Err(config_error(
