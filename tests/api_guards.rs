@@ -288,3 +288,104 @@ async fn dns_rebinding_host_is_refused_for_reads_and_writes() {
         .await
         .ok();
 }
+
+/// The API on a scripted bus with these allow-lists.
+async fn fake_with(
+    token: Option<&str>,
+    hosts: &[&str],
+    origins: &[&str],
+) -> (support::fake_bus::FakeBus, support::http::Server) {
+    use jointd::http::policy::RequestPolicy;
+    use jointd::http::state::StateOptions;
+    let bus = support::fake_bus::FakeBus::new("fake", &[1, 2]);
+    let state = jointd::http::AppState::new(
+        vec![bus.handle.clone()],
+        Default::default(),
+        token.map(str::to_owned),
+    );
+    let own = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    let policy = RequestPolicy::new(None, &own(hosts), &own(origins), 1024 * 1024).unwrap();
+    let options = StateOptions {
+        policy,
+        ..Default::default()
+    };
+    assert!(state.set_options(options).is_ok());
+    let mut server = support::http::serve(state).await;
+    if let Some(t) = token {
+        server = server.with_token(t);
+    }
+    (bus, server)
+}
+
+#[tokio::test]
+async fn allowed_origins_and_hosts_extend_the_guards() {
+    let (bus, s) = fake_with(None, &["robot-pc"], &["http://robot-pc:3000"]).await;
+    let enable = "/api/v1/buses/fake/devices/1/enable";
+    // A dashboard served elsewhere, allowed by config: another site by design.
+    let elsewhere = [
+        ("origin", "http://robot-pc:3000"),
+        ("sec-fetch-site", "cross-site"),
+    ];
+    s.browser(Method::POST, enable, &elsewhere, None).await.ok();
+    // Not its neighbour on another port.
+    s.browser(
+        Method::POST,
+        enable,
+        &[("origin", "http://robot-pc:3001")],
+        None,
+    )
+    .await
+    .problem(403);
+    // The allowed host name, any port, and its own origin.
+    let host = [
+        ("host", "robot-pc:8080"),
+        ("origin", "http://robot-pc:8080"),
+    ];
+    s.browser(Method::POST, enable, &host, None).await.ok();
+    s.browser(Method::GET, "/api/v1/buses", &[("host", "Robot-PC.")], None)
+        .await
+        .ok();
+    s.browser(
+        Method::GET,
+        "/api/v1/buses",
+        &[("host", "robot-pc.evil.example")],
+        None,
+    )
+    .await
+    .problem(421);
+    assert_eq!(
+        bus.script().log.iter().filter(|l| **l == "enable").count(),
+        2
+    );
+    let (_bus, any) = fake_with(None, &["*"], &[]).await;
+    any.browser(
+        Method::GET,
+        "/api/v1/buses",
+        &[("host", "whatever.example")],
+        None,
+    )
+    .await
+    .ok();
+}
+
+#[tokio::test]
+async fn the_websocket_token_is_percent_decoded() {
+    let token = "a/b+= c";
+    let (_bus, s) = fake_with(Some(token), &[], &[]).await;
+    let base = s.base.replace("http://", "ws://");
+    // What the dashboard sends: encodeURIComponent(token).
+    let url = format!("{base}/api/v1/ws?token=a%2Fb%2B%3D%20c");
+    let (mut ws, _) = connect_async(url).await.expect("encoded token accepted");
+    next_of(&mut ws, "welcome").await;
+    // `+` is a plus, not a space (RFC 3986, not form encoding).
+    let (mut ws, _) = connect_async(format!("{base}/api/v1/ws?token=a%2Fb+%3D%20c"))
+        .await
+        .expect("a literal plus");
+    next_of(&mut ws, "welcome").await;
+    for wrong in ["a%2Fb%2B%3D", "a%2Fb%20%3D%20c", "a%2Fb%2B%3D%2", "%zz"] {
+        match connect_async(format!("{base}/api/v1/ws?token={wrong}")).await {
+            Err(WsError::Http(resp)) => assert_eq!(resp.status(), 401, "{wrong}"),
+            other => panic!("{wrong}: expected 401, got {:?}", other.map(|_| "a socket")),
+        }
+    }
+}
