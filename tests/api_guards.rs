@@ -326,7 +326,47 @@ async fn allowed_origins_and_hosts_extend_the_guards() {
         ("origin", "http://robot-pc:3000"),
         ("sec-fetch-site", "cross-site"),
     ];
-    s.browser(Method::POST, enable, &elsewhere, None).await.ok();
+    let r = s.browser(Method::POST, enable, &elsewhere, None).await;
+    r.ok();
+    assert_eq!(
+        r.headers["access-control-allow-origin"],
+        "http://robot-pc:3000"
+    );
+    // Its preflight (a JSON PUT with the token header) is answered.
+    let preflight = [
+        ("origin", "http://robot-pc:3000"),
+        ("access-control-request-method", "PUT"),
+        (
+            "access-control-request-headers",
+            "authorization,content-type",
+        ),
+    ];
+    let r = s
+        .browser(
+            Method::OPTIONS,
+            "/api/v1/buses/fake/devices/1/target",
+            &preflight,
+            None,
+        )
+        .await;
+    assert!(r.status.is_success(), "{:?}", r);
+    assert_eq!(
+        r.headers["access-control-allow-origin"],
+        "http://robot-pc:3000"
+    );
+    let methods = r.headers["access-control-allow-methods"].to_str().unwrap();
+    assert!(methods.contains("PUT"), "{methods}");
+    // Nobody else's.
+    let foreign = [("origin", EVIL), ("access-control-request-method", "PUT")];
+    let r = s
+        .browser(
+            Method::OPTIONS,
+            "/api/v1/buses/fake/devices/1/target",
+            &foreign,
+            None,
+        )
+        .await;
+    assert!(r.headers.get("access-control-allow-origin").is_none());
     // Not its neighbour on another port.
     s.browser(
         Method::POST,

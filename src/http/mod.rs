@@ -43,6 +43,7 @@ pub mod ws;
 use axum::extract::DefaultBodyLimit;
 use axum::Router;
 use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::trace::TraceLayer;
 
 pub use error::{ApiError, Problem};
@@ -55,7 +56,7 @@ use crate::bus::BusHandle;
 /// options first: the body limit is read here.
 pub fn app(state: AppState) -> Router {
     let (router, doc) = api::router().split_for_parts();
-    router
+    let router = router
         .merge(api::openapi::docs(doc))
         .merge(ws::router())
         .merge(web::router())
@@ -69,12 +70,51 @@ pub fn app(state: AppState) -> Router {
         .layer(axum::middleware::from_fn_with_state(
             state.clone(),
             guard::check,
-        ))
+        ));
+    // Only with allowed_origins: otherwise no origin but the daemon's own
+    // may read an answer, and OPTIONS stays an unsupported method.
+    let router = match cors(state.policy()) {
+        Some(layer) => router.layer(layer),
+        None => router,
+    };
+    router
         .layer(DefaultBodyLimit::max(state.policy().max_body_bytes))
         .layer(CatchPanicLayer::custom(panic_to_problem))
         .layer(TraceLayer::new_for_http())
         .with_state(state)
 }
+
+/// CORS for the configured `allowed_origins` (a dashboard served
+/// elsewhere): preflights answered, answers readable, the token header allowed.
+fn cors(policy: &policy::RequestPolicy) -> Option<CorsLayer> {
+    use axum::http::{header, HeaderValue, Method};
+    let origins: Vec<HeaderValue> = policy
+        .allowed_origins
+        .iter()
+        .filter_map(|o| HeaderValue::from_str(o).ok())
+        .collect();
+    if origins.is_empty() {
+        return None;
+    }
+    let methods = [
+        Method::GET,
+        Method::POST,
+        Method::PUT,
+        Method::PATCH,
+        Method::DELETE,
+    ];
+    Some(
+        CorsLayer::new()
+            .allow_origin(AllowOrigin::list(origins))
+            .allow_methods(methods)
+            .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE])
+            .expose_headers([header::RETRY_AFTER, header::WWW_AUTHENTICATE])
+            .max_age(CORS_MAX_AGE),
+    )
+}
+
+/// How long a browser may cache a preflight answer.
+const CORS_MAX_AGE: std::time::Duration = std::time::Duration::from_secs(600);
 
 async fn not_found(uri: axum::http::Uri) -> ApiError {
     ApiError::not_found("unknown-route", format!("no resource at {}", uri.path()))
