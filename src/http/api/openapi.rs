@@ -34,7 +34,10 @@ const BEARER_SCHEME: &str = "bearer";
         description = "Everything a user can do with a joint module, over HTTP. Angles are \
             output-shaft degrees, speeds rotor rpm (before the 568.81:1 gearbox), currents \
             amperes. Every failure is an RFC 9457 problem (application/problem+json). When the \
-            daemon has a token, every request but /healthz needs `Authorization: Bearer <token>`."
+            daemon has a token, every request but /healthz needs `Authorization: Bearer <token>`. \
+            A request whose Host header names no host of the daemon gets 421 (DNS-rebinding \
+            guard); a change (any method but GET) from a browser page of a foreign origin gets \
+            403; a body over max_body_bytes gets 413."
     ),
     modifiers(&BearerAuth),
     components(schemas(Problem)),
