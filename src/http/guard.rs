@@ -1,6 +1,6 @@
-//! The request guards, in front of auth: the `Host` check (DNS rebinding),
-//! the declared body size, and the browser-origin check on everything that
-//! changes something. The decisions are `policy`'s; this file reads the
+//! The request guards, in front of auth, in this order: the `Host` check
+//! (DNS rebinding), the browser-origin check on everything that changes
+//! something, the declared body size. The decisions are `policy`'s; this file reads the
 //! headers, logs a refusal once per host or origin, and answers.
 
 use axum::extract::{Request, State};
@@ -36,11 +36,6 @@ fn refusal(state: &AppState, req: &Request) -> Option<ApiError> {
             return Some(e);
         }
     }
-    if let Some(len) = declared_length(headers) {
-        if len > policy.max_body_bytes {
-            return Some(ApiError::payload_too_large(Some(policy.max_body_bytes)));
-        }
-    }
     if changes_state(req.method(), path == WS_PATH) {
         let browser = BrowserHeaders {
             host,
@@ -53,7 +48,14 @@ fn refusal(state: &AppState, req: &Request) -> Option<ApiError> {
             return Some(e);
         }
     }
-    None
+    // Declared too large: refused before a byte of it is read. (A chunked
+    // body is cut off by axum's DefaultBodyLimit while it is read.)
+    match declared_length(headers) {
+        Some(len) if len > policy.max_body_bytes => {
+            Some(ApiError::payload_too_large(Some(policy.max_body_bytes)))
+        }
+        _ => None,
+    }
 }
 
 fn header<'a>(headers: &'a HeaderMap, name: &str) -> Option<&'a str> {
