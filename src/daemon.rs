@@ -57,8 +57,8 @@ pub struct RunArgs {
         conflicts_with = "token_file"
     )]
     pub token: Option<String>,
-    /// Read the token from this file (a container secret); one trailing
-    /// newline is ignored, an empty file is refused.
+    /// Read the token from this file (a container secret); trailing
+    /// newlines are ignored, an empty file is refused.
     #[arg(long, value_name = "FILE", env = "JOINTD_TOKEN_FILE")]
     pub token_file: Option<PathBuf>,
     /// Accept requests whose Host header is this name or IP (repeatable, or
