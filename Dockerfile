@@ -29,5 +29,8 @@ HEALTHCHECK --interval=10s --timeout=3s --start-period=5s --retries=3 \
   CMD curl -fsS http://127.0.0.1:8080/healthz || exit 1
 ENTRYPOINT ["/usr/local/bin/jointd"]
 # Default: a simulated bus of 16 joints, reachable through the port mapping.
-# Binding beyond loopback needs a token (JOINTD_TOKEN) or --insecure.
+# Binding beyond loopback needs a token (JOINTD_TOKEN or JOINTD_TOKEN_FILE) or
+# --insecure. Browsers reaching it as localhost/127.0.0.1 (any port) just work;
+# other names or LAN addresses go in JOINTD_ALLOWED_HOSTS (else 421). The
+# health check's /healthz is served under any Host.
 CMD ["--sim", "16", "--listen", "0.0.0.0:8080"]

@@ -14,6 +14,7 @@ use tokio::signal::unix::{signal, SignalKind};
 
 use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle};
 use crate::http::limits::{LimitError, LimitRule, SoftLimits};
+use crate::http::policy::{RequestPolicy, DEFAULT_MAX_BODY_BYTES};
 use crate::http::state::StateOptions;
 use crate::http::teleop::{WatchdogDefault, MAX_HOLD, MIN_HOLD};
 use crate::http::{app, AppState};
@@ -47,14 +48,48 @@ pub struct RunArgs {
     /// port (the first line on stdout says which).
     #[arg(long, value_name = "ADDR", env = "JOINTD_LISTEN")]
     pub listen: Option<SocketAddr>,
-    /// Bearer token required on everything but /healthz.
-    #[arg(long, env = "JOINTD_TOKEN", hide_env_values = true)]
+    /// Bearer token required on everything but /healthz (and the dashboard's
+    /// files). An empty or blank token is refused at start.
+    #[arg(
+        long,
+        env = "JOINTD_TOKEN",
+        hide_env_values = true,
+        conflicts_with = "token_file"
+    )]
     pub token: Option<String>,
+    /// Read the token from this file (a container secret); trailing
+    /// newlines are ignored, an empty file is refused.
+    #[arg(long, value_name = "FILE", env = "JOINTD_TOKEN_FILE")]
+    pub token_file: Option<PathBuf>,
+    /// Accept requests whose Host header is this name or IP (repeatable, or
+    /// comma-separated in the environment); loopback names and the listen IP
+    /// are always accepted, `*` accepts any host. Replaces `allowed_hosts`.
+    #[arg(
+        long = "allowed-host",
+        value_name = "HOST",
+        env = "JOINTD_ALLOWED_HOSTS",
+        value_delimiter = ','
+    )]
+    pub allowed_hosts: Vec<String>,
+    /// Let a browser page of this origin (`scheme://host[:port]`) change
+    /// things and open the WebSocket (repeatable, or comma-separated in the
+    /// environment). Replaces `allowed_origins`.
+    #[arg(
+        long = "allowed-origin",
+        value_name = "ORIGIN",
+        env = "JOINTD_ALLOWED_ORIGINS",
+        value_delimiter = ','
+    )]
+    pub allowed_origins: Vec<String>,
+    /// Largest request body, bytes [default: 1048576]; larger ones get 413.
+    #[arg(long, value_name = "BYTES", env = "JOINTD_MAX_BODY_BYTES")]
+    pub max_body_bytes: Option<usize>,
     /// Allow listening beyond loopback without a token.
     #[arg(long)]
     pub insecure: bool,
     /// TOML config file (see jointd.example.toml): `listen`, `token`,
-    /// `insecure`, `web_dir`, `[[bus]]`, `[[limit]]`, `[[joint]]`, `[watchdog]`.
+    /// `token_file`, `insecure`, `allowed_hosts`, `allowed_origins`,
+    /// `max_body_bytes`, `web_dir`, `[[bus]]`, `[[limit]]`, `[[joint]]`, `[watchdog]`.
     /// Flags and environment variables override it.
     #[arg(long, value_name = "FILE", env = "JOINTD_CONFIG")]
     pub config: Option<PathBuf>,
@@ -70,8 +105,14 @@ pub struct RunArgs {
 pub struct FileConfig {
     pub listen: Option<SocketAddr>,
     pub token: Option<String>,
+    pub token_file: Option<PathBuf>,
     #[serde(default)]
     pub insecure: bool,
+    #[serde(default)]
+    pub allowed_hosts: Vec<String>,
+    #[serde(default)]
+    pub allowed_origins: Vec<String>,
+    pub max_body_bytes: Option<usize>,
     #[serde(default, rename = "bus")]
     pub buses: Vec<BusConfig>,
     #[serde(default, rename = "limit")]
@@ -102,6 +143,10 @@ pub enum DaemonError {
          listen on 127.0.0.1, or pass --insecure"
     )]
     Insecure { addr: SocketAddr },
+    #[error("token ({from}): {why}")]
+    Token { from: String, why: String },
+    #[error("{0}")]
+    Policy(String),
     #[error("soft limits: {0}")]
     Limits(#[from] LimitError),
     #[error("bus: {0}")]
@@ -145,7 +190,8 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     };
     let default_listen: SocketAddr = DEFAULT_LISTEN.parse().map_err(|_| DaemonError::NoBus)?;
     let listen = args.listen.or(file.listen).unwrap_or(default_listen);
-    let token = args.token.clone().or(file.token).filter(|t| !t.is_empty());
+    let token = token(args, &file)?;
+    let policy = request_policy(listen, args, &file)?;
     if !listen.ip().is_loopback() && token.is_none() && !(args.insecure || file.insecure) {
         return Err(DaemonError::Insecure { addr: listen });
     }
@@ -161,6 +207,7 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
         web_dir: args.web_dir.clone().or(file.web_dir),
         joint_names: joint_names(&file.joints, args)?,
         watchdog: checked_watchdog(file.watchdog, args)?,
+        policy,
     };
     Ok(Plan {
         listen,
@@ -170,6 +217,94 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
         sim,
         options,
     })
+}
+
+/// The token of the flags (or their environment variables), else of the
+/// file; given twice at one level, empty or unusable: refused.
+fn token(args: &RunArgs, file: &FileConfig) -> Result<Option<String>, DaemonError> {
+    if args.token.is_some() || args.token_file.is_some() {
+        return token_from(
+            args.token.as_deref(),
+            args.token_file.as_ref(),
+            "--token or JOINTD_TOKEN",
+        );
+    }
+    if file.token.is_some() && file.token_file.is_some() {
+        return Err(config_error(
+            args,
+            "give `token` or `token_file`, not both".into(),
+        ));
+    }
+    token_from(
+        file.token.as_deref(),
+        file.token_file.as_ref(),
+        "`token` in the config file",
+    )
+}
+
+fn token_from(
+    value: Option<&str>,
+    path: Option<&PathBuf>,
+    what: &str,
+) -> Result<Option<String>, DaemonError> {
+    let (text, from) = match (value, path) {
+        (Some(v), _) => (v.to_owned(), what.to_owned()),
+        (None, Some(p)) => {
+            let from = format!("file {}", p.display());
+            let text = std::fs::read_to_string(p).map_err(|e| DaemonError::Token {
+                from: from.clone(),
+                why: format!("cannot read it: {e}"),
+            })?;
+            (text.trim_end_matches(['\n', '\r']).to_owned(), from)
+        }
+        (None, None) => return Ok(None),
+    };
+    match token_problem(&text) {
+        Some(why) => Err(DaemonError::Token {
+            from,
+            why: why.into(),
+        }),
+        None => Ok(Some(text)),
+    }
+}
+
+/// Why a token cannot be used: an `Authorization` header cannot carry
+/// blanks at its ends or control characters, and an empty token would
+/// silently turn auth off.
+fn token_problem(token: &str) -> Option<&'static str> {
+    if token.is_empty() {
+        Some("it is empty; give a token, or leave the option out to run without one")
+    } else if token.trim().is_empty() {
+        Some("it is only whitespace")
+    } else if token.trim() != token {
+        Some("it starts or ends with whitespace, which an Authorization header cannot carry")
+    } else if token.chars().any(char::is_control) {
+        Some("it contains a control character")
+    } else {
+        None
+    }
+}
+
+/// `allowed_hosts`, `allowed_origins`, `max_body_bytes`: flags replace the file's.
+fn request_policy(
+    listen: SocketAddr,
+    args: &RunArgs,
+    file: &FileConfig,
+) -> Result<RequestPolicy, DaemonError> {
+    let pick = |flag: &Vec<String>, key: &Vec<String>| {
+        if flag.is_empty() {
+            key.clone()
+        } else {
+            flag.clone()
+        }
+    };
+    let hosts = pick(&args.allowed_hosts, &file.allowed_hosts);
+    let origins = pick(&args.allowed_origins, &file.allowed_origins);
+    let max_body = args
+        .max_body_bytes
+        .or(file.max_body_bytes)
+        .unwrap_or(DEFAULT_MAX_BODY_BYTES);
+    RequestPolicy::new(Some(listen), &hosts, &origins, max_body).map_err(DaemonError::Policy)
 }
 
 fn config_error(args: &RunArgs, why: String) -> DaemonError {
@@ -266,8 +401,10 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     println!("listening on http://{addr}");
     tracing::info!(%addr, auth = plan.token.is_some(), "serving the API");
     let state = AppState::new(handles, plan.limits, plan.token);
+    let mut options = plan.options;
+    options.policy.listen = Some(addr);
     // A fresh state has no options yet: this cannot be refused.
-    let _ = state.set_options(plan.options);
+    let _ = state.set_options(options);
     axum::serve(listener, app(state))
         .with_graceful_shutdown(shutdown_signal())
         .await

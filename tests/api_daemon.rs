@@ -24,6 +24,31 @@ fn refuses_a_public_bind_without_a_token() {
 }
 
 #[test]
+fn an_empty_or_blank_token_stops_the_daemon_at_start() {
+    for (token, why) in [("", "it is empty"), ("   ", "it is only whitespace")] {
+        let out = Command::new(BIN)
+            .args(["--sim", "1", "--listen", "127.0.0.1:0", "--token", token])
+            .env_remove("JOINTD_TOKEN")
+            .output()
+            .expect("run jointd");
+        assert!(!out.status.success(), "{token:?} was accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("token") && err.contains(why),
+            "{token:?}: {err}"
+        );
+    }
+    // The environment variable is held to the same rule.
+    let out = Command::new(BIN)
+        .args(["--sim", "1", "--listen", "127.0.0.1:0"])
+        .env("JOINTD_TOKEN", "")
+        .output()
+        .expect("run jointd");
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("JOINTD_TOKEN"));
+}
+
+#[test]
 fn serves_the_simulator_and_stops_cleanly_on_sigterm() {
     let mut child = Command::new(BIN)
         .args([

@@ -443,3 +443,126 @@ async fn metrics_readyz_and_bus_views() {
         .ok();
     assert_eq!(bus.handle.snapshot().baud, 115200);
 }
+
+#[tokio::test]
+async fn path_ids_must_be_plain_decimal() {
+    let (_bus, s) = setup(None).await;
+    for id in ["+1", "01", "001", "1.0", "%2B1", "-01"] {
+        let r = s.get(&format!("{DEV}/{id}")).await;
+        assert!(
+            r.problem(400)["detail"]
+                .as_str()
+                .unwrap()
+                .contains("plain decimal")
+                || id == "1.0",
+            "{id}: {}",
+            r.body
+        );
+        s.post_empty(&format!("{DEV}/{id}/enable"))
+            .await
+            .problem(400);
+    }
+    s.get(&format!("{DEV}/1")).await.ok();
+    s.get(&format!("{DEV}/-1")).await.problem(422);
+    s.get(&format!("{DEV}/0")).await.problem(422);
+}
+
+#[tokio::test]
+async fn a_group_call_naming_a_joint_twice_is_422() {
+    let (bus, s) = setup(None).await;
+    let p = s
+        .post("/api/v1/buses/fake/control/enable", json!({"ids": [1, 1]}))
+        .await;
+    assert_eq!(p.problem(422)["field"], "ids[1]");
+    s.post(
+        "/api/v1/buses/fake/control/disable",
+        json!({"ids": [2, 3, 2]}),
+    )
+    .await
+    .problem(422);
+    s.put(
+        "/api/v1/buses/fake/control/mode",
+        json!({"ids": [3, 3], "mode": "speed"}),
+    )
+    .await
+    .problem(422);
+    let p = s
+        .put(
+            "/api/v1/buses/fake/control/targets",
+            json!({"targets": [{"id": 1, "position_deg": 1.0}, {"id": 1, "position_deg": 2.0}]}),
+        )
+        .await;
+    assert_eq!(p.problem(422)["field"], "targets[1].id");
+    assert!(bus.script().log.is_empty(), "{:?}", bus.script().log);
+    s.post("/api/v1/buses/fake/control/enable", json!({"ids": [1, 2]}))
+        .await
+        .ok();
+}
+
+#[tokio::test]
+async fn a_body_over_the_limit_is_413() {
+    let (_bus, s) = setup(None).await;
+    // Declared in Content-Length: refused before it is read.
+    let big = format!(
+        "{{\"targets\": [{}]}}",
+        vec![r#"{"id": 1}"#; 120_000].join(",")
+    );
+    assert!(big.len() > 1024 * 1024);
+    let r = s
+        .browser(
+            reqwest::Method::PUT,
+            "/api/v1/buses/fake/control/targets",
+            &[("content-type", "application/json")],
+            Some(&big),
+        )
+        .await;
+    assert_eq!(r.problem(413)["type"], "urn:jointd:problem:body-too-large");
+    // Chunked, no length: refused while it is read (axum's body limit).
+    let chunk = "x".repeat(64 * 1024);
+    let mut req = format!(
+        "PUT /api/v1/buses/fake/control/targets HTTP/1.1\r\nHost: {}\r\n\
+         Content-Type: application/json\r\nTransfer-Encoding: chunked\r\nConnection: close\r\n\r\n",
+        s.authority()
+    )
+    .into_bytes();
+    for _ in 0..20 {
+        req.extend(format!("{:x}\r\n{chunk}\r\n", chunk.len()).into_bytes());
+    }
+    req.extend(b"0\r\n\r\n");
+    let (status, text) = support::http::raw(s.authority(), &req).await;
+    assert_eq!(status, 413, "{text}");
+    assert!(text.contains("application/problem+json"), "{text}");
+}
+
+#[tokio::test]
+async fn the_body_limit_is_configurable() {
+    let bus = FakeBus::new("fake", &[1, 2, 3]);
+    let state = AppState::new(vec![bus.handle.clone()], limits(), None);
+    let mut options = jointd::http::state::StateOptions::default();
+    options.policy.max_body_bytes = 64;
+    assert!(state.set_options(options).is_ok());
+    let s = serve(state).await;
+    let body = json!({"targets": [{"id": 1, "position_deg": 1.0}, {"id": 2, "position_deg": 1.0}]});
+    assert!(body.to_string().len() > 64);
+    s.put("/api/v1/buses/fake/control/targets", body)
+        .await
+        .problem(413);
+    s.post("/api/v1/buses/fake/control/enable", json!({"ids": [1]}))
+        .await
+        .ok();
+}
+
+#[tokio::test]
+async fn a_plain_get_of_the_websocket_endpoint_is_426() {
+    let (_bus, s) = setup(None).await;
+    let r = s.get("/api/v1/ws").await;
+    assert_eq!(
+        r.problem(426)["type"],
+        "urn:jointd:problem:upgrade-required"
+    );
+    assert_eq!(r.headers["upgrade"], "websocket");
+    // With a token, the token is asked for first.
+    let (_bus, s) = setup(Some("t")).await;
+    s.get("/api/v1/ws").await.problem(401);
+    s.with_token("t").get("/api/v1/ws").await.problem(426);
+}

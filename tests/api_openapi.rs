@@ -66,6 +66,11 @@ fn every_operation_documents_examples_and_problem_responses() {
                     assert!(content.is_object(), "{what}: {status} not a problem");
                 }
             }
+            // The guards' statuses, where they apply.
+            let has = |status: &str| responses.contains_key(status);
+            assert_eq!(has("421"), path != "/healthz", "{what}: 421");
+            assert_eq!(has("403"), method != "get", "{what}: 403");
+            assert_eq!(has("413"), op.get("requestBody").is_some(), "{what}: 413");
             if let Some(body) = op.get("requestBody") {
                 let example = &body["content"]["application/json"]["example"];
                 assert!(!example.is_null(), "{what}: request body has no example");

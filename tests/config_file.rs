@@ -124,3 +124,145 @@ fn a_bad_baud_in_the_file_is_refused_when_the_bus_starts() {
         .expect_err("9600 is not a module baud");
     assert!(err.to_string().contains("9600"), "{err}");
 }
+
+/// A file of this test's own (the name says which), removed at the end.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(name: &str, text: &str) -> Self {
+        let path = std::env::temp_dir().join(format!("jointd-{}-{name}", std::process::id()));
+        std::fs::write(&path, text).expect("write scratch file");
+        Self(path)
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+fn sim_args() -> RunArgs {
+    RunArgs {
+        sim: Some(1),
+        ..Default::default()
+    }
+}
+
+#[test]
+fn an_empty_or_blank_token_stops_the_start() {
+    for (token, why) in [
+        ("", "empty"),
+        (" ", "only whitespace"),
+        ("\t\n", "only whitespace"),
+        (" s3cret", "whitespace"),
+        ("s3\u{7}cret", "control character"),
+    ] {
+        let args = RunArgs {
+            token: Some(token.into()),
+            ..sim_args()
+        };
+        let err = plan(&args).expect_err(token).to_string();
+        assert!(
+            err.contains("token") && err.contains(why),
+            "{token:?}: {err}"
+        );
+    }
+    let err =
+        error_of("token = \"\"\n[[bus]]\nname = \"a\"\npath = \"/dev/null\"\nbaud = 500000\n");
+    assert!(err.contains("empty"), "{err}");
+}
+
+#[test]
+fn a_token_file_is_read_once_trimmed_of_its_newline() {
+    let secret = Scratch::new("token-ok", "a/b+= c\n");
+    let args = RunArgs {
+        token_file: Some(secret.0.clone()),
+        ..sim_args()
+    };
+    assert_eq!(plan(&args).unwrap().token.as_deref(), Some("a/b+= c"));
+    let crlf = Scratch::new("token-crlf", "s3cret\r\n");
+    let args = RunArgs {
+        token_file: Some(crlf.0.clone()),
+        ..sim_args()
+    };
+    assert_eq!(plan(&args).unwrap().token.as_deref(), Some("s3cret"));
+    for (name, text, why) in [
+        ("token-empty", "", "empty"),
+        ("token-nl", "\n", "empty"),
+        ("token-blank", "  \n", "whitespace"),
+    ] {
+        let f = Scratch::new(name, text);
+        let args = RunArgs {
+            token_file: Some(f.0.clone()),
+            ..sim_args()
+        };
+        let err = plan(&args).expect_err(name).to_string();
+        assert!(
+            err.contains(&f.0.display().to_string()) && err.contains(why),
+            "{err}"
+        );
+    }
+    let missing = RunArgs {
+        token_file: Some("/nonexistent/jointd-token".into()),
+        ..sim_args()
+    };
+    assert!(plan(&missing)
+        .unwrap_err()
+        .to_string()
+        .contains("cannot read"));
+    // In the config file: token_file, not both.
+    let path = secret.0.display();
+    let (_f, args) = config(&format!("token_file = \"{path}\"\n"));
+    let args = RunArgs {
+        sim: Some(1),
+        ..args
+    };
+    assert_eq!(plan(&args).unwrap().token.as_deref(), Some("a/b+= c"));
+    let (_f, args) = config(&format!("token = \"x\"\ntoken_file = \"{path}\"\n"));
+    let args = RunArgs {
+        sim: Some(1),
+        ..args
+    };
+    assert!(plan(&args).unwrap_err().to_string().contains("not both"));
+}
+
+#[test]
+fn allow_lists_and_body_limit_from_file_and_flags() {
+    let (_f, args) = config(
+        "allowed_hosts = [\"Robot-PC\", \"192.168.1.5\"]\n\
+         allowed_origins = [\"http://robot-pc:3000/\"]\nmax_body_bytes = 4096\n",
+    );
+    let args = RunArgs {
+        sim: Some(1),
+        ..args
+    };
+    let p = plan(&args).unwrap().options.policy;
+    assert_eq!(p.allowed_hosts, ["robot-pc", "192.168.1.5"]);
+    assert_eq!(p.allowed_origins, ["http://robot-pc:3000"]);
+    assert_eq!(p.max_body_bytes, 4096);
+    let flags = RunArgs {
+        allowed_hosts: vec!["arm.lan".into()],
+        allowed_origins: vec!["https://ops.example".into()],
+        max_body_bytes: Some(100),
+        ..args
+    };
+    let p = plan(&flags).unwrap().options.policy;
+    assert_eq!(p.allowed_hosts, ["arm.lan"]);
+    assert_eq!(p.allowed_origins, ["https://ops.example"]);
+    assert_eq!(p.max_body_bytes, 100);
+    let p = plan(&sim_args()).unwrap().options.policy;
+    assert_eq!(p.max_body_bytes, 1024 * 1024);
+    assert!(p.allowed_hosts.is_empty() && p.allowed_origins.is_empty());
+    let err = error_of("allowed_origins = [\"robot-pc:3000\"]\n[[bus]]\nname = \"a\"\npath = \"/dev/null\"\nbaud = 500000\n");
+    assert!(
+        err.contains("allowed_origins") && err.contains("scheme://"),
+        "{err}"
+    );
+    let err = error_of("allowed_hosts = [\"http://robot-pc\"]\n[[bus]]\nname = \"a\"\npath = \"/dev/null\"\nbaud = 500000\n");
+    assert!(err.contains("allowed_hosts"), "{err}");
+    let err = error_of(
+        "max_body_bytes = 0\n[[bus]]\nname = \"a\"\npath = \"/dev/null\"\nbaud = 500000\n",
+    );
+    assert!(err.contains("max_body_bytes"), "{err}");
+}

@@ -30,6 +30,7 @@ pub(crate) async fn require_token(
         .get(AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
         .and_then(bearer_token)
+        .map(str::to_owned)
         .or_else(|| websocket_query_token(&req));
     match presented {
         Some(p) if constant_time_eq(p.as_bytes(), token.as_bytes()) => next.run(req).await,
@@ -39,15 +40,40 @@ pub(crate) async fn require_token(
 }
 
 /// Browsers cannot set headers on a WebSocket upgrade, so the WebSocket
-/// endpoint (only) also takes `?token=`.
-fn websocket_query_token(req: &Request) -> Option<&str> {
+/// endpoint (only) also takes `?token=`, percent-encoded (the dashboard
+/// sends `encodeURIComponent(token)`). A malformed encoding is a wrong token.
+fn websocket_query_token(req: &Request) -> Option<String> {
     if req.uri().path() != WS_PATH {
         return None;
     }
-    req.uri()
+    let raw = req
+        .uri()
         .query()?
         .split('&')
-        .find_map(|pair| pair.strip_prefix("token="))
+        .find_map(|pair| pair.strip_prefix("token="))?;
+    Some(percent_decode(raw).unwrap_or_default())
+}
+
+/// RFC 3986 percent-decoding; `+` stays a plus (it is not form encoding:
+/// `encodeURIComponent` writes a space as `%20` and a plus as `%2B`).
+fn percent_decode(text: &str) -> Option<String> {
+    let bytes = text.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'%' {
+            let hex = text.get(i + 1..i + 3)?;
+            if !hex.bytes().all(|b| b.is_ascii_hexdigit()) {
+                return None;
+            }
+            out.push(u8::from_str_radix(hex, 16).ok()?);
+            i += 3;
+        } else {
+            out.push(bytes[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).ok()
 }
 
 /// The token of an `Authorization` value; the scheme is case-insensitive.
@@ -59,7 +85,9 @@ fn bearer_token(value: &str) -> Option<&str> {
 }
 
 /// Compares without an early exit, so response time does not reveal how
-/// much of a guessed token was right.
+/// much of a guessed token was right: every byte of the longer input is
+/// visited and folded into one accumulator, whatever differs. (The time
+/// depends on the lengths only; the presented one is the caller's own.)
 fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     let len_diff = a.len() ^ b.len();
     let longest = a.len().max(b.len());
@@ -80,6 +108,20 @@ mod tests {
         assert_eq!(bearer_token("bearer abc"), Some("abc"));
         assert_eq!(bearer_token("Basic abc"), None);
         assert_eq!(bearer_token("Bear"), None);
+    }
+
+    #[test]
+    fn query_tokens_are_percent_decoded() {
+        assert_eq!(
+            percent_decode("a%2Fb%2B%3D%20c").as_deref(),
+            Some("a/b+= c")
+        );
+        assert_eq!(percent_decode("a+b").as_deref(), Some("a+b"));
+        assert_eq!(percent_decode("%E2%9C%93").as_deref(), Some("\u{2713}"));
+        assert_eq!(percent_decode("%2"), None);
+        assert_eq!(percent_decode("%zz"), None);
+        assert_eq!(percent_decode("%+1"), None);
+        assert_eq!(percent_decode("%FF"), None);
     }
 
     #[test]

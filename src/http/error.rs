@@ -8,17 +8,22 @@
 //! |---|---|
 //! | malformed JSON, unparsable path or query | 400 |
 //! | missing or wrong bearer token | 401 |
+//! | a change (or the WebSocket) from a foreign browser origin | 403 |
 //! | unknown bus, device or route | 404 |
 //! | method not supported on the route | 405 |
 //! | wrong state (jog while disabled), device refused (RES 0), preempted by e-stop | 409 |
+//! | request body over `max_body_bytes` | 413 |
 //! | JSON body not `application/json` | 415 |
+//! | `Host` names no host of this daemon (DNS rebinding) | 421 |
 //! | value out of range, soft limit, invalid field, body not of the schema | 422 |
+//! | `GET /api/v1/ws` without a WebSocket upgrade | 426 |
 //! | a bug (handler panicked) | 500 |
 //! | device answered something other than what was asked, or reads back another value than written | 502 |
 //! | bus down, request queue full, bus owner stopped, not ready, e-stop unconfirmed | 503 |
 //! | device did not answer; a write sent whose RES or read-back was lost (`write-unverified`) | 504 |
 
 use axum::extract::rejection::{JsonRejection, PathRejection, QueryRejection};
+use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
@@ -182,6 +187,57 @@ impl ApiError {
         )
     }
 
+    /// A request that changes something, or a WebSocket upgrade, from a
+    /// browser page of another origin (403). `what` names the header that
+    /// told (`Origin`, `Sec-Fetch-Site: cross-site`).
+    pub fn foreign_origin(origin: &str, what: &str) -> Self {
+        Self::new(
+            StatusCode::FORBIDDEN,
+            "foreign-origin",
+            "Request from a foreign browser origin",
+            format!(
+                "refused a request from {origin} ({what}): only the daemon's own origin, \
+                 clients that send no Origin, and allowed_origins may change anything"
+            ),
+        )
+    }
+
+    /// A `Host` that names no host of this daemon (421 Misdirected Request:
+    /// the daemon is not the authority for that name; a DNS-rebinding page
+    /// reaches it under a name it does not own).
+    pub fn misdirected(host: &str, why: &str) -> Self {
+        Self::new(
+            StatusCode::MISDIRECTED_REQUEST,
+            "unknown-host",
+            "Host not served by this daemon",
+            format!("Host `{host}` is not a name of this daemon: {why}"),
+        )
+    }
+
+    /// A request body over the limit (413); `limit` when known.
+    pub fn payload_too_large(limit: Option<usize>) -> Self {
+        let detail = match limit {
+            Some(n) => format!("the request body is larger than {n} bytes (max_body_bytes)"),
+            None => "the request body is larger than the limit (max_body_bytes)".to_owned(),
+        };
+        Self::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "body-too-large",
+            "Request body too large",
+            detail,
+        )
+    }
+
+    /// A plain request to the WebSocket endpoint (426; `Upgrade: websocket`).
+    pub fn upgrade_required(detail: impl Into<String>) -> Self {
+        Self::new(
+            StatusCode::UPGRADE_REQUIRED,
+            "upgrade-required",
+            "WebSocket upgrade required",
+            detail,
+        )
+    }
+
     /// A unit conversion refused a value of `field`.
     pub fn from_unit(field: &str, err: UnitError) -> Self {
         match err {
@@ -332,6 +388,10 @@ impl From<BusError> for ApiError {
 
 impl From<JsonRejection> for ApiError {
     fn from(rej: JsonRejection) -> Self {
+        // A body over DefaultBodyLimit fails while buffering; axum marks it 413.
+        if rej.status() == StatusCode::PAYLOAD_TOO_LARGE {
+            return ApiError::payload_too_large(None);
+        }
         match rej {
             // Well-formed JSON of the wrong shape: a missing field, a string
             // where a number belongs, an unknown field.
@@ -352,6 +412,23 @@ impl From<JsonRejection> for ApiError {
     }
 }
 
+/// A plain GET to the WebSocket endpoint (no `Connection: upgrade` /
+/// `Upgrade: websocket`) is told to upgrade (426); a broken handshake is
+/// malformed (400).
+impl From<WebSocketUpgradeRejection> for ApiError {
+    fn from(rej: WebSocketUpgradeRejection) -> Self {
+        match rej {
+            WebSocketUpgradeRejection::InvalidConnectionHeader(_)
+            | WebSocketUpgradeRejection::InvalidUpgradeHeader(_)
+            | WebSocketUpgradeRejection::ConnectionNotUpgradable(_) => ApiError::upgrade_required(
+                "this is the WebSocket endpoint (protocol jointd.ws.v1, docs/websocket.md): \
+                 connect with a WebSocket client",
+            ),
+            other => ApiError::bad_request(format!("WebSocket handshake: {}", other.body_text())),
+        }
+    }
+}
+
 impl From<PathRejection> for ApiError {
     fn from(rej: PathRejection) -> Self {
         ApiError::bad_request(rej.body_text())
@@ -365,7 +442,7 @@ impl From<QueryRejection> for ApiError {
 }
 
 /// Every failure status an operation may answer with, and what it means:
-/// the OpenAPI document's shared responses.
+/// the OpenAPI document's shared responses (every operation).
 pub(crate) const DOCUMENTED_STATUSES: [(&str, &str); 10] = [
     (
         "400",
@@ -397,6 +474,19 @@ pub(crate) const DOCUMENTED_STATUSES: [(&str, &str); 10] = [
     ("500", "Internal error (a bug; never expected)"),
 ];
 
+/// Statuses of the request guards, each documented only where it applies:
+/// 403 on operations that change something, 413 on those with a body, 421
+/// on all but `/healthz`.
+pub(crate) const FORBIDDEN_ORIGIN: (&str, &str) = (
+    "403",
+    "A browser page of a foreign origin tried to change something (Origin / Sec-Fetch-Site)",
+);
+pub(crate) const BODY_TOO_LARGE: (&str, &str) = ("413", "Request body over max_body_bytes");
+pub(crate) const UNKNOWN_HOST: (&str, &str) = (
+    "421",
+    "The Host header names no host of this daemon (DNS rebinding guard; see allowed_hosts)",
+);
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let status = self.status();
@@ -404,6 +494,10 @@ impl IntoResponse for ApiError {
         let mut resp = (status, body).into_response();
         let headers = resp.headers_mut();
         headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON));
+        if status == StatusCode::UPGRADE_REQUIRED {
+            headers.insert(header::UPGRADE, HeaderValue::from_static("websocket"));
+            headers.insert(header::CONNECTION, HeaderValue::from_static("Upgrade"));
+        }
         if status == StatusCode::UNAUTHORIZED {
             headers.insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }

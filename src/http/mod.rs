@@ -14,6 +14,8 @@
 //! - [`state`]: [`AppState`]: the bus handles by name, soft limits, token, options; path guards.
 //! - [`error`]: [`ApiError`], RFC 9457 problem details; the one place that picks HTTP statuses.
 //! - [`extract`]: JSON/path/query extractors whose rejections are problems.
+//! - [`guard`]: the request guards before auth: Host (DNS rebinding), body size, browser origin.
+//! - [`policy`]: what the guards decide, as pure functions: allow-lists, same-origin, body limit.
 //! - [`auth`]: the bearer-token middleware (everything but the public paths).
 //! - [`paths`]: the URLs outside the OpenAPI routes, and which need no token.
 //! - [`limits`]: per-joint soft limits from the config.
@@ -26,9 +28,11 @@ pub mod api;
 pub(crate) mod auth;
 pub(crate) mod error;
 pub(crate) mod extract;
+pub(crate) mod guard;
 pub(crate) mod hub;
 pub mod limits;
 pub(crate) mod paths;
+pub mod policy;
 pub mod state;
 pub(crate) mod targets;
 pub(crate) mod telemetry;
@@ -36,8 +40,10 @@ pub mod teleop;
 pub(crate) mod web;
 pub mod ws;
 
+use axum::extract::DefaultBodyLimit;
 use axum::Router;
 use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::trace::TraceLayer;
 
 pub use error::{ApiError, Problem};
@@ -46,10 +52,11 @@ pub use state::AppState;
 use crate::bus::BusHandle;
 
 /// The whole HTTP application. Tests call it with `oneshot` or serve it on
-/// `127.0.0.1:0`; the daemon serves it on `--listen`.
+/// `127.0.0.1:0`; the daemon serves it on `--listen`. Set the state's
+/// options first: the body limit is read here.
 pub fn app(state: AppState) -> Router {
     let (router, doc) = api::router().split_for_parts();
-    router
+    let router = router
         .merge(api::openapi::docs(doc))
         .merge(ws::router())
         .merge(web::router())
@@ -59,10 +66,55 @@ pub fn app(state: AppState) -> Router {
             state.clone(),
             auth::require_token,
         ))
+        // Outside auth: a foreign page or host learns nothing, not even 401.
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            guard::check,
+        ));
+    // Only with allowed_origins: otherwise no origin but the daemon's own
+    // may read an answer, and OPTIONS stays an unsupported method.
+    let router = match cors(state.policy()) {
+        Some(layer) => router.layer(layer),
+        None => router,
+    };
+    router
+        .layer(DefaultBodyLimit::max(state.policy().max_body_bytes))
         .layer(CatchPanicLayer::custom(panic_to_problem))
         .layer(TraceLayer::new_for_http())
         .with_state(state)
 }
+
+/// CORS for the configured `allowed_origins` (a dashboard served
+/// elsewhere): preflights answered, answers readable, the token header allowed.
+fn cors(policy: &policy::RequestPolicy) -> Option<CorsLayer> {
+    use axum::http::{header, HeaderValue, Method};
+    let origins: Vec<HeaderValue> = policy
+        .allowed_origins
+        .iter()
+        .filter_map(|o| HeaderValue::from_str(o).ok())
+        .collect();
+    if origins.is_empty() {
+        return None;
+    }
+    let methods = [
+        Method::GET,
+        Method::POST,
+        Method::PUT,
+        Method::PATCH,
+        Method::DELETE,
+    ];
+    Some(
+        CorsLayer::new()
+            .allow_origin(AllowOrigin::list(origins))
+            .allow_methods(methods)
+            .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE])
+            .expose_headers([header::RETRY_AFTER, header::WWW_AUTHENTICATE])
+            .max_age(CORS_MAX_AGE),
+    )
+}
+
+/// How long a browser may cache a preflight answer.
+const CORS_MAX_AGE: std::time::Duration = std::time::Duration::from_secs(600);
 
 async fn not_found(uri: axum::http::Uri) -> ApiError {
     ApiError::not_found("unknown-route", format!("no resource at {}", uri.path()))

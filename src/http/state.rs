@@ -8,6 +8,7 @@ use std::time::Instant;
 use super::error::{ApiError, ApiResult};
 use super::hub::WsHub;
 use super::limits::{JointLimits, SoftLimits};
+use super::policy::{RefusalLog, RequestPolicy};
 use super::teleop::WatchdogDefault;
 use crate::bus::handle::DeviceState;
 use crate::bus::{BusHandle, BusSnapshot};
@@ -20,6 +21,8 @@ pub struct StateOptions {
     /// (bus or every bus, id) → name.
     pub joint_names: BTreeMap<(Option<String>, u8), String>,
     pub watchdog: WatchdogDefault,
+    /// Host and origin allow-lists, body limit.
+    pub policy: RequestPolicy,
 }
 
 #[derive(Clone)]
@@ -33,6 +36,7 @@ struct Inner {
     token: Option<String>,
     started: Instant,
     ws: WsHub,
+    refusals: RefusalLog,
     options: std::sync::OnceLock<StateOptions>,
 }
 
@@ -50,6 +54,7 @@ impl AppState {
                 token: token.filter(|t| !t.is_empty()),
                 started: Instant::now(),
                 ws: WsHub::default(),
+                refusals: RefusalLog::default(),
                 options: std::sync::OnceLock::new(),
             }),
         }
@@ -76,8 +81,8 @@ impl AppState {
 
     /// The daemon's options beyond buses, limits and token (set once, at
     /// start; a second call is refused and gets its options back).
-    pub fn set_options(&self, options: StateOptions) -> Result<(), StateOptions> {
-        self.inner.options.set(options)
+    pub fn set_options(&self, options: StateOptions) -> Result<(), Box<StateOptions>> {
+        self.inner.options.set(options).map_err(Box::new)
     }
 
     fn options(&self) -> &StateOptions {
@@ -106,6 +111,16 @@ impl AppState {
     /// declaring a watchdog of its own.
     pub fn watchdog_default(&self) -> WatchdogDefault {
         self.options().watchdog
+    }
+
+    /// Which hosts and origins are served, and the body limit.
+    pub fn policy(&self) -> &RequestPolicy {
+        &self.options().policy
+    }
+
+    /// Which refused hosts/origins were logged.
+    pub(crate) fn refusals(&self) -> &RefusalLog {
+        &self.inner.refusals
     }
 
     /// What the WebSocket connections share.
@@ -161,9 +176,28 @@ pub struct BusPath {
 pub struct DevicePath {
     #[param(example = "sim0")]
     pub bus: String,
-    /// Device id, 1..=159.
+    /// Device id, 1..=159, in plain decimal (`+1` and `01` are malformed).
     #[param(minimum = 1, maximum = 159, example = 1)]
+    #[serde(deserialize_with = "plain_decimal")]
     pub id: i64,
+}
+
+/// A path integer written as a number is written: an optional `-`, then `0`
+/// or digits without a leading zero. `+1` or `01` would name device 1 by
+/// another URL (caches, logs and allow-rules keyed by path would miss it).
+fn plain_decimal<'de, D: serde::Deserializer<'de>>(d: D) -> Result<i64, D::Error> {
+    let text = <std::borrow::Cow<'de, str> as serde::Deserialize>::deserialize(d)?;
+    let digits = text.strip_prefix('-').unwrap_or(&text);
+    let plain = !digits.is_empty()
+        && digits.bytes().all(|b| b.is_ascii_digit())
+        && (digits == "0" || !digits.starts_with('0'));
+    if !plain {
+        return Err(serde::de::Error::custom(format!(
+            "`{text}` is not a device id: write it in plain decimal (e.g. 1, not +1 or 01)"
+        )));
+    }
+    text.parse()
+        .map_err(|_| serde::de::Error::custom(format!("`{text}` is not a device id: too large")))
 }
 
 impl DevicePath {

@@ -7,6 +7,7 @@ import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
 import { spawn } from "node:child_process";
 import { mkdirSync } from "node:fs";
+import { createServer } from "node:http";
 import { chromium } from "playwright-core";
 
 const ROOT = new URL("../../", import.meta.url).pathname;
@@ -143,4 +144,41 @@ test("e-stop disables every joint", async () => {
     .every((td) => td.textContent === "ready"), null, { timeout: WAIT });
   await page.locator("#messages .info", { hasText: "Emergency stop" }).first().waitFor({ timeout: WAIT });
   await page.screenshot({ path: `${SHOTS}/estop.png`, fullPage: true });
+});
+
+// Issue 13: a page of another origin the user happens to visit. It sends the
+// requests a browser lets any page send (no-cors POSTs, a WebSocket); the
+// daemon must refuse them all and the joints stay disabled.
+test("a page of another origin cannot move a joint", async () => {
+  const evil = createServer((_, res) => {
+    res.writeHead(200, { "Content-Type": "text/html" });
+    res.end("<!doctype html><title>elsewhere</title>");
+  });
+  await new Promise((r) => evil.listen(0, "localhost", r));
+  const other = await browser.newPage();
+  try {
+    await other.goto(`http://localhost:${evil.address().port}/`);
+    const outcome = await other.evaluate(async (api) => {
+      const post = (path, init = {}) => fetch(`${api}${path}`, { method: "POST", mode: "no-cors", ...init })
+        .then(() => "sent", () => "failed");
+      await post("/api/v1/buses/sim0/devices/5/enable");
+      await post("/api/v1/buses/sim0/control/enable", { body: "{}", headers: { "Content-Type": "text/plain" } });
+      await post("/api/v1/buses/sim0/devices/5/rezero", { body: "a=b", headers: { "Content-Type": "application/x-www-form-urlencoded" } });
+      const ws = await new Promise((resolve) => {
+        const sock = new WebSocket(`${api.replace("http", "ws")}/api/v1/ws`);
+        sock.onopen = () => {
+          sock.send(JSON.stringify({ type: "setpoints", seq: 1, targets: [{ dev_id: 5, position_deg: 40 }] }));
+          resolve("opened");
+        };
+        sock.onerror = () => resolve("refused");
+      });
+      return ws;
+    }, base);
+    assert.equal(outcome, "refused", "the WebSocket opened from another origin");
+    const all = await rest("GET", "/api/v1/buses/sim0/devices");
+    assert.ok(all.devices.every((d) => d.state === "ready"), JSON.stringify(all.devices.map((d) => d.state)));
+  } finally {
+    await other.close();
+    evil.close();
+  }
 });

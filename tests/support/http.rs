@@ -73,11 +73,44 @@ impl Server {
 
     pub async fn call(&self, method: Method, path: &str, body: Option<Value>) -> Resp {
         let mut req = self.client.request(method, format!("{}{path}", self.base));
-        if let Some(t) = &self.token {
-            req = req.bearer_auth(t);
-        }
         if let Some(b) = body {
             req = req.json(&b);
+        }
+        self.send(req).await
+    }
+
+    /// The daemon's own origin as a browser on its page sends it.
+    pub fn origin(&self) -> String {
+        self.base.clone()
+    }
+
+    /// `host:port` of the server.
+    pub fn authority(&self) -> &str {
+        self.base.trim_start_matches("http://")
+    }
+
+    /// A request as a browser (or an attacker's page) would send it: extra
+    /// headers (`Origin`, `Sec-Fetch-Site`, `Host`, `Content-Type`) and a raw body.
+    pub async fn browser(
+        &self,
+        method: Method,
+        path: &str,
+        headers: &[(&str, &str)],
+        body: Option<&str>,
+    ) -> Resp {
+        let mut req = self.client.request(method, format!("{}{path}", self.base));
+        for (name, value) in headers {
+            req = req.header(*name, *value);
+        }
+        if let Some(b) = body {
+            req = req.body(b.to_owned());
+        }
+        self.send(req).await
+    }
+
+    async fn send(&self, mut req: reqwest::RequestBuilder) -> Resp {
+        if let Some(t) = &self.token {
+            req = req.bearer_auth(t);
         }
         let resp = req.send().await.expect("request");
         let status = resp.status();
@@ -116,4 +149,23 @@ impl Server {
     pub async fn patch(&self, path: &str, body: Value) -> Resp {
         self.call(Method::PATCH, path, Some(body)).await
     }
+}
+
+/// Sends `request` (raw bytes, e.g. a chunked body without Content-Length)
+/// to `authority` and returns the status and the whole response text.
+pub async fn raw(authority: &str, request: &[u8]) -> (u16, String) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut stream = tokio::net::TcpStream::connect(authority)
+        .await
+        .expect("connect");
+    stream.write_all(request).await.expect("write");
+    let mut out = Vec::new();
+    let _ = stream.read_to_end(&mut out).await;
+    let text = String::from_utf8_lossy(&out).into_owned();
+    let status = text
+        .split(' ')
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    (status, text)
 }

@@ -133,10 +133,14 @@ fn group_ids(snap: &BusSnapshot, ids: Option<Vec<i64>>) -> ApiResult<Option<Vec<
     let mut out = Vec::with_capacity(ids.len());
     for (i, id) in ids.into_iter().enumerate() {
         let id = device_id(&format!("ids[{i}]"), id)?;
-        known_device(snap, id)?;
-        if !out.contains(&id) {
-            out.push(id);
+        if out.contains(&id) {
+            return Err(ApiError::invalid(
+                &format!("ids[{i}]"),
+                format!("joint {id} appears twice"),
+            ));
         }
+        known_device(snap, id)?;
+        out.push(id);
     }
     Ok(Some(out))
 }

@@ -12,8 +12,10 @@ use utoipa::{IntoResponses, Modify, OpenApi};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_swagger_ui::SwaggerUi;
 
-use crate::http::error::{Problem, DOCUMENTED_STATUSES, PROBLEM_JSON};
-use crate::http::paths::{DOCS_PATH, OPENAPI_PATH};
+use crate::http::error::{
+    Problem, BODY_TOO_LARGE, DOCUMENTED_STATUSES, FORBIDDEN_ORIGIN, PROBLEM_JSON, UNKNOWN_HOST,
+};
+use crate::http::paths::{DOCS_PATH, HEALTHZ_PATH, OPENAPI_PATH};
 use crate::http::state::AppState;
 
 pub(crate) const TAG_BUSES: &str = "buses";
@@ -32,7 +34,10 @@ const BEARER_SCHEME: &str = "bearer";
         description = "Everything a user can do with a joint module, over HTTP. Angles are \
             output-shaft degrees, speeds rotor rpm (before the 568.81:1 gearbox), currents \
             amperes. Every failure is an RFC 9457 problem (application/problem+json). When the \
-            daemon has a token, every request but /healthz needs `Authorization: Bearer <token>`."
+            daemon has a token, every request but /healthz needs `Authorization: Bearer <token>`. \
+            A request whose Host header names no host of the daemon gets 421 (DNS-rebinding \
+            guard); a change (any method but GET) from a browser page of a foreign origin gets \
+            403; a body over max_body_bytes gets 413."
     ),
     modifiers(&BearerAuth),
     // `PatchOutcomes`: the `partial` of a config PATCH that did not confirm everything.
@@ -92,7 +97,8 @@ impl IntoResponses for ErrorResponses {
 
 /// The shared failure responses, each a [`Problem`].
 fn add_problem_responses(components: &mut utoipa::openapi::Components) {
-    for (status, description) in DOCUMENTED_STATUSES {
+    let guards = [FORBIDDEN_ORIGIN, BODY_TOO_LARGE, UNKNOWN_HOST];
+    for (status, description) in DOCUMENTED_STATUSES.into_iter().chain(guards) {
         let content = ContentBuilder::new()
             .schema(Some(Ref::from_schema_name("Problem")))
             .build();
@@ -106,6 +112,45 @@ fn add_problem_responses(components: &mut utoipa::openapi::Components) {
     }
 }
 
+/// A reference to the shared response of a failure status.
+fn problem_ref(status: &str) -> RefOr<Response> {
+    let name = problem_response_name(status);
+    RefOr::Ref(Ref::new(format!("#/components/responses/{name}")))
+}
+
+/// The guards' statuses, on the operations they apply to: 421 on every
+/// route but `/healthz`, 403 on every method but GET, 413 where a body is
+/// taken. Run on the document once the areas have added their routes.
+pub(crate) fn add_guard_responses(doc: &mut utoipa::openapi::OpenApi) {
+    use utoipa::openapi::HttpMethod;
+    for (path, item) in doc.paths.paths.iter_mut() {
+        let ops = [
+            (HttpMethod::Get, &mut item.get),
+            (HttpMethod::Put, &mut item.put),
+            (HttpMethod::Post, &mut item.post),
+            (HttpMethod::Delete, &mut item.delete),
+            (HttpMethod::Patch, &mut item.patch),
+        ];
+        for (method, op) in ops {
+            let Some(op) = op.as_mut() else { continue };
+            let mut add = |(status, _): (&str, &str)| {
+                op.responses
+                    .responses
+                    .insert(status.to_owned(), problem_ref(status));
+            };
+            if path != HEALTHZ_PATH {
+                add(UNKNOWN_HOST);
+            }
+            if method != HttpMethod::Get {
+                add(FORBIDDEN_ORIGIN);
+            }
+            if op.request_body.is_some() {
+                add(BODY_TOO_LARGE);
+            }
+        }
+    }
+}
+
 /// The document's head (info, tags, security, shared failures), before the
 /// areas add their routes.
 pub(crate) fn base() -> OpenApiRouter<AppState> {
@@ -114,6 +159,7 @@ pub(crate) fn base() -> OpenApiRouter<AppState> {
 
 /// `/openapi.json` and the Swagger UI at `/docs`.
 pub(crate) fn docs(mut doc: utoipa::openapi::OpenApi) -> Router<AppState> {
+    add_guard_responses(&mut doc);
     doc.info.version = env!("CARGO_PKG_VERSION").to_owned();
     SwaggerUi::new(DOCS_PATH).url(OPENAPI_PATH, doc).into()
 }

@@ -17,12 +17,14 @@ pub(crate) mod telemetry;
 pub(crate) mod watchdog;
 pub(crate) mod writer;
 
+use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::{State, WebSocketUpgrade};
-use axum::response::Response;
+use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use axum::Router;
 use futures_util::StreamExt;
 
+use crate::http::error::ApiError;
 use crate::http::paths::WS_PATH;
 use crate::http::state::AppState;
 /// Largest client message accepted (a full batch is well under this).
@@ -32,7 +34,14 @@ pub fn router() -> Router<AppState> {
     Router::new().route(WS_PATH, get(upgrade))
 }
 
-async fn upgrade(ws: WebSocketUpgrade, State(state): State<AppState>) -> Response {
+async fn upgrade(
+    ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
+    State(state): State<AppState>,
+) -> Response {
+    let ws = match ws {
+        Ok(ws) => ws,
+        Err(rej) => return ApiError::from(rej).into_response(),
+    };
     ws.max_message_size(MAX_MESSAGE_BYTES)
         .on_upgrade(move |socket| async move {
             let (sink, stream) = socket.split();
