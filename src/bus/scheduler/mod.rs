@@ -28,7 +28,7 @@ use crate::bus::coalesce::Planned;
 use crate::bus::config::BusConfig;
 use crate::bus::poll::{ControlBudget, PollPlanner};
 use crate::bus::registry::Registry;
-use crate::bus::setpoints::{SetpointStore, StoredSetpoint};
+use crate::bus::setpoints::SetpointStore;
 use crate::bus::state::{BusEvent, WireAck};
 use crate::bus::wire::{ReplyWindow, Want, WireClock};
 use crate::protocol::InfoBlock;
@@ -322,11 +322,6 @@ impl Scheduler {
     /// One joint's pending setpoint is void (disabled, re-zeroed, mode changed).
     pub(crate) fn forget_setpoint(&mut self, id: u8) {
         self.control.forget(id);
-    }
-
-    /// A joint's stored target goes out again (an enable: it holds where it is).
-    pub(crate) fn requeue(&mut self, id: u8, setpoint: StoredSetpoint) {
-        self.control.requeue(id, setpoint);
     }
 
     /// After an id change the device's entry and pending setpoint follow it.
