@@ -9,7 +9,7 @@ mod support;
 
 use std::time::{Duration, Instant};
 
-use jointd::bus::handle::BusEvent;
+use jointd::bus::handle::{BusEvent, DisabledReason};
 use jointd::bus::{Setpoint, Targets};
 use jointd::protocol::status::fsm;
 use jointd::sim::Fault;
@@ -90,6 +90,10 @@ async fn a_power_cut_mid_move_then_enable_does_not_move() {
     })
     .await;
     at_rest(&rig);
+    rig.until("shown disabled by the reset", |s| {
+        s.devices[&1].disabled_reason == Some(DisabledReason::Reset)
+    })
+    .await;
     rig.bus.set_targets(&[(1, toward_100())]);
     enable_and_assert_still(&rig).await;
 }
@@ -129,6 +133,11 @@ async fn a_target_after_the_enable_still_moves_the_joint() {
     rig.reaches(1, 30.0).await;
     // No event claims a reset: the daemon disabled it itself.
     while let Ok(ev) = events.try_recv() {
-        assert!(!matches!(ev, BusEvent::Fault { .. }), "{ev:?}");
+        assert!(!matches!(ev, BusEvent::DeviceReset { .. }), "{ev:?}");
     }
+    let snap = rig.bus.snapshot();
+    assert_eq!(
+        (snap.devices[&1].resets, snap.devices[&1].disabled_reason),
+        (0, None)
+    );
 }

@@ -9,6 +9,7 @@
 
 use crate::bus::error::BusError;
 use crate::bus::handle::{BusEvent, Targets, WriteOutcome};
+use crate::bus::state::DisabledReason;
 use crate::bus::verify::{confirmation, Confirm};
 use crate::bus::wire::Want;
 use crate::protocol::command::index;
@@ -71,8 +72,12 @@ pub(super) fn enable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
     // before it (before a disable, a power cut, a fault, an e-stop) may
     // follow it. Cleared before the frame, so a target written from here
     // on is a new one and goes out (after align, too).
-    forget_targets(ctx, &addressed(ctx, &targets, &ids));
+    let reached = addressed(ctx, &targets, &ids);
+    forget_targets(ctx, &reached);
     ctx.job_send(&control_frames(&targets, &ids, Control::enable))?;
+    for &id in &reached {
+        ctx.sched_mut().registry_mut().note_enabled(id);
+    }
     for &id in &ids {
         await_fsm(ctx, id, "enable", |f| f == fsm::ALIGN || f == fsm::RUN)?;
     }
@@ -82,7 +87,13 @@ pub(super) fn enable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
 pub(super) fn disable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
     let ids = resolve(ctx, &targets)?;
     ctx.job_send(&control_frames(&targets, &ids, Control::disable))?;
-    forget_targets(ctx, &addressed(ctx, &targets, &ids));
+    let reached = addressed(ctx, &targets, &ids);
+    forget_targets(ctx, &reached);
+    for &id in &reached {
+        // Before the read-back: ready from now on is no reset.
+        let reason = DisabledReason::Request;
+        ctx.sched_mut().registry_mut().note_disabled(id, reason);
+    }
     for &id in &ids {
         await_fsm(ctx, id, "disable", |f| f == fsm::READY || f == fsm::FAULT)?;
     }

@@ -32,6 +32,7 @@ use crate::bus::error::BusError;
 use crate::bus::handle::{BusShared, Request};
 use crate::bus::link::Link;
 use crate::bus::scheduler::Slot;
+use crate::bus::state::DisabledReason;
 use crate::protocol::ConfigParam;
 use crate::rt::{precise_timers, set_fifo};
 
@@ -140,7 +141,7 @@ impl Owner {
     fn shutdown(&mut self) {
         let ctx = &mut self.ctx;
         let disable = ctx.cfg().on_shutdown == ShutdownState::Disable;
-        if disable && estop::disable_everything(ctx).is_ok() {
+        if disable && estop::disable_everything(ctx, DisabledReason::Shutdown).is_ok() {
             // Let the disable frames leave the wire before the port closes.
             let _ = ctx.wait_until(ctx.sched().clock().free_at());
         }

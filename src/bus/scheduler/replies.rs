@@ -23,13 +23,15 @@ impl Scheduler {
         if !feeds {
             return ReplyEffect::default();
         }
-        self.reg.on_reply(reply, at, true, &mut self.events)
+        let effect = self.reg.on_reply(reply, at, true, &mut self.events);
+        self.after_reply(reply.dev_id, effect);
+        effect
     }
 
     /// A reply nobody waited for: a power-up announcement, or the late reply
     /// of the last read that timed out (which then widens the deadline).
-    /// A rebooted device forgot its target: what waited for it is stale, and
-    /// the owner clears its slot in the store.
+    /// A device that reset forgot its target: what waited for it is stale,
+    /// and the owner clears its slot in the store.
     pub(crate) fn unsolicited(&mut self, reply: &Reply, at: Instant) -> ReplyEffect {
         self.clock.line_free(at);
         let late = self
@@ -41,11 +43,17 @@ impl Scheduler {
         let effect = self
             .reg
             .on_reply(reply, at, late.is_some(), &mut self.events);
-        if effect.rebooted {
-            self.control.forget(reply.dev_id);
+        self.after_reply(reply.dev_id, effect);
+        effect
+    }
+
+    /// A device that reset or faulted holds no target: what waited to go
+    /// to it is stale, and so is a frame planned with it.
+    fn after_reply(&mut self, id: u8, effect: ReplyEffect) {
+        if effect.reset || effect.faulted {
+            self.control.forget(id);
             self.control.clear_prepared();
         }
-        effect
     }
 
     /// The reply to `want`, due at `due`, had not come by `now`: counted
