@@ -73,6 +73,9 @@ pub(crate) struct ReplyEffect {
     pub reset: bool,
     /// The device just entered its fault state: its target is void.
     pub faulted: bool,
+    /// The first INFO_01 heard from it shows it driving its motor: enabled
+    /// before the daemon started, holding a target the daemon does not know.
+    pub found_enabled: bool,
     /// The device just finished aligning (fsm align → run). A reference sent
     /// while it aligned may not have taken (SPEC leaves it open; the
     /// simulator holds its angle at the end of align), so its target must go
@@ -95,6 +98,11 @@ impl Registry {
             offline_after: offline_after.max(1),
             entries: BTreeMap::new(),
         }
+    }
+
+    /// The bus's name, for events.
+    pub(crate) fn bus(&self) -> &str {
+        &self.bus
     }
 
     /// Adds a device expected on the bus (offline until it answers).
@@ -134,6 +142,7 @@ impl Registry {
         self.entries.get(&id).map(|e| SlotInfo {
             speed_mode: e.state.mode == Some(CtrlMode::Speed),
             target: e.state.target_sent,
+            target_known: e.state.target_known,
             measured: e.measured.map(|(angle, _)| angle),
             last_sent: e.last_sent,
         })
@@ -174,6 +183,7 @@ impl Registry {
     pub(crate) fn note_disabled(&mut self, id: u8, reason: DisabledReason) {
         if let Some(e) = self.entries.get_mut(&id) {
             e.state.target_sent = None;
+            e.state.target_known = true;
             e.state.disabled_reason = Some(reason);
             e.believed_enabled = false;
         }
@@ -183,6 +193,7 @@ impl Registry {
     pub(crate) fn note_enabled(&mut self, id: u8) {
         if let Some(e) = self.entries.get_mut(&id) {
             e.state.target_sent = None;
+            e.state.target_known = true;
             e.state.disabled_reason = None;
         }
     }
@@ -221,6 +232,7 @@ impl Registry {
     pub(crate) fn record_sent(&mut self, id: u8, setpoint: Setpoint, at: Instant) {
         if let Some(e) = self.entries.get_mut(&id) {
             e.state.target_sent = Some(setpoint);
+            e.state.target_known = true;
             e.last_sent = Some(at);
             e.control_updates += 1;
         }
@@ -305,7 +317,14 @@ fn on_info01(
     }
     effect.faulted = note_fault(bus, entry, info, events);
     effect.now_running = before == Some(fsm::ALIGN) && info.fsm == fsm::RUN;
-    if drives_motor(info.fsm) {
+    let driving = drives_motor(info.fsm);
+    // The first INFO_01 decides whether the target is known; later, a
+    // device not driving its motor holds no target at all.
+    effect.found_enabled = before.is_none() && driving;
+    if before.is_none() || !driving {
+        entry.state.target_known = !driving;
+    }
+    if driving {
         entry.believed_enabled = true;
         entry.state.disabled_reason = None;
     }
@@ -345,6 +364,7 @@ fn note_reset(
     let s = &mut entry.state;
     s.mode = None;
     s.target_sent = None;
+    s.target_known = true;
     s.disabled_reason = Some(DisabledReason::Reset);
     s.resets += 1;
     s.last_reset = Some(ResetRecord {

@@ -30,6 +30,10 @@ pub struct DeviceState {
     pub mode: Option<CtrlMode>,
     /// The target last put on the wire.
     pub target_sent: Option<Setpoint>,
+    /// False while the device may hold a target the daemon does not know:
+    /// not heard yet, or found enabled at start (`on_start = "keep"`) and
+    /// sent nothing since. `target_sent` is then `None` meaning unknown.
+    pub target_known: bool,
     pub missed_polls: u32,
     /// Why the daemon holds the joint for disabled, until it is enabled
     /// again (or seen driving its motor): `None` while enabled or before
@@ -232,6 +236,15 @@ pub enum BusEvent {
     },
     Estop {
         bus: String,
+    },
+    /// A device found enabled at start (its first INFO_01 shows align or
+    /// run): what `on_start` does with it.
+    FoundEnabled {
+        bus: String,
+        dev_id: u8,
+        state: &'static str,
+        /// `keep` (left enabled, target unknown) or `disable`.
+        on_start: &'static str,
     },
     /// A device reset (power cut, reboot): it is disabled, forgot its mode
     /// and target; the daemon forgot its targets too.

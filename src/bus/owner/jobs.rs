@@ -85,13 +85,21 @@ pub(super) fn enable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
 }
 
 pub(super) fn disable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
+    disable_because(ctx, targets, DisabledReason::Request)
+}
+
+/// A disable, recorded with why (a request, the start policy).
+pub(super) fn disable_because(
+    ctx: &mut Ctx,
+    targets: Targets,
+    reason: DisabledReason,
+) -> Result<(), BusError> {
     let ids = resolve(ctx, &targets)?;
     ctx.job_send(&control_frames(&targets, &ids, Control::disable))?;
     let reached = addressed(ctx, &targets, &ids);
     forget_targets(ctx, &reached);
     for &id in &reached {
         // Before the read-back: ready from now on is no reset.
-        let reason = DisabledReason::Request;
         ctx.sched_mut().registry_mut().note_disabled(id, reason);
     }
     for &id in &ids {

@@ -10,6 +10,7 @@
 //!
 //! - `ctx`: what the owner's code works with (port, scheduler, publication).
 //! - `jobs`, `estop`, `scan`, `baud`: one-shot requests, functions of a `&mut Ctx`.
+//! - `start`: joints found enabled at start, disabled when `on_start = "disable"`.
 //! - `confirm`: reading a RES, naming a config frame in errors.
 //! - `stats`: rate windows.
 
@@ -19,6 +20,7 @@ mod ctx;
 mod estop;
 mod jobs;
 mod scan;
+mod start;
 mod stats;
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -128,6 +130,10 @@ impl Owner {
             }
             Slot::Scan => {
                 scan::startup(ctx);
+                Ok(())
+            }
+            Slot::Release { ids } => {
+                start::release(ctx, ids);
                 Ok(())
             }
             Slot::Reopen { at } => {

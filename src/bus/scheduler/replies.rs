@@ -5,8 +5,11 @@
 
 use std::time::{Duration, Instant};
 
+use crate::bus::config::StartPolicy;
 use crate::bus::registry::ReplyEffect;
+use crate::bus::state::BusEvent;
 use crate::bus::wire::Want;
+use crate::protocol::status::fsm_name;
 use crate::protocol::{Reply, ReplyBody};
 
 use super::Scheduler;
@@ -54,6 +57,29 @@ impl Scheduler {
             self.control.forget(id);
             self.control.clear_prepared();
         }
+        if effect.found_enabled {
+            self.found_enabled(id);
+        }
+    }
+
+    /// A joint enabled before the daemon started: reported, and with
+    /// `on_start = "disable"` released at the next slot.
+    fn found_enabled(&mut self, id: u8) {
+        let state = self
+            .reg
+            .get(id)
+            .and_then(|e| e.state.info01)
+            .map_or("unknown", |(i, _)| fsm_name(i.fsm));
+        let disable = self.on_start == StartPolicy::Disable;
+        if disable {
+            self.release.insert(id);
+        }
+        self.events.push(BusEvent::FoundEnabled {
+            bus: self.reg.bus().to_string(),
+            dev_id: id,
+            state,
+            on_start: if disable { "disable" } else { "keep" },
+        });
     }
 
     /// The reply to `want`, due at `due`, had not come by `now`: counted

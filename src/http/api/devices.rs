@@ -60,6 +60,14 @@ pub(crate) struct DeviceSummary {
     #[schema(example = 8.2)]
     pub telemetry_age_ms: Option<f64>,
     pub target: Option<TargetView>,
+    /// False while the device may hold a target the daemon does not know
+    /// (not heard from yet, or found enabled at start with the bus's
+    /// `on_start = "keep"` and sent nothing since): `target` is then `null`
+    /// meaning *unknown*, not "no target". True otherwise: `target` is the
+    /// target last put on the wire, or `null` when the joint holds none of
+    /// the daemon's (disabled, or enabled and holding where it stood).
+    #[schema(example = true)]
+    pub target_known: bool,
     /// Why the joint is disabled, when the daemon knows: `reset` (the
     /// device lost power or rebooted), `fault`, `estop`, `request` (a
     /// disable: REST, WebSocket, the teleop watchdog), `on_start` (found
@@ -107,6 +115,14 @@ pub(crate) struct DeviceDetail {
     pub motion: Option<MotionView>,
     /// The target last put on the wire.
     pub target: Option<TargetView>,
+    /// False while the device may hold a target the daemon does not know
+    /// (not heard from yet, or found enabled at start with the bus's
+    /// `on_start = "keep"` and sent nothing since): `target` is then `null`
+    /// meaning *unknown*, not "no target". True otherwise: `target` is the
+    /// target last put on the wire, or `null` when the joint holds none of
+    /// the daemon's (disabled, or enabled and holding where it stood).
+    #[schema(example = true)]
+    pub target_known: bool,
     /// Why the joint is disabled, when the daemon knows: `reset` (the
     /// device lost power or rebooted), `fault`, `estop`, `request` (a
     /// disable: REST, WebSocket, the teleop watchdog), `on_start` (found
@@ -170,6 +186,7 @@ fn summary(dev: &DeviceState, name: Option<&str>, now: Instant) -> DeviceSummary
         vbus_v: status.as_ref().map(|s| s.vbus_v),
         telemetry_age_ms: age,
         target: dev.target_sent.map(|sp| TargetView::new(sp, fw)),
+        target_known: dev.target_known,
         disabled_reason: disabled_reason(dev),
         resets: dev.resets,
         last_reset: reset_view(dev, now),
@@ -228,6 +245,7 @@ async fn get_device(
             .as_ref()
             .map(|(i, at)| motion_view(i, fw, *at, now)),
         target: dev.target_sent.map(|sp| TargetView::new(sp, fw)),
+        target_known: dev.target_known,
         disabled_reason: disabled_reason(&dev),
         resets: dev.resets,
         last_reset: reset_view(&dev, now),

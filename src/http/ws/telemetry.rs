@@ -60,6 +60,10 @@ fn joint(sub: &Subscription, bus: &str, dev: &DeviceState, now: Instant) -> Map<
     );
     for f in &sub.fields {
         m.insert(field_name(*f).into(), field_value(*f, dev));
+        if *f == Field::TargetDeg {
+            // `target_deg: null` with `target_known: false` is unknown, not idle.
+            m.insert("target_known".into(), dev.target_known.into());
+        }
         if *f == Field::Fsm {
             // Beside the state: why the joint is disabled, if known.
             let reason = disabled_reason(dev).map_or(Value::Null, Value::from);

@@ -56,20 +56,31 @@ impl Ctx {
 /// The events an operator must find in the log, once each (here, where
 /// they are published, not on the reply path that detected them).
 fn log_event(bus: &str, event: &BusEvent) {
-    if let BusEvent::DeviceReset {
-        dev_id,
-        seen,
-        state_before,
-        state,
-        ..
-    } = event
-    {
-        tracing::warn!(
+    match event {
+        BusEvent::DeviceReset {
+            dev_id,
+            seen,
+            state_before,
+            state,
+            ..
+        } => tracing::warn!(
             bus,
             dev_id,
             "device {dev_id} reset (power cut or reboot): {} ({state_before} -> {state}); \
              it is disabled and its targets are forgotten",
             seen.name()
-        );
+        ),
+        BusEvent::FoundEnabled {
+            dev_id,
+            state,
+            on_start,
+            ..
+        } => tracing::warn!(
+            bus,
+            dev_id,
+            "device {dev_id} found enabled at start ({state}), its target unknown; \
+             on_start = \"{on_start}\""
+        ),
+        _ => {}
     }
 }
