@@ -1,5 +1,5 @@
 //! An enable never resumes a target set before the joint stopped driving
-//! (power cut, e-stop, disable): the joint enables holding where it
+//! (power cut, e-stop, disable, fault): the joint enables holding where it
 //! stands until a new target arrives. Each test interrupts a joint moving
 //! towards 100°, writes the old target again as a streaming client that has
 //! not noticed yet would, enables, and watches the simulated joint stand
@@ -140,4 +140,32 @@ async fn a_target_after_the_enable_still_moves_the_joint() {
         (snap.devices[&1].resets, snap.devices[&1].disabled_reason),
         (0, None)
     );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stall_fault_mid_move_then_disable_and_enable_does_not_move() {
+    let mut cfg = sim_config(&[1], BAUD);
+    cfg.stall_fault_after = Duration::from_millis(200);
+    let rig = rig_with(cfg, |c| c.ids = vec![1]);
+    rig.online(1).await;
+    rig.enable_all(1).await;
+    rig.sim.inject(Fault::Stall {
+        dev_id: 1,
+        at_deg: Some(25.0),
+    });
+    rig.bus.set_targets(&[(1, toward_100())]);
+    rig.until("shown disabled by the fault", |s| {
+        s.devices[&1].disabled_reason == Some(DisabledReason::Fault)
+    })
+    .await;
+    assert_eq!(rig.bus.shared().setpoints.get(1), None, "target forgotten");
+    rig.sim.inject(Fault::ClearAll);
+    rig.bus.set_targets(&[(1, toward_100())]);
+    rig.bus
+        .disable(Targets::Ids(vec![1]))
+        .await
+        .expect("disable clears the fault");
+    at_rest(&rig);
+    rig.bus.set_targets(&[(1, toward_100())]);
+    enable_and_assert_still(&rig).await;
 }
