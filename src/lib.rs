@@ -30,6 +30,7 @@
 //! | when a frame leaves, when a reply is due or late | `bus::wire` |
 //! | setpoints → broadcast/control frames | `bus::coalesce` |
 //! | online/offline, per-device state and rates | `bus::registry` |
+//! | a device reset (announcement, state drop), a joint found enabled at start | `bus::registry` (detection); `bus::owner` (`start`: `on_start`) |
 //! | enable, verified writes, id/baud change, scan, e-stop on the wire | `bus::owner` (its `jobs`, `write`, `baud`, `scan`, `estop`) |
 //! | what a bus error is; which HTTP status it gets | `bus::error`; `http::error` |
 //! | a REST route | `http::api` (one file per area), its OpenAPI in the same handler |

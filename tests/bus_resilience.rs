@@ -5,8 +5,9 @@ mod support;
 
 use std::time::{Duration, Instant};
 
-use jointd::bus::handle::{BusEvent, LinkState};
+use jointd::bus::handle::{BusEvent, DisabledReason, LinkState, ResetSignal};
 use jointd::bus::{spawn_bus_on, BusConfig, BusError};
+use jointd::protocol::status::fsm;
 use jointd::protocol::{Command, ConfigParam, Frame, InfoBlock};
 use jointd::sim::{Fault, Simulator};
 use jointd::transport::Transport;
@@ -230,4 +231,126 @@ async fn a_panic_in_the_owner_takes_the_bus_down_and_it_comes_back() {
             .any(|r| r.contains("internal error: driver bug")),
         "subscribers heard the bus go down and why: {down:?}"
     );
+}
+
+/// Every `DeviceReset` heard within `quiet` after the first one.
+async fn resets(
+    events: &mut tokio::sync::broadcast::Receiver<BusEvent>,
+    quiet: Duration,
+) -> Vec<BusEvent> {
+    let first = event(events, "a device reset", |e| {
+        matches!(e, BusEvent::DeviceReset { .. })
+    })
+    .await;
+    let mut all = vec![first];
+    let end = tokio::time::Instant::now() + quiet;
+    while let Ok(Ok(ev)) = tokio::time::timeout_at(end, events.recv()).await {
+        if matches!(ev, BusEvent::DeviceReset { .. }) {
+            all.push(ev);
+        }
+    }
+    all
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_power_cut_of_an_enabled_joint_is_reported_once_and_shown_disabled() {
+    let rig = rig_with(sim_config(&[1, 2], BAUD), |c| c.ids = vec![1, 2]);
+    rig.online(2).await;
+    rig.enable_all(2).await;
+    rig.bus.set_targets(&[(2, target(40.0))]);
+    let mut events = rig.bus.events();
+    rig.sim.inject(Fault::PowerCycle { dev_id: 2 });
+    let seen = resets(&mut events, Duration::from_millis(300)).await;
+    assert_eq!(seen.len(), 1, "one event per reset: {seen:?}");
+    let BusEvent::DeviceReset {
+        dev_id,
+        state_before,
+        state,
+        ..
+    } = &seen[0]
+    else {
+        unreachable!()
+    };
+    assert_eq!((*dev_id, *state_before, *state), (2, "run", "ready"));
+    let d = rig.bus.snapshot().devices[&2].clone();
+    assert_eq!(d.resets, 1);
+    assert_eq!(d.disabled_reason, Some(DisabledReason::Reset));
+    assert_eq!(d.target_sent, None);
+    assert_eq!(
+        rig.bus.shared().setpoints.get(2),
+        None,
+        "stored target gone"
+    );
+    let other = &rig.bus.snapshot().devices[&1];
+    assert_eq!((other.resets, other.disabled_reason), (0, None));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_power_cut_whose_announcement_went_unheard_is_seen_in_the_state() {
+    let rig = rig_with(sim_config(&[1], BAUD), |c| c.ids = vec![1]);
+    rig.online(1).await;
+    rig.enable_all(1).await;
+    let mut events = rig.bus.events();
+    // Unplugged while the device reboots: its announcement reaches nobody.
+    rig.sim.inject(Fault::Unplug);
+    rig.until("down", |s| matches!(s.link, LinkState::Down { .. }))
+        .await;
+    rig.sim.inject(Fault::PowerCycle { dev_id: 1 });
+    rig.sim_until("device 1 booted", |sim| {
+        sim.device(1).is_some_and(|d| !d.booting)
+    });
+    rig.sim.inject(Fault::Replug);
+    let seen = resets(&mut events, Duration::from_millis(200)).await;
+    assert_eq!(seen.len(), 1, "{seen:?}");
+    assert!(
+        matches!(
+            seen[0],
+            BusEvent::DeviceReset {
+                dev_id: 1,
+                seen: ResetSignal::StateDropped,
+                state_before: "run",
+                ..
+            }
+        ),
+        "{seen:?}"
+    );
+    let snap = rig
+        .until("reset shown", |s| s.devices[&1].resets == 1)
+        .await;
+    let d = &snap.devices[&1];
+    assert_eq!(d.disabled_reason, Some(DisabledReason::Reset));
+    assert!(d.info01.is_some_and(|(i, _)| i.fsm == fsm::READY));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn disabling_and_estopping_are_no_resets() {
+    let rig = rig_with(sim_config(&[1, 2], BAUD), |c| c.ids = vec![1, 2]);
+    rig.online(2).await;
+    rig.enable_all(2).await;
+    let mut events = rig.bus.events();
+    rig.bus
+        .disable(jointd::bus::Targets::Ids(vec![1]))
+        .await
+        .unwrap();
+    rig.until("device 1 disabled by request", |s| {
+        s.devices[&1].disabled_reason == Some(DisabledReason::Request)
+    })
+    .await;
+    rig.bus.estop().await.unwrap();
+    let mark = Instant::now();
+    rig.until("both polled ready since", |s| {
+        s.devices.values().all(|d| {
+            d.info01
+                .is_some_and(|(i, at)| at > mark && i.fsm == fsm::READY)
+        })
+    })
+    .await;
+    while let Ok(ev) = events.try_recv() {
+        assert!(!matches!(ev, BusEvent::DeviceReset { .. }), "{ev:?}");
+    }
+    let snap = rig.bus.snapshot();
+    assert!(snap
+        .devices
+        .values()
+        .all(|d| d.disabled_reason == Some(DisabledReason::Estop) && d.resets == 0));
 }

@@ -4,8 +4,9 @@
 //!   with new targets share one broadcast frame. A broadcast overwrites the
 //!   target of every device of its group (SPEC §3.2), so the other slots
 //!   carry each joint's current target, or its measured angle if it was never
-//!   commanded, never 0. A group with a known joint that has neither gets no
-//!   broadcast: its joints go one frame each.
+//!   commanded, never 0. A group with a known joint that has neither, or
+//!   that may hold a target the daemon does not know (found enabled at
+//!   start and kept), gets no broadcast: its joints go one frame each.
 //! - A broadcast carries no speed limit, so a joint whose speed limit changes
 //!   gets its own control frame (which carries both).
 //! - Speed-mode joints share a speed broadcast only when every known joint of
@@ -32,6 +33,9 @@ pub(crate) struct SlotInfo {
     pub speed_mode: bool,
     /// The target it was last sent (position and speed limit).
     pub target: Option<Setpoint>,
+    /// False while it may hold a target the daemon does not know (found
+    /// enabled at start): no broadcast may overwrite it.
+    pub target_known: bool,
     /// Its angle from telemetry, if fresh (not from before a re-zero).
     pub measured: Option<i16>,
     /// When a frame last carried a new target to it.
@@ -146,6 +150,7 @@ fn position_broadcast(
             }
             None => match view(id) {
                 None => 0,
+                Some(info) if !info.target_known => return None,
                 Some(info) if info.speed_mode => info.measured.unwrap_or(0),
                 Some(info) => info.target.map(|t| t.pos_ref).or(info.measured)?,
             },
@@ -207,6 +212,7 @@ mod tests {
         move |id| {
             (1..=n).contains(&id).then_some(SlotInfo {
                 speed_mode: false,
+                target_known: true,
                 target: Some(Setpoint {
                     pos_ref: 10 * i16::from(id),
                     spd_ref: 1000,
@@ -244,6 +250,7 @@ mod tests {
                     spd_ref: 9,
                 }),
                 measured,
+                target_known: true,
                 ..SlotInfo::default()
             })
         }
@@ -266,6 +273,28 @@ mod tests {
         let pending = BTreeMap::from([(1, sp(50, 9, 1, t0)), (2, sp(60, 9, 1, t0))]);
         let p = plan(&pending, third_uncommanded(None));
         assert_eq!(p.frames.len(), 2);
+        assert!(p
+            .frames
+            .iter()
+            .all(|f| matches!(f.command, Command::Control(_))));
+    }
+
+    #[test]
+    fn a_joint_holding_an_unknown_target_forbids_the_broadcast() {
+        let t0 = Instant::now();
+        let pending = BTreeMap::from([(1, sp(50, 9, 1, t0)), (2, sp(60, 9, 1, t0))]);
+        let kept = |id: u8| {
+            third_uncommanded(Some(-1234))(id).map(|v| SlotInfo {
+                target_known: id != 3,
+                ..v
+            })
+        };
+        let p = plan(&pending, kept);
+        assert_eq!(
+            p.frames.len(),
+            2,
+            "joint 3's target must not be overwritten"
+        );
         assert!(p
             .frames
             .iter()
@@ -382,6 +411,7 @@ mod tests {
             move |id: u8| {
                 (9..=n).contains(&id).then_some(SlotInfo {
                     speed_mode: id != 12,
+                    target_known: true,
                     target: None,
                     measured: Some(0),
                     last_sent: None,

@@ -45,6 +45,10 @@ pub struct BusConfig {
     /// What the joints are left in when the daemon stops.
     #[serde(default)]
     pub on_shutdown: ShutdownState,
+    /// What the daemon does with a joint it finds enabled at start (the
+    /// first INFO_01 it hears from it shows align or run).
+    #[serde(default)]
+    pub on_start: StartPolicy,
     /// Ask the kernel for RS-485 direction control (driver enable on RTS
     /// while sending) where the serial driver offers it. A port already set
     /// up for RS-485 (device tree, `setserial`) keeps its settings; `false`
@@ -68,6 +72,25 @@ pub enum ShutdownState {
     /// daemon restart). Modules that watch for a silent host may report
     /// err 10, communication lost, once polling stops.
     Hold,
+}
+
+/// What the daemon does with a joint found enabled at start: one left
+/// enabled by a daemon stopped with `on_shutdown = "hold"`, killed, or by
+/// another tool. It holds a target nobody in this daemon set, and may still
+/// be moving towards it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StartPolicy {
+    /// Disable it (release the motor) before anything else on the bus: the
+    /// daemon cannot know what it is doing, and no client supervises it
+    /// yet. The state a stop with the default `on_shutdown` leaves too.
+    #[default]
+    Disable,
+    /// Leave it enabled, its target shown as unknown until a client sends
+    /// one (the partner of `on_shutdown = "hold"`: a grasp survives a
+    /// restart). Its broadcast group moves only with per-joint frames
+    /// meanwhile, so nothing overwrites its target.
+    Keep,
 }
 
 fn default_scan_first() -> u8 {
@@ -170,6 +193,7 @@ impl BusConfig {
             timing: Timing::default(),
             rs485: default_rs485(),
             on_shutdown: ShutdownState::default(),
+            on_start: StartPolicy::default(),
         }
     }
 
@@ -294,6 +318,18 @@ mod tests {
         assert_eq!(c.poll.info01_every, PollPlan::default().info01_every);
         assert_eq!(c.timing, Timing::default());
         assert_eq!((c.scan_first, c.scan_last), (1, 159));
+    }
+
+    #[test]
+    fn on_start_defaults_to_disable_and_reads_keep() {
+        let c: BusConfig =
+            serde_json::from_str(r#"{"name":"b","path":"/dev/ttyUSB0","baud":500000}"#).unwrap();
+        assert_eq!(c.on_start, StartPolicy::Disable);
+        let c: BusConfig = serde_json::from_str(
+            r#"{"name":"b","path":"/dev/ttyUSB0","baud":500000,"on_start":"keep"}"#,
+        )
+        .unwrap();
+        assert_eq!(c.on_start, StartPolicy::Keep);
     }
 
     #[test]

@@ -31,7 +31,7 @@
 //! - `link`: the port: writes, reads, reply matching, frame log, reopen.
 //! - `owner`: the thread: asks the scheduler, does the slot's I/O; its
 //!   `ctx` (port + scheduler + publication) is all one-shot requests
-//!   (`jobs`, `estop`, `scan`, `baud`) get to work with.
+//!   (`jobs`, `estop`, `scan`, `baud`, `start`) get to work with.
 
 pub(crate) mod coalesce;
 pub(crate) mod config;
@@ -51,7 +51,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-pub use config::{BusConfig, PollPlan, ShutdownState, Timing};
+pub use config::{BusConfig, PollPlan, ShutdownState, StartPolicy, Timing};
 pub use error::BusError;
 pub use handle::{BusHandle, BusShared, BusSnapshot, Setpoint, Targets};
 

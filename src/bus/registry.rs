@@ -7,13 +7,28 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-use crate::protocol::status::{active_fault, fault_name, fsm};
+use crate::protocol::status::{active_fault, fault_name, fsm, fsm_name};
 use crate::protocol::{CtrlMode, Info01, Reply, ReplyBody};
 
 use super::coalesce::SlotInfo;
 use super::poll::PollState;
 use super::setpoints::Setpoint;
-use super::state::{BusEvent, DeviceState};
+use super::state::{BusEvent, DeviceState, DisabledReason, ResetRecord, ResetSignal};
+
+/// States in which a joint module powers its motor (SPEC §5 fsm; rev
+/// 2.0.8's `6 start` included).
+pub(crate) fn drives_motor(state: u8) -> bool {
+    const START: u8 = 6;
+    matches!(state, fsm::ALIGN | START | fsm::RUN)
+}
+
+/// States a device is in after power-up (SPEC §5: ready; rev 2.0.8's
+/// `1 init` and `2 precharge` on the way there).
+fn power_up_state(state: u8) -> bool {
+    const INIT: u8 = 1;
+    const PRECHARGE: u8 = 2;
+    matches!(state, fsm::READY | INIT | PRECHARGE)
+}
 
 /// One device as the owner tracks it.
 #[derive(Debug, Clone)]
@@ -25,6 +40,10 @@ pub(crate) struct Entry {
     pub measured: Option<(i16, Instant)>,
     /// When a frame last carried a new target to it.
     last_sent: Option<Instant>,
+    /// The daemon believes the device drives its motor: an INFO_01 said so
+    /// and nothing of the daemon's disabled it since. A power-up state
+    /// seen meanwhile is a reset.
+    believed_enabled: bool,
     control_updates: u32,
     telemetry_samples: u32,
 }
@@ -39,6 +58,7 @@ impl Entry {
             poll: PollState::default(),
             measured: None,
             last_sent: None,
+            believed_enabled: false,
             control_updates: 0,
             telemetry_samples: 0,
         }
@@ -48,9 +68,14 @@ impl Entry {
 /// What a reply changed that the owner must act on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub(crate) struct ReplyEffect {
-    /// A known device announced itself again: it rebooted, lost its mode,
-    /// its target and its enable.
-    pub rebooted: bool,
+    /// The device reset (power cut, reboot): it lost its mode, its target
+    /// and its enable; whatever waited to go to it is stale.
+    pub reset: bool,
+    /// The device just entered its fault state: its target is void.
+    pub faulted: bool,
+    /// The first INFO_01 heard from it shows it driving its motor: enabled
+    /// before the daemon started, holding a target the daemon does not know.
+    pub found_enabled: bool,
     /// The device just finished aligning (fsm align → run). A reference sent
     /// while it aligned may not have taken (SPEC leaves it open; the
     /// simulator holds its angle at the end of align), so its target must go
@@ -73,6 +98,11 @@ impl Registry {
             offline_after: offline_after.max(1),
             entries: BTreeMap::new(),
         }
+    }
+
+    /// The bus's name, for events.
+    pub(crate) fn bus(&self) -> &str {
+        &self.bus
     }
 
     /// Adds a device expected on the bus (offline until it answers).
@@ -112,6 +142,7 @@ impl Registry {
         self.entries.get(&id).map(|e| SlotInfo {
             speed_mode: e.state.mode == Some(CtrlMode::Speed),
             target: e.state.target_sent,
+            target_known: e.state.target_known,
             measured: e.measured.map(|(angle, _)| angle),
             last_sent: e.last_sent,
         })
@@ -126,35 +157,45 @@ impl Registry {
         solicited: bool,
         events: &mut Vec<BusEvent>,
     ) -> ReplyEffect {
-        let known = self.entries.contains_key(&reply.dev_id);
         let Registry { bus, entries, .. } = self;
         let entry = entries
             .entry(reply.dev_id)
             .or_insert_with(|| Entry::new(reply.dev_id));
-        let mut effect = ReplyEffect::default();
         mark_online(bus, entry, events);
         match reply.body() {
             ReplyBody::Info01(info) => {
-                effect.rebooted = !solicited && known;
-                if effect.rebooted {
-                    entry.state.mode = None;
-                    entry.state.target_sent = None;
-                }
-                note_fault(bus, entry, &info, events);
-                let was_aligning = entry.state.info01.is_some_and(|(i, _)| i.fsm == fsm::ALIGN);
-                effect.now_running = was_aligning && info.fsm == fsm::RUN;
-                entry.state.info01 = Some((info, now));
-                entry.measured = Some((info.angle, now));
+                let effect = on_info01(bus, entry, &info, now, solicited, events);
                 entry.telemetry_samples += u32::from(solicited);
+                effect
             }
             ReplyBody::Info02(info) => {
                 entry.state.info02 = Some((info, now));
                 entry.measured = Some((info.angle, now));
                 entry.telemetry_samples += 1;
+                ReplyEffect::default()
             }
-            _ => {}
+            _ => ReplyEffect::default(),
         }
-        effect
+    }
+
+    /// The daemon disabled the device (a request, an e-stop, its own stop):
+    /// it holds no target of ours, and ready from now on is no reset.
+    pub(crate) fn note_disabled(&mut self, id: u8, reason: DisabledReason) {
+        if let Some(e) = self.entries.get_mut(&id) {
+            e.state.target_sent = None;
+            e.state.target_known = true;
+            e.state.disabled_reason = Some(reason);
+            e.believed_enabled = false;
+        }
+    }
+
+    /// The daemon enabled the device: no reason to call it disabled.
+    pub(crate) fn note_enabled(&mut self, id: u8) {
+        if let Some(e) = self.entries.get_mut(&id) {
+            e.state.target_sent = None;
+            e.state.target_known = true;
+            e.state.disabled_reason = None;
+        }
     }
 
     /// A poll or read of `id` went unanswered.
@@ -191,6 +232,7 @@ impl Registry {
     pub(crate) fn record_sent(&mut self, id: u8, setpoint: Setpoint, at: Instant) {
         if let Some(e) = self.entries.get_mut(&id) {
             e.state.target_sent = Some(setpoint);
+            e.state.target_known = true;
             e.last_sent = Some(at);
             e.control_updates += 1;
         }
@@ -258,8 +300,92 @@ fn mark_online(bus: &str, entry: &mut Entry, events: &mut Vec<BusEvent>) {
     }
 }
 
-/// Reports a fault when the device enters one (not on every poll while in it).
-fn note_fault(bus: &str, entry: &Entry, info: &Info01, events: &mut Vec<BusEvent>) {
+/// An INFO_01: reset, fault and end of align detection, then the state.
+fn on_info01(
+    bus: &str,
+    entry: &mut Entry,
+    info: &Info01,
+    now: Instant,
+    solicited: bool,
+    events: &mut Vec<BusEvent>,
+) -> ReplyEffect {
+    let before = entry.state.info01.map(|(i, _)| i.fsm);
+    let mut effect = ReplyEffect::default();
+    if let Some(seen) = reset_signal(entry, info, solicited) {
+        note_reset(bus, entry, info, seen, now, events);
+        effect.reset = true;
+    }
+    effect.faulted = note_fault(bus, entry, info, events);
+    effect.now_running = before == Some(fsm::ALIGN) && info.fsm == fsm::RUN;
+    let driving = drives_motor(info.fsm);
+    // The first INFO_01 decides whether the target is known; later, a
+    // device not driving its motor holds no target at all.
+    effect.found_enabled = before.is_none() && driving;
+    if before.is_none() || !driving {
+        entry.state.target_known = !driving;
+    }
+    if driving {
+        entry.believed_enabled = true;
+        entry.state.disabled_reason = None;
+    }
+    entry.state.info01 = Some((*info, now));
+    entry.measured = Some((info.angle, now));
+    effect
+}
+
+/// A device in a power-up state that announced itself again (it was heard
+/// before: not its first announcement), or that the daemon believed
+/// enabled. An announcement showing the motor driven is no power-up: a
+/// late reply nobody waited for.
+fn reset_signal(entry: &Entry, info: &Info01, solicited: bool) -> Option<ResetSignal> {
+    if !power_up_state(info.fsm) {
+        return None;
+    }
+    let heard_before = entry.state.info01.is_some() || entry.state.info02.is_some();
+    if !solicited && heard_before {
+        Some(ResetSignal::Announcement)
+    } else if entry.believed_enabled {
+        Some(ResetSignal::StateDropped)
+    } else {
+        None
+    }
+}
+
+/// The device reset: disabled, position mode, no target; reported.
+fn note_reset(
+    bus: &str,
+    entry: &mut Entry,
+    info: &Info01,
+    seen: ResetSignal,
+    now: Instant,
+    events: &mut Vec<BusEvent>,
+) {
+    let fsm_before = entry.state.info01.map(|(i, _)| i.fsm);
+    let s = &mut entry.state;
+    s.mode = None;
+    s.target_sent = None;
+    s.target_known = true;
+    s.disabled_reason = Some(DisabledReason::Reset);
+    s.resets += 1;
+    s.last_reset = Some(ResetRecord {
+        seen,
+        fsm_before,
+        fsm: info.fsm,
+        at: now,
+    });
+    entry.believed_enabled = false;
+    events.push(BusEvent::DeviceReset {
+        bus: bus.to_string(),
+        dev_id: s.dev_id,
+        seen,
+        state_before: fsm_before.map_or("unknown", fsm_name),
+        state: fsm_name(info.fsm),
+    });
+}
+
+/// Reports a fault when the device enters one (not on every poll while in
+/// it). True when it just entered its fault state: its target is void.
+fn note_fault(bus: &str, entry: &mut Entry, info: &Info01, events: &mut Vec<BusEvent>) -> bool {
     let active = |i: &Info01| (i.fsm == fsm::FAULT, active_fault(i.err_code));
     let was = entry.state.info01.as_ref().map(|(i, _)| active(i));
     let now = active(info);
@@ -272,6 +398,12 @@ fn note_fault(bus: &str, entry: &Entry, info: &Info01, events: &mut Vec<BusEvent
             name: fault_name(now.1),
         });
     }
+    let entered = now.0 && was.map(|w| w.0) != Some(true);
+    if entered {
+        entry.state.target_sent = None;
+        entry.state.disabled_reason = Some(DisabledReason::Fault);
+    }
+    entered
 }
 
 #[cfg(test)]
@@ -331,7 +463,7 @@ mod tests {
     }
 
     #[test]
-    fn a_second_announcement_is_a_reboot_that_forgets_target_and_mode() {
+    fn a_second_announcement_is_a_reset_that_forgets_target_and_mode() {
         let mut r = Registry::new("b", 3);
         let mut ev = Vec::new();
         let now = Instant::now();
@@ -346,9 +478,21 @@ mod tests {
             now,
         );
         let fx = r.on_reply(&info01(2, 0, 0), now, false, &mut ev);
-        assert!(fx.rebooted);
+        assert!(fx.reset);
         let s = &r.get(2).unwrap().state;
         assert_eq!((s.mode, s.target_sent), (None, None));
+        assert_eq!(
+            (s.resets, s.disabled_reason),
+            (1, Some(DisabledReason::Reset))
+        );
+        assert!(matches!(
+            ev.last(),
+            Some(BusEvent::DeviceReset {
+                dev_id: 2,
+                seen: ResetSignal::Announcement,
+                ..
+            })
+        ));
     }
 
     #[test]

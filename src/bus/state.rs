@@ -30,10 +30,84 @@ pub struct DeviceState {
     pub mode: Option<CtrlMode>,
     /// The target last put on the wire.
     pub target_sent: Option<Setpoint>,
+    /// False while the device may hold a target the daemon does not know:
+    /// not heard yet, or found enabled at start (`on_start = "keep"`) and
+    /// sent nothing since. `target_sent` is then `None` meaning unknown.
+    pub target_known: bool,
     pub missed_polls: u32,
+    /// Why the daemon holds the joint for disabled, until it is enabled
+    /// again (or seen driving its motor): `None` while enabled or before
+    /// anything disabled it.
+    pub disabled_reason: Option<DisabledReason>,
+    /// Resets (power cycles) detected since the daemon started.
+    pub resets: u64,
+    /// The latest of them.
+    pub last_reset: Option<ResetRecord>,
     /// Control updates and telemetry samples per second over the last second.
     pub control_hz: f64,
     pub telemetry_hz: f64,
+}
+
+/// Why a joint is disabled, as far as the daemon knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DisabledReason {
+    /// The device reset (power cut, brown-out, reboot) and came back disabled.
+    Reset,
+    /// The device entered its fault state.
+    Fault,
+    /// An e-stop disabled it.
+    Estop,
+    /// A disable request (REST, WebSocket, the teleop watchdog).
+    Request,
+    /// Found enabled when the daemon started, disabled by `on_start = "disable"`.
+    OnStart,
+    /// The daemon stopped (`on_shutdown = "disable"`).
+    Shutdown,
+}
+
+impl DisabledReason {
+    /// The name in JSON and logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Reset => "reset",
+            Self::Fault => "fault",
+            Self::Estop => "estop",
+            Self::Request => "request",
+            Self::OnStart => "on_start",
+            Self::Shutdown => "shutdown",
+        }
+    }
+}
+
+/// What told the daemon a device had reset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ResetSignal {
+    /// Its unsolicited power-up INFO_01 (SPEC §5), after it had been heard before.
+    Announcement,
+    /// Its state machine back at ready/init/precharge while the daemon
+    /// believed it enabled (nothing of the daemon's disabled it).
+    StateDropped,
+}
+
+impl ResetSignal {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Announcement => "announcement",
+            Self::StateDropped => "state_dropped",
+        }
+    }
+}
+
+/// One detected reset of a device.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ResetRecord {
+    pub seen: ResetSignal,
+    /// fsm before (the last INFO_01 the daemon had), and in the reply that showed it.
+    pub fsm_before: Option<u8>,
+    pub fsm: u8,
+    pub at: Instant,
 }
 
 /// Counters of one bus, monotonic since start (rates are derived by readers).
@@ -168,6 +242,26 @@ pub enum BusEvent {
     },
     Estop {
         bus: String,
+    },
+    /// A device found enabled at start (its first INFO_01 shows align or
+    /// run): what `on_start` does with it.
+    FoundEnabled {
+        bus: String,
+        dev_id: u8,
+        state: &'static str,
+        /// `keep` (left enabled, target unknown) or `disable`.
+        on_start: &'static str,
+    },
+    /// A device reset (power cut, reboot): it is disabled, forgot its mode
+    /// and target; the daemon forgot its targets too.
+    DeviceReset {
+        bus: String,
+        dev_id: u8,
+        /// `announcement` or `state_dropped`.
+        seen: ResetSignal,
+        /// State name before (`run`, ...; `unknown` if never read) and now.
+        state_before: &'static str,
+        state: &'static str,
     },
 }
 

@@ -127,6 +127,38 @@ impl TargetView {
     }
 }
 
+/// A reset (power cut, reboot) the daemon detected.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub(crate) struct ResetView {
+    /// What showed it: `announcement` (its unsolicited power-up INFO_01)
+    /// or `state_dropped` (ready again while the daemon believed it enabled).
+    #[schema(example = "state_dropped")]
+    pub seen: &'static str,
+    /// State before (`unknown` if never read) and in the reply that showed it.
+    #[schema(example = "run")]
+    pub state_before: &'static str,
+    #[schema(example = "ready")]
+    pub state: &'static str,
+    /// Milliseconds since it was detected.
+    #[schema(example = 5230.0)]
+    pub age_ms: f64,
+}
+
+pub(crate) fn reset_view(dev: &DeviceState, now: Instant) -> Option<ResetView> {
+    dev.last_reset.map(|r| ResetView {
+        seen: r.seen.name(),
+        state_before: r.fsm_before.map_or("unknown", fsm_name),
+        state: fsm_name(r.fsm),
+        age_ms: age_ms(r.at, now),
+    })
+}
+
+/// Why the joint is disabled, if the daemon knows: `reset`, `fault`,
+/// `estop`, `request`, `on_start`, `shutdown`.
+pub(crate) fn disabled_reason(dev: &DeviceState) -> Option<&'static str> {
+    dev.disabled_reason.map(|r| r.name())
+}
+
 pub(crate) use crate::protocol::frame_json::hex;
 
 fn age_ms(at: Instant, now: Instant) -> f64 {

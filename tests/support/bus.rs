@@ -113,6 +113,20 @@ impl Rig {
             .collect()
     }
 
+    /// Stops the bus owner and starts a new one on the same simulator, as
+    /// a daemon restart would (the devices keep their state).
+    pub fn restart_bus(&mut self, tune: impl FnOnce(&mut BusConfig)) {
+        self.stop();
+        let path = self.sim.device_path().expect("pty path");
+        let mut cfg = BusConfig::new("test", path, BAUD);
+        cfg.ids = self.sim.devices().iter().map(|d| d.id).collect();
+        cfg.timing.reply_margin_us = TEST_REPLY_MARGIN_US;
+        tune(&mut cfg);
+        let (bus, thread) = spawn_bus(cfg).expect("spawn bus");
+        self.bus = bus;
+        self.thread = Some(thread);
+    }
+
     pub fn stop(&mut self) {
         if let Some(t) = self.thread.take() {
             t.stop();

@@ -8,17 +8,11 @@ use std::time::Instant;
 
 use crate::bus::error::BusError;
 use crate::bus::handle::{BusEvent, EstopReport};
-use crate::protocol::status::fsm;
+use crate::bus::registry::drives_motor;
+use crate::bus::state::DisabledReason;
 use crate::protocol::{Command, Control, ALL_DEVICES};
 
 use super::ctx::Ctx;
-
-/// States in which a joint module powers its motor (SPEC §5 fsm; rev 2.0.8's
-/// `6 start` included).
-fn drives_motor(state: u8) -> bool {
-    const START: u8 = 6;
-    matches!(state, fsm::ALIGN | START | fsm::RUN)
-}
 
 /// What reading a device back after the stop found.
 enum ReadBack {
@@ -37,7 +31,7 @@ pub(super) fn run(ctx: &mut Ctx, generation: u64) {
         .lock()
         .unwrap_or_else(|p| p.into_inner())
         .take();
-    let sent = disable_everything(ctx);
+    let sent = disable_everything(ctx, DisabledReason::Estop);
     let preempted = ctx.fail_queued(&BusError::Preempted);
     let result = sent.map(|(frames_sent, handed)| {
         let mut report = EstopReport {
@@ -67,10 +61,13 @@ pub(super) fn run(ctx: &mut Ctx, generation: u64) {
 
 /// Writes the disable frames and forgets every setpoint; returns the
 /// frame count and when they were handed to the port.
-pub(super) fn disable_everything(ctx: &mut Ctx) -> Result<(u32, Instant), BusError> {
+pub(super) fn disable_everything(
+    ctx: &mut Ctx,
+    reason: DisabledReason,
+) -> Result<(u32, Instant), BusError> {
     ctx.drop_all_setpoints();
     for id in ctx.sched().registry().ids() {
-        ctx.sched_mut().registry_mut().forget_target(id);
+        ctx.sched_mut().registry_mut().note_disabled(id, reason);
     }
     if !ctx.link_is_up() {
         return Err(ctx.down_error());

@@ -6,6 +6,7 @@
 
 use crate::bus::error::BusError;
 use crate::bus::handle::Targets;
+use crate::bus::state::DisabledReason;
 use crate::bus::wire::Want;
 use crate::protocol::command::index;
 use crate::protocol::status::{active_fault, fault_name, fsm, fsm_name};
@@ -62,13 +63,16 @@ fn control_frames(targets: &Targets, ids: &[u8], make: fn(u8) -> Control) -> Vec
 
 pub(super) fn enable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
     let ids = resolve(ctx, &targets)?;
+    // An enable holds the joint where it stands (SPEC §4.1: EN = 1 powers
+    // up and holds; references apply only with EN = 3): no target written
+    // before it (before a disable, a power cut, a fault, an e-stop) may
+    // follow it. Cleared before the frame, so a target written from here
+    // on is a new one and goes out (after align, too).
+    let reached = addressed(ctx, &targets, &ids);
+    forget_targets(ctx, &reached);
     ctx.job_send(&control_frames(&targets, &ids, Control::enable))?;
-    for &id in &ids {
-        // It holds where it is; a target set before the enable goes out again.
-        ctx.sched_mut().registry_mut().forget_target(id);
-        if let Some(setpoint) = ctx.setpoints().get(id) {
-            ctx.sched_mut().requeue(id, setpoint);
-        }
+    for &id in &reached {
+        ctx.sched_mut().registry_mut().note_enabled(id);
     }
     for &id in &ids {
         await_fsm(ctx, id, "enable", |f| f == fsm::ALIGN || f == fsm::RUN)?;
@@ -77,22 +81,44 @@ pub(super) fn enable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
 }
 
 pub(super) fn disable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
+    disable_because(ctx, targets, DisabledReason::Request)
+}
+
+/// A disable, recorded with why (a request, the start policy).
+pub(super) fn disable_because(
+    ctx: &mut Ctx,
+    targets: Targets,
+    reason: DisabledReason,
+) -> Result<(), BusError> {
     let ids = resolve(ctx, &targets)?;
     ctx.job_send(&control_frames(&targets, &ids, Control::disable))?;
-    // `0xFF` reached offline devices too: every target goes.
-    let cleared = match targets {
-        Targets::All => ctx.sched().registry().ids(),
-        Targets::Ids(_) => ids.clone(),
-    };
-    ctx.setpoints().clear(Some(&cleared));
-    for &id in &cleared {
-        ctx.sched_mut().forget_setpoint(id);
-        ctx.sched_mut().registry_mut().forget_target(id);
+    let reached = addressed(ctx, &targets, &ids);
+    forget_targets(ctx, &reached);
+    for &id in &reached {
+        // Before the read-back: ready from now on is no reset.
+        ctx.sched_mut().registry_mut().note_disabled(id, reason);
     }
     for &id in &ids {
         await_fsm(ctx, id, "disable", |f| f == fsm::READY || f == fsm::FAULT)?;
     }
     Ok(())
+}
+
+/// Every device a control frame reached: `0xFF` reaches offline devices too.
+fn addressed(ctx: &Ctx, targets: &Targets, ids: &[u8]) -> Vec<u8> {
+    match targets {
+        Targets::All => ctx.sched().registry().ids(),
+        Targets::Ids(_) => ids.to_vec(),
+    }
+}
+
+/// The joints hold no target of ours: stored, pending and sent ones go.
+fn forget_targets(ctx: &mut Ctx, ids: &[u8]) {
+    ctx.setpoints().clear(Some(ids));
+    for &id in ids {
+        ctx.sched_mut().forget_setpoint(id);
+        ctx.sched_mut().registry_mut().forget_target(id);
+    }
 }
 
 /// Reads INFO_01 until the fsm satisfies `ok`; a fault is reported by name.

@@ -10,6 +10,7 @@
 //!
 //! - `ctx`: what the owner's code works with (port, scheduler, publication).
 //! - `jobs`, `write`, `estop`, `scan`, `baud`: one-shot requests, functions of a `&mut Ctx`.
+//! - `start`: joints found enabled at start, disabled when `on_start = "disable"`.
 //! - `confirm`: reading a RES, naming a config frame in errors.
 //! - `stats`: rate windows.
 
@@ -19,6 +20,7 @@ mod ctx;
 mod estop;
 mod jobs;
 mod scan;
+mod start;
 mod stats;
 mod write;
 
@@ -33,6 +35,7 @@ use crate::bus::error::BusError;
 use crate::bus::handle::{BusShared, Request};
 use crate::bus::link::Link;
 use crate::bus::scheduler::Slot;
+use crate::bus::state::DisabledReason;
 use crate::protocol::ConfigParam;
 use crate::rt::{precise_timers, set_fifo};
 
@@ -130,6 +133,10 @@ impl Owner {
                 scan::startup(ctx);
                 Ok(())
             }
+            Slot::Release { ids } => {
+                start::release(ctx, ids);
+                Ok(())
+            }
             Slot::Reopen { at } => {
                 ctx.while_down(now, at);
                 Ok(())
@@ -141,7 +148,7 @@ impl Owner {
     fn shutdown(&mut self) {
         let ctx = &mut self.ctx;
         let disable = ctx.cfg().on_shutdown == ShutdownState::Disable;
-        if disable && estop::disable_everything(ctx).is_ok() {
+        if disable && estop::disable_everything(ctx, DisabledReason::Shutdown).is_ok() {
             // Let the disable frames leave the wire before the port closes.
             let _ = ctx.wait_until(ctx.sched().clock().free_at());
         }

@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use crate::bus::coalesce::{self, Pending, Planned};
 use crate::bus::registry::Registry;
-use crate::bus::setpoints::{SetpointStore, StoredSetpoint};
+use crate::bus::setpoints::SetpointStore;
 use crate::bus::state::WireAck;
 
 /// Setpoints waiting for the wire and what has been acknowledged of them.
@@ -142,12 +142,6 @@ impl Control {
     /// One joint's pending setpoint is void (disable, re-zero, reboot).
     pub(super) fn forget(&mut self, id: u8) {
         self.pending.remove(&id);
-    }
-
-    /// A joint's stored target goes out again (after an enable).
-    pub(super) fn requeue(&mut self, id: u8, setpoint: StoredSetpoint) {
-        let since = setpoint.accepted;
-        self.pending.insert(id, Pending { setpoint, since });
     }
 
     /// The joint's pending setpoint follows its id change.

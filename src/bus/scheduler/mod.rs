@@ -25,10 +25,10 @@ use std::time::{Duration, Instant};
 #[cfg(test)]
 use crate::bus::coalesce::Pending;
 use crate::bus::coalesce::Planned;
-use crate::bus::config::BusConfig;
+use crate::bus::config::{BusConfig, StartPolicy};
 use crate::bus::poll::{ControlBudget, PollPlanner};
 use crate::bus::registry::Registry;
-use crate::bus::setpoints::{SetpointStore, StoredSetpoint};
+use crate::bus::setpoints::SetpointStore;
 use crate::bus::state::{BusEvent, WireAck};
 use crate::bus::wire::{ReplyWindow, Want, WireClock};
 use crate::protocol::InfoBlock;
@@ -60,6 +60,9 @@ pub(crate) enum Slot {
     Request,
     /// Scan the configured range (no ids were configured).
     Scan,
+    /// Disable these joints, found enabled at start (`on_start = "disable"`):
+    /// ahead of everything but an e-stop.
+    Release { ids: Vec<u8> },
     /// Write this control frame (coalesced setpoints).
     Control(Planned),
     /// Read `block` of `dev_id`; its reply window follows from
@@ -106,6 +109,10 @@ pub(crate) struct Scheduler {
     estop_seen: u64,
     /// The configured range still has to be scanned.
     needs_scan: bool,
+    /// What to do with a joint found enabled at start.
+    on_start: StartPolicy,
+    /// Joints found enabled and still to be disabled (`on_start = "disable"`).
+    release: std::collections::BTreeSet<u8>,
     /// The last read that timed out and when its reply was due: the reply
     /// may still come, late, and must not be taken for an announcement.
     overdue: Option<(Want, Instant)>,
@@ -133,6 +140,8 @@ impl Scheduler {
             job: JobPhase::default(),
             estop_seen: 0,
             needs_scan: cfg.ids.is_empty(),
+            on_start: cfg.on_start,
+            release: Default::default(),
             overdue: None,
             events: Vec::new(),
             dropped: 0,
@@ -157,6 +166,12 @@ impl Scheduler {
         }
         if let Some(slot) = self.estop_slot(work) {
             return slot;
+        }
+        if !self.release.is_empty() {
+            self.control.clear_prepared();
+            self.job = JobPhase::default();
+            let ids = std::mem::take(&mut self.release).into_iter().collect();
+            return Slot::Release { ids };
         }
         if work.request_queued || self.needs_scan {
             self.control.clear_prepared();
@@ -322,11 +337,6 @@ impl Scheduler {
     /// One joint's pending setpoint is void (disabled, re-zeroed, mode changed).
     pub(crate) fn forget_setpoint(&mut self, id: u8) {
         self.control.forget(id);
-    }
-
-    /// A joint's stored target goes out again (an enable: it holds where it is).
-    pub(crate) fn requeue(&mut self, id: u8, setpoint: StoredSetpoint) {
-        self.control.requeue(id, setpoint);
     }
 
     /// After an id change the device's entry and pending setpoint follow it.

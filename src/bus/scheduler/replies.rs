@@ -5,8 +5,11 @@
 
 use std::time::{Duration, Instant};
 
+use crate::bus::config::StartPolicy;
 use crate::bus::registry::ReplyEffect;
+use crate::bus::state::BusEvent;
 use crate::bus::wire::Want;
+use crate::protocol::status::fsm_name;
 use crate::protocol::{Reply, ReplyBody};
 
 use super::Scheduler;
@@ -23,13 +26,15 @@ impl Scheduler {
         if !feeds {
             return ReplyEffect::default();
         }
-        self.reg.on_reply(reply, at, true, &mut self.events)
+        let effect = self.reg.on_reply(reply, at, true, &mut self.events);
+        self.after_reply(reply.dev_id, effect);
+        effect
     }
 
     /// A reply nobody waited for: a power-up announcement, or the late reply
     /// of the last read that timed out (which then widens the deadline).
-    /// A rebooted device forgot its target: what waited for it is stale, and
-    /// the owner clears its slot in the store.
+    /// A device that reset forgot its target: what waited for it is stale,
+    /// and the owner clears its slot in the store.
     pub(crate) fn unsolicited(&mut self, reply: &Reply, at: Instant) -> ReplyEffect {
         self.clock.line_free(at);
         let late = self
@@ -41,11 +46,40 @@ impl Scheduler {
         let effect = self
             .reg
             .on_reply(reply, at, late.is_some(), &mut self.events);
-        if effect.rebooted {
-            self.control.forget(reply.dev_id);
+        self.after_reply(reply.dev_id, effect);
+        effect
+    }
+
+    /// A device that reset or faulted holds no target: what waited to go
+    /// to it is stale, and so is a frame planned with it.
+    fn after_reply(&mut self, id: u8, effect: ReplyEffect) {
+        if effect.reset || effect.faulted {
+            self.control.forget(id);
             self.control.clear_prepared();
         }
-        effect
+        if effect.found_enabled {
+            self.found_enabled(id);
+        }
+    }
+
+    /// A joint enabled before the daemon started: reported, and with
+    /// `on_start = "disable"` released at the next slot.
+    fn found_enabled(&mut self, id: u8) {
+        let state = self
+            .reg
+            .get(id)
+            .and_then(|e| e.state.info01)
+            .map_or("unknown", |(i, _)| fsm_name(i.fsm));
+        let disable = self.on_start == StartPolicy::Disable;
+        if disable {
+            self.release.insert(id);
+        }
+        self.events.push(BusEvent::FoundEnabled {
+            bus: self.reg.bus().to_string(),
+            dev_id: id,
+            state,
+            on_start: if disable { "disable" } else { "keep" },
+        });
     }
 
     /// The reply to `want`, due at `due`, had not come by `now`: counted

@@ -17,7 +17,8 @@ use crate::http::extract::{ApiPath, ApiQuery};
 use crate::http::limits::JointLimits;
 use crate::http::state::{known_device, AppState, BusPath, DevicePath};
 use crate::http::telemetry::{
-    firmware_of, motion_view, status_view, FaultView, MotionView, StatusView, TargetView,
+    disabled_reason, firmware_of, motion_view, reset_view, status_view, FaultView, MotionView,
+    ResetView, StatusView, TargetView,
 };
 use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
 
@@ -59,6 +60,26 @@ pub(crate) struct DeviceSummary {
     #[schema(example = 8.2)]
     pub telemetry_age_ms: Option<f64>,
     pub target: Option<TargetView>,
+    /// False while the device may hold a target the daemon does not know
+    /// (not heard from yet, or found enabled at start with the bus's
+    /// `on_start = "keep"` and sent nothing since): `target` is then `null`
+    /// meaning *unknown*, not "no target". True otherwise: `target` is the
+    /// target last put on the wire, or `null` when the joint holds none of
+    /// the daemon's (disabled, or enabled and holding where it stood).
+    #[schema(example = true)]
+    pub target_known: bool,
+    /// Why the joint is disabled, when the daemon knows: `reset` (the
+    /// device lost power or rebooted), `fault`, `estop`, `request` (a
+    /// disable: REST, WebSocket, the teleop watchdog), `on_start` (found
+    /// enabled at start, disabled by the bus's `on_start`), `shutdown`.
+    /// `null` while enabled, or if nothing disabled it since the daemon started.
+    #[schema(example = "reset")]
+    pub disabled_reason: Option<&'static str>,
+    /// Resets (power cuts, reboots) detected since the daemon started.
+    #[schema(example = 0)]
+    pub resets: u64,
+    /// The latest detected reset.
+    pub last_reset: Option<ResetView>,
     #[schema(example = 450.0)]
     pub control_hz: f64,
     #[schema(example = 45.0)]
@@ -94,6 +115,26 @@ pub(crate) struct DeviceDetail {
     pub motion: Option<MotionView>,
     /// The target last put on the wire.
     pub target: Option<TargetView>,
+    /// False while the device may hold a target the daemon does not know
+    /// (not heard from yet, or found enabled at start with the bus's
+    /// `on_start = "keep"` and sent nothing since): `target` is then `null`
+    /// meaning *unknown*, not "no target". True otherwise: `target` is the
+    /// target last put on the wire, or `null` when the joint holds none of
+    /// the daemon's (disabled, or enabled and holding where it stood).
+    #[schema(example = true)]
+    pub target_known: bool,
+    /// Why the joint is disabled, when the daemon knows: `reset` (the
+    /// device lost power or rebooted), `fault`, `estop`, `request` (a
+    /// disable: REST, WebSocket, the teleop watchdog), `on_start` (found
+    /// enabled at start, disabled by the bus's `on_start`), `shutdown`.
+    /// `null` while enabled, or if nothing disabled it since the daemon started.
+    #[schema(example = "reset")]
+    pub disabled_reason: Option<&'static str>,
+    /// Resets (power cuts, reboots) detected since the daemon started.
+    #[schema(example = 0)]
+    pub resets: u64,
+    /// The latest detected reset.
+    pub last_reset: Option<ResetView>,
     /// Soft limits that apply to targets of this joint.
     pub limits: JointLimits,
     #[schema(example = 0)]
@@ -145,6 +186,10 @@ fn summary(dev: &DeviceState, name: Option<&str>, now: Instant) -> DeviceSummary
         vbus_v: status.as_ref().map(|s| s.vbus_v),
         telemetry_age_ms: age,
         target: dev.target_sent.map(|sp| TargetView::new(sp, fw)),
+        target_known: dev.target_known,
+        disabled_reason: disabled_reason(dev),
+        resets: dev.resets,
+        last_reset: reset_view(dev, now),
         control_hz: dev.control_hz,
         telemetry_hz: dev.telemetry_hz,
     }
@@ -200,6 +245,10 @@ async fn get_device(
             .as_ref()
             .map(|(i, at)| motion_view(i, fw, *at, now)),
         target: dev.target_sent.map(|sp| TargetView::new(sp, fw)),
+        target_known: dev.target_known,
+        disabled_reason: disabled_reason(&dev),
+        resets: dev.resets,
+        last_reset: reset_view(&dev, now),
         limits: state.limits(&snap.name, id),
         missed_polls: dev.missed_polls,
         control_hz: dev.control_hz,

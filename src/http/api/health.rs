@@ -198,6 +198,13 @@ fn device_metrics(m: &mut Metrics, snap: &BusSnapshot, now: Instant) {
         );
         m.gauge("jointd_device_control_hz", l.clone(), dev.control_hz);
         m.gauge("jointd_device_telemetry_hz", l.clone(), dev.telemetry_hz);
+        // Power cuts and reboots the daemon detected (announcement or state drop).
+        m.push(
+            "jointd_device_resets_total",
+            "counter",
+            l.clone(),
+            dev.resets as f64,
+        );
         if let Some((i, at)) = &dev.info01 {
             let age = now.saturating_duration_since(*at).as_secs_f64();
             m.gauge("jointd_device_fsm", l.clone(), f64::from(i.fsm));

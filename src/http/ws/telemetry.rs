@@ -10,7 +10,7 @@ use super::messages::Field;
 use crate::bus::handle::DeviceState;
 use crate::bus::BusSnapshot;
 use crate::http::hub::FragmentCache;
-use crate::http::telemetry::{firmware_of, measured_angle_raw};
+use crate::http::telemetry::{disabled_reason, firmware_of, measured_angle_raw};
 use crate::protocol::status::{active_fault, fault_name, fsm_name};
 use crate::protocol::units;
 
@@ -60,6 +60,15 @@ fn joint(sub: &Subscription, bus: &str, dev: &DeviceState, now: Instant) -> Map<
     );
     for f in &sub.fields {
         m.insert(field_name(*f).into(), field_value(*f, dev));
+        if *f == Field::TargetDeg {
+            // `target_deg: null` with `target_known: false` is unknown, not idle.
+            m.insert("target_known".into(), dev.target_known.into());
+        }
+        if *f == Field::Fsm {
+            // Beside the state: why the joint is disabled, if known.
+            let reason = disabled_reason(dev).map_or(Value::Null, Value::from);
+            m.insert("disabled_reason".into(), reason);
+        }
     }
     m
 }

@@ -40,11 +40,7 @@ impl Ctx {
         for (reply, at) in &inbox {
             self.link.counters.unsolicited += 1;
             let effect = self.sched.unsolicited(reply, *at);
-            if effect.rebooted {
-                // A rebooted device is disabled and forgot its target.
-                self.shared.setpoints.clear(Some(&[reply.dev_id]));
-            }
-            self.resend_if_aligned(reply.dev_id, effect);
+            self.after_reply(reply.dev_id, effect);
         }
         self.link.inbox = inbox;
         self.link.inbox.clear();
@@ -169,12 +165,24 @@ impl Ctx {
             return None;
         };
         let effect = self.sched.reply(&reply, at, due);
-        self.resend_if_aligned(reply.dev_id, effect);
+        self.after_reply(reply.dev_id, effect);
         Some(reply)
     }
 
+    /// What a reply means for the store: a device that reset or faulted
+    /// holds no target, and none written before may reach it later (the
+    /// scheduler already forgot what was pending). Rare: nothing is done
+    /// here for an ordinary reply.
+    fn after_reply(&mut self, id: u8, effect: ReplyEffect) {
+        if effect.reset || effect.faulted {
+            self.shared.setpoints.clear(Some(&[id]));
+        }
+        self.resend_if_aligned(id, effect);
+    }
+
     /// A joint that just finished aligning gets its latest target again,
-    /// through the store like any client write (a newer write wins).
+    /// through the store like any client write (a newer write wins): only
+    /// one written since its enable, which cleared the store.
     fn resend_if_aligned(&mut self, id: u8, effect: ReplyEffect) {
         if !effect.now_running {
             return;

@@ -5,7 +5,7 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Instant, SystemTime};
 
-use crate::bus::handle::BusSnapshot;
+use crate::bus::handle::{BusEvent, BusSnapshot};
 
 use super::Ctx;
 
@@ -46,8 +46,41 @@ impl Ctx {
         };
         self.shared.snapshot.send_replace(Arc::new(snapshot));
         for event in self.sched.drain_events() {
+            log_event(&self.cfg.name, &event);
             self.shared.emit(event);
         }
         self.stats.published(now);
+    }
+}
+
+/// The events an operator must find in the log, once each (here, where
+/// they are published, not on the reply path that detected them).
+fn log_event(bus: &str, event: &BusEvent) {
+    match event {
+        BusEvent::DeviceReset {
+            dev_id,
+            seen,
+            state_before,
+            state,
+            ..
+        } => tracing::warn!(
+            bus,
+            dev_id,
+            "device {dev_id} reset (power cut or reboot): {} ({state_before} -> {state}); \
+             it is disabled and its targets are forgotten",
+            seen.name()
+        ),
+        BusEvent::FoundEnabled {
+            dev_id,
+            state,
+            on_start,
+            ..
+        } => tracing::warn!(
+            bus,
+            dev_id,
+            "device {dev_id} found enabled at start ({state}), its target unknown; \
+             on_start = \"{on_start}\""
+        ),
+        _ => {}
     }
 }

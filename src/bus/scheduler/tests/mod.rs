@@ -58,7 +58,9 @@ impl Bus {
         let t0 = Instant::now();
         let mut s = Scheduler::new(&cfg, t0);
         s.link_up(t0);
+        // Heard ready, then enabled by the daemon: running, target known.
         for &id in online {
+            s.unsolicited(&info01(id, fsm::READY), t0);
             s.unsolicited(&info01(id, fsm::RUN), t0);
         }
         s.drain_events().for_each(drop);

@@ -104,12 +104,12 @@ fn an_announcement_is_no_late_reply() {
 }
 
 #[test]
-fn a_rebooted_device_loses_its_pending_setpoint() {
+fn a_reset_device_loses_its_pending_setpoint() {
     let mut bus = Bus::new(&[1, 2], &[1, 2]);
     bus.set([1, 2], 500);
     bus.s.prepare(bus.now, &bus.store);
     let effect = bus.s.unsolicited(&info01(1, fsm::READY), bus.now);
-    assert!(effect.rebooted);
+    assert!(effect.reset);
     assert_eq!(bus.s.pending().keys().copied().collect::<Vec<_>>(), vec![2]);
     assert!(bus.s.control.peek_prepared().is_none());
 }
@@ -124,4 +124,28 @@ fn an_idle_bus_listens_a_tick() {
             until: bus.now + IDLE_TICK
         }
     );
+}
+
+#[test]
+fn a_running_device_polled_ready_is_a_reset_that_loses_its_pending_setpoint() {
+    let mut bus = Bus::new(&[1, 2], &[1, 2]);
+    bus.set([1, 2], 500);
+    bus.s.prepare(bus.now, &bus.store);
+    let due = bus.now + Duration::from_millis(1);
+    let effect = bus.s.reply(&info01(1, fsm::READY), due, due);
+    assert!(
+        effect.reset,
+        "announced running, now ready: the power-up went unheard"
+    );
+    assert_eq!(bus.s.pending().keys().copied().collect::<Vec<_>>(), vec![2]);
+    assert!(bus.s.control.peek_prepared().is_none());
+    let again = bus.s.reply(&info01(1, fsm::READY), due, due);
+    assert!(!again.reset, "one detection per reset");
+}
+
+#[test]
+fn a_late_reply_of_a_running_device_is_no_reset() {
+    let mut bus = Bus::new(&[1], &[1]);
+    let effect = bus.s.unsolicited(&info01(1, fsm::RUN), bus.now);
+    assert!(!effect.reset);
 }

@@ -53,3 +53,61 @@ fn the_startup_scan_runs_until_done_after_requests() {
     bus.s.scan_done();
     assert!(matches!(bus.next(), Slot::Listen { .. }));
 }
+
+/// A scheduler whose devices were running before it started.
+fn found_running(policy: crate::bus::config::StartPolicy) -> Bus {
+    let mut cfg = config(&[1, 2]);
+    cfg.on_start = policy;
+    let mut bus = Bus::with(cfg, &[]);
+    bus.s.unsolicited(&info01(1, fsm::RUN), bus.now);
+    bus.s.unsolicited(&info01(2, fsm::READY), bus.now);
+    bus
+}
+
+#[test]
+fn a_joint_found_enabled_is_released_first_with_on_start_disable() {
+    let mut bus = found_running(crate::bus::config::StartPolicy::Disable);
+    let events: Vec<_> = bus.s.drain_events().collect();
+    assert!(events.iter().any(|e| matches!(
+        e,
+        BusEvent::FoundEnabled {
+            dev_id: 1,
+            on_start: "disable",
+            ..
+        }
+    )));
+    bus.set([2], 500);
+    bus.request = true;
+    bus.estop = 1;
+    assert_eq!(
+        bus.next(),
+        Slot::EStop { generation: 1 },
+        "an e-stop still first"
+    );
+    assert_eq!(bus.next(), Slot::Release { ids: vec![1] });
+    assert_eq!(bus.next(), Slot::Request, "released once");
+    assert!(!bus.s.registry().get(1).unwrap().state.target_known);
+    assert!(bus.s.registry().get(2).unwrap().state.target_known);
+}
+
+#[test]
+fn a_joint_found_enabled_is_left_alone_with_on_start_keep() {
+    let mut bus = found_running(crate::bus::config::StartPolicy::Keep);
+    let events: Vec<_> = bus.s.drain_events().collect();
+    assert!(events.iter().any(|e| matches!(
+        e,
+        BusEvent::FoundEnabled {
+            dev_id: 1,
+            on_start: "keep",
+            ..
+        }
+    )));
+    bus.request = true;
+    assert_eq!(bus.next(), Slot::Request);
+    assert!(!bus.s.registry().get(1).unwrap().state.target_known);
+    // Heard running again: still nothing to release, still unknown.
+    bus.s.unsolicited(&info01(1, fsm::RUN), bus.now);
+    bus.request = false;
+    assert!(!matches!(bus.next(), Slot::Release { .. }));
+    assert!(!bus.s.registry().get(1).unwrap().state.target_known);
+}
