@@ -33,6 +33,7 @@
 //! | a device reset (announcement, state drop), a joint found enabled at start | `bus::registry` (detection); `bus::owner` (`start`: `on_start`) |
 //! | enable, verified writes, id/baud change, scan, e-stop on the wire | `bus::owner` (its `jobs`, `write`, `baud`, `scan`, `estop`) |
 //! | what a bus error is; which HTTP status it gets | `bus::error`; `http::error` |
+//! | who may call at all: token, Host (DNS rebinding), browser origin, body size | `http::auth`, `http::guard` (checks), `http::policy` (the decisions, pure) |
 //! | a REST route | `http::api` (one file per area), its OpenAPI in the same handler |
 //! | a WebSocket message | `http::ws::messages`, applied in `http::ws::session` |
 //! | soft limits, target checks (REST and WebSocket) | `http::limits`, `http::targets` |
