@@ -128,7 +128,11 @@ pub(crate) fn parse(text: &str) -> Result<ClientMessage, ParseError> {
         .ok_or_else(|| bad("a message is a JSON object with a `type`".into()))?;
     let kind = match obj.remove("type") {
         Some(Value::String(s)) => s,
-        _ => {
+        Some(other) => return Err(bad(format!(
+            "`type` must be a string (subscribe, unsubscribe, setpoints, watchdog, ping), not {}",
+            json_kind(&other)
+        ))),
+        None => {
             return Err(bad(
                 "missing `type` (subscribe, unsubscribe, setpoints, watchdog, ping)".into(),
             ))
@@ -152,6 +156,18 @@ pub(crate) fn parse(text: &str) -> Result<ClientMessage, ParseError> {
         }
     }
     .map_err(field_err)
+}
+
+/// The JSON kind of a value, for error messages ("a number", "null", ...).
+fn json_kind(v: &Value) -> &'static str {
+    match v {
+        Value::Null => "null",
+        Value::Bool(_) => "a boolean",
+        Value::Number(_) => "a number",
+        Value::String(_) => "a string",
+        Value::Array(_) => "an array",
+        Value::Object(_) => "an object",
+    }
 }
 
 /// Error codes of docs/websocket.md.
@@ -264,6 +280,18 @@ mod tests {
             .message
             .contains("dance"));
         assert!(parse(r#"[1]"#).is_err());
+        let e = parse(r#"{"type":5,"seq":2}"#).unwrap_err();
+        assert_eq!((e.code, e.seq), (ErrorCode::BadMessage, Some(2)));
+        assert!(
+            e.message.contains("`type` must be a string"),
+            "{}",
+            e.message
+        );
+        assert!(!e.message.contains("missing"), "{}", e.message);
+        assert!(parse(r#"{"seq":2}"#)
+            .unwrap_err()
+            .message
+            .contains("missing `type`"));
         let s = parse(r#"{"type":"subscribe","fields":["angle_deg"],"rate_hz":10}"#);
         assert!(
             matches!(s, Ok(ClientMessage::Subscribe(s)) if s.fields == Some(vec![Field::AngleDeg]))
