@@ -7,6 +7,8 @@
 //!   typed commands/replies, units, the parameter table (`protocol::params`,
 //!   one row per config/INFO index; everything else derives from it), the
 //!   state and fault names, frames ↔ JSON. No I/O, no runtime.
+//! - `logcap`: collapsing repeated log lines (one per key per window, with a count), for
+//!   failures a client can repeat at will.
 //! - [`rt`]: real-time thread helpers (timer slack, FIFO class) for the bus owner and the simulator.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty with RS-485 setup, in-memory pipe).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory), behaviour from the SPEC.
@@ -42,6 +44,7 @@
 //! | collisions and timing on the simulated wire | `sim::wire`, `sim::engine` |
 //! | opening a serial port, RS-485 mode, FTDI latency | `transport::tty`, `transport::rs485` |
 //! | config file keys, command-line flags | `daemon`, `main.rs` |
+//! | which log lines a failing request writes (5xx: WARN, collapsed) | `http` (`log_failures`), `logcap` |
 
 // Visibility says who may use an item: `pub` only where it is reachable from
 // outside the crate, `pub(crate)` for the rest; every public type prints in
@@ -54,6 +57,7 @@ pub mod bus;
 pub mod cli;
 pub mod daemon;
 pub mod http;
+mod logcap;
 pub mod protocol;
 pub mod rt;
 pub mod sim;

@@ -140,3 +140,57 @@ fn serves_the_simulator_and_stops_cleanly_on_sigterm() {
     };
     assert!(status.success(), "exit status {status}");
 }
+
+/// A burst of identical failing requests (a bus that is down) logs O(1)
+/// lines: the answers are 503, the log says so once, collapsed.
+#[test]
+fn a_burst_of_failing_requests_logs_one_line() {
+    let mut child = Command::new(BIN)
+        .args([
+            "run",
+            "--bus",
+            "x=/dev/jointd-test-nonexistent@500000",
+            "--listen",
+            "127.0.0.1:0",
+        ])
+        .env("RUST_LOG", "info")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn jointd");
+    let mut first = String::new();
+    let stdout = child.stdout.take().expect("stdout");
+    BufReader::new(stdout)
+        .read_line(&mut first)
+        .expect("first line");
+    let base = first
+        .trim()
+        .strip_prefix("listening on ")
+        .expect("address line")
+        .to_owned();
+    const BURST: usize = 50;
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let client = reqwest::Client::new();
+        for _ in 0..BURST {
+            let r = client
+                .post(format!("{base}/api/v1/buses/x/estop"))
+                .json(&serde_json::json!({}))
+                .send()
+                .await
+                .unwrap();
+            assert_eq!(r.status(), 503);
+        }
+    });
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    )
+    .unwrap();
+    let out = child.wait_with_output().expect("jointd exits");
+    let err = String::from_utf8_lossy(&out.stderr);
+    let failures: Vec<&str> = err.lines().filter(|l| l.contains("503")).collect();
+    assert_eq!(failures.len(), 1, "{err}");
+    assert!(failures[0].contains("WARN"), "{err}");
+    assert!(!err.contains("ERROR"), "{err}");
+}

@@ -487,11 +487,18 @@ pub(crate) const UNKNOWN_HOST: (&str, &str) = (
     "The Host header names no host of this daemon (DNS rebinding guard; see allowed_hosts)",
 );
 
+/// The problem type of an answer, left in the response's extensions.
+#[derive(Debug, Clone)]
+pub(crate) struct ProblemType(pub(crate) String);
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let status = self.status();
         let body = serde_json::to_vec(&self.problem).unwrap_or_default();
         let mut resp = (status, body).into_response();
+        // For the failure log (`http::log_failures`), which sees only the response.
+        resp.extensions_mut()
+            .insert(ProblemType(self.problem.kind.clone()));
         let headers = resp.headers_mut();
         headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON));
         if status == StatusCode::UPGRADE_REQUIRED {

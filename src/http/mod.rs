@@ -80,8 +80,57 @@ pub fn app(state: AppState) -> Router {
     router
         .layer(DefaultBodyLimit::max(state.policy().max_body_bytes))
         .layer(CatchPanicLayer::custom(panic_to_problem))
-        .layer(TraceLayer::new_for_http())
+        .layer(axum::middleware::from_fn(log_failures))
+        // Spans only: a failed answer is logged once, collapsed, below.
+        .layer(TraceLayer::new_for_http().on_failure(()))
         .with_state(state)
+}
+
+/// How often the same failed answer (status and problem type) is logged.
+const FAILURE_LOG_WINDOW: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// Server errors answered, collapsed per status and problem type.
+static FAILURES: std::sync::LazyLock<crate::logcap::Collapse> =
+    std::sync::LazyLock::new(|| crate::logcap::Collapse::new(FAILURE_LOG_WINDOW));
+
+/// Logs a 5xx answer: a client retrying against a bus that is down must not
+/// flood the log. Upstream failures (bus down or busy, device timeout) are
+/// the client's to see and the bus log's to explain: WARN, one line per
+/// kind per window with how many were held back. A 500 is a bug: ERROR.
+async fn log_failures(
+    req: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> axum::response::Response {
+    let path = req.uri().path().to_owned();
+    let resp = next.run(req).await;
+    if resp.status().is_server_error() {
+        log_failure(&resp, &path);
+    }
+    resp
+}
+
+fn log_failure(resp: &axum::response::Response, path: &str) {
+    let status = resp.status().as_u16();
+    let problem = resp
+        .extensions()
+        .get::<error::ProblemType>()
+        .map_or("-", |p| p.0.as_str());
+    let key = format!("{status} {problem}");
+    let Some(held) = FAILURES.admit(&key, std::time::Instant::now()) else {
+        return;
+    };
+    let again = match held {
+        0 => String::new(),
+        n => format!(
+            " (and {n} more like it in the last {} s)",
+            FAILURES.window().as_secs()
+        ),
+    };
+    if status == 500 {
+        tracing::error!(status, problem, path, "answered a server error{again}");
+    } else {
+        tracing::warn!(status, problem, path, "answered {status}{again}");
+    }
 }
 
 /// CORS for the configured `allowed_origins` (a dashboard served

@@ -128,10 +128,12 @@ pub(crate) fn parse(text: &str) -> Result<ClientMessage, ParseError> {
         .ok_or_else(|| bad("a message is a JSON object with a `type`".into()))?;
     let kind = match obj.remove("type") {
         Some(Value::String(s)) => s,
-        Some(other) => return Err(bad(format!(
+        Some(other) => {
+            return Err(bad(format!(
             "`type` must be a string (subscribe, unsubscribe, setpoints, watchdog, ping), not {}",
             json_kind(&other)
-        ))),
+        )))
+        }
         None => {
             return Err(bad(
                 "missing `type` (subscribe, unsubscribe, setpoints, watchdog, ping)".into(),
