@@ -405,17 +405,42 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     options.policy.listen = Some(addr);
     // A fresh state has no options yet: this cannot be refused.
     let _ = state.set_options(options);
-    axum::serve(listener, app(state))
-        .with_graceful_shutdown(shutdown_signal())
+    let ws_state = state.clone();
+    let stopping = async move {
+        shutdown_signal().await;
+        // WebSocket sessions outlive the HTTP connections they upgraded:
+        // tell them, so each client gets a close frame (1001).
+        ws_state.ws().shut_down();
+    };
+    axum::serve(listener, app(state.clone()))
+        .with_graceful_shutdown(stopping)
         .await
         .map_err(|e| DaemonError::Io {
             what: "HTTP server".into(),
             source: e,
         })?;
+    wait_for_ws_close(&state).await;
     stop_buses(threads).await;
     drop(sim);
     tracing::info!("stopped");
     Ok(())
+}
+
+/// How long shutdown waits for WebSocket sessions to send their close frames.
+const WS_CLOSE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// Waits (bounded) until every WebSocket session has closed.
+async fn wait_for_ws_close(state: &AppState) {
+    let deadline = tokio::time::Instant::now() + WS_CLOSE_TIMEOUT;
+    while state
+        .ws()
+        .connections
+        .load(std::sync::atomic::Ordering::Relaxed)
+        > 0
+        && tokio::time::Instant::now() < deadline
+    {
+        tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+    }
 }
 
 /// Starts one owner per bus; a port that is not there yet is retried by its owner.

@@ -24,6 +24,12 @@ pub struct WsHub {
     pub dropped_samples: AtomicU64,
     pub dropped_events: AtomicU64,
     pub dropped_replies: AtomicU64,
+    /// Replies to requests that never reached the client (it went away).
+    pub unsent_replies: AtomicU64,
+    /// Clients disconnected for not reading (close 1008 "too slow").
+    pub slow_disconnects: AtomicU64,
+    /// `true` once the daemon is stopping: every writer closes with 1001.
+    shutdown: tokio::sync::watch::Sender<bool>,
     /// Telemetry JSON shared by connections with the same subscription.
     pub fragments: FragmentCache,
 }
@@ -37,6 +43,9 @@ impl Default for WsHub {
             dropped_samples: AtomicU64::new(0),
             dropped_events: AtomicU64::new(0),
             dropped_replies: AtomicU64::new(0),
+            unsent_replies: AtomicU64::new(0),
+            slow_disconnects: AtomicU64::new(0),
+            shutdown: tokio::sync::watch::channel(false).0,
             fragments: Default::default(),
         }
     }
@@ -54,6 +63,15 @@ impl WsHub {
     pub fn publish(&self, event: WatchdogEvent) {
         // No listener is fine: the event is also logged by the caller.
         let _ = self.events.send(event);
+    }
+
+    /// Tells every connection the daemon is going away (close 1001).
+    pub fn shut_down(&self) {
+        self.shutdown.send_replace(true);
+    }
+
+    pub(crate) fn shutdown_signal(&self) -> tokio::sync::watch::Receiver<bool> {
+        self.shutdown.subscribe()
     }
 
     pub fn count(counter: &AtomicU64, n: u64) {

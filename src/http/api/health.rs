@@ -112,6 +112,7 @@ async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
         bus_metrics(&mut m, &snap);
         device_metrics(&mut m, &snap, now);
     }
+    ws_metrics(&mut m, state.ws());
     ([(header::CONTENT_TYPE, PROMETHEUS_TEXT)], m.render())
 }
 
@@ -185,6 +186,47 @@ fn bus_metrics(m: &mut Metrics, snap: &BusSnapshot) {
             }
         }
     }
+}
+
+/// WebSocket counters over all connections since start.
+fn ws_metrics(m: &mut Metrics, ws: &crate::http::hub::WsHub) {
+    let get =
+        |c: &std::sync::atomic::AtomicU64| c.load(std::sync::atomic::Ordering::Relaxed) as f64;
+    m.gauge("jointd_ws_connections", String::new(), get(&ws.connections));
+    // Telemetry samples skipped because a client was slow.
+    m.push(
+        "jointd_ws_dropped_samples_total",
+        "counter",
+        String::new(),
+        get(&ws.dropped_samples),
+    );
+    m.push(
+        "jointd_ws_dropped_events_total",
+        "counter",
+        String::new(),
+        get(&ws.dropped_events),
+    );
+    // Replies dropped because a client's reply queue was full.
+    m.push(
+        "jointd_ws_dropped_replies_total",
+        "counter",
+        String::new(),
+        get(&ws.dropped_replies),
+    );
+    // Replies to requests that never reached the client (it went away).
+    m.push(
+        "jointd_ws_unsent_replies_total",
+        "counter",
+        String::new(),
+        get(&ws.unsent_replies),
+    );
+    // Clients closed with 1008 "too slow".
+    m.push(
+        "jointd_ws_slow_disconnects_total",
+        "counter",
+        String::new(),
+        get(&ws.slow_disconnects),
+    );
 }
 
 fn device_metrics(m: &mut Metrics, snap: &BusSnapshot, now: Instant) {

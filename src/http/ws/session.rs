@@ -65,6 +65,8 @@ where
                 Some(Ok(Message::Close(_))) | Some(Err(_)) | None => break,
                 Some(Ok(_)) => {} // ping/pong: the library answers
             },
+            // The writer closed the connection (slow client, shutdown, socket error).
+            _ = conn.out.closed() => break,
             _ = sleep_until(deadline), if deadline.is_some() => conn.fire_watchdog("timeout").await,
         }
     }
@@ -116,8 +118,14 @@ struct Connection {
 impl Connection {
     /// Queues a reply; a client too slow to take its replies loses them (counted).
     fn reply(&self, msg: ServerMessage) {
-        if self.out.try_send(msg).is_err() {
-            WsHub::count(&self.state.ws().dropped_replies, 1);
+        match self.out.try_send(msg) {
+            Ok(()) => {}
+            Err(mpsc::error::TrySendError::Full(_)) => {
+                WsHub::count(&self.state.ws().dropped_replies, 1)
+            }
+            Err(mpsc::error::TrySendError::Closed(_)) => {
+                WsHub::count(&self.state.ws().unsent_replies, 1)
+            }
         }
     }
 

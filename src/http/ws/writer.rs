@@ -2,12 +2,14 @@
 //! client that stops reading stalls only this task: telemetry ticks it
 //! could not take are skipped and counted (`dropped`), events it fell
 //! behind on are counted (`dropped_events`), and its queue stays bounded.
+//! A client that takes nothing for [`SLOW_CLIENT`] is closed with 1008
+//! "too slow"; on daemon shutdown every connection is closed with 1001.
 
 use std::collections::HashMap;
 use std::pin::Pin;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use axum::extract::ws::{Message, Utf8Bytes};
+use axum::extract::ws::{close_code, CloseFrame, Message, Utf8Bytes};
 use futures_util::stream::{select_all, SelectAll};
 use futures_util::{Sink, SinkExt, Stream, StreamExt};
 use tokio::sync::{mpsc, watch};
@@ -30,6 +32,12 @@ pub(crate) struct PendingAck {
 
 /// Longest wait for a batch to reach the wire before the client hears so.
 const ACK_TIMEOUT: Duration = Duration::from_secs(1);
+/// Longest a client may leave one message untaken before it is closed
+/// (1008 "too slow"): longer than any pause a live client takes, short
+/// enough that a dead one does not hold its writer for minutes.
+pub(crate) const SLOW_CLIENT: Duration = Duration::from_secs(8);
+/// How long a close frame may take to go out before the socket is dropped.
+const CLOSE_TIMEOUT: Duration = Duration::from_secs(1);
 /// How often pending acks are checked for that timeout.
 const ACK_SWEEP: Duration = Duration::from_millis(100);
 
@@ -77,12 +85,18 @@ where
         let mut wire = self.ack_streams();
         let mut ticker = ticker(sub.borrow().as_ref());
         let mut sweep = interval(ACK_SWEEP);
+        let mut shutdown = self.state.ws().shutdown_signal();
         loop {
             let subscribed = sub.borrow().is_some();
             let ok = tokio::select! {
                 biased;
+                // The guard `wait_for` returns is not `Send`: dropped inside.
+                Ok(()) = async { shutdown.wait_for(|&s| s).await.map(drop) } => {
+                    self.close(close_code::AWAY, "daemon shutting down").await;
+                    break;
+                }
                 msg = out.recv() => match msg {
-                    Some(m) => self.send(&m).await,
+                    Some(m) => self.reply(&m).await,
                     None => break,
                 },
                 changed = sub.changed() => {
@@ -101,6 +115,49 @@ where
                 break;
             }
         }
+        // Replies the client will never see: counted, not silently lost.
+        out.close();
+        while out.try_recv().is_ok() {
+            crate::http::hub::WsHub::count(&self.state.ws().unsent_replies, 1);
+        }
+    }
+
+    /// A reply to a request; one the socket refused is counted.
+    async fn reply(&mut self, msg: &ServerMessage) -> bool {
+        let ok = self.send(msg).await;
+        if !ok {
+            crate::http::hub::WsHub::count(&self.state.ws().unsent_replies, 1);
+        }
+        ok
+    }
+
+    /// Writes one message; a client that takes nothing for [`SLOW_CLIENT`]
+    /// is closed with 1008 and counted.
+    async fn put(&mut self, msg: Message) -> bool {
+        // `is_ok` here: the sink's error need not be `Send`, so it must not
+        // live across the close below.
+        let sent = tokio::time::timeout(SLOW_CLIENT, self.sink.send(msg))
+            .await
+            .map(|r| r.is_ok());
+        match sent {
+            Ok(ok) => ok,
+            Err(_) => {
+                crate::http::hub::WsHub::count(&self.state.ws().slow_disconnects, 1);
+                let reason = format!("too slow: no message taken for {} s", SLOW_CLIENT.as_secs());
+                self.close(close_code::POLICY, &reason).await;
+                false
+            }
+        }
+    }
+
+    /// Best effort: a client that reads nothing may not take the close frame either.
+    async fn close(&mut self, code: u16, reason: &str) {
+        let frame = CloseFrame {
+            code,
+            reason: Utf8Bytes::from(reason),
+        };
+        let _ =
+            tokio::time::timeout(CLOSE_TIMEOUT, self.sink.send(Message::Close(Some(frame)))).await;
     }
 
     fn event_streams(&self) -> Events {
@@ -132,10 +189,7 @@ where
             tracing::error!(?msg, "could not serialise a WebSocket message");
             return true;
         };
-        self.sink
-            .send(Message::Text(Utf8Bytes::from(text)))
-            .await
-            .is_ok()
+        self.put(Message::Text(Utf8Bytes::from(text))).await
     }
 
     async fn event(&mut self, item: Result<EventBody, u64>) -> bool {
@@ -186,10 +240,7 @@ where
             parts.join(",")
         );
         self.last_sample = Some(now);
-        self.sink
-            .send(Message::Text(Utf8Bytes::from(text)))
-            .await
-            .is_ok()
+        self.put(Message::Text(Utf8Bytes::from(text))).await
     }
 
     /// Ticks that passed while the socket was not taking messages.
