@@ -134,3 +134,88 @@ async fn stalled_client_does_not_delay_another() {
             >= dropped
     );
 }
+
+/// A client that takes nothing for 8 s is closed with 1008 "too slow",
+/// counted in /metrics, and the replies it never got are counted.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_that_takes_nothing_is_closed_too_slow_and_counted() {
+    use axum::extract::ws::close_code;
+    let bus = sim_bus::start(1, None).await;
+    // Takes the welcome, then holds the next text for 8.5 s: past the 8 s
+    // slow-client limit, within the 1 s the close frame then has to go out
+    // (a sink takes nothing else while a message is stuck in it).
+    let (delivered_tx, mut delivered) = mpsc::unbounded_channel::<Message>();
+    let taken = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let sink = futures_util::sink::unfold(delivered_tx, move |tx, msg: Message| {
+        let taken = taken.clone();
+        async move {
+            let text = matches!(msg, Message::Text(_));
+            if text && taken.fetch_add(1, std::sync::atomic::Ordering::Relaxed) >= 1 {
+                tokio::time::sleep(Duration::from_millis(8500)).await;
+            }
+            let _ = tx.send(msg);
+            Ok::<_, Infallible>(tx)
+        }
+    });
+    let (incoming_tx, incoming_rx) = mpsc::unbounded_channel::<Result<Message, Infallible>>();
+    let state = bus.server_state.clone();
+    let session = tokio::spawn(jointd::http::ws::session::run(
+        state,
+        Box::pin(sink),
+        UnboundedReceiverStream::new(incoming_rx),
+    ));
+    let welcome = tokio::time::timeout(WAIT, delivered.recv())
+        .await
+        .expect("welcome");
+    assert!(matches!(welcome, Some(Message::Text(_))));
+    let ws = bus.server_state.ws();
+    let load = |c: &std::sync::atomic::AtomicU64| c.load(std::sync::atomic::Ordering::Relaxed);
+    let (slow_before, unsent_before) = (load(&ws.slow_disconnects), load(&ws.unsent_replies));
+    // Telemetry stalls the writer; two pings wait behind it, never to be sent.
+    for m in [
+        json!({"type":"subscribe","rate_hz":100}),
+        json!({"type":"ping","seq":1}),
+        json!({"type":"ping","seq":2}),
+    ] {
+        incoming_tx
+            .send(Ok(Message::Text(m.to_string().into())))
+            .expect("send");
+    }
+    let close = async {
+        loop {
+            match delivered.recv().await {
+                Some(Message::Text(_)) => continue,
+                other => return other,
+            }
+        }
+    };
+    let close = tokio::time::timeout(Duration::from_secs(20), close)
+        .await
+        .expect("closed within the slow-client timeout");
+    let Some(Message::Close(Some(frame))) = close else {
+        panic!("expected a close frame, got {close:?}");
+    };
+    assert_eq!(frame.code, close_code::POLICY);
+    assert!(
+        frame.reason.as_str().starts_with("too slow"),
+        "{}",
+        frame.reason
+    );
+    // The reader ends with the writer, though the client never closed.
+    tokio::time::timeout(WAIT, session)
+        .await
+        .expect("session ended")
+        .expect("no panic");
+    assert_eq!(load(&ws.slow_disconnects), slow_before + 1);
+    assert!(
+        load(&ws.unsent_replies) > unsent_before,
+        "the pings queued behind the stall are counted"
+    );
+    let metrics = bus.server.get("/metrics").await;
+    let text = metrics.body.as_str().expect("text").to_owned();
+    assert!(
+        text.contains("\njointd_ws_slow_disconnects_total "),
+        "{text}"
+    );
+    drop(incoming_tx);
+}

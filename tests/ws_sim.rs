@@ -474,3 +474,64 @@ async fn the_watchdog_disable_then_enable_does_not_move_the_joint() {
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_type_that_is_not_a_string_is_named_as_such() {
+    let bus = sim_bus::start(1, None).await;
+    let mut c = connect(&bus).await;
+    let e = c.rejected(json!({"type": 5, "seq": 7})).await;
+    assert_eq!(e["code"], "bad_message");
+    assert_eq!(e["ref_seq"], 7);
+    let msg = e["message"].as_str().expect("message");
+    assert!(msg.contains("`type` must be a string"), "{msg}");
+    assert!(!msg.contains("missing"), "{msg}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn daemon_shutdown_closes_every_session_with_going_away() {
+    use tokio_tungstenite::tungstenite::protocol::frame::coding::CloseCode;
+    let bus = sim_bus::start(1, None).await;
+    let mut c = connect(&bus).await;
+    c.send(json!({"type":"subscribe","rate_hz":50})).await;
+    c.next_of("telemetry").await;
+    bus.server_state.ws().shut_down();
+    let close = async {
+        loop {
+            match c.ws.next().await {
+                Some(Ok(Message::Close(frame))) => return frame,
+                Some(Ok(_)) => continue,
+                other => panic!("no close frame: {other:?}"),
+            }
+        }
+    };
+    let frame = tokio::time::timeout(WAIT, close)
+        .await
+        .expect("close in time")
+        .expect("a close frame with a code");
+    assert_eq!(frame.code, CloseCode::Away);
+    assert!(frame.reason.contains("shutting down"), "{}", frame.reason);
+    // A connection made after shutdown is closed at once too.
+    let mut late = connect_with(ws_url(&bus), None).await.expect("connect");
+    let first_close = async {
+        while let Some(Ok(m)) = late.ws.next().await {
+            if let Message::Close(f) = m {
+                return f;
+            }
+        }
+        None
+    };
+    let f = tokio::time::timeout(WAIT, first_close)
+        .await
+        .expect("closed");
+    assert_eq!(f.expect("code").code, CloseCode::Away);
+    let metrics = bus.server.get("/metrics").await;
+    let text = metrics.body.as_str().expect("text").to_owned();
+    for family in [
+        "jointd_ws_connections",
+        "jointd_ws_dropped_samples_total",
+        "jointd_ws_unsent_replies_total",
+        "jointd_ws_slow_disconnects_total",
+    ] {
+        assert!(text.contains(&format!("\n{family} ")), "{family} in {text}");
+    }
+}
