@@ -535,3 +535,33 @@ async fn daemon_shutdown_closes_every_session_with_going_away() {
         assert!(text.contains(&format!("\n{family} ")), "{family} in {text}");
     }
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_oversized_message_ends_the_session_with_a_policy_close() {
+    use tokio_tungstenite::tungstenite::protocol::frame::coding::CloseCode;
+    let bus = sim_bus::start(1, None).await;
+    let mut c = connect(&bus).await;
+    // Over the endpoint's 256 KiB message limit: a JSON string nobody parses.
+    let big = format!(
+        "{{\"type\":\"subscribe\",\"pad\":\"{}\"}}",
+        "x".repeat(300 * 1024)
+    );
+    // The server may close while the frame is still going out.
+    let _ = c.ws.send(Message::text(big)).await;
+    let close = async {
+        loop {
+            match c.ws.next().await {
+                Some(Ok(Message::Close(frame))) => return frame,
+                Some(Ok(_)) => continue,
+                other => panic!("no close frame: {other:?}"),
+            }
+        }
+    };
+    let frame = tokio::time::timeout(WAIT, close)
+        .await
+        .expect("close in time")
+        .expect("a close frame with a code");
+    assert_eq!(frame.code, CloseCode::Policy);
+    assert!(frame.reason.contains("message refused"), "{}", frame.reason);
+    assert!(frame.reason.len() <= 123);
+}

@@ -6,7 +6,7 @@
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use axum::extract::ws::Message;
+use axum::extract::ws::{close_code, Message};
 use futures_util::{Sink, Stream, StreamExt};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
@@ -35,18 +35,34 @@ pub const MAX_RATE_HZ: f64 = 1000.0;
 const MIN_RATE_HZ: f64 = 1.0;
 const DEFAULT_RATE_HZ: f64 = 50.0;
 
+/// A close frame's reason holds at most 123 bytes (RFC 6455 §5.5).
+const MAX_CLOSE_REASON: usize = 123;
+
+/// Why the session ended on a read error, cut to fit a close frame.
+fn refusal_reason(e: &impl std::fmt::Display) -> String {
+    let mut reason = format!("message refused: {e}");
+    while reason.len() > MAX_CLOSE_REASON {
+        reason.pop();
+    }
+    reason
+}
+
 /// Serves one connection until the client goes away.
 pub async fn run<Si, St, E>(state: AppState, sink: Si, mut stream: St)
 where
     Si: Sink<Message> + Unpin + Send + 'static,
     St: Stream<Item = Result<Message, E>> + Unpin,
+    E: std::fmt::Display,
 {
     let client = state.ws().next_client_id();
     state.ws().connections.fetch_add(1, Ordering::Relaxed);
     let (out_tx, out_rx) = mpsc::channel(OUT_QUEUE);
     let (sub_tx, sub_rx) = watch::channel(None);
     let (ack_tx, ack_rx) = mpsc::channel(MAX_PENDING_ACKS);
-    let writer = tokio::spawn(Writer::new(state.clone(), sink).run(out_rx, sub_rx, ack_rx));
+    // The reader asks the writer (the only task that writes) for a close frame.
+    let (close_tx, close_rx) = mpsc::channel(1);
+    let writer =
+        tokio::spawn(Writer::new(state.clone(), sink).run(out_rx, sub_rx, ack_rx, close_rx));
     let mut conn = Connection {
         state: state.clone(),
         client,
@@ -62,7 +78,13 @@ where
             msg = stream.next() => match msg {
                 Some(Ok(Message::Text(text))) => conn.handle(text.as_str()).await,
                 Some(Ok(Message::Binary(_))) => conn.reject(None, WsError::new(ErrorCode::BadMessage, "binary frames are not part of jointd.ws.v1; send JSON text")),
-                Some(Ok(Message::Close(_))) | Some(Err(_)) | None => break,
+                Some(Ok(Message::Close(_))) | None => break,
+                // An oversized message or a broken frame ends the session:
+                // the client is told why instead of seeing the socket drop.
+                Some(Err(e)) => {
+                    let _ = close_tx.try_send((close_code::POLICY, refusal_reason(&e)));
+                    break;
+                }
                 Some(Ok(_)) => {} // ping/pong: the library answers
             },
             // The writer closed the connection (slow client, shutdown, socket error).

@@ -80,6 +80,7 @@ where
         mut out: mpsc::Receiver<ServerMessage>,
         mut sub: watch::Receiver<Option<Subscription>>,
         mut acks_in: mpsc::Receiver<PendingAck>,
+        mut close_requests: mpsc::Receiver<(u16, String)>,
     ) {
         let mut events = self.event_streams();
         let mut wire = self.ack_streams();
@@ -93,6 +94,11 @@ where
                 // The guard `wait_for` returns is not `Send`: dropped inside.
                 Ok(()) = async { shutdown.wait_for(|&s| s).await.map(drop) } => {
                     self.close(close_code::AWAY, "daemon shutting down").await;
+                    break;
+                }
+                // Before `out`: the reader asks, then drops its side of `out`.
+                Some((code, reason)) = close_requests.recv() => {
+                    self.close(code, &reason).await;
                     break;
                 }
                 msg = out.recv() => match msg {
