@@ -133,6 +133,37 @@ async fn stalled_client_does_not_delay_another() {
             .load(std::sync::atomic::Ordering::Relaxed)
             >= dropped
     );
+
+    // /metrics lists the skips per connected client: the stalled one has
+    // at least what it was told, and its line goes when it does.
+    let (stalled, count) = client_drops(&bus)
+        .await
+        .into_iter()
+        .max_by_key(|(_, n)| *n)
+        .expect("a line per connected client");
+    assert!(count >= dropped, "client {stalled}: {count} < {dropped}");
+    drop(incoming_tx);
+    let gone = async {
+        while client_drops(&bus).await.iter().any(|(c, _)| *c == stalled) {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    };
+    tokio::time::timeout(WAIT, gone)
+        .await
+        .expect("the stalled client's line goes with its connection");
+}
+
+/// (client, skipped samples) from `jointd_ws_client_dropped_samples_total`.
+async fn client_drops(bus: &sim_bus::SimBus) -> Vec<(String, u64)> {
+    let metrics = bus.server.get("/metrics").await;
+    let text = metrics.body.as_str().expect("text").to_owned();
+    text.lines()
+        .filter_map(|l| l.strip_prefix("jointd_ws_client_dropped_samples_total{client=\""))
+        .filter_map(|l| {
+            let (client, rest) = l.split_once("\"} ")?;
+            Some((client.to_owned(), rest.trim().parse::<f64>().ok()? as u64))
+        })
+        .collect()
 }
 
 /// A client that takes nothing for 8 s is closed with 1008 "too slow",

@@ -4,7 +4,7 @@
 //! The app state holds it, so it knows nothing of the `ws` module's
 //! message types beyond the shared watchdog event.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -28,6 +28,9 @@ pub struct WsHub {
     pub unsent_replies: AtomicU64,
     /// Clients disconnected for not reading (close 1008 "too slow").
     pub slow_disconnects: AtomicU64,
+    /// Telemetry samples skipped per connected client. An entry lives as
+    /// long as its connection, so the metric's labels stay bounded.
+    client_drops: Mutex<BTreeMap<u64, Arc<AtomicU64>>>,
     /// `true` once the daemon is stopping: every writer closes with 1001.
     shutdown: tokio::sync::watch::Sender<bool>,
     /// Telemetry JSON shared by connections with the same subscription.
@@ -45,6 +48,7 @@ impl Default for WsHub {
             dropped_replies: AtomicU64::new(0),
             unsent_replies: AtomicU64::new(0),
             slow_disconnects: AtomicU64::new(0),
+            client_drops: Mutex::default(),
             shutdown: tokio::sync::watch::channel(false).0,
             fragments: Default::default(),
         }
@@ -72,6 +76,32 @@ impl WsHub {
 
     pub(crate) fn shutdown_signal(&self) -> tokio::sync::watch::Receiver<bool> {
         self.shutdown.subscribe()
+    }
+
+    /// The skipped-sample counter of a new connection, listed until
+    /// [`Self::forget_client`].
+    pub(crate) fn track_client(&self, client: u64) -> Arc<AtomicU64> {
+        let counter = Arc::new(AtomicU64::new(0));
+        self.clients().insert(client, counter.clone());
+        counter
+    }
+
+    pub(crate) fn forget_client(&self, client: u64) {
+        self.clients().remove(&client);
+    }
+
+    /// (client id, samples skipped) of every connected client.
+    pub(crate) fn client_drops(&self) -> Vec<(u64, u64)> {
+        let clients = self.clients();
+        clients
+            .iter()
+            .map(|(id, n)| (*id, n.load(Ordering::Relaxed)))
+            .collect()
+    }
+
+    // std Mutex: held for one map operation, never across an `.await`.
+    fn clients(&self) -> std::sync::MutexGuard<'_, BTreeMap<u64, Arc<AtomicU64>>> {
+        self.client_drops.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     pub fn count(counter: &AtomicU64, n: u64) {

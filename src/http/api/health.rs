@@ -227,6 +227,15 @@ fn ws_metrics(m: &mut Metrics, ws: &crate::http::hub::WsHub) {
         String::new(),
         get(&ws.slow_disconnects),
     );
+    // Samples skipped per connected client (gone with its connection).
+    for (client, dropped) in ws.client_drops() {
+        m.push(
+            "jointd_ws_client_dropped_samples_total",
+            "counter",
+            format!("client=\"{client}\""),
+            dropped as f64,
+        );
+    }
 }
 
 fn device_metrics(m: &mut Metrics, snap: &BusSnapshot, now: Instant) {

@@ -61,8 +61,9 @@ where
     let (ack_tx, ack_rx) = mpsc::channel(MAX_PENDING_ACKS);
     // The reader asks the writer (the only task that writes) for a close frame.
     let (close_tx, close_rx) = mpsc::channel(1);
-    let writer =
-        tokio::spawn(Writer::new(state.clone(), sink).run(out_rx, sub_rx, ack_rx, close_rx));
+    let drops = state.ws().track_client(client);
+    let writer = Writer::new(state.clone(), sink).counting_drops_in(drops);
+    let writer = tokio::spawn(writer.run(out_rx, sub_rx, ack_rx, close_rx));
     let mut conn = Connection {
         state: state.clone(),
         client,
@@ -97,6 +98,7 @@ where
     }
     drop(conn);
     let _ = writer.await;
+    state.ws().forget_client(client);
     state.ws().connections.fetch_sub(1, Ordering::Relaxed);
 }
 

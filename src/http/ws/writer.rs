@@ -7,6 +7,8 @@
 
 use std::collections::HashMap;
 use std::pin::Pin;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use axum::extract::ws::{close_code, CloseFrame, Message, Utf8Bytes};
@@ -51,6 +53,8 @@ pub(crate) struct Writer<S> {
     event_seq: u64,
     last_sample: Option<Instant>,
     dropped: u64,
+    /// This client's skipped samples since it connected, for `/metrics`.
+    client_drops: Arc<AtomicU64>,
     dropped_events: u64,
     pending: Vec<PendingAck>,
     on_wire: HashMap<String, WireAck>,
@@ -68,10 +72,17 @@ where
             event_seq: 0,
             last_sample: None,
             dropped: 0,
+            client_drops: Arc::default(),
             dropped_events: 0,
             pending: Vec::new(),
             on_wire: HashMap::new(),
         }
+    }
+
+    /// Counts this client's skipped samples in `counter` as well.
+    pub(crate) fn counting_drops_in(mut self, counter: Arc<AtomicU64>) -> Self {
+        self.client_drops = counter;
+        self
     }
 
     /// Runs until the reader drops its side of `out` or the socket fails.
@@ -256,6 +267,7 @@ where
         let skipped = (periods - 1.0).floor().max(0.0) as u64;
         if skipped > 0 {
             self.dropped += skipped;
+            self.client_drops.fetch_add(skipped, Ordering::Relaxed);
             crate::http::hub::WsHub::count(&self.state.ws().dropped_samples, skipped);
         }
     }
