@@ -7,6 +7,7 @@
 //!   typed commands/replies, units, the parameter table (`protocol::params`,
 //!   one row per config/INFO index; everything else derives from it), the
 //!   state and fault names, frames ↔ JSON. No I/O, no runtime.
+//! - [`mem`]: giving freed heap memory back to the system (glibc `malloc_trim`).
 //! - [`rt`]: real-time thread helpers (timer slack, FIFO class) for the bus owner and the simulator.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty with RS-485 setup, in-memory pipe).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory), behaviour from the SPEC.
@@ -54,6 +55,7 @@ pub mod bus;
 pub mod cli;
 pub mod daemon;
 pub mod http;
+pub mod mem;
 pub mod protocol;
 pub mod rt;
 pub mod sim;

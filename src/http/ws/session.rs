@@ -3,7 +3,6 @@
 //! writes to the socket. Generic over `Sink`/`Stream` so tests can drive it
 //! without a network.
 
-use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use axum::extract::ws::Message;
@@ -42,7 +41,7 @@ where
     St: Stream<Item = Result<Message, E>> + Unpin,
 {
     let client = state.ws().next_client_id();
-    state.ws().connections.fetch_add(1, Ordering::Relaxed);
+    state.ws().join();
     let (out_tx, out_rx) = mpsc::channel(OUT_QUEUE);
     let (sub_tx, sub_rx) = watch::channel(None);
     let (ack_tx, ack_rx) = mpsc::channel(MAX_PENDING_ACKS);
@@ -73,7 +72,7 @@ where
     }
     drop(conn);
     let _ = writer.await;
-    state.ws().connections.fetch_sub(1, Ordering::Relaxed);
+    state.ws().leave();
 }
 
 async fn sleep_until(deadline: Option<Instant>) {
