@@ -9,6 +9,7 @@
 //!   state and fault names, frames ↔ JSON. No I/O, no runtime.
 //! - `logcap`: collapsing repeated log lines (one per key per window, with a count), for
 //!   failures a client can repeat at will.
+//! - [`mem`]: giving freed heap memory back to the system (glibc `malloc_trim`).
 //! - [`rt`]: real-time thread helpers (timer slack, FIFO class) for the bus owner and the simulator.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty with RS-485 setup, in-memory pipe).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory), behaviour from the SPEC.
@@ -58,6 +59,7 @@ pub mod cli;
 pub mod daemon;
 pub mod http;
 mod logcap;
+pub mod mem;
 pub mod protocol;
 pub mod rt;
 pub mod sim;

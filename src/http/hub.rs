@@ -104,6 +104,21 @@ impl WsHub {
         self.client_drops.lock().unwrap_or_else(|p| p.into_inner())
     }
 
+    /// A connection starts: counted in `connections`.
+    pub fn join(&self) {
+        self.connections.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// A connection has ended (its writer too). When it was the last one,
+    /// the memory the crowd used goes back to the system (see [`crate::mem`]):
+    /// otherwise glibc keeps the peak's pages after every client has left.
+    pub fn leave(&self) {
+        if self.connections.fetch_sub(1, Ordering::Relaxed) == 1 {
+            self.fragments.clear();
+            crate::mem::release_free_memory();
+        }
+    }
+
     pub fn count(counter: &AtomicU64, n: u64) {
         counter.fetch_add(n, Ordering::Relaxed);
     }
@@ -126,6 +141,17 @@ pub struct FragmentCache {
 const MAX_FRAGMENTS: usize = 64;
 
 impl FragmentCache {
+    /// Drops every cached fragment (no subscriber is left to share them).
+    pub fn clear(&self) {
+        let mut entries = self.entries.lock().unwrap_or_else(|p| p.into_inner());
+        *entries = HashMap::new();
+    }
+
+    /// Fragments cached now.
+    pub fn cached(&self) -> usize {
+        self.entries.lock().unwrap_or_else(|p| p.into_inner()).len()
+    }
+
     /// The text cached for `shape` and this very `snap`, or `build`'s.
     pub fn get_or_build(
         &self,
@@ -146,5 +172,25 @@ impl FragmentCache {
         }
         entries.insert(shape, (id, text.clone()));
         text
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_last_client_leaving_empties_the_fragment_cache() {
+        let hub = WsHub::default();
+        let snap = Arc::new(BusSnapshot::new("sim0", "/dev/null", 500_000));
+        hub.join();
+        hub.join();
+        hub.fragments
+            .get_or_build("a".into(), &snap, || "[]".into());
+        hub.leave();
+        assert_eq!(hub.fragments.cached(), 1, "one client still subscribed");
+        hub.leave();
+        assert_eq!(hub.connections.load(Ordering::Relaxed), 0);
+        assert_eq!(hub.fragments.cached(), 0);
     }
 }

@@ -3,7 +3,6 @@
 //! writes to the socket. Generic over `Sink`/`Stream` so tests can drive it
 //! without a network.
 
-use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use axum::extract::ws::{close_code, Message};
@@ -55,7 +54,7 @@ where
     E: std::fmt::Display,
 {
     let client = state.ws().next_client_id();
-    state.ws().connections.fetch_add(1, Ordering::Relaxed);
+    state.ws().join();
     let (out_tx, out_rx) = mpsc::channel(OUT_QUEUE);
     let (sub_tx, sub_rx) = watch::channel(None);
     let (ack_tx, ack_rx) = mpsc::channel(MAX_PENDING_ACKS);
@@ -99,7 +98,7 @@ where
     drop(conn);
     let _ = writer.await;
     state.ws().forget_client(client);
-    state.ws().connections.fetch_sub(1, Ordering::Relaxed);
+    state.ws().leave();
 }
 
 async fn sleep_until(deadline: Option<Instant>) {
