@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
+use super::config_outcome::{NotWritten, PatchOutcomes, Unverified, Written};
 use super::config_params::{blocks_to_read, to_config, Blocks, ConfigPatch, Param, ParamValues};
 use super::config_schema::{ConfigDevice, ConfigView, ParamTable};
 use super::openapi::{ErrorResponses, TAG_CONFIG};
@@ -28,66 +29,6 @@ pub(crate) fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(persist))
         .routes(routes!(change_id))
         .routes(routes!(param_table))
-}
-
-/// One verified write.
-#[derive(Debug, Serialize, ToSchema)]
-pub(crate) struct Written {
-    #[schema(example = "max_current_a")]
-    pub param: &'static str,
-    #[schema(example = 2.0)]
-    pub value: f64,
-    #[schema(example = 11650)]
-    pub raw: u16,
-    #[schema(example = 18)]
-    pub index: u8,
-    /// `res` (the device's RES reply) or `read_back` (the INFO block read back).
-    #[schema(example = "read_back")]
-    pub verified_by: &'static str,
-}
-
-/// A parameter sent whose confirmation (read-back or RES) was lost after
-/// the retries: the device may or may not have the value.
-#[derive(Debug, Serialize, ToSchema)]
-pub(crate) struct Unverified {
-    #[schema(example = "max_current_a")]
-    pub param: &'static str,
-    #[schema(example = 2.0)]
-    pub value: f64,
-    #[schema(example = 11650)]
-    pub raw: u16,
-    #[schema(example = 18)]
-    pub index: u8,
-    #[schema(example = "no read-back answered after 3 send(s)")]
-    pub reason: String,
-}
-
-/// A parameter the device does not have: refused, read back with another
-/// value, or never sent (an earlier parameter failed, or the bus could not send).
-#[derive(Debug, Serialize, ToSchema)]
-pub(crate) struct NotWritten {
-    #[schema(example = "burst_plus_ms")]
-    pub param: &'static str,
-    #[schema(example = 100.0)]
-    pub value: f64,
-    #[schema(example = 4)]
-    pub raw: u16,
-    #[schema(example = 27)]
-    pub index: u8,
-    #[schema(example = "not sent: an earlier parameter failed")]
-    pub reason: String,
-}
-
-/// Every parameter of a PATCH in one of three lists, each in request
-/// order: the `partial` member of a PATCH that did not confirm everything.
-#[derive(Debug, Default, Serialize, ToSchema)]
-pub(crate) struct PatchOutcomes {
-    /// Confirmed on the device (RAM only until persisted).
-    pub written: Vec<Written>,
-    /// Sent, confirmation lost: the device may or may not have them.
-    pub unverified: Vec<Unverified>,
-    /// Not on the device (refused, read back otherwise, or never sent).
-    pub not_written: Vec<NotWritten>,
 }
 
 #[derive(Debug, Serialize, ToSchema)]

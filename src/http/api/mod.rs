@@ -3,12 +3,15 @@
 //! share only the OpenAPI tags and failure responses of [`openapi`]).
 //!
 //! # Layout
-//! - [`buses`], [`devices`], [`control`], [`config`] (with [`config_params`]),
+//! - [`buses`], [`devices`], [`control`], [`config`] (with [`config_params`]:
+//!   request values → writes; [`config_schema`]: the schemas from the parameter
+//!   table; [`config_outcome`]: what a PATCH did per parameter),
 //!   [`estop`], [`health`]: one router per area.
 //! - [`openapi`]: the document's head, the shared failure responses, the docs page.
 
 pub(crate) mod buses;
 pub(crate) mod config;
+pub(crate) mod config_outcome;
 pub(crate) mod config_params;
 pub(crate) mod config_schema;
 pub(crate) mod control;

@@ -41,7 +41,7 @@ const BEARER_SCHEME: &str = "bearer";
     ),
     modifiers(&BearerAuth),
     // `PatchOutcomes`: the `partial` of a config PATCH that did not confirm everything.
-    components(schemas(Problem, super::config::PatchOutcomes)),
+    components(schemas(Problem, super::config_outcome::PatchOutcomes)),
     tags(
         (name = "buses", description = "Serial buses: state, stats, scan, baud"),
         (name = "devices", description = "Joint modules on a bus and their telemetry"),
