@@ -62,6 +62,23 @@ impl Client {
             .expect("send");
     }
 
+    /// The close frame the server ends the session with (other messages skipped).
+    async fn close_frame(&mut self) -> tokio_tungstenite::tungstenite::protocol::frame::CloseFrame {
+        let close = async {
+            loop {
+                match self.ws.next().await {
+                    Some(Ok(Message::Close(frame))) => return frame,
+                    Some(Ok(_)) => continue,
+                    other => panic!("no close frame: {other:?}"),
+                }
+            }
+        };
+        tokio::time::timeout(WAIT, close)
+            .await
+            .expect("close in time")
+            .expect("a close frame with a code")
+    }
+
     /// The next message of type `kind`, skipping others (telemetry, events).
     async fn next_of(&mut self, kind: &str) -> Value {
         let wait = async {
@@ -495,19 +512,7 @@ async fn daemon_shutdown_closes_every_session_with_going_away() {
     c.send(json!({"type":"subscribe","rate_hz":50})).await;
     c.next_of("telemetry").await;
     bus.server_state.ws().shut_down();
-    let close = async {
-        loop {
-            match c.ws.next().await {
-                Some(Ok(Message::Close(frame))) => return frame,
-                Some(Ok(_)) => continue,
-                other => panic!("no close frame: {other:?}"),
-            }
-        }
-    };
-    let frame = tokio::time::timeout(WAIT, close)
-        .await
-        .expect("close in time")
-        .expect("a close frame with a code");
+    let frame = c.close_frame().await;
     assert_eq!(frame.code, CloseCode::Away);
     assert!(frame.reason.contains("shutting down"), "{}", frame.reason);
     // A connection made after shutdown is closed at once too.
@@ -548,19 +553,7 @@ async fn an_oversized_message_ends_the_session_with_a_policy_close() {
     );
     // The server may close while the frame is still going out.
     let _ = c.ws.send(Message::text(big)).await;
-    let close = async {
-        loop {
-            match c.ws.next().await {
-                Some(Ok(Message::Close(frame))) => return frame,
-                Some(Ok(_)) => continue,
-                other => panic!("no close frame: {other:?}"),
-            }
-        }
-    };
-    let frame = tokio::time::timeout(WAIT, close)
-        .await
-        .expect("close in time")
-        .expect("a close frame with a code");
+    let frame = c.close_frame().await;
     assert_eq!(frame.code, CloseCode::Policy);
     assert!(frame.reason.contains("message refused"), "{}", frame.reason);
     assert!(frame.reason.len() <= 123);
