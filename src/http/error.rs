@@ -76,8 +76,24 @@ pub struct Problem {
     /// What was already done before the failure (e.g. parameters written), or
     /// per-bus results of an e-stop that did not stop everything.
     #[serde(skip_serializing_if = "Option::is_none")]
-    #[schema(value_type = Option<Object>)]
+    #[schema(schema_with = partial_schema)]
     pub partial: Option<serde_json::Value>,
+}
+
+/// `partial`: a config PATCH's per-parameter outcomes, or another object
+/// (per-bus e-stop results, per-bus link states).
+fn partial_schema() -> utoipa::openapi::Schema {
+    use utoipa::openapi::schema::{AnyOfBuilder, ObjectBuilder, Schema, Type};
+    use utoipa::openapi::Ref;
+    let any_of = AnyOfBuilder::new()
+        .item(Ref::from_schema_name("PatchOutcomes"))
+        .item(ObjectBuilder::new().schema_type(Type::Object))
+        .description(Some(
+            "What was already done before the failure: a config PATCH's per-parameter \
+             outcomes (`PatchOutcomes`), or per-bus results of an e-stop or readiness check.",
+        ))
+        .build();
+    Schema::AnyOf(any_of)
 }
 
 /// An error a handler returns; renders as a [`Problem`].

@@ -156,6 +156,9 @@ pub(crate) struct FrameLog {
 }
 
 /// List every bus with its state and stats.
+///
+/// Each bus with its serial path, baud, link state (and why it is down), known and online devices,
+/// queue depth and counters.
 #[utoipa::path(get, path = "/api/v1/buses", tag = TAG_BUSES,
     responses((status = 200, description = "Every configured bus", body = BusList), ErrorResponses))]
 async fn list_buses(State(state): State<AppState>) -> Json<BusList> {
@@ -164,6 +167,9 @@ async fn list_buses(State(state): State<AppState>) -> Json<BusList> {
 }
 
 /// One bus's state: link, baud, stats.
+///
+/// The bus's serial path, baud, link state (and why it is down, with the next retry), devices known
+/// and online, queue depth and the frame, error and timing counters.
 #[utoipa::path(get, path = "/api/v1/buses/{bus}", tag = TAG_BUSES, params(BusPath),
     responses((status = 200, description = "The bus", body = BusView), ErrorResponses))]
 async fn get_bus(
@@ -174,6 +180,9 @@ async fn get_bus(
 }
 
 /// Scan an id range: poll INFO_01 of each id; devices that answer join the bus.
+///
+/// Polls INFO_01 of every id in `first..=last` between the bus's regular work; devices that answer
+/// join the bus and are polled from then on. Nothing is enabled or moved.
 #[utoipa::path(post, path = "/api/v1/buses/{bus}/scan", tag = TAG_BUSES, params(BusPath),
     request_body(content = ScanRequest, example = json!({"first": 1, "last": 16})),
     responses((status = 200, description = "Ids that answered", body = ScanResult), ErrorResponses))]
@@ -205,6 +214,10 @@ async fn scan(
 }
 
 /// Change the baud of every device on the bus, then of the port.
+///
+/// Writes the new baud level to every known device (each confirms with RES), then switches the
+/// port. The level is RAM until persisted with
+/// `config/persist`.
 #[utoipa::path(put, path = "/api/v1/buses/{bus}/baud", tag = TAG_BUSES, params(BusPath),
     request_body(content = BaudRequest, example = json!({"baud": 500000})),
     responses((status = 200, description = "The bus now runs at this baud", body = BaudRequest),
@@ -239,6 +252,9 @@ async fn set_baud(
 }
 
 /// The latest frames seen on the wire, oldest first, decoded.
+///
+/// The frame log of the bus: each frame's direction, wire time, raw hex and decoded fields, oldest
+/// first. `limit` bounds the count; the dashboard's frame log reads it.
 #[utoipa::path(get, path = "/api/v1/buses/{bus}/frames", tag = TAG_BUSES,
     params(BusPath, FramesQuery),
     responses((status = 200, description = "Raw frame log", body = FrameLog), ErrorResponses))]

@@ -98,6 +98,9 @@ fn block_label(block: InfoBlock) -> String {
 }
 
 /// Read every parameter (INFO_03..06) in physical units, raw values beside them.
+///
+/// Reads INFO_03 to INFO_06 from the device now and shows every parameter of the table in physical
+/// units, with its raw value and index, plus the raw INFO bytes.
 #[utoipa::path(get, path = "/api/v1/buses/{bus}/devices/{id}/config", tag = TAG_CONFIG, params(DevicePath),
     responses((status = 200, description = "Every parameter, read from the device now", body = ConfigView), ErrorResponses))]
 async fn read_config(
@@ -258,6 +261,9 @@ fn patch_problem(failed: Option<ApiError>, out: &PatchOutcomes) -> Option<ApiErr
 }
 
 /// Persist the RAM parameters to flash (WRITE_FLASH, key 0xA5), confirmed by RES.
+///
+/// WRITE_FLASH with key 0xA5: the device stores its RAM parameters (gains, limits, baud level) so
+/// they survive a power cycle. Confirmed by the device's RES reply.
 #[utoipa::path(post, path = "/api/v1/buses/{bus}/devices/{id}/config/persist", tag = TAG_CONFIG, params(DevicePath),
     responses((status = 200, description = "Parameters stored in flash", body = PersistResult), ErrorResponses))]
 async fn persist(
@@ -276,6 +282,9 @@ async fn persist(
 }
 
 /// Change a device's id (stored to flash at once; the device answers from the new id).
+///
+/// CONFIG_SET_ID: the device stores the new id in flash at once and answers from it. 409 when the
+/// new id is taken on this bus. The registry follows the device to its new id.
 #[utoipa::path(put, path = "/api/v1/buses/{bus}/devices/{id}/id", tag = TAG_CONFIG, params(DevicePath),
     request_body(content = IdRequest, example = json!({"new_id": 5})),
     responses((status = 200, description = "Id changed, confirmed from the new id", body = IdResult), ErrorResponses))]
@@ -317,6 +326,9 @@ async fn change_id(
 /// The parameter table: every config index of SPEC §4.3 with its raw type,
 /// scale, range, reply, read-back field, storage and revision. The dashboard
 /// builds its configuration form from it.
+///
+/// The dashboard builds its configuration form from this table; clients can use it to validate
+/// values before a PATCH.
 #[utoipa::path(get, path = "/api/v1/params", tag = TAG_CONFIG,
     responses((status = 200, description = "The parameter table, one row per index", body = ParamTable), ErrorResponses))]
 async fn param_table() -> Json<ParamTable> {

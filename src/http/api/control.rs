@@ -203,6 +203,10 @@ async fn apply_targets(
 }
 
 /// Enable one device (power up and hold; the first enable aligns for ~1 s).
+///
+/// Sends CMD_ENABLE to one device and waits until its status says it is enabled; the joint then
+/// holds its current angle. The first enable after power-up aligns the encoder (state `align`,
+/// about 1 s) before `run`.
 #[utoipa::path(post, path = "/api/v1/buses/{bus}/devices/{id}/enable", tag = TAG_CONTROL, params(DevicePath),
     responses((status = 200, description = "Enable sent and confirmed by the bus", body = ActionDone), ErrorResponses))]
 async fn enable_one(
@@ -216,6 +220,9 @@ async fn enable_one(
 }
 
 /// Disable one device (release the motor).
+///
+/// Sends CMD_DISABLE: the motor is released and the joint goes limp. Any target, setpoint stream or
+/// move on this joint stops with it.
 #[utoipa::path(post, path = "/api/v1/buses/{bus}/devices/{id}/disable", tag = TAG_CONTROL, params(DevicePath),
     responses((status = 200, description = "Disable sent", body = ActionDone), ErrorResponses))]
 async fn disable_one(
@@ -230,6 +237,11 @@ async fn disable_one(
 
 /// Set one joint's target (position in degrees with a speed limit in rpm,
 /// or a speed in speed mode). Outside the soft limits: 422, never clamped.
+///
+/// Position mode: `position_deg` with an optional `speed_rpm` limit (the default speed when left
+/// out). Speed mode: `speed_rpm` only. Values outside the configured soft limits are refused with
+/// 422 and never clamped. 200 when the reference went out on the wire, 202 when it is stored for
+/// the next control frame.
 #[utoipa::path(put, path = "/api/v1/buses/{bus}/devices/{id}/target", tag = TAG_CONTROL, params(DevicePath),
     request_body(content = TargetRequest, example = json!({"position_deg": 45.0, "speed_rpm": 3000.0})),
     responses((status = 200, description = "Target written to the wire", body = TargetAck),
@@ -248,6 +260,9 @@ async fn target_one(
 }
 
 /// Switch one device between position and speed mode (not saved by the device).
+///
+/// Writes CTRL_MODE_SW and reads the mode back. The device does not save the mode: after a power
+/// cycle it is in position mode again.
 #[utoipa::path(put, path = "/api/v1/buses/{bus}/devices/{id}/mode", tag = TAG_CONTROL, params(DevicePath),
     request_body(content = ModeRequest, example = json!({"mode": "speed"})),
     responses((status = 200, description = "Mode set and verified", body = ActionDone), ErrorResponses))]
@@ -264,6 +279,9 @@ async fn mode_one(
 }
 
 /// Jog an enabled device: `cw` +5°, `ccw` −3°; it re-zeroes afterwards. 409 while disabled.
+///
+/// Nudges an enabled joint: `cw` moves +5°, `ccw` −3°. The device resets its zero to the new
+/// position afterwards (the angle reads about 0), as the protocol defines a jog.
 #[utoipa::path(post, path = "/api/v1/buses/{bus}/devices/{id}/jog", tag = TAG_CONTROL, params(DevicePath),
     request_body(content = JogRequest, example = json!({"direction": "cw"})),
     responses((status = 200, description = "Jog sent", body = ActionDone), ErrorResponses))]
@@ -284,6 +302,9 @@ async fn jog(
 }
 
 /// Make the current output position the new 0°.
+///
+/// UPDATE_FIN_ZERO: the output angle reads 0° at the current position from now on. The device keeps
+/// the new zero; targets and soft limits are relative to it.
 #[utoipa::path(post, path = "/api/v1/buses/{bus}/devices/{id}/rezero", tag = TAG_CONTROL, params(DevicePath),
     responses((status = 200, description = "Zero set", body = ActionDone), ErrorResponses))]
 async fn rezero(
@@ -297,6 +318,9 @@ async fn rezero(
 }
 
 /// Enable a group of devices (no `ids`: every device on the bus).
+///
+/// Enables every listed device (every device on the bus when `ids` is left out) with per-device
+/// control frames, then waits for each to report enabled.
 #[utoipa::path(post, path = "/api/v1/buses/{bus}/control/enable", tag = TAG_CONTROL, params(BusPath),
     request_body(content = GroupRequest, example = json!({"ids": [1, 2, 3]})),
     responses((status = 200, description = "Enable sent", body = ActionDone), ErrorResponses))]
@@ -312,6 +336,9 @@ async fn enable_group(
 }
 
 /// Disable a group of devices (no `ids`: every device on the bus).
+///
+/// Disables every listed device (every device on the bus when `ids` is left out): the motors are
+/// released.
 #[utoipa::path(post, path = "/api/v1/buses/{bus}/control/disable", tag = TAG_CONTROL, params(BusPath),
     request_body(content = GroupRequest, example = json!({"ids": [1, 2, 3]})),
     responses((status = 200, description = "Disable sent", body = ActionDone), ErrorResponses))]
@@ -328,6 +355,10 @@ async fn disable_group(
 
 /// Set several joints' targets in one call: all are checked first (one bad
 /// target rejects the whole request), then stored in one write.
+///
+/// Every target is checked against the soft limits and the devices' states before anything is
+/// stored: one bad target refuses the whole request (422 or 409). The accepted targets go out
+/// together in the next control cycle.
 #[utoipa::path(put, path = "/api/v1/buses/{bus}/control/targets", tag = TAG_CONTROL, params(BusPath),
     request_body(content = GroupTargetRequest, example = json!({"targets": [
         {"id": 1, "position_deg": 30.0, "speed_rpm": 3000.0},
@@ -377,6 +408,9 @@ async fn target_group(
 }
 
 /// Switch a group of devices between position and speed mode.
+///
+/// Writes CTRL_MODE_SW to each listed device and reads each mode back; the answer lists the devices
+/// switched.
 #[utoipa::path(put, path = "/api/v1/buses/{bus}/control/mode", tag = TAG_CONTROL, params(BusPath),
     request_body(content = GroupModeRequest, example = json!({"ids": [1, 2], "mode": "position"})),
     responses((status = 200, description = "Mode set on every device", body = ActionDone), ErrorResponses))]

@@ -196,6 +196,10 @@ fn summary(dev: &DeviceState, name: Option<&str>, now: Instant) -> DeviceSummary
 }
 
 /// List the devices of a bus with their latest telemetry.
+///
+/// Every device the bus has seen (by discovery, a scan or its power-up announcement), online or
+/// not, with its latest state, fault, angle, speed, current, temperature and bus voltage, and how
+/// old that telemetry is.
 #[utoipa::path(get, path = "/api/v1/buses/{bus}/devices", tag = TAG_DEVICES,
     params(BusPath),
     responses((status = 200, description = "Devices known on the bus", body = DeviceList), ErrorResponses))]
@@ -216,6 +220,10 @@ async fn list_devices(
 }
 
 /// One device's full state: INFO_01 and INFO_02 decoded, firmware, fault names.
+///
+/// INFO_01 and INFO_02 decoded with their raw bytes, firmware version, fault names (active and
+/// latched), the current target and why a joint was disabled, if it was. `fresh=true` polls the
+/// device now instead of answering from the latest telemetry.
 #[utoipa::path(get, path = "/api/v1/buses/{bus}/devices/{id}", tag = TAG_DEVICES,
     params(DevicePath, FreshQuery),
     responses((status = 200, description = "The device's state", body = DeviceDetail), ErrorResponses))]

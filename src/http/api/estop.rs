@@ -140,6 +140,10 @@ async fn stop(buses: Vec<BusHandle>) -> ApiResult<Json<EstopResult>> {
 }
 
 /// Disable every device on every bus at once, ahead of anything queued.
+///
+/// Emergency stop: every bus sends CMD_DISABLE to all its devices ahead of any queued request and
+/// confirms each device stopped. 503 with per-bus results in `partial` when a bus could not confirm
+/// every device.
 #[utoipa::path(post, path = "/api/v1/estop", tag = TAG_ESTOP,
     responses((status = 200, description = "Every bus stopped", body = EstopResult), ErrorResponses))]
 async fn estop_all(State(state): State<AppState>) -> ApiResult<Json<EstopResult>> {
@@ -147,6 +151,9 @@ async fn estop_all(State(state): State<AppState>) -> ApiResult<Json<EstopResult>
 }
 
 /// Disable every device on one bus, ahead of anything queued.
+///
+/// Emergency stop of one bus: CMD_DISABLE to all its devices ahead of any queued request, confirmed
+/// per device. Other buses are not touched.
 #[utoipa::path(post, path = "/api/v1/buses/{bus}/estop", tag = TAG_ESTOP, params(BusPath),
     responses((status = 200, description = "The bus stopped", body = EstopResult), ErrorResponses))]
 async fn estop_bus(

@@ -63,6 +63,9 @@ pub(crate) fn link_name(link: &LinkState) -> &'static str {
 }
 
 /// The process is up (never needs a token).
+///
+/// Answers as long as the process runs, whatever the buses do; for a container's liveness probe.
+/// Never needs a token and skips the Host check so probes from outside work.
 #[utoipa::path(get, path = "/healthz", tag = TAG_HEALTH, security(()),
     responses((status = 200, description = "The process is up", body = Health)))]
 async fn healthz(State(state): State<AppState>) -> Json<Health> {
@@ -74,6 +77,10 @@ async fn healthz(State(state): State<AppState>) -> Json<Health> {
 }
 
 /// Every configured bus is up (503 otherwise, with each bus's link state).
+///
+/// Ready means every configured bus has its port open and its owner running. A bus that is down
+/// (device unplugged, port missing) makes it 503 with each bus's link state in `partial`; for a
+/// readiness probe or a start-up script that waits for the hardware.
 #[utoipa::path(get, path = "/readyz", tag = TAG_HEALTH,
     responses((status = 200, description = "Every bus is up", body = Readiness), ErrorResponses))]
 async fn readyz(State(state): State<AppState>) -> ApiResult<Json<Readiness>> {
@@ -98,6 +105,10 @@ async fn readyz(State(state): State<AppState>) -> ApiResult<Json<Readiness>> {
 }
 
 /// Prometheus text: bus counters, link state, per-joint gauges.
+///
+/// The Prometheus text exposition of every counter and gauge: frames per kind, CRC errors,
+/// timeouts, collisions, queue depths, per-joint telemetry, WebSocket clients. Scrape it;
+/// `docs/metrics.md` lists the families.
 #[utoipa::path(get, path = "/metrics", tag = TAG_HEALTH,
     responses((status = 200, description = "Prometheus text exposition format",
         content_type = "text/plain", body = String,

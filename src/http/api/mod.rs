@@ -38,8 +38,7 @@ pub fn router() -> OpenApiRouter<AppState> {
 /// The document as served, with the crate version.
 pub fn document() -> utoipa::openapi::OpenApi {
     let (_, mut doc) = router().split_for_parts();
-    openapi::add_guard_responses(&mut doc);
-    doc.info.version = env!("CARGO_PKG_VERSION").to_owned();
+    openapi::finish(&mut doc);
     doc
 }
 

@@ -37,7 +37,12 @@ const BEARER_SCHEME: &str = "bearer";
             daemon has a token, every request but /healthz needs `Authorization: Bearer <token>`. \
             A request whose Host header names no host of the daemon gets 421 (DNS-rebinding \
             guard); a change (any method but GET) from a browser page of a foreign origin gets \
-            403; a body over max_body_bytes gets 413."
+            403; a body over max_body_bytes gets 413.",
+        contact(name = "jointd developers"),
+        license(name = "MIT OR Apache-2.0", identifier = "MIT OR Apache-2.0")
+    ),
+    servers(
+        (url = "http://127.0.0.1:8080", description = "The daemon on this machine, default `--listen` address"),
     ),
     modifiers(&BearerAuth),
     // `PatchOutcomes`: the `partial` of a config PATCH that did not confirm everything.
@@ -69,6 +74,44 @@ impl Modify for BearerAuth {
             utoipa::openapi::security::SecurityRequirement::new::<_, _, &str>(BEARER_SCHEME, []),
             utoipa::openapi::security::SecurityRequirement::default(),
         ]);
+    }
+}
+
+/// Success examples recorded from `jointd --sim 2` (lists shortened), one
+/// per operation, keyed `"<method> <path>"`. Kept beside the document so a
+/// linter checks each against its schema.
+const EXAMPLES_JSON: &str = include_str!("../../../openapi/examples.json");
+
+/// Puts each operation's example of `json` on its first success response.
+fn add_examples(doc: &mut utoipa::openapi::OpenApi, json: &str) {
+    let Ok(serde_json::Value::Object(examples)) = serde_json::from_str(json) else {
+        tracing::error!("openapi/examples.json is not a JSON object: examples left out");
+        return;
+    };
+    for (path, item) in doc.paths.paths.iter_mut() {
+        let ops = [
+            ("get", &mut item.get),
+            ("put", &mut item.put),
+            ("post", &mut item.post),
+            ("delete", &mut item.delete),
+            ("patch", &mut item.patch),
+        ];
+        for (method, op) in ops {
+            let Some(op) = op.as_mut() else { continue };
+            let Some(example) = examples.get(&format!("{method} {path}")) else {
+                continue;
+            };
+            let success = op
+                .responses
+                .responses
+                .iter_mut()
+                .find(|(s, _)| s.starts_with('2'));
+            if let Some((_, RefOr::T(response))) = success {
+                if let Some(content) = response.content.get_mut("application/json") {
+                    content.example = Some(example.clone());
+                }
+            }
+        }
     }
 }
 
@@ -121,7 +164,7 @@ fn problem_ref(status: &str) -> RefOr<Response> {
 /// The guards' statuses, on the operations they apply to: 421 on every
 /// route but `/healthz`, 403 on every method but GET, 413 where a body is
 /// taken. Run on the document once the areas have added their routes.
-pub(crate) fn add_guard_responses(doc: &mut utoipa::openapi::OpenApi) {
+fn add_guard_responses(doc: &mut utoipa::openapi::OpenApi) {
     use utoipa::openapi::HttpMethod;
     for (path, item) in doc.paths.paths.iter_mut() {
         let ops = [
@@ -159,9 +202,16 @@ pub(crate) fn base() -> OpenApiRouter<AppState> {
 
 /// `/openapi.json` and the Swagger UI at `/docs`.
 pub(crate) fn docs(mut doc: utoipa::openapi::OpenApi) -> Router<AppState> {
-    add_guard_responses(&mut doc);
-    doc.info.version = env!("CARGO_PKG_VERSION").to_owned();
+    finish(&mut doc);
     SwaggerUi::new(DOCS_PATH).url(OPENAPI_PATH, doc).into()
+}
+
+/// What the document gets once the areas have added their routes: the
+/// guards' responses, the recorded examples, the crate version.
+pub(crate) fn finish(doc: &mut utoipa::openapi::OpenApi) {
+    add_guard_responses(doc);
+    add_examples(doc, EXAMPLES_JSON);
+    doc.info.version = env!("CARGO_PKG_VERSION").to_owned();
 }
 
 /// A document as pretty JSON, as checked in under `openapi/`.
