@@ -58,6 +58,7 @@ pub mod bus;
 pub mod cli;
 mod config_locate;
 pub mod daemon;
+pub mod histogram;
 pub mod http;
 mod logcap;
 pub mod mem;
