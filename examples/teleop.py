@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Teleoperation example for jointd's WebSocket (jointd.ws.v1).
+"""Teleoperation example for jointd's WebSocket (jointd.ws.v1), on the
+jointd-client package.
 
 Streams a sine wave to every joint at 500 Hz for 10 s, asks for an ack of
 every batch, and prints the acknowledged setpoint-to-wire latency (p50/p99,
@@ -7,28 +8,27 @@ as the daemon measured it: accepted -> last byte of the carrying frame on the
 wire), the client's round trip (send -> ack received), and the telemetry rate
 it received.
 
-    jointd --sim 16                                  # in another terminal
-    pip install websockets
+    cargo run --release -- --sim 16                  # in another terminal
+    pip install ./clients/python
     python3 examples/teleop.py --enable              # enables the joints first
 
 Without --enable the joints must already be enabled (the daemon never moves a
 disabled joint; targets to one are rejected with `wrong_state`). The
-watchdog is armed: if this script stops, the joints freeze where they are.
+watchdog is armed while the stream runs: if this script dies, the joints
+freeze where they are. On a normal finish it disarms the watchdog, then
+closes the socket, so the daemon logs no watchdog firing.
 """
 
 import argparse
 import asyncio
-import json
 import math
-import statistics
 import sys
 import time
-import urllib.request
 
 try:
-    import websockets
+    from jointd_client import Jointd
 except ImportError:
-    sys.exit("needs the websockets package: pip install websockets")
+    sys.exit("needs the client package: pip install ./clients/python")
 
 
 def percentile(values, p):
@@ -38,58 +38,32 @@ def percentile(values, p):
     return s[min(len(s) - 1, int(round(p / 100 * (len(s) - 1))))]
 
 
-def rest(base, method, path, token, body=None):
-    req = urllib.request.Request(base + path, method=method,
-                                 data=None if body is None else json.dumps(body).encode())
-    req.add_header("Content-Type", "application/json")
-    if token:
-        req.add_header("Authorization", f"Bearer {token}")
-    with urllib.request.urlopen(req, timeout=10) as r:
-        return json.loads(r.read() or b"null")
+async def count_telemetry(client, rate_hz, counter, stop):
+    async for _ in client.telemetry(rate_hz=rate_hz):
+        if stop.is_set():
+            return
+        counter[0] += 1
 
 
 async def run(args):
-    url = args.url + (f"?token={args.token}" if args.token else "")
-    http = args.url.replace("ws://", "http://").replace("wss://", "https://").split("/api/")[0]
-    async with websockets.connect(url, max_queue=None) as ws:
-        welcome = json.loads(await ws.recv())
-        joints = [(b["name"], d) for b in welcome["buses"] for d in b["devices"]]
-        if not joints:
-            sys.exit("the daemon knows no joints")
-        print(f"{len(joints)} joints on {len(welcome['buses'])} bus(es)")
-        if args.enable:
-            for bus in {b for b, _ in joints}:
-                rest(http, "POST", f"/api/v1/buses/{bus}/control/enable", args.token, {})
-            await asyncio.sleep(args.align_s)  # the first enable aligns (~1 s)
-        await ws.send(json.dumps({"type": "watchdog", "hold_timeout_ms": 200, "policy": "hold"}))
-        await ws.send(json.dumps({"type": "subscribe", "rate_hz": args.telemetry_hz}))
+    client = Jointd(args.url, token=args.token)
+    joints = [(b.name, d.id) for b in client.buses() for d in client.devices(b.name)]
+    if not joints:
+        sys.exit("the daemon knows no joints")
+    print(f"{len(joints)} joints on {len({b for b, _ in joints})} bus(es)")
+    if args.enable:
+        for bus in {b for b, _ in joints}:
+            client.enable_all(bus)
+        await asyncio.sleep(args.align_s)  # the first enable aligns (~1 s)
 
-        sent_at = {}
-        server_latency, round_trip, errors = [], [], []
-        telemetry = 0
-        done = asyncio.Event()
-
-        async def receive():
-            nonlocal telemetry
-            async for raw in ws:
-                m = json.loads(raw)
-                kind = m.get("type")
-                if kind == "ack":
-                    t0 = sent_at.pop(m["ref_seq"], None)
-                    server_latency.append(m["latency_us"])
-                    if t0 is not None:
-                        round_trip.append((time.perf_counter() - t0) * 1e6)
-                elif kind == "telemetry" and not done.is_set():
-                    telemetry += 1
-                elif kind == "error":
-                    errors.append(m)
-                    if len(errors) <= 3:
-                        print("error:", m.get("code"), m.get("message"), file=sys.stderr)
-
-        receiver = asyncio.create_task(receive())
-        period = 1.0 / args.rate_hz
+    telemetry, stop = [0], asyncio.Event()
+    counter = asyncio.create_task(count_telemetry(client, args.telemetry_hz, telemetry, stop))
+    server_latency, round_trip, errors = [], [], []
+    period = 1.0 / args.rate_hz
+    async with client.setpoints(hold_timeout_ms=200, policy="hold") as stream:
         start = time.perf_counter()
         seq = 0
+        pending = []
         while (now := time.perf_counter()) - start < args.seconds:
             t = now - start
             targets = [{"bus": b, "dev_id": d,
@@ -97,26 +71,36 @@ async def run(args):
                         "speed_rpm": 20000}
                        for i, (b, d) in enumerate(joints)]
             seq += 1
-            sent_at[seq] = time.perf_counter()
-            await ws.send(json.dumps({"type": "setpoints", "seq": seq, "ack": True, "targets": targets}))
+            sent = time.perf_counter()
+            fut = await stream.send_nowait(targets)
+            fut.add_done_callback(lambda f, sent=sent: round_trip.append((time.perf_counter() - sent) * 1e6)
+                                  if not f.exception() else None)
+            pending.append(fut)
             await asyncio.sleep(max(0.0, start + seq * period - time.perf_counter()))
         elapsed = time.perf_counter() - start
-        done.set()
-        await asyncio.sleep(0.3)  # late acks
-        receiver.cancel()
+        done, _ = await asyncio.wait(pending, timeout=1.0)  # late acks
+        for f in done:
+            if f.exception():
+                errors.append(f.exception())
+            else:
+                server_latency.append(f.result()["latency_us"])
+    stop.set()
+    counter.cancel()
+    for e in errors[:3]:
+        print("error:", e, file=sys.stderr)
 
     print(f"sent {seq} batches in {elapsed:.2f} s ({seq / elapsed:.0f} Hz), {len(server_latency)} acked, {len(errors)} errors")
     print(f"setpoint-to-wire latency (daemon): p50 {percentile(server_latency, 50) / 1000:.2f} ms, "
           f"p99 {percentile(server_latency, 99) / 1000:.2f} ms")
     print(f"client round trip (send -> ack):   p50 {percentile(round_trip, 50) / 1000:.2f} ms, "
           f"p99 {percentile(round_trip, 99) / 1000:.2f} ms")
-    print(f"telemetry received: {telemetry / elapsed:.1f} messages/s (subscribed {args.telemetry_hz} Hz)")
+    print(f"telemetry received: {telemetry[0] / elapsed:.1f} messages/s (subscribed {args.telemetry_hz} Hz)")
     return 0 if server_latency and not errors else 1
 
 
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--url", default="ws://127.0.0.1:8080/api/v1/ws")
+    p.add_argument("--url", default="http://127.0.0.1:8080")
     p.add_argument("--token", default=None)
     p.add_argument("--enable", action="store_true", help="enable every joint first (they will move!)")
     p.add_argument("--align-s", type=float, default=1.5)

@@ -10,6 +10,8 @@ use std::time::Duration;
 use serde::Deserialize;
 use thiserror::Error;
 use tokio::net::TcpListener;
+
+use crate::config_locate::key_in_table_array;
 use tokio::signal::unix::{signal, SignalKind};
 
 use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle};
@@ -179,7 +181,36 @@ fn load_file(path: &PathBuf) -> Result<FileConfig, DaemonError> {
         why,
     };
     let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
-    toml::from_str(&text).map_err(|e| bad(e.to_string()))
+    let file: FileConfig = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    // The parser placed type errors; values it accepted but a bus cannot run
+    // with are placed here, so the user is told the line, not just the key.
+    for (i, bus) in file.buses.iter().enumerate() {
+        if let Some((key, why)) = bus.invalid_field() {
+            let at = match key_in_table_array(&text, "bus", i, key) {
+                Some((line, column)) => format!("line {line}, column {column}: "),
+                None => String::new(),
+            };
+            return Err(bad(format!(
+                "{at}`{key}` of [[bus]] `{}` (bus #{}): {why}",
+                bus.name,
+                i + 1
+            )));
+        }
+    }
+    Ok(file)
+}
+
+/// A failed bind, with the way out when the address is taken.
+fn listen_error(addr: SocketAddr, source: std::io::Error) -> DaemonError {
+    let what = if source.kind() == std::io::ErrorKind::AddrInUse {
+        format!(
+            "cannot listen on {addr} (is another jointd running?); choose another address \
+             with --listen, e.g. --listen 127.0.0.1:8081 (or `listen` in the config file)"
+        )
+    } else {
+        format!("cannot listen on {addr}; choose another address with --listen")
+    };
+    DaemonError::Io { what, source }
 }
 
 /// Merges the config file and the flags, and refuses unsafe combinations.
@@ -389,10 +420,7 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     let (handles, threads) = start_buses(configs)?;
     let listener = TcpListener::bind(plan.listen)
         .await
-        .map_err(|e| DaemonError::Io {
-            what: format!("cannot listen on {}", plan.listen),
-            source: e,
-        })?;
+        .map_err(|e| listen_error(plan.listen, e))?;
     let addr = listener.local_addr().map_err(|e| DaemonError::Io {
         what: "listener address".into(),
         source: e,

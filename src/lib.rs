@@ -44,7 +44,7 @@
 //! | what a simulated device does with a frame | `sim::device`, `sim::physics`, `sim::faults` |
 //! | collisions and timing on the simulated wire | `sim::wire`, `sim::engine` |
 //! | opening a serial port, RS-485 mode, FTDI latency | `transport::tty`, `transport::rs485` |
-//! | config file keys, command-line flags | `daemon`, `main.rs` |
+//! | config file keys, command-line flags | `daemon`, `main.rs`; a refused value's line: `config_locate` |
 //! | which log lines a failing request writes (5xx: WARN, collapsed) | `http` (`log_failures`), `logcap` |
 
 // Visibility says who may use an item: `pub` only where it is reachable from
@@ -56,7 +56,9 @@
 pub mod bench;
 pub mod bus;
 pub mod cli;
+mod config_locate;
 pub mod daemon;
+pub mod histogram;
 pub mod http;
 mod logcap;
 pub mod mem;

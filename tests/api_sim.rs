@@ -271,7 +271,7 @@ async fn buses_frames_scan_metrics_and_auth() {
     let m = s.get("/metrics").await;
     let text = m.body.as_str().unwrap().to_owned();
     assert!(text.contains("jointd_bus_up{bus=\"sim0\"} 1"));
-    assert!(text.contains("jointd_bus_wire_utilisation{bus=\"sim0\"}"));
+    assert!(text.contains("jointd_bus_wire_utilisation_ratio{bus=\"sim0\"}"));
     assert!(text
         .lines()
         .any(|l| l.starts_with("jointd_bus_frames_rx_total{bus=\"sim0\"}") && !l.ends_with(" 0")));

@@ -375,6 +375,12 @@ $("#change-id").onclick = async () => {
 
 // ---------------------------------------------------------------- raw frames
 
+/** `18:45:10.684`: 24-hour wall time with milliseconds, whatever the locale. */
+function clockTime(t) {
+  const two = (n) => String(n).padStart(2, "0");
+  return `${two(t.getHours())}:${two(t.getMinutes())}:${two(t.getSeconds())}.${String(t.getMilliseconds()).padStart(3, "0")}`;
+}
+
 async function loadFrames() {
   if (!state.selected) return;
   const data = await act(null, () => api("GET", `buses/${encodeURIComponent(state.selected.bus)}/frames?limit=30`));
@@ -385,8 +391,7 @@ async function loadFrames() {
     const d = f.decoded || {};
     const summary = Object.entries(d).filter(([k]) => k !== "raw").map(([k, v]) => `${k}=${Array.isArray(v) ? "[…]" : v}`).join(" ");
     const tr = document.createElement("tr");
-    const t = new Date(f.at * 1000);
-    tr.innerHTML = `<td>${t.toLocaleTimeString()}.${String(t.getMilliseconds()).padStart(3, "0")}</td><td>${f.direction}</td><td></td><td></td>`;
+    tr.innerHTML = `<td>${clockTime(new Date(f.at * 1000))}</td><td>${f.direction}</td><td></td><td></td>`;
     tr.children[2].textContent = f.hex; tr.children[3].textContent = summary;
     tbody.appendChild(tr);
   }

@@ -208,7 +208,15 @@ impl BusConfig {
         };
         let (path, baud) = match rest.rsplit_once('@') {
             Some((path, baud)) => (path, parse_baud(baud)?),
-            None => (rest, FACTORY_BAUD),
+            None => {
+                // Said aloud: a bus that stays silent at the wrong baud
+                // looks exactly like a bus with no devices.
+                tracing::info!(
+                    "bus `{spec}` has no @BAUD: assuming the factory {FACTORY_BAUD} baud; \
+                     write `{rest}@500000` (or another baud) if the devices run at another"
+                );
+                (rest, FACTORY_BAUD)
+            }
         };
         if path.is_empty() {
             return Err(BusError::Invalid(format!(
@@ -228,30 +236,53 @@ impl BusConfig {
 
     /// Refuses what the owner cannot run with, saying which field and why.
     pub fn validate(&self) -> Result<(), BusError> {
-        let bad = |why: String| Err(BusError::Invalid(format!("bus `{}`: {why}", self.name)));
+        match self.invalid_field() {
+            Some((_, why)) => Err(BusError::Invalid(format!("bus `{}`: {why}", self.name))),
+            None => Ok(()),
+        }
+    }
+
+    /// The first field the owner cannot run with: its key as the config
+    /// file spells it (so the file's line can be found) and why.
+    pub fn invalid_field(&self) -> Option<(&'static str, String)> {
         if BaudLevel::from_baud(self.baud).is_none() {
-            return bad(format!("baud {} is not one of {}", self.baud, BAUD_LIST));
+            return Some((
+                "baud",
+                format!("baud {} is not one of {}", self.baud, BAUD_LIST),
+            ));
         }
         if let Some(id) = self.ids.iter().find(|id| !is_device_id(**id)) {
-            return bad(format!("device id {id} is outside 1..=159"));
+            return Some(("ids", format!("device id {id} is outside 1..=159")));
         }
         if !is_device_id(self.scan_first)
             || !is_device_id(self.scan_last)
             || self.scan_first > self.scan_last
         {
-            return bad(format!(
+            let why = format!(
                 "scan range {}..={} must lie within 1..=159",
                 self.scan_first, self.scan_last
-            ));
+            );
+            let key = if is_device_id(self.scan_first) {
+                "scan_last"
+            } else {
+                "scan_first"
+            };
+            return Some((key, why));
         }
         let share = self.poll.control_share;
         if !(share > 0.0 && share <= 1.0) {
-            return bad(format!("control_share {share} must be in (0, 1]"));
+            return Some((
+                "control_share",
+                format!("control_share {share} must be in (0, 1]"),
+            ));
         }
-        if self.poll.info01_every == 0 || self.poll.offline_after == 0 {
-            return bad("info01_every and offline_after must be at least 1".into());
+        if self.poll.info01_every == 0 {
+            return Some(("info01_every", "info01_every must be at least 1".into()));
         }
-        Ok(())
+        if self.poll.offline_after == 0 {
+            return Some(("offline_after", "offline_after must be at least 1".into()));
+        }
+        None
     }
 
     /// Time one frame occupies the wire at the configured baud.

@@ -25,8 +25,8 @@ use super::error::BusError;
 // are part of this contract and reachable under `bus::handle::` as before.
 pub use super::setpoints::{Setpoint, SetpointStore, StoredSetpoint};
 pub use super::state::{
-    BusCounters, BusEvent, BusRates, BusSnapshot, DeviceState, DisabledReason, LinkState,
-    LoggedFrame, ResetRecord, ResetSignal, WireAck,
+    BusCounters, BusEvent, BusLatency, BusRates, BusSnapshot, DeviceState, DisabledReason,
+    LinkState, LoggedFrame, ResetRecord, ResetSignal, WireAck,
 };
 
 /// Which devices a control request addresses.

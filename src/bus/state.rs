@@ -143,6 +143,15 @@ pub struct BusCounters {
     pub writes_unverified: u64,
 }
 
+/// Latency histograms since start (`/metrics`).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct BusLatency {
+    /// A setpoint's acceptance to the last byte of its frame on the wire.
+    pub setpoint_to_wire: crate::histogram::Histogram,
+    /// A config/read frame handed to the port to its reply read back.
+    pub round_trip: crate::histogram::Histogram,
+}
+
 /// Rates over the last statistics window (about one second).
 #[derive(Debug, Clone, PartialEq, Default, Serialize)]
 pub struct BusRates {
@@ -182,6 +191,8 @@ pub struct BusSnapshot {
     pub published_wall: SystemTime,
     /// Rates over the last statistics window.
     pub rates: BusRates,
+    /// Latency histograms since start.
+    pub latency: BusLatency,
     /// What starting the owner and opening the port found worth telling
     /// (no real-time priority, failed ioctls on a pty, an FTDI latency timer and its fix).
     pub port_notes: Vec<String>,
@@ -201,6 +212,7 @@ impl BusSnapshot {
             published_at: Instant::now(),
             published_wall: SystemTime::now(),
             rates: BusRates::default(),
+            latency: BusLatency::default(),
             port_notes: Vec::new(),
         }
     }

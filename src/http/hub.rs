@@ -35,6 +35,8 @@ pub struct WsHub {
     shutdown: tokio::sync::watch::Sender<bool>,
     /// Telemetry JSON shared by connections with the same subscription.
     pub fragments: FragmentCache,
+    /// How long writing one message to a client's socket took.
+    send_latency: Mutex<crate::histogram::Histogram>,
 }
 
 impl Default for WsHub {
@@ -48,6 +50,7 @@ impl Default for WsHub {
             dropped_replies: AtomicU64::new(0),
             unsent_replies: AtomicU64::new(0),
             slow_disconnects: AtomicU64::new(0),
+            send_latency: Mutex::default(),
             client_drops: Mutex::default(),
             shutdown: tokio::sync::watch::channel(false).0,
             fragments: Default::default(),
@@ -121,6 +124,23 @@ impl WsHub {
 
     pub fn count(counter: &AtomicU64, n: u64) {
         counter.fetch_add(n, Ordering::Relaxed);
+    }
+
+    /// One message written to a client's socket in `took`.
+    pub(crate) fn observe_send(&self, took: std::time::Duration) {
+        // std Mutex: one array update, never across an `.await`.
+        self.send_latency
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .observe(took);
+    }
+
+    /// The socket write latencies so far.
+    pub(crate) fn send_latency(&self) -> crate::histogram::Histogram {
+        self.send_latency
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
     }
 }
 

@@ -11,7 +11,8 @@ use super::limits::{JointLimits, SoftLimits};
 use super::policy::{RefusalLog, RequestPolicy};
 use super::teleop::WatchdogDefault;
 use crate::bus::handle::DeviceState;
-use crate::bus::{BusHandle, BusSnapshot};
+use crate::bus::handle::LinkState;
+use crate::bus::{BusError, BusHandle, BusSnapshot};
 use crate::protocol::{is_device_id, MAX_DEVICE_ID, MIN_DEVICE_ID};
 
 /// Options of the config file that handlers read.
@@ -148,8 +149,17 @@ pub fn device_id(field: &str, id: i64) -> ApiResult<u8> {
         })
 }
 
-/// The snapshot entry of a device, or 404.
+/// The snapshot entry of a device, or 404; 503 when the bus is down (a bus
+/// whose port is missing knows no device, and saying "unknown device" would
+/// send the user scanning instead of plugging the adapter in).
 pub fn known_device(snap: &BusSnapshot, id: u8) -> ApiResult<&DeviceState> {
+    if let (None, LinkState::Down { reason, .. }) = (snap.devices.get(&id), &snap.link) {
+        return Err(BusError::Down {
+            bus: snap.name.clone(),
+            reason: reason.clone(),
+        }
+        .into());
+    }
     snap.devices.get(&id).ok_or_else(|| {
         ApiError::not_found(
             "unknown-device",

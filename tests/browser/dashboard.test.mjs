@@ -1,7 +1,9 @@
 // The dashboard in real headless Chromium (Debian's), driven by playwright-core,
 // against `jointd --sim 16`: live device table, a slider moving a joint, a
 // configuration change applied and read back, e-stop disabling everything.
-// Screenshots go to $SCREENSHOT_DIR (default screenshots-out/ at the repo root).
+// Screenshots go to $SCREENSHOT_DIR (default screenshots-out/ at the repo root);
+// docs/dashboard.png is rewritten by every run, at the 1366×768 of a laptop,
+// so the README always shows the current page.
 
 import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
@@ -15,6 +17,8 @@ const BIN = process.env.JOINTD_BIN || `${ROOT}target/debug/jointd`;
 const SHOTS = process.env.SCREENSHOT_DIR || `${ROOT}screenshots-out`;
 const CHROMIUM = process.env.CHROMIUM || "/usr/bin/chromium";
 const WAIT = 20_000;
+/** A common laptop screen: the joint panel must be usable without scrolling. */
+const VIEWPORT = { width: 1366, height: 768 };
 
 let daemon, browser, page, base;
 
@@ -66,7 +70,7 @@ before(async () => {
     args: ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
       "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic"],
   });
-  page = await browser.newPage({ viewport: { width: 1280, height: 1000 } });
+  page = await browser.newPage({ viewport: VIEWPORT });
   page.on("pageerror", (e) => console.error("page error:", e.message));
   await page.goto(base);
 });
@@ -117,6 +121,36 @@ test("moving the slider moves the joint", async () => {
   await page.screenshot({ path: `${SHOTS}/joint-panel.png`, fullPage: true });
   await page.evaluate(() => window.scrollTo(0, 0));
   await page.screenshot({ path: `${SHOTS}/dashboard.png` });
+  await page.screenshot({ path: `${ROOT}docs/dashboard.png` });
+});
+
+test("at 1366×768 the joint panel's controls are in view without scrolling", async () => {
+  await page.evaluate(() => window.scrollTo(0, 0));
+  for (const sel of ['[data-testid="device-panel"] h2', '[data-testid="enable"]', '[data-testid="target-slider"]',
+    '[data-testid="target-number"]', '[data-testid="move"]', "#plot"]) {
+    const box = await page.locator(sel).boundingBox();
+    assert.ok(box, `${sel} is laid out`);
+    assert.ok(box.y >= 0 && box.y + box.height <= VIEWPORT.height && box.x + box.width <= VIEWPORT.width,
+      `${sel} at ${JSON.stringify(box)} is outside ${VIEWPORT.width}×${VIEWPORT.height}`);
+  }
+});
+
+test("the target box shows a long number whole", async () => {
+  const input = page.locator('[data-testid="target-number"]');
+  await input.fill("-123.456");
+  const fits = await input.evaluate((el) => el.scrollWidth <= el.clientWidth);
+  assert.ok(fits, "the number is cut off");
+  await input.fill("30");
+});
+
+test("the frame log is live by default, with 24-hour times", async () => {
+  assert.equal(await page.locator("#frames-live").isChecked(), true, "live is off on load");
+  const first = () => page.locator("#frames tbody tr td:first-child").first().textContent();
+  await page.locator("#frames tbody tr").first().waitFor({ timeout: WAIT });
+  const before = await first();
+  assert.match(before, /^([01]\d|2[0-3]):[0-5]\d:[0-5]\d\.\d{3}$/, `time cell ${before}`);
+  // Live: newer frames replace the shown ones without a click.
+  await page.waitForFunction((b) => document.querySelector("#frames tbody tr td")?.textContent !== b, before, { timeout: WAIT });
 });
 
 test("a configuration change is applied and read back", async () => {

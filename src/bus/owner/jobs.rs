@@ -35,6 +35,9 @@ fn rezero_tolerance_deg(elapsed: std::time::Duration) -> f64 {
 pub(super) fn known(ctx: &Ctx, id: u8) -> Result<(), BusError> {
     match ctx.sched().registry().get(id) {
         Some(_) => Ok(()),
+        // A bus that is down knows no device: the answer is "bus down"
+        // (503, as a scan gets), not "unknown device" (404).
+        None if !ctx.link_is_up() => Err(ctx.down_error()),
         None => Err(BusError::UnknownDevice {
             bus: ctx.name().to_string(),
             dev_id: id,

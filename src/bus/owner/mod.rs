@@ -148,17 +148,44 @@ impl Owner {
     fn shutdown(&mut self) {
         let ctx = &mut self.ctx;
         let disable = ctx.cfg().on_shutdown == ShutdownState::Disable;
-        if disable && estop::disable_everything(ctx, DisabledReason::Shutdown).is_ok() {
-            // Let the disable frames leave the wire before the port closes.
-            let _ = ctx.wait_until(ctx.sched().clock().free_at());
-        }
-        if !disable {
-            tracing::warn!(bus = %ctx.name(), "stopping with the joints left enabled (on_shutdown = \"hold\")");
+        // Said before the frames go, from the last state each joint reported:
+        // after a stop, the log is where a user looks for what was released.
+        let ids = ctx.sched().registry().ids();
+        let driving = driving_ids(ctx);
+        if disable {
+            match estop::disable_everything(ctx, DisabledReason::Shutdown) {
+                Ok(_) => {
+                    // Let the disable frames leave the wire before the port closes.
+                    let _ = ctx.wait_until(ctx.sched().clock().free_at());
+                    tracing::info!(bus = %ctx.name(), ?ids, enabled_before = ?driving,
+                        "shutdown: disable sent to every joint (on_shutdown = \"disable\")");
+                }
+                Err(e) => tracing::warn!(bus = %ctx.name(), ?ids, enabled_before = ?driving,
+                    "shutdown: could not send the disable: {e}"),
+            }
+        } else {
+            tracing::warn!(bus = %ctx.name(), left_enabled = ?driving,
+                "stopping with the joints left enabled (on_shutdown = \"hold\")");
         }
         ctx.fail_queued(&BusError::Stopped);
         ctx.close();
         ctx.publish(Instant::now());
     }
+}
+
+/// The joints whose last reported state drives the motor.
+fn driving_ids(ctx: &Ctx) -> Vec<u8> {
+    let registry = ctx.sched().registry();
+    registry
+        .ids()
+        .into_iter()
+        .filter(|id| {
+            registry
+                .get(*id)
+                .and_then(|e| e.state.info01.as_ref())
+                .is_some_and(|(info, _)| crate::bus::registry::drives_motor(info.fsm))
+        })
+        .collect()
 }
 
 /// Runs one request and answers its caller (who may have given up: a

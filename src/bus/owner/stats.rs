@@ -5,6 +5,7 @@
 use std::time::{Duration, Instant};
 
 use crate::bus::handle::{BusCounters, BusRates};
+use crate::bus::state::BusLatency;
 
 /// Length of the window rates are computed over.
 const WINDOW: Duration = Duration::from_secs(1);
@@ -16,6 +17,7 @@ pub(crate) struct Stats {
     base: BusCounters,
     ages_us: Vec<u64>,
     rates: BusRates,
+    latency: BusLatency,
     publish_every: Duration,
     next_publish: Instant,
 }
@@ -27,6 +29,7 @@ impl Stats {
             base: BusCounters::default(),
             ages_us: Vec::new(),
             rates: BusRates::default(),
+            latency: BusLatency::default(),
             publish_every,
             next_publish: now,
         }
@@ -34,6 +37,7 @@ impl Stats {
 
     /// Age of a setpoint when the last byte of its frame is due on the wire.
     pub(crate) fn setpoint_age(&mut self, age: Duration) {
+        self.latency.setpoint_to_wire.observe(age);
         if self.ages_us.len() < MAX_AGE_SAMPLES {
             self.ages_us.push(age.as_micros() as u64);
         }
@@ -56,6 +60,15 @@ impl Stats {
 
     pub(crate) fn rates(&self) -> &BusRates {
         &self.rates
+    }
+
+    /// A config/read frame handed to the port to its reply read back.
+    pub(crate) fn round_trip(&mut self, latency: Duration) {
+        self.latency.round_trip.observe(latency);
+    }
+
+    pub(crate) fn latency(&self) -> &BusLatency {
+        &self.latency
     }
 
     /// The reply timeout as of the last window (shown with the rates).

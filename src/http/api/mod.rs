@@ -18,6 +18,7 @@ pub(crate) mod control;
 pub(crate) mod devices;
 pub(crate) mod estop;
 pub(crate) mod health;
+pub(crate) mod metrics;
 pub(crate) mod openapi;
 
 use utoipa_axum::router::OpenApiRouter;

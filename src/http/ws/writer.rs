@@ -153,11 +153,15 @@ where
     async fn put(&mut self, msg: Message) -> bool {
         // `is_ok` here: the sink's error need not be `Send`, so it must not
         // live across the close below.
+        let started = std::time::Instant::now();
         let sent = tokio::time::timeout(SLOW_CLIENT, self.sink.send(msg))
             .await
             .map(|r| r.is_ok());
         match sent {
-            Ok(ok) => ok,
+            Ok(ok) => {
+                self.state.ws().observe_send(started.elapsed());
+                ok
+            }
             Err(_) => {
                 crate::http::hub::WsHub::count(&self.state.ws().slow_disconnects, 1);
                 let reason = format!("too slow: no message taken for {} s", SLOW_CLIENT.as_secs());

@@ -85,6 +85,7 @@ impl Ctx {
         want: Want,
         prepare: bool,
     ) -> Result<Option<Reply>, BusError> {
+        let handed = Instant::now();
         let end = self.send(&[Command::Config(cmd)])?;
         let window = self.sched.reply_window(end);
         let mut got = Ok(None);
@@ -100,6 +101,10 @@ impl Ctx {
         }
         self.absorb_inbox();
         let got = got.map_err(|e| self.lost(e))?;
+        if let Some((_, read_at)) = &got {
+            self.stats
+                .round_trip(read_at.saturating_duration_since(handed));
+        }
         Ok(self.settle_exchange(got, want, window.due))
     }
 

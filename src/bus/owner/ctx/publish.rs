@@ -37,6 +37,7 @@ impl Ctx {
             published_at: now,
             published_wall: SystemTime::now(),
             rates: self.stats.rates().clone(),
+            latency: self.stats.latency().clone(),
             port_notes: self
                 .thread_notes
                 .iter()

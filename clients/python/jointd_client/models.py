@@ -1,0 +1,80 @@
+"""Typed views of the daemon's answers. Each mirrors a schema of
+openapi/openapi.json (named in `SCHEMA`); tests/test_models.py checks every
+field against the document, so a renamed field fails there, not in a user's
+script. Fields the client does not model stay reachable in `raw`."""
+
+from dataclasses import dataclass, field, fields
+from typing import Any, List, Optional
+
+
+def _pick(cls, data: dict):
+    names = {f.name for f in fields(cls)} - {"raw"}
+    return cls(**{n: data.get(n) for n in names}, raw=data)
+
+
+@dataclass(frozen=True)
+class Bus:
+    SCHEMA = "BusView"
+    name: str
+    path: str
+    baud: int
+    link: str
+    devices_known: int
+    devices_online: int
+    queue_depth: int
+    raw: dict = field(repr=False, compare=False)
+
+    @classmethod
+    def from_json(cls, data: dict) -> "Bus":
+        return _pick(cls, data)
+
+
+@dataclass(frozen=True)
+class Device:
+    SCHEMA = "DeviceSummary"
+    id: int
+    name: Optional[str]
+    online: bool
+    state: Optional[str]
+    angle_deg: Optional[float]
+    speed_rpm: Optional[float]
+    q_current_a: Optional[float]
+    temp_c: Optional[float]
+    vbus_v: Optional[float]
+    target_known: bool
+    raw: dict = field(repr=False, compare=False)
+
+    @classmethod
+    def from_json(cls, data: dict) -> "Device":
+        return _pick(cls, data)
+
+
+@dataclass(frozen=True)
+class ActionDone:
+    SCHEMA = "ActionDone"
+    bus: str
+    action: str
+    ids: Optional[List[int]]
+    value: Optional[Any]
+    raw: dict = field(repr=False, compare=False)
+
+    @classmethod
+    def from_json(cls, data: dict) -> "ActionDone":
+        return _pick(cls, data)
+
+
+@dataclass(frozen=True)
+class TargetAck:
+    SCHEMA = "TargetAck"
+    bus: str
+    seq: int
+    on_wire: bool
+    targets: List[dict]
+    raw: dict = field(repr=False, compare=False)
+
+    @classmethod
+    def from_json(cls, data: dict) -> "TargetAck":
+        return _pick(cls, data)
+
+
+MODELS = [Bus, Device, ActionDone, TargetAck]

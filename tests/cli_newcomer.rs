@@ -1,0 +1,246 @@
+//! What a newcomer meets on the command line (issue 17): the assumed baud
+//! said aloud, a taken port that names `--listen`, a refused config value
+//! with its line, a bus that is down answering "bus down" for every device
+//! call, and a shutdown that names the joints it disabled.
+
+use std::io::{BufRead, BufReader, Read};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{channel, Receiver};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_jointd");
+const WAIT: Duration = Duration::from_secs(20);
+
+/// A running daemon: its base URL and its log lines as they come.
+struct Daemon {
+    child: Child,
+    base: String,
+    log: Receiver<String>,
+    seen: Vec<String>,
+}
+
+impl Daemon {
+    fn spawn(args: &[&str]) -> Self {
+        let mut child = Command::new(BIN)
+            .args(args)
+            .env_remove("JOINTD_TOKEN")
+            .env("NO_COLOR", "1")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn jointd");
+        let (tx, log) = channel();
+        let stderr = child.stderr.take().expect("stderr");
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut first = String::new();
+        BufReader::new(child.stdout.take().expect("stdout"))
+            .read_line(&mut first)
+            .expect("first line");
+        let base = first
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap_or_else(|| panic!("no address line: {first:?}"))
+            .to_owned();
+        Self {
+            child,
+            base,
+            log,
+            seen: Vec::new(),
+        }
+    }
+
+    /// The first log line (seen or to come) holding every one of `parts`.
+    fn log_line(&mut self, parts: &[&str]) -> String {
+        let deadline = Instant::now() + WAIT;
+        loop {
+            if let Some(line) = self
+                .seen
+                .iter()
+                .find(|l| parts.iter().all(|p| l.contains(p)))
+            {
+                return line.clone();
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.log.recv_timeout(left) {
+                Ok(line) => self.seen.push(line),
+                Err(_) => panic!(
+                    "no log line with {parts:?}; seen:\n{}",
+                    self.seen.join("\n")
+                ),
+            }
+        }
+    }
+
+    fn stop(&mut self) {
+        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
+        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).expect("SIGTERM");
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn missing_device_path() -> String {
+    format!("/tmp/jointd-test-no-such-tty-{}", std::process::id())
+}
+
+#[test]
+fn a_bus_without_baud_logs_the_baud_it_assumes() {
+    let path = missing_device_path();
+    let mut d = Daemon::spawn(&["--bus", &path, "--listen", "127.0.0.1:0"]);
+    let line = d.log_line(&["no @BAUD", "230400"]);
+    assert!(line.contains(&format!("{path}@500000")), "{line}");
+}
+
+#[test]
+fn a_taken_port_names_the_address_and_listen() {
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+    let addr = taken.local_addr().expect("addr").to_string();
+    let out = Command::new(BIN)
+        .args(["--sim", "1", "--listen", &addr])
+        .env_remove("JOINTD_TOKEN")
+        .output()
+        .expect("run jointd");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&addr) && err.contains("--listen"), "{err}");
+}
+
+#[test]
+fn a_refused_config_value_is_reported_with_its_line_and_key() {
+    let dir = std::env::temp_dir().join(format!("jointd-cfg-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let file = dir.join("bad.toml");
+    let text = "listen = \"127.0.0.1:0\"\n\n[[bus]]\nname = \"ok\"\npath = \"/dev/null\"\nbaud = 500000\n\n[[bus]]\nname = \"left\"\npath = \"/dev/null\"\n  baud = 123456\n";
+    std::fs::write(&file, text).expect("write");
+    let out = Command::new(BIN)
+        .args(["--config", file.to_str().expect("utf-8 path")])
+        .env_remove("JOINTD_TOKEN")
+        .output()
+        .expect("run jointd");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("line 11, column 3"), "{err}");
+    assert!(
+        err.contains("`baud`") && err.contains("left") && err.contains("123456"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn every_device_call_on_a_bus_that_is_down_answers_bus_down() {
+    let path = missing_device_path();
+    let spec = format!("gone={path}@500000");
+    let d = Daemon::spawn(&["--bus", &spec, "--listen", "127.0.0.1:0"]);
+    let base = format!("{}/api/v1/buses/gone", d.base);
+    let rt = tokio::runtime::Runtime::new().expect("runtime");
+    rt.block_on(async {
+        let client = reqwest::Client::new();
+        let deadline = Instant::now() + WAIT;
+        loop {
+            let bus: serde_json::Value = client
+                .get(&base)
+                .send()
+                .await
+                .unwrap()
+                .json()
+                .await
+                .unwrap();
+            if bus["link"] == "down" {
+                break;
+            }
+            assert!(Instant::now() < deadline, "the bus never went down: {bus}");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        let json = |v: serde_json::Value| v;
+        let calls = [
+            (reqwest::Method::POST, "/devices/1/enable", None),
+            (reqwest::Method::POST, "/devices/1/disable", None),
+            (reqwest::Method::GET, "/devices/1", None),
+            (reqwest::Method::GET, "/devices/1/config", None),
+            (
+                reqwest::Method::PUT,
+                "/devices/1/target",
+                Some(json(serde_json::json!({"position_deg": 1.0}))),
+            ),
+            (
+                reqwest::Method::POST,
+                "/control/enable",
+                Some(json(serde_json::json!({"ids": [1]}))),
+            ),
+            (
+                reqwest::Method::POST,
+                "/scan",
+                Some(json(serde_json::json!({"first": 1, "last": 2}))),
+            ),
+        ];
+        for (method, path, body) in calls {
+            let mut req = client.request(method.clone(), format!("{base}{path}"));
+            if let Some(body) = body {
+                req = req.json(&body);
+            }
+            let resp = req.send().await.unwrap();
+            let status = resp.status().as_u16();
+            let problem: serde_json::Value = resp.json().await.unwrap();
+            assert_eq!(
+                (status, problem["type"].as_str()),
+                (503, Some("urn:jointd:problem:bus-down")),
+                "{method} {path}: {problem}"
+            );
+        }
+    });
+}
+
+#[test]
+fn shutdown_logs_the_joints_it_disabled() {
+    let mut d = Daemon::spawn(&["--sim", "3", "--listen", "127.0.0.1:0"]);
+    let base = d.base.clone();
+    let rt = tokio::runtime::Runtime::new().expect("runtime");
+    rt.block_on(async {
+        let client = reqwest::Client::new();
+        let deadline = Instant::now() + WAIT;
+        loop {
+            let r = client
+                .post(format!("{base}/api/v1/buses/sim0/devices/2/enable"))
+                .send()
+                .await
+                .unwrap();
+            if r.status() == 200 {
+                break;
+            }
+            assert!(Instant::now() < deadline, "device 2 never enabled");
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    });
+    d.stop();
+    let mut rest = String::new();
+    while let Ok(line) = d.log.recv_timeout(Duration::from_millis(200)) {
+        rest.push_str(&line);
+        rest.push('\n');
+    }
+    let line = rest
+        .lines()
+        .find(|l| l.contains("shutdown: disable sent"))
+        .unwrap_or_else(|| panic!("no shutdown line in:\n{rest}"));
+    assert!(
+        line.contains("[1, 2, 3]") && line.contains("enabled_before=[2]"),
+        "{line}"
+    );
+    let _ = d
+        .child
+        .stdout
+        .take()
+        .map(|mut s| s.read_to_end(&mut Vec::new()));
+}
