@@ -40,9 +40,26 @@ pub(crate) fn key_in_table_array(
     None
 }
 
+/// The 1-based line of the `index`-th (0-based) `[[table]]` header of `text`.
+pub(crate) fn table_array_line(text: &str, table: &str, index: usize) -> Option<usize> {
+    let header = format!("[[{table}]]");
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| l.trim_start().starts_with(&header))
+        .nth(index)
+        .map(|(n, _)| n + 1)
+}
+
 #[cfg(test)]
 mod tests {
-    use super::key_in_table_array;
+    use super::{key_in_table_array, table_array_line};
+
+    #[test]
+    fn finds_the_header_of_the_nth_table() {
+        assert_eq!(table_array_line(TEXT, "bus", 1), Some(7));
+        assert_eq!(table_array_line(TEXT, "limit", 0), Some(14));
+        assert_eq!(table_array_line(TEXT, "limit", 1), None);
+    }
 
     const TEXT: &str = "listen = \"127.0.0.1:8080\"\n\n[[bus]]\nname = \"a\"\nbaud = 500000\n\n[[bus]]\nname = \"b\"\n  baud = 123456\n\n[bus.poll]\ncontrol_share = 2.0\n\n[[limit]]\nbaud = 1\n";
 

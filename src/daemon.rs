@@ -11,7 +11,7 @@ use serde::Deserialize;
 use thiserror::Error;
 use tokio::net::TcpListener;
 
-use crate::config_locate::key_in_table_array;
+use crate::config_locate::{key_in_table_array, table_array_line};
 use tokio::signal::unix::{signal, SignalKind};
 
 use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle};
@@ -196,6 +196,11 @@ fn load_file(path: &PathBuf) -> Result<FileConfig, DaemonError> {
                 i + 1
             )));
         }
+    }
+    if let Err(LimitError::Bad { rule, why }) = SoftLimits::new(file.limits.clone()) {
+        let at = table_array_line(&text, "limit", rule.saturating_sub(1))
+            .map_or_else(String::new, |line| format!("line {line}: "));
+        return Err(bad(format!("{at}[[limit]] #{rule}: {why}")));
     }
     Ok(file)
 }

@@ -244,3 +244,24 @@ fn shutdown_logs_the_joints_it_disabled() {
         .take()
         .map(|mut s| s.read_to_end(&mut Vec::new()));
 }
+
+#[test]
+fn a_refused_soft_limit_is_reported_with_its_table_line() {
+    let dir = std::env::temp_dir().join(format!("jointd-limit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let file = dir.join("bad.toml");
+    let text = "listen = \"127.0.0.1:0\"\n\n[[limit]]\nmin_deg = -90.0\n\n[[limit]]\nbus = \"sim0\"\nmax_deg = 500.0\n";
+    std::fs::write(&file, text).expect("write");
+    let out = Command::new(BIN)
+        .args(["--config", file.to_str().expect("utf-8 path"), "--sim", "1"])
+        .env_remove("JOINTD_TOKEN")
+        .output()
+        .expect("run jointd");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("line 6: [[limit]] #2") && err.contains("500"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
