@@ -19,6 +19,17 @@ pub enum LinkState {
     Down { reason: String, retry_in_ms: u64 },
 }
 
+impl LinkState {
+    /// The state's name as the API and the metrics show it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Opening => "opening",
+            Self::Up => "up",
+            Self::Down { .. } => "down",
+        }
+    }
+}
+
 /// Latest knowledge of one device.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct DeviceState {

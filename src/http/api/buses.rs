@@ -9,7 +9,6 @@ use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
-use super::health::link_name;
 use super::openapi::{ErrorResponses, TAG_BUSES};
 use crate::bus::handle::{LinkState, FRAME_LOG_LEN};
 use crate::bus::BusSnapshot;
@@ -81,7 +80,7 @@ impl BusView {
             name: snap.name.clone(),
             path: snap.path.clone(),
             baud: snap.baud,
-            link: link_name(&snap.link),
+            link: snap.link.name(),
             down_reason,
             retry_in_ms,
             devices_known: snap.devices.len(),

@@ -10,7 +10,6 @@ use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_HEALTH};
-use crate::bus::handle::LinkState;
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::state::AppState;
 
@@ -47,14 +46,6 @@ pub(crate) struct Readiness {
     pub buses: Vec<BusReadiness>,
 }
 
-pub(crate) fn link_name(link: &LinkState) -> &'static str {
-    match link {
-        LinkState::Opening => "opening",
-        LinkState::Up => "up",
-        LinkState::Down { .. } => "down",
-    }
-}
-
 /// The process is up (never needs a token).
 ///
 /// Answers as long as the process runs, whatever the buses do; for a container's liveness probe.
@@ -81,7 +72,7 @@ async fn readyz(State(state): State<AppState>) -> ApiResult<Json<Readiness>> {
         .buses()
         .map(|b| BusReadiness {
             bus: b.name().to_owned(),
-            link: link_name(&b.snapshot().link),
+            link: b.snapshot().link.name(),
         })
         .collect();
     let down: Vec<&str> = buses

@@ -217,7 +217,7 @@ fn bus_families(m: &mut Exposition, snap: &BusSnapshot) {
         f64::from(u8::from(up)),
     );
     for state in ["opening", "up", "down"] {
-        let is = crate::http::api::health::link_name(&snap.link) == state;
+        let is = snap.link.name() == state;
         m.gauge(
             "jointd_bus_link_state",
             "The bus's link state as a state set: 1 on the current state's line.",
