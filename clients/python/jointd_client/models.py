@@ -7,13 +7,17 @@ from dataclasses import dataclass, field, fields
 from typing import Any, List, Optional
 
 
-def _pick(cls, data: dict):
-    names = {f.name for f in fields(cls)} - {"raw"}
-    return cls(**{n: data.get(n) for n in names}, raw=data)
+class _FromJson:
+    """`Model.from_json(answer)`: the modelled fields, the whole answer in `raw`."""
+
+    @classmethod
+    def from_json(cls, data: dict):
+        names = {f.name for f in fields(cls)} - {"raw"}
+        return cls(**{n: data.get(n) for n in names}, raw=data)
 
 
 @dataclass(frozen=True)
-class Bus:
+class Bus(_FromJson):
     SCHEMA = "BusView"
     name: str
     path: str
@@ -24,13 +28,9 @@ class Bus:
     queue_depth: int
     raw: dict = field(repr=False, compare=False)
 
-    @classmethod
-    def from_json(cls, data: dict) -> "Bus":
-        return _pick(cls, data)
-
 
 @dataclass(frozen=True)
-class Device:
+class Device(_FromJson):
     SCHEMA = "DeviceSummary"
     id: int
     name: Optional[str]
@@ -44,13 +44,9 @@ class Device:
     target_known: bool
     raw: dict = field(repr=False, compare=False)
 
-    @classmethod
-    def from_json(cls, data: dict) -> "Device":
-        return _pick(cls, data)
-
 
 @dataclass(frozen=True)
-class ActionDone:
+class ActionDone(_FromJson):
     SCHEMA = "ActionDone"
     bus: str
     action: str
@@ -58,23 +54,15 @@ class ActionDone:
     value: Optional[Any]
     raw: dict = field(repr=False, compare=False)
 
-    @classmethod
-    def from_json(cls, data: dict) -> "ActionDone":
-        return _pick(cls, data)
-
 
 @dataclass(frozen=True)
-class TargetAck:
+class TargetAck(_FromJson):
     SCHEMA = "TargetAck"
     bus: str
     seq: int
     on_wire: bool
     targets: List[dict]
     raw: dict = field(repr=False, compare=False)
-
-    @classmethod
-    def from_json(cls, data: dict) -> "TargetAck":
-        return _pick(cls, data)
 
 
 MODELS = [Bus, Device, ActionDone, TargetAck]
