@@ -114,15 +114,13 @@ fn bad_keys_and_values_are_named() {
 }
 
 #[test]
-fn a_bad_baud_in_the_file_is_refused_when_the_bus_starts() {
-    // Values a bus checks itself (baud, ranges) are refused by spawn_bus with
-    // the bus's name; plan() only reads the file.
+fn a_bad_baud_in_the_file_is_refused_at_load_with_its_line() {
+    // Values a bus checks itself (baud, ranges) are refused when the file is
+    // read, with the line of the key (issue 17), not later by the bus.
     let (_f, args) = config("[[bus]]\nname = \"b\"\npath = \"/dev/null\"\nbaud = 9600\n");
-    let p = plan(&args).expect("plan");
-    let err = p.buses[0]
-        .validate()
-        .expect_err("9600 is not a module baud");
-    assert!(err.to_string().contains("9600"), "{err}");
+    let err = plan(&args).expect_err("9600 is not a module baud").to_string();
+    assert!(err.contains("line 4, column 1") && err.contains("`baud`"), "{err}");
+    assert!(err.contains("9600"), "{err}");
 }
 
 /// A file of this test's own (the name says which), removed at the end.
