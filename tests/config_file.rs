@@ -118,8 +118,13 @@ fn a_bad_baud_in_the_file_is_refused_at_load_with_its_line() {
     // Values a bus checks itself (baud, ranges) are refused when the file is
     // read, with the line of the key (issue 17), not later by the bus.
     let (_f, args) = config("[[bus]]\nname = \"b\"\npath = \"/dev/null\"\nbaud = 9600\n");
-    let err = plan(&args).expect_err("9600 is not a module baud").to_string();
-    assert!(err.contains("line 4, column 1") && err.contains("`baud`"), "{err}");
+    let err = plan(&args)
+        .expect_err("9600 is not a module baud")
+        .to_string();
+    assert!(
+        err.contains("line 4, column 1") && err.contains("`baud`"),
+        "{err}"
+    );
     assert!(err.contains("9600"), "{err}");
 }
 
