@@ -123,7 +123,9 @@ where
                     true
                 }
                 Some(item) = events.next() => self.event(item).await,
-                Some(ack) = acks_in.recv() => { self.pending.push(ack); true }
+                // The bus may have put the batch on the wire before its
+                // pending ack got here: flush now, not on the next write.
+                Some(ack) = acks_in.recv() => { self.pending.push(ack); self.flush_acks().await }
                 Some((bus, ack)) = wire.next() => { self.on_wire.insert(bus, ack); self.flush_acks().await }
                 _ = sweep.tick(), if !self.pending.is_empty() => self.expire_acks().await,
                 _ = ticker.tick(), if subscribed => self.telemetry(&sub).await,
