@@ -4,7 +4,7 @@
 //! raw integers are what the wire carries, [`super::units`] converts them.
 
 use super::error::ProtocolError;
-use super::frame::{BroadcastFrame, BroadcastKind, Frame, FrameBytes, StandardFrame};
+use super::frame::{BroadcastFrame, BroadcastKind, CrcCoverage, Frame, FrameBytes, StandardFrame};
 use super::is_address;
 use super::params::{self, ParamRow, RawType, Scale};
 
@@ -27,13 +27,30 @@ pub enum Command {
     BroadcastEnableUnverified(BroadcastEnable),
 }
 
-/// `EN` of a control frame. 0 is never sent (SPEC errata 10).
+/// `EN` of a control frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u8)]
 pub enum ControlOp {
+    /// EN = 0: SET_REF on rev 2.0.8 firmware, a no-op on V2.0.1 (SPEC §4.1,
+    /// errata 10). Public host programs for rev 2.0.8 send their angle
+    /// commands this way, so it decodes; jointd itself never sends it, since
+    /// it means different things on different firmware.
+    SetRefRev208 = 0,
     Enable = 1,
     Disable = 2,
     SetRef = 3,
+}
+
+impl ControlOp {
+    /// The name `jointd frame decode` and the raw frame views print.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::SetRefRev208 => "set-ref (rev 2.0.8; a no-op in V2.0.1)",
+            Self::Enable => "enable",
+            Self::Disable => "disable",
+            Self::SetRef => "set_ref",
+        }
+    }
 }
 
 /// SPEC §4.1. `cur_ref` is reserved since firmware 1.2.0 and always sent as 0.
@@ -290,6 +307,8 @@ pub struct BroadcastSpd {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BroadcastEnable {
     pub ops: [u8; 16],
+    /// How its CRC was computed (SPEC errata 3: two readings are in use).
+    pub crc: CrcCoverage,
 }
 
 impl Command {
@@ -303,6 +322,7 @@ impl Command {
             Command::BroadcastEnableUnverified(b) => Frame::Broadcast(BroadcastFrame {
                 kind: BroadcastKind::Enable,
                 values: b.ops,
+                crc: b.crc,
             }),
         }
     }
@@ -352,9 +372,10 @@ impl Command {
                 group: Group::High,
                 spd_ref: words,
             }),
-            BroadcastKind::Enable => {
-                Command::BroadcastEnableUnverified(BroadcastEnable { ops: b.values })
-            }
+            BroadcastKind::Enable => Command::BroadcastEnableUnverified(BroadcastEnable {
+                ops: b.values,
+                crc: b.crc,
+            }),
         }
     }
 }
@@ -412,16 +433,15 @@ impl Control {
 
     fn from_data(dev_id: u8, data: &[u8; 8]) -> Result<Self, ProtocolError> {
         let op = match data[6] {
+            0 => ControlOp::SetRefRev208,
             1 => ControlOp::Enable,
             2 => ControlOp::Disable,
             3 => ControlOp::SetRef,
-            other => {
-                return Err(bad(
-                    "en",
-                    other,
-                    "1 enable, 2 disable, 3 set_ref; anything else is a no-op",
-                ))
-            }
+            other => return Err(bad(
+                "en",
+                other,
+                "0 set-ref (rev 2.0.8), 1 enable, 2 disable, 3 set_ref; anything else is a no-op",
+            )),
         };
         Ok(Self {
             dev_id,
@@ -492,6 +512,7 @@ impl BroadcastPos {
         BroadcastFrame {
             kind,
             values: words_to_bytes(&self.pos_ref),
+            crc: CrcCoverage::Values,
         }
     }
 }
@@ -505,6 +526,7 @@ impl BroadcastSpd {
         BroadcastFrame {
             kind,
             values: words_to_bytes(&self.spd_ref),
+            crc: CrcCoverage::Values,
         }
     }
 }
@@ -534,9 +556,16 @@ mod tests {
     }
 
     #[test]
-    fn control_with_en_zero_is_rejected() {
-        let data = [0u8; 8];
-        assert!(Control::from_data(1, &data).is_err());
+    fn control_with_en_zero_decodes_as_the_rev_2_0_8_set_ref() {
+        let mut data = [0u8; 8];
+        data[0..2].copy_from_slice(&(30 * 128i16).to_le_bytes());
+        let c = Control::from_data(3, &data).expect("EN = 0 decodes");
+        assert_eq!(c.op, ControlOp::SetRefRev208);
+        assert_eq!((c.pos_ref, c.spd_ref), (30 * 128, 0));
+        // It encodes back to the same bytes: the decoder can show what it read.
+        assert_eq!(c.to_frame().data, data);
+        data[6] = 4;
+        assert!(Control::from_data(3, &data).is_err());
     }
 
     #[test]

@@ -36,6 +36,38 @@ pub struct StandardFrame {
 pub struct BroadcastFrame {
     pub kind: BroadcastKind,
     pub values: [u8; 16],
+    /// Which bytes the CRC covers: always the values, except for `0xB155`
+    /// frames as public rev 2.0.8 host programs send them.
+    pub crc: CrcCoverage,
+}
+
+/// The bytes a broadcast frame's CRC covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum CrcCoverage {
+    /// Bytes 2..18, the 16 value bytes: SPEC §3.2's rule, the only one jointd sends.
+    #[default]
+    Values,
+    /// Bytes 0..18, head included: how a public rev 2.0.8 host firmware
+    /// (E1_Hand_G474) computes the CRC of `0xB155` (SPEC errata 3). Accepted
+    /// for `0xB155` only, where the SPEC has no verified rule to protect.
+    HeadAndValues,
+}
+
+impl CrcCoverage {
+    /// What `jointd frame decode` says about it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Values => "CRC over bytes 2..18 (the values; SPEC §3.2)",
+            Self::HeadAndValues => "CRC over bytes 0..18 (head and values; E1_Hand_G474's reading)",
+        }
+    }
+
+    fn covered(self, frame: &[u8]) -> &[u8] {
+        match self {
+            Self::Values => &frame[2..18],
+            Self::HeadAndValues => &frame[0..18],
+        }
+    }
 }
 
 /// The broadcast heads, as the u16 LE value of bytes 0..2.
@@ -94,7 +126,7 @@ impl BroadcastFrame {
         let mut out = [0u8; FRAME_LEN];
         out[0..2].copy_from_slice(&self.kind.head2().to_le_bytes());
         out[2..18].copy_from_slice(&self.values);
-        let crc = crc16(&out[2..18]);
+        let crc = crc16(self.crc.covered(&out));
         out[18..20].copy_from_slice(&crc.to_le_bytes());
         out
     }
@@ -142,10 +174,18 @@ fn decode_broadcast(
     kind: BroadcastKind,
     bytes: &FrameBytes,
 ) -> Result<BroadcastFrame, ProtocolError> {
-    check_crc(&bytes[2..18], [bytes[18], bytes[19]])?;
+    let stored = [bytes[18], bytes[19]];
+    let crc = match check_crc(CrcCoverage::Values.covered(bytes), stored) {
+        Ok(()) => CrcCoverage::Values,
+        Err(e) if kind != BroadcastKind::Enable => return Err(e),
+        Err(e) => check_crc(CrcCoverage::HeadAndValues.covered(bytes), stored)
+            .map(|()| CrcCoverage::HeadAndValues)
+            // The error names the SPEC's rule, not the variant's.
+            .map_err(|_| e)?,
+    };
     let mut values = [0u8; 16];
     values.copy_from_slice(&bytes[2..18]);
-    Ok(BroadcastFrame { kind, values })
+    Ok(BroadcastFrame { kind, values, crc })
 }
 
 fn check_crc(covered: &[u8], stored: [u8; 2]) -> Result<(), ProtocolError> {
@@ -225,6 +265,36 @@ mod tests {
             Frame::decode(&bytes),
             Err(ProtocolError::Crc { .. })
         ));
+    }
+
+    #[test]
+    fn only_the_enable_broadcast_may_carry_its_crc_over_the_head() {
+        for kind in BroadcastKind::ALL {
+            let f = BroadcastFrame {
+                kind,
+                values: [1; 16],
+                crc: CrcCoverage::HeadAndValues,
+            };
+            let bytes = f.encode();
+            assert_ne!(
+                bytes,
+                BroadcastFrame {
+                    crc: CrcCoverage::Values,
+                    ..f
+                }
+                .encode(),
+                "the two rules give different CRCs"
+            );
+            let decoded = Frame::decode(&bytes);
+            if kind == BroadcastKind::Enable {
+                assert_eq!(decoded, Ok(Frame::Broadcast(f)));
+            } else {
+                assert!(
+                    matches!(decoded, Err(ProtocolError::Crc { .. })),
+                    "{kind:?}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -13,7 +13,8 @@ use super::status::{active_fault, fault_history, fault_name, fsm_name};
 use super::units::{self, FirmwareVersion};
 use super::{
     BaudLevel, BroadcastEnable, BroadcastPos, BroadcastSpd, Command, Config, ConfigParam, Control,
-    ControlOp, CtrlMode, Frame, Group, Jog, JogDir, Message, ProtocolError, Reply, ReplyBody,
+    ControlOp, CrcCoverage, CtrlMode, Frame, Group, Jog, JogDir, Message, ProtocolError, Reply,
+    ReplyBody,
 };
 
 #[derive(Debug, Error)]
@@ -152,7 +153,7 @@ pub fn reply_json(r: &Reply) -> Map<String, Value> {
 fn command_json(c: &Command) -> Map<String, Value> {
     match c {
         Command::Control(c) => obj(json!({
-            "kind": "control", "dev_id": c.dev_id, "en": c.op as u8, "op": op_name(c.op),
+            "kind": "control", "dev_id": c.dev_id, "en": c.op as u8, "op": c.op.name(),
             "pos_ref_raw": c.pos_ref, "pos_deg": units::angle_deg(c.pos_ref),
             "spd_ref_raw": c.spd_ref,
             "spd_rpm": units::speed_rpm(c.spd_ref, FirmwareVersion::SPEED_BASE_50K),
@@ -171,7 +172,7 @@ fn command_json(c: &Command) -> Map<String, Value> {
         })),
         Command::BroadcastEnableUnverified(b) => obj(json!({
             "kind": "broadcast", "head2": head2(c), "group": "enable 1-16",
-            "values_raw": b.ops, "unverified": true,
+            "values_raw": b.ops, "unverified": true, "crc": b.crc.describe(),
         })),
     }
 }
@@ -208,14 +209,6 @@ fn physical_json(row: &ParamRow, value: u16) -> Option<(&'static str, Value)> {
         _ => json!(row.physical(value)),
     };
     Some((field, v))
-}
-
-fn op_name(op: ControlOp) -> &'static str {
-    match op {
-        ControlOp::Enable => "enable",
-        ControlOp::Disable => "disable",
-        ControlOp::SetRef => "set_ref",
-    }
 }
 
 fn dir_name(d: JogDir) -> &'static str {
@@ -377,7 +370,7 @@ fn control_from(f: &Fields) -> Result<Command, FrameJsonError> {
         Some(_) => {
             return Err(bad(
                 "en",
-                "1/\"enable\", 2/\"disable\" or 3/\"set_ref\" (0 is never sent)",
+                "1/\"enable\", 2/\"disable\" or 3/\"set_ref\" (jointd never sends 0: rev 2.0.8 reads it as set-ref, V2.0.1 as a no-op)",
             ))
         }
         None => return Err(FrameJsonError::Missing("en")),
@@ -507,7 +500,10 @@ fn broadcast_from(f: &Fields) -> Result<Command, FrameJsonError> {
         _ => {
             let raw = int_list(f, "values_raw")?.ok_or(FrameJsonError::Missing("values_raw"))?;
             let ops: [u8; 16] = list_to_array(raw, "values_raw", "a u8")?;
-            Ok(Command::BroadcastEnableUnverified(BroadcastEnable { ops }))
+            Ok(Command::BroadcastEnableUnverified(BroadcastEnable {
+                ops,
+                crc: CrcCoverage::Values,
+            }))
         }
     }
 }

@@ -37,7 +37,9 @@ pub use command::{
     ControlOp, CtrlMode, Group, InfoBlock, Jog, JogDir,
 };
 pub use error::ProtocolError;
-pub use frame::{BroadcastFrame, BroadcastKind, Frame, FrameBytes, StandardFrame, FRAME_LEN};
+pub use frame::{
+    BroadcastFrame, BroadcastKind, CrcCoverage, Frame, FrameBytes, StandardFrame, FRAME_LEN,
+};
 pub use message::Message;
 pub use reply::{Gains, Info01, Info02, Info04, Info05, Info06, Reply, ReplyBody};
 pub use stream::{DecoderStats, StreamDecoder};

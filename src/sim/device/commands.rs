@@ -48,6 +48,8 @@ impl Device {
             ControlOp::Enable => self.enable(now),
             ControlOp::Disable => self.disable(),
             ControlOp::SetRef => self.set_ref(Some(c.pos_ref), Some(c.spd_ref)),
+            // A no-op in V2.0.1 (SPEC §4.1).
+            ControlOp::SetRefRev208 => {}
         }
     }
 
