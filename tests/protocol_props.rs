@@ -12,18 +12,22 @@ fn address() -> impl Strategy<Value = u8> {
 
 fn control() -> impl Strategy<Value = Command> {
     let op = prop_oneof![
+        Just(ControlOp::SetRefRev208),
         Just(ControlOp::Enable),
         Just(ControlOp::Disable),
         Just(ControlOp::SetRef)
     ];
-    (address(), op, any::<i16>(), any::<i16>()).prop_map(|(dev_id, op, pos_ref, spd_ref)| {
-        Command::Control(Control {
-            dev_id,
-            op,
-            pos_ref,
-            spd_ref,
-        })
-    })
+    (address(), op, any::<i16>(), any::<i16>(), any::<i16>()).prop_map(
+        |(dev_id, op, pos_ref, spd_ref, cur_ref)| {
+            Command::Control(Control {
+                dev_id,
+                op,
+                pos_ref,
+                spd_ref,
+                cur_ref,
+            })
+        },
+    )
 }
 
 fn jog() -> impl Strategy<Value = Command> {

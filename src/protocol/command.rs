@@ -53,7 +53,7 @@ impl ControlOp {
     }
 }
 
-/// SPEC §4.1. `cur_ref` is reserved since firmware 1.2.0 and always sent as 0.
+/// SPEC §4.1.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Control {
     pub dev_id: u8,
@@ -62,6 +62,10 @@ pub struct Control {
     pub pos_ref: i16,
     /// Q15 of the base rotor speed; the speed limit in position mode.
     pub spd_ref: i16,
+    /// Q15 current: reserved since firmware 1.2.0 (jointd sends 0 outside
+    /// current mode); kept as it came so a decoder loses nothing, and the
+    /// reference of rev 2.0.8's current mode.
+    pub cur_ref: i16,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -399,6 +403,7 @@ impl Control {
             op: ControlOp::Enable,
             pos_ref: 0,
             spd_ref: 0,
+            cur_ref: 0,
         }
     }
 
@@ -408,6 +413,7 @@ impl Control {
             op: ControlOp::Disable,
             pos_ref: 0,
             spd_ref: 0,
+            cur_ref: 0,
         }
     }
 
@@ -417,6 +423,7 @@ impl Control {
             op: ControlOp::SetRef,
             pos_ref,
             spd_ref,
+            cur_ref: 0,
         }
     }
 
@@ -424,6 +431,7 @@ impl Control {
         let mut data = [0u8; 8];
         data[0..2].copy_from_slice(&self.pos_ref.to_le_bytes());
         data[2..4].copy_from_slice(&self.spd_ref.to_le_bytes());
+        data[4..6].copy_from_slice(&self.cur_ref.to_le_bytes());
         data[6] = self.op as u8;
         StandardFrame {
             can_id: u32::from(self.dev_id),
@@ -448,6 +456,7 @@ impl Control {
             op,
             pos_ref: i16::from_le_bytes([data[0], data[1]]),
             spd_ref: i16::from_le_bytes([data[2], data[3]]),
+            cur_ref: i16::from_le_bytes([data[4], data[5]]),
         })
     }
 }

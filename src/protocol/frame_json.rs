@@ -157,6 +157,7 @@ fn command_json(c: &Command) -> Map<String, Value> {
             "pos_ref_raw": c.pos_ref, "pos_deg": units::angle_deg(c.pos_ref),
             "spd_ref_raw": c.spd_ref,
             "spd_rpm": units::speed_rpm(c.spd_ref, FirmwareVersion::SPEED_BASE_50K),
+            "cur_ref_raw": c.cur_ref,
         })),
         Command::Jog(j) => obj(json!({"kind": "jog", "dev_id": j.dev_id, "dir": dir_name(j.dir)})),
         Command::Config(c) => config_json(c),
@@ -357,6 +358,7 @@ fn control_from(f: &Fields) -> Result<Command, FrameJsonError> {
         "pos_deg",
         "spd_ref_raw",
         "spd_rpm",
+        "cur_ref_raw",
         "soft_ver",
     ])?;
     let dev_id = dev_id(f)?;
@@ -394,6 +396,7 @@ fn control_from(f: &Fields) -> Result<Command, FrameJsonError> {
         op,
         pos_ref: in_range("pos_ref_raw", pos.unwrap_or(0), "an i16")?,
         spd_ref: in_range("spd_ref_raw", spd.unwrap_or(0), "an i16")?,
+        cur_ref: in_range("cur_ref_raw", f.int("cur_ref_raw")?.unwrap_or(0), "an i16")?,
     }))
 }
 
