@@ -5,6 +5,7 @@
 //! Every field but `name`, `path` and `baud` has a default, so a config file
 //! may name only what it changes; on the command line a bus is `PATH@BAUD`.
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -13,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use crate::protocol::{is_device_id, BaudLevel, MAX_DEVICE_ID, MIN_DEVICE_ID};
 
 use super::error::BusError;
+use super::firmware::{FirmwarePolicy, FirmwareSetting};
 
 /// Low among real-time priorities: above every normal thread, below the
 /// kernel's own real-time work.
@@ -55,6 +57,13 @@ pub struct BusConfig {
     /// leaves the port's RS-485 settings alone.
     #[serde(default = "default_rs485")]
     pub rs485: bool,
+    /// The devices' protocol revision: `auto` (ask each device once, the
+    /// default), `2.0.1` or `2.0.8` (see [`super::firmware`]).
+    #[serde(default)]
+    pub firmware: FirmwareSetting,
+    /// Per device where a bus mixes revisions, e.g. `{ "9-16" = "2.0.1" }`.
+    #[serde(default)]
+    pub firmware_by_id: BTreeMap<String, FirmwareSetting>,
 }
 
 fn default_rs485() -> bool {
@@ -194,7 +203,18 @@ impl BusConfig {
             rs485: default_rs485(),
             on_shutdown: ShutdownState::default(),
             on_start: StartPolicy::default(),
+            firmware: FirmwareSetting::default(),
+            firmware_by_id: BTreeMap::new(),
         }
+    }
+
+    /// The firmware setting of every device (checked by [`Self::validate`]).
+    pub fn firmware_policy(&self) -> Result<FirmwarePolicy, String> {
+        let pairs = self
+            .firmware_by_id
+            .iter()
+            .map(|(ids, s)| (ids.as_str(), *s));
+        FirmwarePolicy::with_ids(self.firmware, pairs)
     }
 
     /// Parses the command line form `[NAME=]PATH@BAUD` (`@BAUD` may be left
@@ -281,6 +301,9 @@ impl BusConfig {
         }
         if self.poll.offline_after == 0 {
             return Some(("offline_after", "offline_after must be at least 1".into()));
+        }
+        if let Err(why) = self.firmware_policy() {
+            return Some(("firmware_by_id", why));
         }
         None
     }

@@ -13,7 +13,8 @@
 //! The contract and pure data:
 //! - [`error`]: what went wrong, typed (`Timeout`, `Refused`, `UnexpectedReply`,
 //!   `Down`, …); the HTTP status of each is chosen in the HTTP layer (`http::error`).
-//! - [`config`]: [`BusConfig`]: port, baud, expected ids, poll plan, timing.
+//! - [`firmware`]: which protocol revision each device speaks, and how the daemon knows.
+//! - [`config`]: [`BusConfig`]: port, baud, expected ids, poll plan, timing, firmware.
 //! - [`setpoints`]: the latest-value store of joint targets.
 //! - [`state`]: what the owner publishes: snapshot, events, frame log, wire acks.
 //! - [`handle`]: the cloneable handle and the requests it sends (the API's contract).
@@ -36,6 +37,7 @@
 pub(crate) mod coalesce;
 pub(crate) mod config;
 pub mod error;
+pub mod firmware;
 pub mod handle;
 mod link;
 mod owner;

@@ -11,6 +11,7 @@ use crate::protocol::status::{active_fault, fault_name, fsm, fsm_name};
 use crate::protocol::{CtrlMode, Info01, Reply, ReplyBody};
 
 use super::coalesce::SlotInfo;
+use super::firmware::DeviceFirmware;
 use super::poll::PollState;
 use super::setpoints::Setpoint;
 use super::state::{BusEvent, DeviceState, DisabledReason, ResetRecord, ResetSignal};
@@ -277,6 +278,21 @@ impl Registry {
             e.state.telemetry_hz = f64::from(e.telemetry_samples) / secs;
             e.control_updates = 0;
             e.telemetry_samples = 0;
+        }
+    }
+
+    /// Online devices whose firmware revision nobody has told yet.
+    pub(crate) fn firmware_unknown(&self) -> Vec<u8> {
+        self.entries
+            .values()
+            .filter(|e| e.state.online && e.state.firmware.is_none())
+            .map(|e| e.state.dev_id)
+            .collect()
+    }
+
+    pub(crate) fn set_firmware(&mut self, id: u8, firmware: DeviceFirmware) {
+        if let Some(e) = self.entries.get_mut(&id) {
+            e.state.firmware = Some(firmware);
         }
     }
 

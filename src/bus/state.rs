@@ -57,6 +57,9 @@ pub struct DeviceState {
     /// Control updates and telemetry samples per second over the last second.
     pub control_hz: f64,
     pub telemetry_hz: f64,
+    /// Its protocol revision, once the config or the device told
+    /// (`None` while an `auto` device has not been asked yet).
+    pub firmware: Option<crate::bus::firmware::DeviceFirmware>,
 }
 
 /// Why a joint is disabled, as far as the daemon knows.
@@ -152,6 +155,11 @@ pub struct BusCounters {
     pub verify_retries: u64,
     /// Writes that went out but stayed unconfirmed after those retries.
     pub writes_unverified: u64,
+    /// `INFO_07` reads asking a device its firmware revision (`firmware = "auto"`).
+    pub firmware_probes: u64,
+    /// Of those, attempts no reply answered: how V2.0.1 firmware shows
+    /// itself, so they count here and not as timeouts.
+    pub firmware_probes_unanswered: u64,
 }
 
 /// Latency histograms since start (`/metrics`).

@@ -11,6 +11,7 @@
 //! - `ctx`: what the owner's code works with (port, scheduler, publication).
 //! - `jobs`, `write`, `estop`, `scan`, `baud`: one-shot requests, functions of a `&mut Ctx`.
 //! - `start`: joints found enabled at start, disabled when `on_start = "disable"`.
+//! - `probe`: asking a device its firmware revision (`firmware = "auto"`).
 //! - `confirm`: reading a RES, naming a config frame in errors.
 //! - `stats`: rate windows.
 
@@ -19,6 +20,7 @@ mod confirm;
 mod ctx;
 mod estop;
 mod jobs;
+mod probe;
 mod scan;
 mod start;
 mod stats;
@@ -135,6 +137,10 @@ impl Owner {
             }
             Slot::Release { ids } => {
                 start::release(ctx, ids);
+                Ok(())
+            }
+            Slot::Probe { dev_id } => {
+                probe::probe(ctx, dev_id);
                 Ok(())
             }
             Slot::Reopen { at } => {

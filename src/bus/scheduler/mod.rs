@@ -26,6 +26,7 @@ use std::time::{Duration, Instant};
 use crate::bus::coalesce::Pending;
 use crate::bus::coalesce::Planned;
 use crate::bus::config::{BusConfig, StartPolicy};
+use crate::bus::firmware::{DeviceFirmware, FirmwarePolicy, FirmwareSetting, FirmwareSource};
 use crate::bus::poll::{ControlBudget, PollPlanner};
 use crate::bus::registry::Registry;
 use crate::bus::setpoints::SetpointStore;
@@ -63,6 +64,9 @@ pub(crate) enum Slot {
     /// Disable these joints, found enabled at start (`on_start = "disable"`):
     /// ahead of everything but an e-stop.
     Release { ids: Vec<u8> },
+    /// Ask `dev_id` its firmware revision (an `INFO_07` read; silence is
+    /// V2.0.1): once, when an `auto` device is first heard.
+    Probe { dev_id: u8 },
     /// Write this control frame (coalesced setpoints).
     Control(Planned),
     /// Read `block` of `dev_id`; its reply window follows from
@@ -111,6 +115,8 @@ pub(crate) struct Scheduler {
     needs_scan: bool,
     /// What to do with a joint found enabled at start.
     on_start: StartPolicy,
+    /// Which devices are asked their firmware revision, which are told.
+    firmware: FirmwarePolicy,
     /// Joints found enabled and still to be disabled (`on_start = "disable"`).
     release: std::collections::BTreeSet<u8>,
     /// The last read that timed out and when its reply was due: the reply
@@ -141,6 +147,9 @@ impl Scheduler {
             estop_seen: 0,
             needs_scan: cfg.ids.is_empty(),
             on_start: cfg.on_start,
+            // Checked when the config was loaded; a bus built in code with a
+            // bad list asks every device rather than failing here.
+            firmware: cfg.firmware_policy().unwrap_or_default(),
             release: Default::default(),
             overdue: None,
             events: Vec::new(),
@@ -182,7 +191,31 @@ impl Scheduler {
                 Slot::Scan
             };
         }
+        if let Some(dev_id) = self.firmware_to_ask() {
+            self.control.clear_prepared();
+            self.job = JobPhase::default();
+            return Slot::Probe { dev_id };
+        }
         self.wire_slot(now, work.setpoints)
+    }
+
+    /// Records the configured revision of devices the config names, and
+    /// returns the first online device whose revision must be asked.
+    fn firmware_to_ask(&mut self) -> Option<u8> {
+        for id in self.reg.firmware_unknown() {
+            match self.firmware.for_id(id) {
+                FirmwareSetting::Auto => return Some(id),
+                FirmwareSetting::Fixed(revision) => self.reg.set_firmware(
+                    id,
+                    DeviceFirmware {
+                        revision,
+                        source: FirmwareSource::Config,
+                        serial: None,
+                    },
+                ),
+            }
+        }
+        None
     }
 
     fn estop_slot(&mut self, work: &Work<'_>) -> Option<Slot> {
@@ -306,6 +339,11 @@ impl Scheduler {
     }
 
     /// The wire ack to publish, if one came up since the last call.
+    /// The revision `id` turned out to have (asked or, after a silence, inferred).
+    pub(crate) fn firmware_known(&mut self, id: u8, firmware: DeviceFirmware) {
+        self.reg.set_firmware(id, firmware);
+    }
+
     pub(crate) fn take_ack(&mut self) -> Option<WireAck> {
         self.control.take_ack()
     }

@@ -91,6 +91,14 @@ impl Scheduler {
         self.reg.on_missed(want.dev_id, &mut self.events);
     }
 
+    /// A read that some firmware does not answer (a revision probe) got no
+    /// reply by `now`: the line is free again, and the silence says
+    /// nothing against the device (it is not a missed poll).
+    pub(crate) fn unanswered(&mut self, want: Want, due: Instant, now: Instant) {
+        self.overdue = Some((want, due));
+        self.clock.line_free(now);
+    }
+
     /// The port opened at `now`; true when it had been up before (a reconnect).
     pub(crate) fn link_up(&mut self, now: Instant) -> bool {
         self.clock.line_free(now);

@@ -85,6 +85,14 @@ const BUS_COUNTER_HELP: &[(&str, &str)] = &[
         "writes_unverified",
         "Writes that stayed unconfirmed after their retries.",
     ),
+    (
+        "firmware_probes",
+        "INFO_07 reads asking a device its firmware revision (firmware = auto).",
+    ),
+    (
+        "firmware_probes_unanswered",
+        "Firmware probe attempts with no reply: how V2.0.1 devices show themselves (not timeouts).",
+    ),
 ];
 
 /// Builds the exposition: families in order of first use, each with one

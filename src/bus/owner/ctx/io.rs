@@ -85,6 +85,16 @@ impl Ctx {
         want: Want,
         prepare: bool,
     ) -> Result<Option<Reply>, BusError> {
+        self.exchange_as(cmd, want, prepare, Silence::Missed)
+    }
+
+    fn exchange_as(
+        &mut self,
+        cmd: Config,
+        want: Want,
+        prepare: bool,
+        silence: Silence,
+    ) -> Result<Option<Reply>, BusError> {
         let handed = Instant::now();
         let end = self.send(&[Command::Config(cmd)])?;
         let window = self.sched.reply_window(end);
@@ -105,7 +115,7 @@ impl Ctx {
             self.stats
                 .round_trip(read_at.saturating_duration_since(handed));
         }
-        Ok(self.settle_exchange(got, want, window.due))
+        Ok(self.settle_exchange(got, want, window.due, silence))
     }
 
     /// Waits for `want` until `deadline`. Past a frame after the modelled
@@ -163,10 +173,19 @@ impl Ctx {
         got: Option<(Reply, Instant)>,
         want: Want,
         due: Instant,
+        silence: Silence,
     ) -> Option<Reply> {
         let Some((reply, at)) = got else {
-            self.link.counters.timeouts += 1;
-            self.sched.timed_out(want, due, Instant::now());
+            match silence {
+                Silence::Missed => {
+                    self.link.counters.timeouts += 1;
+                    self.sched.timed_out(want, due, Instant::now());
+                }
+                Silence::Answer => {
+                    self.link.counters.firmware_probes_unanswered += 1;
+                    self.sched.unanswered(want, due, Instant::now());
+                }
+            }
             return None;
         };
         let effect = self.sched.reply(&reply, at, due);
@@ -213,6 +232,25 @@ impl Ctx {
             }
             self.before_job_frame()?;
             if let Some(reply) = self.exchange(cmd, want, false)? {
+                return Ok(Some(reply));
+            }
+        }
+        Ok(None)
+    }
+
+    /// A firmware probe: like [`Self::try_transact`], but no reply is an
+    /// answer (V2.0.1 firmware does not know the index), so it counts as
+    /// an unanswered probe, not as a timeout or a missed poll.
+    pub(crate) fn probe(
+        &mut self,
+        cmd: Config,
+        want: Want,
+        attempts: u32,
+    ) -> Result<Option<Reply>, BusError> {
+        for _ in 0..attempts.max(1) {
+            self.link.counters.firmware_probes += 1;
+            self.before_job_frame()?;
+            if let Some(reply) = self.exchange_as(cmd, want, false, Silence::Answer)? {
                 return Ok(Some(reply));
             }
         }
@@ -269,4 +307,13 @@ impl Ctx {
         }
         Ok(())
     }
+}
+
+/// What a missing reply means.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Silence {
+    /// The device should have answered: a timeout, a missed poll.
+    Missed,
+    /// Silence is an answer (a firmware probe).
+    Answer,
 }
