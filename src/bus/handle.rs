@@ -47,6 +47,16 @@ pub struct WriteOutcome {
     pub verified_by: &'static str,
 }
 
+/// What a write to every device did, device by device.
+#[derive(Debug)]
+pub struct WriteAllOutcome {
+    /// One frame to id 0xFF carried the write (every device runs rev
+    /// 2.0.8); `false`: one write per device.
+    pub one_frame: bool,
+    /// Each device's own result, in the order asked.
+    pub per_device: Vec<(u8, Result<WriteOutcome, BusError>)>,
+}
+
 /// What an e-stop did.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct EstopReport {
@@ -107,6 +117,13 @@ pub enum Request {
         param: ConfigParam,
         reply: Reply1<WriteOutcome>,
     },
+    /// One parameter to every device in `ids` (one frame to 0xFF where
+    /// every one runs rev 2.0.8), each verified for itself.
+    WriteAll {
+        ids: Vec<u8>,
+        param: ConfigParam,
+        reply: Reply1<WriteAllOutcome>,
+    },
     WriteFlash {
         dev_id: u8,
         reply: Reply1<WriteOutcome>,
@@ -145,6 +162,7 @@ impl Request {
             | Request::WriteFlash { reply, .. }
             | Request::SetId { reply, .. } => drop(reply.send(Err(err))),
             Request::Scan { reply, .. } => drop(reply.send(Err(err))),
+            Request::WriteAll { reply, .. } => drop(reply.send(Err(err))),
         }
     }
 }
@@ -349,6 +367,18 @@ impl BusHandle {
             reply,
         })
         .await
+    }
+
+    /// `param` to every device in `ids`: one frame to 0xFF when all run rev
+    /// 2.0.8 (and the write has no reply), else one write each; every
+    /// device verified for itself.
+    pub async fn write_all(
+        &self,
+        ids: Vec<u8>,
+        param: ConfigParam,
+    ) -> Result<WriteAllOutcome, BusError> {
+        self.call(|reply| Request::WriteAll { ids, param, reply })
+            .await
     }
 
     pub async fn write_flash(&self, dev_id: u8) -> Result<WriteOutcome, BusError> {

@@ -10,10 +10,10 @@ use utoipa::ToSchema;
 
 use super::error::{ApiError, ApiResult};
 use super::limits::JointLimits;
-use super::telemetry::{firmware_of, is_enabled, measured_angle_raw, TargetView};
+use super::telemetry::{firmware_of, is_enabled, measured_angle_raw, revision_of, TargetView};
 use crate::bus::handle::DeviceState;
 use crate::bus::{BusError, BusHandle, Setpoint};
-use crate::protocol::status::fsm_name;
+use crate::protocol::status::fsm_name_in;
 use crate::protocol::units;
 use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
 
@@ -147,7 +147,7 @@ pub(crate) async fn ensure_enabled(
             format!(
                 "{what} needs device {} enabled; it is `{}` (enable it first)",
                 dev.dev_id,
-                fsm_name(i.fsm)
+                fsm_name_in(i.fsm, revision_of(dev))
             ),
         )),
         _ => Err(BusError::UnexpectedReply(format!(

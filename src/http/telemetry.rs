@@ -6,9 +6,13 @@ use std::time::Instant;
 use serde::Serialize;
 use utoipa::ToSchema;
 
+use crate::bus::firmware::{DeviceFirmware, FirmwareSource};
 use crate::bus::handle::DeviceState;
 use crate::bus::Setpoint;
-use crate::protocol::status::{active_fault, fault_history, fault_name, fsm, fsm_name};
+use crate::protocol::params::Revision;
+use crate::protocol::status::{
+    active_fault, fault_history, fault_name, fsm, fsm_name, fsm_name_in,
+};
 use crate::protocol::units::{self, FirmwareVersion};
 use crate::protocol::{Info01, Info02};
 
@@ -165,10 +169,46 @@ fn age_ms(at: Instant, now: Instant) -> f64 {
     now.saturating_duration_since(at).as_secs_f64() * 1000.0
 }
 
-pub(crate) fn status_view(info: &Info01, at: Instant, now: Instant) -> StatusView {
+/// The protocol revision a device speaks, and how the daemon knows.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub(crate) struct RevisionView {
+    /// `2.0.1` or `2.0.8`: what the config surface offers and how state codes read.
+    #[schema(example = "2.0.8")]
+    pub revision: &'static str,
+    /// `config` (the bus's `firmware` setting) or `detected` (the device
+    /// answered an INFO_07 read: 2.0.8; or stayed silent to it: 2.0.1).
+    #[schema(value_type = String, example = "detected")]
+    pub source: FirmwareSource,
+    /// INFO_07's 8 data bytes, hex: the serial number (rev 2.0.8; the
+    /// layout is unpublished, so the bytes are given as they came).
+    #[schema(example = "39 30 00 00 00 00 00 00")]
+    pub serial_number: Option<String>,
+}
+
+impl RevisionView {
+    pub(crate) fn new(f: &DeviceFirmware) -> Self {
+        Self {
+            revision: f.revision.as_str(),
+            source: f.source,
+            serial_number: f.serial.as_ref().map(|s| hex(s)),
+        }
+    }
+}
+
+/// The revision a device is known to run, if known.
+pub(crate) fn revision_of(dev: &DeviceState) -> Option<Revision> {
+    dev.firmware.map(|f| f.revision)
+}
+
+pub(crate) fn status_view(
+    info: &Info01,
+    revision: Option<Revision>,
+    at: Instant,
+    now: Instant,
+) -> StatusView {
     StatusView {
         fsm: info.fsm,
-        state: fsm_name(info.fsm),
+        state: fsm_name_in(info.fsm, revision),
         fault: FaultView::new(info.err_code),
         soft_ver: info.soft_ver,
         firmware: info.firmware().dotted(),

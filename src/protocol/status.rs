@@ -66,6 +66,17 @@ pub fn fsm_name(fsm: u8) -> &'static str {
         .map_or("reserved", |(_, n, _)| n)
 }
 
+/// Name of an fsm state as a device of `revision` means it: a code only
+/// rev 2.0.8 names is `reserved` on V2.0.1 firmware. An unknown revision
+/// gets every name (a name is more use than `reserved` while it is asked).
+pub fn fsm_name_in(fsm: u8, revision: Option<Revision>) -> &'static str {
+    match FSM_STATES.iter().find(|(v, _, _)| *v == fsm) {
+        Some((_, _, since)) if revision.is_some_and(|r| r < *since) => "reserved",
+        Some((_, name, _)) => name,
+        None => "reserved",
+    }
+}
+
 /// Name of a fault code; pass [`active_fault`] or [`fault_history`] of an err_code.
 pub fn fault_name(code: u8) -> &'static str {
     FAULTS
@@ -95,5 +106,14 @@ mod tests {
         assert_eq!(fault_name(active_fault(0x98)), "stall");
         assert_eq!(fault_name(fault_history(0x98)), "over_temperature");
         assert_eq!(fault_name(12), "unknown");
+    }
+
+    #[test]
+    fn state_names_follow_the_revision() {
+        assert_eq!(fsm_name_in(8, Some(Revision::V2_0_8)), "stop");
+        assert_eq!(fsm_name_in(8, Some(Revision::V2_0_1)), "reserved");
+        assert_eq!(fsm_name_in(8, None), "stop");
+        assert_eq!(fsm_name_in(7, Some(Revision::V2_0_1)), "run");
+        assert_eq!(fsm_name_in(3, Some(Revision::V2_0_8)), "reserved");
     }
 }

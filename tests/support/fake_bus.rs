@@ -285,6 +285,26 @@ impl Owner {
                 let r = self.gate(Some(dev_id)).and(outcome);
                 let _ = reply.send(r);
             }
+            Request::WriteAll { ids, param, reply } => {
+                let (index, value) = param.index_value();
+                let per_device = ids
+                    .into_iter()
+                    .map(|dev_id| {
+                        let outcome = WriteOutcome {
+                            dev_id,
+                            index,
+                            value,
+                            verified_by: "read_back",
+                        };
+                        (dev_id, self.gate(Some(dev_id)).map(|_| outcome))
+                    })
+                    .collect();
+                let r = Ok(jointd::bus::handle::WriteAllOutcome {
+                    one_frame: false,
+                    per_device,
+                });
+                let _ = reply.send(r);
+            }
             Request::WriteFlash { dev_id, reply } => {
                 if self.script.lock().unwrap().wrong_block {
                     // What the real owner's RES check reports.
@@ -394,6 +414,7 @@ fn kind(req: &Request) -> &'static str {
         Request::SetMode { .. } => "set_mode",
         Request::ReadInfo { .. } => "read_info",
         Request::WriteConfig { .. } => "write_config",
+        Request::WriteAll { .. } => "write_all",
         Request::WriteFlash { .. } => "write_flash",
         Request::SetId { .. } => "set_id",
         Request::SetBaud { .. } => "set_baud",
@@ -415,6 +436,7 @@ fn fail(req: Request, err: BusError) {
         | Request::WriteFlash { reply, .. }
         | Request::SetId { reply, .. } => drop(reply.send(Err(err))),
         Request::Scan { reply, .. } => drop(reply.send(Err(err))),
+        Request::WriteAll { reply, .. } => drop(reply.send(Err(err))),
     }
 }
 

@@ -9,7 +9,7 @@
 //! when the port is back. Nothing here can take another bus down.
 //!
 //! - `ctx`: what the owner's code works with (port, scheduler, publication).
-//! - `jobs`, `write`, `estop`, `scan`, `baud`: one-shot requests, functions of a `&mut Ctx`.
+//! - `jobs`, `write`, `write_all`, `estop`, `scan`, `baud`: one-shot requests, functions of a `&mut Ctx`.
 //! - `start`: joints found enabled at start, disabled when `on_start = "disable"`.
 //! - `probe`: asking a device its firmware revision (`firmware = "auto"`).
 //! - `confirm`: reading a RES, naming a config frame in errors.
@@ -25,6 +25,7 @@ mod scan;
 mod start;
 mod stats;
 mod write;
+mod write_all;
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -217,6 +218,9 @@ fn run_request(ctx: &mut Ctx, req: Request) {
             param,
             reply,
         } => drop(reply.send(write::write_config(ctx, dev_id, param))),
+        Request::WriteAll { ids, param, reply } => {
+            drop(reply.send(write_all::write_all(ctx, ids, param)))
+        }
         Request::WriteFlash { dev_id, reply } => {
             let key = crate::protocol::command::WRITE_FLASH_KEY;
             let param = ConfigParam::WriteFlash { key };

@@ -21,7 +21,7 @@ use super::ctx::Ctx;
 use super::jobs::{known, zero_moved};
 
 /// What one confirmation attempt found.
-enum Seen {
+pub(super) enum Seen {
     /// The value is on the device (RES 1, or the field reads it).
     Confirmed,
     /// The read-back shows this other value: the write did not take.
@@ -157,7 +157,7 @@ fn read_after_send(
 
 /// Reads `block` until one read answers (at most `reads` times) and
 /// compares the field with the value written.
-fn read_field(
+pub(super) fn read_field(
     ctx: &mut Ctx,
     dev_id: u8,
     param: &ConfigParam,

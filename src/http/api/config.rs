@@ -10,17 +10,19 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
-use super::config_outcome::{NotWritten, PatchOutcomes, Unverified, Written};
-use super::config_params::{blocks_to_read, to_config, Blocks, ConfigPatch, Param, ParamValues};
+use super::config_outcome::{NotWritten, PatchOutcomes, Unverified, Written, NOT_SENT};
+use super::config_params::{
+    api_params, blocks_to_read, check_offered, offered, to_config, Blocks, ConfigPatch, Param,
+    ParamValues,
+};
 use super::config_schema::{ConfigDevice, ConfigView, ParamTable};
 use super::openapi::{ErrorResponses, TAG_CONFIG};
-use crate::bus::handle::WriteOutcome;
 use crate::bus::{BusError, BusHandle};
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::state::{device_id, known_device, AppState, DevicePath};
-use crate::http::telemetry::hex;
-use crate::protocol::params;
+use crate::http::telemetry::{hex, revision_of};
+use crate::protocol::params::{self, Revision};
 use crate::protocol::{BaudLevel, ConfigParam, Info04, InfoBlock};
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {
@@ -108,8 +110,16 @@ async fn read_config(
     ApiPath(p): ApiPath<DevicePath>,
 ) -> ApiResult<Json<ConfigView>> {
     let (bus, id) = p.resolve(&state)?;
-    known_device(&bus.snapshot(), id)?;
-    let blocks = read_blocks(bus, id).await?;
+    let revision = revision_of(known_device(&bus.snapshot(), id)?);
+    let mut blocks = read_blocks(bus, id).await?;
+    // The serial number, where the firmware has one (rev 2.0.8).
+    let serial = if revision == Some(Revision::V2_0_8) {
+        let reply = bus.read_info(id, InfoBlock::Info07).await?;
+        blocks.0.push((InfoBlock::Info07, reply.data));
+        Some(hex(&reply.data))
+    } else {
+        None
+    };
     let info04 = blocks
         .data(InfoBlock::Info04)
         .map(Info04::from_bytes)
@@ -119,13 +129,25 @@ async fn read_config(
         device: ConfigDevice {
             bus: bus.name().to_owned(),
             id,
+            revision: revision.map(Revision::as_str),
             baud: BaudLevel::from_raw(info04.baud_level).map(BaudLevel::baud),
             baud_level: info04.baud_level,
             param_ver: info04.param_ver,
+            serial_number: serial,
+            write_only: write_only_params(revision),
             raw: raw.collect(),
         },
         params: ParamValues::from_blocks(&blocks),
     }))
+}
+
+/// Offered parameters no published INFO block shows (rev 2.0.8's): a
+/// PATCH writes them, unverifiable; a read cannot show them.
+fn write_only_params(revision: Option<Revision>) -> Vec<&'static str> {
+    api_params()
+        .filter(|p| p.read_back.is_none() && offered(p, revision))
+        .map(|p| p.key)
+        .collect()
 }
 
 /// Change any subset of parameters in one request. Every value is checked
@@ -150,9 +172,11 @@ async fn patch_config(
     ApiJson(patch): ApiJson<ConfigPatch>,
 ) -> ApiResult<Json<PatchResult>> {
     let (bus, id) = p.resolve(&state)?;
-    known_device(&bus.snapshot(), id)?;
+    let snap = bus.snapshot();
+    let dev = known_device(&snap, id)?;
     let mut writes = Vec::new();
     for (param, value) in patch.entries() {
+        check_offered(param, id, dev)?;
         writes.push((param, value, to_config(param, value)?));
     }
     let (out, failed) = write_in_turn(bus, id, writes).await;
@@ -179,62 +203,31 @@ async fn write_in_turn(
         let raw = config.index_value().1;
         if failed.is_some() {
             out.not_written
-                .push(not_written(param, value, raw, NOT_SENT.into()));
+                .push(NotWritten::new(param, value, raw, NOT_SENT.into()));
             continue;
         }
         match bus.write_config(id, config).await {
-            Ok(outcome) => out.written.push(written_entry(param, value, &outcome)),
+            Ok(outcome) => out.written.push(Written::new(param, value, &outcome)),
             Err(BusError::Unverified { reason, .. }) => {
-                out.unverified.push(unverified(param, value, raw, reason));
+                out.unverified
+                    .push(Unverified::new(param, value, raw, reason));
             }
             // The owner may still send it: unknown, and the rest waits no longer.
             Err(e @ BusError::OwnerTimeout) => {
                 out.unverified
-                    .push(unverified(param, value, raw, e.to_string()));
+                    .push(Unverified::new(param, value, raw, e.to_string()));
                 failed = Some(ApiError::from(e).with_field(param.key));
             }
             Err(e) => {
                 let err = ApiError::from(e);
                 let reason = err.problem.detail.clone();
-                out.not_written.push(not_written(param, value, raw, reason));
+                out.not_written
+                    .push(NotWritten::new(param, value, raw, reason));
                 failed = Some(err.with_field(param.key));
             }
         }
     }
     (out, failed)
-}
-
-fn written_entry(param: Param, value: f64, outcome: &WriteOutcome) -> Written {
-    Written {
-        param: param.key,
-        value,
-        raw: outcome.value,
-        index: outcome.index,
-        verified_by: outcome.verified_by,
-    }
-}
-
-fn unverified(param: Param, value: f64, raw: u16, reason: String) -> Unverified {
-    Unverified {
-        param: param.key,
-        value,
-        raw,
-        index: param.index,
-        reason,
-    }
-}
-
-/// Why a parameter after a failed one is `not_written`.
-const NOT_SENT: &str = "not sent: an earlier parameter failed";
-
-fn not_written(param: Param, value: f64, raw: u16, reason: String) -> NotWritten {
-    NotWritten {
-        param: param.key,
-        value,
-        raw,
-        index: param.index,
-        reason,
-    }
 }
 
 /// The problem a PATCH answers unless everything was confirmed: the

@@ -6,6 +6,9 @@
 use serde::Serialize;
 use utoipa::ToSchema;
 
+use super::config_params::Param;
+use crate::bus::handle::WriteOutcome;
+
 /// One verified write.
 #[derive(Debug, Serialize, ToSchema)]
 pub(crate) struct Written {
@@ -64,4 +67,43 @@ pub(crate) struct PatchOutcomes {
     pub unverified: Vec<Unverified>,
     /// Not on the device (refused, read back otherwise, or never sent).
     pub not_written: Vec<NotWritten>,
+}
+
+impl Written {
+    pub(crate) fn new(param: Param, value: f64, outcome: &WriteOutcome) -> Self {
+        Self {
+            param: param.key,
+            value,
+            raw: outcome.value,
+            index: outcome.index,
+            verified_by: outcome.verified_by,
+        }
+    }
+}
+
+impl Unverified {
+    pub(crate) fn new(param: Param, value: f64, raw: u16, reason: String) -> Self {
+        Self {
+            param: param.key,
+            value,
+            raw,
+            index: param.index,
+            reason,
+        }
+    }
+}
+
+/// Why a parameter after a failed one is `not_written`.
+pub(crate) const NOT_SENT: &str = "not sent: an earlier parameter failed";
+
+impl NotWritten {
+    pub(crate) fn new(param: Param, value: f64, raw: u16, reason: String) -> Self {
+        Self {
+            param: param.key,
+            value,
+            raw,
+            index: param.index,
+            reason,
+        }
+    }
 }

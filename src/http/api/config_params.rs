@@ -13,8 +13,11 @@ use serde::ser::SerializeMap;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use utoipa::ToSchema;
 
+use crate::bus::firmware::FirmwareSource;
+use crate::bus::handle::DeviceState;
 use crate::http::error::{ApiError, ApiResult};
-use crate::protocol::params::{self, ParamRow};
+use crate::http::telemetry::revision_of;
+use crate::protocol::params::{self, ParamRow, Revision};
 use crate::protocol::units::UnitError;
 use crate::protocol::{ConfigParam, InfoBlock};
 
@@ -65,6 +68,47 @@ impl Blocks {
 pub(crate) fn to_config(p: Param, value: f64) -> ApiResult<ConfigParam> {
     let raw = p.to_raw(value).map_err(|e| unit_error(p, e))?;
     ConfigParam::from_index_value(p.index, raw).map_err(|e| ApiError::invalid(p.key, e.to_string()))
+}
+
+/// Whether a device of `revision` has the parameter (an unknown revision:
+/// only what every revision has).
+pub(crate) fn offered(p: Param, revision: Option<Revision>) -> bool {
+    revision.unwrap_or(Revision::V2_0_1) >= p.since
+}
+
+/// 422 for a parameter the device's firmware does not have; 409 while its
+/// revision is not known yet (asked when it is first heard).
+pub(crate) fn check_offered(p: Param, id: u8, dev: &DeviceState) -> ApiResult<()> {
+    let revision = revision_of(dev);
+    if offered(p, revision) {
+        return Ok(());
+    }
+    let need = p.since.as_str();
+    match dev.firmware {
+        Some(f) => Err(ApiError::invalid(
+            p.key,
+            format!(
+                "{} (index {}) needs rev {need} firmware; device {id} runs {} ({})",
+                p.key,
+                p.index,
+                f.revision.as_str(),
+                match f.source {
+                    FirmwareSource::Config => "set in the config",
+                    FirmwareSource::Detected => "detected",
+                }
+            ),
+        )),
+        None => Err(ApiError::conflict(
+            "firmware-unknown",
+            "Firmware revision not known yet",
+            format!(
+                "{} needs rev {need} firmware and device {id}'s revision is not known yet \
+                 (it is asked once the device answers; or set `firmware` in the bus's config)",
+                p.key
+            ),
+        )
+        .with_field(p.key)),
+    }
 }
 
 /// A unit error as a 422; whole-number rows say so in words.
@@ -255,7 +299,9 @@ mod tests {
                 .collect(),
         );
         let values = ParamValues::from_blocks(&data);
-        assert_eq!(values.0.len(), api_params().count());
+        // Every offered parameter with a read-back shows; write-only ones cannot.
+        let readable = api_params().filter(|p| p.read_back.is_some()).count();
+        assert_eq!(values.0.len(), readable);
         let lpf = by_key("lpf_level").map(|r| r.index);
         assert_eq!(lpf, Some(index::POS_LPF_LV));
     }

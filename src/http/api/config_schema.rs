@@ -15,7 +15,7 @@ use utoipa::openapi::{Ref, RefOr};
 use utoipa::{PartialSchema, ToSchema};
 
 use super::config_params::{api_params, ConfigPatch, Param, ParamValue, ParamValues};
-use crate::protocol::params::{Guard, ParamRow, PARAMS};
+use crate::protocol::params::{Guard, ParamRow, Revision, PARAMS};
 
 /// Every parameter of a device, read from it now: the device's fields and
 /// one [`ParamValue`] per offered parameter, by its key.
@@ -34,6 +34,10 @@ pub(crate) struct ConfigDevice {
     pub bus: String,
     #[schema(example = 1)]
     pub id: u8,
+    /// The protocol revision the device speaks (`2.0.1`, `2.0.8`; absent
+    /// until known): what this surface offers it.
+    #[schema(example = "2.0.1")]
+    pub revision: Option<&'static str>,
     /// The device's baud from INFO_04 (absent if its level is unknown); change it on the bus.
     #[schema(example = 500000)]
     pub baud: Option<u32>,
@@ -41,6 +45,14 @@ pub(crate) struct ConfigDevice {
     pub baud_level: u8,
     #[schema(example = 3)]
     pub param_ver: u8,
+    /// INFO_07's data bytes, hex (rev 2.0.8: the serial number, layout unpublished).
+    #[schema(example = json!(null))]
+    pub serial_number: Option<String>,
+    /// Parameters a PATCH may write to this device that no published INFO
+    /// block shows (rev 2.0.8's `drv_ot_c`, `spd_limit_rpm`, `sn`): written
+    /// unverifiable, never shown here.
+    #[schema(example = json!([]))]
+    pub write_only: Vec<&'static str>,
     /// The raw data bytes of each block, hex (INFO_06 carries bytes whose
     /// layout is unpublished).
     #[schema(example = json!({"info03": "FF 0F 00 00 00 10 00 01", "info04": "02 01 03 00 10 11 69 03",
@@ -55,7 +67,8 @@ impl PartialSchema for ConfigView {
             _ => Object::new(),
         };
         obj.description = Some("Every parameter of a device, read from it now.".into());
-        for p in api_params() {
+        // Write-only parameters (rev 2.0.8's) are never shown.
+        for p in api_params().filter(|p| p.read_back.is_some()) {
             let value = RefOr::Ref(Ref::from_schema_name(ParamValue::name()));
             obj.properties.insert(p.key.into(), value);
             obj.required.push(p.key.into());
@@ -123,7 +136,19 @@ fn describe(p: &ParamRow) -> String {
         Some(s) if s > 1.0 => format!(", multiples of {s}{unit}"),
         _ => String::new(),
     };
-    format!("{}, {min}..={max}{unit}{step} (index {}).", p.doc, p.index)
+    let revision = if p.since > Revision::V2_0_1 {
+        format!(
+            " Rev {} firmware only (422 for other devices); write-only: no published \
+             INFO block shows it, so the write is reported `unverifiable`.",
+            p.since.as_str()
+        )
+    } else {
+        String::new()
+    };
+    format!(
+        "{}, {min}..={max}{unit}{step} (index {}).{revision}",
+        p.doc, p.index
+    )
 }
 
 /// The parameter table as JSON (`GET /api/v1/params`).

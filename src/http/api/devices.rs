@@ -17,8 +17,8 @@ use crate::http::extract::{ApiPath, ApiQuery};
 use crate::http::limits::JointLimits;
 use crate::http::state::{known_device, AppState, BusPath, DevicePath};
 use crate::http::telemetry::{
-    disabled_reason, firmware_of, motion_view, reset_view, status_view, FaultView, MotionView,
-    ResetView, StatusView, TargetView,
+    disabled_reason, firmware_of, motion_view, reset_view, revision_of, status_view, FaultView,
+    MotionView, ResetView, RevisionView, StatusView, TargetView,
 };
 use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
 
@@ -38,6 +38,9 @@ pub(crate) struct DeviceSummary {
     pub name: Option<String>,
     #[schema(example = true)]
     pub online: bool,
+    /// Protocol revision, `2.0.1` or `2.0.8` (absent until known: see the device's `protocol`).
+    #[schema(example = "2.0.8")]
+    pub revision: Option<&'static str>,
     /// fsm state name from the latest INFO_01.
     #[schema(example = "run")]
     pub state: Option<&'static str>,
@@ -105,8 +108,11 @@ pub(crate) struct DeviceDetail {
     pub name: Option<String>,
     #[schema(example = true)]
     pub online: bool,
+    /// The firmware version from INFO_01 (`soft_ver`).
     #[schema(example = "1.2.8")]
     pub firmware: Option<String>,
+    /// The protocol revision it speaks (absent until the config or the device told).
+    pub protocol: Option<RevisionView>,
     #[schema(example = "position")]
     pub mode: Option<&'static str>,
     /// INFO_01 decoded (absent until the device has answered one).
@@ -157,7 +163,10 @@ pub(crate) struct FreshQuery {
 
 fn summary(dev: &DeviceState, name: Option<&str>, now: Instant) -> DeviceSummary {
     let fw = firmware_of(dev);
-    let status = dev.info01.as_ref().map(|(i, at)| status_view(i, *at, now));
+    let status = dev
+        .info01
+        .as_ref()
+        .map(|(i, at)| status_view(i, revision_of(dev), *at, now));
     let motion = dev
         .info02
         .as_ref()
@@ -173,6 +182,7 @@ fn summary(dev: &DeviceState, name: Option<&str>, now: Instant) -> DeviceSummary
         id: dev.dev_id,
         name: name.map(str::to_owned),
         online: dev.online,
+        revision: revision_of(dev).map(crate::protocol::params::Revision::as_str),
         state: status.as_ref().map(|s| s.state),
         fault: status.as_ref().map(|s| s.fault.clone()),
         mode: dev.mode.map(CtrlMode::name),
@@ -247,7 +257,11 @@ async fn get_device(
         online: dev.online,
         firmware: dev.info01.as_ref().map(|(i, _)| i.firmware().dotted()),
         mode: dev.mode.map(CtrlMode::name),
-        status: dev.info01.as_ref().map(|(i, at)| status_view(i, *at, now)),
+        status: dev
+            .info01
+            .as_ref()
+            .map(|(i, at)| status_view(i, revision_of(&dev), *at, now)),
+        protocol: dev.firmware.as_ref().map(RevisionView::new),
         motion: dev
             .info02
             .as_ref()

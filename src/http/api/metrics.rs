@@ -19,7 +19,8 @@ use crate::bus::BusSnapshot;
 use crate::histogram::Histogram;
 use crate::http::hub::WsHub;
 use crate::http::state::AppState;
-use crate::protocol::status::{active_fault, fault_history, fault_name, fsm_name};
+use crate::http::telemetry::revision_of;
+use crate::protocol::status::{active_fault, fault_history, fault_name, fsm_name_in};
 
 /// Content type of the Prometheus text exposition format.
 pub(crate) const PROMETHEUS_TEXT: &str = "text/plain; version=0.0.4; charset=utf-8";
@@ -336,7 +337,7 @@ fn device_families(m: &mut Exposition, snap: &BusSnapshot, now: Instant) {
             m.gauge(
                 "jointd_device_state",
                 "The device's state machine state (from INFO_01) as a label; always 1.",
-                &format!("{l},state=\"{}\"", fsm_name(i.fsm)),
+                &format!("{l},state=\"{}\"", fsm_name_in(i.fsm, revision_of(dev))),
                 1.0,
             );
             m.gauge(

@@ -3,7 +3,8 @@
 //! share only the OpenAPI tags and failure responses of [`openapi`]).
 //!
 //! # Layout
-//! - [`buses`], [`devices`], [`control`], [`config`] (with [`config_params`]:
+//! - [`buses`], [`devices`], [`control`], [`config`] and [`config_all`] (a
+//!   whole bus at once) (with [`config_params`]:
 //!   request values → writes; [`config_schema`]: the schemas from the parameter
 //!   table; [`config_outcome`]: what a PATCH did per parameter),
 //!   [`estop`], [`health`]: one router per area.
@@ -11,6 +12,7 @@
 
 pub(crate) mod buses;
 pub(crate) mod config;
+pub(crate) mod config_all;
 pub(crate) mod config_outcome;
 pub(crate) mod config_params;
 pub(crate) mod config_schema;
@@ -33,6 +35,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .merge(devices::router())
         .merge(control::router())
         .merge(config::router())
+        .merge(config_all::router())
         .merge(estop::router())
 }
 

@@ -10,8 +10,8 @@ use super::messages::Field;
 use crate::bus::handle::DeviceState;
 use crate::bus::BusSnapshot;
 use crate::http::hub::FragmentCache;
-use crate::http::telemetry::{disabled_reason, firmware_of, measured_angle_raw};
-use crate::protocol::status::{active_fault, fault_name, fsm_name};
+use crate::http::telemetry::{disabled_reason, firmware_of, measured_angle_raw, revision_of};
+use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
 use crate::protocol::units;
 
 /// What a client asked to receive.
@@ -114,7 +114,7 @@ fn field_value(f: Field, dev: &DeviceState) -> Value {
             .map(|t| Value::from(units::angle_deg(t.pos_ref))),
         Field::SpeedRpm => info02.map(|i| Value::from(round3(i.speed_rpm(firmware_of(dev))))),
         Field::CurrentA => info02.map(|i| Value::from(round3(units::current_a(i.q_cur)))),
-        Field::Fsm => info01.map(|i| Value::from(fsm_name(i.fsm))),
+        Field::Fsm => info01.map(|i| Value::from(fsm_name_in(i.fsm, revision_of(dev)))),
         Field::Fault => info01.map(|i| Value::from(fault_name(active_fault(i.err_code)))),
         Field::TempC => info01.map(|i| Value::from(i.temp_c())),
         Field::VbusV => info01.map(|i| Value::from(i.vbus_v())),

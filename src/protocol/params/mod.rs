@@ -163,8 +163,10 @@ const fn setting(
     }
 }
 
-/// A rev 2.0.8 setting: decoded and simulated, not offered by the REST surface
-/// (SPEC: "decode them, never depend on them"); INFO_06's offsets for them are unpublished.
+/// A rev 2.0.8 setting: offered by the REST surface to devices that speak
+/// rev 2.0.8 only, write-only (INFO_06's offsets for them are unpublished,
+/// so no read-back confirms a write); the daemon never depends on them
+/// (SPEC: "decode them, never depend on them").
 const fn extension(
     index: u8,
     name: &'static str,
@@ -186,7 +188,7 @@ const fn extension(
         read_back: None,
         storage: Storage::Ram,
         guard: Guard::None,
-        api: false,
+        api: true,
         default,
         since: Revision::V2_0_8,
         doc,

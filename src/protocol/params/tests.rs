@@ -133,8 +133,10 @@ fn read_back_fields_sit_inside_their_block_without_overlap() {
 fn api_rows_are_verifiable_ram_settings() {
     for r in api_rows() {
         assert!(r.is_setting(), "{}", r.name);
+        // Rev 2.0.8's settings have no published read-back: offered to
+        // 2.0.8 devices as write-only, their writes reported unverifiable.
         assert!(
-            r.read_back.is_some(),
+            r.read_back.is_some() || r.since == Revision::V2_0_8,
             "{}: a REST write must be verifiable",
             r.name
         );
