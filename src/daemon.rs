@@ -21,7 +21,7 @@ use crate::http::state::StateOptions;
 use crate::http::teleop::{WatchdogDefault, MAX_HOLD, MIN_HOLD};
 use crate::http::{app, AppState};
 use crate::protocol::is_device_id;
-use crate::sim::{SimConfig, SimError, SimHandle, Simulator};
+use crate::sim::{Firmware, SimConfig, SimError, SimHandle, Simulator};
 
 /// Default HTTP address: loopback only.
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8080";
@@ -46,6 +46,10 @@ pub struct RunArgs {
     /// Baud of the simulated bus.
     #[arg(long, value_name = "BAUD", default_value_t = 500_000)]
     pub sim_baud: u32,
+    /// Firmware revision of the simulated joints: `2.0.1` (default), `2.0.8`,
+    /// or per id, e.g. `1-8=2.0.8,9-16=2.0.1` (ids not named run 2.0.1).
+    #[arg(long, value_name = "SPEC", requires = "sim")]
+    pub sim_firmware: Option<String>,
     /// HTTP address to listen on [default: 127.0.0.1:8080]; port 0 picks a free
     /// port (the first line on stdout says which).
     #[arg(long, value_name = "ADDR", env = "JOINTD_LISTEN")]
@@ -171,7 +175,8 @@ pub struct Plan {
     pub token: Option<String>,
     pub buses: Vec<BusConfig>,
     pub limits: SoftLimits,
-    pub sim: Option<(u8, u32)>,
+    /// The simulated bus of `--sim`, checked.
+    pub sim: Option<SimConfig>,
     pub options: StateOptions,
 }
 
@@ -235,7 +240,7 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     for spec in &args.buses {
         buses.push(BusConfig::parse_cli(spec)?);
     }
-    let sim = args.sim.map(|n| (n, args.sim_baud));
+    let sim = args.sim.map(|n| sim_config(n, args)).transpose()?;
     if buses.is_empty() && sim.is_none() {
         return Err(DaemonError::NoBus);
     }
@@ -393,15 +398,28 @@ fn checked_watchdog(w: WatchdogDefault, args: &RunArgs) -> Result<WatchdogDefaul
     Ok(w)
 }
 
+/// The simulator `--sim N` asks for: ids 1..=N at `--sim-baud`, with the
+/// firmware of `--sim-firmware` (refused here, before anything starts).
+fn sim_config(joints: u8, args: &RunArgs) -> Result<SimConfig, DaemonError> {
+    let mut cfg = SimConfig::new((1..=joints).collect(), args.sim_baud);
+    if let Some(spec) = &args.sim_firmware {
+        cfg.firmware = Firmware::parse(spec)?;
+    }
+    // The rest (the baud) is checked when the simulator starts, as before.
+    cfg.firmware.check_ids(&cfg.ids)?;
+    Ok(cfg)
+}
+
 /// Starts the simulator of `--sim` and the bus config that opens its pty.
-fn start_sim(joints: u8, baud: u32) -> Result<(SimHandle, BusConfig), DaemonError> {
-    let ids: Vec<u8> = (1..=joints).collect();
-    let sim = Simulator::spawn_pty(SimConfig::new(ids.clone(), baud))?;
+fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusConfig), DaemonError> {
+    let (ids, baud, joints) = (sim_cfg.ids.clone(), sim_cfg.baud, sim_cfg.ids.len());
+    let firmware = sim_cfg.firmware.to_string();
+    let sim = Simulator::spawn_pty(sim_cfg)?;
     let path = sim.device_path().ok_or_else(|| DaemonError::Io {
         what: "simulator".into(),
         source: std::io::Error::other("the simulator has no device path"),
     })?;
-    tracing::info!(path = %path.display(), joints, baud, "simulated bus started");
+    tracing::info!(path = %path.display(), joints, baud, %firmware, "simulated bus started");
     let mut cfg = BusConfig::new(SIM_BUS_NAME, path, baud);
     cfg.ids = ids;
     // The simulator shares the CPU with the daemon: on a busy machine its
@@ -415,8 +433,8 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     let plan = plan(&args)?;
     let mut configs = plan.buses;
     let sim = match plan.sim {
-        Some((n, baud)) => {
-            let (sim, cfg) = start_sim(n, baud)?;
+        Some(sim_cfg) => {
+            let (sim, cfg) = start_sim(sim_cfg)?;
             configs.push(cfg);
             Some(sim)
         }
@@ -558,6 +576,38 @@ mod tests {
         .unwrap();
         assert_eq!(p.listen.to_string(), DEFAULT_LISTEN);
         assert!(matches!(plan(&RunArgs::default()), Err(DaemonError::NoBus)));
+    }
+
+    #[test]
+    fn sim_firmware_is_parsed_and_checked_against_the_simulated_ids() {
+        let with = |spec: &str| {
+            plan(&RunArgs {
+                sim: Some(4),
+                sim_firmware: Some(spec.into()),
+                ..Default::default()
+            })
+        };
+        let p = with("1-2=2.0.8").unwrap();
+        let fw = &p.sim.as_ref().unwrap().firmware;
+        assert_eq!(fw.revision_of(2).as_str(), "2.0.8");
+        assert_eq!(fw.revision_of(3).as_str(), "2.0.1");
+        let default = plan(&RunArgs {
+            sim: Some(4),
+            ..Default::default()
+        })
+        .unwrap();
+        assert_eq!(default.sim.unwrap().firmware, Firmware::default());
+        for bad in ["2.0.9", "5=2.0.8", "1-4"] {
+            let err = with(bad).unwrap_err();
+            assert!(
+                matches!(err, DaemonError::Sim(SimError::BadFirmware(_))),
+                "{bad}: {err}"
+            );
+        }
+        assert!(with("3-9=2.0.8")
+            .unwrap_err()
+            .to_string()
+            .contains("not on the bus"));
     }
 
     #[test]

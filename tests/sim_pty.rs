@@ -54,6 +54,12 @@ fn every_read_answers_with_the_spec_layout() {
     let (_sim, mut host) = pty(config(&[2]));
     host.recv(WAIT).expect("power-up INFO_01");
     for block in InfoBlock::ALL {
+        if block == InfoBlock::Info07 {
+            // A V2.0.1 device (the default) does not know rev 2.0.8's INFO_07:
+            // no reply (tests/sim_firmware.rs has the 2.0.8 answer).
+            assert!(host.read(2, block).is_none(), "V2.0.1 answered INFO_07");
+            continue;
+        }
         let r = host
             .read(2, block)
             .unwrap_or_else(|| panic!("no reply to {block:?}"));
@@ -82,7 +88,6 @@ fn every_read_answers_with_the_spec_layout() {
                 (2912, 600, 582, 400)
             ),
             ReplyBody::Info06(i) => assert_eq!((i.cold_dt, i.plus_t), (20, 4)),
-            ReplyBody::Info07(sn) => assert_eq!(sn, [0; 8]),
             other => panic!("unexpected body {other:?}"),
         }
     }

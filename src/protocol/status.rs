@@ -7,9 +7,19 @@ use super::params::Revision;
 /// fsm values of SPEC §5 this project relies on.
 pub mod fsm {
     pub const READY: u8 = 0;
+    /// Rev 2.0.8.
+    pub const INIT: u8 = 1;
+    /// Rev 2.0.8.
+    pub const PRECHARGE: u8 = 2;
     pub const ALIGN: u8 = 5;
+    /// Rev 2.0.8.
+    pub const START: u8 = 6;
     pub const RUN: u8 = 7;
+    /// Rev 2.0.8.
+    pub const STOP: u8 = 8;
     pub const FAULT: u8 = 9;
+    /// Rev 2.0.8.
+    pub const BRAKE: u8 = 10;
 }
 
 /// err_code values of SPEC §5.
@@ -26,14 +36,14 @@ pub mod fault {
 /// Every named fsm state, with the revision that documents it.
 pub const FSM_STATES: [(u8, &str, Revision); 9] = [
     (fsm::READY, "ready", Revision::V2_0_1),
-    (1, "init", Revision::V2_0_8),
-    (2, "precharge", Revision::V2_0_8),
+    (fsm::INIT, "init", Revision::V2_0_8),
+    (fsm::PRECHARGE, "precharge", Revision::V2_0_8),
     (fsm::ALIGN, "align", Revision::V2_0_1),
-    (6, "start", Revision::V2_0_8),
+    (fsm::START, "start", Revision::V2_0_8),
     (fsm::RUN, "run", Revision::V2_0_1),
-    (8, "stop", Revision::V2_0_8),
+    (fsm::STOP, "stop", Revision::V2_0_8),
     (fsm::FAULT, "fault", Revision::V2_0_1),
-    (10, "brake", Revision::V2_0_8),
+    (fsm::BRAKE, "brake", Revision::V2_0_8),
 ];
 
 /// Every fault code of SPEC §5 (9 is both hardware and software

@@ -9,7 +9,7 @@ use std::time::Duration;
 use clap::Args;
 use nix::sys::signal::{SigSet, Signal};
 
-use super::{parse_ids, Fault, SimConfig, SimError, SimHandle, Simulator};
+use super::{parse_ids, Fault, Firmware, SimConfig, SimError, SimHandle, Simulator};
 
 /// Arguments of `jointd sim`.
 #[derive(Args, Debug, Clone)]
@@ -47,6 +47,10 @@ pub struct SimArgs {
     /// Devices whose supply sags below the under-voltage level.
     #[arg(long)]
     pub under_voltage: Vec<u8>,
+    /// Protocol revision of the devices' firmware: `2.0.1`, `2.0.8`, or per
+    /// id, e.g. `1-8=2.0.8,9-16=2.0.1` (ids not named run 2.0.1).
+    #[arg(long, value_name = "SPEC", default_value = "2.0.1")]
+    pub firmware: String,
     /// Seed of noise and fault dice.
     #[arg(long, default_value_t = super::config::DEFAULT_SEED)]
     pub seed: u64,
@@ -68,6 +72,8 @@ impl SimArgs {
         cfg.state_file = self.state_file.clone();
         cfg.seed = self.seed;
         cfg.realtime = self.realtime;
+        cfg.firmware = Firmware::parse(&self.firmware)?;
+        cfg.validate()?;
         Ok(cfg)
     }
 

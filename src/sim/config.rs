@@ -8,6 +8,8 @@ use thiserror::Error;
 
 use crate::protocol::{is_device_id, BaudLevel};
 
+use super::firmware::Firmware;
+
 /// SPEC §1 leaves the turnaround undocumented; the simulator's default.
 pub(crate) const DEFAULT_TURNAROUND: Duration = Duration::from_micros(100);
 /// SPEC §4.1: "about 1 s" of encoder alignment after the first enable.
@@ -42,6 +44,9 @@ pub struct SimConfig {
     pub soft_ver: u8,
     pub log_capacity: usize,
     pub seed: u64,
+    /// The protocol revision each device's firmware implements (default:
+    /// V2.0.1 for every device); see [`super::firmware`].
+    pub firmware: Firmware,
     /// Run the simulator thread under SCHED_FIFO if the system allows it:
     /// tighter delivery times on a busy machine. Off by default (it is a
     /// privilege, and a spinning real-time thread competes with everything).
@@ -61,11 +66,13 @@ impl SimConfig {
             soft_ver: DEFAULT_SOFT_VER,
             log_capacity: DEFAULT_LOG_CAPACITY,
             seed: DEFAULT_SEED,
+            firmware: Firmware::default(),
             realtime: false,
         }
     }
 
-    /// Refuses what no bus could be: no devices, a bad id, a baud no module speaks.
+    /// Refuses what no bus could be: no devices, a bad id, a baud no module
+    /// speaks, a firmware revision for a device the bus does not have.
     pub fn validate(&self) -> Result<(), SimError> {
         if self.ids.is_empty() {
             return Err(SimError::BadIds("a bus needs at least one device".into()));
@@ -78,7 +85,7 @@ impl SimConfig {
         if BaudLevel::from_baud(self.baud).is_none() {
             return Err(SimError::BadBaud(self.baud));
         }
-        Ok(())
+        self.firmware.check_ids(&self.ids)
     }
 }
 
@@ -89,6 +96,8 @@ pub enum SimError {
     BadIds(String),
     #[error("baud {0} is not one the modules speak (500000, 230400, 115200, 38400, 19200)")]
     BadBaud(u32),
+    #[error("bad firmware: {0}")]
+    BadFirmware(String),
     #[error("state file {path}: {why}")]
     StateFile { path: PathBuf, why: String },
     #[error("pseudo-terminal: {0}")]

@@ -378,3 +378,7 @@ impl Engine {
 #[cfg(test)]
 #[path = "engine_tests.rs"]
 mod tests;
+
+#[cfg(test)]
+#[path = "firmware_tests.rs"]
+mod firmware_tests;

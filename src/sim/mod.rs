@@ -9,6 +9,9 @@
 //! - [`busy`]: line occupancy accounting.
 //! - [`engine`]: the whole bus as a function of timestamps (wire + devices + faults).
 //! - [`device`]: one module's state machine and SPEC behaviour, pure.
+//! - [`firmware`]: the firmware profiles (V2.0.1, rev 2.0.8): the one place
+//!   that says what each revision does differently, and the assumptions made
+//!   where the SPEC is silent.
 //! - [`physics`]: angle, speed, current, protection, burst, temperature.
 //! - [`params`]: RAM/flash parameters (storage, defaults and INFO layout from
 //!   [`crate::protocol::params`]) and the JSON state file.
@@ -37,8 +40,12 @@
 //!   but replaced by that hold on enable. Jog and references in READY do nothing.
 //! - COMM_SILENT with a non-zero value silences the device; with 0 it speaks
 //!   again; a reboot or power cycle also ends the silence.
-//! - UPDATE_ENC_ZERO answers RES (rev 2.0.8): success in READY (the next
-//!   enable aligns again), failure while enabled.
+//! - UPDATE_ENC_ZERO in READY makes the next enable align again; while
+//!   enabled it does nothing. Rev 2.0.8 firmware answers RES (success /
+//!   failure), V2.0.1 nothing.
+//! - Each device runs the firmware of one protocol revision (V2.0.1 unless
+//!   [`SimConfig::firmware`] says otherwise): what rev 2.0.8 changes, and the
+//!   choices made where the SPEC is silent, are listed in [`firmware`].
 //! - The output zero set by a jog or UPDATE_FIN_ZERO survives a power cycle.
 //! - Under-voltage reports err 5 (as the captured vendor frame does); it faults
 //!   an enabled device. A stall latches err 8 after `stall_fault_after` of
@@ -62,6 +69,7 @@ pub(crate) mod console;
 pub(crate) mod device;
 pub(crate) mod engine;
 pub(crate) mod faults;
+pub mod firmware;
 pub(crate) mod line;
 pub(crate) mod log;
 pub(crate) mod measure;
@@ -81,6 +89,7 @@ use std::time::Instant;
 
 pub use config::{parse_ids, SimConfig, SimError};
 pub use faults::Fault;
+pub use firmware::Firmware;
 pub use log::{collision_context, WireFrame};
 pub use params::Params;
 pub use stats::{FrameKinds, SimStats};

@@ -70,6 +70,11 @@ impl Params {
         params::by_index(index).map_or(0.0, |row| row.physical(self.raw(index)))
     }
 
+    /// Sets a setting's raw value directly (a device's own factory values, like its serial).
+    pub(crate) fn set_raw(&mut self, index: u8, raw: u16) {
+        self.set(index, raw);
+    }
+
     fn set(&mut self, index: u8, raw: u16) {
         if let Some(slot) = self.raw.get_mut(usize::from(index)) {
             *slot = raw;
@@ -97,7 +102,8 @@ impl Params {
     }
 
     /// The data bytes of INFO_03..06: every setting at its row's read-back
-    /// field (INFO_06's rev 2.0.8 tail stays zero: its offsets are unpublished).
+    /// field (INFO_06's rev 2.0.8 tail stays zero here: its offsets are
+    /// unpublished; a rev 2.0.8 device adds the simulator's own layout).
     pub fn block(&self, block: InfoBlock) -> [u8; 8] {
         let mut data = [0u8; 8];
         if block == InfoBlock::Info04 {

@@ -44,6 +44,10 @@ pub(crate) enum Drive {
     Position { target: f64, vmax: f64 },
     /// Turn at `vel` °/s.
     Speed { vel: f64 },
+    /// Drive `amps` of q-axis current (rev 2.0.8 current mode, capped like
+    /// any current). A free joint settles where viscous friction takes what
+    /// the hold (static) current leaves: `(|I| − hold) / friction` °/s.
+    Current { amps: f64 },
 }
 
 /// Something the joint cannot move past.
@@ -129,6 +133,7 @@ impl Joint {
                 lpf_tau(p),
             ),
             Drive::Speed { vel } => (vel, lpf_tau(p)),
+            Drive::Current { amps } => (current_speed(amps, self.current_cap(p)), lpf_tau(p)),
         };
         let vel = self.vel + (v_des - self.vel) * (dt / tau).min(1.0);
         self.acc = (vel - self.vel) / dt;
@@ -173,6 +178,12 @@ impl Joint {
         let cap = self.current_cap(p);
         let demand = match drive {
             Drive::Off => 0.0,
+            Drive::Current { amps } => {
+                if self.blocked {
+                    self.blocked_s += dt;
+                }
+                amps
+            }
             _ if self.blocked => {
                 self.blocked_s += dt;
                 v_des.signum() * (self.current.abs() + BLOCKED_RAMP_A_PER_S * dt)
@@ -243,6 +254,13 @@ impl Joint {
     }
 }
 
+/// The free-running output speed a q-axis current holds, °/s (the inverse
+/// of the current a moving joint draws at steady speed).
+fn current_speed(amps: f64, cap: f64) -> f64 {
+    let amps = amps.clamp(-cap, cap);
+    amps.signum() * (amps.abs() - HOLD_CURRENT_A).max(0.0) / FRICTION_A_PER_DEG_S
+}
+
 fn lpf_tau(p: &Params) -> f64 {
     LPF_TAU_S[usize::from(p.raw(index::POS_LPF_LV)).min(LPF_TAU_S.len() - 1)]
 }
@@ -271,6 +289,27 @@ mod tests {
         j.advance(1.0, d, &params(), BOUNDS);
         assert!((j.pos - 90.0).abs() < 0.05, "settled {}", j.pos);
         assert!(j.current.abs() < 0.1);
+    }
+
+    #[test]
+    fn current_drive_turns_a_free_joint_and_pushes_a_blocked_one() {
+        let p = params();
+        let mut j = Joint::default();
+        let d = Drive::Current { amps: 0.3 };
+        j.advance(0.5, d, &p, BOUNDS);
+        let free = (0.3 - HOLD_CURRENT_A) / FRICTION_A_PER_DEG_S;
+        assert!((j.vel - free).abs() < 1.0, "vel {}", j.vel);
+        assert!((j.current - 0.3).abs() < 1e-9);
+        let mut held = Joint::default();
+        held.advance(0.5, Drive::Current { amps: 0.02 }, &p, BOUNDS);
+        assert_eq!(held.pos, 0.0, "below the hold current nothing turns");
+        let mut blocked = Joint {
+            obstacle: Some(Obstacle::at(1.0)),
+            ..Joint::default()
+        };
+        blocked.advance(0.5, d, &p, BOUNDS);
+        assert_eq!(blocked.pos, 1.0);
+        assert!(blocked.blocked && blocked.blocked_s > 0.1);
     }
 
     #[test]

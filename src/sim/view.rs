@@ -3,6 +3,7 @@
 
 use serde::Serialize;
 
+use crate::protocol::params::Revision;
 use crate::protocol::CtrlMode;
 
 use super::params::Params;
@@ -13,12 +14,16 @@ pub struct DeviceView {
     /// Position on the bus (stable across id changes).
     pub slot: usize,
     pub id: u8,
-    /// SPEC §5 fsm (0 ready, 5 align, 7 run, 9 fault).
+    /// The protocol revision its firmware implements (`"2.0.1"`, `"2.0.8"`).
+    #[serde(serialize_with = "as_text")]
+    pub firmware: Revision,
+    /// SPEC §5 fsm (0 ready, 5 align, 7 run, 9 fault; rev 2.0.8 adds 1, 2, 6, 8, 10).
     pub fsm: u8,
+    /// As INFO_01 carries it (rev 2.0.8: low nibble active, high nibble history).
     pub err_code: u8,
     #[serde(serialize_with = "as_name")]
     pub mode: CtrlMode,
-    /// In align or run: the motor is powered.
+    /// In align, start or run: the motor is powered.
     pub enabled: bool,
     pub aligned: bool,
     pub angle_deg: f64,
@@ -29,6 +34,8 @@ pub struct DeviceView {
     pub velocity_deg_s: f64,
     /// Last speed reference (Q15): the limit in position mode.
     pub spd_ref: i16,
+    /// Last current reference (Q15 of 5.625 A): rev 2.0.8 current mode.
+    pub cur_ref: i16,
     pub q_current_a: f64,
     pub temp_c: f64,
     pub vbus_v: f64,
@@ -49,4 +56,9 @@ pub struct DeviceView {
 /// The mode by its one name ([`CtrlMode`]'s `Display`).
 fn as_name<S: serde::Serializer>(mode: &CtrlMode, s: S) -> Result<S::Ok, S::Error> {
     s.collect_str(mode)
+}
+
+/// The revision as SPEC writes it.
+fn as_text<S: serde::Serializer>(rev: &Revision, s: S) -> Result<S::Ok, S::Error> {
+    s.collect_str(rev)
 }

@@ -31,7 +31,9 @@
 mod row;
 mod scale;
 
-pub use row::{Access, Field, Guard, ParamRow, RawType, ReplyKind, Revision, Storage};
+pub use row::{
+    Access, Field, Guard, ParamRow, RawType, ReplyKind, Revision, Storage, UnknownRevision,
+};
 pub use scale::Scale;
 
 use super::values::{BaudLevel, CtrlMode, InfoBlock};
@@ -290,9 +292,12 @@ pub const PARAMS: &[ParamRow] = &[
         f(B::Info06, 1, U8), 4, "Burst duration"),
     extension(i::DRV_OT, "DRV_OT", "drv_ot_c", U8, Scale::Celsius, 90,
         "Driver over-temperature threshold (recovers 10 °C below)."),
+    // Factory limit: the vendor's recommended maximum rotor speed, 20000 rpm
+    // (SPEC §4.1, `13106`), not the 50000 rpm base: a host that relies on the
+    // limit (speed reference 0) then moves no faster than the vendor advises.
     ParamRow {
         range: Q15_RAW,
-        ..extension(i::SPD_LIMIT, "SPD_LIMIT", "spd_limit_rpm", U16, Scale::SpeedQ15, 32767,
+        ..extension(i::SPD_LIMIT, "SPD_LIMIT", "spd_limit_rpm", U16, Scale::SpeedQ15, 13106,
             "Rotor speed limit (Q15); in position mode a zero speed reference moves at it.")
     },
     extension(i::SN, "SN", "sn", U16, Scale::Plain, 0, "Serial number (undocumented layout)."),

@@ -13,13 +13,45 @@ pub enum Revision {
 }
 
 impl Revision {
+    /// Every revision, oldest first.
+    pub const ALL: [Revision; 2] = [Self::V2_0_1, Self::V2_0_8];
+
     pub fn as_str(self) -> &'static str {
         match self {
             Self::V2_0_1 => "2.0.1",
             Self::V2_0_8 => "2.0.8",
         }
     }
+
+    /// `"2.0.1"` or `"2.0.8"` (a leading `v`/`V` is accepted).
+    pub fn parse(text: &str) -> Result<Self, UnknownRevision> {
+        let t = text.trim();
+        let bare = t.strip_prefix(['v', 'V']).unwrap_or(t);
+        Self::ALL
+            .into_iter()
+            .find(|r| r.as_str() == bare)
+            .ok_or_else(|| UnknownRevision(t.to_owned()))
+    }
 }
+
+impl std::fmt::Display for Revision {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for Revision {
+    type Err = UnknownRevision;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::parse(s)
+    }
+}
+
+/// A revision name no [`Revision`] has.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("`{0}` is not a protocol revision (known: 2.0.1, 2.0.8)")]
+pub struct UnknownRevision(pub String);
 
 /// Whether the host reads an INFO block with the index or writes a value.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

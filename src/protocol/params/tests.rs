@@ -218,3 +218,19 @@ fn read_back_fields_agree_with_the_typed_info_blocks() {
         assert_eq!(got, u16::from(idx) + 1, "{}", name_of(idx));
     }
 }
+
+#[test]
+fn revisions_parse_and_print_as_the_spec_names_them() {
+    for r in Revision::ALL {
+        assert_eq!(Revision::parse(&r.to_string()), Ok(r));
+    }
+    assert_eq!("v2.0.8".parse::<Revision>(), Ok(Revision::V2_0_8));
+    assert_eq!(Revision::parse(" 2.0.1 "), Ok(Revision::V2_0_1));
+    for bad in ["", "2.0", "2.0.2", "208", "latest"] {
+        assert!(Revision::parse(bad).is_err(), "{bad:?}");
+    }
+    assert!(
+        Revision::V2_0_1 < Revision::V2_0_8,
+        "rows compare `since` by order"
+    );
+}

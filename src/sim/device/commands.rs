@@ -1,4 +1,5 @@
-//! What a device does with each command it hears (SPEC §4).
+//! What a device does with each command it hears (SPEC §4), as its
+//! firmware profile says.
 
 use std::time::{Duration, Instant};
 
@@ -11,6 +12,7 @@ use crate::protocol::{
     Reply, ReplyBody, ALL_DEVICES,
 };
 
+use super::super::firmware;
 use super::{Device, Outcome, JOG_CCW_DEG, JOG_CW_DEG};
 
 impl Device {
@@ -47,8 +49,11 @@ impl Device {
         match c.op {
             ControlOp::Enable => self.enable(now),
             ControlOp::Disable => self.disable(),
-            ControlOp::SetRef => self.set_ref(Some(c.pos_ref), Some(c.spd_ref)),
-            // A no-op in V2.0.1 (SPEC §4.1).
+            ControlOp::SetRef => self.set_ref(Some(c.pos_ref), Some(c.spd_ref), Some(c.cur_ref)),
+            // SET_REF under rev 2.0.8, a no-op in V2.0.1 (SPEC §4.1, errata 10).
+            ControlOp::SetRefRev208 if self.profile.en_zero_sets_ref() => {
+                self.set_ref(Some(c.pos_ref), Some(c.spd_ref), Some(c.cur_ref))
+            }
             ControlOp::SetRefRev208 => {}
         }
     }
@@ -57,36 +62,66 @@ impl Device {
         if self.fsm != fsm::READY {
             return;
         }
+        // A cause still present faults again (rev 2.0.8 keeps an
+        // over-temperature active until the joint has cooled).
         if self.under_voltage {
             self.enter_fault(fault::HW_UNDER_VOLTAGE);
-        } else if self.aligned {
-            self.fsm = fsm::RUN;
-            self.target = self.angle();
+            return;
+        }
+        if self.err_code == fault::OVER_TEMPERATURE {
+            self.enter_fault(fault::OVER_TEMPERATURE);
+            return;
+        }
+        self.target = self.angle();
+        self.cur_ref = 0;
+        if self.aligned {
+            self.start(now);
         } else {
             self.fsm = fsm::ALIGN;
-            self.align_done_at = Some(now + self.timing.align_time);
+            let align = self
+                .profile
+                .align_time(self.timing.align_time, self.align_load());
+            self.timer = Some(now + align);
         }
     }
 
+    /// Release: ready (rev 2.0.8: through brake if still turning, then
+    /// stop). Clears a fault whose cause is gone.
     fn disable(&mut self) {
-        self.fsm = fsm::READY;
-        self.align_done_at = None;
+        let was = self.fsm;
+        self.timer = None;
         self.jog_goal = None;
-        self.err_code = if self.under_voltage {
+        let still = if self.under_voltage {
             fault::HW_UNDER_VOLTAGE
+        } else if self.err_code == fault::OVER_TEMPERATURE && self.profile.ot_recovers() {
+            fault::OVER_TEMPERATURE
         } else {
             fault::NONE
         };
+        self.set_active_fault(still);
+        if !self.profile.transit_states() {
+            self.fsm = fsm::READY;
+        } else if matches!(was, fsm::READY | fsm::BRAKE) {
+            self.fsm = was;
+        } else if self.joint.vel.abs() >= firmware::BRAKE_DONE_DEG_S {
+            self.fsm = fsm::BRAKE;
+        } else {
+            self.fsm = fsm::STOP;
+            self.timer = Some(self.last + firmware::STOP_TIME);
+        }
     }
 
     /// New references (SET_REF or a broadcast). In speed mode the angle is ignored.
-    fn set_ref(&mut self, pos_ref: Option<i16>, spd_ref: Option<i16>) {
+    fn set_ref(&mut self, pos_ref: Option<i16>, spd_ref: Option<i16>, cur_ref: Option<i16>) {
         if let Some(p) = pos_ref.filter(|_| self.mode != CtrlMode::Speed) {
             self.target = angle_deg(p).clamp(-MAX_ANGLE_DEG, MAX_ANGLE_DEG);
             self.jog_goal = None;
         }
         if let Some(s) = spd_ref {
             self.spd_ref = s;
+        }
+        if let Some(c) = cur_ref {
+            self.cur_ref = c;
         }
         self.joint.command_burst(&self.ram);
     }
@@ -100,15 +135,19 @@ impl Device {
         }
         let v = values[slot];
         if is_pos {
-            self.set_ref(Some(v), None);
+            self.set_ref(Some(v), None, None);
         } else {
-            self.set_ref(None, Some(v));
+            self.set_ref(None, Some(v), None);
         }
     }
 
     /// `0xB155` in the table layout (SPEC errata 3: unverified): one byte per
-    /// device 1..16, with the control frame's EN codes.
+    /// device 1..16, with the control frame's EN codes. Its CRC over bytes
+    /// 0..18 (E1_Hand_G474's reading) is obeyed by rev 2.0.8 firmware only.
     fn broadcast_enable(&mut self, b: &BroadcastEnable, now: Instant) {
+        if !self.profile.accepts_enable_broadcast(b.crc) {
+            return;
+        }
         let Some(op) = usize::from(self.id)
             .checked_sub(1)
             .and_then(|i| b.ops.get(i))
@@ -135,6 +174,11 @@ impl Device {
     }
 
     fn config(&mut self, c: &Config, now: Instant) -> Outcome {
+        // An index the firmware's revision does not have is ignored: no
+        // reply (how a host tells a V2.0.1 device by an INFO_07 read).
+        if !self.profile.knows_index(c.param.index_value().0) {
+            return Outcome::default();
+        }
         if let ConfigParam::ReadInfo(block) = c.param {
             // Reads cannot be broadcast (SPEC §4.3): only the exact id answers.
             return if c.dev_id == self.id {
@@ -143,6 +187,8 @@ impl Device {
                 Outcome::default()
             };
         }
+        // A write to 0xFF reaches every device, and each answers as for its
+        // own id: replies to such a write collide (see `firmware`).
         if !self.addressed(c.dev_id) {
             return Outcome::default();
         }
@@ -170,7 +216,10 @@ impl Device {
                 if idle {
                     self.aligned = false;
                 }
-                return Outcome::reply(self.res(index::UPDATE_ENC_ZERO, idle));
+                // SPEC documents the RES from rev 2.0.8 on; V2.0.1 answers nothing.
+                if self.profile.enc_zero_replies() {
+                    return Outcome::reply(self.res(index::UPDATE_ENC_ZERO, idle));
+                }
             }
             ConfigParam::CommSilent(v) => self.silent = v != 0,
             ConfigParam::CtrlMode(m) => self.switch_mode(m),
@@ -204,11 +253,17 @@ impl Device {
         if m == CtrlMode::None || m == self.mode {
             return;
         }
+        // Mode 3 is rev 2.0.8's; V2.0.1 firmware ignores it.
+        if m == CtrlMode::Current && !self.profile.current_mode() {
+            return;
+        }
         self.mode = m;
         self.jog_goal = None;
         self.target = self.angle();
-        if m == CtrlMode::Speed {
-            self.spd_ref = 0;
+        match m {
+            CtrlMode::Speed => self.spd_ref = 0,
+            CtrlMode::Current => self.cur_ref = 0,
+            _ => {}
         }
     }
 }

@@ -31,17 +31,27 @@ impl Device {
             InfoBlock::Info01 => ReplyBody::Info01(self.info01()),
             InfoBlock::Info02 => ReplyBody::Info02(self.info02()),
             InfoBlock::Info07 => {
-                // The layout is unpublished: the simulator puts SN's u16 first.
+                // Rev 2.0.8 only (the device checks before asking). The layout
+                // is unpublished: the simulator puts SN's u16 first.
                 let mut sn = [0u8; 8];
                 sn[..2].copy_from_slice(&self.ram.raw(index::SN).to_le_bytes());
                 ReplyBody::Info07(sn)
             }
             parameters => {
+                let mut data = self.ram.block(parameters);
+                if parameters == InfoBlock::Info06 {
+                    self.profile.info06_tail(
+                        &mut data,
+                        self.enc_offset,
+                        self.ram.raw(index::DRV_OT),
+                        self.ram.raw(index::SPD_LIMIT),
+                    );
+                }
                 return Reply {
                     dev_id: self.id,
                     index: parameters.index(),
-                    data: self.ram.block(parameters),
-                }
+                    data,
+                };
             }
         };
         Reply::new(self.id, body)
@@ -60,7 +70,7 @@ impl Device {
         let angle = self.angle() + self.rng.noise(ANGLE_NOISE_DEG);
         Info01 {
             fsm: self.fsm,
-            err_code: self.err_code,
+            err_code: self.err_byte(),
             soft_ver: self.timing.soft_ver,
             temp_raw: units::temp_raw_saturating(self.joint.temp_c),
             angle: units::angle_raw_saturating(angle),
@@ -70,7 +80,7 @@ impl Device {
 
     fn info02(&mut self) -> Info02 {
         let rotor_rpm = units::rotor_rpm(self.joint.vel);
-        let powered = self.fsm == fsm::RUN || self.fsm == fsm::ALIGN;
+        let powered = self.enabled() || self.fsm == fsm::BRAKE;
         let noise = if powered { CURRENT_NOISE_A } else { 0.0 };
         let d = self.rng.noise(noise);
         let q = self.joint.current + self.rng.noise(noise);
@@ -87,16 +97,18 @@ impl Device {
         DeviceView {
             slot: self.slot,
             id: self.id,
+            firmware: self.profile.revision(),
             fsm: self.fsm,
-            err_code: self.err_code,
+            err_code: self.err_byte(),
             mode: self.mode,
-            enabled: self.fsm == fsm::RUN || self.fsm == fsm::ALIGN,
+            enabled: self.enabled(),
             aligned: self.aligned,
             angle_deg: self.angle(),
             zero_deg: self.zero,
             target_deg: self.jog_goal.unwrap_or(self.target),
             velocity_deg_s: self.joint.vel,
             spd_ref: self.spd_ref,
+            cur_ref: self.cur_ref,
             q_current_a: self.joint.current,
             temp_c: self.joint.temp_c,
             vbus_v: if self.under_voltage {
