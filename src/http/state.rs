@@ -10,9 +10,11 @@ use super::hub::WsHub;
 use super::limits::{JointLimits, SoftLimits};
 use super::policy::{RefusalLog, RequestPolicy};
 use super::teleop::WatchdogDefault;
+use crate::bus::firmware::FirmwareSource;
 use crate::bus::handle::DeviceState;
 use crate::bus::handle::LinkState;
 use crate::bus::{BusError, BusHandle, BusSnapshot};
+use crate::protocol::params::Revision;
 use crate::protocol::{is_device_id, MAX_DEVICE_ID, MIN_DEVICE_ID};
 
 /// Options of the config file that handlers read.
@@ -225,5 +227,41 @@ impl std::fmt::Debug for AppState {
         f.debug_struct("AppState")
             .field("buses", &buses)
             .finish_non_exhaustive()
+    }
+}
+
+/// 422 when device `id` runs a revision older than `need` (saying which and
+/// how the daemon knows), 409 while its revision is not known yet. `field`
+/// names the request member, `what` the feature asked for.
+pub(crate) fn require_revision(
+    field: &str,
+    what: &str,
+    need: Revision,
+    id: u8,
+    dev: &DeviceState,
+) -> ApiResult<()> {
+    let need_s = need.as_str();
+    match dev.firmware {
+        Some(f) if f.revision >= need => Ok(()),
+        Some(f) => Err(ApiError::invalid(
+            field,
+            format!(
+                "{what} needs rev {need_s} firmware; device {id} runs {} ({})",
+                f.revision.as_str(),
+                match f.source {
+                    FirmwareSource::Config => "set in the config",
+                    FirmwareSource::Detected => "detected",
+                }
+            ),
+        )),
+        None => Err(ApiError::conflict(
+            "firmware-unknown",
+            "Firmware revision not known yet",
+            format!(
+                "{what} needs rev {need_s} firmware and device {id}'s revision is not known yet \
+                 (it is asked once the device answers; or set `firmware` in the bus's config)"
+            ),
+        )
+        .with_field(field)),
     }
 }

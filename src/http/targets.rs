@@ -74,6 +74,19 @@ pub(crate) fn setpoint(
     if dev.mode == Some(CtrlMode::Speed) {
         return speed_setpoint(dev, limits, req, field);
     }
+    if dev.mode == Some(CtrlMode::Current) {
+        // Its reference is a current, which jointd does not stream (yet):
+        // a position or speed sent now would be taken as something else.
+        return Err(ApiError::conflict(
+            "wrong-mode",
+            "Joint in current mode",
+            format!(
+                "joint {} is in current mode: position and speed targets do not apply \
+                 (set its mode to position or speed first)",
+                dev.dev_id
+            ),
+        ));
+    }
     let who = format!("joint {}", dev.dev_id);
     let fw = firmware_of(dev);
     let (pos_field, spd_field) = (format!("{field}position_deg"), format!("{field}speed_rpm"));

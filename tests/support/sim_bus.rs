@@ -35,15 +35,28 @@ pub struct SimBus {
 /// `n` joints (ids 1..=n) behind a pty, the engine on it, the API in front;
 /// returns once every joint is online.
 pub async fn start(n: u8, token: Option<&str>) -> SimBus {
+    start_with(n, token, "2.0.1", |_| {}).await
+}
+
+/// [`start`] with the simulated devices' firmware (`jointd sim --firmware`
+/// syntax, e.g. `1=2.0.8`) and a last word on the bus's config.
+pub async fn start_with(
+    n: u8,
+    token: Option<&str>,
+    firmware: &str,
+    tweak: impl FnOnce(&mut BusConfig),
+) -> SimBus {
     let turn = ONE_AT_A_TIME.lock().await;
     let ids: Vec<u8> = (1..=n).collect();
     let mut cfg = SimConfig::new(ids.clone(), BAUD);
     cfg.align_time = Duration::from_millis(50);
     cfg.boot_delay = Duration::from_millis(2);
+    cfg.firmware = jointd::sim::Firmware::parse(firmware).expect("firmware spec");
     let sim = Simulator::spawn_pty(cfg).expect("simulator");
     let path = sim.device_path().expect("pty path");
     let mut bus_cfg = BusConfig::new(BUS, path, BAUD);
     bus_cfg.ids = ids;
+    tweak(&mut bus_cfg);
     // A loaded 2-core machine delays pty bytes by milliseconds: give replies
     // that much slack so a late reply is not mistaken for a silent device.
     bus_cfg.timing.reply_margin_us = REPLY_MARGIN_US;

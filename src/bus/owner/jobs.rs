@@ -6,6 +6,7 @@
 
 use crate::bus::error::BusError;
 use crate::bus::handle::Targets;
+use crate::bus::registry::drives_motor;
 use crate::bus::state::DisabledReason;
 use crate::bus::wire::Want;
 use crate::protocol::command::index;
@@ -78,9 +79,52 @@ pub(super) fn enable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
         ctx.sched_mut().registry_mut().note_enabled(id);
     }
     for &id in &ids {
-        await_fsm(ctx, id, "enable", |f| f == fsm::ALIGN || f == fsm::RUN)?;
+        // Rev 2.0.8 passes through `start` on the way to run.
+        if let Err(e) = await_fsm(ctx, id, "enable", drives_motor) {
+            enable_after_transit(ctx, id).ok_or(e)??;
+        }
     }
     Ok(())
+}
+
+/// Reads of a device in a passing state (rev 2.0.8's stop, brake, init,
+/// precharge) before the daemon gives up waiting for it to settle.
+const SETTLE_CHECKS: u32 = 50;
+
+/// Rev 2.0.8 ignores an enable while it stops, brakes or starts up (the
+/// simulator's reading; the vendor's document is silent): an enable right
+/// after a disable can be lost that way. `None` when the device is not in
+/// such a state (the enable failed for another reason); otherwise the
+/// device is awaited until it settles and enabled once more.
+fn enable_after_transit(ctx: &mut Ctx, id: u8) -> Option<Result<(), BusError>> {
+    match read_info01(ctx, id) {
+        Ok(info) if passing(info.fsm) || info.fsm == fsm::READY => {}
+        _ => return None,
+    }
+    Some(settle_and_enable(ctx, id))
+}
+
+fn passing(state: u8) -> bool {
+    matches!(state, fsm::STOP | fsm::BRAKE | fsm::INIT | fsm::PRECHARGE)
+}
+
+fn settle_and_enable(ctx: &mut Ctx, id: u8) -> Result<(), BusError> {
+    let mut settled = false;
+    for _ in 0..SETTLE_CHECKS {
+        if !passing(read_info01(ctx, id)?.fsm) {
+            settled = true;
+            break;
+        }
+    }
+    if !settled {
+        return Err(BusError::WrongState(format!(
+            "device {id} did not settle after stopping; enable it again"
+        )));
+    }
+    tracing::info!(bus = %ctx.name(), dev_id = id,
+        "enable: device {id} ignored the enable while stopping; enabled again");
+    ctx.job_send(&[Command::Control(Control::enable(id))])?;
+    await_fsm(ctx, id, "enable", drives_motor).map(drop)
 }
 
 pub(super) fn disable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
@@ -102,7 +146,9 @@ pub(super) fn disable_because(
         ctx.sched_mut().registry_mut().note_disabled(id, reason);
     }
     for &id in &ids {
-        await_fsm(ctx, id, "disable", |f| f == fsm::READY || f == fsm::FAULT)?;
+        // Released is what counts: rev 2.0.8 passes through `stop` (and
+        // `brake` while still turning) on the way to ready.
+        await_fsm(ctx, id, "disable", |f| !drives_motor(f))?;
     }
     Ok(())
 }

@@ -199,39 +199,51 @@ fn driving_ids(ctx: &Ctx) -> Vec<u8> {
 /// dropped receiver is nothing to tell).
 fn run_request(ctx: &mut Ctx, req: Request) {
     match req {
-        Request::Enable { targets, reply } => drop(reply.send(jobs::enable(ctx, targets))),
-        Request::Disable { targets, reply } => drop(reply.send(jobs::disable(ctx, targets))),
-        Request::Jog { dev_id, dir, reply } => drop(reply.send(jobs::jog(ctx, dev_id, dir))),
-        Request::Rezero { dev_id, reply } => drop(reply.send(jobs::rezero(ctx, dev_id))),
+        Request::Enable { targets, reply } => answer(reply, jobs::enable(ctx, targets), ctx),
+        Request::Disable { targets, reply } => answer(reply, jobs::disable(ctx, targets), ctx),
+        Request::Jog { dev_id, dir, reply } => answer(reply, jobs::jog(ctx, dev_id, dir), ctx),
+        Request::Rezero { dev_id, reply } => answer(reply, jobs::rezero(ctx, dev_id), ctx),
         Request::SetMode {
             dev_id,
             mode,
             reply,
-        } => drop(reply.send(write::set_mode(ctx, dev_id, mode))),
+        } => answer(reply, write::set_mode(ctx, dev_id, mode), ctx),
         Request::ReadInfo {
             dev_id,
             block,
             reply,
-        } => drop(reply.send(jobs::read_info(ctx, dev_id, block))),
+        } => answer(reply, jobs::read_info(ctx, dev_id, block), ctx),
         Request::WriteConfig {
             dev_id,
             param,
             reply,
-        } => drop(reply.send(write::write_config(ctx, dev_id, param))),
+        } => answer(reply, write::write_config(ctx, dev_id, param), ctx),
         Request::WriteAll { ids, param, reply } => {
-            drop(reply.send(write_all::write_all(ctx, ids, param)))
+            answer(reply, write_all::write_all(ctx, ids, param), ctx)
         }
         Request::WriteFlash { dev_id, reply } => {
             let key = crate::protocol::command::WRITE_FLASH_KEY;
             let param = ConfigParam::WriteFlash { key };
-            drop(reply.send(write::write_config(ctx, dev_id, param)))
+            answer(reply, write::write_config(ctx, dev_id, param), ctx)
         }
         Request::SetId {
             dev_id,
             new_id,
             reply,
-        } => drop(reply.send(write::set_id(ctx, dev_id, new_id))),
-        Request::SetBaud { baud, reply } => drop(reply.send(baud::set_baud(ctx, baud))),
-        Request::Scan { first, last, reply } => drop(reply.send(scan::scan(ctx, first, last))),
+        } => answer(reply, write::set_id(ctx, dev_id, new_id), ctx),
+        Request::SetBaud { baud, reply } => answer(reply, baud::set_baud(ctx, baud), ctx),
+        Request::Scan { first, last, reply } => answer(reply, scan::scan(ctx, first, last), ctx),
     }
+}
+
+/// Publishes what the request changed, then answers: a caller that reads
+/// the snapshot next finds its own change in it (a mode, a firmware, a target
+/// forgotten), not the state of the last periodic publication.
+fn answer<T>(
+    reply: tokio::sync::oneshot::Sender<Result<T, BusError>>,
+    result: Result<T, BusError>,
+    ctx: &mut Ctx,
+) {
+    ctx.publish(Instant::now());
+    drop(reply.send(result));
 }

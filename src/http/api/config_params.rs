@@ -13,9 +13,9 @@ use serde::ser::SerializeMap;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use utoipa::ToSchema;
 
-use crate::bus::firmware::FirmwareSource;
 use crate::bus::handle::DeviceState;
 use crate::http::error::{ApiError, ApiResult};
+use crate::http::state::require_revision;
 use crate::http::telemetry::revision_of;
 use crate::protocol::params::{self, ParamRow, Revision};
 use crate::protocol::units::UnitError;
@@ -79,36 +79,11 @@ pub(crate) fn offered(p: Param, revision: Option<Revision>) -> bool {
 /// 422 for a parameter the device's firmware does not have; 409 while its
 /// revision is not known yet (asked when it is first heard).
 pub(crate) fn check_offered(p: Param, id: u8, dev: &DeviceState) -> ApiResult<()> {
-    let revision = revision_of(dev);
-    if offered(p, revision) {
+    if offered(p, revision_of(dev)) {
         return Ok(());
     }
-    let need = p.since.as_str();
-    match dev.firmware {
-        Some(f) => Err(ApiError::invalid(
-            p.key,
-            format!(
-                "{} (index {}) needs rev {need} firmware; device {id} runs {} ({})",
-                p.key,
-                p.index,
-                f.revision.as_str(),
-                match f.source {
-                    FirmwareSource::Config => "set in the config",
-                    FirmwareSource::Detected => "detected",
-                }
-            ),
-        )),
-        None => Err(ApiError::conflict(
-            "firmware-unknown",
-            "Firmware revision not known yet",
-            format!(
-                "{} needs rev {need} firmware and device {id}'s revision is not known yet \
-                 (it is asked once the device answers; or set `firmware` in the bus's config)",
-                p.key
-            ),
-        )
-        .with_field(p.key)),
-    }
+    let what = format!("{} (index {})", p.key, p.index);
+    require_revision(p.key, &what, p.since, id, dev)
 }
 
 /// A unit error as a 422; whole-number rows say so in words.

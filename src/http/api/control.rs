@@ -9,14 +9,18 @@ use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
+use crate::bus::handle::DeviceState;
 use crate::bus::{BusHandle, BusSnapshot, Setpoint, Targets};
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
-use crate::http::state::{device_id, known_device, AppState, BusPath, DevicePath};
+use crate::http::state::{
+    device_id, known_device, require_revision, AppState, BusPath, DevicePath,
+};
 use crate::http::targets::{
     ensure_enabled, setpoint, wait_on_wire, JointTarget, TargetAck, TargetRequest,
 };
 use crate::http::telemetry::{firmware_of, TargetView};
+use crate::protocol::params::Revision;
 use crate::protocol::{CtrlMode, JogDir};
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {
@@ -62,6 +66,10 @@ pub(crate) struct GroupRequest {
 pub enum ModeName {
     Position,
     Speed,
+    /// Rev 2.0.8 firmware only (422 for V2.0.1 devices). The joint then
+    /// follows a q-axis current, not a position or speed: targets are
+    /// refused until it is back in position or speed mode.
+    Current,
 }
 
 impl From<ModeName> for CtrlMode {
@@ -69,8 +77,17 @@ impl From<ModeName> for CtrlMode {
         match m {
             ModeName::Position => CtrlMode::Position,
             ModeName::Speed => CtrlMode::Speed,
+            ModeName::Current => CtrlMode::Current,
         }
     }
+}
+
+/// Current mode exists on rev 2.0.8 firmware only.
+fn check_mode(mode: CtrlMode, id: u8, dev: &DeviceState) -> ApiResult<()> {
+    if mode != CtrlMode::Current {
+        return Ok(());
+    }
+    require_revision("mode", "current mode", Revision::V2_0_8, id, dev)
 }
 
 #[derive(Debug, Deserialize, ToSchema)]
@@ -272,8 +289,9 @@ async fn mode_one(
     ApiJson(req): ApiJson<ModeRequest>,
 ) -> ApiResult<Json<ActionDone>> {
     let (bus, id) = p.resolve(&state)?;
-    known_device(&bus.snapshot(), id)?;
+    let snap = bus.snapshot();
     let mode = CtrlMode::from(req.mode);
+    check_mode(mode, id, known_device(&snap, id)?)?;
     bus.set_mode(id, mode).await?;
     Ok(done(bus, "mode", Some(vec![id]), Some(mode.name())))
 }
@@ -426,6 +444,10 @@ async fn mode_group(
     let each: Vec<u8> = ids
         .clone()
         .unwrap_or_else(|| snap.devices.keys().copied().collect());
+    // Every device checked before any is switched.
+    for &id in &each {
+        check_mode(mode, id, known_device(&snap, id)?)?;
+    }
     for id in each {
         bus.set_mode(id, mode).await?;
     }
