@@ -28,5 +28,15 @@ async fn the_table_is_served_row_by_row() {
         (Some("INFO_07_R"), Some("2.0.8"))
     );
     let offered: Vec<_> = rows.iter().filter(|r| r["api"] == true).collect();
-    assert_eq!(offered.len(), 13, "the keys PATCH …/config accepts");
+    assert_eq!(offered.len(), 16, "the keys PATCH …/config accepts");
+    // Three of them only on rev 2.0.8 devices, and write-only there.
+    let rev_2_0_8: Vec<_> = offered
+        .iter()
+        .filter(|r| r["since"] == "2.0.8")
+        .map(|r| (r["key"].as_str().unwrap_or(""), r["read_back"].is_null()))
+        .collect();
+    assert_eq!(
+        rev_2_0_8,
+        [("drv_ot_c", true), ("spd_limit_rpm", true), ("sn", true)]
+    );
 }

@@ -231,6 +231,11 @@ fn count_tx(c: &mut BusCounters, cmd: &Command) {
     match cmd {
         Command::BroadcastPos(_) | Command::BroadcastSpd(_) => c.frames_tx_broadcast += 1,
         Command::BroadcastEnableUnverified(_) => c.frames_tx_broadcast += 1,
+        // Never built by the daemon; counted where it would go on the wire.
+        Command::Vendor(v) => match v.is_broadcast() {
+            true => c.frames_tx_broadcast += 1,
+            false => c.frames_tx_control += 1,
+        },
         Command::Control(_) => c.frames_tx_control += 1,
         Command::Jog(_) => c.frames_tx_jog += 1,
         Command::Config(_) => c.frames_tx_config += 1,

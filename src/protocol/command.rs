@@ -25,6 +25,58 @@ pub enum Command {
     BroadcastSpd(BroadcastSpd),
     /// Unverified layout (SPEC errata 3); offered for completeness, never sent by the daemon.
     BroadcastEnableUnverified(BroadcastEnable),
+    /// Frames public host programs send that no table documents: decoded
+    /// so a capture reads whole and the simulator can answer them; never
+    /// sent by the daemon.
+    Vendor(VendorCommand),
+}
+
+/// can_id of the vendor SDK's enable-all standard frame (see [`VendorCommand::EnableAll`]).
+pub const CAN_ID_VENDOR_ENABLE_ALL: u32 = 0xB1;
+
+/// The undocumented frames of the vendor's MotorSDK (Stella-robot/GaiaHand,
+/// `Software/MotorSDK/motor.py`, commit 8334adee).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VendorCommand {
+    /// Standard frame, can_id 0xB1, data `[dev_id, op, 0 …]`: `enable_all_motors`
+    /// sends `[0xFF, 1]` to enable and `[0xFF, 0]` to disable every device.
+    /// The vendor document's printed `0xB155` example (SPEC errata 3) is this
+    /// frame, with the broadcast head in place of the standard one.
+    EnableAll { dev_id: u8, op: u8 },
+    /// Heads `55 AF` / `55 B0`: 8 × i16 LE currents (the SDK's own raw
+    /// scale, 0..3000), CRC over the values like every broadcast.
+    CurrentBroadcast { group: Group, cur_ref: [i16; 8] },
+}
+
+impl VendorCommand {
+    /// Whether its frame has a broadcast layout (the current broadcasts)
+    /// or a standard one (the enable-all).
+    pub fn is_broadcast(&self) -> bool {
+        matches!(self, Self::CurrentBroadcast { .. })
+    }
+
+    /// What `jointd frame decode` calls it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::EnableAll { .. } => "vendor enable-all (standard frame, can_id 0xB1)",
+            Self::CurrentBroadcast { .. } => "vendor current broadcast (55 AF / 55 B0)",
+        }
+    }
+
+    /// Why it is not in the tables.
+    pub fn note(&self) -> &'static str {
+        match self {
+            Self::EnableAll { .. } => {
+                "sent by the vendor's MotorSDK (enable_all_motors: [0xFF, 1] enable, [0xFF, 0] \
+                 disable) and printed as the 0xB155 example of the vendor document; no table \
+                 documents it (SPEC errata 3)"
+            }
+            Self::CurrentBroadcast { .. } => {
+                "sent by the vendor's MotorSDK (set_motor_currents_broadcast); no table of the \
+                 vendor document has these heads"
+            }
+        }
+    }
 }
 
 /// `EN` of a control frame.
@@ -328,6 +380,25 @@ impl Command {
                 values: b.ops,
                 crc: b.crc,
             }),
+            Command::Vendor(VendorCommand::EnableAll { dev_id, op }) => {
+                let mut data = [0u8; 8];
+                data[0] = *dev_id;
+                data[1] = *op;
+                Frame::Standard(StandardFrame {
+                    can_id: CAN_ID_VENDOR_ENABLE_ALL,
+                    data,
+                })
+            }
+            Command::Vendor(VendorCommand::CurrentBroadcast { group, cur_ref }) => {
+                Frame::Broadcast(BroadcastFrame {
+                    kind: match group {
+                        Group::Low => BroadcastKind::CurLow,
+                        Group::High => BroadcastKind::CurHigh,
+                    },
+                    values: words_to_bytes(cur_ref),
+                    crc: CrcCoverage::Values,
+                })
+            }
         }
     }
 
@@ -348,6 +419,10 @@ impl Command {
         match f.can_id {
             CAN_ID_JOG => Jog::from_data(&f.data).map(Command::Jog),
             CAN_ID_CONFIG => Config::from_data(&f.data).map(Command::Config),
+            CAN_ID_VENDOR_ENABLE_ALL => Ok(Command::Vendor(VendorCommand::EnableAll {
+                dev_id: f.data[0],
+                op: f.data[1],
+            })),
             id => match u8::try_from(id) {
                 Ok(id8) if is_address(id8) => {
                     Control::from_data(id8, &f.data).map(Command::Control)
@@ -379,6 +454,14 @@ impl Command {
             BroadcastKind::Enable => Command::BroadcastEnableUnverified(BroadcastEnable {
                 ops: b.values,
                 crc: b.crc,
+            }),
+            BroadcastKind::CurLow => Command::Vendor(VendorCommand::CurrentBroadcast {
+                group: Group::Low,
+                cur_ref: words,
+            }),
+            BroadcastKind::CurHigh => Command::Vendor(VendorCommand::CurrentBroadcast {
+                group: Group::High,
+                cur_ref: words,
             }),
         }
     }
@@ -575,6 +658,41 @@ mod tests {
         assert_eq!(c.to_frame().data, data);
         data[6] = 4;
         assert!(Control::from_data(3, &data).is_err());
+    }
+
+    #[test]
+    fn the_vendor_sdk_frames_decode_by_name_and_round_trip() {
+        // MotorSDK's enable_all_motors(True): standard head, can_id 0xB1, [FF 01].
+        let mut bytes = [0u8; 20];
+        bytes[0..4].copy_from_slice(&[0x55, 0xAA, 0x00, 0x14]);
+        bytes[4] = 0xB1;
+        bytes[8] = 0xFF;
+        bytes[9] = 0x01;
+        let crc = crate::protocol::checksum::crc16(&bytes[4..16]);
+        bytes[16..18].copy_from_slice(&crc.to_le_bytes());
+        let frame = Frame::decode(&bytes).expect("a standard frame");
+        let cmd = Command::from_frame(&frame).expect("named, not invalid");
+        assert_eq!(
+            cmd,
+            Command::Vendor(VendorCommand::EnableAll {
+                dev_id: 0xFF,
+                op: 1
+            })
+        );
+        assert_eq!(cmd.encode(), bytes);
+        // set_motor_currents_broadcast: head 55 AF, CRC over the values.
+        let cur = Command::Vendor(VendorCommand::CurrentBroadcast {
+            group: Group::High,
+            cur_ref: [100, 0, 0, 0, 0, 0, 0, 3000],
+        });
+        let bytes = cur.encode();
+        assert_eq!(&bytes[0..2], &[0x55, 0xB0]);
+        let crc = crate::protocol::checksum::crc16(&bytes[2..18]);
+        assert_eq!(&bytes[18..20], &crc.to_le_bytes());
+        assert_eq!(
+            Command::from_frame(&Frame::decode(&bytes).unwrap()),
+            Ok(cur)
+        );
     }
 
     #[test]

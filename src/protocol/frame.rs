@@ -85,16 +85,31 @@ pub enum BroadcastKind {
     /// Enable/disable of devices 1–16. **Unverified** (SPEC errata 3): the
     /// vendor's table and its printed example disagree; the daemon never sends it.
     Enable = 0xB155,
+    /// Currents of devices 1–8. **Undocumented**: no table of the vendor
+    /// document has it; the vendor's MotorSDK (Stella-robot/GaiaHand,
+    /// `Software/MotorSDK/motor.py`) sends it. Decoded so a capture reads
+    /// whole; the daemon never sends it.
+    CurLow = 0xAF55,
+    /// Currents of devices 9–16 (undocumented, as [`Self::CurLow`]).
+    CurHigh = 0xB055,
 }
 
 impl BroadcastKind {
-    pub const ALL: [BroadcastKind; 5] = [
+    pub const ALL: [BroadcastKind; 7] = [
         Self::PosLow,
         Self::PosHigh,
         Self::SpdLow,
         Self::SpdHigh,
         Self::Enable,
+        Self::CurLow,
+        Self::CurHigh,
     ];
+
+    /// False for heads no table of the vendor document has (seen in public
+    /// host programs only).
+    pub fn documented(self) -> bool {
+        !matches!(self, Self::CurLow | Self::CurHigh)
+    }
 
     /// The head as the u16 LE value of bytes 0..2 (`head2` in the vectors).
     pub fn head2(self) -> u16 {
@@ -247,7 +262,11 @@ mod tests {
             classify_head(&[0x55, 0xAB]),
             Head::Broadcast(BroadcastKind::PosLow)
         );
-        assert_eq!(classify_head(&[0x55, 0xAF]), Head::Invalid);
+        assert_eq!(
+            classify_head(&[0x55, 0xAF]),
+            Head::Broadcast(BroadcastKind::CurLow)
+        );
+        assert_eq!(classify_head(&[0x55, 0xB2]), Head::Invalid);
     }
 
     #[test]

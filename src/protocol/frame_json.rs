@@ -8,13 +8,14 @@
 use serde_json::{json, Map, Value};
 use thiserror::Error;
 
+use super::command::CAN_ID_VENDOR_ENABLE_ALL;
 use super::params::{self, Access, ParamRow, Scale};
 use super::status::{active_fault, fault_history, fault_name, fsm_name};
 use super::units::{self, FirmwareVersion};
 use super::{
     BaudLevel, BroadcastEnable, BroadcastPos, BroadcastSpd, Command, Config, ConfigParam, Control,
     ControlOp, CrcCoverage, CtrlMode, Frame, Group, Jog, JogDir, Message, ProtocolError, Reply,
-    ReplyBody,
+    ReplyBody, VendorCommand,
 };
 
 #[derive(Debug, Error)]
@@ -175,6 +176,20 @@ fn command_json(c: &Command) -> Map<String, Value> {
             "kind": "broadcast", "head2": head2(c), "group": "enable 1-16",
             "values_raw": b.ops, "unverified": true, "crc": b.crc.describe(),
         })),
+        Command::Vendor(v) => {
+            let mut m = obj(json!({"kind": "vendor", "name": v.name(), "note": v.note()}));
+            let fields = match v {
+                VendorCommand::EnableAll { dev_id, op } => json!({
+                    "can_id": CAN_ID_VENDOR_ENABLE_ALL, "dev_id": dev_id, "op_raw": op,
+                    "op": match op { 1 => "enable", 0 | 2 => "disable", _ => "unknown" },
+                }),
+                VendorCommand::CurrentBroadcast { group, cur_ref } => json!({
+                    "head2": head2(c), "group": group_name("cur", *group), "values_raw": cur_ref,
+                }),
+            };
+            extend(&mut m, fields);
+            m
+        }
     }
 }
 

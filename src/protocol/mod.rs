@@ -34,7 +34,7 @@ pub mod values;
 
 pub use command::{
     BaudLevel, BroadcastEnable, BroadcastPos, BroadcastSpd, Command, Config, ConfigParam, Control,
-    ControlOp, CtrlMode, Group, InfoBlock, Jog, JogDir,
+    ControlOp, CtrlMode, Group, InfoBlock, Jog, JogDir, VendorCommand,
 };
 pub use error::ProtocolError;
 pub use frame::{

@@ -17,6 +17,8 @@
 //! | err_code | the fault | low nibble active, high nibble latched history |
 //! | alignment after the first enable | the configured time | 1× to 5× it, by load |
 //! | `0xB155` with its CRC over bytes 0..18 | refused | accepted (both coverages) |
+//! | vendor SDK enable-all (standard frame, can_id `0xB1`, `[id, op]`) | ignored | op 1 enables, 0 or 2 disables `id` (`0xFF`: all) |
+//! | vendor SDK current broadcast (`55 AF` / `55 B0`) | ignored | ignored (its scale is the SDK's own; no table documents it) |
 //! | INFO_06 bytes 2..8 | zero | the simulator's layout (below) |
 //!
 //! Unchanged in both: config writes to `0xFF` reach every device (SPEC §8
@@ -271,6 +273,13 @@ impl Profile {
     }
 
     /// Whether a `0xB155` frame with this CRC coverage is obeyed.
+    /// The vendor MotorSDK's enable-all frame (can_id 0xB1): the vendor
+    /// document prints it as its `0xB155` example (SPEC errata 3) and the
+    /// SDK written for current firmware sends it; modelled on rev 2.0.8.
+    pub(crate) fn vendor_enable_all(self) -> bool {
+        self.0 >= Revision::V2_0_8
+    }
+
     pub(crate) fn accepts_enable_broadcast(self, crc: CrcCoverage) -> bool {
         crc == CrcCoverage::Values || self.rev208()
     }

@@ -10,7 +10,7 @@ use crate::protocol::status::{active_fault, fault, fault_history, fsm};
 use crate::protocol::units::{angle_raw_saturating, current_raw_saturating};
 use crate::protocol::{
     BroadcastEnable, Config, ConfigParam, Control, ControlOp, CrcCoverage, CtrlMode, InfoBlock,
-    Message, Reply, ReplyBody, ALL_DEVICES,
+    Message, Reply, ReplyBody, VendorCommand, ALL_DEVICES,
 };
 use crate::sim::firmware::{default_serial, Firmware, START_TIME, STOP_TIME};
 
@@ -544,4 +544,28 @@ fn the_b155_crc_over_head_and_values_is_obeyed_by_2_0_8_only() {
     assert!(b.send(&[frame(CrcCoverage::Values)]).is_empty());
     b.wait(ALIGN * 3);
     assert!(b.dev(OLD).enabled, "the table layout works on both");
+}
+
+#[test]
+fn the_vendor_sdk_enable_all_frame_is_obeyed_by_2_0_8_only() {
+    let mut b = mixed();
+    let all = |op| {
+        Command::Vendor(VendorCommand::EnableAll {
+            dev_id: ALL_DEVICES,
+            op,
+        })
+    };
+    assert!(b.send(&[all(1)]).is_empty());
+    b.wait(ALIGN * 3);
+    assert!(b.dev(NEW).enabled);
+    assert!(!b.dev(OLD).enabled, "V2.0.1 ignores can_id 0xB1");
+    // The SDK's "disable" is op 0.
+    assert!(b.send(&[all(0)]).is_empty());
+    b.wait(STOP_TIME * 2);
+    assert!(!b.dev(NEW).enabled);
+    // Addressed to one id, only that device acts.
+    let one = Command::Vendor(VendorCommand::EnableAll { dev_id: OLD, op: 1 });
+    assert!(b.send(&[one]).is_empty());
+    b.wait(ALIGN * 3);
+    assert!(!b.dev(NEW).enabled && !b.dev(OLD).enabled);
 }

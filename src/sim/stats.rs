@@ -17,8 +17,11 @@ pub struct FrameKinds {
     pub broadcast_pos: u64,
     pub broadcast_spd: u64,
     pub broadcast_enable: u64,
-    /// Valid CRC, but not a command (e.g. EN = 0, a reply's can_id, a bad field).
+    /// Valid CRC, but not a command (e.g. EN 4..255, a reply's can_id, a bad field).
     pub not_a_command: u64,
+    /// Frames of public host programs that no table documents (the vendor
+    /// SDK's enable-all and current broadcasts).
+    pub vendor: u64,
 }
 
 impl FrameKinds {
@@ -32,6 +35,7 @@ impl FrameKinds {
             Command::BroadcastPos(_) => self.broadcast_pos += 1,
             Command::BroadcastSpd(_) => self.broadcast_spd += 1,
             Command::BroadcastEnableUnverified(_) => self.broadcast_enable += 1,
+            Command::Vendor(_) => self.vendor += 1,
         }
     }
 }

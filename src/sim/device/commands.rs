@@ -9,7 +9,7 @@ use crate::protocol::status::{fault, fsm};
 use crate::protocol::units::{angle_deg, MAX_ANGLE_DEG};
 use crate::protocol::{
     BroadcastEnable, Command, Config, ConfigParam, Control, ControlOp, CtrlMode, Group, JogDir,
-    Reply, ReplyBody, ALL_DEVICES,
+    Reply, ReplyBody, VendorCommand, ALL_DEVICES,
 };
 
 use super::super::firmware;
@@ -32,6 +32,16 @@ impl Device {
             Command::BroadcastPos(b) => self.broadcast(b.group, &b.pos_ref, true),
             Command::BroadcastSpd(b) => self.broadcast(b.group, &b.spd_ref, false),
             Command::BroadcastEnableUnverified(b) => self.broadcast_enable(b, now),
+            Command::Vendor(VendorCommand::EnableAll { dev_id, op })
+                if self.profile.vendor_enable_all() && self.addressed(*dev_id) =>
+            {
+                // The SDK sends 0 for "disable"; 2 is the control frame's disable.
+                match op {
+                    1 => self.enable(now),
+                    0 | 2 => self.disable(),
+                    _ => {}
+                }
+            }
             _ => {}
         }
         Outcome::default()
