@@ -276,9 +276,22 @@ async function select(bus, id) {
     slider.value = target; $("#target-number").value = target;
     if (detail.mode) $("#mode").value = detail.mode;
     if (detail.name) $("#panel-title").textContent = `${id} (${detail.name}) on ${bus}`;
+    showFirmware(detail);
   }
   loadConfig();
   loadFrames();
+}
+
+/** Firmware version, protocol revision (and how the daemon knows), serial;
+ *  current mode is offered to rev 2.0.8 devices only. */
+function showFirmware(detail) {
+  const p = detail.protocol;
+  const parts = [];
+  if (detail.firmware) parts.push(`firmware ${detail.firmware}`);
+  parts.push(p ? `protocol rev ${p.revision} (${p.source})` : "protocol revision not known yet");
+  if (p && p.serial_number) parts.push(`serial ${p.serial_number}`);
+  $("#panel-firmware").textContent = parts.join(" · ");
+  $('#mode option[value="current"]').disabled = !(p && p.revision === "2.0.8");
 }
 
 function sendTarget(deg) {
@@ -348,6 +361,21 @@ async function loadConfig() {
     input.oninput = () => tr.classList.toggle("changed", input.value !== input.dataset.shown);
     tbody.appendChild(tr);
   }
+  // Rev 2.0.8's settings no published INFO block shows: writable, never shown.
+  for (const name of cfg.write_only || []) {
+    const row = rows.find((r) => r.key === name);
+    if (!row) continue;
+    const tr = document.createElement("tr");
+    tr.innerHTML = `<td></td><td><input data-param="${name}" data-testid="param-${name}" type="number" placeholder="write-only"></td><td></td><td>–</td>`;
+    tr.children[0].textContent = `${row.description} (rev ${row.since}, write-only)`;
+    tr.children[0].title = `${row.name} (index ${row.index}), ${shown(row.min)}..${shown(row.max)} ${row.unit}`;
+    tr.children[2].textContent = row.unit;
+    const input = tr.querySelector("input");
+    input.min = row.min; input.max = row.max; input.step = row.step ?? "any";
+    input.dataset.shown = "";
+    input.oninput = () => tr.classList.toggle("changed", input.value !== "");
+    tbody.appendChild(tr);
+  }
 }
 
 $("#config-reload").onclick = loadConfig;
@@ -358,7 +386,13 @@ $("#config-apply").onclick = async () => {
     if (input.value !== input.dataset.shown) patch[name] = Number(input.value);
   }
   if (!Object.keys(patch).length) return say("Nothing changed.", "info");
-  const done = await act(`Applied to RAM and verified: ${Object.keys(patch).join(", ")}.`, () => api("PATCH", dev("/config"), patch));
+  const writeOnly = new Set((state.config && state.config.write_only) || []);
+  const keys = Object.keys(patch);
+  const verified = keys.filter((k) => !writeOnly.has(k));
+  const sent = keys.filter((k) => writeOnly.has(k));
+  const said = [verified.length ? `verified: ${verified.join(", ")}` : "",
+    sent.length ? `sent, not reported back by the device: ${sent.join(", ")}` : ""].filter(Boolean).join("; ");
+  const done = await act(`Applied to RAM (${said}).`, () => api("PATCH", dev("/config"), patch));
   if (done) loadConfig();
 };
 $("#config-persist").onclick = () => {

@@ -62,7 +62,8 @@ const cell = (id, field) => page.locator(`[data-testid="device-row-sim0-${id}"] 
 
 before(async () => {
   mkdirSync(SHOTS, { recursive: true });
-  daemon = spawn(BIN, ["--sim", "16", "--listen", "127.0.0.1:0"], { stdio: ["ignore", "pipe", "inherit"] });
+  // Joints 9–16 run rev 2.0.8 firmware, 1–8 V2.0.1: a mixed bus, as in the field.
+  daemon = spawn(BIN, ["--sim", "16", "--sim-firmware", "9-16=2.0.8", "--listen", "127.0.0.1:0"], { stdio: ["ignore", "pipe", "inherit"] });
   base = await listeningUrl(daemon);
   await waitReady(base);
   browser = await chromium.launch({
@@ -167,6 +168,25 @@ test("a configuration change is applied and read back", async () => {
   // Q12 steps: 0.5 and 0.75 are exact.
   assert.equal(cfg.pos_kp.value, wanted, "the device reads back the new gain");
   await page.screenshot({ path: `${SHOTS}/config.png`, fullPage: true });
+});
+
+test("the panel shows each joint's firmware revision and offers what it has", async () => {
+  await page.locator('[data-testid="device-row-sim0-9"]').click();
+  await page.waitForFunction(() => /protocol rev 2\.0\.8 \(detected\) · serial /.test(document.querySelector('[data-testid="panel-firmware"]')?.textContent || ""), null, { timeout: WAIT });
+  assert.equal(await page.locator('[data-testid="mode-current"]').isDisabled(), false, "current mode offered on 2.0.8");
+  const limit = page.locator('[data-testid="param-spd_limit_rpm"]');
+  await limit.waitFor({ state: "visible", timeout: WAIT });
+  assert.equal(await limit.getAttribute("placeholder"), "write-only");
+  await limit.fill("10000");
+  await page.locator('[data-testid="config-apply"]').click();
+  await page.locator("#messages .info", { hasText: "sent, not reported back by the device: spd_limit_rpm" }).waitFor({ timeout: WAIT });
+  await page.screenshot({ path: `${SHOTS}/firmware-2.0.8.png`, fullPage: true });
+
+  await page.locator('[data-testid="device-row-sim0-1"]').click();
+  await page.waitForFunction(() => /protocol rev 2\.0\.1 \(detected\)$/.test(document.querySelector('[data-testid="panel-firmware"]')?.textContent || ""), null, { timeout: WAIT });
+  assert.equal(await page.locator('[data-testid="mode-current"]').isDisabled(), true, "no current mode on 2.0.1");
+  await page.locator('[data-testid="param-pos_kp"]').waitFor({ state: "visible", timeout: WAIT });
+  assert.equal(await page.locator('[data-testid="param-spd_limit_rpm"]').count(), 0, "no rev 2.0.8 rows on 2.0.1");
 });
 
 test("e-stop disables every joint", async () => {
