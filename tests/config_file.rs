@@ -76,6 +76,22 @@ fn the_annotated_example_plans() {
         Some("index_mcp")
     );
     assert_eq!(p.options.watchdog.hold_timeout_ms, 300);
+    assert_eq!(p.buses[0].firmware.name(), "auto");
+}
+
+#[test]
+fn firmware_is_read_per_bus_and_per_device() {
+    let (_f, args) = config(
+        "[[bus]]\nname = \"b\"\npath = \"/dev/null\"\nbaud = 500000\nfirmware = \"2.0.8\"\n\
+         firmware_by_id = { \"9-16\" = \"2.0.1\", \"3\" = \"auto\" }\n",
+    );
+    let p = plan(&args).expect("plan");
+    let policy = p.buses[0].firmware_policy().expect("valid");
+    let names: Vec<&str> = [1, 3, 9, 16]
+        .iter()
+        .map(|id| policy.for_id(*id).name())
+        .collect();
+    assert_eq!(names, ["2.0.8", "auto", "2.0.1", "2.0.1"]);
 }
 
 #[test]
@@ -103,6 +119,9 @@ fn bad_keys_and_values_are_named() {
         (format!("{bus}[watchdog]\npolicy = \"drop\"\n"), "drop"),
         (format!("{bus}[[limit]]\nmin_deg = -300.0\n"), "-300"),
         ("listen = \"0.0.0.0:8080\"\n[[bus]]\nname = \"b\"\npath = \"/dev/null\"\nbaud = 500000\n".to_string(), "without a token"),
+        (format!("{bus}firmware = \"2.0.2\"\n"), "\"auto\", \"2.0.1\", \"2.0.8\""),
+        (format!("{bus}firmware_by_id = {{ \"1-3\" = \"2.0.8\", \"3\" = \"2.0.1\" }}\n"), "device 3 twice"),
+        (format!("{bus}firmware_by_id = {{ \"0\" = \"2.0.8\" }}\n"), "not a device id"),
     ];
     for (text, needle) in cases {
         let msg = error_of(&text);
