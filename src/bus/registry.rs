@@ -47,6 +47,9 @@ pub(crate) struct Entry {
     believed_enabled: bool,
     control_updates: u32,
     telemetry_samples: u32,
+    /// Firmware probes (INFO_07 reads) in a row it left unanswered while
+    /// answering its polls: enough of them make it V2.0.1.
+    pub probe_silences: u32,
 }
 
 impl Entry {
@@ -62,6 +65,7 @@ impl Entry {
             believed_enabled: false,
             control_updates: 0,
             telemetry_samples: 0,
+            probe_silences: 0,
         }
     }
 }
@@ -205,6 +209,8 @@ impl Registry {
             return;
         };
         entry.state.missed_polls = entry.state.missed_polls.saturating_add(1);
+        // A device that misses polls too says nothing by missing a probe.
+        entry.probe_silences = 0;
         if entry.state.online && entry.state.missed_polls >= self.offline_after {
             entry.state.online = false;
             entry.poll.retry_at = None;
@@ -288,6 +294,14 @@ impl Registry {
             .filter(|e| e.state.online && e.state.firmware.is_none())
             .map(|e| e.state.dev_id)
             .collect()
+    }
+
+    /// A firmware probe of `id` went unanswered; returns how many in a row.
+    pub(crate) fn probe_silence(&mut self, id: u8) -> u32 {
+        self.entries.get_mut(&id).map_or(0, |e| {
+            e.probe_silences += 1;
+            e.probe_silences
+        })
     }
 
     pub(crate) fn set_firmware(&mut self, id: u8, firmware: DeviceFirmware) {

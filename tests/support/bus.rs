@@ -6,6 +6,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use jointd::bus::firmware::FirmwareSetting;
 use jointd::bus::handle::BusEvent;
 use jointd::bus::{spawn_bus, BusConfig, BusHandle, BusSnapshot, Setpoint, Targets};
 use jointd::protocol::status::fsm;
@@ -61,12 +62,23 @@ fn bus_on(sim: SimHandle, baud: u32, tune: impl FnOnce(&mut BusConfig)) -> Rig {
     // Wait long enough that a reply given up on is really gone (on hardware
     // the default is ample). Tests avoid absent ids, which pay this wait.
     cfg.timing.reply_margin_us = TEST_REPLY_MARGIN_US;
+    firmware_as_configured(&mut cfg, &sim);
     tune(&mut cfg);
     let (bus, thread) = spawn_bus(cfg).expect("spawn bus");
     Rig {
         sim,
         bus,
         thread: Some(thread),
+    }
+}
+
+/// The devices' firmware as a config file would say it: a probe of a
+/// silent V2.0.1 device pays the test margin, like an absent id. Detection
+/// has its own tests (api_firmware, the scheduler's).
+fn firmware_as_configured(cfg: &mut BusConfig, sim: &SimHandle) {
+    for d in sim.devices() {
+        cfg.firmware_by_id
+            .insert(d.id.to_string(), FirmwareSetting::Fixed(d.firmware));
     }
 }
 
@@ -121,6 +133,7 @@ impl Rig {
         let mut cfg = BusConfig::new("test", path, BAUD);
         cfg.ids = self.sim.devices().iter().map(|d| d.id).collect();
         cfg.timing.reply_margin_us = TEST_REPLY_MARGIN_US;
+        firmware_as_configured(&mut cfg, &self.sim);
         tune(&mut cfg);
         let (bus, thread) = spawn_bus(cfg).expect("spawn bus");
         self.bus = bus;

@@ -32,6 +32,7 @@ use crate::bus::registry::Registry;
 use crate::bus::setpoints::SetpointStore;
 use crate::bus::state::{BusEvent, WireAck};
 use crate::bus::wire::{ReplyWindow, Want, WireClock};
+use crate::protocol::params::Revision;
 use crate::protocol::InfoBlock;
 
 #[cfg(test)]
@@ -117,6 +118,12 @@ pub(crate) struct Scheduler {
     on_start: StartPolicy,
     /// Which devices are asked their firmware revision, which are told.
     firmware: FirmwarePolicy,
+    /// Unanswered probes in a row that make a device V2.0.1 (1 + retries:
+    /// as many tries as any read gets, so noise does not decide).
+    probe_attempts: u32,
+    /// The last slot was a probe: the next goes to the wire's usual work, so
+    /// probing a bus of silent V2.0.1 devices never starves polls or setpoints.
+    probed_last: bool,
     /// Joints found enabled and still to be disabled (`on_start = "disable"`).
     release: std::collections::BTreeSet<u8>,
     /// The last read that timed out and when its reply was due: the reply
@@ -150,6 +157,8 @@ impl Scheduler {
             // Checked when the config was loaded; a bus built in code with a
             // bad list asks every device rather than failing here.
             firmware: cfg.firmware_policy().unwrap_or_default(),
+            probe_attempts: 1 + cfg.timing.retries,
+            probed_last: false,
             release: Default::default(),
             overdue: None,
             events: Vec::new(),
@@ -191,10 +200,13 @@ impl Scheduler {
                 Slot::Scan
             };
         }
-        if let Some(dev_id) = self.firmware_to_ask() {
-            self.control.clear_prepared();
-            self.job = JobPhase::default();
-            return Slot::Probe { dev_id };
+        if !std::mem::take(&mut self.probed_last) {
+            if let Some(dev_id) = self.firmware_to_ask() {
+                self.control.clear_prepared();
+                self.job = JobPhase::default();
+                self.probed_last = true;
+                return Slot::Probe { dev_id };
+            }
         }
         self.wire_slot(now, work.setpoints)
     }
@@ -339,9 +351,27 @@ impl Scheduler {
     }
 
     /// The wire ack to publish, if one came up since the last call.
-    /// The revision `id` turned out to have (asked or, after a silence, inferred).
+    /// The revision `id` told (it answered a probe).
     pub(crate) fn firmware_known(&mut self, id: u8, firmware: DeviceFirmware) {
         self.reg.set_firmware(id, firmware);
+    }
+
+    /// A probe of `id` went unanswered. After `probe_attempts` in a row (and
+    /// no missed poll meanwhile, which resets the count) the silence is the
+    /// answer: V2.0.1 does not know index 32. Returns the revision then.
+    pub(crate) fn probe_unanswered(&mut self, id: u8) -> Option<Revision> {
+        if self.reg.probe_silence(id) < self.probe_attempts {
+            return None;
+        }
+        self.reg.set_firmware(
+            id,
+            DeviceFirmware {
+                revision: Revision::V2_0_1,
+                source: FirmwareSource::Detected,
+                serial: None,
+            },
+        );
+        Some(Revision::V2_0_1)
     }
 
     pub(crate) fn take_ack(&mut self) -> Option<WireAck> {

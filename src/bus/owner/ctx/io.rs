@@ -238,23 +238,13 @@ impl Ctx {
         Ok(None)
     }
 
-    /// A firmware probe: like [`Self::try_transact`], but no reply is an
-    /// answer (V2.0.1 firmware does not know the index), so it counts as
-    /// an unanswered probe, not as a timeout or a missed poll.
-    pub(crate) fn probe(
-        &mut self,
-        cmd: Config,
-        want: Want,
-        attempts: u32,
-    ) -> Result<Option<Reply>, BusError> {
-        for _ in 0..attempts.max(1) {
-            self.link.counters.firmware_probes += 1;
-            self.before_job_frame()?;
-            if let Some(reply) = self.exchange_as(cmd, want, false, Silence::Answer)? {
-                return Ok(Some(reply));
-            }
-        }
-        Ok(None)
+    /// A firmware probe: one read whose silence is an answer (V2.0.1
+    /// firmware does not know the index), so it counts as an unanswered
+    /// probe, not as a timeout or a missed poll.
+    pub(crate) fn probe(&mut self, cmd: Config, want: Want) -> Result<Option<Reply>, BusError> {
+        self.link.counters.firmware_probes += 1;
+        self.before_job_frame()?;
+        self.exchange_as(cmd, want, false, Silence::Answer)
     }
 
     /// [`Self::try_transact`] with the configured retries; a timeout is an error.

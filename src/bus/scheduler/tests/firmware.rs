@@ -17,16 +17,24 @@ fn firmware(b: &Bus, id: u8) -> Option<DeviceFirmware> {
 }
 
 #[test]
-fn each_online_device_is_asked_once_before_it_is_polled() {
+fn each_online_device_is_asked_once_and_probes_alternate_with_polls() {
     let mut b = Bus::with(auto(&[1, 2, 3]), &[1, 2]);
     assert_eq!(b.next(), Slot::Probe { dev_id: 1 });
+    // Never two probes in a row: a bus of silent V2.0.1 devices still polls.
+    let slots = b.run(6, &[3]);
+    for pair in slots.windows(2) {
+        assert!(
+            !(matches!(pair[0], Slot::Probe { .. }) && matches!(pair[1], Slot::Probe { .. })),
+            "{slots:?}"
+        );
+    }
+    assert!(!polls(&slots).is_empty(), "{slots:?}");
     let detected = |revision| DeviceFirmware {
         revision,
         source: FirmwareSource::Detected,
         serial: None,
     };
     b.s.firmware_known(1, detected(Revision::V2_0_8));
-    assert_eq!(b.next(), Slot::Probe { dev_id: 2 });
     b.s.firmware_known(2, detected(Revision::V2_0_1));
     // Device 3 is offline: nothing to ask until it answers.
     let slots = b.run(20, &[3]);
@@ -34,9 +42,26 @@ fn each_online_device_is_asked_once_before_it_is_polled() {
         !slots.iter().any(|s| matches!(s, Slot::Probe { .. })),
         "{slots:?}"
     );
-    assert!(!polls(&slots).is_empty());
     assert_eq!(firmware(&b, 1).map(|f| f.revision), Some(Revision::V2_0_8));
     assert_eq!(firmware(&b, 2).map(|f| f.revision), Some(Revision::V2_0_1));
+}
+
+#[test]
+fn silences_in_a_row_from_a_device_that_answers_polls_make_it_2_0_1() {
+    let mut b = Bus::with(auto(&[1]), &[1]);
+    // 1 + the default 2 retries.
+    assert_eq!(b.s.probe_unanswered(1), None);
+    assert_eq!(b.s.probe_unanswered(1), None);
+    // A missed poll says the device may be gone: the count starts over.
+    b.do_poll(1, InfoBlock::Info02, false);
+    assert_eq!(b.s.probe_unanswered(1), None);
+    assert_eq!(b.s.probe_unanswered(1), None);
+    assert_eq!(b.s.probe_unanswered(1), Some(Revision::V2_0_1));
+    let f = firmware(&b, 1).expect("known");
+    assert_eq!(
+        (f.revision, f.source),
+        (Revision::V2_0_1, FirmwareSource::Detected)
+    );
 }
 
 #[test]
