@@ -24,6 +24,7 @@ pub mod command;
 pub mod error;
 pub mod frame;
 pub mod frame_json;
+pub mod ids;
 pub mod message;
 pub mod params;
 pub mod reply;

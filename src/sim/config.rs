@@ -4,9 +4,9 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use thiserror::Error;
-
 use crate::protocol::{is_device_id, BaudLevel};
+
+pub use super::error::SimError;
 
 use super::firmware::Firmware;
 
@@ -89,53 +89,10 @@ impl SimConfig {
     }
 }
 
-/// Why a simulator could not be built or run.
-#[derive(Debug, Error)]
-pub enum SimError {
-    #[error("bad device ids: {0}")]
-    BadIds(String),
-    #[error("baud {0} is not one the modules speak (500000, 230400, 115200, 38400, 19200)")]
-    BadBaud(u32),
-    #[error("bad firmware: {0}")]
-    BadFirmware(String),
-    #[error("state file {path}: {why}")]
-    StateFile { path: PathBuf, why: String },
-    #[error("pseudo-terminal: {0}")]
-    Pty(#[source] std::io::Error),
-    #[error("simulator thread: {0}")]
-    Thread(#[source] std::io::Error),
-}
-
 /// Parses `"1-16"`, `"1,2,5-7"`, `"3,3"`: ranges and lists, duplicates kept
 /// (they reproduce id conflicts), order kept.
 pub fn parse_ids(spec: &str) -> Result<Vec<u8>, SimError> {
-    let mut ids = Vec::new();
-    for part in spec.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        match part.split_once('-') {
-            Some((a, b)) => {
-                let (lo, hi) = (parse_one(a)?, parse_one(b)?);
-                if lo > hi {
-                    return Err(SimError::BadIds(format!("range {part} runs backwards")));
-                }
-                ids.extend(lo..=hi);
-            }
-            None => ids.push(parse_one(part)?),
-        }
-    }
-    if ids.is_empty() {
-        return Err(SimError::BadIds(format!("`{spec}` names no device")));
-    }
-    Ok(ids)
-}
-
-fn parse_one(text: &str) -> Result<u8, SimError> {
-    let text = text.trim();
-    match text.parse::<u8>() {
-        Ok(id) if is_device_id(id) => Ok(id),
-        _ => Err(SimError::BadIds(format!(
-            "`{text}` is not a device id (1..=159)"
-        ))),
-    }
+    crate::protocol::ids::parse_id_list(spec).map_err(SimError::BadIds)
 }
 
 #[cfg(test)]

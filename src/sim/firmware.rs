@@ -73,7 +73,7 @@ use std::time::Duration;
 use crate::protocol::params::{self, index, Revision};
 use crate::protocol::CrcCoverage;
 
-use super::config::SimError;
+use super::error::SimError;
 
 /// Rev 2.0.8 start state (6) between align/ready and run.
 pub(crate) const START_TIME: Duration = Duration::from_millis(10);
@@ -145,7 +145,7 @@ impl Firmware {
                 )));
             };
             let rev = Revision::parse(rev).map_err(|e| bad(e.to_string()))?;
-            let ids = super::config::parse_ids(ids).map_err(|e| bad(e.to_string()))?;
+            let ids = crate::protocol::ids::parse_id_list(ids).map_err(bad)?;
             for id in ids {
                 if by_id.insert(id, rev).is_some_and(|old| old != rev) {
                     return Err(bad(format!("device {id} is given two revisions")));

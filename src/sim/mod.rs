@@ -68,6 +68,7 @@ pub(crate) mod config;
 pub(crate) mod console;
 pub(crate) mod device;
 pub(crate) mod engine;
+mod error;
 pub(crate) mod faults;
 pub mod firmware;
 pub(crate) mod line;

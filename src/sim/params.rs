@@ -11,7 +11,7 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use crate::protocol::params::{self, index, ParamRow};
 use crate::protocol::{BaudLevel, ConfigParam, InfoBlock};
 
-use super::config::SimError;
+use super::error::SimError;
 
 /// INFO_04's parameter version: not a config index, what the captured module reports.
 pub(crate) const PARAM_VER: u8 = 3;
