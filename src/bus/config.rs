@@ -12,6 +12,7 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 use crate::protocol::{is_device_id, BaudLevel, MAX_DEVICE_ID, MIN_DEVICE_ID};
+use crate::transport::adapter::AdapterModel;
 
 use super::error::BusError;
 use super::firmware::{FirmwarePolicy, FirmwareSetting};
@@ -64,6 +65,46 @@ pub struct BusConfig {
     /// Per device where a bus mixes revisions, e.g. `{ "9-16" = "2.0.1" }`.
     #[serde(default)]
     pub firmware_by_id: BTreeMap<String, FirmwareSetting>,
+    /// The USB adapter in front of the bus: `auto` (found from sysfs when the
+    /// port opens, the default) or `native`, `ftdi[:MS]`, `ch340`, `cp2102`,
+    /// `ft232h[:MS]` (see [`crate::transport::adapter`]).
+    #[serde(default)]
+    pub adapter: AdapterSetting,
+}
+
+/// Which adapter timing the bus plans for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum AdapterSetting {
+    /// What sysfs says when the port opens (native for a pty or a UART).
+    #[default]
+    Auto,
+    /// This model, whatever sysfs says.
+    Fixed(AdapterModel),
+}
+
+impl AdapterSetting {
+    pub fn parse(text: &str) -> Result<Self, String> {
+        match text.trim() {
+            "auto" => Ok(Self::Auto),
+            t => AdapterModel::parse(t).map(Self::Fixed),
+        }
+    }
+}
+
+impl Serialize for AdapterSetting {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Self::Auto => s.serialize_str("auto"),
+            Self::Fixed(m) => s.serialize_str(&m.to_string()),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for AdapterSetting {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        Self::parse(&text).map_err(serde::de::Error::custom)
+    }
 }
 
 fn default_rs485() -> bool {
@@ -205,6 +246,7 @@ impl BusConfig {
             on_start: StartPolicy::default(),
             firmware: FirmwareSetting::default(),
             firmware_by_id: BTreeMap::new(),
+            adapter: AdapterSetting::default(),
         }
     }
 

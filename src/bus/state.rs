@@ -215,6 +215,10 @@ pub struct BusSnapshot {
     /// What starting the owner and opening the port found worth telling
     /// (no real-time priority, failed ioctls on a pty, an FTDI latency timer and its fix).
     pub port_notes: Vec<String>,
+    /// The adapter timing the bus plans for (`native`, `ftdi:16`, ...).
+    pub adapter: String,
+    /// One poll's round trip as the host lives it on that adapter, µs.
+    pub transaction_us: u64,
 }
 
 impl BusSnapshot {
@@ -233,6 +237,8 @@ impl BusSnapshot {
             rates: BusRates::default(),
             latency: BusLatency::default(),
             port_notes: Vec::new(),
+            adapter: "native".into(),
+            transaction_us: 0,
         }
     }
 }

@@ -11,6 +11,7 @@
 use std::time::{Duration, Instant};
 
 use super::config::{frame_time, Timing};
+use crate::transport::adapter::AdapterModel;
 
 /// The reply a transaction waits for: matched by device id and index.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -40,6 +41,8 @@ pub(crate) struct WireClock {
     /// (decaying), and when it was seen: the host path's own latency.
     late: Duration,
     late_at: Instant,
+    /// The USB adapter in between: how long it holds a write and a reply.
+    adapter: AdapterModel,
 }
 
 /// Half-life of the observed reply lateness: a stall seen once keeps the
@@ -62,17 +65,33 @@ impl WireClock {
             free_at: now,
             late: Duration::ZERO,
             late_at: now,
+            adapter: AdapterModel::Native,
         }
+    }
+
+    /// The adapter the port turned out to be (or the config says).
+    pub(crate) fn set_adapter(&mut self, adapter: AdapterModel) {
+        self.adapter = adapter;
+    }
+
+    pub(crate) fn adapter(&self) -> AdapterModel {
+        self.adapter
+    }
+
+    /// One poll as the host lives it on this adapter: the write's wait for
+    /// a USB frame, request and reply on the wire, the adapter's hold.
+    pub(crate) fn transaction_time(&self) -> Duration {
+        self.transaction_time_with(self.adapter)
+    }
+
+    /// [`Self::transaction_time`] on another adapter (what a fix would give).
+    pub(crate) fn transaction_time_with(&self, adapter: AdapterModel) -> Duration {
+        adapter.write_hold() + self.frame * 2 + self.turnaround + adapter.reply_hold()
     }
 
     /// After a baud change: frames take another time from now on.
     pub(crate) fn set_baud(&mut self, baud: u32) {
         self.frame = frame_time(baud);
-    }
-
-    /// Extra margin for an adapter that holds replies back (FTDI latency timer).
-    pub(crate) fn add_reply_margin(&mut self, extra: Duration) {
-        self.reply_margin += extra;
     }
 
     pub(crate) fn frame_time(&self) -> Duration {
@@ -102,9 +121,11 @@ impl WireClock {
         self.free_at
     }
 
-    /// When a reply to a request ending at `request_end` should complete.
+    /// When a reply to a request ending at `request_end` should reach the
+    /// host: its end on the wire, then the adapter's hold (its latency
+    /// timer, or one USB frame; nothing on a pty).
     pub(crate) fn reply_due(&self, request_end: Instant) -> Instant {
-        request_end + self.turnaround + self.frame
+        request_end + self.turnaround + self.frame + self.adapter.reply_hold()
     }
 
     /// The latest a reply to a request ending at `request_end` may
@@ -113,7 +134,8 @@ impl WireClock {
     /// the allowance follows what is measured).
     pub(crate) fn reply_deadline(&self, request_end: Instant) -> Instant {
         let allowance = (self.late_now(request_end) * LATE_FACTOR).min(MAX_LATE_ALLOWANCE);
-        self.reply_due(request_end) + self.reply_margin + allowance
+        // The request itself may wait up to a USB frame before it is on the wire.
+        self.reply_due(request_end) + self.adapter.write_hold() + self.reply_margin + allowance
     }
 
     /// Both ends of the reply window of a request ending at `request_end`.

@@ -11,7 +11,9 @@
 //! - [`tty`]: a tty opened raw at a baud rate (real adapter or pty slave).
 //! - [`rs485`]: the kernel's RS-485 direction control on a tty, where it exists.
 //! - [`note`]: what opening a port found worth telling ([`note::PortNote`]).
+//! - [`adapter`]: the USB adapter in between: its timing model and its detection from sysfs.
 
+pub mod adapter;
 pub mod memory;
 pub(crate) mod note;
 pub(crate) mod rs485;

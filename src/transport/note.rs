@@ -9,6 +9,7 @@ pub enum PortNote {
     IoctlUnsupported { what: &'static str, error: String },
     /// RS-485 direction control: what the driver was left doing.
     Rs485(String),
-    /// An FTDI adapter whose latency timer delays every reply.
-    FtdiLatency { ms: u32, fix: String },
+    /// The USB adapter behind the tty (or none), found from sysfs after
+    /// the port was set up, so its latency timer is the one in effect.
+    Adapter(super::adapter::AdapterInfo),
 }

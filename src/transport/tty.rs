@@ -140,7 +140,9 @@ impl TtyPort {
         if setup.rs485 {
             notes.extend(super::rs485::enable(&file));
         }
-        notes.extend(ftdi_latency_note(path));
+        // After ASYNC_LOW_LATENCY: the Linux FTDI driver turns it into a 1 ms
+        // timer, and what is reported must be what is in effect.
+        notes.push(PortNote::Adapter(super::adapter::detect(path)));
         Ok((
             TtyPort {
                 file,
@@ -183,18 +185,6 @@ fn set_low_latency(file: &File) -> io::Result<()> {
         return Err(io::Error::last_os_error());
     }
     Ok(())
-}
-
-/// FTDI adapters buffer replies for `latency_timer` ms (16 by default).
-fn ftdi_latency_note(path: &Path) -> Option<PortNote> {
-    let real = std::fs::canonicalize(path).ok()?;
-    let name = real.file_name()?.to_str()?;
-    let sys = format!("/sys/class/tty/{name}/device/latency_timer");
-    let ms: u32 = std::fs::read_to_string(&sys).ok()?.trim().parse().ok()?;
-    (ms > 1).then(|| PortNote::FtdiLatency {
-        ms,
-        fix: format!("echo 1 | sudo tee {sys}   (or a udev rule, see README)"),
-    })
 }
 
 impl Transport for TtyPort {

@@ -122,6 +122,11 @@ impl Owner {
             Slot::Listen { until } => ctx.wait_until(until),
             Slot::Control(frame) => ctx.send_planned(frame),
             Slot::Poll { dev_id, block } => ctx.poll(dev_id, block),
+            Slot::Batch {
+                control,
+                dev_id,
+                block,
+            } => ctx.poll_behind(control, dev_id, block),
             Slot::EStop { generation } => {
                 estop::run(ctx, generation);
                 Ok(())

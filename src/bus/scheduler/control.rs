@@ -100,6 +100,23 @@ impl Control {
         (first, plan.unknown.len() as u32)
     }
 
+    /// Every frame the pending setpoints need, oldest first, at most `max`
+    /// (for one USB transfer); drops what needs none, as [`Self::plan`].
+    pub(super) fn plan_up_to(&mut self, reg: &Registry, max: usize) -> (Vec<Planned>, u32) {
+        if self.pending.is_empty() {
+            return (Vec::new(), 0);
+        }
+        let plan = coalesce::plan(&self.pending, |id| reg.slot_info(id));
+        for (id, sp) in &plan.settled {
+            self.settle(*id, sp.seq);
+        }
+        for id in &plan.unknown {
+            self.pending.remove(id);
+        }
+        let frames = plan.frames.into_iter().take(max).collect();
+        (frames, plan.unknown.len() as u32)
+    }
+
     /// `frame` left for the wire, its last byte due at `end`.
     pub(super) fn sent(&mut self, frame: &Planned, reg: &mut Registry, end: Instant) {
         for (id, sp) in &frame.carries {

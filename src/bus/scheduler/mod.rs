@@ -46,6 +46,10 @@ pub(crate) const MAX_INTERLEAVED: u32 = 2;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct Preempted;
 
+/// Control frames written in front of a poll on a latent adapter: the two
+/// broadcasts of 16 joints.
+pub(crate) const MAX_BATCHED: usize = 2;
+
 /// How long the owner listens when there is nothing to send. Bounds how
 /// late it notices a request or setpoint on an idle bus.
 pub(crate) const IDLE_TICK: Duration = Duration::from_millis(1);
@@ -73,6 +77,13 @@ pub(crate) enum Slot {
     /// Read `block` of `dev_id`; its reply window follows from
     /// [`Scheduler::sent`] and [`Scheduler::reply_window`].
     Poll { dev_id: u8, block: InfoBlock },
+    /// A latent adapter (USB): these control frames and then the poll in
+    /// one write, one USB transfer, instead of a round trip each.
+    Batch {
+        control: Vec<Planned>,
+        dev_id: u8,
+        block: InfoBlock,
+    },
     /// The port is down: try to open it at `at` (fail requests meanwhile).
     Reopen { at: Instant },
 }
@@ -263,6 +274,14 @@ impl Scheduler {
         }
         let timeout = self.clock.reply_timeout(now);
         if let Some(poll) = self.planner.next(self.reg.poll_states(), now, timeout) {
+            let control = self.batch_control(store);
+            if !control.is_empty() {
+                return Slot::Batch {
+                    control,
+                    dev_id: poll.dev_id,
+                    block: poll.block,
+                };
+            }
             return Slot::Poll {
                 dev_id: poll.dev_id,
                 block: poll.block,
@@ -274,6 +293,22 @@ impl Scheduler {
                 until: now + IDLE_TICK,
             },
         }
+    }
+
+    /// On a latent adapter, the control frames (at most [`MAX_BATCHED`])
+    /// that ride in front of a poll: a USB round trip costs a millisecond or
+    /// more, a frame on the wire 0.4 ms. None on a native line, where the
+    /// round trip is the wire's.
+    fn batch_control(&mut self, store: &SetpointStore) -> Vec<Planned> {
+        // Not held to the control budget: frames in front of a poll cost it
+        // 0.4 ms each against a round trip of a millisecond or more.
+        if !self.clock.adapter().is_latent() {
+            return Vec::new();
+        }
+        self.control.collect(store);
+        let (frames, dropped) = self.control.plan_up_to(&self.reg, MAX_BATCHED);
+        self.dropped += u64::from(dropped);
+        frames
     }
 
     /// Collects and plans the frame carrying the oldest pending setpoint.
@@ -419,8 +454,9 @@ impl Scheduler {
         self.budget.set_frame(self.clock.frame_time());
     }
 
-    /// An adapter that holds replies back (FTDI latency timer) widens every deadline.
-    pub(crate) fn add_reply_margin(&mut self, extra: Duration) {
-        self.clock.add_reply_margin(extra);
+    /// The adapter in front of the bus: reply deadlines follow it, and a
+    /// latent one gets control frames and the next poll in one write.
+    pub(crate) fn set_adapter(&mut self, adapter: crate::transport::adapter::AdapterModel) {
+        self.clock.set_adapter(adapter);
     }
 }

@@ -65,6 +65,15 @@ pub(crate) struct BusView {
     pub rates: serde_json::Value,
     /// What opening the port found worth telling (e.g. an FTDI latency timer and its fix).
     pub port_notes: Vec<String>,
+    /// The USB adapter timing the bus plans for: `native` (a pty, a UART),
+    /// `ftdi:MS` (MS = its latency timer in effect), `ch340`, `cp2102`,
+    /// `ft232h:MS`; from the bus's `adapter` setting or sysfs.
+    #[schema(example = "ftdi:1")]
+    pub adapter: String,
+    /// One poll's round trip as the host lives it on that adapter
+    /// (USB frame wait, both frames, turnaround, the adapter's hold), µs.
+    #[schema(example = 2900)]
+    pub transaction_us: u64,
 }
 
 impl BusView {
@@ -89,6 +98,8 @@ impl BusView {
             counters: serde_json::to_value(&snap.counters).unwrap_or_default(),
             rates: serde_json::to_value(&snap.rates).unwrap_or_default(),
             port_notes: snap.port_notes.clone(),
+            adapter: snap.adapter.clone(),
+            transaction_us: snap.transaction_us,
         }
     }
 }

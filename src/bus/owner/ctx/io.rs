@@ -52,6 +52,25 @@ impl Ctx {
         Ok(self.sched.sent(handed, cmds.len() as u32))
     }
 
+    /// Accounts control frames written in front of the last frame of a
+    /// write that ended on the wire at `end` (each one frame earlier).
+    fn control_frames_sent(&mut self, control: &[Planned], end: Instant) {
+        let frame = self.sched.clock().frame_time();
+        let n = control.len() as u32;
+        for (i, planned) in control.iter().enumerate() {
+            let its_end = end - frame * (n - i as u32);
+            for (_, sp) in &planned.carries {
+                self.stats
+                    .setpoint_age(its_end.saturating_duration_since(sp.accepted));
+                self.link.counters.setpoints_sent += 1;
+            }
+            self.sched.control_sent(planned, its_end);
+        }
+        if n > 0 {
+            self.after_decision();
+        }
+    }
+
     /// Writes a control frame the scheduler planned.
     pub(crate) fn send_planned(&mut self, frame: Planned) -> Result<(), BusError> {
         let end = self.send(&[frame.command])?;
@@ -67,12 +86,24 @@ impl Ctx {
 
     /// One telemetry poll the scheduler picked.
     pub(crate) fn poll(&mut self, dev_id: u8, block: InfoBlock) -> Result<(), BusError> {
+        self.poll_behind(Vec::new(), dev_id, block)
+    }
+
+    /// A poll with control frames in front of it, all in one write (one USB
+    /// transfer on a latent adapter): the frames leave back to back and the
+    /// poll's reply follows the last.
+    pub(crate) fn poll_behind(
+        &mut self,
+        control: Vec<Planned>,
+        dev_id: u8,
+        block: InfoBlock,
+    ) -> Result<(), BusError> {
         self.link.counters.polls += 1;
         let want = Want {
             dev_id,
             index: block.index(),
         };
-        self.exchange(Config::read(dev_id, block), want, true)?;
+        self.exchange_behind(&control, Config::read(dev_id, block), want)?;
         Ok(())
     }
 
@@ -88,6 +119,16 @@ impl Ctx {
         self.exchange_as(cmd, want, prepare, Silence::Missed)
     }
 
+    /// [`Self::exchange`] of a poll behind `control` frames, one write.
+    fn exchange_behind(
+        &mut self,
+        control: &[Planned],
+        cmd: Config,
+        want: Want,
+    ) -> Result<Option<Reply>, BusError> {
+        self.exchange_with(control, cmd, want, true, Silence::Missed)
+    }
+
     fn exchange_as(
         &mut self,
         cmd: Config,
@@ -95,8 +136,25 @@ impl Ctx {
         prepare: bool,
         silence: Silence,
     ) -> Result<Option<Reply>, BusError> {
+        self.exchange_with(&[], cmd, want, prepare, silence)
+    }
+
+    fn exchange_with(
+        &mut self,
+        control: &[Planned],
+        cmd: Config,
+        want: Want,
+        prepare: bool,
+        silence: Silence,
+    ) -> Result<Option<Reply>, BusError> {
         let handed = Instant::now();
-        let end = self.send(&[Command::Config(cmd)])?;
+        let cmds: Vec<Command> = control
+            .iter()
+            .map(|p| p.command)
+            .chain([Command::Config(cmd)])
+            .collect();
+        let end = self.send(&cmds)?;
+        self.control_frames_sent(control, end);
         let window = self.sched.reply_window(end);
         let mut got = Ok(None);
         if prepare {

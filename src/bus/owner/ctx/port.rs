@@ -7,8 +7,10 @@ use std::sync::atomic::Ordering;
 use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
+use crate::bus::config::AdapterSetting;
 use crate::bus::error::BusError;
 use crate::bus::handle::{BusEvent, LinkState};
+use crate::transport::adapter::{AdapterInfo, AdapterModel};
 use crate::transport::tty::PortNote;
 
 use super::Ctx;
@@ -99,8 +101,8 @@ impl Ctx {
         }
     }
 
-    /// Logs what opening the port found; an FTDI latency timer also widens
-    /// the reply timeout, since it delays every reply by that much.
+    /// Logs what opening the port found; the adapter's timing goes to the
+    /// scheduler (reply deadlines follow it).
     fn note_port(&mut self, notes: Vec<PortNote>) {
         self.port_notes.clear();
         for note in notes {
@@ -113,17 +115,52 @@ impl Ctx {
                     tracing::info!(bus = %self.cfg.name, "{text}");
                     text
                 }
-                PortNote::FtdiLatency { ms, fix } => {
-                    self.sched
-                        .add_reply_margin(Duration::from_millis(u64::from(ms)));
-                    let text =
-                        format!("FTDI latency timer is {ms} ms (delays every reply); fix: {fix}");
-                    tracing::warn!(bus = %self.cfg.name, "{text}");
-                    text
-                }
+                PortNote::Adapter(info) => self.take_adapter(&info),
             };
             self.port_notes.push(text);
         }
+    }
+
+    /// The adapter the bus plans for: the config's, or the one sysfs shows.
+    /// An FTDI timer above 1 ms is said aloud with its cost and its fix.
+    fn take_adapter(&mut self, info: &AdapterInfo) -> String {
+        let (model, why) = match self.cfg.adapter {
+            AdapterSetting::Fixed(m) => {
+                (m, format!("set in the config (sysfs: {})", info.found_by))
+            }
+            AdapterSetting::Auto => (info.model, format!("detected: {}", info.found_by)),
+        };
+        self.sched.set_adapter(model);
+        let mut text = format!("adapter {model} ({why})");
+        if let Some(timer) = model
+            .latency_timer()
+            .filter(|t| *t > Duration::from_millis(1))
+        {
+            let with_1ms = match model {
+                AdapterModel::Ft232h { .. } => AdapterModel::Ft232h { latency_ms: 1 },
+                _ => AdapterModel::Ftdi { latency_ms: 1 },
+            };
+            let now = self.sched.clock().transaction_time();
+            let fast = self.sched.clock().transaction_time_with(with_1ms);
+            let speedup = now.as_secs_f64() / fast.as_secs_f64().max(1e-6);
+            let name = self
+                .cfg
+                .path
+                .file_name()
+                .map_or_else(|| "ttyUSB0".into(), |n| n.to_string_lossy().into_owned());
+            text = format!(
+                "{text}: its latency timer holds every reply {} ms, so each poll takes {:.1} ms; \
+                 at 1 ms it would take {:.1} ms ({speedup:.1}x the telemetry). Fix: echo 1 | sudo tee \
+                 /sys/bus/usb-serial/devices/{name}/latency_timer (or the udev rule in deploy/)",
+                timer.as_millis(),
+                now.as_secs_f64() * 1e3,
+                fast.as_secs_f64() * 1e3,
+            );
+            tracing::warn!(bus = %self.cfg.name, "{text}");
+        } else {
+            tracing::info!(bus = %self.cfg.name, "{text}");
+        }
+        text
     }
 }
 

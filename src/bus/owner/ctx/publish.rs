@@ -44,6 +44,8 @@ impl Ctx {
                 .chain(&self.port_notes)
                 .cloned()
                 .collect(),
+            adapter: self.sched.clock().adapter().to_string(),
+            transaction_us: self.sched.clock().transaction_time().as_micros() as u64,
         };
         self.shared.snapshot.send_replace(Arc::new(snapshot));
         for event in self.sched.drain_events() {

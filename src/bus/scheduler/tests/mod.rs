@@ -143,6 +143,20 @@ impl Bus {
             Slot::Listen { until } => self.now = *until,
             Slot::Control(frame) => self.send_control(frame),
             Slot::Poll { dev_id, block } => self.do_poll(*dev_id, *block, !silent.contains(dev_id)),
+            Slot::Batch {
+                control,
+                dev_id,
+                block,
+            } => {
+                // One write: the frames back to back, the poll's reply after.
+                let end = self.s.sent(self.now, control.len() as u32);
+                let frame = self.s.clock().frame_time();
+                for (i, c) in control.iter().enumerate() {
+                    self.s
+                        .control_sent(c, end - frame * (control.len() - i) as u32);
+                }
+                self.do_poll(*dev_id, *block, !silent.contains(dev_id));
+            }
             _ => {}
         }
         slot
@@ -187,6 +201,7 @@ fn polls(slots: &[Slot]) -> Vec<(u8, InfoBlock)> {
         .collect()
 }
 
+mod adapter;
 mod control;
 mod firmware;
 mod jobs;
