@@ -111,6 +111,22 @@ impl AdapterModel {
         self.usb_frame().unwrap_or_default()
     }
 
+    /// The shortest cycle of `broadcasts` control frames and one poll with
+    /// its reply this adapter allows: a wire-timed pipeline writing one USB
+    /// transfer per cycle, `T = P·⌈((B + 2)·tf + ta) / P⌉` (P the USB frame
+    /// period, tf the frame time, ta the turnaround); on a native line the
+    /// wire alone, `(B + 2)·tf + ta`. The bound the bench's ratios use.
+    pub fn cycle_bound(self, frame: Duration, turnaround: Duration, broadcasts: u32) -> Duration {
+        let wire = frame * (broadcasts + 2) + turnaround;
+        match self.usb_frame() {
+            None => wire,
+            Some(p) => {
+                let frames = wire.as_nanos().div_ceil(p.as_nanos().max(1));
+                p * u32::try_from(frames).unwrap_or(u32::MAX)
+            }
+        }
+    }
+
     /// True when a transaction's round trip is dominated by the adapter,
     /// not the wire: worth putting several frames in one write.
     pub fn is_latent(self) -> bool {
@@ -240,6 +256,19 @@ mod tests {
             Duration::from_micros(1125)
         );
         assert!(!AdapterModel::Native.is_latent() && AdapterModel::Cp2102.is_latent());
+    }
+
+    #[test]
+    fn cycle_bounds_match_the_issue_table() {
+        let (tf, ta) = (Duration::from_micros(400), Duration::from_micros(100));
+        // Idle polling (no broadcasts): 1111/s native; one poll per 1 ms frame.
+        let idle = |m: AdapterModel| 1.0 / m.cycle_bound(tf, ta, 0).as_secs_f64();
+        assert!((idle(AdapterModel::Native) - 1111.1).abs() < 0.2);
+        assert!((idle(AdapterModel::Ch340) - 1000.0).abs() < 1e-6);
+        // Two broadcasts and a poll: 500 cycles/s on full speed, 571 on FT232H.
+        let with = |m: AdapterModel| 1.0 / m.cycle_bound(tf, ta, 2).as_secs_f64();
+        assert!((with(AdapterModel::Ftdi { latency_ms: 16 }) - 500.0).abs() < 1e-6);
+        assert!((with(AdapterModel::Ft232h { latency_ms: 1 }) - 571.43).abs() < 0.01);
     }
 
     /// A fake sysfs: class/tty/NAME/device -> devices/usb/1-1/1-1:1.0/NAME,
