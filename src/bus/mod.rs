@@ -53,7 +53,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-pub use config::{BusConfig, PollPlan, ShutdownState, StartPolicy, Timing};
+pub use config::{AdapterSetting, BusConfig, PollPlan, ShutdownState, StartPolicy, Timing};
 pub use error::BusError;
 pub use handle::{BusHandle, BusShared, BusSnapshot, Setpoint, Targets};
 

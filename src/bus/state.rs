@@ -160,6 +160,9 @@ pub struct BusCounters {
     /// Of those, attempts no reply answered: how V2.0.1 firmware shows
     /// itself, so they count here and not as timeouts.
     pub firmware_probes_unanswered: u64,
+    /// Control frames written in front of a poll, in the same write (one USB
+    /// transfer), on a latent adapter.
+    pub frames_tx_batched: u64,
 }
 
 /// Latency histograms since start (`/metrics`).

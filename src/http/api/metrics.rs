@@ -94,6 +94,10 @@ const BUS_COUNTER_HELP: &[(&str, &str)] = &[
         "firmware_probes_unanswered",
         "Firmware probe attempts with no reply: how V2.0.1 devices show themselves (not timeouts).",
     ),
+    (
+        "frames_tx_batched",
+        "Control frames written in front of a poll in one write (one USB transfer), on a latent adapter.",
+    ),
 ];
 
 /// Builds the exposition: families in order of first use, each with one

@@ -154,6 +154,7 @@ impl Ctx {
             .chain([Command::Config(cmd)])
             .collect();
         let end = self.send(&cmds)?;
+        self.link.counters.frames_tx_batched += control.len() as u64;
         self.control_frames_sent(control, end);
         let window = self.sched.reply_window(end);
         let mut got = Ok(None);
