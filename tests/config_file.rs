@@ -77,6 +77,7 @@ fn the_annotated_example_plans() {
     );
     assert_eq!(p.options.watchdog.hold_timeout_ms, 300);
     assert_eq!(p.buses[0].firmware.name(), "auto");
+    assert_eq!(p.buses[0].adapter, jointd::bus::AdapterSetting::Auto);
 }
 
 #[test]
@@ -122,6 +123,8 @@ fn bad_keys_and_values_are_named() {
         (format!("{bus}firmware = \"2.0.2\"\n"), "\"auto\", \"2.0.1\", \"2.0.8\""),
         (format!("{bus}firmware_by_id = {{ \"1-3\" = \"2.0.8\", \"3\" = \"2.0.1\" }}\n"), "device 3 twice"),
         (format!("{bus}firmware_by_id = {{ \"0\" = \"2.0.8\" }}\n"), "not a device id"),
+        (format!("{bus}adapter = \"pl2303\"\n"), "not one of native, ftdi[:MS]"),
+        (format!("{bus}adapter = \"ftdi:0\"\n"), "1..=255"),
     ];
     for (text, needle) in cases {
         let msg = error_of(&text);
