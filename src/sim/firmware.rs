@@ -175,15 +175,27 @@ impl Firmware {
 }
 
 impl fmt::Display for Firmware {
-    /// The text form [`Firmware::parse`] reads (per id, one entry per id).
+    /// The text form [`Firmware::parse`] reads, consecutive ids of one
+    /// revision as a range (`9-16=2.0.8`).
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         if self.by_id.is_empty() {
             return write!(f, "{}", self.all);
         }
-        let parts: Vec<String> = self
-            .by_id
+        let mut runs: Vec<(u8, u8, Revision)> = Vec::new();
+        for (&id, &rev) in &self.by_id {
+            match runs.last_mut() {
+                Some((_, last, r)) if *r == rev && u16::from(*last) + 1 == u16::from(id) => {
+                    *last = id
+                }
+                _ => runs.push((id, id, rev)),
+            }
+        }
+        let parts: Vec<String> = runs
             .iter()
-            .map(|(id, rev)| format!("{id}={rev}"))
+            .map(|(a, b, rev)| match a == b {
+                true => format!("{a}={rev}"),
+                false => format!("{a}-{b}={rev}"),
+            })
             .collect();
         f.write_str(&parts.join(","))
     }
@@ -332,6 +344,7 @@ mod tests {
         assert_eq!(mixed.revision_of(9), Revision::V2_0_1);
         assert_eq!(mixed.revision_of(40), Revision::V2_0_1, "not named: 2.0.1");
         assert_eq!(Firmware::default().revision_of(3), Revision::V2_0_1);
+        assert_eq!(mixed.to_string(), "1-8=2.0.8,9-16=2.0.1");
         let again = Firmware::parse(&mixed.to_string()).unwrap();
         assert_eq!(again, mixed);
     }
