@@ -28,6 +28,7 @@ use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle, BusThread, Targets, 
 use crate::protocol::status::fsm;
 use crate::sim::{SimConfig, SimError, SimHandle, SimStats, Simulator};
 
+use analysis::Analysis;
 use client::{Client, CLIENT_THREAD};
 use report::Report;
 
@@ -68,6 +69,11 @@ pub struct BenchArgs {
     /// Print the frames around every collision the simulator saw.
     #[arg(long)]
     pub show_collisions: bool,
+    /// Run this many buses at once, each with `--joints` joints on its own
+    /// simulator and owner, after one bus carrying all of them: what a
+    /// second adapter buys (per-joint rates, the ratio, the CPU).
+    #[arg(long, default_value_t = 1)]
+    pub buses: u8,
     /// Measure the WebSocket path instead (issue 6): the engine alone, the
     /// same stream through /api/v1/ws, then with telemetry clients added.
     #[arg(long)]
@@ -122,6 +128,9 @@ pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
     if args.ws {
         return ws::run(args);
     }
+    if args.buses > 1 {
+        return several_buses(args);
+    }
     let mut all = true;
     for &baud in &args.bauds {
         let report = workload(args, baud)?;
@@ -130,6 +139,84 @@ pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
     }
     Ok(all)
 }
+
+/// Per-joint rates of one bus carrying every joint, then of `--buses`
+/// buses of `--joints` each running at once; true when the buses' rates
+/// are at least [`MIN_SPLIT_GAIN`] times the single bus's.
+fn several_buses(args: &BenchArgs) -> Result<bool, BenchError> {
+    let n = usize::from(args.buses);
+    let total = u16::from(args.joints) * u16::from(args.buses);
+    let total = u8::try_from(total)
+        .ok()
+        .filter(|t| *t <= 16)
+        .ok_or_else(|| {
+            BenchError::Setup("buses x joints must be at most 16 (one broadcast pair)".into())
+        })?;
+    let mut all = true;
+    for &baud in &args.bauds {
+        let one = BenchArgs {
+            joints: total,
+            buses: 1,
+            ..args.clone()
+        };
+        let single = workload(&one, baud)?;
+        println!("== one bus of {total} joints\n{single}");
+        let reports: Vec<Result<Report, BenchError>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = (0..n)
+                .map(|_| scope.spawn(|| workload(args, baud)))
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join().unwrap_or_else(|_| {
+                        Err(BenchError::Setup("a bus's bench thread panicked".into()))
+                    })
+                })
+                .collect()
+        });
+        let reports = reports.into_iter().collect::<Result<Vec<_>, _>>()?;
+        let mean = |r: &Report, f: fn(&Analysis) -> &std::collections::BTreeMap<u8, f64>| {
+            Analysis::mean_rate(f(&r.analysis))
+        };
+        let control = |r: &Report| mean(r, |a| &a.control_hz);
+        let telemetry = |r: &Report| mean(r, |a| &a.telemetry_hz);
+        for (i, r) in reports.iter().enumerate() {
+            println!(
+                "== bus {} of {n}, {} joints, at the same time\n{r}",
+                i + 1,
+                args.joints
+            );
+        }
+        let worst =
+            |f: &dyn Fn(&Report) -> f64| reports.iter().map(f).fold(f64::INFINITY, f64::min);
+        let (c_gain, t_gain) = (
+            worst(&control) / control(&single).max(f64::EPSILON),
+            worst(&telemetry) / telemetry(&single).max(f64::EPSILON),
+        );
+        // The owners' threads share one name prefix: each report's owner
+        // CPU is every owner's together.
+        println!(
+            "== {n} buses of {} vs one of {total} at {baud} baud: control per joint x{c_gain:.2}, \
+             telemetry per joint x{t_gain:.2} (goal x{MIN_SPLIT_GAIN}); all bus owners {:.1} % of a core, \
+             all simulators {:.1} %",
+            args.joints,
+            reports[0].cpu_owner * 100.0,
+            reports[0].cpu_sim * 100.0,
+        );
+        let ok = c_gain >= MIN_SPLIT_GAIN
+            && t_gain >= MIN_SPLIT_GAIN
+            && reports.iter().all(|r| r.collisions == 0);
+        println!(
+            "  [{}] per-joint rates >= {MIN_SPLIT_GAIN}x one bus's, zero collisions",
+            if ok { "ok" } else { "FAIL" }
+        );
+        all &= ok;
+    }
+    Ok(all)
+}
+
+/// What splitting the joints over two adapters must at least buy per joint.
+const MIN_SPLIT_GAIN: f64 = 1.95;
 
 pub(crate) fn load_average() -> String {
     std::fs::read_to_string("/proc/loadavg")
