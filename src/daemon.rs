@@ -14,14 +14,14 @@ use tokio::net::TcpListener;
 use crate::config_locate::{key_in_table_array, table_array_line};
 use tokio::signal::unix::{signal, SignalKind};
 
-use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle};
+use crate::bus::{spawn_bus, AdapterSetting, BusConfig, BusError, BusHandle};
 use crate::http::limits::{LimitError, LimitRule, SoftLimits};
 use crate::http::policy::{RequestPolicy, DEFAULT_MAX_BODY_BYTES};
 use crate::http::state::StateOptions;
 use crate::http::teleop::{WatchdogDefault, MAX_HOLD, MIN_HOLD};
 use crate::http::{app, AppState};
 use crate::protocol::is_device_id;
-use crate::sim::{Firmware, SimConfig, SimError, SimHandle, Simulator};
+use crate::sim::{AdapterModel, Firmware, SimConfig, SimError, SimHandle, Simulator};
 
 /// Default HTTP address: loopback only.
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8080";
@@ -50,6 +50,10 @@ pub struct RunArgs {
     /// or per id, e.g. `1-8=2.0.8,9-16=2.0.1` (ids not named run 2.0.1).
     #[arg(long, value_name = "SPEC", requires = "sim")]
     pub sim_firmware: Option<String>,
+    /// The USB adapter the simulated bus sits behind: `native` (default),
+    /// `ftdi[:MS]`, `ch340`, `cp2102`, `ft232h[:MS]`; the bus plans for it.
+    #[arg(long, value_name = "MODEL", requires = "sim")]
+    pub sim_adapter: Option<String>,
     /// HTTP address to listen on [default: 127.0.0.1:8080]; port 0 picks a free
     /// port (the first line on stdout says which).
     #[arg(long, value_name = "ADDR", env = "JOINTD_LISTEN")]
@@ -405,6 +409,9 @@ fn sim_config(joints: u8, args: &RunArgs) -> Result<SimConfig, DaemonError> {
     if let Some(spec) = &args.sim_firmware {
         cfg.firmware = Firmware::parse(spec)?;
     }
+    if let Some(model) = &args.sim_adapter {
+        cfg.adapter = AdapterModel::parse(model).map_err(SimError::BadAdapter)?;
+    }
     // The rest (the baud) is checked when the simulator starts, as before.
     cfg.firmware.check_ids(&cfg.ids)?;
     Ok(cfg)
@@ -414,14 +421,17 @@ fn sim_config(joints: u8, args: &RunArgs) -> Result<SimConfig, DaemonError> {
 fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusConfig), DaemonError> {
     let (ids, baud, joints) = (sim_cfg.ids.clone(), sim_cfg.baud, sim_cfg.ids.len());
     let firmware = sim_cfg.firmware.to_string();
+    let adapter = sim_cfg.adapter;
     let sim = Simulator::spawn_pty(sim_cfg)?;
     let path = sim.device_path().ok_or_else(|| DaemonError::Io {
         what: "simulator".into(),
         source: std::io::Error::other("the simulator has no device path"),
     })?;
-    tracing::info!(path = %path.display(), joints, baud, %firmware, "simulated bus started");
+    tracing::info!(path = %path.display(), joints, baud, %firmware, %adapter, "simulated bus started");
     let mut cfg = BusConfig::new(SIM_BUS_NAME, path, baud);
     cfg.ids = ids;
+    // A pty shows no USB in sysfs: the bus is told what the simulator models.
+    cfg.adapter = AdapterSetting::Fixed(adapter);
     // The simulator shares the CPU with the daemon: on a busy machine its
     // replies can come milliseconds late, which is not a silent device.
     cfg.timing.reply_margin_us = SIM_REPLY_MARGIN_US;

@@ -24,9 +24,11 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use thiserror::Error;
 
-use crate::bus::{spawn_bus, BusConfig, BusError, BusHandle, BusThread, Targets, THREAD_PREFIX};
+use crate::bus::{
+    spawn_bus, AdapterSetting, BusConfig, BusError, BusHandle, BusThread, Targets, THREAD_PREFIX,
+};
 use crate::protocol::status::fsm;
-use crate::sim::{SimConfig, SimError, SimHandle, SimStats, Simulator};
+use crate::sim::{AdapterModel, SimConfig, SimError, SimHandle, SimStats, Simulator};
 
 use analysis::Analysis;
 use client::{Client, CLIENT_THREAD};
@@ -69,6 +71,11 @@ pub struct BenchArgs {
     /// Print the frames around every collision the simulator saw.
     #[arg(long)]
     pub show_collisions: bool,
+    /// The USB adapter the simulated bus sits behind (`native`, `ftdi[:MS]`,
+    /// `ch340`, `cp2102`, `ft232h[:MS]`); the bus is told the same. The
+    /// report gives each rate as a share of what that adapter allows.
+    #[arg(long, default_value = "native")]
+    pub adapter: String,
     /// Run this many buses at once, each with `--joints` joints on its own
     /// simulator and owner, after one bus carrying all of them: what a
     /// second adapter buys (per-joint rates, the ratio, the CPU).
@@ -215,6 +222,10 @@ fn several_buses(args: &BenchArgs) -> Result<bool, BenchError> {
     Ok(all)
 }
 
+fn adapter_of(args: &BenchArgs) -> Result<AdapterModel, BenchError> {
+    AdapterModel::parse(&args.adapter).map_err(BenchError::Setup)
+}
+
 /// What splitting the joints over two adapters must at least buy per joint.
 const MIN_SPLIT_GAIN: f64 = 1.95;
 
@@ -245,6 +256,8 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
     let share = |i: usize| cpu_share(&run.cpu[0], &run.cpu[1], s0, s1, i);
     Ok(Report {
         baud,
+        adapter: adapter_of(args)?,
+        turnaround: Duration::from_micros(args.turnaround_us),
         joints: ids.len(),
         rate_hz: args.rate_hz,
         warmup: Duration::from_secs_f64(args.warmup),
@@ -270,6 +283,8 @@ pub(crate) fn setup(
     let mut sim_cfg = SimConfig::new(ids.to_vec(), baud);
     sim_cfg.align_time = ALIGN;
     sim_cfg.turnaround = Duration::from_micros(args.turnaround_us);
+    let adapter = adapter_of(args)?;
+    sim_cfg.adapter = adapter;
     let sim = Simulator::spawn_pty(sim_cfg)?;
     if !args.no_rt {
         referee_realtime()?;
@@ -279,6 +294,7 @@ pub(crate) fn setup(
         .ok_or_else(|| BenchError::Setup("the simulator has no pty path".into()))?;
     let mut cfg = BusConfig::new("bench", path, baud);
     cfg.ids = ids.to_vec();
+    cfg.adapter = AdapterSetting::Fixed(adapter);
     cfg.timing.turnaround_us = args.turnaround_us;
     if args.no_rt {
         cfg.timing.rt_priority = 0;

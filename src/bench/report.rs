@@ -19,6 +19,10 @@ const MAX_DAEMON_CPU: f64 = 0.15;
 #[derive(Debug)]
 pub struct Report {
     pub baud: u32,
+    /// The adapter the bus sat behind, and the devices' turnaround: what
+    /// the bounds below follow from.
+    pub adapter: crate::sim::AdapterModel,
+    pub turnaround: Duration,
     pub joints: usize,
     pub rate_hz: u32,
     pub warmup: Duration,
@@ -122,6 +126,33 @@ impl Report {
         ]
     }
 
+    /// The cycle of two broadcasts and a poll this adapter allows (the
+    /// pipeline bound `T = P·⌈((B + 2)·tf + ta) / P⌉`, the wire alone on
+    /// native), and the measured rates as shares of what it gives: control
+    /// `1/T` updates/s per joint (two broadcasts carry all 16), telemetry
+    /// `1/(T·joints)` per joint.
+    fn bound_rows(&self) -> Vec<(&'static str, String)> {
+        let frame = Duration::from_secs_f64(200.0 / f64::from(self.baud));
+        let cycle = self.adapter.cycle_bound(frame, self.turnaround, 2);
+        let per_s = 1.0 / cycle.as_secs_f64().max(f64::EPSILON);
+        let a = &self.analysis;
+        let control = Analysis::min_rate(&a.control_hz);
+        let telemetry = Analysis::min_rate(&a.telemetry_hz);
+        let joints = self.joints.max(1) as f64;
+        vec![(
+            "against the adapter's bound",
+            format!(
+                "{}: cycle {:.0} µs -> control {:.0}/s, telemetry {:.1}/s per joint; measured control {:.2}, telemetry {:.2} of it",
+                self.adapter,
+                cycle.as_secs_f64() * 1e6,
+                per_s,
+                per_s / joints,
+                control / per_s,
+                telemetry / (per_s / joints),
+            ),
+        )]
+    }
+
     /// Where the wire time went, and how precise the referee was.
     fn context_rows(&self) -> Vec<(&'static str, String)> {
         let a = &self.analysis;
@@ -183,7 +214,8 @@ impl fmt::Display for Report {
             self.analysis.window.as_secs_f64(),
             self.warmup.as_secs_f64()
         )?;
-        for (label, value) in self.result_rows().into_iter().chain(self.context_rows()) {
+        let rows = self.result_rows().into_iter().chain(self.bound_rows());
+        for (label, value) in rows.chain(self.context_rows()) {
             writeln!(f, "  {label:<36}{value}")?;
         }
         for (what, ok) in self.checks() {

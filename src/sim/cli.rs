@@ -51,6 +51,10 @@ pub struct SimArgs {
     /// id, e.g. `1-8=2.0.8,9-16=2.0.1` (ids not named run 2.0.1).
     #[arg(long, value_name = "SPEC", default_value = "2.0.1")]
     pub firmware: String,
+    /// The USB adapter between the host and the wire: `native` (none),
+    /// `ftdi[:MS]` (latency timer, default 16), `ch340`, `cp2102`, `ft232h[:MS]`.
+    #[arg(long, value_name = "MODEL", default_value = "native")]
+    pub adapter: String,
     /// Seed of noise and fault dice.
     #[arg(long, default_value_t = super::config::DEFAULT_SEED)]
     pub seed: u64,
@@ -73,6 +77,7 @@ impl SimArgs {
         cfg.seed = self.seed;
         cfg.realtime = self.realtime;
         cfg.firmware = Firmware::parse(&self.firmware)?;
+        cfg.adapter = super::AdapterModel::parse(&self.adapter).map_err(SimError::BadAdapter)?;
         cfg.validate()?;
         Ok(cfg)
     }

@@ -9,6 +9,7 @@ use crate::protocol::{is_device_id, BaudLevel};
 pub use super::error::SimError;
 
 use super::firmware::Firmware;
+use crate::transport::adapter::AdapterModel;
 
 /// SPEC §1 leaves the turnaround undocumented; the simulator's default.
 pub(crate) const DEFAULT_TURNAROUND: Duration = Duration::from_micros(100);
@@ -47,6 +48,9 @@ pub struct SimConfig {
     /// The protocol revision each device's firmware implements (default:
     /// V2.0.1 for every device); see [`super::firmware`].
     pub firmware: Firmware,
+    /// The USB adapter between the host's tty and the wire (default:
+    /// native, none); see [`super::adapter`].
+    pub adapter: AdapterModel,
     /// Run the simulator thread under SCHED_FIFO if the system allows it:
     /// tighter delivery times on a busy machine. Off by default (it is a
     /// privilege, and a spinning real-time thread competes with everything).
@@ -67,6 +71,7 @@ impl SimConfig {
             log_capacity: DEFAULT_LOG_CAPACITY,
             seed: DEFAULT_SEED,
             firmware: Firmware::default(),
+            adapter: AdapterModel::Native,
             realtime: false,
         }
     }

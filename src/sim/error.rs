@@ -15,6 +15,8 @@ pub enum SimError {
     BadBaud(u32),
     #[error("bad firmware: {0}")]
     BadFirmware(String),
+    #[error("bad adapter: {0}")]
+    BadAdapter(String),
     #[error("state file {path}: {why}")]
     StateFile { path: PathBuf, why: String },
     #[error("pseudo-terminal: {0}")]

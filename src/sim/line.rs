@@ -24,6 +24,15 @@ pub(crate) trait Line: Send {
     fn path(&self) -> Option<&Path> {
         None
     }
+    /// When bytes held on their way to the host (an adapter model) are due
+    /// there; a plain line holds nothing.
+    fn next_release(&self) -> Option<std::time::Instant> {
+        None
+    }
+    /// Hands the host what is due by `now` (an adapter model).
+    fn flush_due(&mut self, _now: std::time::Instant) -> io::Result<()> {
+        Ok(())
+    }
 }
 
 /// The device end of an in-memory pipe.

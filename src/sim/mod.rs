@@ -62,6 +62,7 @@
 //! # Ok::<(), jointd::sim::SimError>(())
 //! ```
 
+pub(crate) mod adapter;
 pub(crate) mod busy;
 pub mod cli;
 pub(crate) mod config;
@@ -88,6 +89,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Instant;
 
+pub use crate::transport::adapter::AdapterModel;
 pub use config::{parse_ids, SimConfig, SimError};
 pub use faults::Fault;
 pub use firmware::Firmware;
@@ -143,7 +145,12 @@ impl SimHandle {
         line: Box<dyn Line>,
         device_path: Option<PathBuf>,
     ) -> Result<Self, SimError> {
-        let engine = Arc::new(Mutex::new(Engine::new(cfg, Instant::now())?));
+        let start = Instant::now();
+        let line: Box<dyn Line> = match cfg.adapter {
+            AdapterModel::Native => line,
+            model => Box::new(adapter::AdapterLine::new(line, model, start, cfg.seed)),
+        };
+        let engine = Arc::new(Mutex::new(Engine::new(cfg, start)?));
         let ctl = Arc::new(Control::default());
         let (e, c, rt) = (engine.clone(), ctl.clone(), cfg.realtime);
         let thread = std::thread::Builder::new()

@@ -134,14 +134,17 @@ impl Runner {
         };
         let can_read = !self.line.is_unplugged() && backlog < MAX_BACKLOG;
         let now = Instant::now();
-        let Some(due) = next else {
+        // An adapter model holds bytes for the host: their release is a
+        // delivery like the engine's.
+        let release = self.line.next_release();
+        let Some(due) = [next, release].into_iter().flatten().min() else {
             self.wait(now + MAX_IDLE, can_read);
             return;
         };
         // Only bytes due at the host need the spin; the engine's own events
         // carry their modelled instants, so running them a little late is harmless.
-        let spin_from = match delivery {
-            Some(d) if d == due => due.checked_sub(SPIN).unwrap_or(due),
+        let spin_from = match (delivery, release) {
+            (Some(d), _) | (_, Some(d)) if d == due => due.checked_sub(SPIN).unwrap_or(due),
             _ => due,
         };
         if now < spin_from {
@@ -183,6 +186,9 @@ impl Runner {
     }
 
     fn run_due(&mut self) {
+        if let Err(e) = self.line.flush_due(Instant::now()) {
+            tracing::debug!("simulator adapter release: {e}");
+        }
         let baud = self.line.host_baud();
         let mut engine = lock_engine(&self.engine);
         let out: Vec<Delivery> = engine.advance(Instant::now(), baud);

@@ -1,0 +1,298 @@
+//! A USB-RS485 adapter between the host's tty and the simulated wire: the
+//! line the runner sees delays bytes the way the chip and the USB bus do.
+//! The referee keeps judging the true wire: host bytes enter it when the
+//! adapter lets them out, device bytes leave it when the engine says.
+//!
+//! # The models (`jointd sim --adapter`, [`AdapterModel`])
+//! - `native`: no adapter; the runner uses the line as it is (byte for
+//!   byte the simulator without adapters).
+//! - `ftdi[:MS]` (FT232R/FT231X, USB full speed): the host's bytes go out
+//!   in the next 1 ms USB frame; received bytes wait in the chip until 62
+//!   are buffered (a 64-byte packet less the two status bytes) or the
+//!   latency timer (16 ms by default) has run since the first of them
+//!   arrived, then reach the host in the next frame. Source: FTDI
+//!   application note AN232B-04 "Data Throughput, Latency and
+//!   Handshaking" (the timer is read here as running from the first byte
+//!   buffered, the case of a short reply on an idle chip).
+//! - `ch340`, `cp2102` (full speed, no settable timer): received bytes reach
+//!   the host in the next 1 ms frame; host bytes go out in the next frame.
+//!   Source: WCH CH340 and Silicon Labs CP2102 data sheets (bulk endpoints
+//!   polled once per frame by the host controller).
+//! - `ft232h[:MS]` (USB high speed): as `ftdi` with 125 µs microframes
+//!   (FTDI FT232H data sheet; its latency timer works as on the FT232R).
+//!
+//! # Assumptions
+//! - The USB frame clock is not the host's: its phase is a fixed offset
+//!   from the simulator's seed, reproducible, and unknown to the daemon.
+//! - A host write reaches the wire whole in the frame after it was made
+//!   (bulk OUT of up to 19 × 64 bytes per full-speed frame: ample for a few
+//!   frames).
+//! - Nothing is lost or reordered; only held.
+
+use std::io;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use crate::transport::adapter::AdapterModel;
+
+use super::line::Line;
+
+/// Bytes an FTDI chip sends at once without waiting for its timer.
+const FTDI_PACKET_PAYLOAD: usize = 62;
+
+/// The USB (micro)frame clock: boundaries at `origin + k·period`.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct UsbClock {
+    origin: Instant,
+    period: Duration,
+}
+
+impl UsbClock {
+    /// A clock whose boundaries sit at `phase` (taken modulo the period)
+    /// after `start`.
+    pub(crate) fn new(start: Instant, period: Duration, phase: Duration) -> Self {
+        let phase_ns = phase.as_nanos() % period.as_nanos().max(1);
+        Self {
+            origin: start + Duration::from_nanos(u64::try_from(phase_ns).unwrap_or(0)),
+            period,
+        }
+    }
+
+    /// The first boundary strictly after `t`.
+    pub(crate) fn next_after(&self, t: Instant) -> Instant {
+        let p = self.period.as_nanos().max(1);
+        if t < self.origin {
+            return self.origin;
+        }
+        let since = t.duration_since(self.origin).as_nanos();
+        let k = since / p + 1;
+        self.origin + Duration::from_nanos(u64::try_from(k * p).unwrap_or(u64::MAX))
+    }
+}
+
+/// When the chip hands received bytes to the host.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RxRule {
+    timer: Option<Duration>,
+}
+
+impl RxRule {
+    pub(crate) fn of(model: AdapterModel) -> Self {
+        Self {
+            timer: model.latency_timer(),
+        }
+    }
+
+    /// The moment `held` bytes, the first of them received at `first_at`,
+    /// the last at `last_at`, reach the host.
+    pub(crate) fn release(
+        &self,
+        clock: &UsbClock,
+        held: usize,
+        first_at: Instant,
+        last_at: Instant,
+    ) -> Instant {
+        match self.timer {
+            Some(timer) if held < FTDI_PACKET_PAYLOAD => clock.next_after(first_at + timer),
+            _ => clock.next_after(last_at),
+        }
+    }
+}
+
+/// Bytes held in one direction, with the rule that lets them go.
+#[derive(Debug, Default)]
+struct Held {
+    bytes: Vec<u8>,
+    first_at: Option<Instant>,
+    release: Option<Instant>,
+}
+
+/// The runner's line seen through an adapter model.
+pub(crate) struct AdapterLine {
+    inner: Box<dyn Line>,
+    clock: UsbClock,
+    rx: RxRule,
+    /// Host bytes on their way to the wire.
+    to_wire: Held,
+    /// Device bytes waiting in the chip for the host.
+    to_host: Held,
+    /// Bytes read from the host and not yet on the wire.
+    scratch: Vec<u8>,
+}
+
+impl AdapterLine {
+    pub(crate) fn new(
+        inner: Box<dyn Line>,
+        model: AdapterModel,
+        start: Instant,
+        seed: u64,
+    ) -> Self {
+        let period = model.usb_frame().unwrap_or(Duration::from_millis(1));
+        // The frame phase: from the seed, reproducible, unknown to the host.
+        let phase = Duration::from_nanos(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) % 1_000_000);
+        Self {
+            inner,
+            clock: UsbClock::new(start, period, phase),
+            rx: RxRule::of(model),
+            to_wire: Held::default(),
+            to_host: Held::default(),
+            scratch: vec![0; 4096],
+        }
+    }
+
+    /// Hands the chip's held bytes to the host if their time has come.
+    fn flush_to_host(&mut self, now: Instant) -> io::Result<()> {
+        let Some(release) = self.to_host.release else {
+            return Ok(());
+        };
+        if now < release {
+            return Ok(());
+        }
+        let bytes = std::mem::take(&mut self.to_host.bytes);
+        self.to_host.first_at = None;
+        self.to_host.release = None;
+        // The host side of a pty takes what fits; the runner counts no overrun here.
+        self.inner.write(&bytes).map(drop)
+    }
+}
+
+impl Line for AdapterLine {
+    /// Host bytes come out when the adapter has put them on the wire: at
+    /// the frame after they were written.
+    fn read_timeout(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let now = Instant::now();
+            self.flush_to_host(now)?;
+            if self.to_wire.release.is_some_and(|r| r <= now) {
+                let n = self.to_wire.bytes.len().min(buf.len());
+                buf[..n].copy_from_slice(&self.to_wire.bytes[..n]);
+                self.to_wire.bytes.drain(..n);
+                if self.to_wire.bytes.is_empty() {
+                    self.to_wire.release = None;
+                    self.to_wire.first_at = None;
+                }
+                return Ok(n);
+            }
+            // Wake for whichever comes first: the deadline, bytes on their
+            // way to the wire or to the host.
+            let wake = [Some(deadline), self.to_wire.release, self.to_host.release]
+                .into_iter()
+                .flatten()
+                .min()
+                .unwrap_or(deadline);
+            let n = self
+                .inner
+                .read_timeout(&mut self.scratch, wake.saturating_duration_since(now))?;
+            if n > 0 {
+                let at = Instant::now();
+                self.to_wire.bytes.extend_from_slice(&self.scratch[..n]);
+                if self.to_wire.release.is_none() {
+                    self.to_wire.first_at = Some(at);
+                    self.to_wire.release = Some(self.clock.next_after(at));
+                }
+                continue;
+            }
+            if Instant::now() >= deadline {
+                self.flush_to_host(Instant::now())?;
+                return Ok(0);
+            }
+        }
+    }
+
+    /// Device bytes go into the chip; they reach the host by the model's rule.
+    fn write(&mut self, bytes: &[u8]) -> io::Result<usize> {
+        let now = Instant::now();
+        let first = *self.to_host.first_at.get_or_insert(now);
+        self.to_host.bytes.extend_from_slice(bytes);
+        self.to_host.release =
+            Some(
+                self.rx
+                    .release(&self.clock, self.to_host.bytes.len(), first, now),
+            );
+        self.flush_to_host(now)?;
+        Ok(bytes.len())
+    }
+
+    fn host_baud(&self) -> Option<u32> {
+        self.inner.host_baud()
+    }
+
+    fn unplug(&mut self) -> io::Result<()> {
+        self.to_wire = Held::default();
+        self.to_host = Held::default();
+        self.inner.unplug()
+    }
+
+    fn replug(&mut self) -> io::Result<()> {
+        self.inner.replug()
+    }
+
+    fn is_unplugged(&self) -> bool {
+        self.inner.is_unplugged()
+    }
+
+    fn path(&self) -> Option<&Path> {
+        self.inner.path()
+    }
+
+    fn next_release(&self) -> Option<Instant> {
+        self.to_host.release
+    }
+
+    fn flush_due(&mut self, now: Instant) -> io::Result<()> {
+        self.flush_to_host(now)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ms(n: u64) -> Duration {
+        Duration::from_millis(n)
+    }
+
+    #[test]
+    fn frame_boundaries_follow_the_period_and_phase() {
+        let t0 = Instant::now();
+        let c = UsbClock::new(t0, ms(1), Duration::from_micros(300));
+        assert_eq!(c.next_after(t0), t0 + Duration::from_micros(300));
+        assert_eq!(
+            c.next_after(t0 + Duration::from_micros(300)),
+            t0 + Duration::from_micros(1300)
+        );
+        assert_eq!(
+            c.next_after(t0 + Duration::from_micros(1299)),
+            t0 + Duration::from_micros(1300)
+        );
+        let hs = UsbClock::new(t0, Duration::from_micros(125), Duration::ZERO);
+        assert_eq!(
+            hs.next_after(t0 + Duration::from_micros(130)),
+            t0 + Duration::from_micros(250)
+        );
+    }
+
+    #[test]
+    fn ftdi_holds_a_short_reply_for_its_timer_and_a_full_packet_not() {
+        let t0 = Instant::now();
+        let c = UsbClock::new(t0, ms(1), Duration::ZERO);
+        let ftdi = RxRule::of(AdapterModel::Ftdi { latency_ms: 16 });
+        let got = t0 + Duration::from_micros(2500);
+        // A 20-byte reply: first byte + 16 ms, then the next frame.
+        assert_eq!(ftdi.release(&c, 20, got, got), t0 + ms(19));
+        // 62 bytes: the next frame.
+        assert_eq!(ftdi.release(&c, 62, got, got), t0 + ms(3));
+        let ftdi1 = RxRule::of(AdapterModel::Ftdi { latency_ms: 1 });
+        assert_eq!(ftdi1.release(&c, 20, got, got), t0 + ms(4));
+        // No timer: the next frame after the last byte.
+        let ch340 = RxRule::of(AdapterModel::Ch340);
+        assert_eq!(ch340.release(&c, 20, got, got), t0 + ms(3));
+        let hs = UsbClock::new(t0, Duration::from_micros(125), Duration::ZERO);
+        let ft232h = RxRule::of(AdapterModel::Ft232h { latency_ms: 1 });
+        assert_eq!(
+            ft232h.release(&hs, 20, got, got),
+            t0 + Duration::from_micros(3625)
+        );
+    }
+}
