@@ -118,6 +118,7 @@ pub(crate) struct AdapterLine {
     to_host: Held,
     /// Bytes read from the host and not yet on the wire.
     scratch: Vec<u8>,
+    read_at: Option<Instant>,
 }
 
 impl AdapterLine {
@@ -137,6 +138,7 @@ impl AdapterLine {
             to_wire: Held::default(),
             to_host: Held::default(),
             scratch: vec![0; 4096],
+            read_at: None,
         }
     }
 
@@ -164,7 +166,9 @@ impl Line for AdapterLine {
         loop {
             let now = Instant::now();
             self.flush_to_host(now)?;
-            if self.to_wire.release.is_some_and(|r| r <= now) {
+            if let Some(release) = self.to_wire.release.filter(|r| *r <= now) {
+                // On the wire at the frame boundary, not when this thread got here.
+                self.read_at = Some(release);
                 let n = self.to_wire.bytes.len().min(buf.len());
                 buf[..n].copy_from_slice(&self.to_wire.bytes[..n]);
                 self.to_wire.bytes.drain(..n);
@@ -234,6 +238,10 @@ impl Line for AdapterLine {
 
     fn path(&self) -> Option<&Path> {
         self.inner.path()
+    }
+
+    fn take_read_at(&mut self) -> Option<Instant> {
+        self.read_at.take()
     }
 
     fn next_release(&self) -> Option<Instant> {

@@ -33,6 +33,12 @@ pub(crate) trait Line: Send {
     fn flush_due(&mut self, _now: std::time::Instant) -> io::Result<()> {
         Ok(())
     }
+    /// When the bytes of the last read entered the wire, if the line knows
+    /// better than the moment they were read (an adapter releases them at a
+    /// USB frame boundary, whenever the runner gets to them).
+    fn take_read_at(&mut self) -> Option<std::time::Instant> {
+        None
+    }
 }
 
 /// The device end of an in-memory pipe.

@@ -174,7 +174,7 @@ impl Runner {
         match self.line.read_timeout(&mut self.buf, timeout) {
             Ok(0) => {}
             Ok(n) => {
-                let at = Instant::now();
+                let at = self.line.take_read_at().unwrap_or_else(Instant::now);
                 let baud = self.line.host_baud();
                 lock_engine(&self.engine).on_host_bytes(&self.buf[..n], at, baud);
             }
