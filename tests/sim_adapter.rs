@@ -44,7 +44,7 @@ fn stream_for_5_s_behind(model: AdapterModel) {
     let ids: Vec<u8> = (1..=16).collect();
     let mut sim_cfg = sim_config(&ids, BAUD);
     sim_cfg.adapter = model;
-    let rig = rig_with(sim_cfg, |c| {
+    let rig = rig_on_memory(sim_cfg, |c| {
         c.ids = ids.clone();
         c.adapter = AdapterSetting::Fixed(model);
     });

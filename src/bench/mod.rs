@@ -268,6 +268,7 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
         cpu_sim: share(1),
         cpu_client: share(2),
         daemon: snapshot.rates.clone(),
+        referee_undated: s1.host_reads_undated.saturating_sub(s0.host_reads_undated),
         referee_late_us: [0.5, 0.99]
             .map(|p| analysis::quantile_i64(&referee_late_ns, p) as f64 / 1e3),
     })

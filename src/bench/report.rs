@@ -38,6 +38,9 @@ pub struct Report {
     /// How late the simulator delivered replies against its own model, µs
     /// (p50, p99): the referee's precision on this machine.
     pub referee_late_us: [f64; 2],
+    /// Host writes the adapter model found waiting after a stall of the
+    /// simulator's thread (dated to the earliest they may have been written).
+    pub referee_undated: u64,
 }
 
 impl Report {
@@ -184,6 +187,13 @@ impl Report {
                 format!(
                     "p50 {:.1} µs late, p99 {:.1} µs late",
                     self.referee_late_us[0], self.referee_late_us[1]
+                ),
+            ),
+            (
+                "host writes the referee found waiting",
+                format!(
+                    "{} (after a stall of its thread of over 100 µs)",
+                    self.referee_undated
                 ),
             ),
             (

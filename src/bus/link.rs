@@ -8,6 +8,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
 use crate::protocol::{Command, FrameBytes, Message, Reply, StreamDecoder, FRAME_LEN};
+use crate::transport::adapter::{AdapterInfo, AdapterModel};
 use crate::transport::tty::{PortNote, PortSetup, TtyPort};
 use crate::transport::Transport;
 
@@ -99,7 +100,12 @@ impl Link {
             None => {
                 let port = self.port.as_mut().ok_or_else(not_open)?;
                 port.read_timeout(&mut self.buf, std::time::Duration::ZERO)?;
-                Vec::new()
+                // No tty to look at: the config's adapter, if it names one,
+                // still says how the bytes travel.
+                vec![PortNote::Adapter(AdapterInfo {
+                    model: AdapterModel::Native,
+                    found_by: "a transport handed in, no tty to look at".into(),
+                })]
             }
         };
         if let Some(port) = self.port.as_mut() {

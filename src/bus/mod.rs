@@ -21,6 +21,8 @@
 //!
 //! The pure parts the scheduler is made of:
 //! - [`wire`]: the line model: when frames leave, when a reply is due or overdue.
+//! - [`usb_pipeline`]: behind a USB adapter, the frame clock learnt from
+//!   arrivals and the polls written blind (replies in flight).
 //! - [`poll`]: control budget and poll plan.
 //! - [`coalesce`]: pending setpoints → cheapest correct frames.
 //! - [`registry`]: per-device state, online/offline, rates.
@@ -46,6 +48,7 @@ pub(crate) mod registry;
 pub(crate) mod scheduler;
 pub(crate) mod setpoints;
 pub(crate) mod state;
+pub(crate) mod usb_pipeline;
 pub(crate) mod verify;
 pub(crate) mod wire;
 

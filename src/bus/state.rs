@@ -163,6 +163,13 @@ pub struct BusCounters {
     /// Control frames written in front of a poll, in the same write (one USB
     /// transfer), on a latent adapter.
     pub frames_tx_batched: u64,
+    /// Polls written blind behind a USB adapter, timed by its frame clock:
+    /// before the previous reply reached the host (matched when it comes).
+    pub polls_pipelined: u64,
+    /// Writes that came too close to a USB frame boundary to know which
+    /// frame took them; the wire was held for the later one (a host that
+    /// woke late, not a collision).
+    pub usb_writes_ambiguous: u64,
 }
 
 /// Latency histograms since start (`/metrics`).
@@ -209,6 +216,8 @@ pub struct BusSnapshot {
     pub counters: BusCounters,
     /// Depth of the request queue when published.
     pub queue_depth: usize,
+    /// Polls written blind whose reply is still in the adapter.
+    pub polls_in_flight: usize,
     pub published_at: Instant,
     pub published_wall: SystemTime,
     /// Rates over the last statistics window.
@@ -235,6 +244,7 @@ impl BusSnapshot {
             devices: BTreeMap::new(),
             counters: BusCounters::default(),
             queue_depth: 0,
+            polls_in_flight: 0,
             published_at: Instant::now(),
             published_wall: SystemTime::now(),
             rates: BusRates::default(),

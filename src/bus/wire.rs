@@ -151,6 +151,12 @@ impl WireClock {
         self.reply_deadline(now) - now
     }
 
+    /// A reply will follow a request ending at `request_end` (written
+    /// blind, not waited for): the line is held until its last byte.
+    pub(crate) fn reply_on_wire(&mut self, request_end: Instant) {
+        self.free_at = self.free_at.max(request_end + self.turnaround + self.frame);
+    }
+
     /// A reply due at `due` arrived at `arrived`.
     pub(crate) fn observe_reply(&mut self, due: Instant, arrived: Instant) {
         let late = arrived.saturating_duration_since(due);

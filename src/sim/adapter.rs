@@ -28,7 +28,19 @@
 //!   (bulk OUT of up to 19 × 64 bytes per full-speed frame: ample for a few
 //!   frames).
 //! - Nothing is lost or reordered; only held.
+//! - When a host write was made is known only as well as this thread was
+//!   watching the line: a read that blocked and woke on the bytes dates
+//!   them to its wake-up; bytes found waiting after the thread was busy
+//!   elsewhere (a stall of the machine) were written at some instant since
+//!   it last saw the line empty. They are dated to the earliest of those
+//!   instants: the frame the host aimed at if it wrote in time, and the
+//!   earlier of two frames if it wrote too early, which is the mistake a
+//!   collision should show. An in-memory line says when each write was
+//!   made, and that is used instead. Such reads are counted
+//!   ([`SimStats::host_reads_undated`](super::stats::SimStats)): a run where
+//!   they coincide with collisions was judged with less precision.
 
+use std::collections::VecDeque;
 use std::io;
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -39,6 +51,12 @@ use super::line::Line;
 
 /// Bytes an FTDI chip sends at once without waiting for its timer.
 const FTDI_PACKET_PAYLOAD: usize = 62;
+/// A read that returns sooner than this after it was called did not wait:
+/// its bytes were already there.
+const READ_BLOCKED: Duration = Duration::from_micros(20);
+/// Bytes found waiting after the line went unwatched this long are
+/// counted as undated (their stamp may be off by that much).
+const UNDATED_AFTER: Duration = Duration::from_micros(100);
 
 /// The USB (micro)frame clock: boundaries at `origin + k·period`.
 #[derive(Debug, Clone, Copy)]
@@ -112,13 +130,19 @@ pub(crate) struct AdapterLine {
     inner: Box<dyn Line>,
     clock: UsbClock,
     rx: RxRule,
-    /// Host bytes on their way to the wire.
-    to_wire: Held,
+    /// Host bytes on their way to the wire, by the USB frame that takes
+    /// them (bytes written after a frame began wait for the next one, even
+    /// if this thread gets to them late).
+    to_wire: VecDeque<(Instant, Vec<u8>)>,
     /// Device bytes waiting in the chip for the host.
     to_host: Held,
     /// Bytes read from the host and not yet on the wire.
     scratch: Vec<u8>,
     read_at: Option<Instant>,
+    /// The last instant the host's side was seen empty.
+    seen_empty: Option<Instant>,
+    /// Reads whose bytes had waited unwatched (see the module doc).
+    undated: u64,
 }
 
 impl AdapterLine {
@@ -135,11 +159,30 @@ impl AdapterLine {
             inner,
             clock: UsbClock::new(start, period, phase),
             rx: RxRule::of(model),
-            to_wire: Held::default(),
+            to_wire: VecDeque::new(),
             to_host: Held::default(),
             scratch: vec![0; 4096],
             read_at: None,
+            seen_empty: None,
+            undated: 0,
         }
+    }
+
+    /// When host bytes read by a call made at `called` that returned at
+    /// `returned` were written: at the wake-up if the call waited for them,
+    /// else the earliest instant since the line was last seen empty.
+    fn written_at(&mut self, called: Instant, returned: Instant) -> Instant {
+        let seen_empty = self.seen_empty.replace(returned);
+        if returned.duration_since(called) >= READ_BLOCKED {
+            return returned;
+        }
+        let Some(empty) = seen_empty else {
+            return returned;
+        };
+        if returned.duration_since(empty) > UNDATED_AFTER {
+            self.undated += 1;
+        }
+        empty
     }
 
     /// Hands the chip's held bytes to the host if their time has come.
@@ -166,37 +209,49 @@ impl Line for AdapterLine {
         loop {
             let now = Instant::now();
             self.flush_to_host(now)?;
-            if let Some(release) = self.to_wire.release.filter(|r| *r <= now) {
+            if let Some((release, bytes)) = self.to_wire.front_mut().filter(|(r, _)| *r <= now) {
                 // On the wire at the frame boundary, not when this thread got here.
-                self.read_at = Some(release);
-                let n = self.to_wire.bytes.len().min(buf.len());
-                buf[..n].copy_from_slice(&self.to_wire.bytes[..n]);
-                self.to_wire.bytes.drain(..n);
-                if self.to_wire.bytes.is_empty() {
-                    self.to_wire.release = None;
-                    self.to_wire.first_at = None;
+                self.read_at = Some(*release);
+                let n = bytes.len().min(buf.len());
+                buf[..n].copy_from_slice(&bytes[..n]);
+                bytes.drain(..n);
+                if bytes.is_empty() {
+                    self.to_wire.pop_front();
                 }
                 return Ok(n);
             }
             // Wake for whichever comes first: the deadline, bytes on their
             // way to the wire or to the host.
-            let wake = [Some(deadline), self.to_wire.release, self.to_host.release]
+            let to_wire = self.to_wire.front().map(|(r, _)| *r);
+            let wake = [Some(deadline), to_wire, self.to_host.release]
                 .into_iter()
                 .flatten()
                 .min()
                 .unwrap_or(deadline);
+            let called = Instant::now();
             let n = self
                 .inner
                 .read_timeout(&mut self.scratch, wake.saturating_duration_since(now))?;
+            let returned = Instant::now();
             if n > 0 {
-                let at = Instant::now();
-                self.to_wire.bytes.extend_from_slice(&self.scratch[..n]);
-                if self.to_wire.release.is_none() {
-                    self.to_wire.first_at = Some(at);
-                    self.to_wire.release = Some(self.clock.next_after(at));
+                let at = match self.inner.take_written_at() {
+                    Some(written) => written,
+                    None => self.written_at(called, returned),
+                };
+                let release = self.clock.next_after(at);
+                match self.to_wire.back_mut() {
+                    // Written before that frame began: it takes them too.
+                    Some((r, bytes)) if *r == release => {
+                        bytes.extend_from_slice(&self.scratch[..n]);
+                    }
+                    _ => {
+                        self.to_wire
+                            .push_back((release, self.scratch[..n].to_vec()));
+                    }
                 }
                 continue;
             }
+            self.seen_empty = Some(returned);
             if Instant::now() >= deadline {
                 self.flush_to_host(Instant::now())?;
                 return Ok(0);
@@ -223,7 +278,7 @@ impl Line for AdapterLine {
     }
 
     fn unplug(&mut self) -> io::Result<()> {
-        self.to_wire = Held::default();
+        self.to_wire.clear();
         self.to_host = Held::default();
         self.inner.unplug()
     }
@@ -242,6 +297,10 @@ impl Line for AdapterLine {
 
     fn take_read_at(&mut self) -> Option<Instant> {
         self.read_at.take()
+    }
+
+    fn take_undated_reads(&mut self) -> u64 {
+        std::mem::take(&mut self.undated)
     }
 
     fn next_release(&self) -> Option<Instant> {

@@ -370,6 +370,10 @@ impl Engine {
         self.delivery_errors_ns.iter().copied().collect()
     }
 
+    pub(crate) fn count_undated_reads(&mut self, reads: u64) {
+        self.stats.host_reads_undated += reads;
+    }
+
     pub(crate) fn count_overrun(&mut self, bytes: usize) {
         self.stats.host_overrun_bytes += bytes as u64;
     }

@@ -39,6 +39,17 @@ pub(crate) trait Line: Send {
     fn take_read_at(&mut self) -> Option<std::time::Instant> {
         None
     }
+    /// Reads whose bytes had waited while the runner was not watching the
+    /// line (dated to the earliest instant they may have been written)
+    /// since the last call.
+    fn take_undated_reads(&mut self) -> u64 {
+        0
+    }
+    /// When the host wrote the first byte of the last read, if the line
+    /// knows (an in-memory pipe does; a pty's kernel may pass bytes on late).
+    fn take_written_at(&mut self) -> Option<std::time::Instant> {
+        None
+    }
 }
 
 /// The device end of an in-memory pipe.
@@ -62,6 +73,10 @@ impl Line for MemoryLine {
 
     fn write(&mut self, bytes: &[u8]) -> io::Result<usize> {
         self.port.write_all(bytes).map(|()| bytes.len())
+    }
+
+    fn take_written_at(&mut self) -> Option<std::time::Instant> {
+        self.port.take_written_at()
     }
 
     fn host_baud(&self) -> Option<u32> {

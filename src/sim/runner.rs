@@ -176,7 +176,10 @@ impl Runner {
             Ok(n) => {
                 let at = self.line.take_read_at().unwrap_or_else(Instant::now);
                 let baud = self.line.host_baud();
-                lock_engine(&self.engine).on_host_bytes(&self.buf[..n], at, baud);
+                let undated = self.line.take_undated_reads();
+                let mut engine = lock_engine(&self.engine);
+                engine.count_undated_reads(undated);
+                engine.on_host_bytes(&self.buf[..n], at, baud);
             }
             Err(e) => {
                 tracing::debug!("simulator read: {e}");

@@ -75,6 +75,10 @@ pub struct SimStats {
     pub corrupted_replies: u64,
     /// Reply bytes the host was not reading fast enough to take.
     pub host_overrun_bytes: u64,
+    /// Host writes an adapter model found waiting after the simulator's
+    /// thread had not watched the line for over 100 µs (a stall): dated to
+    /// the earliest instant they may have been written.
+    pub host_reads_undated: u64,
     /// The line is unplugged right now.
     pub unplugged: bool,
 }
@@ -99,6 +103,7 @@ impl SimStats {
             missed_control_frames: 0,
             corrupted_replies: 0,
             host_overrun_bytes: 0,
+            host_reads_undated: 0,
             unplugged: false,
         }
     }

@@ -14,8 +14,23 @@ use super::Transport;
 /// One direction of the pipe.
 #[derive(Default)]
 struct Channel {
-    bytes: Mutex<VecDeque<u8>>,
+    bytes: Mutex<Queue>,
     ready: Condvar,
+}
+
+/// The bytes in one direction, and when each write of them was made
+/// (its instant and how many of its bytes are still unread).
+#[derive(Default)]
+struct Queue {
+    bytes: VecDeque<u8>,
+    writes: VecDeque<(Instant, usize)>,
+}
+
+impl Queue {
+    fn clear(&mut self) {
+        self.bytes.clear();
+        self.writes.clear();
+    }
 }
 
 /// State both ends see.
@@ -30,6 +45,8 @@ struct Line {
 pub struct MemoryPort {
     line: Arc<Line>,
     is_host: bool,
+    /// When the first byte of the last read was written by the other end.
+    last_written_at: Option<Instant>,
 }
 
 /// Makes a line at `baud`: `(host end, device end)`.
@@ -43,17 +60,19 @@ pub fn pair(baud: u32) -> (MemoryPort, MemoryPort) {
     let host = MemoryPort {
         line: line.clone(),
         is_host: true,
+        last_written_at: None,
     };
     let device = MemoryPort {
         line,
         is_host: false,
+        last_written_at: None,
     };
     (host, device)
 }
 
 /// Lock a channel; a poisoned lock only means another thread panicked while
 /// holding plain bytes, which stay usable.
-fn lock(ch: &Channel) -> MutexGuard<'_, VecDeque<u8>> {
+fn lock(ch: &Channel) -> MutexGuard<'_, Queue> {
     ch.bytes.lock().unwrap_or_else(|p| p.into_inner())
 }
 
@@ -90,6 +109,12 @@ impl MemoryPort {
     pub fn is_hung_up(&self) -> bool {
         self.line.hung_up.load(Ordering::SeqCst)
     }
+
+    /// When the other end wrote the first byte of the last read: a pipe in
+    /// memory knows, unlike a tty, whose kernel may pass bytes on late.
+    pub fn take_written_at(&mut self) -> Option<Instant> {
+        self.last_written_at.take()
+    }
 }
 
 impl Transport for MemoryPort {
@@ -97,24 +122,41 @@ impl Transport for MemoryPort {
         if self.is_hung_up() {
             return Err(hangup_error());
         }
+        if bytes.is_empty() {
+            return Ok(());
+        }
         let ch = self.outgoing();
-        lock(ch).extend(bytes);
+        let mut q = lock(ch);
+        q.writes.push_back((Instant::now(), bytes.len()));
+        q.bytes.extend(bytes);
+        drop(q);
         ch.ready.notify_all();
         Ok(())
     }
 
     fn read_timeout(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
         let deadline = Instant::now() + timeout;
-        let ch = self.incoming();
+        let line = self.line.clone();
+        let ch = if self.is_host {
+            &line.to_host
+        } else {
+            &line.to_device
+        };
         let mut q = lock(ch);
         loop {
             if self.is_hung_up() {
                 return Err(hangup_error());
             }
-            if !q.is_empty() {
-                let n = buf.len().min(q.len());
-                for (dst, src) in buf.iter_mut().zip(q.drain(..n)) {
+            if let Some(&(written_at, left)) = q.writes.front() {
+                // One write at a time, so each read has one instant.
+                let n = buf.len().min(left).min(q.bytes.len());
+                for (dst, src) in buf.iter_mut().zip(q.bytes.drain(..n)) {
                     *dst = src;
+                }
+                self.last_written_at = Some(written_at);
+                match q.writes.front_mut() {
+                    Some(front) if front.1 > n => front.1 -= n,
+                    _ => drop(q.writes.pop_front()),
                 }
                 return Ok(n);
             }
@@ -156,6 +198,24 @@ impl std::fmt::Debug for MemoryPort {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn each_read_takes_one_write_and_says_when_it_was_made() {
+        let (mut host, mut dev) = pair(500_000);
+        let before = Instant::now();
+        host.write_all(&[1, 2]).unwrap();
+        std::thread::sleep(Duration::from_millis(2));
+        let between = Instant::now();
+        host.write_all(&[3]).unwrap();
+        let mut buf = [0u8; 8];
+        assert_eq!(dev.read_timeout(&mut buf, Duration::ZERO).unwrap(), 2);
+        let first = dev.take_written_at().expect("an instant");
+        assert!(first >= before && first < between);
+        assert_eq!(dev.read_timeout(&mut buf, Duration::ZERO).unwrap(), 1);
+        assert_eq!(buf[0], 3);
+        assert!(dev.take_written_at().expect("an instant") >= between);
+        assert_eq!(dev.take_written_at(), None, "taken once");
+    }
 
     #[test]
     fn bytes_cross_and_baud_is_shared() {

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use jointd::bus::firmware::FirmwareSetting;
 use jointd::bus::handle::BusEvent;
-use jointd::bus::{spawn_bus, BusConfig, BusHandle, BusSnapshot, Setpoint, Targets};
+use jointd::bus::{spawn_bus, spawn_bus_on, BusConfig, BusHandle, BusSnapshot, Setpoint, Targets};
 use jointd::protocol::status::fsm;
 use jointd::sim::{SimConfig, SimHandle, Simulator, WireFrame};
 
@@ -36,6 +36,26 @@ pub fn sim_config(ids: &[u8], baud: u32) -> SimConfig {
 pub fn rig_with(sim_cfg: SimConfig, tune: impl FnOnce(&mut BusConfig)) -> Rig {
     let sim = Simulator::spawn_pty(sim_cfg.clone()).expect("spawn simulator");
     bus_on(sim, sim_cfg.baud, tune)
+}
+
+/// Like [`rig_with`], on an in-memory pipe instead of a pty: the
+/// simulator knows when each host write was made, where a pty's kernel
+/// worker may pass bytes on milliseconds late on a loaded machine (a delay
+/// a USB-serial driver, which submits the write at once, does not add).
+/// For tests that judge the timing of writes on the true wire.
+pub fn rig_on_memory(sim_cfg: SimConfig, tune: impl FnOnce(&mut BusConfig)) -> Rig {
+    let (sim, host) = Simulator::spawn_memory(sim_cfg.clone()).expect("spawn simulator");
+    let mut cfg = BusConfig::new("test", "memory", sim_cfg.baud);
+    cfg.scan_last = sim.devices().iter().map(|d| d.id).max().unwrap_or(1);
+    cfg.timing.reply_margin_us = TEST_REPLY_MARGIN_US;
+    firmware_as_configured(&mut cfg, &sim);
+    tune(&mut cfg);
+    let (bus, thread) = spawn_bus_on(cfg, Box::new(host)).expect("spawn bus");
+    Rig {
+        sim,
+        bus,
+        thread: Some(thread),
+    }
 }
 
 /// Like [`rig_with`], but the bus starts only after every device has

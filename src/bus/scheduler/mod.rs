@@ -31,6 +31,7 @@ use crate::bus::poll::{ControlBudget, PollPlanner};
 use crate::bus::registry::Registry;
 use crate::bus::setpoints::SetpointStore;
 use crate::bus::state::{BusEvent, WireAck};
+use crate::bus::usb_pipeline::{Inflight, UsbPipeline};
 use crate::bus::wire::{ReplyWindow, Want, WireClock};
 use crate::protocol::params::Revision;
 use crate::protocol::InfoBlock;
@@ -144,6 +145,11 @@ pub(crate) struct Scheduler {
     events: Vec<BusEvent>,
     /// Setpoints dropped for ids nobody answers to, not yet counted.
     dropped: u64,
+    /// Behind a latent (USB) adapter: the frame clock and the polls
+    /// written blind (see [`crate::bus::usb_pipeline`]).
+    pipeline: Option<UsbPipeline>,
+    /// Writes that came too close to a USB frame boundary, not yet counted.
+    ambiguous_writes: u64,
 }
 
 impl Scheduler {
@@ -174,6 +180,8 @@ impl Scheduler {
             overdue: None,
             events: Vec::new(),
             dropped: 0,
+            pipeline: None,
+            ambiguous_writes: 0,
         }
     }
 
@@ -189,11 +197,14 @@ impl Scheduler {
                 at: self.reopen.next_open(),
             };
         }
-        let ready = self.clock.write_at().max(self.reopen.quiet_until());
+        let ready = self.write_at(now).max(self.reopen.quiet_until());
         if now < ready {
             return Slot::Listen { until: ready };
         }
         if let Some(slot) = self.estop_slot(work) {
+            return slot;
+        }
+        if let Some(slot) = self.drain_first(now, work) {
             return slot;
         }
         if !self.release.is_empty() {
@@ -220,6 +231,42 @@ impl Scheduler {
             }
         }
         self.wire_slot(now, work.setpoints)
+    }
+
+    /// When the next frame may be handed to the port: a little before the
+    /// line frees; behind a USB adapter whose frame clock is known, in the
+    /// middle of the USB frame before the boundary the line allows.
+    /// Behind one whose clock is not known yet, once the line is free: a
+    /// write made earlier could leave while a reply is still on the wire.
+    pub(crate) fn write_at(&self, now: Instant) -> Instant {
+        match &self.pipeline {
+            Some(pipeline) if pipeline.active() => pipeline.write_at(self.clock.free_at(), now),
+            Some(_) => self.clock.free_at(),
+            None => self.clock.write_at(),
+        }
+    }
+
+    /// With polls in flight, a one-shot request, a scan, a release or a
+    /// probe waits for them (their replies, or their deadlines): those
+    /// transactions wait for each reply, and a reply still in the adapter
+    /// must not be taken for theirs. An e-stop does not wait.
+    fn drain_first(&self, now: Instant, work: &Work<'_>) -> Option<Slot> {
+        let deadline = self.pipeline.as_ref()?.next_deadline()?;
+        let other_work = work.request_queued
+            || self.needs_scan
+            || !self.release.is_empty()
+            || (!self.probed_last && self.probe_wanted());
+        other_work.then(|| Slot::Listen {
+            until: deadline.min(now + IDLE_TICK),
+        })
+    }
+
+    /// True when an online device's revision is still to be asked.
+    fn probe_wanted(&self) -> bool {
+        self.reg
+            .firmware_unknown()
+            .into_iter()
+            .any(|id| self.firmware.for_id(id) == FirmwareSetting::Auto)
     }
 
     /// Records the configured revision of devices the config names, and
@@ -256,6 +303,13 @@ impl Scheduler {
     /// A prepared frame is good for this decision only, and only if no
     /// setpoint came in since it was planned.
     fn wire_slot(&mut self, now: Instant, store: &SetpointStore) -> Slot {
+        // Behind a USB adapter every write carries a poll (with the control
+        // frames in front), whether it is timed by the frame clock or waits
+        // for its reply: a control frame alone costs a whole USB round trip,
+        // and without replies the frame clock is never learnt.
+        if self.pipeline.is_some() {
+            return self.pipelined_slot(now, store);
+        }
         if let Some((frame, seq)) = self.control.take_prepared() {
             if self.budget.allows(now) {
                 if seq == store.latest_seq() {
@@ -293,6 +347,73 @@ impl Scheduler {
                 until: now + IDLE_TICK,
             },
         }
+    }
+
+    /// Behind a USB adapter (the write time was waited for in
+    /// [`Self::next`]): one transfer a cycle, the pending control frames and
+    /// the next poll; its reply is left in flight once the frame clock is
+    /// known, waited for until then.
+    fn pipelined_slot(&mut self, now: Instant, store: &SetpointStore) -> Slot {
+        let timeout = self.clock.reply_timeout(now);
+        if let Some(poll) = self.planner.next(self.reg.poll_states(), now, timeout) {
+            return Slot::Batch {
+                control: self.batch_control(store),
+                dev_id: poll.dev_id,
+                block: poll.block,
+            };
+        }
+        match self.plan_control(now, store) {
+            Some(frame) => Slot::Control(frame),
+            None => Slot::Listen {
+                until: now + IDLE_TICK,
+            },
+        }
+    }
+
+    /// True when polls are written blind, timed by the USB frame clock.
+    pub(crate) fn pipelining(&self) -> bool {
+        self.pipeline.as_ref().is_some_and(UsbPipeline::active)
+    }
+
+    /// A reply came out of the port at `at`: behind a USB adapter, one
+    /// more sample of the frame clock.
+    pub(crate) fn arrival(&mut self, at: Instant) {
+        if let Some(pipeline) = self.pipeline.as_mut() {
+            pipeline.arrival(at);
+        }
+    }
+
+    /// A poll written blind (its request's last byte due on the wire at
+    /// `end`): its reply is matched when it comes; the line is held for it.
+    /// `handed` is when the write was handed to the port.
+    pub(crate) fn track(&mut self, want: Want, end: Instant, handed: Instant) {
+        let window = self.clock.reply_window(end);
+        self.clock.reply_on_wire(end);
+        if let Some(pipeline) = self.pipeline.as_mut() {
+            pipeline.track(want, window, handed);
+        }
+    }
+
+    /// The poll in flight `reply` answers, taken out.
+    pub(crate) fn take_inflight(&mut self, reply: &crate::protocol::Reply) -> Option<Inflight> {
+        let want = Want {
+            dev_id: reply.dev_id,
+            index: reply.index,
+        };
+        self.pipeline.as_mut()?.take(want)
+    }
+
+    /// Polls in flight whose deadline passed by `now`, taken out.
+    pub(crate) fn expired_inflight(&mut self, now: Instant) -> Vec<Inflight> {
+        self.pipeline
+            .as_mut()
+            .map(|p| p.expired(now))
+            .unwrap_or_default()
+    }
+
+    /// Polls in flight now.
+    pub(crate) fn in_flight(&self) -> usize {
+        self.pipeline.as_ref().map_or(0, UsbPipeline::in_flight)
     }
 
     /// On a latent adapter, the control frames (at most [`MAX_BATCHED`])
@@ -335,8 +456,26 @@ impl Scheduler {
 
     /// `n` host frames were handed to the port at `handed`; returns when the
     /// last one's last byte leaves the wire.
+    /// Behind a USB adapter with a known frame clock they leave at the
+    /// boundary after the write (the later one when the write came close
+    /// to one: counted in `ambiguous`).
+    /// Before the clock is known, a write is taken to leave as late as it
+    /// may: a period and the write's reach after it was made.
     pub(crate) fn sent(&mut self, handed: Instant, n: u32) -> Instant {
-        self.clock.host_frames(handed, n)
+        match &self.pipeline {
+            Some(pipeline) => {
+                let released = pipeline.latest_release(handed);
+                self.ambiguous_writes += u64::from(released.ambiguous);
+                self.clock.host_frames(released.at, n)
+            }
+            None => self.clock.host_frames(handed, n),
+        }
+    }
+
+    /// Writes that came too close to a USB frame boundary to know which
+    /// frame took them, since the last call.
+    pub(crate) fn take_ambiguous_writes(&mut self) -> u64 {
+        std::mem::take(&mut self.ambiguous_writes)
     }
 
     /// A control frame from [`Slot::Control`] (or an interleave) left for
@@ -458,5 +597,9 @@ impl Scheduler {
     /// latent one gets control frames and the next poll in one write.
     pub(crate) fn set_adapter(&mut self, adapter: crate::transport::adapter::AdapterModel) {
         self.clock.set_adapter(adapter);
+        let period = adapter.usb_frame();
+        if self.pipeline.as_ref().map(UsbPipeline::period) != period {
+            self.pipeline = period.map(UsbPipeline::new);
+        }
     }
 }

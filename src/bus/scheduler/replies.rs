@@ -12,7 +12,7 @@ use crate::bus::wire::Want;
 use crate::protocol::status::fsm_name;
 use crate::protocol::{Reply, ReplyBody};
 
-use super::Scheduler;
+use super::{Inflight, Scheduler};
 
 impl Scheduler {
     /// The reply a transaction waited for arrived at `at` (it was due at
@@ -20,6 +20,22 @@ impl Scheduler {
     /// request renames the old entry itself.
     pub(crate) fn reply(&mut self, reply: &Reply, at: Instant, due: Instant) -> ReplyEffect {
         self.clock.line_free(at);
+        self.take_reply(reply, at, due)
+    }
+
+    /// The reply to a poll written blind (see [`Scheduler::track`]) came
+    /// out of the adapter at `at`. The line was held for it by the model
+    /// and freed long before it reached the host: nothing to free here.
+    pub(crate) fn inflight_reply(
+        &mut self,
+        reply: &Reply,
+        at: Instant,
+        inflight: &Inflight,
+    ) -> ReplyEffect {
+        self.take_reply(reply, at, inflight.window.due)
+    }
+
+    fn take_reply(&mut self, reply: &Reply, at: Instant, due: Instant) -> ReplyEffect {
         self.clock.observe_reply(due, at);
         let feeds =
             self.reg.get(reply.dev_id).is_some() || matches!(reply.body(), ReplyBody::Info01(_));
@@ -36,7 +52,11 @@ impl Scheduler {
     /// A device that reset forgot its target: what waited for it is stale,
     /// and the owner clears its slot in the store.
     pub(crate) fn unsolicited(&mut self, reply: &Reply, at: Instant) -> ReplyEffect {
-        self.clock.line_free(at);
+        // Behind a pipelining adapter a reply reaches the host long after
+        // the wire was free: the model, not the arrival, says when it is.
+        if !self.pipelining() {
+            self.clock.line_free(at);
+        }
         let late = self
             .overdue
             .take_if(|(w, _)| w.dev_id == reply.dev_id && w.index == reply.index);
@@ -91,6 +111,13 @@ impl Scheduler {
         self.reg.on_missed(want.dev_id, &mut self.events);
     }
 
+    /// A poll written blind got no reply by its deadline: missed like any
+    /// other, but the line was never held for it beyond the model.
+    pub(crate) fn inflight_timed_out(&mut self, inflight: &Inflight) {
+        self.overdue = Some((inflight.want, inflight.window.due));
+        self.reg.on_missed(inflight.want.dev_id, &mut self.events);
+    }
+
     /// A read that some firmware does not answer (a revision probe) got no
     /// reply by `now`: the line is free again, and the silence says
     /// nothing against the device (it is not a missed poll).
@@ -102,6 +129,9 @@ impl Scheduler {
     /// The port opened at `now`; true when it had been up before (a reconnect).
     pub(crate) fn link_up(&mut self, now: Instant) -> bool {
         self.clock.line_free(now);
+        if let Some(pipeline) = self.pipeline.as_mut() {
+            pipeline.reset();
+        }
         self.reopen.opened(now)
     }
 
@@ -116,6 +146,9 @@ impl Scheduler {
     pub(crate) fn link_lost(&mut self, now: Instant) -> Duration {
         self.control.clear_prepared();
         self.control.clear_pending();
+        if let Some(pipeline) = self.pipeline.as_mut() {
+            pipeline.reset();
+        }
         self.reg.all_offline(&mut self.events);
         self.reopen.lost(now)
     }

@@ -55,6 +55,9 @@ pub(crate) struct BusView {
     /// One-shot requests waiting for the bus.
     #[schema(example = 0)]
     pub queue_depth: usize,
+    /// Polls written blind behind a USB adapter whose reply is still on its way (0 on a native line).
+    #[schema(example = 0)]
+    pub polls_in_flight: usize,
     /// Monotonic counters since start (frames by kind, CRC errors, timeouts, retries, ...).
     #[schema(value_type = Object, example = json!({"frames_rx": 10432, "crc_errors": 0, "timeouts": 3}))]
     pub counters: serde_json::Value,
@@ -95,6 +98,7 @@ impl BusView {
             devices_known: snap.devices.len(),
             devices_online: snap.devices.values().filter(|d| d.online).count(),
             queue_depth: snap.queue_depth,
+            polls_in_flight: snap.polls_in_flight,
             counters: serde_json::to_value(&snap.counters).unwrap_or_default(),
             rates: serde_json::to_value(&snap.rates).unwrap_or_default(),
             port_notes: snap.port_notes.clone(),

@@ -98,6 +98,14 @@ const BUS_COUNTER_HELP: &[(&str, &str)] = &[
         "frames_tx_batched",
         "Control frames written in front of a poll in one write (one USB transfer), on a latent adapter.",
     ),
+    (
+        "polls_pipelined",
+        "Polls written behind a USB adapter before the previous reply reached the host, timed by the adapter's frame clock.",
+    ),
+    (
+        "usb_writes_ambiguous",
+        "Writes too close to a USB frame boundary to know which frame took them (the wire was held for the later).",
+    ),
 ];
 
 /// Builds the exposition: families in order of first use, each with one
@@ -249,6 +257,12 @@ fn bus_families(m: &mut Exposition, snap: &BusSnapshot) {
         "Requests waiting for the bus owner.",
         &l,
         snap.queue_depth as f64,
+    );
+    m.gauge(
+        "jointd_bus_polls_in_flight",
+        "Polls written blind behind a USB adapter whose reply has not reached the host yet.",
+        &l,
+        snap.polls_in_flight as f64,
     );
     m.gauge(
         "jointd_bus_devices_online",

@@ -34,12 +34,23 @@ impl Ctx {
         waited.map(|_| ()).map_err(|e| self.lost(e))
     }
 
-    /// Unsolicited replies: power-up announcements, late replies.
+    /// Replies no transaction waited for: those of polls written blind
+    /// (matched here), power-up announcements, late replies.
     pub(crate) fn absorb_inbox(&mut self) {
         let inbox = std::mem::take(&mut self.link.inbox);
         for (reply, at) in &inbox {
-            self.link.counters.unsolicited += 1;
-            let effect = self.sched.unsolicited(reply, *at);
+            self.sched.arrival(*at);
+            let effect = match self.sched.take_inflight(reply) {
+                Some(inflight) => {
+                    self.stats
+                        .round_trip(at.saturating_duration_since(inflight.handed));
+                    self.sched.inflight_reply(reply, *at, &inflight)
+                }
+                None => {
+                    self.link.counters.unsolicited += 1;
+                    self.sched.unsolicited(reply, *at)
+                }
+            };
             self.after_reply(reply.dev_id, effect);
         }
         self.link.inbox = inbox;
@@ -103,8 +114,40 @@ impl Ctx {
             dev_id,
             index: block.index(),
         };
+        if self.sched.pipelining() {
+            return self.poll_blind(&control, Config::read(dev_id, block), want);
+        }
         self.exchange_behind(&control, Config::read(dev_id, block), want)?;
         Ok(())
+    }
+
+    /// Behind a USB adapter whose frame clock is known: writes the control
+    /// frames and the poll as one transfer and goes on without waiting;
+    /// the reply is matched when the adapter hands it over (`absorb_inbox`)
+    /// or counted missing at its deadline (`expire_inflight`).
+    fn poll_blind(&mut self, control: &[Planned], cmd: Config, want: Want) -> Result<(), BusError> {
+        let cmds: Vec<Command> = control
+            .iter()
+            .map(|p| p.command)
+            .chain([Command::Config(cmd)])
+            .collect();
+        let handed = Instant::now();
+        let end = self.send(&cmds)?;
+        self.link.counters.frames_tx_batched += control.len() as u64;
+        self.link.counters.polls_pipelined += 1;
+        self.control_frames_sent(control, end);
+        self.sched.track(want, end, handed);
+        Ok(())
+    }
+
+    /// Polls written blind whose deadline passed: missed, like a poll
+    /// that timed out.
+    pub(crate) fn expire_inflight(&mut self, now: Instant) {
+        for inflight in self.sched.expired_inflight(now) {
+            self.link.counters.timeouts += 1;
+            self.sched.inflight_timed_out(&inflight);
+        }
+        self.link.counters.usb_writes_ambiguous += self.sched.take_ambiguous_writes();
     }
 
     /// Writes one config/read frame and waits for the reply it asks for;
@@ -234,6 +277,9 @@ impl Ctx {
         due: Instant,
         silence: Silence,
     ) -> Option<Reply> {
+        if let Some((_, at)) = &got {
+            self.sched.arrival(*at);
+        }
         let Some((reply, at)) = got else {
             match silence {
                 Silence::Missed => {
@@ -335,7 +381,7 @@ impl Ctx {
     /// e-stop.
     fn before_job_frame(&mut self) -> Result<(), BusError> {
         loop {
-            self.wait_until(self.sched.clock().write_at())?;
+            self.wait_until(self.sched.write_at(Instant::now()))?;
             let generation = self.estop_generation();
             let now = Instant::now();
             let interleave = self

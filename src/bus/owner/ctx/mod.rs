@@ -65,6 +65,7 @@ impl Ctx {
 
     /// Asks the scheduler for the next slot at `now`.
     pub(crate) fn decide(&mut self, now: Instant) -> Slot {
+        self.expire_inflight(now);
         if self.held.is_none() && self.sched.link_is_up() {
             self.held = self.next_request();
         }

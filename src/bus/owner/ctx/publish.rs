@@ -34,6 +34,7 @@ impl Ctx {
             devices: self.sched.registry().device_states(),
             counters: self.link.counters.clone(),
             queue_depth: self.shared.queued.load(Ordering::Relaxed),
+            polls_in_flight: self.sched.in_flight(),
             published_at: now,
             published_wall: SystemTime::now(),
             rates: self.stats.rates().clone(),

@@ -1,0 +1,432 @@
+//! Wire-timed pipelining through a latent USB adapter (issue 15).
+//!
+//! Behind a USB adapter a reply reaches the host a USB frame (CH340,
+//! CP2102), or a latency timer (FTDI), after it left the wire, while the
+//! wire itself is free a turnaround after the reply's last byte. Waiting for
+//! each reply before the next write leaves the wire idle for that whole
+//! round trip. Instead the owner writes each transfer (control broadcasts
+//! and a poll) when the *wire* will be free, blind to replies still held
+//! in the adapter, and matches them when they come ([`Inflight`]).
+//!
+//! What makes that safe is knowing when a write reaches the wire: host
+//! bytes leave at the next USB (micro)frame boundary. The boundaries are
+//! not visible to the host, but the adapter also hands received bytes to
+//! the host at boundaries, so every reply's arrival is a boundary plus the
+//! host's own wake-up delay (never minus). [`FramePhase`] keeps the last
+//! arrivals and takes as the boundary the one that makes them least late
+//! (a median, so a stalled thread's late read does not move it).
+//!
+//! Each write is aimed early in the frame before the boundary it should
+//! leave at (0.8 of a period before it), so a write, or the adapter's
+//! taking of it, may be late by most of a frame and still make it. A write that comes later than planned (the host stalled) is
+//! modelled as leaving at the later boundary it may have missed into: the
+//! next transfer is placed after the latest the wire can be busy, so the
+//! one thing the host cannot observe never makes a collision.
+//!
+//! Pure: every instant is passed in.
+
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+use super::wire::{ReplyWindow, Want};
+
+/// Arrivals the phase estimate is made of.
+const PHASE_SAMPLES: usize = 32;
+/// The estimate is the start of the shortest stretch of the period that
+/// holds this share of the arrivals (the rest are reads of a host that was
+/// busy elsewhere when the bytes came).
+const PHASE_QUANTILE: f64 = 0.8;
+/// Arrivals needed before the estimate is trusted (before that the owner
+/// waits for each reply, as on a native line).
+const PHASE_MIN_SAMPLES: usize = PHASE_SAMPLES;
+/// The estimate is trusted once that share of the arrivals falls within
+/// this part of a period after it (the host reads its replies promptly
+/// enough for the boundaries to show), and until it no longer falls
+/// within the wider one (hysteresis: a burst of late reads does not stop
+/// the pipeline, which would then learn again from its slower polls).
+const PHASE_TRUST_SPREAD: f64 = 0.25;
+const PHASE_DOUBT_SPREAD: f64 = 0.45;
+/// How long a host write may take to reach the adapter (the system call,
+/// the USB stack, a host or adapter thread that is late): a write this
+/// close before a boundary may miss it. At most a period is counted (on a
+/// 125 µs microframe the write is then held for the next one).
+const WRITE_REACH: Duration = Duration::from_micros(200);
+/// A write is still aimed at a boundary this close: whether it makes it
+/// or the next is then not known, and the wire is held for the later one
+/// ([`UsbPipeline::released`]). Below [`WRITE_REACH`] so that a host that
+/// wakes a little late still writes instead of chasing the next frame (on
+/// a 125 µs microframe the two are hardly apart).
+const WRITE_LAST_CHANCE: Duration = Duration::from_micros(10);
+/// How far into the frame before its boundary a write is aimed, as a
+/// share of the period from the boundary: early, so that a write (or the
+/// adapter's read of it) may be late by most of a frame and still make its
+/// boundary; not at the very start, where the frame clock's own error
+/// would let it leave a frame early.
+const WRITE_LEAD: f64 = 0.8;
+/// Spacing between the wire's modelled end of one transfer and the next
+/// release, for the device's turnaround jitter.
+const GUARD: Duration = Duration::from_micros(50);
+
+/// The USB frame clock as the host infers it from reply arrivals.
+#[derive(Debug, Clone)]
+pub(crate) struct FramePhase {
+    period: Duration,
+    /// A fixed reference (the first arrival); boundaries are
+    /// `origin + offset + k·period`.
+    origin: Option<Instant>,
+    /// The last arrivals, as offsets from `origin` within a period (ns).
+    samples: VecDeque<u64>,
+    /// The estimated boundary offset (ns), once enough samples came and
+    /// while they agree on it.
+    offset: Option<u64>,
+}
+
+impl FramePhase {
+    pub(crate) fn new(period: Duration) -> Self {
+        Self {
+            period,
+            origin: None,
+            samples: VecDeque::with_capacity(PHASE_SAMPLES),
+            offset: None,
+        }
+    }
+
+    fn period_ns(&self) -> u64 {
+        u64::try_from(self.period.as_nanos())
+            .unwrap_or(u64::MAX)
+            .max(1)
+    }
+
+    /// `t`'s offset within the period, from `origin` (`t` may be earlier).
+    fn phase_of(&self, t: Instant) -> u64 {
+        let p = self.period_ns();
+        let origin = self.origin.unwrap_or(t);
+        match t.checked_duration_since(origin) {
+            Some(d) => (d.as_nanos() % u128::from(p)) as u64,
+            None => {
+                let back = (origin.duration_since(t).as_nanos() % u128::from(p)) as u64;
+                (p - back) % p
+            }
+        }
+    }
+
+    /// A reply arrived at `at`: one more sample of "a boundary, a little earlier".
+    pub(crate) fn arrival(&mut self, at: Instant) {
+        self.origin.get_or_insert(at);
+        if self.samples.len() == PHASE_SAMPLES {
+            self.samples.pop_front();
+        }
+        self.samples.push_back(self.phase_of(at));
+        if self.samples.len() >= PHASE_MIN_SAMPLES {
+            let (offset, spread) = self.estimate();
+            let limit = if self.offset.is_some() {
+                PHASE_DOUBT_SPREAD
+            } else {
+                PHASE_TRUST_SPREAD
+            };
+            let tight = (spread as f64) < self.period_ns() as f64 * limit;
+            self.offset = tight.then_some(offset);
+        }
+    }
+
+    /// The sample offset that starts the shortest stretch of the period
+    /// holding [`PHASE_QUANTILE`] of the samples: the earliest arrivals of
+    /// the cluster they form, since no arrival precedes its boundary.
+    /// Returns it and the stretch's length (ns).
+    fn estimate(&self) -> (u64, u64) {
+        let p = self.period_ns();
+        let n = self.samples.len();
+        let k = ((n as f64 * PHASE_QUANTILE).ceil() as usize).clamp(1, n) - 1;
+        let mut best = (u64::MAX, 0);
+        let mut late: Vec<u64> = Vec::with_capacity(n);
+        for &candidate in &self.samples {
+            late.clear();
+            late.extend(self.samples.iter().map(|&s| (s + p - candidate) % p));
+            late.sort_unstable();
+            if late[k] < best.0 {
+                best = (late[k], candidate);
+            }
+        }
+        (best.1, best.0)
+    }
+
+    /// True once the boundaries are known well enough to write blind.
+    pub(crate) fn known(&self) -> bool {
+        self.offset.is_some()
+    }
+
+    /// The first boundary strictly after `t` (by the estimate).
+    pub(crate) fn boundary_after(&self, t: Instant) -> Instant {
+        let p = self.period_ns();
+        let offset = self.offset.unwrap_or(0);
+        let into = (self.phase_of(t) + p - offset) % p;
+        t + Duration::from_nanos(p - into)
+    }
+
+    /// The first boundary at or after `t`.
+    pub(crate) fn boundary_at_or_after(&self, t: Instant) -> Instant {
+        let p = self.period_ns();
+        let offset = self.offset.unwrap_or(0);
+        let into = (self.phase_of(t) + p - offset) % p;
+        if into == 0 {
+            t
+        } else {
+            t + Duration::from_nanos(p - into)
+        }
+    }
+
+    pub(crate) fn forget(&mut self) {
+        self.origin = None;
+        self.samples.clear();
+        self.offset = None;
+    }
+}
+
+/// A poll written blind: its reply is matched when the adapter hands it over.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Inflight {
+    pub want: Want,
+    pub window: ReplyWindow,
+    /// When its write was handed to the port (for the round-trip histogram).
+    pub handed: Instant,
+}
+
+/// Where a transfer of host frames went on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Released {
+    /// The boundary it left at, as late as the host's timing allows.
+    pub at: Instant,
+    /// True when the write came too close to a boundary to know which one
+    /// it made (the wire is then held for the later).
+    pub ambiguous: bool,
+}
+
+/// The pipeline of one latent bus: the frame clock and the replies in flight.
+#[derive(Debug, Clone)]
+pub(crate) struct UsbPipeline {
+    phase: FramePhase,
+    inflight: VecDeque<Inflight>,
+}
+
+impl UsbPipeline {
+    pub(crate) fn new(period: Duration) -> Self {
+        Self {
+            phase: FramePhase::new(period),
+            inflight: VecDeque::new(),
+        }
+    }
+
+    pub(crate) fn period(&self) -> Duration {
+        self.phase.period
+    }
+
+    /// True once writes can be timed by the frame clock.
+    pub(crate) fn active(&self) -> bool {
+        self.phase.known()
+    }
+
+    /// A reply (any) came out of the adapter at `at`.
+    pub(crate) fn arrival(&mut self, at: Instant) {
+        self.phase.arrival(at);
+    }
+
+    /// When to write the next transfer so that it leaves at the first
+    /// boundary the wire allows (`free_at` plus the guard): the middle of
+    /// the frame before it. A boundary the host can no longer make is
+    /// skipped for the next.
+    pub(crate) fn write_at(&self, free_at: Instant, now: Instant) -> Instant {
+        let by_wire = self.phase.boundary_at_or_after(free_at + GUARD);
+        let by_host = self.phase.boundary_after(now + WRITE_LAST_CHANCE);
+        let release = by_wire.max(by_host);
+        let lead = self.period().mul_f64(WRITE_LEAD).max(self.period() / 2);
+        release.checked_sub(lead).unwrap_or(release)
+    }
+
+    /// A write was handed to the port at `handed`: the boundary it leaves
+    /// at (the later one if it came close enough to miss the first).
+    pub(crate) fn released(&self, handed: Instant) -> Released {
+        let first = self.phase.boundary_after(handed);
+        let latest = self
+            .phase
+            .boundary_after(handed + WRITE_REACH.min(self.period()));
+        Released {
+            at: latest,
+            ambiguous: latest != first,
+        }
+    }
+
+    /// The latest a write handed over at `handed` leaves, whether the frame
+    /// clock is known or not (then: a whole period and the write's reach).
+    pub(crate) fn latest_release(&self, handed: Instant) -> Released {
+        if self.active() {
+            return self.released(handed);
+        }
+        Released {
+            at: handed + self.period() + WRITE_REACH.min(self.period()),
+            ambiguous: false,
+        }
+    }
+
+    /// A poll written blind, its reply expected in `window`.
+    pub(crate) fn track(&mut self, want: Want, window: ReplyWindow, handed: Instant) {
+        self.inflight.push_back(Inflight {
+            want,
+            window,
+            handed,
+        });
+    }
+
+    /// The oldest poll in flight that `want` answers, taken out.
+    pub(crate) fn take(&mut self, want: Want) -> Option<Inflight> {
+        let pos = self.inflight.iter().position(|i| i.want == want)?;
+        self.inflight.remove(pos)
+    }
+
+    /// Polls whose deadline passed by `now`, taken out, oldest first.
+    pub(crate) fn expired(&mut self, now: Instant) -> Vec<Inflight> {
+        let mut gone = Vec::new();
+        self.inflight.retain(|i| {
+            let late = i.window.deadline <= now;
+            if late {
+                gone.push(*i);
+            }
+            !late
+        });
+        gone
+    }
+
+    /// The earliest deadline in flight.
+    pub(crate) fn next_deadline(&self) -> Option<Instant> {
+        self.inflight.iter().map(|i| i.window.deadline).min()
+    }
+
+    pub(crate) fn in_flight(&self) -> usize {
+        self.inflight.len()
+    }
+
+    /// The port was lost or reopened: nothing is in flight, and the frame
+    /// clock is learnt again.
+    pub(crate) fn reset(&mut self) {
+        self.inflight.clear();
+        self.phase.forget();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn us(n: u64) -> Duration {
+        Duration::from_micros(n)
+    }
+
+    /// A frame clock with boundaries at `t0 + 300 µs + k ms`, learnt from
+    /// arrivals `lateness` after boundaries.
+    fn learnt(t0: Instant, lateness: &[u64]) -> UsbPipeline {
+        let mut p = UsbPipeline::new(Duration::from_millis(1));
+        for (k, late) in lateness.iter().enumerate() {
+            p.arrival(t0 + us(300 + 1000 * (k as u64 + 1) + late));
+        }
+        p
+    }
+
+    #[test]
+    fn the_boundary_is_the_start_of_the_arrivals_cluster() {
+        let t0 = Instant::now();
+        let mut late = vec![40, 12, 25, 900, 30, 18, 14, 60];
+        late.extend([20; PHASE_SAMPLES - 8]);
+        let p = learnt(t0, &late);
+        assert!(p.active());
+        // The 900 µs outlier (a stalled thread) is not taken for early.
+        // The dense cluster's start (a few µs after the earliest read at 312 µs).
+        let b = p.phase.boundary_after(t0 + us(10_000)) - t0;
+        assert!(b >= us(10_312) && b <= us(10_320), "{b:?}");
+    }
+
+    #[test]
+    fn not_active_before_enough_arrivals_nor_while_they_disagree() {
+        let t0 = Instant::now();
+        assert!(!learnt(t0, &[10; PHASE_SAMPLES - 1]).active());
+        assert!(learnt(t0, &[10; PHASE_SAMPLES]).active());
+        // Arrivals all over the period: a host too busy to read them when
+        // they come shows no boundary.
+        let spread: Vec<u64> = (0..PHASE_SAMPLES as u64).map(|k| k * 31 % 1000).collect();
+        assert!(!learnt(t0, &spread).active());
+    }
+
+    #[test]
+    fn boundaries_wrap_around_the_origin() {
+        let t0 = Instant::now() + Duration::from_secs(1);
+        let mut f = FramePhase::new(Duration::from_millis(1));
+        // Arrivals straddling the period's end: 990 µs and 10 µs into it.
+        for k in 1..=PHASE_SAMPLES as u64 {
+            let late = if k % 2 == 0 { 990 } else { 1010 };
+            f.arrival(t0 + us(1000 * k + late));
+        }
+        // The cluster starts at 990 µs (the 10 µs ones are 20 µs later).
+        assert!(f.known());
+        assert_eq!(f.boundary_after(t0 + us(5000)), t0 + us(5990));
+        assert_eq!(f.boundary_at_or_after(t0 + us(5990)), t0 + us(5990));
+        // Before the origin too.
+        assert_eq!(f.boundary_after(t0 - us(500)), t0 - us(10));
+    }
+
+    #[test]
+    fn a_write_is_aimed_early_in_the_frame_before_its_boundary() {
+        let t0 = Instant::now();
+        let p = learnt(t0, &[0; PHASE_SAMPLES]);
+        // Wire free at 10.1 ms: the first boundary after it plus the
+        // guard is 10.3 ms; write 0.8 of a frame before.
+        let free = t0 + us(10_100);
+        assert_eq!(p.write_at(free, t0 + us(9_000)), t0 + us(9_500));
+        // Late, but still before the boundary: write now (the wire will
+        // be held for the later frame, see `released`).
+        assert_eq!(p.write_at(free, t0 + us(10_260)), t0 + us(9_500));
+        // Too close to it: the next one.
+        assert_eq!(p.write_at(free, t0 + us(10_295)), t0 + us(10_500));
+    }
+
+    #[test]
+    fn a_write_close_to_a_boundary_holds_the_wire_for_the_later_one() {
+        let t0 = Instant::now();
+        let p = learnt(t0, &[0; PHASE_SAMPLES]);
+        let clear = p.released(t0 + us(9_800));
+        assert_eq!(clear.at, t0 + us(10_300));
+        assert!(!clear.ambiguous);
+        let close = p.released(t0 + us(10_150));
+        assert_eq!(close.at, t0 + us(11_300));
+        assert!(close.ambiguous);
+    }
+
+    #[test]
+    fn without_a_known_clock_a_write_may_leave_a_period_and_its_reach_later() {
+        let t0 = Instant::now();
+        let p = UsbPipeline::new(Duration::from_millis(1));
+        assert_eq!(p.latest_release(t0).at, t0 + us(1_200));
+        let hs = UsbPipeline::new(us(125));
+        assert_eq!(hs.latest_release(t0).at, t0 + us(250));
+    }
+
+    #[test]
+    fn replies_are_matched_oldest_first_and_expire_by_deadline() {
+        let t0 = Instant::now();
+        let mut p = UsbPipeline::new(Duration::from_millis(1));
+        let want = |dev_id| Want { dev_id, index: 1 };
+        let window = |ms| ReplyWindow {
+            due: t0 + Duration::from_millis(ms),
+            deadline: t0 + Duration::from_millis(ms + 5),
+        };
+        p.track(want(1), window(1), t0);
+        p.track(want(2), window(2), t0);
+        p.track(want(1), window(3), t0);
+        assert_eq!(p.take(want(1)).map(|i| i.window), Some(window(1)));
+        assert_eq!(p.next_deadline(), Some(t0 + Duration::from_millis(7)));
+        let gone = p.expired(t0 + Duration::from_millis(7));
+        assert_eq!(gone.len(), 1);
+        assert_eq!(gone[0].want, want(2));
+        assert_eq!(p.in_flight(), 1);
+        p.reset();
+        assert_eq!(p.in_flight(), 0);
+        assert!(!p.active());
+    }
+}
