@@ -85,6 +85,12 @@ fn stream_for_5_s_behind(model: AdapterModel) {
                 snap.counters.frames_tx_batched > 0,
                 "{model}: nothing batched"
             );
+            // Timed by the USB frame clock learnt from the replies, not
+            // waiting for each reply.
+            assert!(
+                snap.counters.polls_pipelined > start.polls_pipelined,
+                "{model}: nothing pipelined"
+            );
         }
     });
 }

@@ -25,7 +25,8 @@ use clap::Args;
 use thiserror::Error;
 
 use crate::bus::{
-    spawn_bus, AdapterSetting, BusConfig, BusError, BusHandle, BusThread, Targets, THREAD_PREFIX,
+    spawn_bus, spawn_bus_on, AdapterSetting, BusConfig, BusError, BusHandle, BusThread, Targets,
+    THREAD_PREFIX,
 };
 use crate::protocol::status::fsm;
 use crate::sim::{AdapterModel, SimConfig, SimError, SimHandle, SimStats, Simulator};
@@ -81,6 +82,13 @@ pub struct BenchArgs {
     /// second adapter buys (per-joint rates, the ratio, the CPU).
     #[arg(long, default_value_t = 1)]
     pub buses: u8,
+    /// How the bus reaches the simulator: `pty` (opened by path, like
+    /// hardware) or `memory` (an in-process pipe that dates each write when
+    /// it is made: under load a pty's kernel worker passes bytes on up to
+    /// milliseconds late, a delay USB-serial drivers do not add, which the
+    /// adapter models then take for a write that missed its USB frame).
+    #[arg(long, default_value = "pty", value_parser = ["pty", "memory"])]
+    pub line: String,
     /// Measure the WebSocket path instead (issue 6): the engine alone, the
     /// same stream through /api/v1/ws, then with telemetry clients added.
     #[arg(long)]
@@ -286,13 +294,21 @@ pub(crate) fn setup(
     sim_cfg.turnaround = Duration::from_micros(args.turnaround_us);
     let adapter = adapter_of(args)?;
     sim_cfg.adapter = adapter;
-    let sim = Simulator::spawn_pty(sim_cfg)?;
+    let (sim, memory) = if args.line == "memory" {
+        let (sim, host) = Simulator::spawn_memory(sim_cfg)?;
+        (sim, Some(host))
+    } else {
+        (Simulator::spawn_pty(sim_cfg)?, None)
+    };
     if !args.no_rt {
         referee_realtime()?;
     }
-    let path = sim
-        .device_path()
-        .ok_or_else(|| BenchError::Setup("the simulator has no pty path".into()))?;
+    let path = match &memory {
+        Some(_) => std::path::PathBuf::from("memory"),
+        None => sim
+            .device_path()
+            .ok_or_else(|| BenchError::Setup("the simulator has no pty path".into()))?,
+    };
     let mut cfg = BusConfig::new("bench", path, baud);
     cfg.ids = ids.to_vec();
     cfg.adapter = AdapterSetting::Fixed(adapter);
@@ -306,7 +322,10 @@ pub(crate) fn setup(
     if let Some(share) = args.control_share {
         cfg.poll.control_share = share;
     }
-    let (bus, thread) = spawn_bus(cfg)?;
+    let (bus, thread) = match memory {
+        Some(host) => spawn_bus_on(cfg, Box::new(host))?,
+        None => spawn_bus(cfg)?,
+    };
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;

@@ -149,8 +149,11 @@ impl Ctx {
                 .file_name()
                 .map_or_else(|| "ttyUSB0".into(), |n| n.to_string_lossy().into_owned());
             text = format!(
-                "{text}: its latency timer holds every reply {} ms, so each poll takes {:.1} ms; \
-                 at 1 ms it would take {:.1} ms ({speedup:.1}x the telemetry). Fix: echo 1 | sudo tee \
+                "{text}: its latency timer holds every reply {} ms. Polls keep their rate once \
+                 they are pipelined (after the first replies show the USB frame clock), but each \
+                 telemetry sample reaches the host that much older, and each one-shot transaction \
+                 (enable, a config read or write) takes {:.1} ms; at 1 ms it would take {:.1} ms \
+                 ({speedup:.1}x faster). Fix: echo 1 | sudo tee \
                  /sys/bus/usb-serial/devices/{name}/latency_timer (or the udev rule in deploy/)",
                 timer.as_millis(),
                 now.as_secs_f64() * 1e3,

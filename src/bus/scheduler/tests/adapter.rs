@@ -63,3 +63,138 @@ fn reply_deadlines_cover_the_adapter_hold() {
     assert_eq!(ftdi.due - native.due, Duration::from_millis(17));
     assert_eq!(ftdi.deadline - native.deadline, Duration::from_millis(18));
 }
+
+/// A CH340 bus whose replies have shown the USB frame clock: boundaries
+/// every ms, 20 µs before each arrival.
+fn pipelining_bus() -> (Bus, Instant) {
+    let ids: Vec<u8> = (1..=16).collect();
+    let mut b = Bus::new(&ids, &ids);
+    let t0 = b.now;
+    b.s.set_adapter(AdapterModel::Ch340);
+    assert!(!b.s.pipelining(), "nothing learnt yet");
+    for k in 0..40u64 {
+        b.s.arrival(b.now + Duration::from_micros(1_000 * k + 20));
+    }
+    assert!(b.s.pipelining());
+    (b, t0)
+}
+
+/// One transfer the pipelined bus wrote.
+#[derive(Debug, Clone, Copy)]
+struct Written {
+    at: Instant,
+    /// Where its first frame left, by the model.
+    released: Instant,
+    broadcasts: usize,
+    want: Want,
+}
+
+/// Drives the pipelined bus for `cycles` writes with new targets before
+/// each, feeding back no reply at all; returns each write's instant and
+/// where its frames left the wire (the modelled release).
+fn pipeline_writes(b: &mut Bus, cycles: usize) -> Vec<Written> {
+    let mut writes = Vec::new();
+    for k in 0..cycles {
+        b.set(1..=16, 100 + k as i16);
+        let slot = loop {
+            match b.next() {
+                Slot::Listen { until } => b.now = until,
+                slot => break slot,
+            }
+        };
+        let Slot::Batch {
+            control,
+            dev_id,
+            block,
+        } = slot
+        else {
+            panic!("cycle {k}: {slot:?}");
+        };
+        let n = control.len() as u32 + 1;
+        let end = b.s.sent(b.now, n);
+        for (i, c) in control.iter().enumerate() {
+            b.s.control_sent(c, end - FRAME * (n - i as u32));
+        }
+        let want = Want {
+            dev_id,
+            index: block.index(),
+        };
+        b.s.track(want, end, b.now);
+        writes.push(Written {
+            at: b.now,
+            released: end - FRAME * n,
+            broadcasts: control.len(),
+            want,
+        });
+    }
+    writes
+}
+
+#[test]
+fn once_the_usb_frame_clock_is_known_polls_go_out_before_their_replies() {
+    let (mut b, t0) = pipelining_bus();
+    let writes = pipeline_writes(&mut b, 20);
+    // Twenty transfers, none waiting for a reply: all twenty in flight.
+    assert_eq!(b.s.in_flight(), 20);
+    for w in writes.windows(2) {
+        let (first, next) = (w[0], w[1]);
+        // Each transfer leaves at a boundary (the arrivals' phase), written
+        // 0.8 ms before it, in the frame before.
+        assert_eq!((next.released - t0).as_micros() % 1_000, 20);
+        assert_eq!(next.released - next.at, Duration::from_micros(800));
+        // The next leaves only after this one's frames, the poll's
+        // turnaround and reply: 2 ms later on a 1 ms clock.
+        let wire = FRAME * (first.broadcasts as u32 + 2) + Duration::from_micros(100);
+        let gap = next.released - first.released;
+        assert!(gap >= wire, "{gap:?}");
+        assert_eq!(gap, Duration::from_millis(2));
+    }
+    // Both broadcasts of 16 joints ride in every transfer.
+    assert!(
+        writes.iter().skip(1).all(|w| w.broadcasts == 2),
+        "{writes:?}"
+    );
+}
+
+#[test]
+fn a_request_waits_for_the_polls_in_flight_and_a_missing_reply_counts_at_its_deadline() {
+    let (mut b, _) = pipelining_bus();
+    let writes = pipeline_writes(&mut b, 3);
+    b.request = true;
+    // The request waits while replies are in the adapter.
+    assert!(matches!(b.next(), Slot::Listen { .. }));
+    // Two replies come; the third never does.
+    let replies: Vec<Reply> = writes[..2]
+        .iter()
+        .map(|w| match w.want.index {
+            1 => info01(w.want.dev_id, fsm::RUN),
+            _ => info02(w.want.dev_id),
+        })
+        .collect();
+    for reply in &replies {
+        let inflight = b.s.take_inflight(reply).expect("a poll in flight");
+        b.s.inflight_reply(reply, b.now, &inflight);
+    }
+    assert_eq!(b.s.in_flight(), 1);
+    let late = b.now + Duration::from_secs(1);
+    let expired = b.s.expired_inflight(late);
+    assert_eq!(expired.len(), 1);
+    b.s.inflight_timed_out(&expired[0]);
+    b.now = late;
+    assert_eq!(b.next(), Slot::Request);
+}
+
+#[test]
+fn an_e_stop_does_not_wait_for_the_polls_in_flight() {
+    let (mut b, _) = pipelining_bus();
+    pipeline_writes(&mut b, 3);
+    b.estop = 1;
+    let slot = loop {
+        match b.next() {
+            Slot::Listen { until } => b.now = until,
+            slot => break slot,
+        }
+    };
+    assert_eq!(slot, Slot::EStop { generation: 1 });
+    assert_eq!(b.s.in_flight(), 3, "still matched when they come");
+}
