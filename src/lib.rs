@@ -10,6 +10,8 @@
 //! - `logcap`: collapsing repeated log lines (one per key per window, with a count), for
 //!   failures a client can repeat at will.
 //! - [`mem`]: giving freed heap memory back to the system (glibc `malloc_trim`).
+//! - [`motion`]: moves generated in the daemon: synchronised multi-joint paths
+//!   (linear, minimum-jerk, trapezoid; waypoints; limits) and a move's status. Pure.
 //! - [`rt`]: real-time thread helpers (timer slack, FIFO class) for the bus owner and the simulator.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty with RS-485 setup, in-memory pipe).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory), behaviour from the SPEC.
@@ -62,6 +64,7 @@ pub mod histogram;
 pub mod http;
 mod logcap;
 pub mod mem;
+pub mod motion;
 pub mod protocol;
 pub mod rt;
 pub mod sim;

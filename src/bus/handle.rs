@@ -187,6 +187,8 @@ pub struct BusShared {
     pub estop_called: Mutex<Option<Instant>>,
     /// Requests handed to the owner and not yet taken.
     pub queued: AtomicUsize,
+    /// Joints following a move, sampled by the owner every control cycle.
+    pub motion: super::motion::BusMotion,
 }
 
 /// How many frames the raw frame view keeps.
@@ -207,6 +209,7 @@ impl BusShared {
             frame_log: Mutex::new(std::collections::VecDeque::with_capacity(FRAME_LOG_LEN)),
             estop_called: Mutex::new(None),
             queued: AtomicUsize::new(0),
+            motion: Default::default(),
         })
     }
 
@@ -247,8 +250,25 @@ impl BusHandle {
 
     /// Stores targets; the scheduler puts them on the wire at its next chance.
     /// Returns the sequence number to match against [`Self::wire_acks`].
+    /// A client's targets: each joint leaves the move it followed, if any
+    /// (see [`Self::take_over`]).
     pub fn set_targets(&self, targets: &[(u8, Setpoint)]) -> u64 {
+        if self.shared.motion.is_active() {
+            let ids: Vec<u8> = targets.iter().map(|(id, _)| *id).collect();
+            self.shared.motion.release(&ids);
+        }
         self.shared.setpoints.set(targets)
+    }
+
+    /// Puts joints of this bus on a move; returns the ids of the moves they
+    /// left (a new move replaces a running one joint by joint).
+    pub fn follow(&self, followers: Vec<super::motion::Follower>) -> Vec<u64> {
+        self.shared.motion.follow(followers)
+    }
+
+    /// Takes joints out of their moves (a newer setpoint); returns those moves.
+    pub fn take_over(&self, ids: &[u8]) -> Vec<u64> {
+        self.shared.motion.release(ids)
     }
 
     pub fn snapshot(&self) -> Arc<BusSnapshot> {
@@ -289,6 +309,9 @@ impl BusHandle {
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .get_or_insert(now);
+        // Moves stop now, not when the owner gets to the e-stop: no path
+        // sample may reach the store after this.
+        self.shared.motion.abort_all("e-stop");
         let generation = self.shared.estop_generation.fetch_add(1, Ordering::SeqCst) + 1;
         let mut done = self.shared.estop_done.subscribe();
         let wait = async {

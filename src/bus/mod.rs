@@ -18,6 +18,7 @@
 //! - [`setpoints`]: the latest-value store of joint targets.
 //! - [`state`]: what the owner publishes: snapshot, events, frame log, wire acks.
 //! - [`handle`]: the cloneable handle and the requests it sends (the API's contract).
+//! - [`motion`]: the joints following a move, sampled by the owner every control cycle.
 //!
 //! The pure parts the scheduler is made of:
 //! - [`wire`]: the line model: when frames leave, when a reply is due or overdue.
@@ -42,6 +43,7 @@ pub mod error;
 pub mod firmware;
 pub mod handle;
 mod link;
+pub mod motion;
 mod owner;
 pub(crate) mod poll;
 pub(crate) mod registry;

@@ -302,6 +302,13 @@ pub enum BusEvent {
         /// `keep` (left enabled, target unknown) or `disable`.
         on_start: &'static str,
     },
+    /// A move ([`crate::motion`]) was cut short on this bus: a joint went
+    /// offline or faulted. Its other joints stop where they are.
+    MoveAborted {
+        bus: String,
+        move_id: u64,
+        reason: String,
+    },
     /// A device reset (power cut, reboot): it is disabled, forgot its mode
     /// and target; the daemon forgot its targets too.
     DeviceReset {

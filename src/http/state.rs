@@ -41,6 +41,7 @@ struct Inner {
     ws: WsHub,
     refusals: RefusalLog,
     options: std::sync::OnceLock<StateOptions>,
+    moves: crate::http::move_book::MoveBook,
 }
 
 impl AppState {
@@ -59,6 +60,7 @@ impl AppState {
                 ws: WsHub::default(),
                 refusals: RefusalLog::default(),
                 options: std::sync::OnceLock::new(),
+                moves: Default::default(),
             }),
         }
     }
@@ -76,6 +78,11 @@ impl AppState {
 
     pub fn token(&self) -> Option<&str> {
         self.inner.token.as_deref()
+    }
+
+    /// The moves started through the API.
+    pub(crate) fn moves(&self) -> &crate::http::move_book::MoveBook {
+        &self.inner.moves
     }
 
     pub fn limits(&self, bus: &str, id: u8) -> JointLimits {

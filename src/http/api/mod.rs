@@ -7,7 +7,8 @@
 //!   whole bus at once) (with [`config_params`]:
 //!   request values → writes; [`config_schema`]: the schemas from the parameter
 //!   table; [`config_outcome`]: what a PATCH did per parameter),
-//!   [`estop`], [`health`]: one router per area.
+//!   [`estop`], [`health`], [`moves`] (paths generated in the daemon): one
+//!   router per area.
 //! - [`openapi`]: the document's head, the shared failure responses, the docs page.
 
 pub(crate) mod buses;
@@ -21,6 +22,7 @@ pub(crate) mod devices;
 pub(crate) mod estop;
 pub(crate) mod health;
 pub(crate) mod metrics;
+pub(crate) mod moves;
 pub(crate) mod openapi;
 
 use utoipa_axum::router::OpenApiRouter;
@@ -37,6 +39,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .merge(config::router())
         .merge(config_all::router())
         .merge(estop::router())
+        .merge(moves::router())
 }
 
 /// The document as served, with the crate version.

@@ -39,6 +39,8 @@ pub(crate) struct Ctx {
     thread_notes: Vec<String>,
     /// A request taken from the queue, waiting for its slot.
     held: Option<Request>,
+    /// When moves are sampled next.
+    next_motion_sample: Instant,
 }
 
 impl Ctx {
@@ -60,12 +62,14 @@ impl Ctx {
             port_notes: Vec::new(),
             thread_notes: Vec::new(),
             held: None,
+            next_motion_sample: now,
         }
     }
 
     /// Asks the scheduler for the next slot at `now`.
     pub(crate) fn decide(&mut self, now: Instant) -> Slot {
         self.expire_inflight(now);
+        self.sample_moves(now);
         if self.held.is_none() && self.sched.link_is_up() {
             self.held = self.next_request();
         }
@@ -82,6 +86,28 @@ impl Ctx {
             self.housekeeping(now);
         }
         slot
+    }
+
+    /// Joints following a move get their position at the instant the next
+    /// control frame would reach the wire: every control cycle, at most
+    /// once a frame time.
+    fn sample_moves(&mut self, now: Instant) {
+        if !self.shared.motion.is_active() || now < self.next_motion_sample {
+            return;
+        }
+        let frame = self.sched.clock().frame_time();
+        self.next_motion_sample = now + frame.min(crate::bus::motion::MIN_SAMPLE_INTERVAL);
+        let wire_at = self.sched.write_at(now).max(now) + frame;
+        let mut events = Vec::new();
+        self.shared.motion.tick(
+            wire_at,
+            &self.shared.setpoints,
+            self.sched.registry(),
+            &mut events,
+        );
+        for event in events {
+            self.sched.push_event(event);
+        }
     }
 
     /// What a decision left to hand on: a wire ack, dropped setpoints.

@@ -69,6 +69,7 @@ impl Ctx {
     /// The port failed: the bus is down until it reopens.
     pub(crate) fn lost(&mut self, e: io::Error) -> BusError {
         self.link.close();
+        self.shared.motion.abort_all("the bus went down");
         let retry = self.sched.link_lost(Instant::now());
         self.mark_down(format!("port lost: {e}"), retry);
         self.down_error()
@@ -183,8 +184,12 @@ impl Ctx {
         Ok(())
     }
 
-    /// Forgets every setpoint, in the store and on their way (e-stop, shutdown).
+    /// Forgets every setpoint, in the store and on their way (e-stop,
+    /// shutdown), and stops every move on this bus first.
     pub(crate) fn drop_all_setpoints(&mut self) {
+        self.shared
+            .motion
+            .abort_all("e-stop (or shutdown): every joint disabled");
         self.shared.setpoints.clear(None);
         self.sched.drop_setpoints(&self.shared.setpoints);
     }

@@ -85,6 +85,9 @@ fn log_event(bus: &str, event: &BusEvent) {
             "device {dev_id} found enabled at start ({state}), its target unknown; \
              on_start = \"{on_start}\""
         ),
+        BusEvent::MoveAborted {
+            move_id, reason, ..
+        } => tracing::warn!(bus, move_id, "move {move_id} aborted: {reason}"),
         _ => {}
     }
 }
