@@ -8,7 +8,9 @@ mod support;
 
 use std::time::Duration;
 
+use jointd::bus::handle::BusEvent;
 use jointd::protocol::status::fsm;
+use jointd::sim::Fault;
 use reqwest::Method;
 use serde_json::{json, Value};
 use support::sim_bus::{start, SimBus, WAIT};
@@ -234,4 +236,92 @@ async fn a_move_is_stopped_replaced_joint_by_joint_and_aborted_by_an_e_stop() {
     .await;
     assert_eq!(view["reason"], "e-stop");
     s.get("/api/v1/moves/999").await.problem(404);
+}
+
+/// The move events of the bus (the WebSocket forwards these as they are),
+/// up to and including the first that `last` accepts.
+async fn move_events(
+    rx: &mut tokio::sync::broadcast::Receiver<BusEvent>,
+    last: impl Fn(&BusEvent) -> bool,
+) -> Vec<BusEvent> {
+    let mut out = Vec::new();
+    loop {
+        let e = tokio::time::timeout(WAIT, rx.recv())
+            .await
+            .unwrap_or_else(|_| panic!("no closing event after {out:?}"))
+            .expect("events");
+        let end = last(&e);
+        if matches!(
+            e,
+            BusEvent::MoveStarted { .. }
+                | BusEvent::MoveProgress { .. }
+                | BusEvent::MoveDone { .. }
+                | BusEvent::MoveStopped { .. }
+                | BusEvent::MoveAborted { .. }
+        ) {
+            out.push(e);
+        }
+        if end {
+            return out;
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_move_says_started_progress_and_done_and_a_silent_joint_aborts_it() {
+    let b = start(2, None).await;
+    enable(&b, &[1, 2]).await;
+    let mut rx = b.handle.events();
+    let s = &b.server;
+    let r = s
+        .post(
+            "/api/v1/moves",
+            json!({"joints": [{"bus": "sim0", "id": 1, "position_deg": 10},
+                              {"bus": "sim0", "id": 2, "position_deg": -10}],
+                   "duration_ms": 400, "method": "trapezoid"}),
+        )
+        .await;
+    let id = r.ok()["id"].as_u64().expect("id");
+    let events = move_events(&mut rx, |e| matches!(e, BusEvent::MoveDone { .. })).await;
+    assert!(
+        matches!(events.first(), Some(BusEvent::MoveStarted { move_id, ids, .. }) if *move_id == id && ids == &vec![1, 2]),
+        "{events:?}"
+    );
+    assert!(
+        matches!(events.last(), Some(BusEvent::MoveDone { move_id, .. }) if *move_id == id),
+        "{events:?}"
+    );
+    let progress: Vec<f64> = events
+        .iter()
+        .filter_map(|e| match e {
+            BusEvent::MoveProgress { progress, .. } => Some(*progress),
+            _ => None,
+        })
+        .collect();
+    assert!(!progress.is_empty(), "{events:?}");
+    assert!(progress.windows(2).all(|w| w[0] <= w[1]), "{progress:?}");
+
+    // Joint 2 falls silent mid-move: offline, and the move is aborted.
+    let r = s
+        .post(
+            "/api/v1/moves",
+            json!({"joints": [{"bus": "sim0", "id": 1, "position_deg": -10},
+                              {"bus": "sim0", "id": 2, "position_deg": 10}],
+                   "duration_ms": 20000}),
+        )
+        .await;
+    let id = r.ok()["id"].as_u64().expect("id");
+    b.sim.inject(Fault::DropReplies {
+        dev_id: Some(2),
+        rate: 1.0,
+    });
+    let events = move_events(&mut rx, |e| matches!(e, BusEvent::MoveAborted { .. })).await;
+    assert!(
+        matches!(events.last(), Some(BusEvent::MoveAborted { move_id, reason, .. })
+            if *move_id == id && reason == "joint 2 went offline"),
+        "{events:?}"
+    );
+    let view = s.get(&format!("/api/v1/moves/{id}")).await.ok().clone();
+    assert_eq!(view["state"], "aborted");
+    assert_eq!(view["reason"], "joint 2 went offline");
 }

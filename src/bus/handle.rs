@@ -260,10 +260,27 @@ impl BusHandle {
         self.shared.setpoints.set(targets)
     }
 
-    /// Puts joints of this bus on a move; returns the ids of the moves they
-    /// left (a new move replaces a running one joint by joint).
+    /// Puts joints of this bus on a move (and says so to subscribers);
+    /// returns the ids of the moves they left (a new move replaces a
+    /// running one joint by joint).
     pub fn follow(&self, followers: Vec<super::motion::Follower>) -> Vec<u64> {
+        if let Some(first) = followers.first() {
+            self.shared.emit(BusEvent::MoveStarted {
+                bus: self.name().to_string(),
+                move_id: first.mv.id,
+                ids: followers.iter().map(|f| f.dev_id).collect(),
+                duration_ms: first.mv.path.duration().as_secs_f64() * 1e3,
+            });
+        }
         self.shared.motion.follow(followers)
+    }
+
+    /// Says to subscribers that a move with joints on this bus was stopped.
+    pub fn move_stopped(&self, move_id: u64) {
+        self.shared.emit(BusEvent::MoveStopped {
+            bus: self.name().to_string(),
+            move_id,
+        });
     }
 
     /// Takes joints out of their moves (a newer setpoint); returns those moves.
@@ -311,7 +328,13 @@ impl BusHandle {
             .get_or_insert(now);
         // Moves stop now, not when the owner gets to the e-stop: no path
         // sample may reach the store after this.
-        self.shared.motion.abort_all("e-stop");
+        for move_id in self.shared.motion.abort_all("e-stop") {
+            self.shared.emit(BusEvent::MoveAborted {
+                bus: self.name().to_string(),
+                move_id,
+                reason: "e-stop".into(),
+            });
+        }
         let generation = self.shared.estop_generation.fetch_add(1, Ordering::SeqCst) + 1;
         let mut done = self.shared.estop_done.subscribe();
         let wait = async {

@@ -35,6 +35,8 @@ pub struct Follower {
 #[derive(Debug, Default)]
 pub struct BusMotion {
     followers: Mutex<Vec<Follower>>,
+    /// When the owner last said how far the running moves are.
+    progress_said: Mutex<Option<Instant>>,
     /// True while any joint follows a move: the owner's check per decision
     /// costs one atomic load when nothing moves.
     active: AtomicBool,
@@ -91,6 +93,17 @@ impl BusMotion {
         ended
     }
 
+    /// The moves this bus's joints follow, once each.
+    fn moves(list: &[Follower]) -> Vec<Arc<RunningMove>> {
+        let mut moves: Vec<Arc<RunningMove>> = Vec::new();
+        for f in list {
+            if !moves.iter().any(|m| m.id == f.mv.id) {
+                moves.push(f.mv.clone());
+            }
+        }
+        moves
+    }
+
     pub fn is_active(&self) -> bool {
         self.active.load(Ordering::Acquire)
     }
@@ -110,8 +123,10 @@ impl BusMotion {
             return;
         }
         let mut list = self.lock();
+        self.say_progress(&list, wire_at, reg.bus(), events);
         let mut targets: Vec<(u8, Setpoint)> = Vec::with_capacity(list.len());
         let mut aborted: Vec<(Arc<RunningMove>, String)> = Vec::new();
+        let mut done: Vec<u64> = Vec::new();
         list.retain(|f| {
             if !f.mv.is_running() {
                 return false;
@@ -134,12 +149,18 @@ impl BusMotion {
                     },
                 ));
             }
-            let done = t >= f.mv.path.duration();
-            if done {
-                f.mv.arrived(f.joint);
+            let arrived = t >= f.mv.path.duration();
+            if arrived && f.mv.arrived(f.joint) {
+                done.push(f.mv.id);
             }
-            !done
+            !arrived
         });
+        for move_id in done {
+            events.push(BusEvent::MoveDone {
+                bus: reg.bus().to_string(),
+                move_id,
+            });
+        }
         for (mv, reason) in aborted {
             if mv.end(MoveState::Aborted, reason.clone()) {
                 events.push(BusEvent::MoveAborted {
@@ -158,6 +179,27 @@ impl BusMotion {
         }
     }
 }
+
+impl BusMotion {
+    /// Every [`PROGRESS_EVERY`]: how far each running move of this bus is.
+    fn say_progress(&self, list: &[Follower], now: Instant, bus: &str, events: &mut Vec<BusEvent>) {
+        let mut said = self.progress_said.lock().unwrap_or_else(|p| p.into_inner());
+        if said.is_some_and(|at| now < at + PROGRESS_EVERY) {
+            return;
+        }
+        *said = Some(now);
+        for mv in Self::moves(list).iter().filter(|m| m.is_running()) {
+            events.push(BusEvent::MoveProgress {
+                bus: bus.to_string(),
+                move_id: mv.id,
+                progress: mv.progress(now),
+            });
+        }
+    }
+}
+
+/// How often a running move's progress is published.
+pub(crate) const PROGRESS_EVERY: Duration = Duration::from_millis(100);
 
 /// Why a joint can no longer follow a path, if it cannot.
 fn unfit(reg: &Registry, id: u8) -> Option<&'static str> {

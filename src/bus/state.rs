@@ -302,8 +302,33 @@ pub enum BusEvent {
         /// `keep` (left enabled, target unknown) or `disable`.
         on_start: &'static str,
     },
-    /// A move ([`crate::motion`]) was cut short on this bus: a joint went
-    /// offline or faulted. Its other joints stop where they are.
+    /// A move ([`crate::motion`]) with joints on this bus started.
+    MoveStarted {
+        bus: String,
+        move_id: u64,
+        /// Its joints on this bus.
+        ids: Vec<u8>,
+        duration_ms: f64,
+    },
+    /// How far a running move is (share of its time), every 100 ms.
+    MoveProgress {
+        bus: String,
+        move_id: u64,
+        progress: f64,
+    },
+    /// Every joint of the move reached the end of its path (or was taken
+    /// over by a newer move or setpoint).
+    MoveDone {
+        bus: String,
+        move_id: u64,
+    },
+    /// Stopped by its caller: its joints hold where they are.
+    MoveStopped {
+        bus: String,
+        move_id: u64,
+    },
+    /// A move was cut short: an e-stop, the bus lost, a joint went offline
+    /// or faulted. Its joints stop where they are.
     MoveAborted {
         bus: String,
         move_id: u64,

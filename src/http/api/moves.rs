@@ -205,6 +205,13 @@ async fn stop_move(
     let booked = booked(&state, p.id)?;
     if booked.mv.end(MoveState::Stopped, "stopped by its caller") {
         tracing::info!(move_id = p.id, "move stopped by its caller");
+        let mut buses: Vec<&str> = booked.joints.iter().map(|j| j.bus.as_str()).collect();
+        buses.dedup();
+        for name in buses {
+            if let Ok(bus) = state.bus(name) {
+                bus.move_stopped(p.id);
+            }
+        }
     }
     Ok(Json(view(&booked.mv, &booked.joints)))
 }

@@ -69,7 +69,7 @@ impl Ctx {
     /// The port failed: the bus is down until it reopens.
     pub(crate) fn lost(&mut self, e: io::Error) -> BusError {
         self.link.close();
-        self.shared.motion.abort_all("the bus went down");
+        self.abort_moves("the bus went down");
         let retry = self.sched.link_lost(Instant::now());
         self.mark_down(format!("port lost: {e}"), retry);
         self.down_error()
@@ -187,11 +187,20 @@ impl Ctx {
     /// Forgets every setpoint, in the store and on their way (e-stop,
     /// shutdown), and stops every move on this bus first.
     pub(crate) fn drop_all_setpoints(&mut self) {
-        self.shared
-            .motion
-            .abort_all("e-stop (or shutdown): every joint disabled");
+        self.abort_moves("every joint disabled (e-stop or shutdown)");
         self.shared.setpoints.clear(None);
         self.sched.drop_setpoints(&self.shared.setpoints);
+    }
+
+    /// Aborts every move a joint of this bus follows, and says so.
+    pub(crate) fn abort_moves(&mut self, reason: &str) {
+        for move_id in self.shared.motion.abort_all(reason) {
+            self.sched.push_event(BusEvent::MoveAborted {
+                bus: self.cfg.name.clone(),
+                move_id,
+                reason: reason.to_string(),
+            });
+        }
     }
 
     /// True while the port is open.
