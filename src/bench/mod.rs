@@ -12,10 +12,12 @@
 //! - [`analysis`]: per-joint rates and setpoint-to-wire latency from the frame log.
 //! - [`cpu`]: per-thread CPU time by thread name.
 //! - [`report`]: the result, the issue's targets, the printout.
+//! - `moves`: `--moves`: back-to-back moves generated in the daemon (issue 18).
 
 pub mod analysis;
 pub mod client;
 pub mod cpu;
+mod moves;
 pub mod report;
 pub mod ws;
 
@@ -89,6 +91,11 @@ pub struct BenchArgs {
     /// adapter models then take for a write that missed its USB frame).
     #[arg(long, default_value = "pty", value_parser = ["pty", "memory"])]
     pub line: String,
+    /// Measure moves generated in the daemon instead (issue 18): every joint
+    /// doing back-to-back minimum-jerk moves of 300 ms; the rate of move
+    /// setpoints on the wire per joint, the tracking error, occupancy, CPU.
+    #[arg(long)]
+    pub moves: bool,
     /// Measure the WebSocket path instead (issue 6): the engine alone, the
     /// same stream through /api/v1/ws, then with telemetry clients added.
     #[arg(long)]
@@ -142,6 +149,9 @@ pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
     );
     if args.ws {
         return ws::run(args);
+    }
+    if args.moves {
+        return moves::run(args);
     }
     if args.buses > 1 {
         return several_buses(args);
