@@ -558,3 +558,47 @@ async fn an_oversized_message_ends_the_session_with_a_policy_close() {
     assert!(frame.reason.contains("message refused"), "{}", frame.reason);
     assert!(frame.reason.len() <= 123);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_move_message_starts_a_move_and_its_events_follow() {
+    let bus = sim_bus::start(2, None).await;
+    enable(&bus, &[1, 2]).await;
+    let mut c = connect(&bus).await;
+    // Outside joint 2's soft limit (±45°): refused whole, nothing starts.
+    let e = c
+        .rejected(json!({"type": "move", "seq": 4,
+            "joints": [{"bus": "sim0", "id": 1, "position_deg": 10},
+                       {"bus": "sim0", "id": 2, "position_deg": 90}],
+            "duration_ms": 300}))
+        .await;
+    assert_eq!(e["ref_seq"], 4);
+    assert_eq!(e["code"], "out_of_limit");
+    assert_eq!(e["field"], "joints[1].position_deg");
+    // An unknown field is named, like every other message's.
+    let e = c
+        .rejected(json!({"type": "move", "seq": 5, "joints": [], "speed": 3}))
+        .await;
+    assert_eq!(e["code"], "bad_message");
+    assert!(
+        e["message"].as_str().is_some_and(|m| m.contains("speed")),
+        "{e}"
+    );
+    c.send(json!({"type": "move", "seq": 6,
+        "joints": [{"bus": "sim0", "id": 1, "position_deg": 10},
+                   {"bus": "sim0", "id": 2, "position_deg": -10}],
+        "duration_ms": 300, "method": "trapezoid"}))
+        .await;
+    let started = c.next_of("move_started").await;
+    assert_eq!(started["ref_seq"], 6);
+    assert_eq!(started["move"]["state"], "running");
+    assert_eq!(started["move"]["method"], "trapezoid");
+    let id = started["move"]["id"].clone();
+    // Events reach every session (this one subscribed to nothing).
+    loop {
+        let ev = c.next_of("event").await;
+        if ev["event"]["event"] == "move_done" {
+            assert_eq!(ev["event"]["move_id"], id);
+            break;
+        }
+    }
+}

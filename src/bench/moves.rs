@@ -170,7 +170,10 @@ impl Report {
                 format!("occupancy >= {MIN_OCCUPANCY} (at 500000 baud)"),
                 occupancy >= min_occupancy,
             ),
-            ("zero collisions".to_string(), s1.collisions == s0.collisions),
+            (
+                "zero collisions".to_string(),
+                s1.collisions == s0.collisions,
+            ),
         ];
         let mut text = format!(
             "== moves: {} joints at {baud} baud, back-to-back min-jerk moves of {} ms between ±{AMPLITUDE_DEG}°, {moves} moves in {wall:.1} s\n\

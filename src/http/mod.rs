@@ -20,6 +20,7 @@
 //! - [`paths`]: the URLs outside the OpenAPI routes, and which need no token.
 //! - [`limits`]: per-joint soft limits from the config.
 //! - `move_book`: the moves started through the API, for `GET` and `DELETE` on them.
+//! - `moves`: a move request checked whole and started (REST and WebSocket alike).
 //! - [`telemetry`]: snapshot → physical-unit views (REST and WebSocket).
 //! - [`targets`]: physical targets → raw setpoints, checked (REST and WebSocket).
 //! - [`teleop`]: the watchdog policy, default and event both state and WebSocket use.
@@ -33,6 +34,7 @@ pub(crate) mod guard;
 pub(crate) mod hub;
 pub mod limits;
 pub(crate) mod move_book;
+pub(crate) mod moves;
 pub(crate) mod paths;
 pub mod policy;
 pub mod state;

@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::bus::handle::BusEvent;
+use crate::http::moves::{MoveRequest, MoveView};
 use crate::http::teleop::{WatchdogEvent, WatchdogPolicy};
 
 /// Name and version of this protocol, sent in `welcome`.
@@ -14,10 +15,19 @@ pub(crate) const PROTOCOL: &str = "jointd.ws.v1";
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum ClientMessage {
     Subscribe(Subscribe),
-    Unsubscribe { seq: Option<u64> },
+    Unsubscribe {
+        seq: Option<u64>,
+    },
     Setpoints(SetpointBatch),
     Watchdog(WatchdogRequest),
-    Ping { seq: Option<u64> },
+    Ping {
+        seq: Option<u64>,
+    },
+    /// Start a move (the body of `POST /api/v1/moves`).
+    Move {
+        seq: Option<u64>,
+        request: MoveRequest,
+    },
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
@@ -130,13 +140,13 @@ pub(crate) fn parse(text: &str) -> Result<ClientMessage, ParseError> {
         Some(Value::String(s)) => s,
         Some(other) => {
             return Err(bad(format!(
-            "`type` must be a string (subscribe, unsubscribe, setpoints, watchdog, ping), not {}",
+            "`type` must be a string (subscribe, unsubscribe, setpoints, watchdog, ping, move), not {}",
             json_kind(&other)
         )))
         }
         None => {
             return Err(bad(
-                "missing `type` (subscribe, unsubscribe, setpoints, watchdog, ping)".into(),
+                "missing `type` (subscribe, unsubscribe, setpoints, watchdog, ping, move)".into(),
             ))
         }
     };
@@ -151,9 +161,16 @@ pub(crate) fn parse(text: &str) -> Result<ClientMessage, ParseError> {
         "ping" => {
             serde_json::from_value::<SeqOnly>(rest).map(|s| ClientMessage::Ping { seq: s.seq })
         }
+        "move" => {
+            let mut rest = rest;
+            if let Some(obj) = rest.as_object_mut() {
+                obj.remove("seq");
+            }
+            serde_json::from_value(rest).map(|request| ClientMessage::Move { seq, request })
+        }
         other => {
             return Err(bad(format!(
-                "unknown type `{other}` (subscribe, unsubscribe, setpoints, watchdog, ping)"
+                "unknown type `{other}` (subscribe, unsubscribe, setpoints, watchdog, ping, move)"
             )))
         }
     }
@@ -232,6 +249,12 @@ pub(crate) enum ServerMessage {
     },
     Pong {
         ref_seq: Option<u64>,
+    },
+    /// A `move` was accepted: the move as `GET /api/v1/moves/{id}` shows it.
+    MoveStarted {
+        ref_seq: Option<u64>,
+        #[serde(rename = "move")]
+        started: MoveView,
     },
 }
 

@@ -175,6 +175,15 @@ impl Connection {
             ClientMessage::Setpoints(batch) => self.setpoints(batch),
             ClientMessage::Watchdog(w) => self.arm_watchdog(w),
             ClientMessage::Ping { seq } => self.reply(ServerMessage::Pong { ref_seq: seq }),
+            ClientMessage::Move { seq, request } => {
+                match crate::http::moves::start(&self.state, &request).await {
+                    Ok(started) => self.reply(ServerMessage::MoveStarted {
+                        ref_seq: seq,
+                        started,
+                    }),
+                    Err(e) => self.reject(seq, e.into()),
+                }
+            }
         }
     }
 
