@@ -306,7 +306,21 @@ $("#jog-cw").onclick = () => act("Jogged +5°.", () => api("POST", dev("/jog"), 
 $("#jog-ccw").onclick = () => act("Jogged −3°.", () => api("POST", dev("/jog"), { direction: "ccw" }));
 $("#rezero").onclick = () => act("Re-zeroed.", () => api("POST", dev("/rezero")));
 $("#mode").onchange = (e) => act(`Mode set to ${e.target.value}.`, () => api("PUT", dev("/mode"), { mode: e.target.value }));
-$("#move").onclick = () => sendTarget(Number($("#target-number").value));
+/** Move with a duration: the daemon generates the path (POST /api/v1/moves)
+ *  and streams it at the bus's control rate; without one, a plain target. */
+function sendMove(deg) {
+  const ms = Number($("#move-ms").value);
+  if (!(ms > 0)) return sendTarget(deg);
+  const { bus, id } = state.selected;
+  const method = $("#move-method").value;
+  return act(null, async () => {
+    const mv = await api("POST", "moves", { joints: [{ bus, id, position_deg: deg }], duration_ms: ms, method });
+    say(`Move ${mv.id}: to ${deg}° in ${mv.duration_ms} ms (${mv.method}).`, "info");
+    return mv;
+  });
+}
+
+$("#move").onclick = () => sendMove(Number($("#target-number").value));
 $("#target-number").onchange = (e) => { $("#target-slider").value = e.target.value; };
 
 // The slider streams targets while it moves, at most every 50 ms.

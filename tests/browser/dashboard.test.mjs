@@ -125,10 +125,27 @@ test("moving the slider moves the joint", async () => {
   await page.screenshot({ path: `${ROOT}docs/dashboard.png` });
 });
 
+test("a move with a duration goes through the daemon's path generator", async () => {
+  await page.locator('[data-testid="move-ms"]').fill("400");
+  await page.locator('[data-testid="move-method"]').selectOption("trapezoid");
+  await page.locator('[data-testid="target-number"]').fill("-20");
+  await page.locator('[data-testid="move"]').click();
+  await page.locator("#messages .info", { hasText: /^Move \d+: to -20° in 400 ms \(trapezoid\)\.$/ }).waitFor({ timeout: WAIT });
+  await page.waitForFunction(() => {
+    const v = Number(document.querySelector('[data-testid="device-row-sim0-1"] td[data-field="angle_deg"]')?.textContent);
+    return Math.abs(v + 20) < 1;
+  }, null, { timeout: WAIT });
+  // The daemon reports the move done.
+  const state = await page.evaluate(async () => (await (await fetch("/api/v1/moves/1")).json()).state);
+  assert.equal(state, "done");
+  await page.locator('[data-testid="move-ms"]').fill("");
+});
+
 test("at 1366×768 the joint panel's controls are in view without scrolling", async () => {
   await page.evaluate(() => window.scrollTo(0, 0));
   for (const sel of ['[data-testid="device-panel"] h2', '[data-testid="enable"]', '[data-testid="target-slider"]',
-    '[data-testid="target-number"]', '[data-testid="move"]', "#plot"]) {
+    '[data-testid="target-number"]', '[data-testid="move-ms"]', '[data-testid="move-method"]',
+    '[data-testid="move"]', "#plot"]) {
     const box = await page.locator(sel).boundingBox();
     assert.ok(box, `${sel} is laid out`);
     assert.ok(box.y >= 0 && box.y + box.height <= VIEWPORT.height && box.x + box.width <= VIEWPORT.width,
