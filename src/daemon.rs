@@ -99,7 +99,8 @@ pub struct RunArgs {
     pub insecure: bool,
     /// TOML config file (see jointd.example.toml): `listen`, `token`,
     /// `token_file`, `insecure`, `allowed_hosts`, `allowed_origins`,
-    /// `max_body_bytes`, `web_dir`, `[[bus]]`, `[[limit]]`, `[[joint]]`, `[watchdog]`.
+    /// `max_body_bytes`, `web_dir`, `state_dir`, `[[bus]]`, `[[limit]]`, `[[joint]]`,
+    /// `[[hand]]`, `[watchdog]`.
     /// Flags and environment variables override it.
     #[arg(long, value_name = "FILE", env = "JOINTD_CONFIG")]
     pub config: Option<PathBuf>,
@@ -107,6 +108,10 @@ pub struct RunArgs {
     /// the binary (while editing web/).
     #[arg(long, value_name = "DIR")]
     pub web_dir: Option<PathBuf>,
+    /// Where the state file (saved poses) lives; without one, poses last
+    /// until the daemon stops.
+    #[arg(long, value_name = "DIR", env = "JOINTD_STATE_DIR")]
+    pub state_dir: Option<PathBuf>,
 }
 
 /// The config file. Flags override its values.
@@ -132,6 +137,11 @@ pub struct FileConfig {
     #[serde(default)]
     pub watchdog: WatchdogDefault,
     pub web_dir: Option<PathBuf>,
+    /// Where the state file (saved poses) lives.
+    pub state_dir: Option<PathBuf>,
+    /// `[[hand]]`: named sets of joints, possibly on several buses.
+    #[serde(default, rename = "hand")]
+    pub hands: Vec<crate::hands::HandConfig>,
 }
 
 /// `[[joint]]`: a name for a joint, shown in the API, telemetry and dashboard.
@@ -248,7 +258,27 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     if buses.is_empty() && sim.is_none() {
         return Err(DaemonError::NoBus);
     }
+    let bus_names: Vec<String> = buses
+        .iter()
+        .map(|b| b.name.clone())
+        .chain(sim.as_ref().map(|_| SIM_BUS_NAME.to_string()))
+        .collect();
+    let hands = crate::hands::resolve(&file.hands, &bus_names)
+        .map_err(|e| DaemonError::Policy(format!("[[hand]]: {e}")))?;
+    let state_dir = args.state_dir.clone().or(file.state_dir);
+    let poses = crate::hands::PoseStore::open(hands, state_dir.as_deref())
+        .map_err(|e| DaemonError::Policy(e.to_string()))?;
+    match poses.state_path() {
+        Some(path) => {
+            tracing::info!(state_file = %path.display(), "poses are kept in the state file")
+        }
+        None if !poses.hands().is_empty() => tracing::warn!(
+            "no state_dir: saved poses last until the daemon stops (set state_dir or --state-dir)"
+        ),
+        None => {}
+    }
     let options = StateOptions {
+        hands: Some(std::sync::Arc::new(poses)),
         web_dir: args.web_dir.clone().or(file.web_dir),
         joint_names: joint_names(&file.joints, args)?,
         watchdog: checked_watchdog(file.watchdog, args)?,

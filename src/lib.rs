@@ -12,6 +12,8 @@
 //! - [`mem`]: giving freed heap memory back to the system (glibc `malloc_trim`).
 //! - [`motion`]: moves generated in the daemon: synchronised multi-joint paths
 //!   (linear, minimum-jerk, trapezoid; waypoints; limits) and a move's status. Pure.
+//! - [`hands`]: named hands (`[[hand]]`) and their poses, kept in the state file (`state_dir`),
+//!   written atomically.
 //! - [`rt`]: real-time thread helpers (timer slack, FIFO class) for the bus owner and the simulator.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty with RS-485 setup, in-memory pipe).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory), behaviour from the SPEC.
@@ -60,6 +62,7 @@ pub mod bus;
 pub mod cli;
 mod config_locate;
 pub mod daemon;
+pub mod hands;
 pub mod histogram;
 pub mod http;
 mod logcap;

@@ -325,6 +325,16 @@ impl ApiError {
         Self::new(status, kind, title, detail)
     }
 
+    /// The state file could not be written (503): nothing was changed.
+    pub fn state_unwritable(detail: impl Into<String>) -> Self {
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "state-unwritable",
+            "State file not written",
+            detail,
+        )
+    }
+
     /// An e-stop that could not confirm every bus stopped (503; `partial`
     /// carries each bus's result).
     pub fn estop_incomplete(detail: impl Into<String>) -> Self {

@@ -20,6 +20,8 @@ use crate::protocol::{is_device_id, MAX_DEVICE_ID, MIN_DEVICE_ID};
 /// Options of the config file that handlers read.
 #[derive(Debug, Clone, Default)]
 pub struct StateOptions {
+    /// The named hands and their saved poses.
+    pub hands: Option<Arc<crate::hands::PoseStore>>,
     pub web_dir: Option<std::path::PathBuf>,
     /// (bus or every bus, id) → name.
     pub joint_names: BTreeMap<(Option<String>, u8), String>,
@@ -78,6 +80,11 @@ impl AppState {
 
     pub fn token(&self) -> Option<&str> {
         self.inner.token.as_deref()
+    }
+
+    /// The named hands and their poses (none configured: an empty store).
+    pub(crate) fn hands(&self) -> Option<&crate::hands::PoseStore> {
+        self.options().hands.as_deref()
     }
 
     /// The moves started through the API.

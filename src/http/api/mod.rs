@@ -7,7 +7,8 @@
 //!   whole bus at once) (with [`config_params`]:
 //!   request values → writes; [`config_schema`]: the schemas from the parameter
 //!   table; [`config_outcome`]: what a PATCH did per parameter),
-//!   [`estop`], [`health`], [`moves`] (paths generated in the daemon): one
+//!   [`estop`], [`health`], [`moves`] (paths generated in the daemon),
+//!   [`hands`] (named hands and their poses): one
 //!   router per area.
 //! - [`openapi`]: the document's head, the shared failure responses, the docs page.
 
@@ -20,6 +21,7 @@ pub(crate) mod config_schema;
 pub(crate) mod control;
 pub(crate) mod devices;
 pub(crate) mod estop;
+pub(crate) mod hands;
 pub(crate) mod health;
 pub(crate) mod metrics;
 pub(crate) mod moves;
@@ -40,6 +42,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .merge(config_all::router())
         .merge(estop::router())
         .merge(moves::router())
+        .merge(hands::router())
 }
 
 /// The document as served, with the crate version.

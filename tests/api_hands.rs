@@ -1,0 +1,233 @@
+//! Named hands and poses (issue 18) through the real binary: a `[[hand]]`
+//! of the simulated bus, a pose saved, the daemon stopped and started again
+//! on the same state directory with the pose still there, and going to it
+//! as a move; bad poses and names get a 4xx that says what was wrong.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::{json, Value};
+
+const BIN: &str = env!("CARGO_BIN_EXE_jointd");
+const WAIT: Duration = Duration::from_secs(20);
+
+struct Daemon {
+    child: Child,
+    base: String,
+}
+
+impl Daemon {
+    fn start(config: &std::path::Path) -> Self {
+        let mut child = Command::new(BIN)
+            .args(["--sim", "4", "--listen", "127.0.0.1:0", "--config"])
+            .arg(config)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("spawn jointd");
+        let mut first = String::new();
+        BufReader::new(child.stdout.take().expect("stdout"))
+            .read_line(&mut first)
+            .expect("first line");
+        let base = first
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap_or_else(|| panic!("address line, got {first:?}"))
+            .to_owned();
+        Self { child, base }
+    }
+
+    /// Stops it as a service manager would (SIGTERM) and waits.
+    fn stop(mut self) {
+        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
+        let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+async fn call(method: reqwest::Method, url: String, body: Option<Value>) -> (u16, Value) {
+    let client = reqwest::Client::new();
+    let mut req = client.request(method, url);
+    if let Some(b) = body {
+        req = req.json(&b);
+    }
+    let r = req.send().await.expect("request");
+    let status = r.status().as_u16();
+    (status, r.json().await.unwrap_or(Value::Null))
+}
+
+async fn wait_online(base: &str) {
+    let deadline = Instant::now() + WAIT;
+    loop {
+        let (_, bus) = call(
+            reqwest::Method::GET,
+            format!("{base}/api/v1/buses/sim0"),
+            None,
+        )
+        .await;
+        if bus["devices_online"] == 4 {
+            return;
+        }
+        assert!(Instant::now() < deadline, "joints never online: {bus}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+#[test]
+fn a_pose_survives_a_restart_and_a_hand_goes_to_it() {
+    let dir = std::env::temp_dir().join(format!("jointd-hands-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let config = dir.join("jointd.toml");
+    std::fs::write(
+        &config,
+        format!(
+            r#"state_dir = "{}"
+
+[[hand]]
+name = "left"
+joints = [{{ bus = "sim0", ids = "1-2", names = ["thumb", "index"] }}, {{ bus = "sim0", ids = 3 }}]
+
+[[limit]]
+ids = [2]
+min_deg = -45.0
+max_deg = 45.0
+"#,
+            dir.join("state").display()
+        ),
+    )
+    .unwrap();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let fist = json!({"thumb": 20.0, "index": 30.0, "sim0_3": -10.0});
+
+    let d = Daemon::start(&config);
+    rt.block_on(async {
+        let base = &d.base;
+        wait_online(base).await;
+        let (s, hands) = call(reqwest::Method::GET, format!("{base}/api/v1/hands"), None).await;
+        assert_eq!(s, 200);
+        assert_eq!(hands["hands"][0]["name"], "left");
+        let names: Vec<&str> = hands["hands"][0]["joints"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|j| j["name"].as_str())
+            .collect();
+        assert_eq!(names, ["thumb", "index", "sim0_3"]);
+        let put = |name: &str, body: Value| {
+            call(
+                reqwest::Method::PUT,
+                format!("{base}/api/v1/hands/left/poses/{name}"),
+                Some(body),
+            )
+        };
+        let (s, saved) = put("fist", json!({ "positions_deg": fist })).await;
+        assert_eq!(s, 200, "{saved}");
+        assert_eq!(saved["positions_deg"], fist);
+        // Outside joint 2's soft limit, an unknown joint, a bad name: 422, nothing saved.
+        let (s, p) = put("wide", json!({"positions_deg": {"index": 60.0}})).await;
+        assert_eq!((s, p["field"].as_str()), (422, Some("positions_deg.index")));
+        let (s, p) = put("odd", json!({"positions_deg": {"pinky": 1.0}})).await;
+        assert_eq!((s, p["field"].as_str()), (422, Some("positions_deg.pinky")));
+        let (s, _) = put("bad%20name", json!({"positions_deg": {"thumb": 1.0}})).await;
+        assert_eq!(s, 422);
+        let (s, _) = call(
+            reqwest::Method::GET,
+            format!("{base}/api/v1/hands/left/poses/wide"),
+            None,
+        )
+        .await;
+        assert_eq!(s, 404);
+        let (s, _) = call(
+            reqwest::Method::GET,
+            format!("{base}/api/v1/hands/right/poses/fist"),
+            None,
+        )
+        .await;
+        assert_eq!(s, 404);
+    });
+    d.stop();
+
+    // Started again on the same state directory: the pose is there.
+    let d = Daemon::start(&config);
+    rt.block_on(async {
+        let base = &d.base;
+        wait_online(base).await;
+        let (s, pose) = call(
+            reqwest::Method::GET,
+            format!("{base}/api/v1/hands/left/poses/fist"),
+            None,
+        )
+        .await;
+        assert_eq!(s, 200);
+        assert_eq!(pose["positions_deg"], fist);
+        // Going to it needs the joints enabled: 409 first, then a move.
+        let go = || {
+            call(
+                reqwest::Method::POST,
+                format!("{base}/api/v1/hands/left/poses/fist/go"),
+                Some(json!({"duration_ms": 500, "method": "min_jerk"})),
+            )
+        };
+        let (s, _) = go().await;
+        assert_eq!(s, 409);
+        let (s, _) = call(
+            reqwest::Method::POST,
+            format!("{base}/api/v1/buses/sim0/control/enable"),
+            Some(json!({"ids": [1, 2, 3]})),
+        )
+        .await;
+        assert_eq!(s, 200);
+        let deadline = Instant::now() + WAIT;
+        let started = loop {
+            let (s, body) = go().await;
+            if s == 201 {
+                break body;
+            }
+            // Aligning after the enable: not yet running.
+            assert!(s == 409 && Instant::now() < deadline, "{s} {body}");
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        };
+        let id = started["id"].as_u64().expect("a move id");
+        assert_eq!(started["joints"].as_array().map(Vec::len), Some(3));
+        let deadline = Instant::now() + WAIT;
+        loop {
+            let (_, mv) = call(
+                reqwest::Method::GET,
+                format!("{base}/api/v1/moves/{id}"),
+                None,
+            )
+            .await;
+            if mv["state"] == "done" {
+                break;
+            }
+            assert!(Instant::now() < deadline, "move never done: {mv}");
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        // Deleted, and gone.
+        let (s, _) = call(
+            reqwest::Method::DELETE,
+            format!("{base}/api/v1/hands/left/poses/fist"),
+            None,
+        )
+        .await;
+        assert_eq!(s, 200);
+        let (s, _) = call(
+            reqwest::Method::GET,
+            format!("{base}/api/v1/hands/left/poses/fist"),
+            None,
+        )
+        .await;
+        assert_eq!(s, 404);
+    });
+    d.stop();
+    let _ = std::fs::remove_dir_all(&dir);
+}
