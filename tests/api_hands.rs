@@ -212,6 +212,21 @@ max_deg = 45.0
             assert!(Instant::now() < deadline, "move never done: {mv}");
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
+        // A move may name joints by hand and joint name.
+        let by_name = |joint: Value| {
+            call(
+                reqwest::Method::POST,
+                format!("{base}/api/v1/moves"),
+                Some(json!({"joints": [joint], "duration_ms": 200})),
+            )
+        };
+        let (s, mv) = by_name(json!({"hand": "left", "joint": "thumb", "position_deg": 5.0})).await;
+        assert_eq!(s, 201, "{mv}");
+        assert_eq!(mv["joints"], json!([{"bus": "sim0", "id": 1}]));
+        let (s, p) = by_name(json!({"hand": "left", "joint": "pinky", "position_deg": 5.0})).await;
+        assert_eq!((s, p["field"].as_str()), (422, Some("joints[0].joint")));
+        let (s, p) = by_name(json!({"hand": "left", "bus": "sim0", "position_deg": 5.0})).await;
+        assert_eq!((s, p["field"].as_str()), (422, Some("joints[0]")));
         // Deleted, and gone.
         let (s, _) = call(
             reqwest::Method::DELETE,

@@ -32,14 +32,19 @@ const SPEED_HEADROOM: f64 = 1.25;
 /// ... and at least this (rotor rpm): a slow path still gets a firm limit.
 const MIN_SPEED_LIMIT_RPM: f64 = 500.0;
 
-/// One joint and where it goes.
+/// One joint and where it goes: by `bus` and `id`, or by `hand` and
+/// `joint` (its name in a `[[hand]]` of the config).
 #[derive(Debug, Clone, PartialEq, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct MoveJoint {
     #[schema(example = "sim0")]
-    pub bus: String,
+    pub bus: Option<String>,
     #[schema(example = 1)]
-    pub id: i64,
+    pub id: Option<i64>,
+    /// A hand's name (with `joint`, instead of `bus` and `id`).
+    pub hand: Option<String>,
+    /// The joint's name in that hand.
+    pub joint: Option<String>,
     /// Target, degrees (required unless `waypoints` are given).
     #[schema(example = 30.0)]
     pub position_deg: Option<f64>,
@@ -218,16 +223,12 @@ fn plan<'a>(state: &'a AppState, req: &MoveRequest) -> ApiResult<Plan<'a>> {
     let mut joints: Vec<JointRef> = Vec::with_capacity(req.joints.len());
     let mut start = Vec::with_capacity(req.joints.len());
     for (i, j) in req.joints.iter().enumerate() {
-        let bus = state.bus(&j.bus)?;
-        let id = device_id(&format!("joints[{i}].id"), j.id)?;
-        let r = JointRef {
-            bus: j.bus.clone(),
-            id,
-        };
+        let r = joint_ref(state, i, j)?;
+        let (bus, id) = (state.bus(&r.bus)?, r.id);
         if joints.contains(&r) {
             return Err(ApiError::invalid(
                 &format!("joints[{i}]"),
-                format!("joint {id} of bus `{}` appears twice", j.bus),
+                format!("joint {id} of bus `{}` appears twice", r.bus),
             ));
         }
         let snap = bus.snapshot();
@@ -238,7 +239,7 @@ fn plan<'a>(state: &'a AppState, req: &MoveRequest) -> ApiResult<Plan<'a>> {
                 "Joint not in position mode",
                 format!(
                     "joint {id} of bus `{}` is not in position mode: a move needs position mode",
-                    j.bus
+                    r.bus
                 ),
             ));
         }
@@ -252,7 +253,7 @@ fn plan<'a>(state: &'a AppState, req: &MoveRequest) -> ApiResult<Plan<'a>> {
                     "Position unknown",
                     format!(
                         "joint {id} of bus `{}` has not reported its angle yet",
-                        j.bus
+                        r.bus
                     ),
                 )
             })?;
@@ -276,6 +277,41 @@ fn plan<'a>(state: &'a AppState, req: &MoveRequest) -> ApiResult<Plan<'a>> {
         joints,
         by_bus,
     })
+}
+
+/// A joint named by bus and id, or by hand and joint name.
+fn joint_ref(state: &AppState, i: usize, j: &MoveJoint) -> ApiResult<JointRef> {
+    match (&j.bus, j.id, &j.hand, &j.joint) {
+        (Some(bus), Some(id), None, None) => {
+            state.bus(bus)?;
+            Ok(JointRef {
+                bus: bus.clone(),
+                id: device_id(&format!("joints[{i}].id"), id)?,
+            })
+        }
+        (None, None, Some(hand), Some(name)) => {
+            let hand_of = state
+                .hands()
+                .and_then(|store| store.hand(hand))
+                .ok_or_else(|| {
+                    ApiError::not_found("unknown-hand", format!("no hand named `{hand}`"))
+                })?;
+            let joint = hand_of.joint(name).ok_or_else(|| {
+                ApiError::invalid(
+                    &format!("joints[{i}].joint"),
+                    format!("hand `{hand}` has no joint `{name}`"),
+                )
+            })?;
+            Ok(JointRef {
+                bus: joint.bus.clone(),
+                id: joint.id,
+            })
+        }
+        _ => Err(ApiError::invalid(
+            &format!("joints[{i}]"),
+            "name a joint by `bus` and `id`, or by `hand` and `joint`",
+        )),
+    }
 }
 
 /// The request's waypoints, or its targets as the one waypoint (time to be set).

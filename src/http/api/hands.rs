@@ -221,8 +221,10 @@ async fn go_to_pose(
         .iter()
         .filter_map(|(name, deg)| {
             hand.joint(name).map(|j| MoveJoint {
-                bus: j.bus.clone(),
-                id: i64::from(j.id),
+                bus: Some(j.bus.clone()),
+                id: Some(i64::from(j.id)),
+                hand: None,
+                joint: None,
                 position_deg: Some(*deg),
             })
         })
