@@ -15,7 +15,7 @@ use crate::http::error::{ApiError, ApiResult};
 use crate::http::move_book::{Booked, JointRef};
 use crate::http::state::{device_id, known_device, AppState};
 use crate::http::targets::ensure_enabled;
-use crate::http::telemetry::{firmware_of, measured_angle_raw};
+use crate::http::telemetry::{commanded_or_measured_raw, firmware_of};
 use crate::motion::{Method, MoveState, Path, RunningMove};
 use crate::protocol::{units, CtrlMode};
 
@@ -243,20 +243,16 @@ fn plan<'a>(state: &'a AppState, req: &MoveRequest) -> ApiResult<Plan<'a>> {
                 ),
             ));
         }
-        let from = dev
-            .target_sent
-            .map(|t| t.pos_ref)
-            .or_else(|| measured_angle_raw(dev))
-            .ok_or_else(|| {
-                ApiError::conflict(
-                    "no-position",
-                    "Position unknown",
-                    format!(
-                        "joint {id} of bus `{}` has not reported its angle yet",
-                        r.bus
-                    ),
-                )
-            })?;
+        let from = commanded_or_measured_raw(dev).ok_or_else(|| {
+            ApiError::conflict(
+                "no-position",
+                "Position unknown",
+                format!(
+                    "joint {id} of bus `{}` has not reported its angle yet",
+                    r.bus
+                ),
+            )
+        })?;
         start.push(units::angle_deg(from));
         joints.push(r);
     }

@@ -10,7 +10,9 @@ use utoipa::ToSchema;
 
 use super::error::{ApiError, ApiResult};
 use super::limits::JointLimits;
-use super::telemetry::{firmware_of, is_enabled, measured_angle_raw, revision_of, TargetView};
+use super::telemetry::{
+    commanded_or_measured_raw, firmware_of, is_enabled, revision_of, TargetView,
+};
 use crate::bus::handle::DeviceState;
 use crate::bus::{BusError, BusHandle, Setpoint};
 use crate::protocol::status::fsm_name_in;
@@ -133,11 +135,7 @@ fn speed_setpoint(
     limits.check_speed(&spd_field, rpm, &who)?;
     let spd_ref = units::speed_to_raw(rpm, firmware_of(dev))
         .map_err(|e| ApiError::from_unit(&spd_field, e))?;
-    let pos_ref = dev
-        .target_sent
-        .map(|t| t.pos_ref)
-        .or_else(|| measured_angle_raw(dev))
-        .unwrap_or(0);
+    let pos_ref = commanded_or_measured_raw(dev).unwrap_or(0);
     Ok(Setpoint { pos_ref, spd_ref })
 }
 

@@ -239,6 +239,14 @@ pub(crate) fn motion_view(
 }
 
 /// Latest angle the daemon knows: INFO_02 if fresher than INFO_01.
+/// Where a joint is headed: the last target sent, else where it was
+/// measured (a move or a pose starts from here).
+pub(crate) fn commanded_or_measured_raw(dev: &DeviceState) -> Option<i16> {
+    dev.target_sent
+        .map(|t| t.pos_ref)
+        .or_else(|| measured_angle_raw(dev))
+}
+
 pub(crate) fn measured_angle_raw(dev: &DeviceState) -> Option<i16> {
     match (&dev.info01, &dev.info02) {
         (Some((a, ta)), Some((b, tb))) => Some(if tb >= ta { b.angle } else { a.angle }),

@@ -341,12 +341,7 @@ impl Scheduler {
                 block: poll.block,
             };
         }
-        match self.plan_control(now, store) {
-            Some(frame) => Slot::Control(frame),
-            None => Slot::Listen {
-                until: now + IDLE_TICK,
-            },
-        }
+        self.control_or_listen(now, store)
     }
 
     /// Behind a USB adapter (the write time was waited for in
@@ -362,6 +357,11 @@ impl Scheduler {
                 block: poll.block,
             };
         }
+        self.control_or_listen(now, store)
+    }
+
+    /// Nothing to poll: setpoints if any are pending, else listen a tick.
+    fn control_or_listen(&mut self, now: Instant, store: &SetpointStore) -> Slot {
         match self.plan_control(now, store) {
             Some(frame) => Slot::Control(frame),
             None => Slot::Listen {

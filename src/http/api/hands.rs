@@ -17,7 +17,7 @@ use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::moves::{self, MoveJoint, MoveRequest, MoveView};
 use crate::http::state::AppState;
-use crate::http::telemetry::measured_angle_raw;
+use crate::http::telemetry::commanded_or_measured_raw;
 use crate::motion::Method;
 use crate::protocol::units;
 
@@ -319,11 +319,7 @@ fn current(state: &AppState, hand: &Hand) -> ApiResult<Pose> {
         let raw = snap
             .devices
             .get(&j.id)
-            .and_then(|d| {
-                d.target_sent
-                    .map(|t| t.pos_ref)
-                    .or_else(|| measured_angle_raw(d))
-            })
+            .and_then(commanded_or_measured_raw)
             .ok_or_else(|| {
                 ApiError::conflict(
                     "no-position",
