@@ -246,3 +246,79 @@ max_deg = 45.0
     d.stop();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A daemon killed (SIGKILL) while eight clients save poses at once, 8
+/// times at different moments: the state file is always whole JSON with no
+/// pose lost that an earlier round saved, never a torn write. (Seen to fail
+/// with a writer that truncates and writes the file in place.)
+#[test]
+fn a_kill_during_pose_writes_leaves_a_whole_state_file() {
+    let dir = std::env::temp_dir().join(format!("jointd-hands-kill-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let state = dir.join("state");
+    let config = dir.join("jointd.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "state_dir = \"{}\"\n\n[[hand]]\nname = \"left\"\njoints = [{{ bus = \"sim0\", ids = \"1-4\" }}]\n",
+            state.display()
+        ),
+    )
+    .unwrap();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let mut saved_before = 0usize;
+    for round in 0..8u64 {
+        let mut d = Daemon::start(&config);
+        let base = d.base.clone();
+        let kill_at = Instant::now() + Duration::from_millis(60 + 17 * round);
+        let sent = rt.block_on(async move {
+            // Eight clients saving poses at once, so a write is under way
+            // when the kill comes.
+            let mut clients = Vec::new();
+            for c in 0..8u64 {
+                let base = base.clone();
+                clients.push(tokio::spawn(async move {
+                    let client = reqwest::Client::new();
+                    let mut k = 0u64;
+                    while Instant::now() < kill_at + Duration::from_millis(50) {
+                        let positions: serde_json::Map<String, Value> = (1..=4)
+                            .map(|j| (format!("sim0_{j}"), json!(((c * 7 + k) % 90) as f64 + 0.25)))
+                            .collect();
+                        let r = client
+                            .put(format!("{base}/api/v1/hands/left/poses/p{c}_{}", k % 20))
+                            .json(&json!({ "positions_deg": positions }))
+                            .send()
+                            .await;
+                        if r.is_err() {
+                            break; // the daemon is gone
+                        }
+                        k += 1;
+                    }
+                    k
+                }));
+            }
+            tokio::time::sleep(kill_at.saturating_duration_since(Instant::now())).await;
+            let _ = d.child.kill();
+            let mut sent = 0;
+            for c in clients {
+                sent += c.await.unwrap_or(0);
+            }
+            (sent, d)
+        });
+        let (sent, mut d) = sent;
+        let _ = d.child.wait();
+        let Ok(text) = std::fs::read_to_string(state.join("state.json")) else {
+            // Killed before its first write completed: nothing to tear yet.
+            assert_eq!(saved_before, 0, "round {round}: the state file vanished");
+            continue;
+        };
+        let parsed: Value = serde_json::from_str(&text)
+            .unwrap_or_else(|e| panic!("round {round}: torn state file ({e}): {text}"));
+        let poses = parsed["poses"]["left"].as_object().map_or(0, |p| p.len());
+        assert!(poses >= saved_before, "round {round}: poses lost");
+        assert!(sent > 0, "round {round}: no write went out");
+        saved_before = poses;
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
