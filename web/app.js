@@ -462,8 +462,65 @@ $("#estop").onclick = async () => {
   say(text + ".", r.stopped && !unconfirmed.length ? "info" : "error");
 };
 
+// ---------------------------------------------------------------- hands and poses
+
+/** The configured hands (`[[hand]]`), each with a button per saved pose and
+ *  a way to save where it is now; hidden when no hand is configured. */
+async function refreshHands() {
+  let list;
+  try { list = await api("GET", "hands"); } catch { return; }
+  const hands = list.hands || [];
+  $("#poses-section").hidden = hands.length === 0;
+  const box = $("#poses");
+  box.textContent = "";
+  for (const h of hands) {
+    const row = document.createElement("div");
+    row.className = "row";
+    const label = document.createElement("strong");
+    label.textContent = h.name;
+    row.append(label);
+    for (const name of h.poses) {
+      const b = document.createElement("button");
+      b.textContent = name;
+      b.dataset.testid = `pose-${h.name}-${name}`;
+      b.onclick = () => goPose(h.name, name);
+      row.append(b);
+    }
+    const input = document.createElement("input");
+    input.placeholder = "pose name";
+    input.size = 10;
+    input.dataset.testid = `pose-name-${h.name}`;
+    const save = document.createElement("button");
+    save.textContent = "Save current";
+    save.dataset.testid = `pose-save-${h.name}`;
+    save.onclick = () => savePose(h.name, input.value.trim());
+    row.append(input, save);
+    box.append(row);
+  }
+}
+
+const handPath = (hand, name) => `hands/${encodeURIComponent(hand)}/poses/${encodeURIComponent(name)}`;
+
+async function savePose(hand, name) {
+  if (!name) return say("Name the pose first.");
+  const saved = await act(null, () => api("PUT", handPath(hand, name), { from_current: true }));
+  if (saved) {
+    say(`Pose ${name} of ${hand} saved.`, "info");
+    refreshHands();
+  }
+}
+
+function goPose(hand, name) {
+  const ms = Number($("#move-ms").value) || 800;
+  return act(null, async () => {
+    const mv = await api("POST", `${handPath(hand, name)}/go`, { duration_ms: ms, method: $("#move-method").value });
+    say(`Move ${mv.id}: ${hand} to pose ${name} in ${mv.duration_ms} ms.`, "info");
+  });
+}
+
 // ---------------------------------------------------------------- start
 
 connect();
+refreshHands();
 refreshBuses();
 setInterval(refreshBuses, 1000);

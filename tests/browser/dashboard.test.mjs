@@ -8,7 +8,9 @@
 import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
 import { spawn } from "node:child_process";
-import { mkdirSync } from "node:fs";
+import { mkdirSync, mkdtempSync, writeFileSync } from "node:fs";
+import { tmpdir } from "node:os";
+import { join } from "node:path";
 import { createServer } from "node:http";
 import { chromium } from "playwright-core";
 
@@ -63,7 +65,12 @@ const cell = (id, field) => page.locator(`[data-testid="device-row-sim0-${id}"] 
 before(async () => {
   mkdirSync(SHOTS, { recursive: true });
   // Joints 9–16 run rev 2.0.8 firmware, 1–8 V2.0.1: a mixed bus, as in the field.
-  daemon = spawn(BIN, ["--sim", "16", "--sim-firmware", "9-16=2.0.8", "--listen", "127.0.0.1:0"], { stdio: ["ignore", "pipe", "inherit"] });
+  // A hand of joint 1, its poses in a state file of a fresh directory.
+  const dir = mkdtempSync(join(tmpdir(), "jointd-browser-"));
+  const config = join(dir, "jointd.toml");
+  writeFileSync(config, `state_dir = "${join(dir, "state")}"\n\n[[hand]]\nname = "left"\njoints = [{ bus = "sim0", ids = 1, names = ["thumb"] }]\n`);
+  daemon = spawn(BIN, ["--sim", "16", "--sim-firmware", "9-16=2.0.8", "--listen", "127.0.0.1:0", "--config", config],
+    { stdio: ["ignore", "pipe", "inherit"] });
   base = await listeningUrl(daemon);
   await waitReady(base);
   browser = await chromium.launch({
@@ -138,6 +145,31 @@ test("a move with a duration goes through the daemon's path generator", async ()
   // The daemon reports the move done.
   const state = await page.evaluate(async () => (await (await fetch("/api/v1/moves/1")).json()).state);
   assert.equal(state, "done");
+  await page.locator('[data-testid="move-ms"]').fill("");
+});
+
+/** Waits until joint `id`'s angle in the table is within 1° of `deg`. */
+async function angleNear(id, deg) {
+  await page.waitForFunction(([id, deg]) => {
+    const v = Number(document.querySelector(`[data-testid="device-row-sim0-${id}"] td[data-field="angle_deg"]`)?.textContent);
+    return Math.abs(v - deg) < 1;
+  }, [id, deg], { timeout: WAIT });
+}
+
+test("a hand's pose is saved from where it is and gone back to", async () => {
+  await page.locator('[data-testid="poses"]').waitFor({ state: "visible", timeout: WAIT });
+  await page.locator('[data-testid="pose-name-left"]').fill("bent");
+  await page.locator('[data-testid="pose-save-left"]').click();
+  const pose = page.locator('[data-testid="pose-left-bent"]');
+  await pose.waitFor({ timeout: WAIT });
+  // Somewhere else, then back to the pose (-20°, where the last test left it).
+  await page.locator('[data-testid="target-number"]').fill("10");
+  await page.locator('[data-testid="move"]').click();
+  await angleNear(1, 10);
+  await page.locator('[data-testid="move-ms"]').fill("300");
+  await pose.click();
+  await page.locator("#messages .info", { hasText: /^Move \d+: left to pose bent in 300 ms\.$/ }).waitFor({ timeout: WAIT });
+  await angleNear(1, -20);
   await page.locator('[data-testid="move-ms"]').fill("");
 });
 
