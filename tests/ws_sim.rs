@@ -602,3 +602,52 @@ async fn a_move_message_starts_a_move_and_its_events_follow() {
         }
     }
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn setpoints_may_name_joints_by_hand_and_joint_name() {
+    use jointd::hands::{resolve, HandConfig, HandJoints, Ids, PoseStore};
+    let bus = sim_bus::start(2, None).await;
+    let hands = resolve(
+        &[HandConfig {
+            name: "left".into(),
+            joints: vec![HandJoints {
+                bus: "sim0".into(),
+                ids: Ids::List(vec![1, 2]),
+                names: vec!["thumb".into(), "index".into()],
+            }],
+        }],
+        &["sim0".to_string()],
+    )
+    .expect("a hand");
+    let store = PoseStore::open(hands, None).expect("poses in memory");
+    let options = jointd::http::state::StateOptions {
+        hands: Some(std::sync::Arc::new(store)),
+        ..Default::default()
+    };
+    assert!(bus.server_state.set_options(options).is_ok());
+    enable(&bus, &[1, 2]).await;
+    let mut c = connect(&bus).await;
+    c.send(json!({"type": "setpoints", "seq": 1, "ack": true,
+        "targets": [{"hand": "left", "joint": "index", "position_deg": 12.5}]}))
+        .await;
+    assert_eq!(c.next_of("ack").await["ref_seq"], 1);
+    bus.wait_snapshot("joint 2 targeted", |s| {
+        s.devices[&2]
+            .target_sent
+            .is_some_and(|t| (jointd::protocol::units::angle_deg(t.pos_ref) - 12.5).abs() < 0.01)
+    })
+    .await;
+    let e = c
+        .rejected(json!({"type": "setpoints", "seq": 2,
+            "targets": [{"hand": "left", "joint": "pinky", "position_deg": 1}]}))
+        .await;
+    assert_eq!(e["field"], "targets[0].joint");
+    let e = c
+        .rejected(json!({"type": "setpoints", "seq": 3,
+            "targets": [{"hand": "left", "dev_id": 1, "position_deg": 1}]}))
+        .await;
+    assert_eq!(
+        (e["code"].as_str(), e["field"].as_str()),
+        (Some("bad_message"), Some("targets[0]"))
+    );
+}

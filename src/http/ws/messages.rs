@@ -86,7 +86,10 @@ pub(crate) struct SetpointBatch {
 pub(crate) struct TargetItem {
     /// Optional when the daemon has exactly one bus.
     pub bus: Option<String>,
-    pub dev_id: i64,
+    /// The joint by id on `bus`; or by `hand` and `joint` name instead.
+    pub dev_id: Option<i64>,
+    pub hand: Option<String>,
+    pub joint: Option<String>,
     pub position_deg: Option<f64>,
     pub speed_rpm: Option<f64>,
 }

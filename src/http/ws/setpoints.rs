@@ -111,7 +111,7 @@ fn validate(state: &AppState, targets: &[TargetItem]) -> Result<PerBus, WsError>
     let mut per_bus = PerBus::new();
     for (i, t) in targets.iter().enumerate() {
         let field = format!("targets[{i}].");
-        let name = bus_name(state, t).map_err(|e| e.with_field(format!("{field}bus")))?;
+        let (name, id) = joint_of(state, t, &field)?;
         let snap = match snapshots.get(&name) {
             Some(s) => s.clone(),
             None => {
@@ -120,7 +120,7 @@ fn validate(state: &AppState, targets: &[TargetItem]) -> Result<PerBus, WsError>
                 s
             }
         };
-        let (id, sp) = one_target(state, &snap, t, &field)?;
+        let sp = one_target(state, &snap, id, t, &field)?;
         let list = per_bus.entry(name.clone()).or_default();
         if list.iter().any(|(seen, _)| *seen == id) {
             return Err(WsError::new(
@@ -134,13 +134,47 @@ fn validate(state: &AppState, targets: &[TargetItem]) -> Result<PerBus, WsError>
     Ok(per_bus)
 }
 
+/// The bus and id a target names: by `dev_id` (on `bus`, or the only
+/// bus), or by `hand` and `joint` name.
+fn joint_of(state: &AppState, t: &TargetItem, field: &str) -> Result<(String, u8), WsError> {
+    match (t.dev_id, &t.hand, &t.joint) {
+        (Some(dev_id), None, None) => {
+            let name = bus_name(state, t).map_err(|e| e.with_field(format!("{field}bus")))?;
+            Ok((name, device_id(&format!("{field}dev_id"), dev_id)?))
+        }
+        (None, Some(hand), Some(joint)) if t.bus.is_none() => {
+            let found = state
+                .hands()
+                .and_then(|store| store.hand(hand))
+                .ok_or_else(|| {
+                    WsError::new(ErrorCode::UnknownDevice, format!("no hand named `{hand}`"))
+                        .with_field(format!("{field}hand"))
+                })?
+                .joint(joint)
+                .ok_or_else(|| {
+                    WsError::new(
+                        ErrorCode::UnknownDevice,
+                        format!("hand `{hand}` has no joint `{joint}`"),
+                    )
+                    .with_field(format!("{field}joint"))
+                })?;
+            Ok((found.bus.clone(), found.id))
+        }
+        _ => Err(WsError::new(
+            ErrorCode::BadMessage,
+            "name the joint by `dev_id` (and `bus`), or by `hand` and `joint`",
+        )
+        .with_field(field.trim_end_matches('.').to_string())),
+    }
+}
+
 fn one_target(
     state: &AppState,
     snap: &BusSnapshot,
+    id: u8,
     t: &TargetItem,
     field: &str,
-) -> Result<(u8, Setpoint), WsError> {
-    let id = device_id(&format!("{field}dev_id"), t.dev_id)?;
+) -> Result<Setpoint, WsError> {
     let dev = known_device(snap, id)?;
     // Only a state known to be disabled is refused: checking freshly would
     // cost a bus round trip per message at teleoperation rates.
@@ -161,7 +195,7 @@ fn one_target(
         position_deg: t.position_deg,
         speed_rpm: t.speed_rpm,
     };
-    Ok((id, setpoint(dev, &limits, &req, field)?))
+    Ok(setpoint(dev, &limits, &req, field)?)
 }
 
 /// The target's bus, or the only bus when it names none.
