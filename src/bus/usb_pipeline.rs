@@ -45,7 +45,10 @@ const PHASE_MIN_SAMPLES: usize = PHASE_SAMPLES;
 /// within the wider one (hysteresis: a burst of late reads does not stop
 /// the pipeline, which would then learn again from its slower polls).
 const PHASE_TRUST_SPREAD: f64 = 0.25;
-const PHASE_DOUBT_SPREAD: f64 = 0.45;
+/// How far the trusted estimate may move per arrival (ns): well under the
+/// guard for the few arrivals between two transfers, far above any drift.
+const PHASE_SLEW_NS: i64 = 5_000;
+const PHASE_DOUBT_SPREAD: f64 = 0.35;
 /// How long a host write may take to reach the adapter (the system call,
 /// the USB stack, a host or adapter thread that is late): a write this
 /// close before a boundary may miss it. At most a period is counted (on a
@@ -125,8 +128,27 @@ impl FramePhase {
                 PHASE_TRUST_SPREAD
             };
             let tight = (spread as f64) < self.period_ns() as f64 * limit;
-            self.offset = tight.then_some(offset);
+            self.offset = match (tight, self.offset) {
+                (false, _) => None,
+                (true, None) => Some(offset),
+                (true, Some(old)) => Some(self.slew(old, offset)),
+            };
         }
+    }
+
+    /// Moves the estimate from `old` toward `new` by at most [`PHASE_SLEW`]:
+    /// the frame clock does not jump (a crystal drifts by well under a µs a
+    /// ms), but a burst of late reads moves the raw estimate, and a jump
+    /// between two transfers larger than the guard would put the second on
+    /// the wire before the first's reply has ended.
+    fn slew(&self, old: u64, new: u64) -> u64 {
+        let p = self.period_ns() as i64;
+        let mut d = (new as i64 - old as i64).rem_euclid(p);
+        if d > p / 2 {
+            d -= p;
+        }
+        let step = d.clamp(-PHASE_SLEW_NS, PHASE_SLEW_NS);
+        (old as i64 + step).rem_euclid(p) as u64
     }
 
     /// The sample offset that starts the shortest stretch of the period
@@ -341,6 +363,21 @@ mod tests {
         // The dense cluster's start (a few µs after the earliest read at 312 µs).
         let b = p.phase.boundary_after(t0 + us(10_000)) - t0;
         assert!(b >= us(10_312) && b <= us(10_320), "{b:?}");
+    }
+
+    #[test]
+    fn a_trusted_estimate_moves_at_most_5_us_per_arrival() {
+        let t0 = Instant::now();
+        let mut p = learnt(t0, &[0; PHASE_SAMPLES]);
+        let before = p.phase.boundary_after(t0 + us(100_000));
+        // A burst of reads 40 µs late (a busy host) would move the raw
+        // estimate by 40 µs at once.
+        for k in 0..PHASE_SAMPLES as u64 {
+            p.arrival(t0 + us(300 + 1000 * (40 + k) + 40));
+            let now = p.phase.boundary_after(t0 + us(100_000));
+            assert!(now - before <= us(5 * (k + 1)), "{:?}", now - before);
+        }
+        assert!(p.active());
     }
 
     #[test]
