@@ -49,6 +49,10 @@ const PHASE_TRUST_SPREAD: f64 = 0.25;
 /// guard for the few arrivals between two transfers, far above any drift.
 const PHASE_SLEW_NS: i64 = 5_000;
 const PHASE_DOUBT_SPREAD: f64 = 0.35;
+/// ... but never below this (ns): on a 125 µs microframe a host's wake-up
+/// jitter alone is a third of the period, and a write there is always held
+/// for the later microframe anyway.
+const DOUBT_FLOOR_NS: f64 = 60_000.0;
 /// How long a host write may take to reach the adapter (the system call,
 /// the USB stack, a host or adapter thread that is late): a write this
 /// close before a boundary may miss it. At most a period is counted (on a
@@ -127,7 +131,12 @@ impl FramePhase {
             } else {
                 PHASE_TRUST_SPREAD
             };
-            let tight = (spread as f64) < self.period_ns() as f64 * limit;
+            let limit_ns = (self.period_ns() as f64 * limit).max(if self.offset.is_some() {
+                DOUBT_FLOOR_NS
+            } else {
+                0.0
+            });
+            let tight = (spread as f64) < limit_ns;
             self.offset = match (tight, self.offset) {
                 (false, _) => None,
                 (true, None) => Some(offset),
