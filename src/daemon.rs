@@ -266,7 +266,7 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     let hands = crate::hands::resolve(&file.hands, &bus_names)
         .map_err(|e| DaemonError::Policy(format!("[[hand]]: {e}")))?;
     let state_dir = args.state_dir.clone().or(file.state_dir);
-    let poses = crate::hands::PoseStore::open(hands, state_dir.as_deref())
+    let poses = crate::hands::StateStore::open(hands, state_dir.as_deref())
         .map_err(|e| DaemonError::Policy(e.to_string()))?;
     match poses.state_path() {
         Some(path) => {

@@ -605,7 +605,7 @@ async fn a_move_message_starts_a_move_and_its_events_follow() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn setpoints_may_name_joints_by_hand_and_joint_name() {
-    use jointd::hands::{resolve, HandConfig, HandJoints, Ids, PoseStore};
+    use jointd::hands::{resolve, HandConfig, HandJoints, Ids, StateStore};
     let bus = sim_bus::start(2, None).await;
     let hands = resolve(
         &[HandConfig {
@@ -619,7 +619,7 @@ async fn setpoints_may_name_joints_by_hand_and_joint_name() {
         &["sim0".to_string()],
     )
     .expect("a hand");
-    let store = PoseStore::open(hands, None).expect("poses in memory");
+    let store = StateStore::open(hands, None).expect("poses in memory");
     let options = jointd::http::state::StateOptions {
         hands: Some(std::sync::Arc::new(store)),
         ..Default::default()

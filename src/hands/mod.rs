@@ -4,8 +4,11 @@
 //! (`state_dir`) so they survive restarts.
 //!
 //! - [`state_file`]: the state file, written atomically.
-//! - this file: the hands from the config, checked, and the pose store.
+//! - [`calibration`]: a joint's offset, direction and range.
+//! - this file: the hands from the config, checked, and the store of what
+//!   users saved (poses, calibrations).
 
+pub mod calibration;
 pub mod state_file;
 
 use std::collections::BTreeMap;
@@ -15,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::protocol::ids::parse_id_list;
+pub use calibration::{Calibration, CalibrationError};
 pub use state_file::{StateFile, StateFileError};
 
 /// `[[hand]]`: a named set of joints.
@@ -181,18 +185,21 @@ struct Saved {
     version: u32,
     /// hand → pose name → pose.
     poses: BTreeMap<String, BTreeMap<String, Pose>>,
+    /// bus → device id → calibration (absent: the identity).
+    #[serde(default)]
+    calibration: BTreeMap<String, BTreeMap<u8, Calibration>>,
 }
 
-/// The hands and their poses; saved to the state file on every change when
-/// there is one (a std `Mutex`: never held across an `.await`).
+/// The hands, their poses and the joints' calibrations; saved to the state
+/// file on every change when there is one (a std `Mutex`: never held across an `.await`).
 #[derive(Debug)]
-pub struct PoseStore {
+pub struct StateStore {
     hands: Vec<Hand>,
     file: Option<StateFile>,
     saved: Mutex<Saved>,
 }
 
-impl PoseStore {
+impl StateStore {
     /// The hands with the poses the state file in `state_dir` holds (none
     /// without a `state_dir`: poses then live until the daemon stops).
     pub fn open(
@@ -257,6 +264,46 @@ impl PoseStore {
             existed = s.poses.get_mut(hand).and_then(|p| p.remove(name)).is_some();
         })?;
         Ok(existed)
+    }
+
+    /// The calibration of joint `id` on `bus` (the identity if none).
+    pub fn calibration(&self, bus: &str, id: u8) -> Calibration {
+        self.lock()
+            .calibration
+            .get(bus)
+            .and_then(|c| c.get(&id))
+            .copied()
+            .unwrap_or(Calibration::IDENTITY)
+    }
+
+    /// Every calibration saved: bus → id → calibration.
+    pub fn calibrations(&self) -> BTreeMap<String, BTreeMap<u8, Calibration>> {
+        self.lock().calibration.clone()
+    }
+
+    /// Saves the calibration of joint `id` on `bus` (the identity removes
+    /// it); on a failed write nothing changes.
+    pub fn set_calibration(
+        &self,
+        bus: &str,
+        id: u8,
+        cal: Calibration,
+    ) -> Result<(), StateFileError> {
+        self.change(|s| {
+            if cal.is_identity() {
+                if let Some(c) = s.calibration.get_mut(bus) {
+                    c.remove(&id);
+                    if c.is_empty() {
+                        s.calibration.remove(bus);
+                    }
+                }
+            } else {
+                s.calibration
+                    .entry(bus.to_string())
+                    .or_default()
+                    .insert(id, cal);
+            }
+        })
     }
 
     fn change(&self, edit: impl FnOnce(&mut Saved)) -> Result<(), StateFileError> {
@@ -363,7 +410,7 @@ joints = [{ bus = "l", ids = "1-2", names = ["thumb", "index"] }]"#,
             &buses(),
         )
         .unwrap();
-        let store = PoseStore::open(hands.clone(), Some(&dir)).unwrap();
+        let store = StateStore::open(hands.clone(), Some(&dir)).unwrap();
         let fist = Pose::from([("thumb".into(), 40.0), ("index".into(), 80.0)]);
         store.put("left", "fist", fist.clone()).unwrap();
         store
@@ -371,8 +418,30 @@ joints = [{ bus = "l", ids = "1-2", names = ["thumb", "index"] }]"#,
             .unwrap();
         assert!(store.delete("left", "open").unwrap());
         assert!(!store.delete("left", "open").unwrap());
-        let again = PoseStore::open(hands, Some(&dir)).unwrap();
+        let again = StateStore::open(hands, Some(&dir)).unwrap();
         assert_eq!(again.pose("left", "fist"), Some(fist));
         assert_eq!(again.poses("left").len(), 1);
+    }
+
+    #[test]
+    fn calibrations_survive_a_new_store_and_the_identity_removes_one() {
+        let dir = std::env::temp_dir().join(format!("jointd-cal-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let store = StateStore::open(Vec::new(), Some(&dir)).unwrap();
+        let cal = Calibration {
+            offset_deg: 12.0,
+            flip: true,
+            range_deg: Some((-5.0, 80.0)),
+            homed_at_ms: None,
+        };
+        store.set_calibration("l", 3, cal).unwrap();
+        store.set_calibration("l", 4, cal).unwrap();
+        store
+            .set_calibration("l", 4, Calibration::IDENTITY)
+            .unwrap();
+        let again = StateStore::open(Vec::new(), Some(&dir)).unwrap();
+        assert_eq!(again.calibration("l", 3), cal);
+        assert_eq!(again.calibration("l", 4), Calibration::IDENTITY);
+        assert_eq!(again.calibrations()["l"].len(), 1);
     }
 }

@@ -288,6 +288,20 @@ impl ApiError {
         .with_range(min, max, unit)
     }
 
+    /// A target outside the usable range its calibration gives a joint.
+    pub fn calibrated_range(field: &str, value: f64, (min, max): (f64, f64), who: &str) -> Self {
+        Self::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "calibrated-range",
+            "Target outside the joint's calibrated range",
+            format!(
+                "{field} = {value} deg is outside the calibrated range of {who} ({min}..={max} deg)"
+            ),
+        )
+        .with_field(field)
+        .with_range(min, max, "deg")
+    }
+
     pub fn method_not_allowed(method: &axum::http::Method) -> Self {
         Self::new(
             StatusCode::METHOD_NOT_ALLOWED,

@@ -7,6 +7,7 @@ use thiserror::Error;
 use utoipa::ToSchema;
 
 use super::error::ApiError;
+use crate::hands::Calibration;
 use crate::protocol::units::MAX_ANGLE_DEG;
 
 /// One rule of the `[[limit]]` table. Later rules override earlier ones
@@ -117,26 +118,32 @@ impl SoftLimits {
 }
 
 impl JointLimits {
-    /// Refuses a position target outside `min_deg..=max_deg`.
-    pub fn check_position(&self, field: &str, deg: f64, who: &str) -> Result<(), ApiError> {
+    /// Refuses a position target given in the joint's calibrated degrees
+    /// outside its calibrated range, the device's range or the soft limits
+    /// (the last two told in joint degrees too); the device angle to send.
+    pub fn check_joint_position(
+        &self,
+        cal: &Calibration,
+        field: &str,
+        deg: f64,
+        who: &str,
+    ) -> Result<f64, ApiError> {
         if !deg.is_finite() {
             return Err(ApiError::invalid(field, format!("{field} must be finite")));
         }
-        if deg.abs() > MAX_ANGLE_DEG {
-            // The device's own range, not a configured limit.
-            let range = (-MAX_ANGLE_DEG, MAX_ANGLE_DEG);
+        if let Some((lo, hi)) = cal.range_deg.filter(|(lo, hi)| deg < *lo || deg > *hi) {
+            return Err(ApiError::calibrated_range(field, deg, (lo, hi), who));
+        }
+        let device = cal.to_device(deg);
+        if device.abs() > MAX_ANGLE_DEG {
+            let range = cal.range_to_joint((-MAX_ANGLE_DEG, MAX_ANGLE_DEG));
             return Err(ApiError::out_of_range(field, deg, range, "deg"));
         }
-        if deg < self.min_deg || deg > self.max_deg {
-            return Err(ApiError::soft_limit(
-                field,
-                deg,
-                (self.min_deg, self.max_deg),
-                "deg",
-                who,
-            ));
+        if device < self.min_deg || device > self.max_deg {
+            let range = cal.range_to_joint((self.min_deg, self.max_deg));
+            return Err(ApiError::soft_limit(field, deg, range, "deg", who));
         }
-        Ok(())
+        Ok(device)
     }
 
     /// Refuses a speed whose magnitude exceeds `max_rpm`.
@@ -178,8 +185,12 @@ mod tests {
         );
         let other = limits.for_joint("right", 3);
         assert_eq!((other.min_deg, other.max_deg), (-100.0, 100.0));
-        assert!(j3.check_position("position_deg", 25.0, "joint 3").is_err());
-        assert!(j3.check_position("position_deg", 20.0, "joint 3").is_ok());
+        assert!(j3
+            .check_joint_position(&Calibration::IDENTITY, "position_deg", 25.0, "joint 3")
+            .is_err());
+        assert!(j3
+            .check_joint_position(&Calibration::IDENTITY, "position_deg", 20.0, "joint 3")
+            .is_ok());
         let err = j3.check_speed("speed_rpm", -6000.0, "joint 3").unwrap_err();
         assert_eq!(err.problem.status, 422);
         assert_eq!(err.problem.allowed.unwrap().max, 5000.0);

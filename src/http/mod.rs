@@ -28,6 +28,7 @@
 
 pub mod api;
 pub(crate) mod auth;
+pub(crate) mod calibration;
 pub(crate) mod error;
 pub(crate) mod extract;
 pub(crate) mod guard;

@@ -11,6 +11,7 @@ use utoipa::ToSchema;
 
 use crate::bus::motion::Follower;
 use crate::bus::BusHandle;
+use crate::hands::Calibration;
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::move_book::{Booked, JointRef};
 use crate::http::state::{device_id, known_device, AppState};
@@ -256,9 +257,13 @@ fn plan<'a>(state: &'a AppState, req: &MoveRequest) -> ApiResult<Plan<'a>> {
         start.push(units::angle_deg(from));
         joints.push(r);
     }
-    let waypoints = waypoints(req)?;
+    let cals: Vec<Calibration> = joints
+        .iter()
+        .map(|r| state.calibration(&r.bus, r.id))
+        .collect();
+    let waypoints = to_device_frame(waypoints(req)?, &cals);
     let path = timed_path(req, method, start, waypoints)?;
-    check_limits(state, &joints, &path)?;
+    check_limits(state, &joints, &cals, &path)?;
     let mut by_bus: Vec<(&BusHandle, Vec<OnBus>)> = Vec::new();
     for (i, r) in joints.iter().enumerate() {
         let bus = state.bus(&r.bus)?;
@@ -404,13 +409,35 @@ fn timed_path(
     Path::new(method, start, timed).map_err(|e| ApiError::invalid("waypoints", e.to_string()))
 }
 
-/// Every position the path passes through within each joint's soft limits.
-fn check_limits(state: &AppState, joints: &[JointRef], path: &Path) -> ApiResult<()> {
-    for (i, r) in joints.iter().enumerate() {
+/// Positions as given (each joint's calibrated frame) as device angles:
+/// the path is planned and streamed in the device's frame. The map is
+/// affine, so the path has the same shape and timing in both.
+fn to_device_frame(
+    mut waypoints: Vec<(Option<f64>, Vec<f64>)>,
+    cals: &[Calibration],
+) -> Vec<(Option<f64>, Vec<f64>)> {
+    for (_, positions) in &mut waypoints {
+        for (deg, cal) in positions.iter_mut().zip(cals) {
+            *deg = cal.to_device(*deg);
+        }
+    }
+    waypoints
+}
+
+/// Every position the path passes through within each joint's calibrated
+/// range and soft limits (told in the joint's frame).
+fn check_limits(
+    state: &AppState,
+    joints: &[JointRef],
+    cals: &[Calibration],
+    path: &Path,
+) -> ApiResult<()> {
+    for ((i, r), cal) in joints.iter().enumerate().zip(cals) {
         let limits = state.limits(&r.bus, r.id);
         let who = format!("joint {} of bus `{}`", r.id, r.bus);
         for deg in path.extremes(i).skip(1) {
-            limits.check_position(&format!("joints[{i}].position_deg"), deg, &who)?;
+            let field = format!("joints[{i}].position_deg");
+            limits.check_joint_position(cal, &field, cal.to_joint(deg), &who)?;
         }
     }
     Ok(())

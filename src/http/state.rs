@@ -21,7 +21,7 @@ use crate::protocol::{is_device_id, MAX_DEVICE_ID, MIN_DEVICE_ID};
 #[derive(Debug, Clone, Default)]
 pub struct StateOptions {
     /// The named hands and their saved poses.
-    pub hands: Option<Arc<crate::hands::PoseStore>>,
+    pub hands: Option<Arc<crate::hands::StateStore>>,
     pub web_dir: Option<std::path::PathBuf>,
     /// (bus or every bus, id) → name.
     pub joint_names: BTreeMap<(Option<String>, u8), String>,
@@ -83,7 +83,7 @@ impl AppState {
     }
 
     /// The named hands and their poses (none configured: an empty store).
-    pub(crate) fn hands(&self) -> Option<&crate::hands::PoseStore> {
+    pub(crate) fn hands(&self) -> Option<&crate::hands::StateStore> {
         self.options().hands.as_deref()
     }
 
@@ -94,6 +94,14 @@ impl AppState {
 
     pub fn limits(&self, bus: &str, id: u8) -> JointLimits {
         self.inner.limits.for_joint(bus, id)
+    }
+
+    /// The calibration of joint `id` on `bus`: how its angles read at the API.
+    pub(crate) fn calibration(&self, bus: &str, id: u8) -> crate::hands::Calibration {
+        self.hands()
+            .map_or(crate::hands::Calibration::IDENTITY, |store| {
+                store.calibration(bus, id)
+            })
     }
 
     /// The daemon's options beyond buses, limits and token (set once, at

@@ -15,6 +15,7 @@ use super::telemetry::{
 };
 use crate::bus::handle::DeviceState;
 use crate::bus::{BusError, BusHandle, Setpoint};
+use crate::hands::Calibration;
 use crate::protocol::status::fsm_name_in;
 use crate::protocol::units;
 use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
@@ -65,16 +66,17 @@ pub(crate) struct JointTarget {
     pub target: TargetView,
 }
 
-/// Converts one joint's target; `field` prefixes error field names
-/// (`targets[2].` in a group request).
+/// Converts one joint's target, given in its calibrated frame (`cal`);
+/// `field` prefixes error field names (`targets[2].` in a group request).
 pub(crate) fn setpoint(
     dev: &DeviceState,
     limits: &JointLimits,
+    cal: &Calibration,
     req: &TargetRequest,
     field: &str,
 ) -> ApiResult<Setpoint> {
     if dev.mode == Some(CtrlMode::Speed) {
-        return speed_setpoint(dev, limits, req, field);
+        return speed_setpoint(dev, limits, cal, req, field);
     }
     if dev.mode == Some(CtrlMode::Current) {
         // Its reference is a current, which jointd does not stream (yet):
@@ -98,8 +100,9 @@ pub(crate) fn setpoint(
             format!("{who} is in position mode: position_deg is required"),
         )
     })?;
-    limits.check_position(&pos_field, deg, &who)?;
-    let pos_ref = units::angle_to_raw(deg).map_err(|e| ApiError::from_unit(&pos_field, e))?;
+    let device_deg = limits.check_joint_position(cal, &pos_field, deg, &who)?;
+    let pos_ref =
+        units::angle_to_raw(device_deg).map_err(|e| ApiError::from_unit(&pos_field, e))?;
     let default_rpm = limits
         .max_rpm
         .map_or(DEFAULT_SPEED_LIMIT_RPM, |m| m.min(DEFAULT_SPEED_LIMIT_RPM));
@@ -115,6 +118,7 @@ pub(crate) fn setpoint(
 fn speed_setpoint(
     dev: &DeviceState,
     limits: &JointLimits,
+    cal: &Calibration,
     req: &TargetRequest,
     field: &str,
 ) -> ApiResult<Setpoint> {
@@ -133,7 +137,8 @@ fn speed_setpoint(
         )
     })?;
     limits.check_speed(&spd_field, rpm, &who)?;
-    let spd_ref = units::speed_to_raw(rpm, firmware_of(dev))
+    // A flipped joint turns the device the other way.
+    let spd_ref = units::speed_to_raw(cal.sign() * rpm, firmware_of(dev))
         .map_err(|e| ApiError::from_unit(&spd_field, e))?;
     let pos_ref = commanded_or_measured_raw(dev).unwrap_or(0);
     Ok(Setpoint { pos_ref, spd_ref })
@@ -213,14 +218,42 @@ mod tests {
     fn position_mode_uses_the_firmware_speed_base() {
         let limits = JointLimits::default();
         let new_fw = dev(CtrlMode::Position, Some(128));
-        let sp = setpoint(&new_fw, &limits, &req(Some(-10.5), Some(20000.0)), "").unwrap();
+        let sp = setpoint(
+            &new_fw,
+            &limits,
+            &Calibration::IDENTITY,
+            &req(Some(-10.5), Some(20000.0)),
+            "",
+        )
+        .unwrap();
         assert_eq!((sp.pos_ref, sp.spd_ref), (-1344, 13107));
         let old_fw = dev(CtrlMode::Position, Some(117));
-        let sp = setpoint(&old_fw, &limits, &req(Some(0.0), Some(20000.0)), "").unwrap();
+        let sp = setpoint(
+            &old_fw,
+            &limits,
+            &Calibration::IDENTITY,
+            &req(Some(0.0), Some(20000.0)),
+            "",
+        )
+        .unwrap();
         assert_eq!(sp.spd_ref, 16384, "40000 rpm base before firmware 1.2.4");
-        let err = setpoint(&new_fw, &limits, &req(Some(0.0), Some(-5.0)), "").unwrap_err();
+        let err = setpoint(
+            &new_fw,
+            &limits,
+            &Calibration::IDENTITY,
+            &req(Some(0.0), Some(-5.0)),
+            "",
+        )
+        .unwrap_err();
         assert_eq!(err.problem.field.as_deref(), Some("speed_rpm"));
-        let err = setpoint(&new_fw, &limits, &req(None, Some(5.0)), "t.").unwrap_err();
+        let err = setpoint(
+            &new_fw,
+            &limits,
+            &Calibration::IDENTITY,
+            &req(None, Some(5.0)),
+            "t.",
+        )
+        .unwrap_err();
         assert_eq!(err.problem.field.as_deref(), Some("t.position_deg"));
     }
 
@@ -233,6 +266,7 @@ mod tests {
         let sp = setpoint(
             &dev(CtrlMode::Position, None),
             &limits,
+            &Calibration::IDENTITY,
             &req(Some(1.0), None),
             "",
         );
@@ -244,9 +278,62 @@ mod tests {
     fn speed_mode_takes_a_signed_speed_and_holds_the_position_slot() {
         let limits = JointLimits::default();
         let d = dev(CtrlMode::Speed, Some(128));
-        let sp = setpoint(&d, &limits, &req(None, Some(-1000.0)), "").unwrap();
+        let sp = setpoint(
+            &d,
+            &limits,
+            &Calibration::IDENTITY,
+            &req(None, Some(-1000.0)),
+            "",
+        )
+        .unwrap();
         assert_eq!((sp.pos_ref, sp.spd_ref), (1280, -655));
-        assert!(setpoint(&d, &limits, &req(Some(3.0), Some(1.0)), "").is_err());
-        assert!(setpoint(&d, &limits, &req(None, None), "").is_err());
+        assert!(setpoint(
+            &d,
+            &limits,
+            &Calibration::IDENTITY,
+            &req(Some(3.0), Some(1.0)),
+            ""
+        )
+        .is_err());
+        assert!(setpoint(&d, &limits, &Calibration::IDENTITY, &req(None, None), "").is_err());
+    }
+
+    #[test]
+    fn a_calibrated_target_is_the_device_angle_and_a_flip_turns_the_speed() {
+        let cal = Calibration {
+            offset_deg: 20.0,
+            flip: true,
+            range_deg: Some((-10.0, 60.0)),
+            homed_at_ms: None,
+        };
+        let limits = JointLimits {
+            min_deg: -30.0,
+            max_deg: 90.0,
+            max_rpm: None,
+        };
+        let pos = dev(CtrlMode::Position, Some(128));
+        // joint 15 deg = device 20 - 15 = 5 deg.
+        let sp = setpoint(&pos, &limits, &cal, &req(Some(15.0), None), "").unwrap();
+        assert_eq!(sp.pos_ref, units::angle_to_raw(5.0).unwrap());
+        let err = setpoint(&pos, &limits, &cal, &req(Some(61.0), None), "").unwrap_err();
+        assert!(
+            err.problem.kind.ends_with("calibrated-range"),
+            "{}",
+            err.problem.kind
+        );
+        // joint 55 deg = device -35 deg: inside the range, past the soft limit
+        // (-30..=90 device = -70..=50 joint), told in joint degrees.
+        let err = setpoint(&pos, &limits, &cal, &req(Some(55.0), None), "").unwrap_err();
+        assert!(
+            err.problem.detail.contains("-70..=50"),
+            "{}",
+            err.problem.detail
+        );
+        let spd = dev(CtrlMode::Speed, Some(128));
+        let sp = setpoint(&spd, &limits, &cal, &req(None, Some(-1000.0)), "").unwrap();
+        assert!(
+            sp.spd_ref > 0,
+            "a flipped joint turns the device the other way"
+        );
     }
 }

@@ -9,11 +9,13 @@ use utoipa::ToSchema;
 use crate::bus::firmware::{DeviceFirmware, FirmwareSource};
 use crate::bus::handle::DeviceState;
 use crate::bus::Setpoint;
+use crate::hands::Calibration;
 use crate::protocol::params::Revision;
 use crate::protocol::status::{
     active_fault, fault_history, fault_name, fsm, fsm_name, fsm_name_in,
 };
 use crate::protocol::units::{self, FirmwareVersion};
+use crate::protocol::CtrlMode;
 use crate::protocol::{Info01, Info02};
 
 /// The speed base to assume before a device has reported its firmware: the
@@ -107,7 +109,8 @@ pub(crate) struct MotionView {
     pub age_ms: f64,
 }
 
-/// A target in physical units with its raw wire values.
+/// A target in physical units (the joint's calibrated frame) with its raw
+/// wire values (the device's).
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub(crate) struct TargetView {
     #[schema(example = 45.0)]
@@ -121,10 +124,22 @@ pub(crate) struct TargetView {
 }
 
 impl TargetView {
-    pub(crate) fn new(sp: Setpoint, fw: FirmwareVersion) -> Self {
+    /// `mode`: in speed mode the speed is signed (and turns with a flip);
+    /// in position mode it is a limit, never negative.
+    pub(crate) fn new(
+        sp: Setpoint,
+        fw: FirmwareVersion,
+        cal: &Calibration,
+        mode: Option<CtrlMode>,
+    ) -> Self {
+        let rpm = units::speed_rpm(sp.spd_ref, fw);
         Self {
-            position_deg: units::angle_deg(sp.pos_ref),
-            speed_rpm: units::speed_rpm(sp.spd_ref, fw),
+            position_deg: cal.to_joint(units::angle_deg(sp.pos_ref)),
+            speed_rpm: if mode == Some(CtrlMode::Speed) {
+                cal.sign() * rpm
+            } else {
+                rpm
+            },
             pos_ref_raw: sp.pos_ref,
             spd_ref_raw: sp.spd_ref,
         }
@@ -200,9 +215,11 @@ pub(crate) fn revision_of(dev: &DeviceState) -> Option<Revision> {
     dev.firmware.map(|f| f.revision)
 }
 
+/// INFO_01 in the joint's calibrated frame (`cal`).
 pub(crate) fn status_view(
     info: &Info01,
     revision: Option<Revision>,
+    cal: &Calibration,
     at: Instant,
     now: Instant,
 ) -> StatusView {
@@ -213,26 +230,29 @@ pub(crate) fn status_view(
         soft_ver: info.soft_ver,
         firmware: info.firmware().dotted(),
         temp_c: info.temp_c(),
-        angle_deg: info.angle_deg(),
+        angle_deg: cal.to_joint(info.angle_deg()),
         vbus_v: info.vbus_v(),
         raw: hex(&info.to_bytes()),
         age_ms: age_ms(at, now),
     }
 }
 
+/// INFO_02 in the joint's calibrated frame (`cal`): a flip turns the
+/// angle, the speeds and the torque-making (q) current around.
 pub(crate) fn motion_view(
     info: &Info02,
     fw: FirmwareVersion,
+    cal: &Calibration,
     at: Instant,
     now: Instant,
 ) -> MotionView {
-    let rpm = info.speed_rpm(fw);
+    let rpm = cal.sign() * info.speed_rpm(fw);
     MotionView {
-        angle_deg: info.angle_deg(),
+        angle_deg: cal.to_joint(info.angle_deg()),
         speed_rpm: rpm,
         output_deg_per_s: units::output_deg_per_s(rpm),
         d_current_a: units::current_a(info.d_cur),
-        q_current_a: units::current_a(info.q_cur),
+        q_current_a: cal.sign() * units::current_a(info.q_cur),
         raw: hex(&info.to_bytes()),
         age_ms: age_ms(at, now),
     }

@@ -183,6 +183,7 @@ fn done(
 /// Stores targets for several joints in one write (one coalesced frame where
 /// the bus can) and reports whether they reached the wire.
 async fn apply_targets(
+    state: &AppState,
     bus: &BusHandle,
     snap: &BusSnapshot,
     targets: Vec<(u8, Setpoint)>,
@@ -192,14 +193,14 @@ async fn apply_targets(
     let views = targets
         .into_iter()
         .map(|(id, sp)| {
-            let fw = snap
-                .devices
-                .get(&id)
+            let dev = snap.devices.get(&id);
+            let fw = dev
                 .map(firmware_of)
                 .unwrap_or(crate::http::telemetry::ASSUMED_FIRMWARE);
+            let cal = state.calibration(bus.name(), id);
             JointTarget {
                 id,
-                target: TargetView::new(sp, fw),
+                target: TargetView::new(sp, fw, &cal, dev.and_then(|d| d.mode)),
             }
         })
         .collect();
@@ -271,9 +272,10 @@ async fn target_one(
     let (bus, id) = p.resolve(&state)?;
     let snap = bus.snapshot();
     let dev = known_device(&snap, id)?;
-    let sp = setpoint(dev, &state.limits(&snap.name, id), &req, "")?;
+    let cal = state.calibration(&snap.name, id);
+    let sp = setpoint(dev, &state.limits(&snap.name, id), &cal, &req, "")?;
     ensure_enabled(bus, dev, "a target").await?;
-    Ok(apply_targets(bus, &snap, vec![(id, sp)]).await)
+    Ok(apply_targets(&state, bus, &snap, vec![(id, sp)]).await)
 }
 
 /// Switch one device between position and speed mode (not saved by the device).
@@ -412,6 +414,7 @@ async fn target_group(
             setpoint(
                 dev,
                 &state.limits(&snap.name, id),
+                &state.calibration(&snap.name, id),
                 &req,
                 &format!("targets[{i}]."),
             )?,
@@ -422,7 +425,7 @@ async fn target_group(
             ensure_enabled(bus, dev, "a target").await?;
         }
     }
-    Ok(apply_targets(bus, &snap, out).await)
+    Ok(apply_targets(&state, bus, &snap, out).await)
 }
 
 /// Switch a group of devices between position and speed mode.

@@ -12,6 +12,8 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::openapi::{ErrorResponses, TAG_DEVICES};
 use crate::bus::handle::DeviceState;
 use crate::bus::BusError;
+use crate::hands::Calibration;
+use crate::http::calibration::CalibrationView;
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiPath, ApiQuery};
 use crate::http::limits::JointLimits;
@@ -141,8 +143,12 @@ pub(crate) struct DeviceDetail {
     pub resets: u64,
     /// The latest detected reset.
     pub last_reset: Option<ResetView>,
-    /// Soft limits that apply to targets of this joint.
+    /// Soft limits that apply to targets of this joint, in its calibrated
+    /// frame (the config gives them in device degrees).
     pub limits: JointLimits,
+    /// Its calibration, when it has one: every angle, speed and q current
+    /// here is in the joint's frame; the `raw` fields stay the device's.
+    pub calibration: Option<CalibrationView>,
     #[schema(example = 0)]
     pub missed_polls: u32,
     #[schema(example = 450.0)]
@@ -161,16 +167,21 @@ pub(crate) struct FreshQuery {
     pub fresh: bool,
 }
 
-fn summary(dev: &DeviceState, name: Option<&str>, now: Instant) -> DeviceSummary {
+fn summary(
+    dev: &DeviceState,
+    name: Option<&str>,
+    cal: &Calibration,
+    now: Instant,
+) -> DeviceSummary {
     let fw = firmware_of(dev);
     let status = dev
         .info01
         .as_ref()
-        .map(|(i, at)| status_view(i, revision_of(dev), *at, now));
+        .map(|(i, at)| status_view(i, revision_of(dev), cal, *at, now));
     let motion = dev
         .info02
         .as_ref()
-        .map(|(i, at)| motion_view(i, fw, *at, now));
+        .map(|(i, at)| motion_view(i, fw, cal, *at, now));
     let age = [
         status.as_ref().map(|s| s.age_ms),
         motion.as_ref().map(|m| m.age_ms),
@@ -195,7 +206,9 @@ fn summary(dev: &DeviceState, name: Option<&str>, now: Instant) -> DeviceSummary
         temp_c: status.as_ref().map(|s| s.temp_c),
         vbus_v: status.as_ref().map(|s| s.vbus_v),
         telemetry_age_ms: age,
-        target: dev.target_sent.map(|sp| TargetView::new(sp, fw)),
+        target: dev
+            .target_sent
+            .map(|sp| TargetView::new(sp, fw, cal, dev.mode)),
         target_known: dev.target_known,
         disabled_reason: disabled_reason(dev),
         resets: dev.resets,
@@ -224,7 +237,10 @@ async fn list_devices(
         devices: snap
             .devices
             .values()
-            .map(|d| summary(d, state.joint_name(&snap.name, d.dev_id), now))
+            .map(|d| {
+                let cal = state.calibration(&snap.name, d.dev_id);
+                summary(d, state.joint_name(&snap.name, d.dev_id), &cal, now)
+            })
             .collect(),
     }))
 }
@@ -250,6 +266,7 @@ async fn get_device(
     }
     let now = Instant::now();
     let fw = firmware_of(&dev);
+    let cal = state.calibration(&snap.name, id);
     Ok(Json(DeviceDetail {
         bus: snap.name.clone(),
         id,
@@ -260,18 +277,21 @@ async fn get_device(
         status: dev
             .info01
             .as_ref()
-            .map(|(i, at)| status_view(i, revision_of(&dev), *at, now)),
+            .map(|(i, at)| status_view(i, revision_of(&dev), &cal, *at, now)),
         protocol: dev.firmware.as_ref().map(RevisionView::new),
         motion: dev
             .info02
             .as_ref()
-            .map(|(i, at)| motion_view(i, fw, *at, now)),
-        target: dev.target_sent.map(|sp| TargetView::new(sp, fw)),
+            .map(|(i, at)| motion_view(i, fw, &cal, *at, now)),
+        target: dev
+            .target_sent
+            .map(|sp| TargetView::new(sp, fw, &cal, dev.mode)),
         target_known: dev.target_known,
         disabled_reason: disabled_reason(&dev),
         resets: dev.resets,
         last_reset: reset_view(&dev, now),
-        limits: state.limits(&snap.name, id),
+        limits: limits_in_joint_frame(state.limits(&snap.name, id), &cal),
+        calibration: (!cal.is_identity()).then(|| CalibrationView::new(&snap.name, id, &cal)),
         missed_polls: dev.missed_polls,
         control_hz: dev.control_hz,
         telemetry_hz: dev.telemetry_hz,
@@ -295,5 +315,15 @@ async fn refresh(bus: &crate::bus::BusHandle, dev: &mut DeviceState) -> ApiResul
             "device {id} answered a read with another block"
         ))
         .into()),
+    }
+}
+
+/// Soft limits (device degrees, as configured) in the joint's calibrated frame.
+fn limits_in_joint_frame(limits: JointLimits, cal: &Calibration) -> JointLimits {
+    let (min_deg, max_deg) = cal.range_to_joint((limits.min_deg, limits.max_deg));
+    JointLimits {
+        min_deg,
+        max_deg,
+        ..limits
     }
 }

@@ -12,7 +12,7 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
-use crate::hands::{Hand, HandJoint, Pose, PoseStore};
+use crate::hands::{Hand, HandJoint, Pose, StateStore};
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::moves::{self, MoveJoint, MoveRequest, MoveView};
@@ -241,14 +241,14 @@ async fn go_to_pose(
     Ok((StatusCode::CREATED, Json(started)))
 }
 
-fn hand<'a>(state: &'a AppState, name: &str) -> ApiResult<(&'a PoseStore, &'a Hand)> {
+fn hand<'a>(state: &'a AppState, name: &str) -> ApiResult<(&'a StateStore, &'a Hand)> {
     state
         .hands()
         .and_then(|store| store.hand(name).map(|h| (store, h)))
         .ok_or_else(|| ApiError::not_found("unknown-hand", format!("no hand named `{name}`")))
 }
 
-fn pose(store: &PoseStore, p: &PosePath) -> ApiResult<Pose> {
+fn pose(store: &StateStore, p: &PosePath) -> ApiResult<Pose> {
     store.pose(&p.hand, &p.name).ok_or_else(|| {
         ApiError::not_found(
             "unknown-pose",
@@ -280,8 +280,8 @@ fn check_pose_name(name: &str) -> ApiResult<()> {
     ))
 }
 
-/// Angles given by joint name: each joint of the hand, a finite number
-/// within its soft limits.
+/// Angles given by joint name (calibrated frame): each joint of the hand,
+/// a finite number within its calibrated range and soft limits.
 fn checked(state: &AppState, hand: &Hand, positions: BTreeMap<String, f64>) -> ApiResult<Pose> {
     if positions.is_empty() {
         return Err(ApiError::invalid("positions_deg", "positions_deg is empty"));
@@ -303,9 +303,10 @@ fn checked(state: &AppState, hand: &Hand, positions: BTreeMap<String, f64>) -> A
             return Err(ApiError::invalid(&field, "not a finite number"));
         }
         let who = format!("joint `{name}` ({} on bus `{}`)", joint.id, joint.bus);
+        let cal = state.calibration(&joint.bus, joint.id);
         state
             .limits(&joint.bus, joint.id)
-            .check_position(&field, *deg, &who)?;
+            .check_joint_position(&cal, &field, *deg, &who)?;
     }
     Ok(positions)
 }
@@ -330,7 +331,8 @@ fn current(state: &AppState, hand: &Hand) -> ApiResult<Pose> {
                     ),
                 )
             })?;
-        pose.insert(j.name.clone(), units::angle_deg(raw));
+        let cal = state.calibration(&j.bus, j.id);
+        pose.insert(j.name.clone(), cal.to_joint(units::angle_deg(raw)));
     }
     Ok(pose)
 }

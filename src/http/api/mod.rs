@@ -8,11 +8,13 @@
 //!   request values → writes; [`config_schema`]: the schemas from the parameter
 //!   table; [`config_outcome`]: what a PATCH did per parameter),
 //!   [`estop`], [`health`], [`moves`] (paths generated in the daemon),
-//!   [`hands`] (named hands and their poses): one
+//!   [`hands`] (named hands and their poses), [`calibration`] (joint
+//!   offsets, directions, ranges): one
 //!   router per area.
 //! - [`openapi`]: the document's head, the shared failure responses, the docs page.
 
 pub(crate) mod buses;
+pub(crate) mod calibration;
 pub(crate) mod config;
 pub(crate) mod config_all;
 pub(crate) mod config_outcome;
@@ -43,6 +45,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .merge(estop::router())
         .merge(moves::router())
         .merge(hands::router())
+        .merge(calibration::router())
 }
 
 /// The document as served, with the crate version.

@@ -195,7 +195,8 @@ fn one_target(
         position_deg: t.position_deg,
         speed_rpm: t.speed_rpm,
     };
-    Ok(setpoint(dev, &limits, &req, field)?)
+    let cal = state.calibration(&snap.name, id);
+    Ok(setpoint(dev, &limits, &cal, &req, field)?)
 }
 
 /// The target's bus, or the only bus when it names none.

@@ -9,6 +9,7 @@ use serde_json::{Map, Value};
 use super::messages::Field;
 use crate::bus::handle::DeviceState;
 use crate::bus::BusSnapshot;
+use crate::hands::Calibration;
 use crate::http::hub::FragmentCache;
 use crate::http::telemetry::{disabled_reason, firmware_of, measured_angle_raw, revision_of};
 use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
@@ -25,11 +26,13 @@ pub(crate) struct Subscription {
 }
 
 /// The joints of one bus snapshot that the subscription selects;
-/// `name_of` gives a joint's configured name.
+/// `name_of` gives a joint's configured name, `cal_of` its calibration
+/// (angles, speeds and currents are reported in the calibrated frame).
 pub(crate) fn joints<'a>(
     sub: &Subscription,
     snap: &BusSnapshot,
     name_of: impl Fn(u8) -> Option<&'a str>,
+    cal_of: impl Fn(u8) -> Calibration,
     now: Instant,
     out: &mut Vec<Map<String, Value>>,
 ) {
@@ -41,7 +44,7 @@ pub(crate) fn joints<'a>(
         {
             continue;
         }
-        let mut m = joint(sub, &snap.name, dev, now);
+        let mut m = joint(sub, &snap.name, dev, &cal_of(dev.dev_id), now);
         if let Some(name) = name_of(dev.dev_id) {
             m.insert("name".into(), name.into());
         }
@@ -49,7 +52,13 @@ pub(crate) fn joints<'a>(
     }
 }
 
-fn joint(sub: &Subscription, bus: &str, dev: &DeviceState, now: Instant) -> Map<String, Value> {
+fn joint(
+    sub: &Subscription,
+    bus: &str,
+    dev: &DeviceState,
+    cal: &Calibration,
+    now: Instant,
+) -> Map<String, Value> {
     let mut m = Map::new();
     m.insert("bus".into(), bus.into());
     m.insert("dev_id".into(), dev.dev_id.into());
@@ -59,7 +68,7 @@ fn joint(sub: &Subscription, bus: &str, dev: &DeviceState, now: Instant) -> Map<
         age_ms(dev, now).map_or(Value::Null, Value::from),
     );
     for f in &sub.fields {
-        m.insert(field_name(*f).into(), field_value(*f, dev));
+        m.insert(field_name(*f).into(), field_value(*f, dev, cal));
         if *f == Field::TargetDeg {
             // `target_deg: null` with `target_known: false` is unknown, not idle.
             m.insert("target_known".into(), dev.target_known.into());
@@ -104,16 +113,19 @@ pub(crate) fn field_name(f: Field) -> &'static str {
     }
 }
 
-fn field_value(f: Field, dev: &DeviceState) -> Value {
+fn field_value(f: Field, dev: &DeviceState, cal: &Calibration) -> Value {
     let info01 = dev.info01.as_ref().map(|x| x.0);
     let info02 = dev.info02.as_ref().map(|x| x.0);
+    let angle = |raw: i16| Value::from(cal.to_joint(units::angle_deg(raw)));
     let v = match f {
-        Field::AngleDeg => measured_angle_raw(dev).map(|a| Value::from(units::angle_deg(a))),
-        Field::TargetDeg => dev
-            .target_sent
-            .map(|t| Value::from(units::angle_deg(t.pos_ref))),
-        Field::SpeedRpm => info02.map(|i| Value::from(round3(i.speed_rpm(firmware_of(dev))))),
-        Field::CurrentA => info02.map(|i| Value::from(round3(units::current_a(i.q_cur)))),
+        Field::AngleDeg => measured_angle_raw(dev).map(angle),
+        Field::TargetDeg => dev.target_sent.map(|t| angle(t.pos_ref)),
+        Field::SpeedRpm => {
+            info02.map(|i| Value::from(round3(cal.sign() * i.speed_rpm(firmware_of(dev)))))
+        }
+        Field::CurrentA => {
+            info02.map(|i| Value::from(round3(cal.sign() * units::current_a(i.q_cur))))
+        }
         Field::Fsm => info01.map(|i| Value::from(fsm_name_in(i.fsm, revision_of(dev)))),
         Field::Fault => info01.map(|i| Value::from(fault_name(active_fault(i.err_code)))),
         Field::TempC => info01.map(|i| Value::from(i.temp_c())),
@@ -131,12 +143,13 @@ pub(crate) fn fragment<'a>(
     sub: &Subscription,
     snap: &Arc<BusSnapshot>,
     name_of: impl Fn(u8) -> Option<&'a str>,
+    cal_of: impl Fn(u8) -> Calibration,
     now: Instant,
 ) -> Arc<str> {
     let shape = format!("{}|{:?}|{:?}", snap.name, sub.devices, sub.fields);
     cache.get_or_build(shape, snap, || {
         let mut list = Vec::new();
-        joints(sub, snap, name_of, now, &mut list);
+        joints(sub, snap, name_of, cal_of, now, &mut list);
         list.iter()
             .map(|j| Value::Object(j.clone()).to_string())
             .collect::<Vec<_>>()

@@ -245,8 +245,10 @@ where
         for name in &sub.buses {
             if let Ok(bus) = self.state.bus(name) {
                 let names = |id| self.state.joint_name(name, id);
+                let cals = |id| self.state.calibration(name, id);
                 let cache = &self.state.ws().fragments;
-                let part = super::telemetry::fragment(cache, &sub, &bus.snapshot(), names, now);
+                let snap = bus.snapshot();
+                let part = super::telemetry::fragment(cache, &sub, &snap, names, cals, now);
                 if !part.is_empty() {
                     parts.push(part);
                 }
