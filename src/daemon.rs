@@ -54,6 +54,10 @@ pub struct RunArgs {
     /// `ftdi[:MS]`, `ch340`, `cp2102`, `ft232h[:MS]`; the bus plans for it.
     #[arg(long, value_name = "MODEL", requires = "sim")]
     pub sim_adapter: Option<String>,
+    /// A mechanical end stop of a simulated joint, `ID=DEG` (repeatable),
+    /// e.g. `--sim-hard-stop 1=-40`: what homing finds.
+    #[arg(long, value_name = "ID=DEG", requires = "sim")]
+    pub sim_hard_stop: Vec<String>,
     /// HTTP address to listen on [default: 127.0.0.1:8080]; port 0 picks a free
     /// port (the first line on stdout says which).
     #[arg(long, value_name = "ADDR", env = "JOINTD_LISTEN")]
@@ -442,8 +446,16 @@ fn sim_config(joints: u8, args: &RunArgs) -> Result<SimConfig, DaemonError> {
     if let Some(model) = &args.sim_adapter {
         cfg.adapter = AdapterModel::parse(model).map_err(SimError::BadAdapter)?;
     }
+    cfg.hard_stops = args
+        .sim_hard_stop
+        .iter()
+        .map(|s| crate::sim::cli::parse_hard_stop(s))
+        .collect::<Result<_, _>>()?;
     // The rest (the baud) is checked when the simulator starts, as before.
     cfg.firmware.check_ids(&cfg.ids)?;
+    if let Some((id, _)) = cfg.hard_stops.iter().find(|(id, _)| !cfg.ids.contains(id)) {
+        return Err(SimError::BadHardStop(format!("device {id} is not on the bus")).into());
+    }
     Ok(cfg)
 }
 

@@ -1,8 +1,10 @@
-//! Joint calibration (issue 18) against the simulator: an offset, a flip
-//! and a range set through the API are applied in both directions, for
-//! REST targets, moves, device views and WebSocket telemetry, while the
-//! simulated device turns to the *device* angle they stand for; bad
-//! calibrations and targets outside the range get a 4xx that says why.
+//! Joint calibration and homing (issue 18) against the simulator: an
+//! offset, a flip and a range set through the API are applied in both
+//! directions, for REST targets, moves, device views and WebSocket
+//! telemetry, while the simulated device turns to the *device* angle they
+//! stand for; bad calibrations and targets outside the range get a 4xx that
+//! says why. Homing finds the simulator's hard stop and records it, and
+//! puts the joint's current limit back after an e-stop mid-search.
 
 mod support;
 
@@ -14,14 +16,30 @@ use jointd::hands::StateStore;
 use jointd::http::state::StateOptions;
 use jointd::protocol::status::fsm;
 use serde_json::{json, Value};
-use support::sim_bus::{start, SimBus, WAIT};
+use support::sim_bus::{start, start_sim_with, SimBus, WAIT};
 use tokio_tungstenite::tungstenite::Message;
 
 const CAL: &str = "/api/v1/buses/sim0/devices/1/calibration";
 
 /// The API with an in-memory store for calibrations, joints 1..=n enabled.
 async fn calibrated_rig(n: u8) -> SimBus {
-    let b = start(n, None).await;
+    rig_from(start(n, None).await, n).await
+}
+
+/// [`calibrated_rig`] with joint 1's hard stop at `stop_deg`.
+async fn rig_with_hard_stop(n: u8, stop_deg: f64) -> SimBus {
+    let b = start_sim_with(
+        n,
+        None,
+        "2.0.1",
+        |sim| sim.hard_stops = vec![(1, stop_deg)],
+        |_| {},
+    )
+    .await;
+    rig_from(b, n).await
+}
+
+async fn rig_from(b: SimBus, n: u8) -> SimBus {
     let store = StateStore::open(Vec::new(), None).expect("store");
     b.server_state
         .set_options(StateOptions {
@@ -217,4 +235,139 @@ async fn a_calibration_that_cannot_apply_is_refused_with_the_field() {
     assert_eq!(no_joint.status.as_u16(), 404, "{}", no_joint.body);
     // Nothing was saved by any of them.
     assert_eq!(b.server.get(CAL).await.ok()["offset_deg"], 0.0);
+}
+
+/// Polls homing job `id` until it is done; its view.
+async fn homing_done(b: &SimBus, id: &Value) -> Value {
+    let path = format!("/api/v1/homing/{id}");
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    loop {
+        let view = b.server.get(&path).await.ok().clone();
+        if view["state"] == "done" {
+            return view;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "homing never done: {view}"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+fn max_current_raw(b: &SimBus, id: u8) -> u16 {
+    let dev = b.sim.device(id).expect("a device");
+    dev.params.raw(jointd::protocol::params::index::MAX_CUR)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn homing_finds_the_hard_stop_and_records_it() {
+    let b = rig_with_hard_stop(2, -30.0).await;
+    let before = max_current_raw(&b, 1);
+    let r = b
+        .server
+        .post(
+            "/api/v1/homing",
+            json!({"joints": [{"bus": "sim0", "id": 1}], "direction": "negative",
+                   "speed_dps": 30.0, "backoff_deg": 2.0, "stop_at_deg": 0.0}),
+        )
+        .await;
+    assert_eq!(r.status.as_u16(), 202, "{}", r.body);
+    assert_eq!(r.body["joints"][0]["state"], "running");
+    let done = homing_done(&b, &r.body["id"]).await;
+    let joint = &done["joints"][0];
+    assert_eq!(joint["state"], "homed", "{done}");
+    assert!(near(&joint["hard_stop_device_deg"], -30.0), "{done}");
+    assert_eq!(joint["current_limit_restored"], true);
+    assert_eq!(max_current_raw(&b, 1), before, "the current limit is back");
+    let cal = b.server.get(CAL).await.ok().clone();
+    assert!(near(&cal["offset_deg"], -30.0), "{cal}");
+    assert!(cal["homed_at_ms"].is_u64(), "{cal}");
+    // Backed off by 2°: the joint reads 2° in its new frame, in position mode.
+    device_reaches(&b, 1, -28.0).await;
+    view_reads(&b, 1, 2.0).await;
+    assert_eq!(
+        b.sim.device(1).expect("a device").mode.to_string(),
+        "position"
+    );
+    // Joint 2 has no stop and was not asked: untouched.
+    assert_eq!(
+        b.server
+            .get("/api/v1/buses/sim0/devices/2/calibration")
+            .await
+            .ok()["offset_deg"],
+        0.0
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_estop_mid_homing_aborts_it_and_the_current_limit_is_restored() {
+    // A stop too far to reach before the e-stop.
+    let b = rig_with_hard_stop(1, -200.0).await;
+    let before = max_current_raw(&b, 1);
+    let r = b
+        .server
+        .post(
+            "/api/v1/homing",
+            json!({"joints": [{"bus": "sim0", "id": 1}], "speed_dps": 10.0, "current_limit_a": 0.25}),
+        )
+        .await;
+    assert_eq!(r.status.as_u16(), 202, "{}", r.body);
+    // Wait until it searches under the reduced limit, then e-stop.
+    let deadline = tokio::time::Instant::now() + WAIT;
+    while !(max_current_raw(&b, 1) < before
+        && b.sim.device(1).expect("a device").velocity_deg_s < -5.0)
+    {
+        assert!(tokio::time::Instant::now() < deadline, "never searched");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    b.server.post_empty("/api/v1/estop").await;
+    let done = homing_done(&b, &r.body["id"]).await;
+    let joint = &done["joints"][0];
+    assert_eq!(joint["state"], "aborted", "{done}");
+    assert_eq!(joint["reason"], "e-stop", "{done}");
+    assert_eq!(joint["current_limit_restored"], true, "{done}");
+    assert_eq!(max_current_raw(&b, 1), before, "the current limit is back");
+    let dev = b.sim.device(1).expect("a device");
+    assert!(!dev.enabled, "the e-stop disabled it");
+    assert_eq!(dev.mode.to_string(), "position");
+    // Nothing recorded.
+    assert_eq!(b.server.get(CAL).await.ok()["offset_deg"], 0.0);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn homing_refuses_what_it_cannot_do_safely() {
+    let b = calibrated_rig(1).await;
+    let above = b
+        .server
+        .post(
+            "/api/v1/homing",
+            json!({"joints": [{"bus": "sim0", "id": 1}], "speed_dps": 500.0}),
+        )
+        .await;
+    assert_eq!(above.problem(422)["field"], "speed_dps");
+    let neither = b.server.post("/api/v1/homing", json!({})).await;
+    assert_eq!(neither.problem(422)["field"], "joints");
+    // A limit above the joint's own (0.75 A) would not reduce anything.
+    let r = b
+        .server
+        .post(
+            "/api/v1/homing",
+            json!({"joints": [{"bus": "sim0", "id": 1}], "current_limit_a": 2.0}),
+        )
+        .await;
+    assert_eq!(r.status.as_u16(), 202, "{}", r.body);
+    let done = homing_done(&b, &r.body["id"]).await;
+    assert_eq!(done["joints"][0]["state"], "failed");
+    assert!(
+        done["joints"][0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("not below"),
+        "{done}"
+    );
+    let missing = b.server.get("/api/v1/homing/999").await;
+    assert_eq!(
+        missing.problem(404)["type"],
+        "urn:jointd:problem:unknown-homing"
+    );
 }

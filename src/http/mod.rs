@@ -32,6 +32,7 @@ pub(crate) mod calibration;
 pub(crate) mod error;
 pub(crate) mod extract;
 pub(crate) mod guard;
+pub(crate) mod homing;
 pub(crate) mod hub;
 pub mod limits;
 pub(crate) mod move_book;

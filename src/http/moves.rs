@@ -282,12 +282,32 @@ fn plan<'a>(state: &'a AppState, req: &MoveRequest) -> ApiResult<Plan<'a>> {
 
 /// A joint named by bus and id, or by hand and joint name.
 fn joint_ref(state: &AppState, i: usize, j: &MoveJoint) -> ApiResult<JointRef> {
-    match (&j.bus, j.id, &j.hand, &j.joint) {
+    resolve_joint(
+        state,
+        &format!("joints[{i}]"),
+        j.bus.as_deref(),
+        j.id,
+        j.hand.as_deref(),
+        j.joint.as_deref(),
+    )
+}
+
+/// A joint named by `bus` and `id`, or by `hand` and `joint` (its name in
+/// a `[[hand]]`); `field` names it in errors (`joints[2]`).
+pub(crate) fn resolve_joint(
+    state: &AppState,
+    field: &str,
+    bus: Option<&str>,
+    id: Option<i64>,
+    hand: Option<&str>,
+    joint: Option<&str>,
+) -> ApiResult<JointRef> {
+    match (bus, id, hand, joint) {
         (Some(bus), Some(id), None, None) => {
             state.bus(bus)?;
             Ok(JointRef {
-                bus: bus.clone(),
-                id: device_id(&format!("joints[{i}].id"), id)?,
+                bus: bus.to_owned(),
+                id: device_id(&format!("{field}.id"), id)?,
             })
         }
         (None, None, Some(hand), Some(name)) => {
@@ -299,7 +319,7 @@ fn joint_ref(state: &AppState, i: usize, j: &MoveJoint) -> ApiResult<JointRef> {
                 })?;
             let joint = hand_of.joint(name).ok_or_else(|| {
                 ApiError::invalid(
-                    &format!("joints[{i}].joint"),
+                    &format!("{field}.joint"),
                     format!("hand `{hand}` has no joint `{name}`"),
                 )
             })?;
@@ -309,7 +329,7 @@ fn joint_ref(state: &AppState, i: usize, j: &MoveJoint) -> ApiResult<JointRef> {
             })
         }
         _ => Err(ApiError::invalid(
-            &format!("joints[{i}]"),
+            field,
             "name a joint by `bus` and `id`, or by `hand` and `joint`",
         )),
     }

@@ -44,6 +44,7 @@ struct Inner {
     refusals: RefusalLog,
     options: std::sync::OnceLock<StateOptions>,
     moves: crate::http::move_book::MoveBook,
+    homings: crate::http::homing::HomingBook,
 }
 
 impl AppState {
@@ -63,6 +64,7 @@ impl AppState {
                 refusals: RefusalLog::default(),
                 options: std::sync::OnceLock::new(),
                 moves: Default::default(),
+                homings: Default::default(),
             }),
         }
     }
@@ -90,6 +92,11 @@ impl AppState {
     /// The moves started through the API.
     pub(crate) fn moves(&self) -> &crate::http::move_book::MoveBook {
         &self.inner.moves
+    }
+
+    /// The homing jobs started through the API.
+    pub(crate) fn homings(&self) -> &crate::http::homing::HomingBook {
+        &self.inner.homings
     }
 
     pub fn limits(&self, bus: &str, id: u8) -> JointLimits {

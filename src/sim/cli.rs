@@ -44,6 +44,10 @@ pub struct SimArgs {
     /// Devices blocked by an obstacle where they stand, e.g. `--stall 3 --stall 4`.
     #[arg(long)]
     pub stall: Vec<u8>,
+    /// A mechanical end stop: `ID=DEG` (output degrees of the factory
+    /// zero), e.g. `--hard-stop 1=-40`; the joint cannot pass it.
+    #[arg(long, value_name = "ID=DEG")]
+    pub hard_stop: Vec<String>,
     /// Devices whose supply sags below the under-voltage level.
     #[arg(long)]
     pub under_voltage: Vec<u8>,
@@ -78,6 +82,11 @@ impl SimArgs {
         cfg.realtime = self.realtime;
         cfg.firmware = Firmware::parse(&self.firmware)?;
         cfg.adapter = super::AdapterModel::parse(&self.adapter).map_err(SimError::BadAdapter)?;
+        cfg.hard_stops = self
+            .hard_stop
+            .iter()
+            .map(|s| parse_hard_stop(s))
+            .collect::<Result<_, _>>()?;
         cfg.validate()?;
         Ok(cfg)
     }
@@ -110,6 +119,25 @@ impl SimArgs {
         );
         faults
     }
+}
+
+/// `ID=DEG`: a device id and a finite angle within the device's range.
+pub fn parse_hard_stop(spec: &str) -> Result<(u8, f64), SimError> {
+    let bad =
+        |why: &str| SimError::BadHardStop(format!("`{spec}`: {why} (expected ID=DEG, e.g. 1=-40)"));
+    let (id, deg) = spec.split_once('=').ok_or_else(|| bad("no `=`"))?;
+    let id: u8 = id
+        .trim()
+        .parse()
+        .map_err(|_| bad("the id is not a number"))?;
+    let deg: f64 = deg
+        .trim()
+        .parse()
+        .map_err(|_| bad("the angle is not a number"))?;
+    if !deg.is_finite() || deg.abs() > crate::protocol::units::MAX_ANGLE_DEG {
+        return Err(bad("the angle is outside ±255°"));
+    }
+    Ok((id, deg))
 }
 
 /// Runs the simulator until SIGINT/SIGTERM; prints the path first, stats last (stderr).

@@ -55,6 +55,11 @@ pub struct SimConfig {
     /// tighter delivery times on a busy machine. Off by default (it is a
     /// privilege, and a spinning real-time thread competes with everything).
     pub realtime: bool,
+    /// Mechanical end stops: (device id, output angle in degrees of the
+    /// factory zero). The joint cannot pass one; pushing against it draws
+    /// current up to the cap and, held long enough, faults with a stall,
+    /// like any obstacle. What homing looks for.
+    pub hard_stops: Vec<(u8, f64)>,
 }
 
 impl SimConfig {
@@ -73,6 +78,7 @@ impl SimConfig {
             firmware: Firmware::default(),
             adapter: AdapterModel::Native,
             realtime: false,
+            hard_stops: Vec::new(),
         }
     }
 
@@ -89,6 +95,15 @@ impl SimConfig {
         }
         if BaudLevel::from_baud(self.baud).is_none() {
             return Err(SimError::BadBaud(self.baud));
+        }
+        if let Some((id, _)) = self
+            .hard_stops
+            .iter()
+            .find(|(id, _)| !self.ids.contains(id))
+        {
+            return Err(SimError::BadHardStop(format!(
+                "device {id} is not on the bus"
+            )));
         }
         self.firmware.check_ids(&self.ids)
     }

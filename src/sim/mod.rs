@@ -52,6 +52,9 @@
 //!   pushing; disable clears a fault whose cause is gone.
 //! - The current cap (MAX_CUR, or PROTECT_CUR_LIMIT while protection holds)
 //!   limits the reported current, not the motion of a free joint.
+//! - A hard stop ([`SimConfig::hard_stops`], `--hard-stop ID=DEG`) is a
+//!   mechanical end of travel: the joint cannot pass it, and pushing into
+//!   it is a stall (current up to the cap, err 8 after `stall_fault_after`).
 //!
 //! ```no_run
 //! use jointd::sim::{parse_ids, SimConfig, Simulator};

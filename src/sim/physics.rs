@@ -64,6 +64,30 @@ impl Obstacle {
     pub(crate) fn at(at: f64) -> Self {
         Self { at, side: None }
     }
+
+    /// Where a joint going from `pos` towards `next` (driven at `v_des`)
+    /// ends up, and whether it pushes against this obstacle there.
+    fn stop(&mut self, pos: f64, next: f64, v_des: f64) -> (f64, bool) {
+        let at = self.at;
+        let side = *self.side.get_or_insert_with(|| {
+            let d = pos - at;
+            if d.abs() > CONTACT_DEG {
+                d.signum()
+            } else {
+                -v_des.signum()
+            }
+        });
+        let next = if side != 0.0 && (next - at) * side < 0.0 {
+            at
+        } else {
+            next
+        };
+        let touching = (next - at).abs() < CONTACT_DEG;
+        if side == 0.0 {
+            self.side = None;
+        }
+        (next, touching && v_des * side < 0.0)
+    }
 }
 
 /// Current protection and burst state.
@@ -91,7 +115,10 @@ pub(crate) struct Joint {
     pub current: f64,
     pub temp_c: f64,
     pub obstacle: Option<Obstacle>,
-    /// Pushing against the obstacle right now.
+    /// A mechanical end stop (a finger's joint limit): an obstacle that no
+    /// fault clears and no re-zero moves.
+    pub hard_stop: Option<Obstacle>,
+    /// Pushing against the obstacle or the hard stop right now.
     pub blocked: bool,
     /// How long it has been pushing without a break, s.
     pub blocked_s: f64,
@@ -107,6 +134,7 @@ impl Default for Joint {
             current: 0.0,
             temp_c: AMBIENT_C,
             obstacle: None,
+            hard_stop: None,
             blocked: false,
             blocked_s: 0.0,
             prot: Protection::default(),
@@ -145,31 +173,24 @@ impl Joint {
         self.temp_c += (heat - self.temp_c) * dt / THERMAL_TAU_S;
     }
 
-    /// Moves, stopping at the travel bounds and at the obstacle.
+    /// Moves, stopping at the travel bounds, the obstacle and the hard stop.
     fn move_by(&mut self, delta: f64, v_des: f64, (lo, hi): (f64, f64)) {
         let mut next = (self.pos + delta).clamp(lo, hi);
         if next != self.pos + delta {
             self.vel = 0.0;
         }
         self.blocked = false;
-        if let Some(ob) = self.obstacle.as_mut() {
-            let side = *ob.side.get_or_insert_with(|| {
-                let d = self.pos - ob.at;
-                if d.abs() > CONTACT_DEG {
-                    d.signum()
-                } else {
-                    -v_des.signum()
-                }
-            });
-            if side != 0.0 && (next - ob.at) * side < 0.0 {
-                next = ob.at;
+        let pos = self.pos;
+        for ob in [self.obstacle.as_mut(), self.hard_stop.as_mut()]
+            .into_iter()
+            .flatten()
+        {
+            let (stopped, blocked) = ob.stop(pos, next, v_des);
+            if stopped != next {
+                next = stopped;
                 self.vel = 0.0;
             }
-            let touching = (next - ob.at).abs() < CONTACT_DEG;
-            self.blocked = touching && v_des * side < 0.0;
-            if side == 0.0 {
-                ob.side = None;
-            }
+            self.blocked |= blocked;
         }
         self.pos = next;
     }
@@ -342,6 +363,24 @@ mod tests {
         j.advance(0.1, d, &p, BOUNDS);
         assert!(j.current.abs() <= p.physical(index::PROTECT_CUR_LIMIT) + 1e-9);
         assert!(j.blocked_s > 1.0);
+    }
+
+    #[test]
+    fn a_hard_stop_holds_beside_an_obstacle_and_only_one_way() {
+        let p = params();
+        let mut j = Joint {
+            hard_stop: Some(Obstacle::at(-30.0)),
+            obstacle: Some(Obstacle::at(20.0)),
+            ..Joint::default()
+        };
+        j.advance(1.0, Drive::Speed { vel: -100.0 }, &p, BOUNDS);
+        assert_eq!(j.pos, -30.0);
+        assert!(j.blocked, "pushing into the hard stop");
+        j.advance(0.3, Drive::Speed { vel: 100.0 }, &p, BOUNDS);
+        assert!(!j.blocked && j.pos > -30.0, "leaving it is free");
+        j.advance(1.0, Drive::Speed { vel: 100.0 }, &p, BOUNDS);
+        assert_eq!(j.pos, 20.0, "the obstacle still blocks the other way");
+        assert!(j.blocked);
     }
 
     #[test]

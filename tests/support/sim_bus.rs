@@ -46,12 +46,24 @@ pub async fn start_with(
     firmware: &str,
     tweak: impl FnOnce(&mut BusConfig),
 ) -> SimBus {
+    start_sim_with(n, token, firmware, |_| {}, tweak).await
+}
+
+/// [`start_with`] with a last word on the simulator's config as well.
+pub async fn start_sim_with(
+    n: u8,
+    token: Option<&str>,
+    firmware: &str,
+    sim_tweak: impl FnOnce(&mut SimConfig),
+    tweak: impl FnOnce(&mut BusConfig),
+) -> SimBus {
     let turn = ONE_AT_A_TIME.lock().await;
     let ids: Vec<u8> = (1..=n).collect();
     let mut cfg = SimConfig::new(ids.clone(), BAUD);
     cfg.align_time = Duration::from_millis(50);
     cfg.boot_delay = Duration::from_millis(2);
     cfg.firmware = jointd::sim::Firmware::parse(firmware).expect("firmware spec");
+    sim_tweak(&mut cfg);
     let sim = Simulator::spawn_pty(cfg).expect("simulator");
     let path = sim.device_path().expect("pty path");
     let mut bus_cfg = BusConfig::new(BUS, path, BAUD);

@@ -9,7 +9,7 @@
 //!   table; [`config_outcome`]: what a PATCH did per parameter),
 //!   [`estop`], [`health`], [`moves`] (paths generated in the daemon),
 //!   [`hands`] (named hands and their poses), [`calibration`] (joint
-//!   offsets, directions, ranges): one
+//!   offsets, directions, ranges), [`homing`] (finding hard stops): one
 //!   router per area.
 //! - [`openapi`]: the document's head, the shared failure responses, the docs page.
 
@@ -25,6 +25,7 @@ pub(crate) mod devices;
 pub(crate) mod estop;
 pub(crate) mod hands;
 pub(crate) mod health;
+pub(crate) mod homing;
 pub(crate) mod metrics;
 pub(crate) mod moves;
 pub(crate) mod openapi;
@@ -46,6 +47,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .merge(moves::router())
         .merge(hands::router())
         .merge(calibration::router())
+        .merge(homing::router())
 }
 
 /// The document as served, with the crate version.

@@ -174,7 +174,7 @@ impl Device {
                         .set_raw(index::SN, firmware::default_serial(cfg.seed, slot));
                 }
                 let stagger = slot_time * u32::try_from(slot).unwrap_or(u32::MAX);
-                Self::new(
+                let mut device = Self::new(
                     slot,
                     image,
                     timing,
@@ -182,7 +182,13 @@ impl Device {
                     stagger,
                     cfg.seed ^ slot as u64,
                     profile,
-                )
+                );
+                device.joint.hard_stop = cfg
+                    .hard_stops
+                    .iter()
+                    .find(|(dev_id, _)| *dev_id == id)
+                    .map(|(_, deg)| Obstacle::at(*deg));
+                device
             })
             .collect()
     }

@@ -1,0 +1,693 @@
+//! Homing (issue 18): an opt-in routine per joint (or every joint of a
+//! hand) that finds the joint's hard stop and records it as the joint's
+//! calibration offset. Per joint, in its own task:
+//!
+//! 1. read the current limit (INFO_04) and write a reduced one (RAM only,
+//!    verified by read-back): a joint pushing into its stop must not hurt
+//!    the finger or the gearbox;
+//! 2. speed mode, a slow speed towards the stop; watch the telemetry until
+//!    the joint stalls (its speed drops under a fifth of the asked speed for
+//!    [`STALL_CONFIRM`], after it moved) or pushes (the same, with the q
+//!    current near the reduced limit);
+//! 3. the stall's angle becomes the calibration offset (the stop reads
+//!    `stop_at_deg` from then on); speed 0, position mode, back off by
+//!    `backoff_deg`;
+//! 4. the previous current limit is written back **whatever happened**
+//!    (found, timed out, e-stopped, faulted, offline), and the answer says
+//!    whether that write was verified.
+//!
+//! An e-stop, a fault, the joint disabled or offline abort at once: after
+//! an e-stop nothing that moves is written (only the mode and the current
+//! limit are put back). A job is polled with `GET /api/v1/homing/{id}`.
+
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use serde::{Deserialize, Serialize};
+use tokio::sync::broadcast;
+use utoipa::ToSchema;
+
+use crate::bus::handle::{BusEvent, DeviceState};
+use crate::bus::{BusHandle, Setpoint};
+use crate::http::calibration;
+use crate::http::error::{ApiError, ApiResult};
+use crate::http::move_book::JointRef;
+use crate::http::moves::resolve_joint;
+use crate::http::state::{known_device, AppState};
+use crate::http::targets::ensure_enabled;
+use crate::http::telemetry::{firmware_of, is_enabled, measured_angle_raw};
+use crate::protocol::status::{active_fault, fault_name, fsm};
+use crate::protocol::units;
+use crate::protocol::{ConfigParam, CtrlMode, InfoBlock, ReplyBody};
+
+/// The joint must look stalled this long (by its samples' times).
+const STALL_CONFIRM: Duration = Duration::from_millis(80);
+/// Before the joint has been seen moving, a standstill counts as a stall
+/// only after this long (it may start right at its stop).
+const START_GRACE: Duration = Duration::from_millis(500);
+/// Below this share of the asked speed the joint is not moving ...
+const STALLED_SPEED_SHARE: f64 = 0.2;
+/// ... above this one it is.
+const MOVING_SPEED_SHARE: f64 = 0.5;
+/// The q current counts as risen at this share of the reduced limit.
+const PUSHING_CURRENT_SHARE: f64 = 0.6;
+/// How long the back-off may take before the job ends anyway.
+const BACKOFF_WAIT: Duration = Duration::from_secs(5);
+/// Close enough to the back-off goal, degrees.
+const BACKOFF_TOLERANCE_DEG: f64 = 0.5;
+/// Speed limit of the back-off, rotor rpm (≈ 10 °/s at the output).
+const BACKOFF_RPM: f64 = 1000.0;
+/// Tries at writing the previous current limit back.
+const RESTORE_TRIES: usize = 3;
+/// Jobs kept for `GET` after they ended.
+const KEPT: usize = 64;
+
+/// Which way the joint turns to find its stop (device angles).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub(crate) enum Direction {
+    #[default]
+    Negative,
+    Positive,
+}
+
+impl Direction {
+    fn sign(self) -> f64 {
+        match self {
+            Self::Negative => -1.0,
+            Self::Positive => 1.0,
+        }
+    }
+}
+
+/// One joint to home: by `bus` and `id`, or by `hand` and `joint`.
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct HomingJoint {
+    #[schema(example = "sim0")]
+    pub bus: Option<String>,
+    #[schema(example = 1)]
+    pub id: Option<i64>,
+    pub hand: Option<String>,
+    pub joint: Option<String>,
+}
+
+/// What to home and how. Defaults are gentle: 10 °/s under 0.3 A.
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+#[schema(example = json!({"joints": [{"bus": "sim0", "id": 1}], "direction": "negative",
+    "speed_dps": 10.0, "current_limit_a": 0.3, "backoff_deg": 2.0, "stop_at_deg": 0.0, "timeout_ms": 20000}))]
+pub(crate) struct HomingRequest {
+    /// The joints (or give `hand`).
+    pub joints: Option<Vec<HomingJoint>>,
+    /// Every joint of this hand.
+    pub hand: Option<String>,
+    /// Which way (in device angles) the stop lies; default `negative`.
+    pub direction: Option<Direction>,
+    /// Search speed at the output, °/s (0 < s ≤ 90; default 10).
+    #[schema(example = 10.0)]
+    pub speed_dps: Option<f64>,
+    /// Current limit while searching, A (0 < I, below the joint's own
+    /// limit; default 0.3).
+    #[schema(example = 0.3)]
+    pub current_limit_a: Option<f64>,
+    /// How far to move back off the stop, degrees (0..=30; default 2).
+    #[schema(example = 2.0)]
+    pub backoff_deg: Option<f64>,
+    /// The joint angle the stop reads from then on (default 0).
+    #[schema(example = 0.0)]
+    pub stop_at_deg: Option<f64>,
+    /// Give up the search after this long, ms (0 < t ≤ 120000; default 20000).
+    #[schema(example = 20000.0)]
+    pub timeout_ms: Option<f64>,
+}
+
+/// The request checked.
+#[derive(Debug, Clone, Copy)]
+struct Plan {
+    direction: Direction,
+    speed_dps: f64,
+    current_limit_a: f64,
+    backoff_deg: f64,
+    stop_at_deg: f64,
+    timeout: Duration,
+}
+
+/// Where a joint's homing stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub(crate) enum HomingState {
+    Running,
+    /// The stop was found and recorded.
+    Homed,
+    /// It could not start, or the search timed out.
+    Failed,
+    /// An e-stop, a fault, a disable or the joint going offline ended it.
+    Aborted,
+}
+
+/// One joint of a homing job.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub(crate) struct JointHoming {
+    #[schema(example = "sim0")]
+    pub bus: String,
+    #[schema(example = 1)]
+    pub id: u8,
+    pub state: HomingState,
+    /// What it does now: `starting`, `searching`, `backing_off`, `restoring`, `done`.
+    #[schema(example = "searching")]
+    pub phase: &'static str,
+    /// Why it failed or was aborted.
+    pub reason: Option<String>,
+    /// The device angle where the joint stalled, degrees.
+    #[schema(example = -30.0)]
+    pub hard_stop_device_deg: Option<f64>,
+    /// The calibration offset recorded from it.
+    #[schema(example = -30.0)]
+    pub offset_deg: Option<f64>,
+    /// The joint's current limit before homing, A (INFO_04).
+    #[schema(example = 0.75)]
+    pub previous_current_limit_a: Option<f64>,
+    /// True once the previous current limit is written back and verified.
+    #[schema(example = true)]
+    pub current_limit_restored: bool,
+}
+
+/// A homing job as the API reports it.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub(crate) struct HomingView {
+    #[schema(example = 1)]
+    pub id: u64,
+    /// `running` until every joint ended; then `done` (each joint's state
+    /// says how).
+    #[schema(example = "running")]
+    pub state: &'static str,
+    pub joints: Vec<JointHoming>,
+}
+
+type Slot = Arc<Mutex<JointHoming>>;
+
+/// The homing jobs started through the API.
+#[derive(Default)]
+pub(crate) struct HomingBook {
+    inner: Mutex<(u64, BTreeMap<u64, Vec<Slot>>)>,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+impl HomingBook {
+    fn add(&self, slots: Vec<Slot>) -> u64 {
+        let mut book = lock(&self.inner);
+        book.0 += 1;
+        let id = book.0;
+        book.1.insert(id, slots);
+        while book.1.len() > KEPT {
+            let oldest_ended = book
+                .1
+                .iter()
+                .find(|(_, s)| s.iter().all(|j| lock(j).state != HomingState::Running))
+                .map(|(id, _)| *id);
+            match oldest_ended {
+                Some(id) => drop(book.1.remove(&id)),
+                None => break,
+            }
+        }
+        id
+    }
+
+    fn view(&self, id: u64) -> Option<HomingView> {
+        let book = lock(&self.inner);
+        let slots = book.1.get(&id)?;
+        let joints: Vec<JointHoming> = slots.iter().map(|s| lock(s).clone()).collect();
+        let running = joints.iter().any(|j| j.state == HomingState::Running);
+        Some(HomingView {
+            id,
+            state: if running { "running" } else { "done" },
+            joints,
+        })
+    }
+}
+
+/// Checks the request, then homes each joint in its own task; the job as
+/// it starts.
+pub(crate) async fn start(state: &AppState, req: &HomingRequest) -> ApiResult<HomingView> {
+    let plan = plan(req)?;
+    let joints = joints(state, req)?;
+    for r in &joints {
+        let bus = state.bus(&r.bus)?;
+        let snap = bus.snapshot();
+        let dev = known_device(&snap, r.id)?;
+        ensure_enabled(bus, dev, "homing").await?;
+        if dev.mode.is_some_and(|m| m != CtrlMode::Position) {
+            return Err(ApiError::conflict(
+                "wrong-mode",
+                "Joint not in position mode",
+                format!(
+                    "joint {} of bus `{}` is not in position mode: homing starts from position mode",
+                    r.id, r.bus
+                ),
+            ));
+        }
+    }
+    let slots: Vec<Slot> = joints
+        .iter()
+        .map(|r| {
+            Arc::new(Mutex::new(JointHoming {
+                bus: r.bus.clone(),
+                id: r.id,
+                state: HomingState::Running,
+                phase: "starting",
+                reason: None,
+                hard_stop_device_deg: None,
+                offset_deg: None,
+                previous_current_limit_a: None,
+                current_limit_restored: false,
+            }))
+        })
+        .collect();
+    let id = state.homings().add(slots.clone());
+    for (r, slot) in joints.into_iter().zip(slots) {
+        let bus = state.bus(&r.bus)?.clone();
+        let state = state.clone();
+        tokio::spawn(async move { home(state, bus, r.id, plan, slot, id).await });
+    }
+    tracing::info!(homing_id = id, ?plan, "homing started");
+    state
+        .homings()
+        .view(id)
+        .ok_or_else(|| ApiError::not_found("unknown-homing", format!("no homing with id {id}")))
+}
+
+/// Homing job `id` as it stands.
+pub(crate) fn get(state: &AppState, id: u64) -> ApiResult<HomingView> {
+    state
+        .homings()
+        .view(id)
+        .ok_or_else(|| ApiError::not_found("unknown-homing", format!("no homing with id {id}")))
+}
+
+fn plan(req: &HomingRequest) -> ApiResult<Plan> {
+    let within =
+        |field: &str, v: Option<f64>, default: f64, (lo, hi): (f64, f64), open_low: bool| {
+            let x = v.unwrap_or(default);
+            let low_ok = if open_low { x > lo } else { x >= lo };
+            if x.is_finite() && low_ok && x <= hi {
+                Ok(x)
+            } else {
+                let unit = match field {
+                    "speed_dps" => "deg/s",
+                    "current_limit_a" => "A",
+                    "timeout_ms" => "ms",
+                    _ => "deg",
+                };
+                Err(ApiError::out_of_range(field, x, (lo, hi), unit))
+            }
+        };
+    let max_a = units::current_limit_a(u16::MAX >> 1);
+    Ok(Plan {
+        direction: req.direction.unwrap_or_default(),
+        speed_dps: within("speed_dps", req.speed_dps, 10.0, (0.0, 90.0), true)?,
+        current_limit_a: within(
+            "current_limit_a",
+            req.current_limit_a,
+            0.3,
+            (0.0, max_a),
+            true,
+        )?,
+        backoff_deg: within("backoff_deg", req.backoff_deg, 2.0, (0.0, 30.0), false)?,
+        stop_at_deg: within(
+            "stop_at_deg",
+            req.stop_at_deg,
+            0.0,
+            (-units::MAX_ANGLE_DEG, units::MAX_ANGLE_DEG),
+            false,
+        )?,
+        timeout: Duration::from_secs_f64(
+            within(
+                "timeout_ms",
+                req.timeout_ms,
+                20_000.0,
+                (0.0, 120_000.0),
+                true,
+            )? / 1e3,
+        ),
+    })
+}
+
+/// The joints named, or every joint of the hand; each once.
+fn joints(state: &AppState, req: &HomingRequest) -> ApiResult<Vec<JointRef>> {
+    let list: Vec<JointRef> = match (&req.joints, &req.hand) {
+        (Some(joints), None) if !joints.is_empty() && joints.len() <= 64 => joints
+            .iter()
+            .enumerate()
+            .map(|(i, j)| {
+                resolve_joint(
+                    state,
+                    &format!("joints[{i}]"),
+                    j.bus.as_deref(),
+                    j.id,
+                    j.hand.as_deref(),
+                    j.joint.as_deref(),
+                )
+            })
+            .collect::<ApiResult<_>>()?,
+        (None, Some(hand)) => state
+            .hands()
+            .and_then(|store| store.hand(hand))
+            .ok_or_else(|| ApiError::not_found("unknown-hand", format!("no hand named `{hand}`")))?
+            .joints
+            .iter()
+            .map(|j| JointRef {
+                bus: j.bus.clone(),
+                id: j.id,
+            })
+            .collect(),
+        _ => {
+            return Err(ApiError::invalid(
+                "joints",
+                "give `joints` (1..=64 joints) or `hand`, not both",
+            ))
+        }
+    };
+    for (i, r) in list.iter().enumerate() {
+        if list[..i].contains(r) {
+            return Err(ApiError::invalid(
+                &format!("joints[{i}]"),
+                format!("joint {} of bus `{}` appears twice", r.id, r.bus),
+            ));
+        }
+    }
+    Ok(list)
+}
+
+/// Why a search ended without finding the stop.
+enum Ended {
+    Failed(String),
+    Aborted { reason: String, estop: bool },
+}
+
+fn set(slot: &Slot, edit: impl FnOnce(&mut JointHoming)) {
+    edit(&mut lock(slot));
+}
+
+/// Homes one joint; whatever happens, its previous current limit is
+/// written back before the job says it ended.
+async fn home(state: AppState, bus: BusHandle, id: u8, plan: Plan, slot: Slot, job: u64) {
+    let mut events = bus.events();
+    let previous = match read_current_limit(&bus, id).await {
+        Ok(raw) => raw,
+        Err(why) => return finish(&slot, job, Err(Ended::Failed(why))),
+    };
+    set(&slot, |s| {
+        s.previous_current_limit_a = Some(units::current_limit_a(previous));
+    });
+    let limit = match units::current_limit_to_raw(plan.current_limit_a) {
+        Ok(raw) if raw < previous => raw,
+        _ => {
+            let why = format!(
+                "current_limit_a = {} A is not below the joint's own limit ({:.3} A): homing needs a reduced limit",
+                plan.current_limit_a,
+                units::current_limit_a(previous)
+            );
+            set(&slot, |s| s.current_limit_restored = true);
+            return finish(&slot, job, Err(Ended::Failed(why)));
+        }
+    };
+    bus.take_over(&[id]);
+    let outcome = match bus.write_config(id, ConfigParam::MaxCur(limit)).await {
+        Ok(_) => {
+            set(&slot, |s| s.phase = "searching");
+            search(&bus, id, &plan, &mut events).await
+        }
+        Err(e) => Err(Ended::Failed(format!(
+            "could not reduce the current limit: {e}"
+        ))),
+    };
+    let estopped = matches!(outcome, Err(Ended::Aborted { estop: true, .. }));
+    let outcome = match outcome {
+        Ok(stop_deg) => {
+            set(&slot, |s| {
+                s.phase = "backing_off";
+                s.hard_stop_device_deg = Some(stop_deg);
+            });
+            let offset = record(&state, &bus, id, &plan, stop_deg);
+            back_off(&bus, id, &plan, stop_deg, &mut events).await;
+            offset
+        }
+        Err(ended) => {
+            // Stop pushing and leave speed mode; after an e-stop only the
+            // mode is put back (no target: nothing that could move).
+            hold_here(&bus, id, !estopped).await;
+            Err(ended)
+        }
+    };
+    set(&slot, |s| s.phase = "restoring");
+    let restored = restore(&bus, id, previous).await;
+    set(&slot, |s| s.current_limit_restored = restored);
+    finish(&slot, job, outcome);
+}
+
+fn finish(slot: &Slot, job: u64, outcome: Result<f64, Ended>) {
+    let mut s = lock(slot);
+    s.phase = "done";
+    match outcome {
+        Ok(offset) => {
+            s.state = HomingState::Homed;
+            s.offset_deg = Some(offset);
+            tracing::info!(homing_id = job, bus = %s.bus, id = s.id, offset_deg = offset,
+                stop_deg = ?s.hard_stop_device_deg, restored = s.current_limit_restored, "joint homed");
+        }
+        Err(Ended::Failed(why)) => {
+            s.state = HomingState::Failed;
+            tracing::warn!(homing_id = job, bus = %s.bus, id = s.id, restored = s.current_limit_restored, "homing failed: {why}");
+            s.reason = Some(why);
+        }
+        Err(Ended::Aborted { reason, .. }) => {
+            s.state = HomingState::Aborted;
+            tracing::warn!(homing_id = job, bus = %s.bus, id = s.id, restored = s.current_limit_restored, "homing aborted: {reason}");
+            s.reason = Some(reason);
+        }
+    }
+    if !s.current_limit_restored && s.previous_current_limit_a.is_some() {
+        tracing::error!(homing_id = job, bus = %s.bus, id = s.id,
+            previous_a = ?s.previous_current_limit_a,
+            "the joint's current limit could not be written back: it keeps the reduced limit until set or power-cycled");
+    }
+}
+
+async fn read_current_limit(bus: &BusHandle, id: u8) -> Result<u16, String> {
+    let reply = bus
+        .read_info(id, InfoBlock::Info04)
+        .await
+        .map_err(|e| format!("could not read the current limit (INFO_04): {e}"))?;
+    match reply.body() {
+        ReplyBody::Info04(i) => Ok(i.max_current),
+        _ => Err("the joint answered INFO_04 with another block".into()),
+    }
+}
+
+/// Speed mode towards the stop until the joint stalls there; its angle.
+async fn search(
+    bus: &BusHandle,
+    id: u8,
+    plan: &Plan,
+    events: &mut broadcast::Receiver<BusEvent>,
+) -> Result<f64, Ended> {
+    bus.set_mode(id, CtrlMode::Speed)
+        .await
+        .map_err(|e| Ended::Failed(format!("could not switch to speed mode: {e}")))?;
+    let snap = bus.snapshot();
+    let dev = snap
+        .devices
+        .get(&id)
+        .ok_or_else(|| Ended::Failed("the joint is gone".into()))?;
+    let here = measured_angle_raw(dev).unwrap_or(0);
+    let rpm = plan.direction.sign() * plan.speed_dps / units::output_deg_per_s(1.0);
+    let spd_ref = units::speed_to_raw(rpm, firmware_of(dev))
+        .map_err(|e| Ended::Failed(format!("speed_dps: {e}")))?;
+    bus.set_targets(&[(
+        id,
+        Setpoint {
+            pos_ref: here,
+            spd_ref,
+        },
+    )]);
+    let started = Instant::now();
+    let deadline = started + plan.timeout;
+    let mut watch = bus.watch();
+    let mut last_sample: Option<Instant> = None;
+    let mut moved = false;
+    let mut stalled_since: Option<Instant> = None;
+    loop {
+        aborted_by_event(bus, events)?;
+        let snap = watch.borrow_and_update().clone();
+        let dev = snap.devices.get(&id);
+        unfit(dev)?;
+        if let Some((info, at)) = dev.and_then(|d| d.info02.as_ref().map(|(i, at)| (*i, *at))) {
+            if last_sample.map_or(true, |last| at > last) && at >= started {
+                last_sample = Some(at);
+                let fw = dev.map(firmware_of).unwrap_or_default();
+                let speed = units::output_deg_per_s(info.speed_rpm(fw)).abs();
+                let current = units::current_a(info.q_cur).abs();
+                moved |= speed > MOVING_SPEED_SHARE * plan.speed_dps;
+                let slow = speed < STALLED_SPEED_SHARE * plan.speed_dps;
+                let pushing = slow && current >= PUSHING_CURRENT_SHARE * plan.current_limit_a;
+                let still = slow && (moved || at.duration_since(started) > START_GRACE);
+                if pushing || still {
+                    let since = *stalled_since.get_or_insert(at);
+                    if at.duration_since(since) >= STALL_CONFIRM {
+                        return Ok(units::angle_deg(info.angle));
+                    }
+                } else {
+                    stalled_since = None;
+                }
+            }
+        }
+        let now = Instant::now();
+        if now >= deadline {
+            return Err(Ended::Failed(format!(
+                "no stop found within {} ms (moved: {moved})",
+                plan.timeout.as_millis()
+            )));
+        }
+        let wait = (deadline - now).min(Duration::from_millis(20));
+        let _ = tokio::time::timeout(wait, watch.changed()).await;
+    }
+}
+
+/// An e-stop on the joint's bus ends the search (checked between samples,
+/// and the joint's own state tells it too).
+fn aborted_by_event(
+    bus: &BusHandle,
+    events: &mut broadcast::Receiver<BusEvent>,
+) -> Result<(), Ended> {
+    loop {
+        match events.try_recv() {
+            Ok(BusEvent::Estop { bus: b }) if b == bus.name() => {
+                return Err(Ended::Aborted {
+                    reason: "e-stop".into(),
+                    estop: true,
+                })
+            }
+            Ok(_) | Err(broadcast::error::TryRecvError::Lagged(_)) => continue,
+            Err(_) => return Ok(()),
+        }
+    }
+}
+
+/// Offline, faulted or no longer enabled: the search cannot go on.
+fn unfit(dev: Option<&DeviceState>) -> Result<(), Ended> {
+    let aborted = |reason: String, estop: bool| Err(Ended::Aborted { reason, estop });
+    let Some(dev) = dev.filter(|d| d.online) else {
+        return aborted("the joint went offline".into(), false);
+    };
+    if let Some((info, _)) = &dev.info01 {
+        if info.fsm == fsm::FAULT || active_fault(info.err_code) != 0 {
+            let name = fault_name(active_fault(info.err_code));
+            return aborted(format!("the joint faulted ({name})"), false);
+        }
+        if !is_enabled(info) {
+            let why = dev.disabled_reason.map_or("disabled", |r| r.name());
+            let estop = why == "estop";
+            let reason = if estop {
+                "e-stop".to_string()
+            } else {
+                format!("the joint was disabled ({why})")
+            };
+            return aborted(reason, estop);
+        }
+    }
+    Ok(())
+}
+
+/// Saves the offset that makes the stop read `stop_at_deg` (flip and range
+/// kept); the offset.
+fn record(
+    state: &AppState,
+    bus: &BusHandle,
+    id: u8,
+    plan: &Plan,
+    stop_deg: f64,
+) -> Result<f64, Ended> {
+    let mut cal = state.calibration(bus.name(), id);
+    cal.offset_deg = stop_deg - cal.sign() * plan.stop_at_deg;
+    cal.homed_at_ms = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .ok()
+        .map(|d| d.as_millis() as u64);
+    calibration::save(state, bus.name(), id, cal)
+        .map(|()| cal.offset_deg)
+        .map_err(|e| {
+            Ended::Failed(format!(
+                "the stop was found but not saved: {}",
+                e.problem.detail
+            ))
+        })
+}
+
+/// Stops pushing and goes back to position mode, holding where it is; with
+/// `target` false (after an e-stop) only the mode is put back.
+async fn hold_here(bus: &BusHandle, id: u8, target: bool) {
+    if target {
+        if let Some(here) = bus.snapshot().devices.get(&id).and_then(measured_angle_raw) {
+            bus.set_targets(&[(
+                id,
+                Setpoint {
+                    pos_ref: here,
+                    spd_ref: 0,
+                },
+            )]);
+        }
+    }
+    if let Err(e) = bus.set_mode(id, CtrlMode::Position).await {
+        tracing::warn!(bus = bus.name(), id, error = %e, "homing: could not switch back to position mode");
+    }
+}
+
+/// Off the stop by `backoff_deg`, slowly, in position mode; waits (a
+/// little) until it is there. An e-stop meanwhile leaves it where it is.
+async fn back_off(
+    bus: &BusHandle,
+    id: u8,
+    plan: &Plan,
+    stop_deg: f64,
+    events: &mut broadcast::Receiver<BusEvent>,
+) {
+    hold_here(bus, id, true).await;
+    if plan.backoff_deg == 0.0 || aborted_by_event(bus, events).is_err() {
+        return;
+    }
+    let goal = stop_deg - plan.direction.sign() * plan.backoff_deg;
+    let snap = bus.snapshot();
+    let fw = snap.devices.get(&id).map(firmware_of).unwrap_or_default();
+    let (Ok(pos_ref), Ok(spd_ref)) = (
+        units::angle_to_raw(goal),
+        units::speed_limit_to_raw(BACKOFF_RPM, fw),
+    ) else {
+        return;
+    };
+    bus.set_targets(&[(id, Setpoint { pos_ref, spd_ref })]);
+    let mut watch = bus.watch();
+    let reached = watch.wait_for(|s| {
+        s.devices
+            .get(&id)
+            .and_then(measured_angle_raw)
+            .is_some_and(|a| (units::angle_deg(a) - goal).abs() < BACKOFF_TOLERANCE_DEG)
+    });
+    let _ = tokio::time::timeout(BACKOFF_WAIT, reached).await;
+}
+
+/// Writes the previous current limit back (verified), trying a few times.
+async fn restore(bus: &BusHandle, id: u8, previous: u16) -> bool {
+    for attempt in 1..=RESTORE_TRIES {
+        match bus.write_config(id, ConfigParam::MaxCur(previous)).await {
+            Ok(_) => return true,
+            Err(e) => tracing::warn!(bus = bus.name(), id, attempt, error = %e,
+                "homing: writing the previous current limit back failed"),
+        }
+    }
+    false
+}
