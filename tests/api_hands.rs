@@ -153,6 +153,14 @@ max_deg = 45.0
         )
         .await;
         assert_eq!(s, 404);
+        // A calibration goes to the same state file.
+        let (s, cal) = call(
+            reqwest::Method::PUT,
+            format!("{base}/api/v1/buses/sim0/devices/3/calibration"),
+            Some(json!({"offset_deg": 4.5, "flip": true, "range_deg": [-30.0, 30.0]})),
+        )
+        .await;
+        assert_eq!(s, 200, "{cal}");
     });
     d.stop();
 
@@ -169,6 +177,18 @@ max_deg = 45.0
         .await;
         assert_eq!(s, 200);
         assert_eq!(pose["positions_deg"], fist);
+        let (s, cal) = call(
+            reqwest::Method::GET,
+            format!("{base}/api/v1/hands/left/calibration"),
+            None,
+        )
+        .await;
+        assert_eq!(s, 200);
+        let third = &cal["joints"][2];
+        assert_eq!(third["joint"], "sim0_3", "{cal}");
+        assert_eq!(third["calibration"]["offset_deg"], 4.5, "{cal}");
+        assert_eq!(third["calibration"]["flip"], true, "{cal}");
+        assert_eq!(cal["joints"][0]["calibration"]["offset_deg"], 0.0, "{cal}");
         // Going to it needs the joints enabled: 409 first, then a move.
         let go = || {
             call(
