@@ -287,6 +287,7 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
         joint_names: joint_names(&file.joints, args)?,
         watchdog: checked_watchdog(file.watchdog, args)?,
         policy,
+        recordings_dir: state_dir.as_ref().map(|d| d.join("recordings")),
     };
     Ok(Plan {
         listen,

@@ -45,6 +45,8 @@
 //! | a WebSocket message | `http::ws::messages`, applied in `http::ws::session` |
 //! | soft limits, target checks (REST and WebSocket) | `http::limits`, `http::targets` |
 //! | the dashboard | `web/` (files), served by `http::web` |
+//! | moves generated in the daemon; named hands, poses, calibration, homing | `motion`, `bus::motion`, `http::moves`; `hands`; `http::calibration`, `http::homing` |
+//! | MCAP recordings (what `jointd record` and `POST /api/v1/recordings` write) | `record`, `http::recordings` |
 //! | what a simulated device does with a frame | `sim::device`, `sim::physics`, `sim::faults` |
 //! | collisions and timing on the simulated wire | `sim::wire`, `sim::engine` |
 //! | opening a serial port, RS-485 mode, FTDI latency | `transport::tty`, `transport::rs485` |
@@ -69,6 +71,7 @@ mod logcap;
 pub mod mem;
 pub mod motion;
 pub mod protocol;
+pub mod record;
 pub mod rt;
 pub mod sim;
 pub mod transport;

@@ -27,6 +27,9 @@ enum Command {
     Run(jointd::daemon::RunArgs),
     /// Print the OpenAPI document of the REST API (as checked in under openapi/).
     Openapi,
+    /// Record a running daemon's buses to an MCAP file (joint states, raw
+    /// frames, events, commanded targets) for a duration or until Ctrl-C.
+    Record(jointd::record::client::RecordArgs),
     /// Measure the bus engine against the simulator: occupancy, collisions,
     /// per-joint rates, setpoint-to-wire latency, daemon CPU.
     #[cfg(feature = "bench")]
@@ -38,7 +41,11 @@ enum FrameCommand {
     /// Print one JSON object per frame found in a hex dump (spaces optional).
     Decode {
         /// Hex bytes, e.g. "55 AA 00 14 00 02 01 00 00 00 75 4F 00 00 FA 05 AC 95 00 00".
-        hex: String,
+        #[arg(required_unless_present = "mcap", conflicts_with = "mcap")]
+        hex: Option<String>,
+        /// Instead: list the frames of an MCAP recording (`jointd record`).
+        #[arg(long, value_name = "FILE")]
+        mcap: Option<std::path::PathBuf>,
     },
     /// Print the 20 bytes of the host→device frame a JSON object describes.
     Encode {
@@ -60,6 +67,16 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Some(Command::Frame(cmd)) => run_frame(cmd),
+        Some(Command::Record(args)) => match jointd::record::client::run(&args) {
+            Ok(status) => {
+                println!("{status}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("jointd record: {e}");
+                ExitCode::FAILURE
+            }
+        },
         Some(Command::Sim(args)) => match jointd::sim::cli::run(&args) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
@@ -106,8 +123,15 @@ fn run_daemon(args: jointd::daemon::RunArgs) -> ExitCode {
 
 fn run_frame(cmd: FrameCommand) -> ExitCode {
     let result = match cmd {
-        FrameCommand::Decode { hex } => {
-            jointd::cli::decode_hex(&hex).map(|(lines, stats, trailing)| {
+        FrameCommand::Decode {
+            mcap: Some(path), ..
+        } => jointd::cli::decode_mcap(&path).map(|lines| {
+            for line in lines {
+                println!("{line}");
+            }
+        }),
+        FrameCommand::Decode { hex, .. } => {
+            jointd::cli::decode_hex(&hex.unwrap_or_default()).map(|(lines, stats, trailing)| {
                 for line in lines {
                     println!("{line}");
                 }

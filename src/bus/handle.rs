@@ -189,7 +189,27 @@ pub struct BusShared {
     pub queued: AtomicUsize,
     /// Joints following a move, sampled by the owner every control cycle.
     pub motion: super::motion::BusMotion,
+    /// Every frame as it is logged, for recordings (sent only while one
+    /// listens: nothing is copied otherwise).
+    pub frame_tap: broadcast::Sender<LoggedFrame>,
+    /// Every client write of targets, for recordings (likewise).
+    pub setpoint_tap: broadcast::Sender<Commanded>,
 }
+
+/// Targets as a client commanded them (one `set_targets`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Commanded {
+    pub at: std::time::SystemTime,
+    /// Its sequence number in the setpoint store.
+    pub seq: u64,
+    pub targets: Vec<(u8, Setpoint)>,
+}
+
+/// How many frames a recording may fall behind before it loses some
+/// (counted): ~3 s of a saturated 500000-baud line.
+const FRAME_TAP_LEN: usize = 8192;
+/// Likewise for commanded targets: ~4 s of a 1 kHz client.
+const SETPOINT_TAP_LEN: usize = 4096;
 
 /// How many frames the raw frame view keeps.
 pub const FRAME_LOG_LEN: usize = 512;
@@ -210,11 +230,16 @@ impl BusShared {
             estop_called: Mutex::new(None),
             queued: AtomicUsize::new(0),
             motion: Default::default(),
+            frame_tap: broadcast::channel(FRAME_TAP_LEN).0,
+            setpoint_tap: broadcast::channel(SETPOINT_TAP_LEN).0,
         })
     }
 
     /// Appends to the raw frame log, dropping the oldest.
     pub fn log_frame(&self, frame: LoggedFrame) {
+        if self.frame_tap.receiver_count() > 0 {
+            let _ = self.frame_tap.send(frame.clone());
+        }
         let mut log = self.frame_log.lock().unwrap_or_else(|p| p.into_inner());
         if log.len() == FRAME_LOG_LEN {
             log.pop_front();
@@ -257,7 +282,15 @@ impl BusHandle {
             let ids: Vec<u8> = targets.iter().map(|(id, _)| *id).collect();
             self.shared.motion.release(&ids);
         }
-        self.shared.setpoints.set(targets)
+        let seq = self.shared.setpoints.set(targets);
+        if self.shared.setpoint_tap.receiver_count() > 0 {
+            let _ = self.shared.setpoint_tap.send(Commanded {
+                at: std::time::SystemTime::now(),
+                seq,
+                targets: targets.to_vec(),
+            });
+        }
+        seq
     }
 
     /// Puts joints of this bus on a move (and says so to subscribers);

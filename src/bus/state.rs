@@ -62,6 +62,18 @@ pub struct DeviceState {
     pub firmware: Option<crate::bus::firmware::DeviceFirmware>,
 }
 
+impl DeviceState {
+    /// The firmware the device reported in INFO_01, else the newer 50000
+    /// rpm speed base (an rpm then maps to at most the asked speed on older
+    /// firmware, never more).
+    pub fn firmware_version(&self) -> crate::protocol::units::FirmwareVersion {
+        self.info01.as_ref().map_or(
+            crate::protocol::units::FirmwareVersion::SPEED_BASE_50K,
+            |(i, _)| i.firmware(),
+        )
+    }
+}
+
 /// Why a joint is disabled, as far as the daemon knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]

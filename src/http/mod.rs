@@ -39,6 +39,7 @@ pub(crate) mod move_book;
 pub(crate) mod moves;
 pub(crate) mod paths;
 pub mod policy;
+pub(crate) mod recordings;
 pub mod state;
 pub(crate) mod targets;
 pub(crate) mod telemetry;

@@ -28,6 +28,9 @@ pub struct StateOptions {
     pub watchdog: WatchdogDefault,
     /// Host and origin allow-lists, body limit.
     pub policy: RequestPolicy,
+    /// Where recordings are written (`state_dir/recordings`); absent: a
+    /// directory under the system's temporary one.
+    pub recordings_dir: Option<std::path::PathBuf>,
 }
 
 #[derive(Clone)]
@@ -45,6 +48,7 @@ struct Inner {
     options: std::sync::OnceLock<StateOptions>,
     moves: crate::http::move_book::MoveBook,
     homings: crate::http::homing::HomingBook,
+    recordings: crate::http::recordings::RecordingBook,
 }
 
 impl AppState {
@@ -65,6 +69,7 @@ impl AppState {
                 options: std::sync::OnceLock::new(),
                 moves: Default::default(),
                 homings: Default::default(),
+                recordings: Default::default(),
             }),
         }
     }
@@ -97,6 +102,18 @@ impl AppState {
     /// The homing jobs started through the API.
     pub(crate) fn homings(&self) -> &crate::http::homing::HomingBook {
         &self.inner.homings
+    }
+
+    /// The recordings started through the API.
+    pub(crate) fn recordings(&self) -> &crate::http::recordings::RecordingBook {
+        &self.inner.recordings
+    }
+
+    /// Where recordings are written.
+    pub(crate) fn recordings_dir(&self) -> std::path::PathBuf {
+        self.options().recordings_dir.clone().unwrap_or_else(|| {
+            std::env::temp_dir().join(format!("jointd-recordings-{}", std::process::id()))
+        })
     }
 
     pub fn limits(&self, bus: &str, id: u8) -> JointLimits {

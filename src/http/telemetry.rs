@@ -25,10 +25,7 @@ pub(crate) const ASSUMED_FIRMWARE: FirmwareVersion = FirmwareVersion::SPEED_BASE
 
 /// The firmware a device reported in INFO_01, or [`ASSUMED_FIRMWARE`].
 pub(crate) fn firmware_of(dev: &DeviceState) -> FirmwareVersion {
-    dev.info01
-        .as_ref()
-        .map(|(i, _)| i.firmware())
-        .unwrap_or(ASSUMED_FIRMWARE)
+    dev.firmware_version()
 }
 
 /// Whether the device runs (or is aligning towards running): the states in

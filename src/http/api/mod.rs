@@ -9,7 +9,8 @@
 //!   table; [`config_outcome`]: what a PATCH did per parameter),
 //!   [`estop`], [`health`], [`moves`] (paths generated in the daemon),
 //!   [`hands`] (named hands and their poses), [`calibration`] (joint
-//!   offsets, directions, ranges), [`homing`] (finding hard stops): one
+//!   offsets, directions, ranges), [`homing`] (finding hard stops),
+//!   [`recordings`] (MCAP files): one
 //!   router per area.
 //! - [`openapi`]: the document's head, the shared failure responses, the docs page.
 
@@ -29,6 +30,7 @@ pub(crate) mod homing;
 pub(crate) mod metrics;
 pub(crate) mod moves;
 pub(crate) mod openapi;
+pub(crate) mod recordings;
 
 use utoipa_axum::router::OpenApiRouter;
 
@@ -48,6 +50,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .merge(hands::router())
         .merge(calibration::router())
         .merge(homing::router())
+        .merge(recordings::router())
 }
 
 /// The document as served, with the crate version.

@@ -1,0 +1,233 @@
+//! Recordings made through the API (`POST /api/v1/recordings`): started,
+//! listed, stopped, downloaded. The files go to the recordings directory
+//! (`state_dir/recordings`, else a directory under the system's temporary
+//! one); a std `Mutex` guards the book, never held across an `.await`.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use crate::bus::BusHandle;
+use crate::http::error::{ApiError, ApiResult};
+use crate::http::state::AppState;
+use crate::record::joint_states::Labeler;
+use crate::record::{RecordState, RecordStatus, Recorder};
+
+/// Recordings running at once, at most.
+const MAX_RUNNING: usize = 4;
+/// The longest recording asked with a duration, s (a day).
+const MAX_DURATION_S: f64 = 86_400.0;
+
+/// A recording to start.
+#[derive(Debug, Clone, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+#[schema(example = json!({"duration_s": 5.0}))]
+pub(crate) struct RecordingRequest {
+    /// Stop by itself after this long, s (0 < d ≤ 86400); absent: until
+    /// `DELETE`.
+    #[schema(example = 5.0)]
+    pub duration_s: Option<f64>,
+    /// The buses to record (default: all).
+    #[schema(example = json!(["sim0"]))]
+    pub buses: Option<Vec<String>>,
+}
+
+/// A recording as the API reports it.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub(crate) struct RecordingView {
+    #[schema(example = 1)]
+    pub id: u64,
+    /// `recording`, `finished` (the file is complete) or `failed`.
+    #[schema(value_type = String, example = "recording")]
+    pub state: RecordState,
+    /// The file's name in the daemon's recordings directory.
+    #[schema(example = "rec-1-1764072000.mcap")]
+    pub file: String,
+    #[schema(example = json!(["sim0"]))]
+    pub buses: Vec<String>,
+    #[schema(example = 5.0)]
+    pub duration_s: Option<f64>,
+    /// Unix ms it started and ended.
+    #[schema(example = 1764072000000u64)]
+    pub started_ms: u64,
+    pub ended_ms: Option<u64>,
+    /// Messages written, by topic.
+    #[schema(example = json!({"/sim0/joint_states": 325, "/jointd/sim0/frames": 12210}))]
+    pub messages: BTreeMap<String, u64>,
+    /// Frames or targets the recording fell too far behind to keep.
+    #[schema(example = 0)]
+    pub lost: u64,
+    pub error: Option<String>,
+}
+
+struct Entry {
+    recorder: Arc<Recorder>,
+    buses: Vec<String>,
+    duration_s: Option<f64>,
+}
+
+/// The recordings made through the API.
+#[derive(Default)]
+pub(crate) struct RecordingBook {
+    inner: Mutex<(u64, BTreeMap<u64, Entry>)>,
+}
+
+impl RecordingBook {
+    fn lock(&self) -> MutexGuard<'_, (u64, BTreeMap<u64, Entry>)> {
+        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+fn view(id: u64, e: &Entry, s: &RecordStatus) -> RecordingView {
+    RecordingView {
+        id,
+        state: s.state,
+        file: s
+            .path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        buses: e.buses.clone(),
+        duration_s: e.duration_s,
+        started_ms: s.started_ns / 1_000_000,
+        ended_ms: s.ended_ns.map(|n| n / 1_000_000),
+        messages: s.messages.clone(),
+        lost: s.lost,
+        error: s.error.clone(),
+    }
+}
+
+/// Names and calibrations of the joints as the API gives them: a hand's
+/// joint name, else the configured name, else `<bus>_<id>`.
+pub(crate) fn labeler(state: &AppState) -> Labeler {
+    let state = state.clone();
+    Arc::new(move |bus: &str, id: u8| {
+        let hand_name = state.hands().and_then(|store| {
+            store
+                .hands()
+                .iter()
+                .flat_map(|h| h.joints.iter())
+                .find(|j| j.bus == bus && j.id == id)
+                .map(|j| j.name.clone())
+        });
+        let name = hand_name
+            .or_else(|| state.joint_name(bus, id).map(str::to_owned))
+            .unwrap_or_else(|| format!("{bus}_{id}"));
+        (name, state.calibration(bus, id))
+    })
+}
+
+/// Checks the request and starts the recording.
+pub(crate) fn start(state: &AppState, req: &RecordingRequest) -> ApiResult<RecordingView> {
+    if let Some(d) = req.duration_s {
+        if !(d.is_finite() && d > 0.0 && d <= MAX_DURATION_S) {
+            return Err(ApiError::out_of_range(
+                "duration_s",
+                d,
+                (0.0, MAX_DURATION_S),
+                "s",
+            ));
+        }
+    }
+    let buses: Vec<BusHandle> = match &req.buses {
+        Some(names) if names.is_empty() => {
+            return Err(ApiError::invalid("buses", "buses is empty"))
+        }
+        Some(names) => names
+            .iter()
+            .map(|n| state.bus(n).cloned())
+            .collect::<ApiResult<_>>()?,
+        None => state.buses().cloned().collect(),
+    };
+    let dir = state.recordings_dir();
+    std::fs::create_dir_all(&dir).map_err(|e| {
+        ApiError::state_unwritable(format!("recordings directory {}: {e}", dir.display()))
+    })?;
+    let book = state.recordings();
+    let mut inner = book.lock();
+    let running = inner
+        .1
+        .values()
+        .filter(|e| e.recorder.status().state == RecordState::Recording)
+        .count();
+    if running >= MAX_RUNNING {
+        return Err(ApiError::conflict(
+            "too-many-recordings",
+            "Too many recordings",
+            format!("{running} recordings are running (at most {MAX_RUNNING}): stop one first"),
+        ));
+    }
+    let id = inner.0 + 1;
+    let started_s = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let path: PathBuf = dir.join(format!("rec-{id}-{started_s}.mcap"));
+    let names: Vec<String> = buses.iter().map(|b| b.name().to_owned()).collect();
+    let recorder = Recorder::start(
+        buses,
+        labeler(state),
+        path,
+        req.duration_s.map(Duration::from_secs_f64),
+    )
+    .map_err(|e| ApiError::state_unwritable(e.to_string()))?;
+    inner.0 = id;
+    let entry = Entry {
+        recorder: Arc::new(recorder),
+        buses: names,
+        duration_s: req.duration_s,
+    };
+    let v = view(id, &entry, &entry.recorder.status());
+    tracing::info!(recording = id, file = %v.file, buses = ?v.buses, duration_s = ?v.duration_s, "recording started");
+    inner.1.insert(id, entry);
+    Ok(v)
+}
+
+pub(crate) fn list(state: &AppState) -> Vec<RecordingView> {
+    let inner = state.recordings().lock();
+    inner
+        .1
+        .iter()
+        .map(|(id, e)| view(*id, e, &e.recorder.status()))
+        .collect()
+}
+
+fn entry(state: &AppState, id: u64) -> ApiResult<(Arc<Recorder>, RecordingView)> {
+    let inner = state.recordings().lock();
+    let e = inner.1.get(&id).ok_or_else(|| {
+        ApiError::not_found("unknown-recording", format!("no recording with id {id}"))
+    })?;
+    Ok((e.recorder.clone(), view(id, e, &e.recorder.status())))
+}
+
+pub(crate) fn get(state: &AppState, id: u64) -> ApiResult<RecordingView> {
+    Ok(entry(state, id)?.1)
+}
+
+/// Stops recording `id` and waits until its file is complete.
+pub(crate) async fn stop(state: &AppState, id: u64) -> ApiResult<RecordingView> {
+    let (recorder, _) = entry(state, id)?;
+    recorder.stop().await;
+    tracing::info!(recording = id, "recording stopped");
+    get(state, id)
+}
+
+/// The complete file of recording `id` (409 while it records).
+pub(crate) async fn file(state: &AppState, id: u64) -> ApiResult<(String, Vec<u8>)> {
+    let (recorder, v) = entry(state, id)?;
+    if v.state == RecordState::Recording {
+        return Err(ApiError::conflict(
+            "still-recording",
+            "Recording not finished",
+            format!("recording {id} is still running: stop it (DELETE) or wait for its duration"),
+        ));
+    }
+    let path = recorder.status().path;
+    let bytes = tokio::fs::read(&path).await.map_err(|e| {
+        ApiError::state_unwritable(format!("recording file {}: {e}", path.display()))
+    })?;
+    Ok((v.file, bytes))
+}

@@ -1,0 +1,16 @@
+//! Recordings (issue 16): what the joints did, in an MCAP file that
+//! Foxglove and `ros2 bag play` (storage plugin mcap) open as is.
+//!
+//! - [`cdr`]: `sensor_msgs/msg/JointState` in CDR (shared with the ROS 2 bridge);
+//! - [`joint_states`]: a `JointState` per poll round from a bus's snapshots;
+//! - [`mcap_file`]: the file: schemas, channels, chunks, summary;
+//! - [`recorder`]: the task that taps the buses and writes;
+//! - [`client`]: `jointd record`, which asks a running daemon for one.
+
+pub mod cdr;
+pub mod client;
+pub mod joint_states;
+pub mod mcap_file;
+pub mod recorder;
+
+pub use recorder::{RecordState, RecordStatus, Recorder};
