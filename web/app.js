@@ -518,6 +518,47 @@ function goPose(hand, name) {
   });
 }
 
+// ---------------------------------------------------------------- recording
+
+/** One recording at a time from here: Record starts it (an MCAP file in the
+ *  daemon's recordings directory), the same button stops it, then the file
+ *  can be downloaded (fetched with the token, so it works behind one). */
+let recording = null;
+
+$("#record").onclick = async () => {
+  const button = $("#record");
+  if (!recording) {
+    const r = await act(null, () => api("POST", "recordings", {}));
+    if (!r) return;
+    recording = r;
+    button.textContent = "■ Stop recording";
+    button.classList.add("on");
+    $("#recording-file").hidden = true;
+    say(`Recording ${r.id} to ${r.file}.`, "info");
+    return;
+  }
+  const id = recording.id;
+  const r = await act(null, () => api("DELETE", `recordings/${id}`));
+  recording = null;
+  button.textContent = "● Record";
+  button.classList.remove("on");
+  if (!r) return;
+  const total = Object.values(r.messages).reduce((a, b) => a + b, 0);
+  say(`Recording ${id} finished: ${total} messages in ${r.file}.`, "info");
+  const download = $("#recording-file");
+  download.hidden = false;
+  download.onclick = () => act(null, async () => {
+    const headers = state.token ? { "Authorization": `Bearer ${state.token}` } : {};
+    const res = await fetch(`${API}/recordings/${id}/file`, { headers });
+    if (!res.ok) throw new Error(`HTTP ${res.status}`);
+    const a = document.createElement("a");
+    a.href = URL.createObjectURL(await res.blob());
+    a.download = r.file;
+    a.click();
+    URL.revokeObjectURL(a.href);
+  });
+};
+
 // ---------------------------------------------------------------- start
 
 connect();

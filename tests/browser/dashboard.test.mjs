@@ -173,6 +173,24 @@ test("a hand's pose is saved from where it is and gone back to", async () => {
   await page.locator('[data-testid="move-ms"]').fill("");
 });
 
+test("Record starts a recording, stops it, and the file downloads", async () => {
+  await page.locator('[data-testid="record"]').click();
+  await page.locator("#messages .info", { hasText: /^Recording \d+ to rec-\d+-\d+\.mcap\.$/ }).waitFor({ timeout: WAIT });
+  const running = (await rest("GET", "/api/v1/recordings")).recordings.filter((r) => r.state === "recording");
+  assert.equal(running.length, 1);
+  await new Promise((r) => setTimeout(r, 500));
+  await page.locator('[data-testid="record"]').click();
+  await page.locator("#messages .info", { hasText: /^Recording \d+ finished: \d+ messages/ }).waitFor({ timeout: WAIT });
+  const done = await rest("GET", `/api/v1/recordings/${running[0].id}`);
+  assert.equal(done.state, "finished");
+  assert.ok(done.messages["/sim0/joint_states"] > 0, JSON.stringify(done.messages));
+  const [download] = await Promise.all([
+    page.waitForEvent("download", { timeout: WAIT }),
+    page.locator('[data-testid="recording-file"]').click(),
+  ]);
+  assert.equal(download.suggestedFilename(), done.file);
+});
+
 test("at 1366×768 the joint panel's controls are in view without scrolling", async () => {
   await page.evaluate(() => window.scrollTo(0, 0));
   for (const sel of ['[data-testid="device-panel"] h2', '[data-testid="enable"]', '[data-testid="target-slider"]',
