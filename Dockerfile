@@ -13,7 +13,7 @@ ARG RUNTIME_IMAGE=debian:bookworm-slim
 FROM ${RUST_IMAGE} AS build
 WORKDIR /src
 COPY . .
-RUN cargo build --release --locked --bin jointd \
+RUN cargo build --release --locked --features ros2 --bin jointd \
  && install -s -m 0755 target/release/jointd /usr/local/bin/jointd
 
 FROM ${RUNTIME_IMAGE}

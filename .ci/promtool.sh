@@ -15,7 +15,7 @@ if ! command -v promtool >/dev/null; then
 fi
 promtool --version | head -n1
 
-cargo build --quiet --bin jointd
+cargo build --quiet --features bench,ros2 --bin jointd
 target/debug/jointd --sim 4 --listen 127.0.0.1:0 >"$WORK/stdout" 2>"$WORK/stderr" &
 PID=$!
 cleanup() {

@@ -18,7 +18,7 @@ if ! schemathesis --version 2>/dev/null | grep -q "$SCHEMATHESIS_VERSION"; then
   python3 -m pip install --quiet "schemathesis==$SCHEMATHESIS_VERSION"
 fi
 
-cargo build --quiet --bin jointd
+cargo build --quiet --features bench,ros2 --bin jointd
 JOINTD_TOKEN="$TOKEN" target/debug/jointd --sim 16 --listen 127.0.0.1:0 \
   >"$WORK/stdout" 2>"$WORK/stderr" &
 PID=$!

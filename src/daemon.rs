@@ -116,6 +116,16 @@ pub struct RunArgs {
     /// until the daemon stops.
     #[arg(long, value_name = "DIR", env = "JOINTD_STATE_DIR")]
     pub state_dir: Option<PathBuf>,
+    /// Join ROS 2 over Zenoh (as `[ros2] enabled = true`): joint states,
+    /// diagnostics and joint commands on rmw_zenoh's key expressions.
+    #[arg(long)]
+    pub ros2: bool,
+    /// Zenoh endpoint to connect to (repeatable) [default: tcp/127.0.0.1:7447].
+    #[arg(long, value_name = "ENDPOINT")]
+    pub ros2_connect: Vec<String>,
+    /// The ROS domain [default: ROS_DOMAIN_ID, else 0].
+    #[arg(long, value_name = "ID")]
+    pub ros2_domain_id: Option<u32>,
 }
 
 /// The config file. Flags override its values.
@@ -146,6 +156,9 @@ pub struct FileConfig {
     /// `[[hand]]`: named sets of joints, possibly on several buses.
     #[serde(default, rename = "hand")]
     pub hands: Vec<crate::hands::HandConfig>,
+    /// `[ros2]`: the ROS 2 bridge over Zenoh (off by default).
+    #[serde(default)]
+    pub ros2: crate::ros2::Ros2Config,
 }
 
 /// `[[joint]]`: a name for a joint, shown in the API, telemetry and dashboard.
@@ -196,6 +209,8 @@ pub struct Plan {
     /// The simulated bus of `--sim`, checked.
     pub sim: Option<SimConfig>,
     pub options: StateOptions,
+    /// The ROS 2 bridge, when enabled.
+    pub ros2: Option<crate::ros2::Ros2Config>,
 }
 
 fn load_file(path: &PathBuf) -> Result<FileConfig, DaemonError> {
@@ -281,7 +296,11 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
         ),
         None => {}
     }
+    let ros2 = ros2_config(file.ros2, args, &bus_names)?;
     let options = StateOptions {
+        ros2: ros2
+            .as_ref()
+            .map(|_| std::sync::Arc::new(crate::ros2::Ros2Stats::default())),
         hands: Some(std::sync::Arc::new(poses)),
         web_dir: args.web_dir.clone().or(file.web_dir),
         joint_names: joint_names(&file.joints, args)?,
@@ -296,7 +315,32 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
         limits: SoftLimits::new(file.limits)?,
         sim,
         options,
+        ros2,
     })
+}
+
+/// `[ros2]` with the flags over it; `None` when the bridge is off.
+fn ros2_config(
+    mut cfg: crate::ros2::Ros2Config,
+    args: &RunArgs,
+    buses: &[String],
+) -> Result<Option<crate::ros2::Ros2Config>, DaemonError> {
+    cfg.enabled |= args.ros2;
+    if !args.ros2_connect.is_empty() {
+        cfg.connect = args.ros2_connect.clone();
+    }
+    cfg.domain_id = args.ros2_domain_id.or(cfg.domain_id);
+    if !cfg.enabled {
+        return Ok(None);
+    }
+    if !crate::ros2::BUILT {
+        return Err(DaemonError::Policy(
+            crate::ros2::Ros2Error::NotBuilt.to_string(),
+        ));
+    }
+    cfg.checked(buses)
+        .map(Some)
+        .map_err(|e| DaemonError::Policy(e.to_string()))
 }
 
 /// The token of the flags (or their environment variables), else of the
@@ -507,8 +551,19 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     let state = AppState::new(handles, plan.limits, plan.token);
     let mut options = plan.options;
     options.policy.listen = Some(addr);
+    let ros2_stats = options.ros2.clone();
     // A fresh state has no options yet: this cannot be refused.
     let _ = state.set_options(options);
+    // The bridge lives until the daemon stops (dropped below: the ROS
+    // graph sees its tokens go).
+    let bridge = match (plan.ros2, ros2_stats) {
+        (Some(cfg), Some(stats)) => Some(
+            crate::ros2::start(state.clone(), cfg, stats)
+                .await
+                .map_err(|e| DaemonError::Policy(e.to_string()))?,
+        ),
+        _ => None,
+    };
     let ws_state = state.clone();
     let stopping = async move {
         shutdown_signal().await;
@@ -524,6 +579,10 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
             source: e,
         })?;
     wait_for_ws_close(&state).await;
+    // Leave the ROS graph before the buses stop.
+    if let Some(bridge) = bridge {
+        tracing::debug!(?bridge, "ROS 2 bridge closing");
+    }
     stop_buses(threads).await;
     drop(sim);
     tracing::info!("stopped");

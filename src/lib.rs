@@ -72,6 +72,7 @@ pub mod mem;
 pub mod motion;
 pub mod protocol;
 pub mod record;
+pub mod ros2;
 pub mod rt;
 pub mod sim;
 pub mod transport;

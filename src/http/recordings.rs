@@ -14,7 +14,6 @@ use utoipa::ToSchema;
 use crate::bus::BusHandle;
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::state::AppState;
-use crate::record::joint_states::Labeler;
 use crate::record::{RecordState, RecordStatus, Recorder};
 
 /// Recordings running at once, at most.
@@ -101,26 +100,6 @@ fn view(id: u64, e: &Entry, s: &RecordStatus) -> RecordingView {
     }
 }
 
-/// Names and calibrations of the joints as the API gives them: a hand's
-/// joint name, else the configured name, else `<bus>_<id>`.
-pub(crate) fn labeler(state: &AppState) -> Labeler {
-    let state = state.clone();
-    Arc::new(move |bus: &str, id: u8| {
-        let hand_name = state.hands().and_then(|store| {
-            store
-                .hands()
-                .iter()
-                .flat_map(|h| h.joints.iter())
-                .find(|j| j.bus == bus && j.id == id)
-                .map(|j| j.name.clone())
-        });
-        let name = hand_name
-            .or_else(|| state.joint_name(bus, id).map(str::to_owned))
-            .unwrap_or_else(|| format!("{bus}_{id}"));
-        (name, state.calibration(bus, id))
-    })
-}
-
 /// Checks the request and starts the recording.
 pub(crate) fn start(state: &AppState, req: &RecordingRequest) -> ApiResult<RecordingView> {
     if let Some(d) = req.duration_s {
@@ -169,7 +148,7 @@ pub(crate) fn start(state: &AppState, req: &RecordingRequest) -> ApiResult<Recor
     let names: Vec<String> = buses.iter().map(|b| b.name().to_owned()).collect();
     let recorder = Recorder::start(
         buses,
-        labeler(state),
+        state.joint_labeler(),
         path,
         req.duration_s.map(Duration::from_secs_f64),
     )

@@ -31,6 +31,8 @@ pub struct StateOptions {
     /// Where recordings are written (`state_dir/recordings`); absent: a
     /// directory under the system's temporary one.
     pub recordings_dir: Option<std::path::PathBuf>,
+    /// The ROS 2 bridge's counters, when it runs.
+    pub ros2: Option<Arc<crate::ros2::Ros2Stats>>,
 }
 
 #[derive(Clone)]
@@ -107,6 +109,32 @@ impl AppState {
     /// The recordings started through the API.
     pub(crate) fn recordings(&self) -> &crate::http::recordings::RecordingBook {
         &self.inner.recordings
+    }
+
+    /// Names and calibrations of the joints as every edge gives them (REST,
+    /// recordings, ROS 2): a hand's joint name, else the configured name,
+    /// else `<bus>_<id>`.
+    pub(crate) fn joint_labeler(&self) -> crate::record::joint_states::Labeler {
+        let state = self.clone();
+        Arc::new(move |bus: &str, id: u8| {
+            let hand_name = state.hands().and_then(|store| {
+                store
+                    .hands()
+                    .iter()
+                    .flat_map(|h| h.joints.iter())
+                    .find(|j| j.bus == bus && j.id == id)
+                    .map(|j| j.name.clone())
+            });
+            let name = hand_name
+                .or_else(|| state.joint_name(bus, id).map(str::to_owned))
+                .unwrap_or_else(|| format!("{bus}_{id}"));
+            (name, state.calibration(bus, id))
+        })
+    }
+
+    /// The ROS 2 bridge's counters, when it runs.
+    pub(crate) fn ros2(&self) -> Option<&crate::ros2::Ros2Stats> {
+        self.options().ros2.as_deref()
     }
 
     /// Where recordings are written.

@@ -94,10 +94,7 @@ impl JointState {
     /// The message in CDR, encapsulation header first.
     pub fn to_cdr(&self) -> Vec<u8> {
         let mut w = Cdr::new();
-        let sec = i32::try_from(self.stamp_ns / 1_000_000_000).unwrap_or(i32::MAX);
-        w.i32(sec);
-        w.u32((self.stamp_ns % 1_000_000_000) as u32);
-        w.string(&self.frame_id);
+        w.stamp(self.stamp_ns, &self.frame_id);
         w.u32(len_u32(self.name.len()));
         for n in &self.name {
             w.string(n);
@@ -109,9 +106,213 @@ impl JointState {
     }
 }
 
+/// One `diagnostic_msgs/msg/DiagnosticStatus`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct DiagnosticStatus {
+    /// 0 OK, 1 WARN, 2 ERROR, 3 STALE.
+    pub level: u8,
+    pub name: String,
+    pub message: String,
+    pub hardware_id: String,
+    pub values: Vec<(String, String)>,
+}
+
+/// `diagnostic_msgs/msg/DiagnosticArray` in CDR.
+pub fn diagnostic_array_cdr(stamp_ns: u64, frame_id: &str, status: &[DiagnosticStatus]) -> Vec<u8> {
+    let mut w = Cdr::new();
+    w.stamp(stamp_ns, frame_id);
+    w.u32(len_u32(status.len()));
+    for s in status {
+        w.buf.push(s.level);
+        w.string(&s.name);
+        w.string(&s.message);
+        w.string(&s.hardware_id);
+        w.u32(len_u32(s.values.len()));
+        for (k, v) in &s.values {
+            w.string(k);
+            w.string(v);
+        }
+    }
+    w.buf
+}
+
+impl Cdr {
+    fn stamp(&mut self, stamp_ns: u64, frame_id: &str) {
+        let sec = i32::try_from(stamp_ns / 1_000_000_000).unwrap_or(i32::MAX);
+        self.i32(sec);
+        self.u32((stamp_ns % 1_000_000_000) as u32);
+        self.string(frame_id);
+    }
+}
+
+/// Why bytes are not the `JointState` they claim to be.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CdrError {
+    #[error("not CDR little-endian (encapsulation {0:02X?})")]
+    Encapsulation([u8; 4]),
+    #[error("cut short at byte {0}")]
+    Short(usize),
+    #[error("a string that is not UTF-8 or not NUL-terminated at byte {0}")]
+    BadString(usize),
+    #[error("a sequence of {0} elements does not fit in the message")]
+    TooLong(u32),
+}
+
+/// A CDR little-endian reader (the writer's mirror).
+struct CdrReader<'a> {
+    buf: &'a [u8],
+    at: usize,
+}
+
+impl<'a> CdrReader<'a> {
+    fn new(buf: &'a [u8]) -> Result<Self, CdrError> {
+        let head: [u8; 4] = buf
+            .get(..4)
+            .and_then(|h| h.try_into().ok())
+            .ok_or(CdrError::Short(0))?;
+        // CDR_LE, or PL_CDR_LE (options bytes are ignored).
+        if head[0] != 0 || (head[1] != 1 && head[1] != 3) {
+            return Err(CdrError::Encapsulation(head));
+        }
+        Ok(Self { buf, at: 4 })
+    }
+
+    fn align(&mut self, n: usize) {
+        let offset = self.at - CDR_LE.len();
+        self.at += (n - offset % n) % n;
+    }
+
+    fn take(&mut self, n: usize) -> Result<&'a [u8], CdrError> {
+        let out = self
+            .buf
+            .get(self.at..self.at + n)
+            .ok_or(CdrError::Short(self.at))?;
+        self.at += n;
+        Ok(out)
+    }
+
+    fn u32(&mut self) -> Result<u32, CdrError> {
+        self.align(4);
+        let b = self.take(4)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
+    fn count(&mut self, elem: usize) -> Result<usize, CdrError> {
+        let n = self.u32()?;
+        let left = self.buf.len().saturating_sub(self.at);
+        if (n as usize).saturating_mul(elem.max(1)) > left {
+            return Err(CdrError::TooLong(n));
+        }
+        Ok(n as usize)
+    }
+
+    fn string(&mut self) -> Result<String, CdrError> {
+        let n = self.count(1)?;
+        let at = self.at;
+        let bytes = self.take(n)?;
+        match bytes.split_last() {
+            Some((0, text)) => std::str::from_utf8(text)
+                .map(str::to_owned)
+                .map_err(|_| CdrError::BadString(at)),
+            _ => Err(CdrError::BadString(at)),
+        }
+    }
+
+    fn f64s(&mut self) -> Result<Vec<f64>, CdrError> {
+        let n = self.count(8)?;
+        if n > 0 {
+            self.align(8);
+        }
+        (0..n)
+            .map(|_| {
+                let b = self.take(8)?;
+                let mut a = [0u8; 8];
+                a.copy_from_slice(b);
+                Ok(f64::from_le_bytes(a))
+            })
+            .collect()
+    }
+}
+
+impl JointState {
+    /// A `JointState` from CDR (what a ROS 2 publisher puts on the wire).
+    pub fn from_cdr(buf: &[u8]) -> Result<Self, CdrError> {
+        let mut r = CdrReader::new(buf)?;
+        let sec = r.u32()?;
+        let nanosec = r.u32()?;
+        let frame_id = r.string()?;
+        let names = r.count(4)?;
+        let name = (0..names).map(|_| r.string()).collect::<Result<_, _>>()?;
+        Ok(Self {
+            stamp_ns: u64::from(sec) * 1_000_000_000 + u64::from(nanosec),
+            frame_id,
+            name,
+            position: r.f64s()?,
+            velocity: r.f64s()?,
+            effort: r.f64s()?,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_joint_state_reads_back_and_garbage_is_refused() {
+        let msg = JointState {
+            stamp_ns: 12_000_000_345,
+            frame_id: "f".into(),
+            name: vec!["a".into(), "bcd".into()],
+            position: vec![0.5, -1.0],
+            velocity: vec![],
+            effort: vec![2.0, 3.0],
+        };
+        let bytes = msg.to_cdr();
+        assert_eq!(JointState::from_cdr(&bytes), Ok(msg));
+        assert!(JointState::from_cdr(&bytes[..bytes.len() - 3]).is_err());
+        assert!(matches!(
+            JointState::from_cdr(&[1, 0, 0, 0, 0]),
+            Err(CdrError::Encapsulation(_))
+        ));
+        let mut huge = bytes.clone();
+        huge[4 + 16..4 + 20].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(
+            JointState::from_cdr(&huge).is_err(),
+            "a length past the end"
+        );
+    }
+
+    #[test]
+    fn a_diagnostic_array_is_laid_out_as_cdr_says() {
+        let status = DiagnosticStatus {
+            level: 2,
+            name: "n".into(),
+            message: String::new(),
+            hardware_id: "h".into(),
+            values: vec![("k".into(), "v".into())],
+        };
+        let b = diagnostic_array_cdr(0, "", &[status]);
+        let mut want = vec![0, 1, 0, 0];
+        want.extend([0; 8]); // stamp
+        want.extend(1u32.to_le_bytes()); // frame_id ""
+        want.extend([0, 0, 0, 0]);
+        want.extend(1u32.to_le_bytes()); // 16: one status
+        want.push(2); // 20: level
+        want.extend([0, 0, 0]); // to 24
+        want.extend(2u32.to_le_bytes());
+        want.extend(b"n\0\0\0"); // 28..32
+        want.extend(1u32.to_le_bytes()); // message ""
+        want.extend([0, 0, 0, 0]);
+        want.extend(2u32.to_le_bytes());
+        want.extend(b"h\0\0\0");
+        want.extend(1u32.to_le_bytes()); // one value
+        want.extend(2u32.to_le_bytes());
+        want.extend(b"k\0\0\0");
+        want.extend(2u32.to_le_bytes());
+        want.extend(b"v\0");
+        assert_eq!(b, want);
+    }
 
     #[test]
     fn a_joint_state_is_laid_out_as_cdr_says() {

@@ -10,7 +10,7 @@
 //!   [`estop`], [`health`], [`moves`] (paths generated in the daemon),
 //!   [`hands`] (named hands and their poses), [`calibration`] (joint
 //!   offsets, directions, ranges), [`homing`] (finding hard stops),
-//!   [`recordings`] (MCAP files): one
+//!   [`recordings`] (MCAP files), [`ros2`] (the bridge's counters): one
 //!   router per area.
 //! - [`openapi`]: the document's head, the shared failure responses, the docs page.
 
@@ -31,6 +31,7 @@ pub(crate) mod metrics;
 pub(crate) mod moves;
 pub(crate) mod openapi;
 pub(crate) mod recordings;
+pub(crate) mod ros2;
 
 use utoipa_axum::router::OpenApiRouter;
 
@@ -51,6 +52,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .merge(calibration::router())
         .merge(homing::router())
         .merge(recordings::router())
+        .merge(ros2::router())
 }
 
 /// The document as served, with the crate version.

@@ -1,0 +1,164 @@
+"""The ROS 2 bridge (issue 16) against a real Zenoh router and real ROS
+message definitions, as a ROS 2 node on rmw_zenoh would meet it: a router
+in this process (`eclipse-zenoh`, mode router), `jointd --sim 4 --ros2`
+connected to it, a client session that subscribes to `joint_states` on the
+key expression rmw_zenoh derives (domain, topic, DDS type name, the type
+hash `rosbags` computes from the definition) and decodes with `rosbags`;
+it publishes `joint_commands` and the simulated joint moves, a bad command
+is dropped whole, `/diagnostics` decodes, and the liveliness tokens parse
+as rmw_zenoh's. Needs a jointd built with `--features ros2` (CI's is)."""
+
+import json
+import socket
+import struct
+import subprocess
+import time
+import urllib.request
+
+import pytest
+import zenoh
+from rosbags.typesys import Stores, get_typestore
+
+from conftest import Daemon
+
+TS = get_typestore(Stores.ROS2_JAZZY)
+JOINT_STATE = "sensor_msgs/msg/JointState"
+DIAGNOSTICS = "diagnostic_msgs/msg/DiagnosticArray"
+
+
+def dds_name(ros_type):
+    pkg, kind, name = ros_type.split("/")
+    return f"{pkg}::{kind}::dds_::{name}_"
+
+
+def key(topic, ros_type, domain=0):
+    return f"{domain}/{topic.strip('/')}/{dds_name(ros_type)}/{TS.hash_rihs01(ros_type)}"
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def zenoh_config(mode, endpoints_key, endpoint):
+    c = zenoh.Config()
+    c.insert_json5("mode", json.dumps(mode))
+    c.insert_json5(endpoints_key, json.dumps([endpoint]))
+    c.insert_json5("scouting/multicast/enabled", "false")
+    return c
+
+
+def call(base, method, path, body=None):
+    data = json.dumps(body).encode() if body is not None else None
+    req = urllib.request.Request(base + path, data=data, method=method,
+                                 headers={"content-type": "application/json"})
+    with urllib.request.urlopen(req, timeout=10) as r:
+        return json.loads(r.read() or b"null")
+
+
+@pytest.fixture()
+def ros2():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = zenoh.open(zenoh_config("router", "listen/endpoints", endpoint))
+    d = Daemon("--sim", "4", "--ros2", "--ros2-connect", endpoint)
+    client = zenoh.open(zenoh_config("client", "connect/endpoints", endpoint))
+    try:
+        d.wait("/api/v1/buses/sim0", lambda b: b'"devices_online":4' in b, "4 joints online")
+        yield d, client
+    finally:
+        client.close()
+        d.stop()
+        router.close()
+
+
+def wait_for(what, ok, timeout=15.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = ok()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_joint_states_commands_diagnostics_and_tokens(ros2):
+    d, client = ros2
+    api = d.url + "/api/v1"
+    assert call(api, "GET", "/ros2")["enabled"] is True, "built with --features ros2?"
+
+    states, diagnostics = [], []
+    client.declare_subscriber(key("/sim0/joint_states", JOINT_STATE),
+                              lambda s: states.append((bytes(s.payload.to_bytes()),
+                                                       bytes(s.attachment.to_bytes()))))
+    client.declare_subscriber(key("/diagnostics", DIAGNOSTICS),
+                              lambda s: diagnostics.append(bytes(s.payload.to_bytes())))
+    wait_for("joint states and diagnostics", lambda: len(states) > 50 and diagnostics)
+
+    msg = TS.deserialize_cdr(states[-1][0], JOINT_STATE)
+    assert list(msg.name) == ["sim0_1", "sim0_2", "sim0_3", "sim0_4"]
+    assert len(msg.position) == len(msg.velocity) == len(msg.effort) == 4
+    stamp = msg.header.stamp.sec + msg.header.stamp.nanosec / 1e9
+    assert abs(stamp - time.time()) < 5, "stamped with the sample's time"
+    sequences = []
+    for _, attachment in states[-10:]:
+        assert len(attachment) == 33
+        seq, source_ns, gid_len = struct.unpack("<qqB", attachment[:17])
+        assert gid_len == 16 and abs(source_ns / 1e9 - time.time()) < 5
+        sequences.append(seq)
+    assert sequences == sorted(sequences) and len(set(sequences)) == 10
+
+    diag = TS.deserialize_cdr(diagnostics[-1], DIAGNOSTICS)
+    names = [s.name for s in diag.status]
+    assert names == [f"jointd: sim0_{i}" for i in range(1, 5)], names
+    values = {kv.key: kv.value for kv in diag.status[0].values}
+    assert {"state", "fault", "temperature_c", "voltage_v", "online"} <= values.keys(), values
+    assert values["online"] == "true"
+
+    # Commands: enabled joints follow; a command naming an unknown joint is
+    # dropped whole (joint 1 in it does not move), and counted.
+    call(api, "POST", "/buses/sim0/control/enable", {"ids": [1, 2, 3, 4]})
+    wait_for("joints running", lambda: all(
+        dev["state"] == "run" for dev in call(api, "GET", "/buses/sim0/devices")["devices"]))
+    publisher = client.declare_publisher(key("/sim0/joint_commands", JOINT_STATE))
+    Time = TS.types["builtin_interfaces/msg/Time"]
+    Header = TS.types["std_msgs/msg/Header"]
+    Cmd = TS.types[JOINT_STATE]
+    import numpy as np
+
+    def command(names, rad):
+        m = Cmd(header=Header(stamp=Time(sec=0, nanosec=0), frame_id=""), name=names,
+                position=np.array(rad, dtype=np.float64), velocity=np.array([], dtype=np.float64),
+                effort=np.array([], dtype=np.float64))
+        return bytes(TS.serialize_cdr(m, JOINT_STATE))
+
+    publisher.put(command(["sim0_1", "pinky"], [0.5, 0.1]))
+    wait_for("the bad command counted", lambda: call(api, "GET", "/ros2")["commands_dropped"] >= 1)
+    status = call(api, "GET", "/ros2")
+    assert "pinky" in status["last_dropped"], status
+    publisher.put(command(["sim0_2"], [0.5]))  # 28.65 degrees
+    view = wait_for("joint 2 at 0.5 rad", lambda: (lambda v: v if abs(v["motion"]["angle_deg"] - 28.648) < 0.5 else None)(
+        call(api, "GET", "/buses/sim0/devices/2")))
+    assert view["target"]["position_deg"] == pytest.approx(28.648, abs=0.01)
+    assert abs(call(api, "GET", "/buses/sim0/devices/1")["motion"]["angle_deg"]) < 0.5, "nothing of the bad one"
+    assert call(api, "GET", "/ros2")["commands_applied"] >= 1
+    # Outside the joint's soft limit (±255 deg at most): dropped, not clamped.
+    publisher.put(command(["sim0_3"], [10.0]))
+    wait_for("the out-of-range command counted", lambda: call(api, "GET", "/ros2")["commands_dropped"] >= 2)
+    assert abs(call(api, "GET", "/buses/sim0/devices/3")["motion"]["angle_deg"]) < 0.5
+
+    # The graph as rmw_zenoh's graph cache reads it.
+    tokens = [str(r.ok.key_expr) for r in client.liveliness().get("@ros2_lv/**")]
+    parts = [t.split("/") for t in tokens]
+    node = [p for p in parts if p[5] == "NN"]
+    assert len(node) == 1 and node[0][:2] == ["@ros2_lv", "0"] and node[0][6:] == ["%", "%", "jointd"], tokens
+    zid = node[0][2]
+    endpoints = {(p[5], p[9]): p for p in parts if p[5] in ("MP", "MS")}
+    assert set(endpoints) == {("MP", "%sim0%joint_states"), ("MS", "%sim0%joint_commands"),
+                              ("MP", "%diagnostics")}, tokens
+    for (kind, topic), p in endpoints.items():
+        assert len(p) == 13 and p[2] == zid and p[3] == "0", p
+        ros_type = DIAGNOSTICS if "diagnostics" in topic else JOINT_STATE
+        assert p[10] == dds_name(ros_type) and p[11] == TS.hash_rihs01(ros_type), p
+        assert len(p[12].split(":")) == 6, p[12]
+    assert len({p[4] for p in endpoints.values()}) == 3, "an entity id each"

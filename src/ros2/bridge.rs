@@ -1,0 +1,404 @@
+//! The bridge itself: one Zenoh session, one ROS node (`jointd`), per bus
+//! a `joint_states` publisher and a `joint_commands` subscription, and a
+//! `/diagnostics` publisher; each with its liveliness token so that ROS 2
+//! tools on rmw_zenoh list them. Joint states come from the bus's frame tap
+//! (one message per poll round, as recordings); commands go through
+//! [`super::commands`].
+
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime};
+
+use tokio::sync::broadcast;
+use zenoh::liveliness::LivelinessToken;
+
+use super::commands;
+use super::config::{Ros2Config, Ros2Mode};
+use super::keys::{self, Kind, NodeIdentity};
+use super::Ros2Stats;
+use crate::bus::{BusHandle, Setpoint};
+use crate::http::state::AppState;
+use crate::http::teleop::WatchdogPolicy;
+use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
+use crate::record::cdr::{diagnostic_array_cdr, DiagnosticStatus, JointState};
+use crate::record::joint_states::{system_ns, JointStates};
+
+/// What keeps the bridge alive: dropping it undeclares everything.
+pub struct Bridge {
+    _session: zenoh::Session,
+    _tokens: Vec<LivelinessToken>,
+    tasks: Vec<tokio::task::JoinHandle<()>>,
+}
+
+impl Drop for Bridge {
+    fn drop(&mut self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+    }
+}
+
+impl std::fmt::Debug for Bridge {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Bridge")
+            .field("tasks", &self.tasks.len())
+            .finish_non_exhaustive()
+    }
+}
+
+fn session_config(cfg: &Ros2Config) -> zenoh::Result<zenoh::Config> {
+    let mut z = zenoh::Config::default();
+    let mode = match cfg.mode {
+        Ros2Mode::Client => "\"client\"",
+        Ros2Mode::Peer => "\"peer\"",
+    };
+    z.insert_json5("mode", mode)?;
+    let list = |v: &[String]| serde_json::to_string(v).unwrap_or_else(|_| "[]".into());
+    z.insert_json5("connect/endpoints", &list(&cfg.endpoints()))?;
+    z.insert_json5("listen/endpoints", &list(&cfg.listen))?;
+    // Where the router is, is said: no multicast scouting on the robot's LAN.
+    z.insert_json5("scouting/multicast/enabled", "false")?;
+    Ok(z)
+}
+
+/// Opens the session and starts publishing and listening.
+pub(super) async fn start(
+    state: AppState,
+    cfg: Ros2Config,
+    stats: Arc<Ros2Stats>,
+) -> zenoh::Result<Bridge> {
+    let session = zenoh::open(session_config(&cfg)?).await?;
+    let zid = session.zid();
+    let session_gid: [u8; 16] = zid.to_le_bytes();
+    let node = NodeIdentity {
+        domain: cfg.domain(),
+        session: zid.to_string(),
+        node_id: 0,
+        namespace: String::new(),
+        name: cfg.node_name.clone(),
+    };
+    let mut tokens = vec![
+        session
+            .liveliness()
+            .declare_token(node.node_token())
+            .await?,
+    ];
+    let mut tasks = Vec::new();
+    let mut entity_id = 0u32;
+    let mut next_entity = || {
+        entity_id += 1;
+        entity_id
+    };
+    for bus in state.buses().cloned().collect::<Vec<_>>() {
+        let ns = cfg.namespace(bus.name());
+        // joint_states
+        let topic = keys::qualified(&ns, "joint_states");
+        let id = next_entity();
+        let key = keys::topic_key(
+            node.domain,
+            &topic,
+            keys::JOINT_STATE_TYPE,
+            keys::JOINT_STATE_HASH,
+        );
+        let publisher = session.declare_publisher(key.clone()).await?;
+        tokens.push(
+            session
+                .liveliness()
+                .declare_token(node.endpoint_token(
+                    id,
+                    Kind::Publisher,
+                    &topic,
+                    keys::JOINT_STATE_TYPE,
+                    keys::JOINT_STATE_HASH,
+                ))
+                .await?,
+        );
+        let gid = keys::gid(&session_gid, id);
+        tracing::info!(bus = bus.name(), %key, "ROS 2: publishing joint states");
+        tasks.push(tokio::spawn(publish_joint_states(
+            state.clone(),
+            bus.clone(),
+            publisher,
+            gid,
+            stats.clone(),
+        )));
+        // joint_commands
+        let topic = keys::qualified(&ns, "joint_commands");
+        let id = next_entity();
+        let key = keys::topic_key(
+            node.domain,
+            &topic,
+            keys::JOINT_STATE_TYPE,
+            keys::JOINT_STATE_HASH,
+        );
+        let subscriber = session.declare_subscriber(key.clone()).await?;
+        tokens.push(
+            session
+                .liveliness()
+                .declare_token(node.endpoint_token(
+                    id,
+                    Kind::Subscription,
+                    &topic,
+                    keys::JOINT_STATE_TYPE,
+                    keys::JOINT_STATE_HASH,
+                ))
+                .await?,
+        );
+        tracing::info!(bus = bus.name(), %key, "ROS 2: taking joint commands");
+        tasks.push(tokio::spawn(take_commands(
+            state.clone(),
+            bus,
+            subscriber,
+            stats.clone(),
+        )));
+    }
+    let topic = "/diagnostics";
+    let id = next_entity();
+    let key = keys::topic_key(
+        node.domain,
+        topic,
+        keys::DIAGNOSTIC_ARRAY_TYPE,
+        keys::DIAGNOSTIC_ARRAY_HASH,
+    );
+    let publisher = session.declare_publisher(key).await?;
+    tokens.push(
+        session
+            .liveliness()
+            .declare_token(node.endpoint_token(
+                id,
+                Kind::Publisher,
+                topic,
+                keys::DIAGNOSTIC_ARRAY_TYPE,
+                keys::DIAGNOSTIC_ARRAY_HASH,
+            ))
+            .await?,
+    );
+    let period = Duration::from_secs_f64(1.0 / cfg.diagnostics_hz);
+    tasks.push(tokio::spawn(publish_diagnostics(
+        state.clone(),
+        publisher,
+        keys::gid(&session_gid, id),
+        period,
+        stats.clone(),
+    )));
+    tracing::info!(zid = %zid, domain = node.domain, mode = ?cfg.mode, endpoints = ?cfg.endpoints(),
+        node = %cfg.node_name, "ROS 2 bridge up (rmw_zenoh key expressions)");
+    Ok(Bridge {
+        _session: session,
+        _tokens: tokens,
+        tasks,
+    })
+}
+
+fn now_ns() -> i64 {
+    i64::try_from(system_ns(SystemTime::now())).unwrap_or(i64::MAX)
+}
+
+async fn publish_joint_states(
+    state: AppState,
+    bus: BusHandle,
+    publisher: zenoh::pubsub::Publisher<'static>,
+    gid: [u8; 16],
+    stats: Arc<Ros2Stats>,
+) {
+    let mut frames = bus.shared().frame_tap.subscribe();
+    let mut snapshots = bus.watch();
+    let mut states = JointStates::new(bus.name(), state.joint_labeler());
+    let mut sequence = 0i64;
+    loop {
+        let frame = match frames.recv().await {
+            Ok(f) => f,
+            Err(broadcast::error::RecvError::Lagged(n)) => {
+                stats.frames_lost.fetch_add(n, Ordering::Relaxed);
+                continue;
+            }
+            Err(broadcast::error::RecvError::Closed) => return,
+        };
+        states.on_frame(&frame);
+        let snap = snapshots.borrow_and_update().clone();
+        let Some(msg) = states.next(&snap) else {
+            continue;
+        };
+        sequence += 1;
+        let attachment = keys::attachment(sequence, now_ns(), &gid);
+        match publisher.put(msg.to_cdr()).attachment(attachment).await {
+            Ok(()) => {
+                stats.joint_states.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(e) => {
+                if stats.publish_errors.fetch_add(1, Ordering::Relaxed) == 0 {
+                    tracing::warn!(bus = bus.name(), error = %e, "ROS 2: a joint state could not be published (said once)");
+                }
+            }
+        }
+    }
+}
+
+/// Commands in; the teleoperation watchdog of `[watchdog]` over them.
+async fn take_commands(
+    state: AppState,
+    bus: BusHandle,
+    subscriber: zenoh::pubsub::Subscriber<
+        zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>,
+    >,
+    stats: Arc<Ros2Stats>,
+) {
+    let watchdog = state.watchdog_default();
+    let hold = Duration::from_millis(watchdog.hold_timeout_ms);
+    let mut commanded: Vec<u8> = Vec::new();
+    let mut deadline: Option<Instant> = None;
+    let mut said_bad = false;
+    loop {
+        let sample = match deadline {
+            Some(d) => match tokio::time::timeout_at(d.into(), subscriber.recv_async()).await {
+                Ok(s) => s,
+                Err(_) => {
+                    fire_watchdog(&bus, &commanded, watchdog.policy).await;
+                    stats.watchdog_fired.fetch_add(1, Ordering::Relaxed);
+                    deadline = None;
+                    commanded.clear();
+                    continue;
+                }
+            },
+            None => subscriber.recv_async().await,
+        };
+        let Ok(sample) = sample else { return };
+        let bytes = sample.payload().to_bytes();
+        let outcome = JointState::from_cdr(&bytes)
+            .map_err(|e| format!("not a sensor_msgs/msg/JointState in CDR: {e}"))
+            .and_then(|cmd| commands::setpoints(&state, &bus, &cmd));
+        match outcome {
+            Ok(targets) => {
+                bus.set_targets(&targets);
+                stats.commands_applied.fetch_add(1, Ordering::Relaxed);
+                for (id, _) in &targets {
+                    if !commanded.contains(id) {
+                        commanded.push(*id);
+                    }
+                }
+                if !hold.is_zero() {
+                    deadline = Some(Instant::now() + hold);
+                }
+            }
+            Err(why) => {
+                stats.commands_dropped.fetch_add(1, Ordering::Relaxed);
+                if !said_bad {
+                    said_bad = true;
+                    tracing::warn!(bus = bus.name(), "ROS 2: a joint command was dropped whole: {why} (said once; counted in GET /api/v1/ros2)");
+                }
+                *stats.last_dropped.lock().unwrap_or_else(|p| p.into_inner()) = Some(why);
+            }
+        }
+    }
+}
+
+/// The command stream stopped: hold the commanded joints where they are,
+/// or disable them, as `[watchdog]` says.
+async fn fire_watchdog(bus: &BusHandle, ids: &[u8], policy: WatchdogPolicy) {
+    tracing::warn!(
+        bus = bus.name(),
+        ?ids,
+        ?policy,
+        "ROS 2: joint commands stopped: watchdog"
+    );
+    match policy {
+        WatchdogPolicy::Disable => {
+            if let Err(e) = bus.disable(crate::bus::Targets::Ids(ids.to_vec())).await {
+                tracing::error!(bus = bus.name(), error = %e, "ROS 2 watchdog could not disable joints");
+            }
+        }
+        WatchdogPolicy::Hold => {
+            let snap = bus.snapshot();
+            let holds: Vec<(u8, Setpoint)> = ids
+                .iter()
+                .filter_map(|id| snap.devices.get(id))
+                .filter_map(|d| {
+                    Some((
+                        d.dev_id,
+                        Setpoint {
+                            pos_ref: crate::http::telemetry::measured_angle_raw(d)?,
+                            spd_ref: d.target_sent?.spd_ref,
+                        },
+                    ))
+                })
+                .collect();
+            bus.set_targets(&holds);
+        }
+    }
+}
+
+async fn publish_diagnostics(
+    state: AppState,
+    publisher: zenoh::pubsub::Publisher<'static>,
+    gid: [u8; 16],
+    period: Duration,
+    stats: Arc<Ros2Stats>,
+) {
+    let mut tick = tokio::time::interval(period);
+    let mut sequence = 0i64;
+    let label = state.joint_labeler();
+    loop {
+        tick.tick().await;
+        let mut status = Vec::new();
+        for bus in state.buses() {
+            let snap = bus.snapshot();
+            for dev in snap.devices.values() {
+                let (name, _) = label(bus.name(), dev.dev_id);
+                status.push(joint_status(bus.name(), &name, dev));
+            }
+        }
+        sequence += 1;
+        let ns = now_ns();
+        let cdr = diagnostic_array_cdr(u64::try_from(ns).unwrap_or(0), "", &status);
+        if publisher
+            .put(cdr)
+            .attachment(keys::attachment(sequence, ns, &gid))
+            .await
+            .is_ok()
+        {
+            stats.diagnostics.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// One joint as `diagnostic_msgs/DiagnosticStatus`: OK running or ready,
+/// WARN disabled by something, ERROR faulted, STALE offline.
+fn joint_status(bus: &str, name: &str, dev: &crate::bus::handle::DeviceState) -> DiagnosticStatus {
+    let info = dev.info01.as_ref().map(|(i, _)| *i);
+    let fault = info.map_or(0, |i| active_fault(i.err_code));
+    let (level, message) = if !dev.online {
+        (3, "offline".to_string())
+    } else if fault != 0 {
+        (2, format!("fault: {}", fault_name(fault)))
+    } else if let Some(reason) = dev.disabled_reason {
+        (1, format!("disabled ({})", reason.name()))
+    } else {
+        (
+            0,
+            info.map_or("no status yet".into(), |i| {
+                fsm_name_in(i.fsm, dev.firmware.map(|f| f.revision)).to_string()
+            }),
+        )
+    };
+    let mut values = vec![
+        ("bus".to_string(), bus.to_string()),
+        ("id".to_string(), dev.dev_id.to_string()),
+        ("online".to_string(), dev.online.to_string()),
+    ];
+    if let Some(i) = info {
+        values.push((
+            "state".into(),
+            fsm_name_in(i.fsm, dev.firmware.map(|f| f.revision)).into(),
+        ));
+        values.push(("fault".into(), fault_name(fault).into()));
+        values.push(("temperature_c".into(), format!("{:.1}", i.temp_c())));
+        values.push(("voltage_v".into(), format!("{:.2}", i.vbus_v())));
+    }
+    DiagnosticStatus {
+        level,
+        name: format!("jointd: {name}"),
+        message,
+        hardware_id: format!("{bus}/{}", dev.dev_id),
+        values,
+    }
+}

@@ -1,0 +1,206 @@
+//! `[ros2]` in the config file (and `--ros2`, `--ros2-connect`,
+//! `--ros2-domain-id`): off unless asked.
+
+use std::collections::BTreeMap;
+
+use serde::Deserialize;
+use thiserror::Error;
+
+/// The router rmw_zenoh's nodes use by default.
+pub const DEFAULT_ROUTER: &str = "tcp/127.0.0.1:7447";
+
+/// How the bridge joins the Zenoh network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Ros2Mode {
+    /// Through a router (`zenohd`, `ros2 run rmw_zenoh_cpp rmw_zenohd`), as
+    /// rmw_zenoh's nodes do.
+    #[default]
+    Client,
+    /// Directly with other peers (listening on `listen`).
+    Peer,
+}
+
+/// `[ros2]`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ros2Config {
+    #[serde(default)]
+    pub enabled: bool,
+    #[serde(default)]
+    pub mode: Ros2Mode,
+    /// Zenoh endpoints to connect to (default: the local router).
+    #[serde(default)]
+    pub connect: Vec<String>,
+    /// Zenoh endpoints to listen on (peer mode).
+    #[serde(default)]
+    pub listen: Vec<String>,
+    /// The ROS domain (default: `ROS_DOMAIN_ID`, else 0).
+    pub domain_id: Option<u32>,
+    /// A namespace per bus (default: the bus's name): its topics are
+    /// `/<namespace>/joint_states` and `/<namespace>/joint_commands`.
+    #[serde(default)]
+    pub namespaces: BTreeMap<String, String>,
+    /// How often `/diagnostics` is published, Hz (0 < r ≤ 50; default 1).
+    #[serde(default = "one_hz")]
+    pub diagnostics_hz: f64,
+    /// The ROS node the topics belong to (default `jointd`).
+    #[serde(default = "default_node")]
+    pub node_name: String,
+}
+
+fn one_hz() -> f64 {
+    1.0
+}
+
+fn default_node() -> String {
+    "jointd".into()
+}
+
+impl Default for Ros2Config {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            mode: Ros2Mode::Client,
+            connect: Vec::new(),
+            listen: Vec::new(),
+            domain_id: None,
+            namespaces: BTreeMap::new(),
+            diagnostics_hz: one_hz(),
+            node_name: default_node(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum Ros2ConfigError {
+    #[error("[ros2] namespaces: no bus named `{0}`")]
+    UnknownBus(String),
+    #[error("[ros2] `{name}` = `{value}`: {why}")]
+    BadName {
+        name: &'static str,
+        value: String,
+        why: &'static str,
+    },
+    #[error("[ros2] diagnostics_hz = {0}: give 0 < rate <= 50")]
+    Rate(f64),
+    #[error("[ros2] domain_id = {0}: ROS domains are 0..=232")]
+    Domain(u32),
+}
+
+/// A ROS name token: letters, digits, `_`, not starting with a digit.
+fn is_token(s: &str) -> bool {
+    !s.is_empty()
+        && !s.starts_with(|c: char| c.is_ascii_digit())
+        && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+}
+
+impl Ros2Config {
+    /// Checks names and rates against the buses there are.
+    pub fn checked(self, buses: &[String]) -> Result<Self, Ros2ConfigError> {
+        for (bus, ns) in &self.namespaces {
+            if !buses.contains(bus) {
+                return Err(Ros2ConfigError::UnknownBus(bus.clone()));
+            }
+            let ok = ns.trim_matches('/').split('/').all(is_token);
+            if !ok {
+                return Err(Ros2ConfigError::BadName {
+                    name: "namespaces",
+                    value: ns.clone(),
+                    why: "a ROS namespace is tokens of letters, digits and `_` separated by `/`",
+                });
+            }
+        }
+        if !is_token(&self.node_name) {
+            return Err(Ros2ConfigError::BadName {
+                name: "node_name",
+                value: self.node_name.clone(),
+                why: "a ROS node name is letters, digits and `_`, not starting with a digit",
+            });
+        }
+        if !(self.diagnostics_hz.is_finite()
+            && self.diagnostics_hz > 0.0
+            && self.diagnostics_hz <= 50.0)
+        {
+            return Err(Ros2ConfigError::Rate(self.diagnostics_hz));
+        }
+        if let Some(d) = self.domain_id.filter(|d| *d > 232) {
+            return Err(Ros2ConfigError::Domain(d));
+        }
+        Ok(self)
+    }
+
+    /// The namespace of a bus, without slashes at either end.
+    pub fn namespace(&self, bus: &str) -> String {
+        self.namespaces
+            .get(bus)
+            .map_or(bus, String::as_str)
+            .trim_matches('/')
+            .to_owned()
+    }
+
+    /// The domain: the config's, else `ROS_DOMAIN_ID`, else 0.
+    pub fn domain(&self) -> u32 {
+        self.domain_id
+            .or_else(|| std::env::var("ROS_DOMAIN_ID").ok()?.parse().ok())
+            .unwrap_or(0)
+    }
+
+    /// Where to connect: as configured, else the local router in client mode.
+    pub fn endpoints(&self) -> Vec<String> {
+        if self.connect.is_empty() && self.mode == Ros2Mode::Client {
+            vec![DEFAULT_ROUTER.to_owned()]
+        } else {
+            self.connect.clone()
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Ros2Config, toml::de::Error> {
+        toml::from_str(text)
+    }
+
+    #[test]
+    fn defaults_a_namespace_per_bus_and_the_local_router() {
+        let cfg = parse("enabled = true").unwrap();
+        assert_eq!(cfg.namespace("sim0"), "sim0");
+        assert_eq!(cfg.endpoints(), vec![DEFAULT_ROUTER.to_string()]);
+        assert_eq!(cfg.node_name, "jointd");
+        let peer = parse("mode = \"peer\"\nlisten = [\"tcp/0.0.0.0:7450\"]").unwrap();
+        assert!(
+            peer.endpoints().is_empty(),
+            "a peer connects to nobody unless told"
+        );
+        let named = parse("[namespaces]\nl = \"/hand/left/\"").unwrap();
+        assert_eq!(named.namespace("l"), "hand/left");
+    }
+
+    #[test]
+    fn bad_names_rates_and_buses_are_refused() {
+        let buses = vec!["l".to_string()];
+        let bad = |text: &str| parse(text).unwrap().checked(&buses).unwrap_err();
+        assert_eq!(
+            bad("[namespaces]\nr = \"x\""),
+            Ros2ConfigError::UnknownBus("r".into())
+        );
+        assert!(matches!(
+            bad("[namespaces]\nl = \"a b\""),
+            Ros2ConfigError::BadName { .. }
+        ));
+        assert!(matches!(
+            bad("node_name = \"9x\""),
+            Ros2ConfigError::BadName { .. }
+        ));
+        assert_eq!(bad("diagnostics_hz = 0.0"), Ros2ConfigError::Rate(0.0));
+        assert_eq!(bad("domain_id = 300"), Ros2ConfigError::Domain(300));
+        assert!(parse("nope = 1").is_err(), "unknown keys are refused");
+        assert!(parse("[namespaces]\nl = \"hand/left\"")
+            .unwrap()
+            .checked(&buses)
+            .is_ok());
+    }
+}

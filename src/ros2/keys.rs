@@ -1,0 +1,204 @@
+//! Names on the Zenoh network as rmw_zenoh gives them, so that ROS 2 nodes
+//! running `rmw_zenoh_cpp` see jointd's topics and it sees theirs. From
+//! rmw_zenoh's design document (`docs/design.md` of ros2/rmw_zenoh,
+//! "Topic and Service name mapping to Zenoh key expressions", "Graph
+//! Cache", "Publishers"):
+//!
+//! - data: `<domain_id>/<fully qualified topic, no leading />/<DDS type
+//!   name>/<type hash>`;
+//! - liveliness tokens: `@ros2_lv/<domain_id>/<session id>/<node id>/<entity
+//!   id>/<kind>/<enclave>/<namespace>/<node name>[/<topic>/<type>/<hash>/<qos>]`,
+//!   with `/` in names replaced by `%` and an empty name written `%`;
+//! - the attachment of every sample: sequence number (i64 LE), source
+//!   timestamp (ns since the epoch, i64 LE), the GID's length (one byte,
+//!   16) and the publisher's 16-byte GID.
+//!
+//! Type hashes (REP-2016, RIHS01), as `ros2 topic info --verbose` prints
+//! them on Jazzy and as `rosbags` computes them from the definitions:
+//! `sensor_msgs/msg/JointState` [`JOINT_STATE_HASH`],
+//! `diagnostic_msgs/msg/DiagnosticArray` [`DIAGNOSTIC_ARRAY_HASH`].
+
+pub const JOINT_STATE_TYPE: &str = "sensor_msgs::msg::dds_::JointState_";
+pub const JOINT_STATE_HASH: &str =
+    "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e";
+pub const DIAGNOSTIC_ARRAY_TYPE: &str = "diagnostic_msgs::msg::dds_::DiagnosticArray_";
+pub const DIAGNOSTIC_ARRAY_HASH: &str =
+    "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e";
+
+/// The QoS every jointd endpoint declares, in rmw_zenoh's compact form:
+/// reliability, durability and history kinds left at their defaults
+/// (reliable, volatile, keep last), depth 10, no deadline, lifespan or
+/// liveliness lease.
+pub const QOS: &str = "::,10:,:,:,,";
+
+/// What an endpoint is, in a liveliness token.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    Publisher,
+    Subscription,
+}
+
+impl Kind {
+    fn code(self) -> &'static str {
+        match self {
+            Self::Publisher => "MP",
+            Self::Subscription => "MS",
+        }
+    }
+}
+
+/// `/` → `%`; an empty name is `%`.
+pub fn mangle(name: &str) -> String {
+    if name.is_empty() {
+        "%".into()
+    } else {
+        name.replace('/', "%")
+    }
+}
+
+/// A topic's fully qualified name: `/<namespace>/<topic>`.
+pub fn qualified(namespace: &str, topic: &str) -> String {
+    let ns = namespace.trim_matches('/');
+    if ns.is_empty() {
+        format!("/{topic}")
+    } else {
+        format!("/{ns}/{topic}")
+    }
+}
+
+/// The key expression a topic's samples travel on.
+pub fn topic_key(domain: u32, qualified: &str, type_name: &str, hash: &str) -> String {
+    format!(
+        "{domain}/{}/{type_name}/{hash}",
+        qualified.trim_start_matches('/')
+    )
+}
+
+/// Who declares tokens: one session, one node.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeIdentity {
+    pub domain: u32,
+    /// The Zenoh session id, as Zenoh prints it.
+    pub session: String,
+    pub node_id: u32,
+    /// The node's namespace (`/` or empty: none).
+    pub namespace: String,
+    pub name: String,
+}
+
+impl NodeIdentity {
+    fn prefix(&self, entity_id: u32, kind: &str) -> String {
+        let ns = self.namespace.trim_matches('/');
+        let ns = if ns.is_empty() {
+            "%".to_owned()
+        } else {
+            mangle(&format!("/{ns}"))
+        };
+        format!(
+            "@ros2_lv/{}/{}/{}/{entity_id}/{kind}/%/{ns}/{}",
+            self.domain, self.session, self.node_id, self.name
+        )
+    }
+
+    /// The node's own token (its entity id is its node id).
+    pub fn node_token(&self) -> String {
+        self.prefix(self.node_id, "NN")
+    }
+
+    /// A publisher's or subscription's token.
+    pub fn endpoint_token(
+        &self,
+        entity_id: u32,
+        kind: Kind,
+        qualified: &str,
+        type_name: &str,
+        hash: &str,
+    ) -> String {
+        format!(
+            "{}/{}/{type_name}/{hash}/{QOS}",
+            self.prefix(entity_id, kind.code()),
+            mangle(qualified)
+        )
+    }
+}
+
+/// A publisher's GID: 16 bytes unique to the session and the entity.
+pub fn gid(session: &[u8; 16], entity_id: u32) -> [u8; 16] {
+    let mut g = *session;
+    for (b, e) in g[12..].iter_mut().zip(entity_id.to_le_bytes()) {
+        *b ^= e;
+    }
+    g
+}
+
+/// The attachment rmw_zenoh puts on (and expects with) every sample.
+pub fn attachment(sequence: i64, source_ns: i64, gid: &[u8; 16]) -> Vec<u8> {
+    let mut a = Vec::with_capacity(33);
+    a.extend_from_slice(&sequence.to_le_bytes());
+    a.extend_from_slice(&source_ns.to_le_bytes());
+    a.push(16);
+    a.extend_from_slice(gid);
+    a
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn node() -> NodeIdentity {
+        NodeIdentity {
+            domain: 2,
+            session: "8b20917502ee955ac4476e0266340d5c".into(),
+            node_id: 0,
+            namespace: String::new(),
+            name: "talker".into(),
+        }
+    }
+
+    #[test]
+    fn keys_and_tokens_read_as_the_design_document_prints_them() {
+        // The design document's own examples, with String's type and hash.
+        let string = (
+            "std_msgs::msg::dds_::String_",
+            "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18",
+        );
+        assert_eq!(
+            topic_key(0, &qualified("", "chatter"), string.0, string.1),
+            "0/chatter/std_msgs::msg::dds_::String_/RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
+        );
+        assert_eq!(
+            topic_key(0, &qualified("/robot1", "chatter"), string.0, string.1),
+            "0/robot1/chatter/std_msgs::msg::dds_::String_/RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
+        );
+        assert_eq!(
+            node().endpoint_token(10, Kind::Publisher, "/chatter", string.0, string.1),
+            "@ros2_lv/2/8b20917502ee955ac4476e0266340d5c/0/10/MP/%/%/talker/%chatter/std_msgs::msg::dds_::String_/RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18/::,10:,:,:,,"
+        );
+        let listener = NodeIdentity {
+            name: "listener".into(),
+            session: "aac3178e146ba6f1fc6e6a4085e77f21".into(),
+            ..node()
+        };
+        assert_eq!(
+            listener.node_token(),
+            "@ros2_lv/2/aac3178e146ba6f1fc6e6a4085e77f21/0/0/NN/%/%/listener"
+        );
+        let namespaced = NodeIdentity {
+            namespace: "/hand/left".into(),
+            ..node()
+        };
+        assert!(namespaced.node_token().ends_with("/NN/%/%hand%left/talker"));
+    }
+
+    #[test]
+    fn the_attachment_is_33_bytes_in_the_documented_order() {
+        let g = gid(&[7; 16], 3);
+        let a = attachment(5, 1_700_000_000_000_000_000, &g);
+        assert_eq!(a.len(), 33);
+        assert_eq!(&a[..8], &5i64.to_le_bytes());
+        assert_eq!(&a[8..16], &1_700_000_000_000_000_000i64.to_le_bytes());
+        assert_eq!(a[16], 16);
+        assert_eq!(&a[17..], &g);
+        assert_ne!(gid(&[7; 16], 3), gid(&[7; 16], 4), "one GID per entity");
+    }
+}

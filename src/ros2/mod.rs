@@ -1,0 +1,92 @@
+//! ROS 2 over Zenoh (issue 16): `sensor_msgs/msg/JointState` on
+//! `/<namespace>/joint_states` per bus at the telemetry rate,
+//! `diagnostic_msgs/msg/DiagnosticArray` on `/diagnostics`, and
+//! `/<namespace>/joint_commands` taken as setpoints; named, encoded and
+//! announced as `rmw_zenoh` does, so ROS 2 nodes on rmw_zenoh (and `ros2
+//! topic list` / `echo`) see them with no bridge of their own.
+//!
+//! - [`config`]: the `[ros2]` table;
+//! - [`keys`]: key expressions, liveliness tokens, attachments, type
+//!   hashes (the design document is cited there);
+//! - [`commands`]: a command checked whole and turned into setpoints;
+//! - `bridge` (cargo feature `ros2`: Zenoh adds minutes to a cold build):
+//!   the session, publishers, subscription and tokens.
+//!
+//! Messages are CDR ([`crate::record::cdr`], shared with MCAP recordings).
+//! Positions are rad, velocities rad/s at the output shaft, and **effort is
+//! the q-axis current in A**, in each joint's calibrated frame.
+
+#[cfg(feature = "ros2")]
+pub(crate) mod commands;
+pub mod config;
+pub mod keys;
+
+#[cfg(feature = "ros2")]
+mod bridge;
+
+use std::sync::atomic::AtomicU64;
+use std::sync::{Arc, Mutex};
+
+use serde::Serialize;
+use thiserror::Error;
+
+pub use config::{Ros2Config, Ros2Mode};
+
+/// What the bridge did, for `GET /api/v1/ros2`.
+#[derive(Debug, Default, Serialize)]
+pub struct Ros2Stats {
+    pub joint_states: AtomicU64,
+    pub diagnostics: AtomicU64,
+    pub commands_applied: AtomicU64,
+    /// Commands refused whole (unknown joint, out of limits, NaN, ...).
+    pub commands_dropped: AtomicU64,
+    /// Why the latest one was.
+    pub last_dropped: Mutex<Option<String>>,
+    /// Times the command stream stopped and `[watchdog]` acted.
+    pub watchdog_fired: AtomicU64,
+    /// Frames the bridge fell too far behind to see.
+    pub frames_lost: AtomicU64,
+    pub publish_errors: AtomicU64,
+}
+
+#[derive(Debug, Error)]
+pub enum Ros2Error {
+    #[error("--ros2 / [ros2] enabled: this jointd was built without the `ros2` feature (cargo build --features ros2)")]
+    NotBuilt,
+    #[error("ROS 2 bridge (Zenoh): {0}")]
+    Zenoh(String),
+}
+
+/// The running bridge; dropping it leaves the ROS graph.
+#[cfg(feature = "ros2")]
+pub use bridge::Bridge;
+
+/// Without the `ros2` feature there is no bridge to run.
+#[cfg(not(feature = "ros2"))]
+#[derive(Debug)]
+pub struct Bridge;
+
+/// Starts the bridge for every bus of `state`.
+#[cfg(feature = "ros2")]
+pub async fn start(
+    state: crate::http::AppState,
+    cfg: Ros2Config,
+    stats: Arc<Ros2Stats>,
+) -> Result<Bridge, Ros2Error> {
+    bridge::start(state, cfg, stats)
+        .await
+        .map_err(|e| Ros2Error::Zenoh(e.to_string()))
+}
+
+/// Without the `ros2` feature: says so.
+#[cfg(not(feature = "ros2"))]
+pub async fn start(
+    _state: crate::http::AppState,
+    _cfg: Ros2Config,
+    _stats: Arc<Ros2Stats>,
+) -> Result<Bridge, Ros2Error> {
+    Err(Ros2Error::NotBuilt)
+}
+
+/// Whether this build has the bridge.
+pub const BUILT: bool = cfg!(feature = "ros2");
