@@ -104,7 +104,7 @@ pub struct RunArgs {
     /// TOML config file (see jointd.example.toml): `listen`, `token`,
     /// `token_file`, `insecure`, `allowed_hosts`, `allowed_origins`,
     /// `max_body_bytes`, `web_dir`, `state_dir`, `[[bus]]`, `[[limit]]`, `[[joint]]`,
-    /// `[[hand]]`, `[watchdog]`.
+    /// `[[hand]]`, `[watchdog]`, `[ros2]`.
     /// Flags and environment variables override it.
     #[arg(long, value_name = "FILE", env = "JOINTD_CONFIG")]
     pub config: Option<PathBuf>,
