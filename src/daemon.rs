@@ -300,7 +300,7 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     let options = StateOptions {
         ros2: ros2
             .as_ref()
-            .map(|_| std::sync::Arc::new(crate::ros2::Ros2Stats::default())),
+            .map(|_| std::sync::Arc::new(crate::http::ros2_stats::Ros2Stats::default())),
         hands: Some(std::sync::Arc::new(poses)),
         web_dir: args.web_dir.clone().or(file.web_dir),
         joint_names: joint_names(&file.joints, args)?,

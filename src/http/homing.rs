@@ -20,8 +20,7 @@
 //! an e-stop nothing that moves is written (only the mode and the current
 //! limit are put back). A job is polled with `GET /api/v1/homing/{id}`.
 
-use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
@@ -32,6 +31,7 @@ use crate::bus::handle::{BusEvent, DeviceState};
 use crate::bus::{BusHandle, Setpoint};
 use crate::http::calibration;
 use crate::http::error::{ApiError, ApiResult};
+use crate::http::homing_book::{lock, HomingState, HomingView, JointHoming, Slot};
 use crate::http::move_book::JointRef;
 use crate::http::moves::resolve_joint;
 use crate::http::state::{known_device, AppState};
@@ -60,8 +60,6 @@ const BACKOFF_TOLERANCE_DEG: f64 = 0.5;
 const BACKOFF_RPM: f64 = 1000.0;
 /// Tries at writing the previous current limit back.
 const RESTORE_TRIES: usize = 3;
-/// Jobs kept for `GET` after they ended.
-const KEPT: usize = 64;
 
 /// Which way the joint turns to find its stop (device angles).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize, ToSchema)]
@@ -132,103 +130,6 @@ struct Plan {
     backoff_deg: f64,
     stop_at_deg: f64,
     timeout: Duration,
-}
-
-/// Where a joint's homing stands.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub(crate) enum HomingState {
-    Running,
-    /// The stop was found and recorded.
-    Homed,
-    /// It could not start, or the search timed out.
-    Failed,
-    /// An e-stop, a fault, a disable or the joint going offline ended it.
-    Aborted,
-}
-
-/// One joint of a homing job.
-#[derive(Debug, Clone, Serialize, ToSchema)]
-pub(crate) struct JointHoming {
-    #[schema(example = "sim0")]
-    pub bus: String,
-    #[schema(example = 1)]
-    pub id: u8,
-    pub state: HomingState,
-    /// What it does now: `starting`, `searching`, `backing_off`, `restoring`, `done`.
-    #[schema(example = "searching")]
-    pub phase: &'static str,
-    /// Why it failed or was aborted.
-    pub reason: Option<String>,
-    /// The device angle where the joint stalled, degrees.
-    #[schema(example = -30.0)]
-    pub hard_stop_device_deg: Option<f64>,
-    /// The calibration offset recorded from it.
-    #[schema(example = -30.0)]
-    pub offset_deg: Option<f64>,
-    /// The joint's current limit before homing, A (INFO_04).
-    #[schema(example = 0.75)]
-    pub previous_current_limit_a: Option<f64>,
-    /// True once the previous current limit is written back and verified.
-    #[schema(example = true)]
-    pub current_limit_restored: bool,
-}
-
-/// A homing job as the API reports it.
-#[derive(Debug, Clone, Serialize, ToSchema)]
-pub(crate) struct HomingView {
-    #[schema(example = 1)]
-    pub id: u64,
-    /// `running` until every joint ended; then `done` (each joint's state
-    /// says how).
-    #[schema(example = "running")]
-    pub state: &'static str,
-    pub joints: Vec<JointHoming>,
-}
-
-type Slot = Arc<Mutex<JointHoming>>;
-
-/// The homing jobs started through the API.
-#[derive(Default)]
-pub(crate) struct HomingBook {
-    inner: Mutex<(u64, BTreeMap<u64, Vec<Slot>>)>,
-}
-
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|p| p.into_inner())
-}
-
-impl HomingBook {
-    fn add(&self, slots: Vec<Slot>) -> u64 {
-        let mut book = lock(&self.inner);
-        book.0 += 1;
-        let id = book.0;
-        book.1.insert(id, slots);
-        while book.1.len() > KEPT {
-            let oldest_ended = book
-                .1
-                .iter()
-                .find(|(_, s)| s.iter().all(|j| lock(j).state != HomingState::Running))
-                .map(|(id, _)| *id);
-            match oldest_ended {
-                Some(id) => drop(book.1.remove(&id)),
-                None => break,
-            }
-        }
-        id
-    }
-
-    fn view(&self, id: u64) -> Option<HomingView> {
-        let book = lock(&self.inner);
-        let slots = book.1.get(&id)?;
-        let joints: Vec<JointHoming> = slots.iter().map(|s| lock(s).clone()).collect();
-        let running = joints.iter().any(|j| j.state == HomingState::Running);
-        Some(HomingView {
-            id,
-            state: if running { "running" } else { "done" },
-            joints,
-        })
-    }
 }
 
 /// Checks the request, then homes each joint in its own task; the job as

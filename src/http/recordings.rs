@@ -3,18 +3,18 @@
 //! (`state_dir/recordings`, else a directory under the system's temporary
 //! one); a std `Mutex` guards the book, never held across an `.await`.
 
-use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::Arc;
 use std::time::Duration;
 
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 use utoipa::ToSchema;
 
 use crate::bus::BusHandle;
 use crate::http::error::{ApiError, ApiResult};
+use crate::http::recording_book::{view, Entry, RecordingView};
 use crate::http::state::AppState;
-use crate::record::{RecordState, RecordStatus, Recorder};
+use crate::record::{RecordState, Recorder};
 
 /// Recordings running at once, at most.
 const MAX_RUNNING: usize = 4;
@@ -33,71 +33,6 @@ pub(crate) struct RecordingRequest {
     /// The buses to record (default: all).
     #[schema(example = json!(["sim0"]))]
     pub buses: Option<Vec<String>>,
-}
-
-/// A recording as the API reports it.
-#[derive(Debug, Clone, Serialize, ToSchema)]
-pub(crate) struct RecordingView {
-    #[schema(example = 1)]
-    pub id: u64,
-    /// `recording`, `finished` (the file is complete) or `failed`.
-    #[schema(value_type = String, example = "recording")]
-    pub state: RecordState,
-    /// The file's name in the daemon's recordings directory.
-    #[schema(example = "rec-1-1764072000.mcap")]
-    pub file: String,
-    #[schema(example = json!(["sim0"]))]
-    pub buses: Vec<String>,
-    #[schema(example = 5.0)]
-    pub duration_s: Option<f64>,
-    /// Unix ms it started and ended.
-    #[schema(example = 1764072000000u64)]
-    pub started_ms: u64,
-    pub ended_ms: Option<u64>,
-    /// Messages written, by topic.
-    #[schema(example = json!({"/sim0/joint_states": 325, "/jointd/sim0/frames": 12210}))]
-    pub messages: BTreeMap<String, u64>,
-    /// Frames or targets the recording fell too far behind to keep.
-    #[schema(example = 0)]
-    pub lost: u64,
-    pub error: Option<String>,
-}
-
-struct Entry {
-    recorder: Arc<Recorder>,
-    buses: Vec<String>,
-    duration_s: Option<f64>,
-}
-
-/// The recordings made through the API.
-#[derive(Default)]
-pub(crate) struct RecordingBook {
-    inner: Mutex<(u64, BTreeMap<u64, Entry>)>,
-}
-
-impl RecordingBook {
-    fn lock(&self) -> MutexGuard<'_, (u64, BTreeMap<u64, Entry>)> {
-        self.inner.lock().unwrap_or_else(|p| p.into_inner())
-    }
-}
-
-fn view(id: u64, e: &Entry, s: &RecordStatus) -> RecordingView {
-    RecordingView {
-        id,
-        state: s.state,
-        file: s
-            .path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default(),
-        buses: e.buses.clone(),
-        duration_s: e.duration_s,
-        started_ms: s.started_ns / 1_000_000,
-        ended_ms: s.ended_ns.map(|n| n / 1_000_000),
-        messages: s.messages.clone(),
-        lost: s.lost,
-        error: s.error.clone(),
-    }
 }
 
 /// Checks the request and starts the recording.

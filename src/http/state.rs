@@ -32,7 +32,7 @@ pub struct StateOptions {
     /// directory under the system's temporary one.
     pub recordings_dir: Option<std::path::PathBuf>,
     /// The ROS 2 bridge's counters, when it runs.
-    pub ros2: Option<Arc<crate::ros2::Ros2Stats>>,
+    pub ros2: Option<Arc<crate::http::ros2_stats::Ros2Stats>>,
 }
 
 #[derive(Clone)]
@@ -49,8 +49,8 @@ struct Inner {
     refusals: RefusalLog,
     options: std::sync::OnceLock<StateOptions>,
     moves: crate::http::move_book::MoveBook,
-    homings: crate::http::homing::HomingBook,
-    recordings: crate::http::recordings::RecordingBook,
+    homings: crate::http::homing_book::HomingBook,
+    recordings: crate::http::recording_book::RecordingBook,
 }
 
 impl AppState {
@@ -102,12 +102,12 @@ impl AppState {
     }
 
     /// The homing jobs started through the API.
-    pub(crate) fn homings(&self) -> &crate::http::homing::HomingBook {
+    pub(crate) fn homings(&self) -> &crate::http::homing_book::HomingBook {
         &self.inner.homings
     }
 
     /// The recordings started through the API.
-    pub(crate) fn recordings(&self) -> &crate::http::recordings::RecordingBook {
+    pub(crate) fn recordings(&self) -> &crate::http::recording_book::RecordingBook {
         &self.inner.recordings
     }
 
@@ -133,7 +133,7 @@ impl AppState {
     }
 
     /// The ROS 2 bridge's counters, when it runs.
-    pub(crate) fn ros2(&self) -> Option<&crate::ros2::Ros2Stats> {
+    pub(crate) fn ros2(&self) -> Option<&crate::http::ros2_stats::Ros2Stats> {
         self.options().ros2.as_deref()
     }
 

@@ -24,30 +24,13 @@ pub mod keys;
 #[cfg(feature = "ros2")]
 mod bridge;
 
-use std::sync::atomic::AtomicU64;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
-use serde::Serialize;
 use thiserror::Error;
 
 pub use config::{Ros2Config, Ros2Mode};
 
-/// What the bridge did, for `GET /api/v1/ros2`.
-#[derive(Debug, Default, Serialize)]
-pub struct Ros2Stats {
-    pub joint_states: AtomicU64,
-    pub diagnostics: AtomicU64,
-    pub commands_applied: AtomicU64,
-    /// Commands refused whole (unknown joint, out of limits, NaN, ...).
-    pub commands_dropped: AtomicU64,
-    /// Why the latest one was.
-    pub last_dropped: Mutex<Option<String>>,
-    /// Times the command stream stopped and `[watchdog]` acted.
-    pub watchdog_fired: AtomicU64,
-    /// Frames the bridge fell too far behind to see.
-    pub frames_lost: AtomicU64,
-    pub publish_errors: AtomicU64,
-}
+pub use crate::http::ros2_stats::Ros2Stats;
 
 #[derive(Debug, Error)]
 pub enum Ros2Error {

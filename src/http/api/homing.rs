@@ -11,7 +11,8 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::openapi::{ErrorResponses, TAG_CONTROL};
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiJson, ApiPath};
-use crate::http::homing::{self, HomingRequest, HomingView};
+use crate::http::homing::{self, HomingRequest};
+use crate::http::homing_book::HomingView;
 use crate::http::state::AppState;
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {

@@ -12,7 +12,8 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::openapi::{ErrorResponses, TAG_CONTROL};
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiJson, ApiPath};
-use crate::http::recordings::{self, RecordingRequest, RecordingView};
+use crate::http::recording_book::RecordingView;
+use crate::http::recordings::{self, RecordingRequest};
 use crate::http::state::AppState;
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {

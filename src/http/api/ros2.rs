@@ -58,12 +58,12 @@ pub(crate) struct Ros2View {
     responses((status = 200, description = "The bridge's counters", body = Ros2View), ErrorResponses))]
 async fn ros2_status(State(state): State<AppState>) -> ApiResult<Json<Ros2View>> {
     let stats = state.ros2();
-    let n = |f: fn(&crate::ros2::Ros2Stats) -> &std::sync::atomic::AtomicU64| {
+    let n = |f: fn(&crate::http::ros2_stats::Ros2Stats) -> &std::sync::atomic::AtomicU64| {
         stats.map_or(0, |s| f(s).load(Ordering::Relaxed))
     };
     Ok(Json(Ros2View {
         enabled: stats.is_some(),
-        built: crate::ros2::BUILT,
+        built: cfg!(feature = "ros2"),
         joint_states: n(|s| &s.joint_states),
         diagnostics: n(|s| &s.diagnostics),
         commands_applied: n(|s| &s.commands_applied),
