@@ -60,3 +60,37 @@ pub struct WatchdogEvent {
     pub why: &'static str,
     pub joints: Vec<JointRef>,
 }
+
+/// What the watchdog does to joints `ids` of `bus` whose stream stopped
+/// (WebSocket clients and the ROS 2 bridge alike): hold each where it is
+/// measured (its speed limit kept), or disable them.
+pub(crate) async fn apply_policy(
+    bus: &crate::bus::BusHandle,
+    ids: Vec<u8>,
+    policy: WatchdogPolicy,
+) {
+    match policy {
+        WatchdogPolicy::Disable => {
+            if let Err(e) = bus.disable(crate::bus::Targets::Ids(ids)).await {
+                tracing::error!(bus = bus.name(), error = %e, "watchdog could not disable joints");
+            }
+        }
+        WatchdogPolicy::Hold => {
+            let snap = bus.snapshot();
+            let holds: Vec<(u8, crate::bus::Setpoint)> = ids
+                .iter()
+                .filter_map(|id| snap.devices.get(id))
+                .filter_map(|d| {
+                    Some((
+                        d.dev_id,
+                        crate::bus::Setpoint {
+                            pos_ref: crate::http::telemetry::measured_angle_raw(d)?,
+                            spd_ref: d.target_sent?.spd_ref,
+                        },
+                    ))
+                })
+                .collect();
+            bus.set_targets(&holds);
+        }
+    }
+}

@@ -16,7 +16,7 @@ use super::commands;
 use super::config::{Ros2Config, Ros2Mode};
 use super::keys::{self, Kind, NodeIdentity};
 use super::Ros2Stats;
-use crate::bus::{BusHandle, Setpoint};
+use crate::bus::BusHandle;
 use crate::http::state::AppState;
 use crate::http::teleop::WatchdogPolicy;
 use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
@@ -91,59 +91,22 @@ pub(super) async fn start(
     };
     for bus in state.buses().cloned().collect::<Vec<_>>() {
         let ns = cfg.namespace(bus.name());
-        // joint_states
         let topic = keys::qualified(&ns, "joint_states");
-        let id = next_entity();
-        let key = keys::topic_key(
-            node.domain,
-            &topic,
-            keys::JOINT_STATE_TYPE,
-            keys::JOINT_STATE_HASH,
-        );
+        let (id, key) = (next_entity(), joint_state_key(&node, &topic));
         let publisher = session.declare_publisher(key.clone()).await?;
-        tokens.push(
-            session
-                .liveliness()
-                .declare_token(node.endpoint_token(
-                    id,
-                    Kind::Publisher,
-                    &topic,
-                    keys::JOINT_STATE_TYPE,
-                    keys::JOINT_STATE_HASH,
-                ))
-                .await?,
-        );
-        let gid = keys::gid(&session_gid, id);
+        tokens.push(announce(&session, &node, id, Kind::Publisher, &topic, JOINT_STATE).await?);
         tracing::info!(bus = bus.name(), %key, "ROS 2: publishing joint states");
         tasks.push(tokio::spawn(publish_joint_states(
             state.clone(),
             bus.clone(),
             publisher,
-            gid,
+            keys::gid(&session_gid, id),
             stats.clone(),
         )));
-        // joint_commands
         let topic = keys::qualified(&ns, "joint_commands");
-        let id = next_entity();
-        let key = keys::topic_key(
-            node.domain,
-            &topic,
-            keys::JOINT_STATE_TYPE,
-            keys::JOINT_STATE_HASH,
-        );
+        let (id, key) = (next_entity(), joint_state_key(&node, &topic));
         let subscriber = session.declare_subscriber(key.clone()).await?;
-        tokens.push(
-            session
-                .liveliness()
-                .declare_token(node.endpoint_token(
-                    id,
-                    Kind::Subscription,
-                    &topic,
-                    keys::JOINT_STATE_TYPE,
-                    keys::JOINT_STATE_HASH,
-                ))
-                .await?,
-        );
+        tokens.push(announce(&session, &node, id, Kind::Subscription, &topic, JOINT_STATE).await?);
         tracing::info!(bus = bus.name(), %key, "ROS 2: taking joint commands");
         tasks.push(tokio::spawn(take_commands(
             state.clone(),
@@ -154,24 +117,18 @@ pub(super) async fn start(
     }
     let topic = "/diagnostics";
     let id = next_entity();
-    let key = keys::topic_key(
-        node.domain,
-        topic,
-        keys::DIAGNOSTIC_ARRAY_TYPE,
-        keys::DIAGNOSTIC_ARRAY_HASH,
-    );
+    let key = keys::topic_key(node.domain, topic, DIAGNOSTIC_ARRAY.0, DIAGNOSTIC_ARRAY.1);
     let publisher = session.declare_publisher(key).await?;
     tokens.push(
-        session
-            .liveliness()
-            .declare_token(node.endpoint_token(
-                id,
-                Kind::Publisher,
-                topic,
-                keys::DIAGNOSTIC_ARRAY_TYPE,
-                keys::DIAGNOSTIC_ARRAY_HASH,
-            ))
-            .await?,
+        announce(
+            &session,
+            &node,
+            id,
+            Kind::Publisher,
+            topic,
+            DIAGNOSTIC_ARRAY,
+        )
+        .await?,
     );
     let period = Duration::from_secs_f64(1.0 / cfg.diagnostics_hz);
     tasks.push(tokio::spawn(publish_diagnostics(
@@ -188,6 +145,30 @@ pub(super) async fn start(
         _tokens: tokens,
         tasks,
     })
+}
+
+/// A message type on the network: its DDS name and its type hash.
+type RosType = (&'static str, &'static str);
+const JOINT_STATE: RosType = (keys::JOINT_STATE_TYPE, keys::JOINT_STATE_HASH);
+const DIAGNOSTIC_ARRAY: RosType = (keys::DIAGNOSTIC_ARRAY_TYPE, keys::DIAGNOSTIC_ARRAY_HASH);
+
+fn joint_state_key(node: &NodeIdentity, topic: &str) -> String {
+    keys::topic_key(node.domain, topic, JOINT_STATE.0, JOINT_STATE.1)
+}
+
+/// The liveliness token that tells the ROS graph an endpoint exists.
+async fn announce(
+    session: &zenoh::Session,
+    node: &NodeIdentity,
+    id: u32,
+    kind: Kind,
+    topic: &str,
+    (type_name, hash): RosType,
+) -> zenoh::Result<LivelinessToken> {
+    session
+        .liveliness()
+        .declare_token(node.endpoint_token(id, kind, topic, type_name, hash))
+        .await
 }
 
 fn now_ns() -> i64 {
@@ -301,30 +282,7 @@ async fn fire_watchdog(bus: &BusHandle, ids: &[u8], policy: WatchdogPolicy) {
         ?policy,
         "ROS 2: joint commands stopped: watchdog"
     );
-    match policy {
-        WatchdogPolicy::Disable => {
-            if let Err(e) = bus.disable(crate::bus::Targets::Ids(ids.to_vec())).await {
-                tracing::error!(bus = bus.name(), error = %e, "ROS 2 watchdog could not disable joints");
-            }
-        }
-        WatchdogPolicy::Hold => {
-            let snap = bus.snapshot();
-            let holds: Vec<(u8, Setpoint)> = ids
-                .iter()
-                .filter_map(|id| snap.devices.get(id))
-                .filter_map(|d| {
-                    Some((
-                        d.dev_id,
-                        Setpoint {
-                            pos_ref: crate::http::telemetry::measured_angle_raw(d)?,
-                            spd_ref: d.target_sent?.spd_ref,
-                        },
-                    ))
-                })
-                .collect();
-            bus.set_targets(&holds);
-        }
-    }
+    crate::http::teleop::apply_policy(bus, ids.to_vec(), policy).await;
 }
 
 async fn publish_diagnostics(

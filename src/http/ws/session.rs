@@ -18,11 +18,9 @@ use super::setpoints::{self, WsError, MAX_BATCH};
 use super::telemetry::Subscription;
 use super::watchdog::Watchdog;
 use super::writer::{PendingAck, Writer};
-use crate::bus::{Setpoint, Targets};
 use crate::http::hub::WsHub;
 use crate::http::state::device_id;
 use crate::http::state::AppState;
-use crate::http::telemetry::measured_angle_raw;
 use crate::http::teleop::{JointRef, WatchdogEvent, WatchdogPolicy, MAX_HOLD, MIN_HOLD};
 
 /// Replies (acks, errors) a connection may have queued; beyond, they are dropped and counted.
@@ -290,30 +288,7 @@ async fn apply_policy(state: &AppState, policy: WatchdogPolicy, joints: &[JointR
         if ids.is_empty() {
             continue;
         }
-        match policy {
-            WatchdogPolicy::Disable => {
-                if let Err(e) = bus.disable(Targets::Ids(ids)).await {
-                    tracing::error!(bus = bus.name(), error = %e, "watchdog could not disable joints");
-                }
-            }
-            WatchdogPolicy::Hold => {
-                let snap = bus.snapshot();
-                let holds: Vec<(u8, Setpoint)> = ids
-                    .iter()
-                    .filter_map(|id| snap.devices.get(id))
-                    .filter_map(|d| {
-                        Some((
-                            d.dev_id,
-                            Setpoint {
-                                pos_ref: measured_angle_raw(d)?,
-                                spd_ref: d.target_sent?.spd_ref,
-                            },
-                        ))
-                    })
-                    .collect();
-                bus.set_targets(&holds);
-            }
-        }
+        crate::http::teleop::apply_policy(bus, ids, policy).await;
     }
 }
 
