@@ -346,6 +346,19 @@ pub enum BusEvent {
         move_id: u64,
         reason: String,
     },
+    /// A parameter written to a device and confirmed (a RES reply or the
+    /// INFO block read back): RAM writes, flash writes, mode switches.
+    ConfigWritten {
+        bus: String,
+        dev_id: u8,
+        index: u8,
+        /// The vendor's name (`MAX_CUR`, `CTRL_MODE_SW`, ...).
+        name: &'static str,
+        /// The raw value written.
+        value: u16,
+        /// `res` or `read_back`.
+        verified_by: &'static str,
+    },
     /// A device reset (power cut, reboot): it is disabled, forgot its mode
     /// and target; the daemon forgot its targets too.
     DeviceReset {

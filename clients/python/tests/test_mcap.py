@@ -50,6 +50,7 @@ def test_a_recording_of_a_moving_joint_reads_back(daemon, tmp_path):
     reading = threading.Thread(target=read_rates)
     reading.start()
     time.sleep(1.5)
+    call(api, "PATCH", "/buses/sim0/devices/3/config", {"pos_kp": 1.25})
     call(api, "POST", "/moves", {"joints": [{"bus": "sim0", "id": 1, "position_deg": 30}],
                                   "duration_ms": 1500, "method": "min_jerk"})
     stdout, stderr = rec.communicate(timeout=SECONDS + 30)
@@ -83,6 +84,13 @@ def test_a_recording_of_a_moving_joint_reads_back(daemon, tmp_path):
     assert min(angles) < 1.0 and max(angles) > 29.0, (min(angles), max(angles))
     assert abs(angles[-1] - final["motion"]["angle_deg"]) < 0.2, (angles[-1], final["motion"])
     assert max(d.velocity[0] for _, d in states) > math.radians(10), "it was seen moving"
+
+    # Device events: the config write made while recording is one.
+    with open(out, "rb") as f:
+        events = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(topics=["/jointd/sim0/events"])]
+    written = [e for e in events if e["event"] == "config_written"]
+    assert any(e["dev_id"] == 3 and e["name"] == "SET_POS_KP" for e in written), events
+    assert any(e["event"] == "move_started" for e in events), events
 
     frames = subprocess.run([BIN, "frame", "decode", "--mcap", str(out)], capture_output=True,
                             text=True, timeout=60, check=True).stdout.splitlines()

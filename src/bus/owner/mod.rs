@@ -222,14 +222,26 @@ fn run_request(ctx: &mut Ctx, req: Request) {
             dev_id,
             param,
             reply,
-        } => answer(reply, write::write_config(ctx, dev_id, param), ctx),
+        } => {
+            let result = write::write_config(ctx, dev_id, param);
+            note_written(ctx, result.as_ref().ok());
+            answer(reply, result, ctx)
+        }
         Request::WriteAll { ids, param, reply } => {
-            answer(reply, write_all::write_all(ctx, ids, param), ctx)
+            let result = write_all::write_all(ctx, ids, param);
+            if let Ok(all) = &result {
+                for (_, outcome) in &all.per_device {
+                    note_written(ctx, outcome.as_ref().ok());
+                }
+            }
+            answer(reply, result, ctx)
         }
         Request::WriteFlash { dev_id, reply } => {
             let key = crate::protocol::command::WRITE_FLASH_KEY;
             let param = ConfigParam::WriteFlash { key };
-            answer(reply, write::write_config(ctx, dev_id, param), ctx)
+            let result = write::write_config(ctx, dev_id, param);
+            note_written(ctx, result.as_ref().ok());
+            answer(reply, result, ctx)
         }
         Request::SetId {
             dev_id,
@@ -239,6 +251,20 @@ fn run_request(ctx: &mut Ctx, req: Request) {
         Request::SetBaud { baud, reply } => answer(reply, baud::set_baud(ctx, baud), ctx),
         Request::Scan { first, last, reply } => answer(reply, scan::scan(ctx, first, last), ctx),
     }
+}
+
+/// Tells subscribers (and recordings) of a confirmed config write.
+fn note_written(ctx: &mut Ctx, outcome: Option<&crate::bus::handle::WriteOutcome>) {
+    let Some(o) = outcome else { return };
+    let name = crate::protocol::params::by_index(o.index).map_or("unknown", |r| r.name);
+    ctx.push_event(crate::bus::state::BusEvent::ConfigWritten {
+        bus: ctx.cfg().name.clone(),
+        dev_id: o.dev_id,
+        index: o.index,
+        name,
+        value: o.value,
+        verified_by: o.verified_by,
+    });
 }
 
 /// Publishes what the request changed, then answers: a caller that reads
