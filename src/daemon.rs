@@ -296,7 +296,8 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
         ),
         None => {}
     }
-    let ros2 = ros2_config(file.ros2, args, &bus_names)?;
+    let hand_names: Vec<String> = poses.hands().iter().map(|h| h.name.clone()).collect();
+    let ros2 = ros2_config(file.ros2, args, &bus_names, &hand_names)?;
     let options = StateOptions {
         ros2: ros2
             .as_ref()
@@ -324,6 +325,7 @@ fn ros2_config(
     mut cfg: crate::ros2::Ros2Config,
     args: &RunArgs,
     buses: &[String],
+    hands: &[String],
 ) -> Result<Option<crate::ros2::Ros2Config>, DaemonError> {
     cfg.enabled |= args.ros2;
     if !args.ros2_connect.is_empty() {
@@ -338,7 +340,7 @@ fn ros2_config(
             crate::ros2::Ros2Error::NotBuilt.to_string(),
         ));
     }
-    cfg.checked(buses)
+    cfg.checked(buses, hands)
         .map(Some)
         .map_err(|e| DaemonError::Policy(e.to_string()))
 }

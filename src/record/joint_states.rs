@@ -8,9 +8,9 @@
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::{SystemTime, UNIX_EPOCH};
 
-use crate::bus::handle::LoggedFrame;
+use crate::bus::handle::{DeviceState, LoggedFrame};
 use crate::bus::BusSnapshot;
 use crate::hands::Calibration;
 use crate::protocol::{units, Frame, Message, ReplyBody};
@@ -32,33 +32,57 @@ struct Heard {
     fresh: bool,
 }
 
-/// Builds one bus's messages.
-pub struct JointStates {
-    bus: String,
-    labeler: Labeler,
-    heard: BTreeMap<u8, Heard>,
+/// Whose joints a message carries.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Scope {
+    /// Every online joint of one bus, by id.
+    Bus(String),
+    /// A named hand's joints (bus, id), in its order, possibly on several buses.
+    Hand {
+        name: String,
+        joints: Vec<(String, u8)>,
+    },
 }
 
-/// Names the bus; the labeler is a closure.
+/// Builds the messages of one bus or one hand.
+pub struct JointStates {
+    scope: Scope,
+    labeler: Labeler,
+    heard: BTreeMap<(String, u8), Heard>,
+}
+
+/// Names the scope; the labeler is a closure.
 impl std::fmt::Debug for JointStates {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("JointStates")
-            .field("bus", &self.bus)
+            .field("scope", &self.scope)
             .finish_non_exhaustive()
     }
 }
 
 impl JointStates {
+    /// Every joint of `bus`.
     pub fn new(bus: &str, labeler: Labeler) -> Self {
+        Self::of(Scope::Bus(bus.to_owned()), labeler)
+    }
+
+    pub fn of(scope: Scope, labeler: Labeler) -> Self {
         Self {
-            bus: bus.to_owned(),
+            scope,
             labeler,
             heard: BTreeMap::new(),
         }
     }
 
-    /// Takes in a frame of the bus: a status reply updates its joint.
-    pub fn on_frame(&mut self, f: &LoggedFrame) {
+    fn wants(&self, bus: &str, id: u8) -> bool {
+        match &self.scope {
+            Scope::Bus(b) => b == bus,
+            Scope::Hand { joints, .. } => joints.iter().any(|(b, i)| b == bus && *i == id),
+        }
+    }
+
+    /// Takes in a frame of `bus`: a status reply updates its joint.
+    pub fn on_frame(&mut self, bus: &str, f: &LoggedFrame) {
         if f.tx {
             return;
         }
@@ -67,7 +91,13 @@ impl JointStates {
         else {
             return;
         };
-        let h = self.heard.entry(reply.dev_id).or_default();
+        if !self.wants(bus, reply.dev_id) {
+            return;
+        }
+        let h = self
+            .heard
+            .entry((bus.to_owned(), reply.dev_id))
+            .or_default();
         match reply.body() {
             ReplyBody::Info01(i) => h.angle = i.angle,
             ReplyBody::Info02(i) => {
@@ -81,24 +111,59 @@ impl JointStates {
         h.fresh = true;
     }
 
-    /// A message when every online joint has answered since the last one;
-    /// `None` until then.
-    pub fn next(&mut self, snap: &BusSnapshot) -> Option<JointState> {
-        let online: Vec<_> = snap.devices.values().filter(|d| d.online).collect();
-        let fresh = |id: u8| self.heard.get(&id).is_some_and(|h| h.fresh);
-        if online.is_empty() || !online.iter().all(|d| fresh(d.dev_id)) {
+    /// The joints of the scope online now, in message order, with their
+    /// state (`snapshots`: the latest of each bus concerned).
+    fn online<'a>(&self, snapshots: &'a [&'a BusSnapshot]) -> Vec<(&'a str, &'a DeviceState)> {
+        let find = |bus: &str| snapshots.iter().find(|s| s.name == bus);
+        match &self.scope {
+            Scope::Bus(bus) => find(bus)
+                .map(|s| {
+                    s.devices
+                        .values()
+                        .filter(|d| d.online)
+                        .map(|d| (s.name.as_str(), d))
+                        .collect()
+                })
+                .unwrap_or_default(),
+            Scope::Hand { joints, .. } => joints
+                .iter()
+                .filter_map(|(bus, id)| {
+                    let s = find(bus)?;
+                    s.devices
+                        .get(id)
+                        .filter(|d| d.online)
+                        .map(|d| (s.name.as_str(), d))
+                })
+                .collect(),
+        }
+    }
+
+    /// A message when every online joint of the scope has answered since
+    /// the last one; `None` until then.
+    pub fn next(&mut self, snapshots: &[&BusSnapshot]) -> Option<JointState> {
+        let online = self.online(snapshots);
+        let fresh = |bus: &str, id: u8| {
+            self.heard
+                .get(&(bus.to_owned(), id))
+                .is_some_and(|h| h.fresh)
+        };
+        if online.is_empty() || !online.iter().all(|(b, d)| fresh(b, d.dev_id)) {
             return None;
         }
+        let frame_id = match &self.scope {
+            Scope::Bus(bus) => bus.clone(),
+            Scope::Hand { name, .. } => name.clone(),
+        };
         let mut msg = JointState {
-            frame_id: self.bus.clone(),
+            frame_id,
             ..JointState::default()
         };
         let mut newest: Option<SystemTime> = None;
-        for dev in online {
-            let Some(h) = self.heard.get_mut(&dev.dev_id) else {
+        for (bus, dev) in online {
+            let Some(h) = self.heard.get_mut(&(bus.to_owned(), dev.dev_id)) else {
                 continue;
             };
-            let (name, cal) = (self.labeler)(&self.bus, dev.dev_id);
+            let (name, cal) = (self.labeler)(bus, dev.dev_id);
             let rpm = units::speed_rpm(h.speed, dev.firmware_version());
             msg.name.push(name);
             msg.position
@@ -112,19 +177,6 @@ impl JointStates {
         msg.stamp_ns = newest.map_or(0, system_ns);
         Some(msg)
     }
-}
-
-/// An `Instant` of this process as Unix time, ns.
-pub fn unix_ns(at: Instant) -> u64 {
-    let now = Instant::now();
-    let wall = SystemTime::now();
-    let then = if at <= now {
-        wall.checked_sub(now - at)
-    } else {
-        wall.checked_add(at - now)
-    };
-    then.and_then(|t| t.duration_since(UNIX_EPOCH).ok())
-        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
 }
 
 /// A wall-clock time as Unix ns.
@@ -187,31 +239,31 @@ mod tests {
                 angle: units::angle_to_raw(angle_deg).unwrap(),
             })
         };
-        js.on_frame(&heard(info2(45.0, 1000), 1, 1000));
-        assert_eq!(js.next(&snap), None, "joint 2 has not answered yet");
-        js.on_frame(&heard(info2(40.0, 1000), 2, 1002));
-        let msg = js.next(&snap).expect("a round");
+        js.on_frame("l", &heard(info2(45.0, 1000), 1, 1000));
+        assert_eq!(js.next(&[&snap]), None, "joint 2 has not answered yet");
+        js.on_frame("l", &heard(info2(40.0, 1000), 2, 1002));
+        let msg = js.next(&[&snap]).expect("a round");
         assert_eq!(msg.name, ["l_1", "l_2"]);
         assert!((msg.position[0] - 45f64.to_radians()).abs() < 1e-12);
         // Flipped about 10 degrees: device 40 reads -30.
         assert!((msg.position[1] - (-30f64).to_radians()).abs() < 1e-12);
         assert!(msg.effort[0] > 0.0 && (msg.effort[0] + msg.effort[1]).abs() < 1e-12);
         assert_eq!(msg.stamp_ns, 1_002_000_000, "the newest reply's wire time");
-        assert_eq!(js.next(&snap), None, "one message per round");
+        assert_eq!(js.next(&[&snap]), None, "one message per round");
         // An INFO_01 counts as an answer and moves the angle.
         let info1 = ReplyBody::Info01(Info01 {
             angle: units::angle_to_raw(50.0).unwrap(),
             ..Info01::default()
         });
-        js.on_frame(&heard(info1, 1, 1010));
-        js.on_frame(&heard(info2(40.0, 0), 2, 1011));
-        let next = js.next(&snap).expect("the second round");
+        js.on_frame("l", &heard(info1, 1, 1010));
+        js.on_frame("l", &heard(info2(40.0, 0), 2, 1011));
+        let next = js.next(&[&snap]).expect("the second round");
         assert!((next.position[0] - 50f64.to_radians()).abs() < 1e-12);
         // A host frame is not an answer.
         let mut tx = heard(info2(0.0, 0), 1, 1020);
         tx.tx = true;
-        js.on_frame(&tx);
-        js.on_frame(&heard(info2(40.0, 0), 2, 1021));
-        assert_eq!(js.next(&snap), None);
+        js.on_frame("l", &tx);
+        js.on_frame("l", &heard(info2(40.0, 0), 2, 1021));
+        assert_eq!(js.next(&[&snap]), None);
     }
 }

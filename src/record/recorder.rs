@@ -223,8 +223,8 @@ fn drain_bus(
                 let ns = system_ns(f.at);
                 let msg = json!({"dir": if f.tx { "tx" } else { "rx" }, "wire_time_ns": ns, "hex": hex(&f.bytes)});
                 file.write(&bus, Topic::Frames, ns, msg.to_string().as_bytes())?;
-                b.joint_states.on_frame(&f);
-                if let Some(state) = b.joint_states.next(&snap) {
+                b.joint_states.on_frame(&bus, &f);
+                if let Some(state) = b.joint_states.next(&[&snap]) {
                     file.write(&bus, Topic::JointStates, state.stamp_ns, &state.to_cdr())?;
                 }
             }

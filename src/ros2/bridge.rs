@@ -9,19 +9,22 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
-use tokio::sync::broadcast;
+use futures_util::StreamExt;
+use tokio_stream::wrappers::errors::BroadcastStreamRecvError;
+use tokio_stream::wrappers::BroadcastStream;
 use zenoh::liveliness::LivelinessToken;
 
 use super::commands;
-use super::config::{Ros2Config, Ros2Mode};
+use super::config::{NamespaceBy, Ros2Config, Ros2Mode};
 use super::keys::{self, Kind, NodeIdentity};
 use super::Ros2Stats;
 use crate::bus::BusHandle;
+use crate::bus::BusSnapshot;
 use crate::http::state::AppState;
 use crate::http::teleop::WatchdogPolicy;
 use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
 use crate::record::cdr::{diagnostic_array_cdr, DiagnosticStatus, JointState};
-use crate::record::joint_states::{system_ns, JointStates};
+use crate::record::joint_states::{system_ns, JointStates, Scope};
 
 /// What keeps the bridge alive: dropping it undeclares everything.
 pub struct Bridge {
@@ -89,16 +92,16 @@ pub(super) async fn start(
         entity_id += 1;
         entity_id
     };
-    for bus in state.buses().cloned().collect::<Vec<_>>() {
-        let ns = cfg.namespace(bus.name());
+    for (name, scope) in scopes(&state, &cfg) {
+        let ns = cfg.namespace(&name);
         let topic = keys::qualified(&ns, "joint_states");
         let (id, key) = (next_entity(), joint_state_key(&node, &topic));
         let publisher = session.declare_publisher(key.clone()).await?;
         tokens.push(announce(&session, &node, id, Kind::Publisher, &topic, JOINT_STATE).await?);
-        tracing::info!(bus = bus.name(), %key, "ROS 2: publishing joint states");
+        tracing::info!(%name, %key, "ROS 2: publishing joint states");
         tasks.push(tokio::spawn(publish_joint_states(
             state.clone(),
-            bus.clone(),
+            scope.clone(),
             publisher,
             keys::gid(&session_gid, id),
             stats.clone(),
@@ -107,10 +110,10 @@ pub(super) async fn start(
         let (id, key) = (next_entity(), joint_state_key(&node, &topic));
         let subscriber = session.declare_subscriber(key.clone()).await?;
         tokens.push(announce(&session, &node, id, Kind::Subscription, &topic, JOINT_STATE).await?);
-        tracing::info!(bus = bus.name(), %key, "ROS 2: taking joint commands");
+        tracing::info!(%name, %key, "ROS 2: taking joint commands");
         tasks.push(tokio::spawn(take_commands(
             state.clone(),
-            bus,
+            scope,
             subscriber,
             stats.clone(),
         )));
@@ -175,29 +178,75 @@ fn now_ns() -> i64 {
     i64::try_from(system_ns(SystemTime::now())).unwrap_or(i64::MAX)
 }
 
+/// What gets topics of its own: every bus, or every named hand.
+fn scopes(state: &AppState, cfg: &Ros2Config) -> Vec<(String, Scope)> {
+    match cfg.namespace_by {
+        NamespaceBy::Bus => state
+            .buses()
+            .map(|b| (b.name().to_owned(), Scope::Bus(b.name().to_owned())))
+            .collect(),
+        NamespaceBy::Hand => state
+            .hands()
+            .map(|store| {
+                store
+                    .hands()
+                    .iter()
+                    .map(|h| {
+                        let joints = h.joints.iter().map(|j| (j.bus.clone(), j.id)).collect();
+                        let scope = Scope::Hand {
+                            name: h.name.clone(),
+                            joints,
+                        };
+                        (h.name.clone(), scope)
+                    })
+                    .collect()
+            })
+            .unwrap_or_default(),
+    }
+}
+
+/// The buses a scope's joints are on.
+fn buses_of(state: &AppState, scope: &Scope) -> Vec<BusHandle> {
+    let mut names: Vec<&str> = match scope {
+        Scope::Bus(b) => vec![b.as_str()],
+        Scope::Hand { joints, .. } => joints.iter().map(|(b, _)| b.as_str()).collect(),
+    };
+    names.dedup();
+    names
+        .into_iter()
+        .filter_map(|n| state.bus(n).ok().cloned())
+        .collect()
+}
+
 async fn publish_joint_states(
     state: AppState,
-    bus: BusHandle,
+    scope: Scope,
     publisher: zenoh::pubsub::Publisher<'static>,
     gid: [u8; 16],
     stats: Arc<Ros2Stats>,
 ) {
-    let mut frames = bus.shared().frame_tap.subscribe();
-    let mut snapshots = bus.watch();
-    let mut states = JointStates::new(bus.name(), state.joint_labeler());
+    let buses = buses_of(&state, &scope);
+    // Every bus's frames in one stream, each with its bus's name.
+    let mut frames = futures_util::stream::select_all(buses.iter().map(|b| {
+        let name = b.name().to_owned();
+        BroadcastStream::new(b.shared().frame_tap.subscribe())
+            .map(move |f| (name.clone(), f))
+            .boxed()
+    }));
+    let mut states = JointStates::of(scope, state.joint_labeler());
     let mut sequence = 0i64;
-    loop {
-        let frame = match frames.recv().await {
+    while let Some((bus, frame)) = frames.next().await {
+        let frame = match frame {
             Ok(f) => f,
-            Err(broadcast::error::RecvError::Lagged(n)) => {
+            Err(BroadcastStreamRecvError::Lagged(n)) => {
                 stats.frames_lost.fetch_add(n, Ordering::Relaxed);
                 continue;
             }
-            Err(broadcast::error::RecvError::Closed) => return,
         };
-        states.on_frame(&frame);
-        let snap = snapshots.borrow_and_update().clone();
-        let Some(msg) = states.next(&snap) else {
+        states.on_frame(&bus, &frame);
+        let snaps: Vec<Arc<BusSnapshot>> = buses.iter().map(BusHandle::snapshot).collect();
+        let views: Vec<&BusSnapshot> = snaps.iter().map(Arc::as_ref).collect();
+        let Some(msg) = states.next(&views) else {
             continue;
         };
         sequence += 1;
@@ -208,7 +257,7 @@ async fn publish_joint_states(
             }
             Err(e) => {
                 if stats.publish_errors.fetch_add(1, Ordering::Relaxed) == 0 {
-                    tracing::warn!(bus = bus.name(), error = %e, "ROS 2: a joint state could not be published (said once)");
+                    tracing::warn!(%bus, error = %e, "ROS 2: a joint state could not be published (said once)");
                 }
             }
         }
@@ -218,7 +267,7 @@ async fn publish_joint_states(
 /// Commands in; the teleoperation watchdog of `[watchdog]` over them.
 async fn take_commands(
     state: AppState,
-    bus: BusHandle,
+    scope: Scope,
     subscriber: zenoh::pubsub::Subscriber<
         zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>,
     >,
@@ -226,7 +275,7 @@ async fn take_commands(
 ) {
     let watchdog = state.watchdog_default();
     let hold = Duration::from_millis(watchdog.hold_timeout_ms);
-    let mut commanded: Vec<u8> = Vec::new();
+    let mut commanded: Vec<(BusHandle, Vec<u8>)> = Vec::new();
     let mut deadline: Option<Instant> = None;
     let mut said_bad = false;
     loop {
@@ -234,7 +283,9 @@ async fn take_commands(
             Some(d) => match tokio::time::timeout_at(d.into(), subscriber.recv_async()).await {
                 Ok(s) => s,
                 Err(_) => {
-                    fire_watchdog(&bus, &commanded, watchdog.policy).await;
+                    for (bus, ids) in &commanded {
+                        fire_watchdog(bus, ids, watchdog.policy).await;
+                    }
                     stats.watchdog_fired.fetch_add(1, Ordering::Relaxed);
                     deadline = None;
                     commanded.clear();
@@ -247,16 +298,25 @@ async fn take_commands(
         let bytes = sample.payload().to_bytes();
         let outcome = JointState::from_cdr(&bytes)
             .map_err(|e| format!("not a sensor_msgs/msg/JointState in CDR: {e}"))
-            .and_then(|cmd| commands::setpoints(&state, &bus, &cmd));
+            .and_then(|cmd| commands::setpoints(&state, &scope, &cmd));
         match outcome {
-            Ok(targets) => {
-                bus.set_targets(&targets);
-                stats.commands_applied.fetch_add(1, Ordering::Relaxed);
-                for (id, _) in &targets {
-                    if !commanded.contains(id) {
-                        commanded.push(*id);
+            Ok(per_bus) => {
+                for (bus, targets) in per_bus {
+                    bus.set_targets(&targets);
+                    let k = match commanded.iter().position(|(b, _)| b.name() == bus.name()) {
+                        Some(k) => k,
+                        None => {
+                            commanded.push((bus.clone(), Vec::new()));
+                            commanded.len() - 1
+                        }
+                    };
+                    for (id, _) in &targets {
+                        if !commanded[k].1.contains(id) {
+                            commanded[k].1.push(*id);
+                        }
                     }
                 }
+                stats.commands_applied.fetch_add(1, Ordering::Relaxed);
                 if !hold.is_zero() {
                     deadline = Some(Instant::now() + hold);
                 }
@@ -265,7 +325,7 @@ async fn take_commands(
                 stats.commands_dropped.fetch_add(1, Ordering::Relaxed);
                 if !said_bad {
                     said_bad = true;
-                    tracing::warn!(bus = bus.name(), "ROS 2: a joint command was dropped whole: {why} (said once; counted in GET /api/v1/ros2)");
+                    tracing::warn!(?scope, "ROS 2: a joint command was dropped whole: {why} (said once; counted in GET /api/v1/ros2)");
                 }
                 *stats.last_dropped.lock().unwrap_or_else(|p| p.into_inner()) = Some(why);
             }

@@ -11,16 +11,21 @@ use crate::http::targets::{setpoint, TargetRequest};
 use crate::http::telemetry::is_enabled;
 use crate::protocol::units;
 use crate::record::cdr::JointState;
+use crate::record::joint_states::Scope;
 
 /// Below this, a velocity is no speed limit (a controller at rest sends 0).
 const MIN_SPEED_DPS: f64 = 0.5;
 
-/// The setpoints `cmd` asks of `bus`, or why it is refused.
+/// Targets for joints of one bus.
+pub(crate) type BusTargets = (BusHandle, Vec<(u8, Setpoint)>);
+
+/// The setpoints `cmd` asks of the joints of `scope` (a bus, or a hand on
+/// one or more buses), grouped by bus; or why it is refused.
 pub(crate) fn setpoints(
     state: &AppState,
-    bus: &BusHandle,
+    scope: &Scope,
     cmd: &JointState,
-) -> Result<Vec<(u8, Setpoint)>, String> {
+) -> Result<Vec<BusTargets>, String> {
     if cmd.name.is_empty() {
         return Err("no joint named".into());
     }
@@ -38,16 +43,42 @@ pub(crate) fn setpoints(
             cmd.velocity.len()
         ));
     }
-    let snap = bus.snapshot();
     let label = state.joint_labeler();
-    let mut out: Vec<(u8, Setpoint)> = Vec::with_capacity(cmd.name.len());
+    let candidates: Vec<(String, u8)> = match scope {
+        Scope::Bus(bus) => state
+            .bus(bus)
+            .map(|b| {
+                b.snapshot()
+                    .devices
+                    .keys()
+                    .map(|id| (bus.clone(), *id))
+                    .collect()
+            })
+            .unwrap_or_default(),
+        Scope::Hand { joints, .. } => joints.clone(),
+    };
+    let mut out: Vec<BusTargets> = Vec::new();
     for (i, name) in cmd.name.iter().enumerate() {
+        let (bus_name, id) = candidates
+            .iter()
+            .find(|(b, id)| label(b, *id).0 == *name)
+            .ok_or_else(|| format!("no joint named `{name}` here"))?;
+        let bus = state
+            .bus(bus_name)
+            .map_err(|_| format!("joint `{name}`: no bus `{bus_name}`"))?;
+        let snap = bus.snapshot();
         let dev = snap
             .devices
-            .values()
-            .find(|d| label(bus.name(), d.dev_id).0 == *name)
-            .ok_or_else(|| format!("no joint named `{name}` on bus `{}`", bus.name()))?;
-        if out.iter().any(|(id, _)| *id == dev.dev_id) {
+            .get(id)
+            .ok_or_else(|| format!("joint `{name}` has not been seen on bus `{bus_name}`"))?;
+        let group = match out.iter().position(|(b, _)| b.name() == bus_name) {
+            Some(k) => k,
+            None => {
+                out.push((bus.clone(), Vec::new()));
+                out.len() - 1
+            }
+        };
+        if out[group].1.iter().any(|(seen, _)| seen == id) {
             return Err(format!("joint `{name}` is named twice"));
         }
         if dev
@@ -68,11 +99,11 @@ pub(crate) fn setpoints(
                 .filter(|v| *v >= MIN_SPEED_DPS)
                 .map(|v| v / units::output_deg_per_s(1.0)),
         };
-        let cal = state.calibration(bus.name(), dev.dev_id);
-        let limits = state.limits(bus.name(), dev.dev_id);
+        let cal = state.calibration(bus_name, *id);
+        let limits = state.limits(bus_name, *id);
         let sp = setpoint(dev, &limits, &cal, &req, &format!("{name}."))
             .map_err(|e| format!("joint `{name}`: {}", e.problem.detail))?;
-        out.push((dev.dev_id, sp));
+        out[group].1.push((*id, sp));
     }
     Ok(out)
 }

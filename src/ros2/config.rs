@@ -21,6 +21,18 @@ pub enum Ros2Mode {
     Peer,
 }
 
+/// What a namespace groups.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NamespaceBy {
+    /// Every joint of a bus.
+    #[default]
+    Bus,
+    /// A named hand's joints, on one bus or several; joints in no hand
+    /// are not bridged.
+    Hand,
+}
+
 /// `[ros2]`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -37,8 +49,11 @@ pub struct Ros2Config {
     pub listen: Vec<String>,
     /// The ROS domain (default: `ROS_DOMAIN_ID`, else 0).
     pub domain_id: Option<u32>,
-    /// A namespace per bus (default: the bus's name): its topics are
+    /// Topics per bus (default) or per named hand (`[[hand]]`): each has
     /// `/<namespace>/joint_states` and `/<namespace>/joint_commands`.
+    #[serde(default)]
+    pub namespace_by: NamespaceBy,
+    /// bus (or hand) → namespace; default: its name.
     #[serde(default)]
     pub namespaces: BTreeMap<String, String>,
     /// How often `/diagnostics` is published, Hz (0 < r ≤ 50; default 1).
@@ -65,6 +80,7 @@ impl Default for Ros2Config {
             connect: Vec::new(),
             listen: Vec::new(),
             domain_id: None,
+            namespace_by: NamespaceBy::Bus,
             namespaces: BTreeMap::new(),
             diagnostics_hz: one_hz(),
             node_name: default_node(),
@@ -74,8 +90,8 @@ impl Default for Ros2Config {
 
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum Ros2ConfigError {
-    #[error("[ros2] namespaces: no bus named `{0}`")]
-    UnknownBus(String),
+    #[error("[ros2] namespaces: no {by} named `{name}`")]
+    UnknownName { by: &'static str, name: String },
     #[error("[ros2] `{name}` = `{value}`: {why}")]
     BadName {
         name: &'static str,
@@ -96,11 +112,18 @@ fn is_token(s: &str) -> bool {
 }
 
 impl Ros2Config {
-    /// Checks names and rates against the buses there are.
-    pub fn checked(self, buses: &[String]) -> Result<Self, Ros2ConfigError> {
-        for (bus, ns) in &self.namespaces {
-            if !buses.contains(bus) {
-                return Err(Ros2ConfigError::UnknownBus(bus.clone()));
+    /// Checks names and rates against the buses (or hands) there are.
+    pub fn checked(self, buses: &[String], hands: &[String]) -> Result<Self, Ros2ConfigError> {
+        let (by, known) = match self.namespace_by {
+            NamespaceBy::Bus => ("bus", buses),
+            NamespaceBy::Hand => ("hand", hands),
+        };
+        for (name, ns) in &self.namespaces {
+            if !known.contains(name) {
+                return Err(Ros2ConfigError::UnknownName {
+                    by,
+                    name: name.clone(),
+                });
             }
             let ok = ns.trim_matches('/').split('/').all(is_token);
             if !ok {
@@ -130,11 +153,11 @@ impl Ros2Config {
         Ok(self)
     }
 
-    /// The namespace of a bus, without slashes at either end.
-    pub fn namespace(&self, bus: &str) -> String {
+    /// The namespace of a bus (or hand), without slashes at either end.
+    pub fn namespace(&self, name: &str) -> String {
         self.namespaces
-            .get(bus)
-            .map_or(bus, String::as_str)
+            .get(name)
+            .map_or(name, String::as_str)
             .trim_matches('/')
             .to_owned()
     }
@@ -182,11 +205,26 @@ mod tests {
     #[test]
     fn bad_names_rates_and_buses_are_refused() {
         let buses = vec!["l".to_string()];
-        let bad = |text: &str| parse(text).unwrap().checked(&buses).unwrap_err();
+        let hands = vec!["left".to_string()];
+        let bad = |text: &str| parse(text).unwrap().checked(&buses, &hands).unwrap_err();
         assert_eq!(
             bad("[namespaces]\nr = \"x\""),
-            Ros2ConfigError::UnknownBus("r".into())
+            Ros2ConfigError::UnknownName {
+                by: "bus",
+                name: "r".into()
+            }
         );
+        assert_eq!(
+            bad("namespace_by = \"hand\"\n[namespaces]\nl = \"x\""),
+            Ros2ConfigError::UnknownName {
+                by: "hand",
+                name: "l".into()
+            }
+        );
+        assert!(parse("namespace_by = \"hand\"\n[namespaces]\nleft = \"x\"")
+            .unwrap()
+            .checked(&buses, &hands)
+            .is_ok());
         assert!(matches!(
             bad("[namespaces]\nl = \"a b\""),
             Ros2ConfigError::BadName { .. }
@@ -200,7 +238,7 @@ mod tests {
         assert!(parse("nope = 1").is_err(), "unknown keys are refused");
         assert!(parse("[namespaces]\nl = \"hand/left\"")
             .unwrap()
-            .checked(&buses)
+            .checked(&buses, &hands)
             .is_ok());
     }
 }

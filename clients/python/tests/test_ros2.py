@@ -162,3 +162,50 @@ def test_joint_states_commands_diagnostics_and_tokens(ros2):
         assert p[10] == dds_name(ros_type) and p[11] == TS.hash_rihs01(ros_type), p
         assert len(p[12].split(":")) == 6, p[12]
     assert len({p[4] for p in endpoints.values()}) == 3, "an entity id each"
+
+
+def test_a_namespace_per_hand(tmp_path):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = zenoh.open(zenoh_config("router", "listen/endpoints", endpoint))
+    config = tmp_path / "jointd.toml"
+    config.write_text(f"""
+[[hand]]
+name = "left"
+joints = [{{ bus = "sim0", ids = "2-3", names = ["index", "middle"] }}]
+
+[ros2]
+enabled = true
+namespace_by = "hand"
+connect = ["{endpoint}"]
+""")
+    d = Daemon("--sim", "4", "--config", str(config))
+    client = zenoh.open(zenoh_config("client", "connect/endpoints", endpoint))
+    try:
+        d.wait("/api/v1/buses/sim0", lambda b: b'"devices_online":4' in b, "4 joints online")
+        api = d.url + "/api/v1"
+        states = []
+        client.declare_subscriber(key("/left/joint_states", JOINT_STATE),
+                                  lambda s: states.append(bytes(s.payload.to_bytes())))
+        wait_for("the hand's joint states", lambda: len(states) > 10)
+        msg = TS.deserialize_cdr(states[-1], JOINT_STATE)
+        assert list(msg.name) == ["index", "middle"] and msg.header.frame_id == "left"
+        call(api, "POST", "/buses/sim0/control/enable", {"ids": [2, 3]})
+        wait_for("joints running", lambda: all(
+            call(api, "GET", f"/buses/sim0/devices/{i}")["status"]["state"] == "run" for i in (2, 3)))
+        Cmd, Header, Time = (TS.types[t] for t in (JOINT_STATE, "std_msgs/msg/Header",
+                                                    "builtin_interfaces/msg/Time"))
+        import numpy as np
+        cmd = Cmd(header=Header(stamp=Time(sec=0, nanosec=0), frame_id=""), name=["middle"],
+                  position=np.array([-0.3]), velocity=np.array([], dtype=np.float64),
+                  effort=np.array([], dtype=np.float64))
+        client.declare_publisher(key("/left/joint_commands", JOINT_STATE)).put(
+            bytes(TS.serialize_cdr(cmd, JOINT_STATE)))
+        wait_for("joint 3 at -0.3 rad", lambda: abs(
+            call(api, "GET", "/buses/sim0/devices/3")["motion"]["angle_deg"] + 17.19) < 0.5)
+        tokens = [str(r.ok.key_expr) for r in client.liveliness().get("@ros2_lv/**")]
+        assert any("/MP/%/%/jointd/%left%joint_states/" in t for t in tokens), tokens
+        assert not any("%sim0%" in t for t in tokens), "per hand, not per bus"
+    finally:
+        client.close()
+        d.stop()
+        router.close()
