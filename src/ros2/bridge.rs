@@ -102,6 +102,8 @@ pub(super) async fn start(
         tasks.push(tokio::spawn(publish_joint_states(
             state.clone(),
             scope.clone(),
+            cfg.joint_states_max_hz
+                .map(|hz| Duration::from_secs_f64(1.0 / hz)),
             publisher,
             keys::gid(&session_gid, id),
             stats.clone(),
@@ -221,6 +223,7 @@ fn buses_of(state: &AppState, scope: &Scope) -> Vec<BusHandle> {
 async fn publish_joint_states(
     state: AppState,
     scope: Scope,
+    min_gap: Option<Duration>,
     publisher: zenoh::pubsub::Publisher<'static>,
     gid: [u8; 16],
     stats: Arc<Ros2Stats>,
@@ -235,6 +238,7 @@ async fn publish_joint_states(
     }));
     let mut states = JointStates::of(scope, state.joint_labeler());
     let mut sequence = 0i64;
+    let mut last_put: Option<Instant> = None;
     while let Some((bus, frame)) = frames.next().await {
         let frame = match frame {
             Ok(f) => f,
@@ -249,6 +253,12 @@ async fn publish_joint_states(
         let Some(msg) = states.next(&views) else {
             continue;
         };
+        // Over the cap: this round is skipped (the next carries newer data).
+        let now = Instant::now();
+        if min_gap.is_some_and(|gap| last_put.is_some_and(|t| now < t + gap)) {
+            continue;
+        }
+        last_put = Some(now);
         sequence += 1;
         let attachment = keys::attachment(sequence, now_ns(), &gid);
         match publisher.put(msg.to_cdr()).attachment(attachment).await {

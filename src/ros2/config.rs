@@ -59,6 +59,9 @@ pub struct Ros2Config {
     /// How often `/diagnostics` is published, Hz (0 < r ≤ 50; default 1).
     #[serde(default = "one_hz")]
     pub diagnostics_hz: f64,
+    /// At most this many `joint_states` per second per namespace (a slow
+    /// link's cap); absent: every poll round (the telemetry rate).
+    pub joint_states_max_hz: Option<f64>,
     /// The ROS node the topics belong to (default `jointd`).
     #[serde(default = "default_node")]
     pub node_name: String,
@@ -83,6 +86,7 @@ impl Default for Ros2Config {
             namespace_by: NamespaceBy::Bus,
             namespaces: BTreeMap::new(),
             diagnostics_hz: one_hz(),
+            joint_states_max_hz: None,
             node_name: default_node(),
         }
     }
@@ -100,6 +104,10 @@ pub enum Ros2ConfigError {
     },
     #[error("[ros2] diagnostics_hz = {0}: give 0 < rate <= 50")]
     Rate(f64),
+    #[error(
+        "[ros2] joint_states_max_hz = {0}: give a rate above 0 (or leave it out: every poll round)"
+    )]
+    StatesRate(f64),
     #[error("[ros2] domain_id = {0}: ROS domains are 0..=232")]
     Domain(u32),
 }
@@ -146,6 +154,12 @@ impl Ros2Config {
             && self.diagnostics_hz <= 50.0)
         {
             return Err(Ros2ConfigError::Rate(self.diagnostics_hz));
+        }
+        if let Some(r) = self
+            .joint_states_max_hz
+            .filter(|r| !(r.is_finite() && *r > 0.0))
+        {
+            return Err(Ros2ConfigError::StatesRate(r));
         }
         if let Some(d) = self.domain_id.filter(|d| *d > 232) {
             return Err(Ros2ConfigError::Domain(d));
@@ -235,6 +249,10 @@ mod tests {
         ));
         assert_eq!(bad("diagnostics_hz = 0.0"), Ros2ConfigError::Rate(0.0));
         assert_eq!(bad("domain_id = 300"), Ros2ConfigError::Domain(300));
+        assert_eq!(
+            bad("joint_states_max_hz = -1.0"),
+            Ros2ConfigError::StatesRate(-1.0)
+        );
         assert!(parse("nope = 1").is_err(), "unknown keys are refused");
         assert!(parse("[namespaces]\nl = \"hand/left\"")
             .unwrap()

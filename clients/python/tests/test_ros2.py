@@ -176,6 +176,7 @@ joints = [{{ bus = "sim0", ids = "2-3", names = ["index", "middle"] }}]
 [ros2]
 enabled = true
 namespace_by = "hand"
+joint_states_max_hz = 20.0
 connect = ["{endpoint}"]
 """)
     d = Daemon("--sim", "4", "--config", str(config))
@@ -187,6 +188,10 @@ connect = ["{endpoint}"]
         client.declare_subscriber(key("/left/joint_states", JOINT_STATE),
                                   lambda s: states.append(bytes(s.payload.to_bytes())))
         wait_for("the hand's joint states", lambda: len(states) > 10)
+        # Capped at 20/s (the bus polls each joint ~250 times a second).
+        before = len(states)
+        time.sleep(2.0)
+        assert 0 < len(states) - before <= 2 * 20 + 2, len(states) - before
         msg = TS.deserialize_cdr(states[-1], JOINT_STATE)
         assert list(msg.name) == ["index", "middle"] and msg.header.frame_id == "left"
         call(api, "POST", "/buses/sim0/control/enable", {"ids": [2, 3]})
