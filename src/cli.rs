@@ -109,7 +109,15 @@ pub fn decode_mcap(path: &std::path::Path) -> Result<Vec<String>, FrameCliError>
         else {
             continue;
         };
-        let v: serde_json::Value = serde_json::from_slice(&message.data)
+        // JSON, or the same text in a std_msgs/String (a bag-compatible recording).
+        let text = if message.channel.message_encoding == "cdr" {
+            crate::record::cdr::string_from_cdr(&message.data)
+                .map_err(|e| FrameCliError::Mcap(format!("{topic}: not a String: {e}")))?
+                .into_bytes()
+        } else {
+            message.data.to_vec()
+        };
+        let v: serde_json::Value = serde_json::from_slice(&text)
             .map_err(|e| FrameCliError::Mcap(format!("{topic}: not a frame record: {e}")))?;
         let hex = v["hex"].as_str().unwrap_or_default();
         let raw = parse_hex(hex)?;

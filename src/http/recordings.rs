@@ -14,6 +14,7 @@ use crate::bus::BusHandle;
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::recording_book::{view, Entry, RecordingView};
 use crate::http::state::AppState;
+use crate::record::mcap_file::SideEncoding;
 use crate::record::{RecordState, Recorder};
 
 /// Recordings running at once, at most.
@@ -33,6 +34,11 @@ pub(crate) struct RecordingRequest {
     /// The buses to record (default: all).
     #[schema(example = json!(["sim0"]))]
     pub buses: Option<Vec<String>>,
+    /// Write frames, events and setpoints as `std_msgs/msg/String` (CDR,
+    /// the same JSON text) instead of JSON, so every channel has one ROS
+    /// serialization, as `ros2 bag play` asks (default false).
+    #[schema(example = false)]
+    pub bag_compatible: Option<bool>,
 }
 
 /// Checks the request and starts the recording.
@@ -86,6 +92,11 @@ pub(crate) fn start(state: &AppState, req: &RecordingRequest) -> ApiResult<Recor
         state.joint_labeler(),
         path,
         req.duration_s.map(Duration::from_secs_f64),
+        if req.bag_compatible.unwrap_or(false) {
+            SideEncoding::RosString
+        } else {
+            SideEncoding::Json
+        },
     )
     .map_err(|e| ApiError::state_unwritable(e.to_string()))?;
     inner.0 = id;

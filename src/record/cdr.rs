@@ -106,6 +106,21 @@ impl JointState {
     }
 }
 
+/// `std_msgs/msg/String`'s definition.
+pub const STRING_MSG: &str = "string data\n";
+
+/// A `std_msgs/msg/String` in CDR.
+pub fn string_cdr(text: &str) -> Vec<u8> {
+    let mut w = Cdr::new();
+    w.string(text);
+    w.buf
+}
+
+/// The text of a `std_msgs/msg/String` in CDR.
+pub fn string_from_cdr(buf: &[u8]) -> Result<String, CdrError> {
+    CdrReader::new(buf)?.string()
+}
+
 /// One `diagnostic_msgs/msg/DiagnosticStatus`.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct DiagnosticStatus {
@@ -281,6 +296,13 @@ mod tests {
             JointState::from_cdr(&huge).is_err(),
             "a length past the end"
         );
+    }
+
+    #[test]
+    fn a_string_message_round_trips() {
+        let b = string_cdr("{\"a\":1}");
+        assert_eq!(&b[..8], &[0, 1, 0, 0, 8, 0, 0, 0]);
+        assert_eq!(string_from_cdr(&b).unwrap(), "{\"a\":1}");
     }
 
     #[test]

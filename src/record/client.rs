@@ -27,6 +27,10 @@ pub struct RecordArgs {
     /// The daemon's base URL.
     #[arg(long, default_value = "http://127.0.0.1:8080")]
     pub url: String,
+    /// Frames, events and setpoints as `std_msgs/msg/String` (CDR) instead
+    /// of JSON: one serialization for every channel, as `ros2 bag play` asks.
+    #[arg(long)]
+    pub bag_compatible: bool,
     /// Bearer token, if the daemon asks for one.
     #[arg(long, env = "JOINTD_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
@@ -64,10 +68,10 @@ pub fn run(args: &RecordArgs) -> Result<Value, RecordCliError> {
     }
     let api = Api::new(&args.url, args.token.clone())?;
     let interrupted = watch_signals()?;
-    let body = match args.duration {
-        Some(s) => json!({"duration_s": s}),
-        None => json!({}),
-    };
+    let mut body = json!({"bag_compatible": args.bag_compatible});
+    if let Some(s) = args.duration {
+        body["duration_s"] = json!(s);
+    }
     let started = api.call("POST", "/api/v1/recordings", Some(&body), "starting")?;
     let id = started["id"].as_u64().unwrap_or(0);
     eprintln!(

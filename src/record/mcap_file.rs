@@ -10,6 +10,11 @@
 //! - `/jointd/B/events`: device and bus events as the WebSocket tells them
 //!   (JSON);
 //! - `/jointd/B/setpoints`: targets as clients commanded them (JSON).
+//!
+//! [`SideEncoding::RosString`] writes the last three as
+//! `std_msgs/msg/String` in CDR holding the same JSON text instead: every
+//! channel then has one ROS serialization, which rosbag2 asks of a bag
+//! it plays.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -21,7 +26,7 @@ use mcap::records::MessageHeader;
 use mcap::{WriteOptions, Writer};
 use thiserror::Error;
 
-use super::cdr::JOINT_STATE_MSG;
+use super::cdr::{string_cdr, JOINT_STATE_MSG, STRING_MSG};
 
 /// How long a chunk may collect messages before it is written out.
 pub const CHUNK_PERIOD: Duration = Duration::from_secs(1);
@@ -83,6 +88,16 @@ const SETPOINT_SCHEMA: &str = r#"{"type":"object","title":"jointd commanded targ
 "id":{"type":"integer"},"position_deg":{"type":"number","description":"In the joint's calibrated frame"},
 "pos_ref_raw":{"type":"integer"},"spd_ref_raw":{"type":"integer"}}}}},"required":["seq","targets"]}"#;
 
+/// How the frames, events and setpoints channels are written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SideEncoding {
+    /// JSON with a JSON schema (Foxglove shows the fields).
+    #[default]
+    Json,
+    /// The same JSON text in a `std_msgs/msg/String`, CDR.
+    RosString,
+}
+
 /// An MCAP file being written.
 pub struct McapFile {
     path: String,
@@ -90,6 +105,7 @@ pub struct McapFile {
     channels: BTreeMap<String, BusChannels>,
     sequence: u32,
     counts: BTreeMap<String, u64>,
+    side: SideEncoding,
 }
 
 /// Names the file and what went into it.
@@ -104,7 +120,11 @@ impl std::fmt::Debug for McapFile {
 
 impl McapFile {
     /// Creates `path` (refusing to overwrite) with the channels of `buses`.
-    pub fn create(path: &Path, buses: &[String]) -> Result<Self, McapFileError> {
+    pub fn create(
+        path: &Path,
+        buses: &[String],
+        side: SideEncoding,
+    ) -> Result<Self, McapFileError> {
         let shown = path.display().to_string();
         let io = |source| McapFileError::Io {
             path: shown.clone(),
@@ -132,15 +152,19 @@ impl McapFile {
                 JOINT_STATE_MSG.as_bytes(),
             )
             .map_err(mcap)?;
-        let frame = writer
-            .add_schema("jointd/Frame", "jsonschema", FRAME_SCHEMA.as_bytes())
-            .map_err(mcap)?;
-        let event = writer
-            .add_schema("jointd/BusEvent", "jsonschema", EVENT_SCHEMA.as_bytes())
-            .map_err(mcap)?;
-        let setpoint = writer
-            .add_schema("jointd/Setpoints", "jsonschema", SETPOINT_SCHEMA.as_bytes())
-            .map_err(mcap)?;
+        let mut json_schema = |name: &str, text: &str| match side {
+            SideEncoding::Json => writer.add_schema(name, "jsonschema", text.as_bytes()),
+            SideEncoding::RosString => {
+                writer.add_schema("std_msgs/msg/String", "ros2msg", STRING_MSG.as_bytes())
+            }
+        };
+        let frame = json_schema("jointd/Frame", FRAME_SCHEMA).map_err(mcap)?;
+        let event = json_schema("jointd/BusEvent", EVENT_SCHEMA).map_err(mcap)?;
+        let setpoint = json_schema("jointd/Setpoints", SETPOINT_SCHEMA).map_err(mcap)?;
+        let side_encoding = match side {
+            SideEncoding::Json => "json",
+            SideEncoding::RosString => "cdr",
+        };
         let none = BTreeMap::new();
         let mut channels = BTreeMap::new();
         for bus in buses {
@@ -149,9 +173,9 @@ impl McapFile {
             };
             let ch = BusChannels {
                 joint_states: add(joint_state, Topic::JointStates, "cdr").map_err(mcap)?,
-                frames: add(frame, Topic::Frames, "json").map_err(mcap)?,
-                events: add(event, Topic::Events, "json").map_err(mcap)?,
-                setpoints: add(setpoint, Topic::Setpoints, "json").map_err(mcap)?,
+                frames: add(frame, Topic::Frames, side_encoding).map_err(mcap)?,
+                events: add(event, Topic::Events, side_encoding).map_err(mcap)?,
+                setpoints: add(setpoint, Topic::Setpoints, side_encoding).map_err(mcap)?,
             };
             channels.insert(bus.clone(), ch);
         }
@@ -161,6 +185,7 @@ impl McapFile {
             channels,
             sequence: 0,
             counts: BTreeMap::new(),
+            side,
         })
     }
 
@@ -194,6 +219,14 @@ impl McapFile {
             sequence: self.sequence,
             log_time: log_ns,
             publish_time: log_ns,
+        };
+        let wrapped;
+        let data = match (topic, self.side) {
+            (Topic::JointStates, _) | (_, SideEncoding::Json) => data,
+            (_, SideEncoding::RosString) => {
+                wrapped = string_cdr(&String::from_utf8_lossy(data));
+                &wrapped
+            }
         };
         self.writer
             .write_to_known_channel(&header, data)

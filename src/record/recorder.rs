@@ -18,7 +18,7 @@ use crate::protocol::frame_json::hex;
 use crate::protocol::units;
 
 use super::joint_states::{system_ns, JointStates, Labeler};
-use super::mcap_file::{McapFile, McapFileError, Topic, CHUNK_PERIOD};
+use super::mcap_file::{McapFile, McapFileError, SideEncoding, Topic, CHUNK_PERIOD};
 
 /// How often the taps are drained (well under a poll round).
 const DRAIN_EVERY: Duration = Duration::from_millis(5);
@@ -87,9 +87,10 @@ impl Recorder {
         labeler: Labeler,
         path: PathBuf,
         duration: Option<Duration>,
+        side: SideEncoding,
     ) -> Result<Self, McapFileError> {
         let names: Vec<String> = buses.iter().map(|b| b.name().to_owned()).collect();
-        let file = McapFile::create(&path, &names)?;
+        let file = McapFile::create(&path, &names, side)?;
         let tapped = buses
             .into_iter()
             .map(|bus| Tapped {

@@ -150,3 +150,23 @@ def test_a_kill_loses_at_most_the_last_chunk(tmp_path):
                             text=True, timeout=60)
     assert frames.returncode == 0, frames.stderr
     assert len(frames.stdout.splitlines()) > 1000
+
+
+def test_a_bag_compatible_recording_has_one_ros_serialization(daemon, tmp_path):
+    out = tmp_path / "bag.mcap"
+    rec = subprocess.run([BIN, "record", "--out", str(out), "--duration", "1.5", "--bag-compatible",
+                          "--url", daemon.url], capture_output=True, text=True, timeout=60)
+    assert rec.returncode == 0, rec.stderr
+    with open(out, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        channels = {c.topic: (c.message_encoding, summary.schemas[c.schema_id].encoding,
+                              summary.schemas[c.schema_id].name) for c in summary.channels.values()}
+        assert all(enc == "cdr" and schema == "ros2msg" for enc, schema, _ in channels.values()), channels
+        assert channels["/jointd/sim0/frames"][2] == "std_msgs/msg/String"
+        frames = [json.loads(d.data) for _, _, _, d in
+                  reader.iter_decoded_messages(topics=["/jointd/sim0/frames"])]
+    assert frames and {"dir", "wire_time_ns", "hex"} <= frames[0].keys()
+    decoded = subprocess.run([BIN, "frame", "decode", "--mcap", str(out)], capture_output=True,
+                             text=True, timeout=60, check=True).stdout.splitlines()
+    assert len(decoded) == len(frames)
