@@ -69,11 +69,9 @@ pub(crate) fn start(state: &AppState, req: &RecordingRequest) -> ApiResult<Recor
     })?;
     let book = state.recordings();
     let mut inner = book.lock();
-    let running = inner
-        .1
-        .values()
-        .filter(|e| e.recorder.status().state == RecordState::Recording)
-        .count();
+    // Counted under the same lock as the insert below: two requests at once
+    // cannot both take the last place.
+    let running = running_in(&inner.1);
     if running >= MAX_RUNNING {
         return Err(ApiError::conflict(
             "too-many-recordings",
@@ -109,6 +107,18 @@ pub(crate) fn start(state: &AppState, req: &RecordingRequest) -> ApiResult<Recor
     tracing::info!(recording = id, file = %v.file, buses = ?v.buses, duration_s = ?v.duration_s, "recording started");
     inner.1.insert(id, entry);
     Ok(v)
+}
+
+/// How many recordings are being written now.
+pub(crate) fn running(state: &AppState) -> usize {
+    running_in(&state.recordings().lock().1)
+}
+
+fn running_in(entries: &std::collections::BTreeMap<u64, Entry>) -> usize {
+    entries
+        .values()
+        .filter(|e| e.recorder.status().state == RecordState::Recording)
+        .count()
 }
 
 pub(crate) fn list(state: &AppState) -> Vec<RecordingView> {

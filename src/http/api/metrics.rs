@@ -224,6 +224,7 @@ pub(crate) fn render(state: &AppState) -> String {
         device_families(&mut m, &snap, now);
     }
     ws_families(&mut m, state.ws());
+    bridge_families(&mut m, state);
     m.render()
 }
 
@@ -410,6 +411,66 @@ fn device_families(m: &mut Exposition, snap: &BusSnapshot, now: Instant) {
             );
         }
     }
+}
+
+/// The ROS 2 bridge's counters (zero when it does not run) and the
+/// recordings running.
+fn bridge_families(m: &mut Exposition, state: &AppState) {
+    let stats = state.ros2();
+    m.gauge(
+        "jointd_ros2_enabled",
+        "1 when the ROS 2 bridge runs.",
+        "",
+        if stats.is_some() { 1.0 } else { 0.0 },
+    );
+    type Field = fn(&crate::http::ros2_stats::Ros2Stats) -> &std::sync::atomic::AtomicU64;
+    let counters: [(&str, &str, Field); 7] = [
+        (
+            "jointd_ros2_joint_states_total",
+            "JointState messages published.",
+            |s| &s.joint_states,
+        ),
+        (
+            "jointd_ros2_diagnostics_total",
+            "DiagnosticArray messages published.",
+            |s| &s.diagnostics,
+        ),
+        (
+            "jointd_ros2_commands_applied_total",
+            "joint_commands applied.",
+            |s| &s.commands_applied,
+        ),
+        (
+            "jointd_ros2_commands_dropped_total",
+            "joint_commands refused whole.",
+            |s| &s.commands_dropped,
+        ),
+        (
+            "jointd_ros2_watchdog_fired_total",
+            "Times the ROS 2 command stream stopped and the watchdog acted.",
+            |s| &s.watchdog_fired,
+        ),
+        (
+            "jointd_ros2_frames_lost_total",
+            "Frames the bridge fell too far behind to see.",
+            |s| &s.frames_lost,
+        ),
+        (
+            "jointd_ros2_publish_errors_total",
+            "Messages Zenoh would not publish.",
+            |s| &s.publish_errors,
+        ),
+    ];
+    for (name, help, field) in counters {
+        let v = stats.map_or(0, |s| field(s).load(std::sync::atomic::Ordering::Relaxed));
+        m.counter(name, help, "", v as f64);
+    }
+    m.gauge(
+        "jointd_recordings_running",
+        "MCAP recordings being written.",
+        "",
+        crate::http::recordings::running(state) as f64,
+    );
 }
 
 /// WebSocket counters over all connections since start.
