@@ -104,20 +104,20 @@ pub(crate) struct HomingRequest {
     /// Which way (in device angles) the stop lies; default `negative`.
     pub direction: Option<Direction>,
     /// Search speed at the output, °/s (0 < s ≤ 90; default 10).
-    #[schema(example = 10.0)]
+    #[schema(example = 10.0, exclusive_minimum = 0.0, maximum = 90.0)]
     pub speed_dps: Option<f64>,
     /// Current limit while searching, A (0 < I, below the joint's own
     /// limit; default 0.3).
-    #[schema(example = 0.3)]
+    #[schema(example = 0.3, exclusive_minimum = 0.0, maximum = 5.625)]
     pub current_limit_a: Option<f64>,
     /// How far to move back off the stop, degrees (0..=30; default 2).
-    #[schema(example = 2.0)]
+    #[schema(example = 2.0, minimum = 0.0, maximum = 30.0)]
     pub backoff_deg: Option<f64>,
     /// The joint angle the stop reads from then on (default 0).
-    #[schema(example = 0.0)]
+    #[schema(example = 0.0, minimum = -255.0, maximum = 255.0)]
     pub stop_at_deg: Option<f64>,
     /// Give up the search after this long, ms (0 < t ≤ 120000; default 20000).
-    #[schema(example = 20000.0)]
+    #[schema(example = 20000.0, exclusive_minimum = 0.0, maximum = 120000.0)]
     pub timeout_ms: Option<f64>,
 }
 

@@ -29,7 +29,7 @@ const MAX_DURATION_S: f64 = 86_400.0;
 pub(crate) struct RecordingRequest {
     /// Stop by itself after this long, s (0 < d ≤ 86400); absent: until
     /// `DELETE`.
-    #[schema(example = 5.0)]
+    #[schema(example = 5.0, exclusive_minimum = 0.0, maximum = 86400.0)]
     pub duration_s: Option<f64>,
     /// The buses to record (default: all).
     #[schema(example = json!(["sim0"]))]
