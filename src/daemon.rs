@@ -581,6 +581,7 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
             source: e,
         })?;
     wait_for_ws_close(&state).await;
+    crate::http::recordings::stop_all(&state).await;
     // Leave the ROS graph before the buses stop.
     if let Some(bridge) = bridge {
         tracing::debug!(?bridge, "ROS 2 bridge closing");

@@ -150,6 +150,23 @@ pub(crate) async fn stop(state: &AppState, id: u64) -> ApiResult<RecordingView> 
     get(state, id)
 }
 
+/// Stops every recording still running (the daemon is stopping): each
+/// file gets its last chunk, summary and footer.
+pub(crate) async fn stop_all(state: &AppState) {
+    let running: Vec<(u64, Arc<Recorder>)> = state
+        .recordings()
+        .lock()
+        .1
+        .iter()
+        .filter(|(_, e)| e.recorder.status().state == RecordState::Recording)
+        .map(|(id, e)| (*id, e.recorder.clone()))
+        .collect();
+    for (id, recorder) in running {
+        let status = recorder.stop().await;
+        tracing::info!(recording = id, path = %status.path.display(), "recording closed at shutdown");
+    }
+}
+
 /// The complete file of recording `id` (409 while it records).
 pub(crate) async fn file(state: &AppState, id: u64) -> ApiResult<(String, Vec<u8>)> {
     let (recorder, v) = entry(state, id)?;

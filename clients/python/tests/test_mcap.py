@@ -170,3 +170,23 @@ def test_a_bag_compatible_recording_has_one_ros_serialization(daemon, tmp_path):
     decoded = subprocess.run([BIN, "frame", "decode", "--mcap", str(out)], capture_output=True,
                              text=True, timeout=60, check=True).stdout.splitlines()
     assert len(decoded) == len(frames)
+
+
+def test_a_recording_running_at_shutdown_is_closed_whole(tmp_path):
+    from conftest import Daemon
+
+    d = Daemon("--sim", "2", "--state-dir", str(tmp_path))
+    try:
+        d.wait("/api/v1/buses/sim0", lambda b: b'"devices_online":2' in b, "2 joints online")
+        started = call(d.url + "/api/v1", "POST", "/recordings", {})
+        time.sleep(1.0)
+    finally:
+        d.stop()  # SIGTERM: a graceful stop
+    path = tmp_path / "recordings" / started["file"]
+    body = path.read_bytes()
+    # A finished file ends with the footer and the closing magic; a cut one
+    # ends with its last whole chunk.
+    assert body[-8:] == b"\x89MCAP0\r\n", "the file was not closed"
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+        assert summary is not None and summary.statistics.message_count > 0
