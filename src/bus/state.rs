@@ -215,6 +215,10 @@ pub struct BusRates {
     /// The reply timeout now in force (request end to giving up), µs: the
     /// model, the configured margin and what the host path's lateness adds.
     pub reply_timeout_us: u64,
+    /// How long before a reply is due the owner stops sleeping and watches
+    /// the port, µs: how late its sleeps were seen to end (a high quantile),
+    /// so the line does not idle after a reply while the thread wakes.
+    pub wake_lead_us: u64,
 }
 
 /// What the owner publishes after every change worth seeing.

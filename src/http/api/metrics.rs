@@ -309,6 +309,12 @@ fn bus_families(m: &mut Exposition, snap: &BusSnapshot) {
         &l,
         snap.rates.reply_timeout_us as f64 / 1e6,
     );
+    m.gauge(
+        "jointd_bus_wake_lead_seconds",
+        "How long before a reply is due the bus thread stops sleeping (how late its sleeps end).",
+        &l,
+        snap.rates.wake_lead_us as f64 / 1e6,
+    );
     m.histogram(
         "jointd_bus_setpoint_to_wire_seconds",
         "A setpoint's acceptance to the last byte of its frame on the wire.",

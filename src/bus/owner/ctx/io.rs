@@ -23,8 +23,6 @@ use super::Ctx;
 const PREPARE_LEAD: Duration = Duration::from_micros(100);
 /// How often a reply wait past its modelled time looks for an e-stop.
 const LATE_WAIT_SLICE: Duration = Duration::from_millis(1);
-/// How long before a reply is due the owner stops sleeping.
-const SPIN_BEFORE_DUE: Duration = Duration::from_micros(10);
 
 impl Ctx {
     /// Listens until `at`; replies nobody waited for are taken in.
@@ -247,10 +245,11 @@ impl Ctx {
         got
     }
 
-    /// Blocks until shortly before the reply is due, then looks at the port
-    /// without sleeping for `reply_spin_us`: a thread woken from sleep (on a
-    /// VM, a halted virtual CPU woken too) reacts tens of µs later, and every
-    /// poll's reply is followed by such a gap on the line.
+    /// Blocks until shortly before the reply is due (by as much as this
+    /// thread is seen to wake late), then looks at the port without
+    /// sleeping until `reply_spin_us` past it: a thread woken from sleep (on
+    /// a VM, a halted virtual CPU woken too) reacts tens of µs later, and
+    /// every poll's reply would be followed by such a gap on the line.
     fn spin_for_reply(
         &mut self,
         want: Want,
@@ -260,8 +259,12 @@ impl Ctx {
         if spin.is_zero() {
             return Ok(None);
         }
-        let spin_from = due.checked_sub(SPIN_BEFORE_DUE).unwrap_or(due);
+        let spin_from = due.checked_sub(self.wake.lead()).unwrap_or(due);
+        let slept = Instant::now() < spin_from;
         let mut got = self.link.wait(Some(want), spin_from);
+        if slept && matches!(got, Ok(None)) {
+            self.wake.observe(spin_from, Instant::now());
+        }
         while matches!(got, Ok(None)) && Instant::now() < due + spin {
             std::hint::spin_loop();
             got = self.link.poll_now(Some(want));
