@@ -60,18 +60,35 @@ async fn a_bus_set_for_ftdi_at_16_ms_says_so_and_keeps_every_joint() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_native_line_never_batches() {
+async fn a_native_line_batches_only_a_control_frame_in_front_of_a_poll() {
     let rig = rig(&[1, 2]);
     let snap = rig.online(2).await;
     assert_eq!(snap.adapter, "native");
     rig.enable_all(2).await;
-    for k in 0..100 {
-        let sp = Setpoint {
-            pos_ref: (k % 20) * 128,
-            spd_ref: 3000,
-        };
-        rig.bus.set_targets(&[(1, sp), (2, sp)]);
-        tokio::time::sleep(std::time::Duration::from_millis(2)).await;
-    }
-    assert_eq!(rig.bus.snapshot().counters.frames_tx_batched, 0);
+    let before = rig.bus.snapshot().counters.clone();
+    // Targets faster than the control budget: it runs out, and the frame
+    // after which it allows no other rides in front of the next poll.
+    let bus = rig.bus.clone();
+    tokio::task::spawn_blocking(move || {
+        for k in 0..1500 {
+            let sp = Setpoint {
+                pos_ref: (k % 20) * 128,
+                spd_ref: 3000,
+            };
+            bus.set_targets(&[(1, sp), (2, sp)]);
+            std::thread::sleep(std::time::Duration::from_micros(200));
+        }
+    })
+    .await
+    .expect("the streaming thread");
+    let after = rig.bus.snapshot();
+    let batched = after.counters.frames_tx_batched - before.frames_tx_batched;
+    let polls = after.counters.polls - before.polls;
+    assert!(batched > 0, "no control frame rode with a poll");
+    assert!(
+        batched <= polls,
+        "{batched} batched frames for {polls} polls"
+    );
+    assert!(after.devices.values().all(|d| d.online));
+    assert_eq!(rig.sim.stats().collisions, 0);
 }

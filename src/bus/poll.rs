@@ -55,6 +55,15 @@ impl ControlBudget {
         self.credit >= 0.0
     }
 
+    /// True when, after a control frame of `frame` time sent now, another
+    /// would still be allowed once that one has left the line.
+    pub(crate) fn allows_another(&self, now: Instant, frame: Duration) -> bool {
+        let dt = now.saturating_duration_since(self.last).as_secs_f64();
+        let credit = (self.credit + self.share * dt).min(self.cap);
+        // Spent now, refilled at the share while the frame is on the line.
+        credit - frame.as_secs_f64() * (1.0 - self.share) >= 0.0
+    }
+
     /// Charges `wire` time of control frames.
     pub(crate) fn spend(&mut self, wire: Duration) {
         self.credit -= wire.as_secs_f64();
@@ -173,6 +182,28 @@ mod tests {
             burst += 1;
         }
         assert_eq!(burst, 3, "cap of two frames, the last spend goes into debt");
+    }
+
+    #[test]
+    fn allows_another_foretells_the_next_decision() {
+        let t0 = Instant::now();
+        let mut b = ControlBudget::new(0.34, FRAME, t0);
+        // Spend frame after frame, asking each time whether the next one
+        // (a frame time later) will be allowed; the answer must match.
+        let mut now = t0;
+        for _ in 0..50 {
+            if !b.allows(now) {
+                now += FRAME;
+                continue;
+            }
+            let foretold = b.allows_another(now, FRAME);
+            b.spend(FRAME);
+            now += FRAME;
+            assert_eq!(b.allows(now), foretold, "at {:?}", now - t0);
+        }
+        // With a full credit of two frames, another is allowed after one.
+        let fresh = ControlBudget::new(0.34, FRAME, t0);
+        assert!(fresh.allows_another(t0, FRAME));
     }
 
     fn states(n: usize) -> Vec<PollState> {

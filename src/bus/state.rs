@@ -172,8 +172,9 @@ pub struct BusCounters {
     /// Of those, attempts no reply answered: how V2.0.1 firmware shows
     /// itself, so they count here and not as timeouts.
     pub firmware_probes_unanswered: u64,
-    /// Control frames written in front of a poll, in the same write (one USB
-    /// transfer), on a latent adapter.
+    /// Control frames written in front of a poll, in the same write: on a
+    /// latent adapter (one USB transfer), and on a native line the frame
+    /// after which the control budget makes a poll follow.
     pub frames_tx_batched: u64,
     /// Polls written blind behind a USB adapter, timed by its frame clock:
     /// before the previous reply reached the host (matched when it comes).

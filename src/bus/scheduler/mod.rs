@@ -78,8 +78,9 @@ pub(crate) enum Slot {
     /// Read `block` of `dev_id`; its reply window follows from
     /// [`Scheduler::sent`] and [`Scheduler::reply_window`].
     Poll { dev_id: u8, block: InfoBlock },
-    /// A latent adapter (USB): these control frames and then the poll in
-    /// one write, one USB transfer, instead of a round trip each.
+    /// These control frames and then the poll in one write: behind a
+    /// latent adapter (USB) one transfer instead of a round trip each; on
+    /// a native line the control frame the budget makes a poll follow.
     Batch {
         control: Vec<Planned>,
         dev_id: u8,
@@ -313,17 +314,17 @@ impl Scheduler {
         if let Some((frame, seq)) = self.control.take_prepared() {
             if self.budget.allows(now) {
                 if seq == store.latest_seq() {
-                    return Slot::Control(frame);
+                    return self.control_slot(now, frame);
                 }
                 if let Some(frame) = self.plan_control(now, store) {
-                    return Slot::Control(frame);
+                    return self.control_slot(now, frame);
                 }
             }
         }
         self.control.collect(store);
         if self.control.has_pending() && self.budget.allows(now) {
             if let Some(frame) = self.plan_control(now, store) {
-                return Slot::Control(frame);
+                return self.control_slot(now, frame);
             }
         }
         let timeout = self.clock.reply_timeout(now);
@@ -342,6 +343,31 @@ impl Scheduler {
             };
         }
         self.control_or_listen(now, store)
+    }
+
+    /// A control frame on a native line, and in the same write the poll
+    /// that must follow it when the budget will not allow another control
+    /// frame once this one has left the line: the owner then sleeps once
+    /// per control frame and poll, not twice (on a VM a wake-up costs more
+    /// of a core than everything else the owner does for a frame). The
+    /// frames are on the wire in the same order and at the same times as
+    /// written one by one; what changes is that a setpoint, a request or an
+    /// e-stop arriving while the control frame is on the wire waits for the
+    /// poll's reply (it would have waited for the poll anyway, bar the one
+    /// frame time in which the poll is chosen).
+    fn control_slot(&mut self, now: Instant, frame: Planned) -> Slot {
+        if self.budget.allows_another(now, self.clock.frame_time()) {
+            return Slot::Control(frame);
+        }
+        let timeout = self.clock.reply_timeout(now);
+        match self.planner.next(self.reg.poll_states(), now, timeout) {
+            Some(poll) => Slot::Batch {
+                control: vec![frame],
+                dev_id: poll.dev_id,
+                block: poll.block,
+            },
+            None => Slot::Control(frame),
+        }
     }
 
     /// Behind a USB adapter (the write time was waited for in

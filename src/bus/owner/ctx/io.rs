@@ -18,8 +18,9 @@ use crate::protocol::{Command, Config, ConfigParam, InfoBlock, Reply};
 
 use super::Ctx;
 
-/// How long before a reply is due the next control frame is planned:
-/// ample for planning, short enough that the setpoints it samples are fresh.
+/// With `reply_spin_us = 0` (no spinning): how long before a reply is due
+/// the owner wakes to plan the next control frame: ample for planning,
+/// short enough that the setpoints it samples are fresh.
 const PREPARE_LEAD: Duration = Duration::from_micros(100);
 /// How often a reply wait past its modelled time looks for an e-stop.
 const LATE_WAIT_SLICE: Duration = Duration::from_millis(1);
@@ -198,13 +199,11 @@ impl Ctx {
         self.link.counters.frames_tx_batched += control.len() as u64;
         self.control_frames_sent(control, end);
         let window = self.sched.reply_window(end);
-        let mut got = Ok(None);
-        if prepare {
-            let prepare_at = window.due.checked_sub(PREPARE_LEAD).unwrap_or(window.due);
-            got = self.link.wait(Some(want), prepare_at);
-            if matches!(got, Ok(None)) {
-                self.sched.prepare(window.due, &self.shared.setpoints);
-            }
+        let mut got = self.sleep_before_reply(want, window.due);
+        if prepare && matches!(got, Ok(None)) {
+            // Planned in the moments before the reply, after the one wake-up
+            // a transaction costs: its setpoints are as fresh as they can be.
+            self.sched.prepare(window.due, &self.shared.setpoints);
         }
         if matches!(got, Ok(None)) {
             got = self.wait_reply(want, window.due, window.deadline);
@@ -245,11 +244,33 @@ impl Ctx {
         got
     }
 
-    /// Blocks until shortly before the reply is due (by as much as this
-    /// thread is seen to wake late), then looks at the port without
-    /// sleeping until `reply_spin_us` past it: a thread woken from sleep (on
-    /// a VM, a halted virtual CPU woken too) reacts tens of µs later, and
-    /// every poll's reply would be followed by such a gap on the line.
+    /// Blocks until shortly before the reply is due: by as much as this
+    /// thread is seen to wake late, when it spins for the reply next
+    /// ([`Self::spin_for_reply`]); by [`PREPARE_LEAD`] when it does not.
+    fn sleep_before_reply(
+        &mut self,
+        want: Want,
+        due: Instant,
+    ) -> std::io::Result<Option<(Reply, Instant)>> {
+        let spinning = self.cfg.timing.reply_spin_us > 0;
+        let lead = if spinning {
+            self.wake.lead()
+        } else {
+            PREPARE_LEAD
+        };
+        let until = due.checked_sub(lead).unwrap_or(due);
+        let slept = Instant::now() < until;
+        let got = self.link.wait(Some(want), until);
+        if spinning && slept && matches!(got, Ok(None)) {
+            self.wake.observe(until, Instant::now());
+        }
+        got
+    }
+
+    /// Looks at the port without sleeping until `reply_spin_us` past the
+    /// reply's due time: a thread woken from sleep (on a VM, a halted
+    /// virtual CPU woken too) reacts tens of µs later, and every poll's
+    /// reply would be followed by such a gap on the line.
     fn spin_for_reply(
         &mut self,
         want: Want,
@@ -259,12 +280,7 @@ impl Ctx {
         if spin.is_zero() {
             return Ok(None);
         }
-        let spin_from = due.checked_sub(self.wake.lead()).unwrap_or(due);
-        let slept = Instant::now() < spin_from;
-        let mut got = self.link.wait(Some(want), spin_from);
-        if slept && matches!(got, Ok(None)) {
-            self.wake.observe(spin_from, Instant::now());
-        }
+        let mut got = self.link.poll_now(Some(want));
         while matches!(got, Ok(None)) && Instant::now() < due + spin {
             std::hint::spin_loop();
             got = self.link.poll_now(Some(want));

@@ -1,6 +1,6 @@
 //! A latent (USB) adapter: control frames ride in front of a poll in one
-//! write; reply deadlines cover the adapter's hold; a native line never
-//! batches.
+//! write; reply deadlines cover the adapter's hold; a native line batches
+//! only the one control frame a poll must follow.
 
 use super::*;
 use crate::transport::adapter::AdapterModel;
@@ -46,10 +46,13 @@ fn on_a_usb_adapter_broadcasts_and_a_poll_share_one_write() {
 }
 
 #[test]
-fn a_native_line_never_batches() {
+fn a_native_line_batches_only_the_control_frame_a_poll_must_follow() {
     let slots = streaming(None);
-    assert!(batches(&slots).is_empty());
-    assert!(!polls(&slots).is_empty() && !controls(&slots).is_empty());
+    let b = batches(&slots);
+    assert!(!b.is_empty(), "{slots:?}");
+    assert!(b.iter().all(|(frames, _)| *frames == 1), "{b:?}");
+    // Where the budget allows another control frame, it goes alone.
+    assert!(!controls(&slots).is_empty());
 }
 
 #[test]

@@ -54,6 +54,12 @@ fn control_keeps_within_its_share_while_telemetry_wants_the_wire() {
         match bus.step(&[]) {
             Slot::Control(_) => control += 1,
             Slot::Poll { .. } => poll += 1,
+            Slot::Batch {
+                control: frames, ..
+            } => {
+                control += frames.len() as u32;
+                poll += 1;
+            }
             _ => {}
         }
     }
@@ -106,8 +112,10 @@ fn a_prepared_frame_waits_for_the_budget() {
     for pos in 0..4 {
         bus.set(ids.clone(), 600 + pos);
         bus.s.prepare(bus.now, &bus.store);
-        if let Slot::Control(frame) = bus.next() {
-            bus.send_control(&frame);
+        match bus.next() {
+            Slot::Control(frame) => bus.send_control(&frame),
+            Slot::Batch { control, .. } => control.iter().for_each(|f| bus.send_control(f)),
+            _ => {}
         }
     }
     bus.set(ids.clone(), 700);

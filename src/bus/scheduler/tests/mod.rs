@@ -169,8 +169,10 @@ impl Bus {
             if self.s.pending().is_empty() && self.store.latest_seq() == self.seen() {
                 break;
             }
-            if let Slot::Control(frame) = self.step(&[]) {
-                frames.push(frame);
+            match self.step(&[]) {
+                Slot::Control(frame) => frames.push(frame),
+                Slot::Batch { control, .. } => frames.extend(control),
+                _ => {}
             }
         }
         frames
