@@ -351,10 +351,10 @@ impl Scheduler {
     /// per control frame and poll, not twice (on a VM a wake-up costs more
     /// of a core than everything else the owner does for a frame). The
     /// frames are on the wire in the same order and at the same times as
-    /// written one by one; what changes is that a setpoint, a request or an
-    /// e-stop arriving while the control frame is on the wire waits for the
-    /// poll's reply (it would have waited for the poll anyway, bar the one
-    /// frame time in which the poll is chosen).
+    /// written one by one. A setpoint arriving while the control frame is
+    /// on the wire would have waited for the poll anyway (the budget chose
+    /// it); a request or an e-stop arriving then now waits for the poll's
+    /// reply too: up to one transaction (0.9 ms at 500000 baud) later.
     fn control_slot(&mut self, now: Instant, frame: Planned) -> Slot {
         if self.budget.allows_another(now, self.clock.frame_time()) {
             return Slot::Control(frame);
