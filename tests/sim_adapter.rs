@@ -85,12 +85,17 @@ fn stream_for_5_s_behind(model: AdapterModel) {
                 snap.counters.frames_tx_batched > 0,
                 "{model}: nothing batched"
             );
-            // Timed by the USB frame clock learnt from the replies, not
-            // waiting for each reply.
-            assert!(
-                snap.counters.polls_pipelined > start.polls_pipelined,
-                "{model}: nothing pipelined"
-            );
+            // Written without waiting for each reply...
+            let pipelined = snap.counters.polls_pipelined - start.polls_pipelined;
+            assert!(pipelined > 0, "{model}: nothing pipelined");
+            // ... and on a full-speed adapter (1 ms frames, far longer than
+            // a host's wake-up), timed by the frame clock learnt from the
+            // replies. A microframe (125 µs) may stay unknown on a loaded
+            // host: the pipeline then holds the wire a microframe longer.
+            let unclocked = snap.counters.usb_writes_unclocked - start.usb_writes_unclocked;
+            if model.usb_frame() == Some(Duration::from_millis(1)) {
+                assert!(unclocked < pipelined, "{model}: the clock never learnt");
+            }
         }
     });
 }
@@ -104,6 +109,7 @@ fn every_adapter_model_keeps_every_joint_and_collides_nowhere() {
         AdapterModel::Ftdi { latency_ms: 1 },
         AdapterModel::Ftdi { latency_ms: 16 },
         AdapterModel::Ft232h { latency_ms: 1 },
+        AdapterModel::Ft232h { latency_ms: 16 },
     ] {
         stream_for_5_s_behind(model);
     }

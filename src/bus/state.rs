@@ -176,9 +176,13 @@ pub struct BusCounters {
     /// latent adapter (one USB transfer), and on a native line the frame
     /// after which the control budget makes a poll follow.
     pub frames_tx_batched: u64,
-    /// Polls written blind behind a USB adapter, timed by its frame clock:
-    /// before the previous reply reached the host (matched when it comes).
+    /// Polls written blind behind a USB adapter: before the previous reply
+    /// reached the host (matched when it comes).
     pub polls_pipelined: u64,
+    /// Of those, the ones written while the adapter's frame clock was not
+    /// known (not learnt yet, or replies read too late to show it): the
+    /// wire was held a whole USB frame longer after each.
+    pub usb_writes_unclocked: u64,
     /// Writes that came too close to a USB frame boundary to know which
     /// frame took them; the wire was held for the later one (a host that
     /// woke late, not a collision).

@@ -8,8 +8,12 @@
 //! and a poll) when the *wire* will be free, blind to replies still held
 //! in the adapter, and matches them when they come ([`Inflight`]).
 //!
-//! What makes that safe is knowing when a write reaches the wire: host
-//! bytes leave at the next USB (micro)frame boundary. The boundaries are
+//! What makes that safe is bounding when a write reaches the wire: host
+//! bytes leave at the next USB (micro)frame boundary, so at the latest a
+//! period (and the write's reach) after the write. Until the frame clock
+//! is known, and whenever the host reads replies too late for it to show,
+//! the wire is held that long after each write: up to a period lost per
+//! transfer, never the adapter's hold of a reply. The boundaries are
 //! not visible to the host, but the adapter also hands received bytes to
 //! the host at boundaries, so every reply's arrival is a boundary plus the
 //! host's own wake-up delay (never minus). [`FramePhase`] keeps the last
@@ -36,8 +40,9 @@ const PHASE_SAMPLES: usize = 32;
 /// holds this share of the arrivals (the rest are reads of a host that was
 /// busy elsewhere when the bytes came).
 const PHASE_QUANTILE: f64 = 0.8;
-/// Arrivals needed before the estimate is trusted (before that the owner
-/// waits for each reply, as on a native line).
+/// Arrivals needed before the estimate is trusted (before that, and
+/// whenever the arrivals stop agreeing, every write is taken to leave as
+/// late as it may: a period and the write's reach after it was made).
 const PHASE_MIN_SAMPLES: usize = PHASE_SAMPLES;
 /// The estimate is trusted once that share of the arrivals falls within
 /// this part of a period after it (the host reads its replies promptly
@@ -251,7 +256,9 @@ impl UsbPipeline {
         self.phase.period
     }
 
-    /// True once writes can be timed by the frame clock.
+    /// True once writes can be timed by the frame clock (before that they
+    /// are written blind all the same, each taken to leave as late as it
+    /// may).
     pub(crate) fn active(&self) -> bool {
         self.phase.known()
     }
@@ -265,7 +272,13 @@ impl UsbPipeline {
     /// boundary the wire allows (`free_at` plus the guard): the middle of
     /// the frame before it. A boundary the host can no longer make is
     /// skipped for the next.
+    /// Before the frame clock is known: once the wire is free and the
+    /// guard has passed (a write leaves at the earliest right after it is
+    /// made; [`Self::latest_release`] holds the wire for the latest).
     pub(crate) fn write_at(&self, free_at: Instant, now: Instant) -> Instant {
+        if !self.active() {
+            return free_at + GUARD;
+        }
         let by_wire = self.phase.boundary_at_or_after(free_at + GUARD);
         let by_host = self.phase.boundary_after(now + WRITE_LAST_CHANCE);
         let release = by_wire.max(by_host);

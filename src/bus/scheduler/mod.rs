@@ -237,12 +237,12 @@ impl Scheduler {
     /// When the next frame may be handed to the port: a little before the
     /// line frees; behind a USB adapter whose frame clock is known, in the
     /// middle of the USB frame before the boundary the line allows.
-    /// Behind one whose clock is not known yet, once the line is free: a
-    /// write made earlier could leave while a reply is still on the wire.
+    /// Behind one whose clock is not known yet, once the line is free and
+    /// the guard has passed: a write made earlier could leave while a
+    /// reply is still on the wire.
     pub(crate) fn write_at(&self, now: Instant) -> Instant {
         match &self.pipeline {
-            Some(pipeline) if pipeline.active() => pipeline.write_at(self.clock.free_at(), now),
-            Some(_) => self.clock.free_at(),
+            Some(pipeline) => pipeline.write_at(self.clock.free_at(), now),
             None => self.clock.write_at(),
         }
     }
@@ -372,8 +372,8 @@ impl Scheduler {
 
     /// Behind a USB adapter (the write time was waited for in
     /// [`Self::next`]): one transfer a cycle, the pending control frames and
-    /// the next poll; its reply is left in flight once the frame clock is
-    /// known, waited for until then.
+    /// the next poll; its reply is left in flight, matched when the adapter
+    /// hands it over.
     fn pipelined_slot(&mut self, now: Instant, store: &SetpointStore) -> Slot {
         let timeout = self.clock.reply_timeout(now);
         if let Some(poll) = self.planner.next(self.reg.poll_states(), now, timeout) {
@@ -396,8 +396,16 @@ impl Scheduler {
         }
     }
 
-    /// True when polls are written blind, timed by the USB frame clock.
+    /// True when polls are written blind: behind any latent (USB)
+    /// adapter, timed by its frame clock once that is known, each taken
+    /// to leave as late as it may until then.
     pub(crate) fn pipelining(&self) -> bool {
+        self.pipeline.is_some()
+    }
+
+    /// True once the USB frame clock is known from reply arrivals (writes
+    /// are then aimed at its boundaries).
+    pub(crate) fn usb_clock_known(&self) -> bool {
         self.pipeline.as_ref().is_some_and(UsbPipeline::active)
     }
 

@@ -100,7 +100,11 @@ const BUS_COUNTER_HELP: &[(&str, &str)] = &[
     ),
     (
         "polls_pipelined",
-        "Polls written behind a USB adapter before the previous reply reached the host, timed by the adapter's frame clock.",
+        "Polls written behind a USB adapter before the previous reply reached the host.",
+    ),
+    (
+        "usb_writes_unclocked",
+        "Polls written behind a USB adapter while its frame clock was not known (each held the wire a USB frame longer).",
     ),
     (
         "usb_writes_ambiguous",

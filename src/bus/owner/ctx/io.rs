@@ -120,8 +120,8 @@ impl Ctx {
         Ok(())
     }
 
-    /// Behind a USB adapter whose frame clock is known: writes the control
-    /// frames and the poll as one transfer and goes on without waiting;
+    /// Behind a USB adapter: writes the control frames and the poll as one
+    /// transfer and goes on without waiting;
     /// the reply is matched when the adapter hands it over (`absorb_inbox`)
     /// or counted missing at its deadline (`expire_inflight`).
     fn poll_blind(&mut self, control: &[Planned], cmd: Config, want: Want) -> Result<(), BusError> {
@@ -130,10 +130,12 @@ impl Ctx {
             .map(|p| p.command)
             .chain([Command::Config(cmd)])
             .collect();
+        let clocked = self.sched.usb_clock_known();
         let handed = Instant::now();
         let end = self.send(&cmds)?;
         self.link.counters.frames_tx_batched += control.len() as u64;
         self.link.counters.polls_pipelined += 1;
+        self.link.counters.usb_writes_unclocked += u64::from(!clocked);
         self.control_frames_sent(control, end);
         self.sched.track(want, end, handed);
         Ok(())

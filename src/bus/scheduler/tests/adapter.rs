@@ -74,11 +74,11 @@ fn pipelining_bus() -> (Bus, Instant) {
     let mut b = Bus::new(&ids, &ids);
     let t0 = b.now;
     b.s.set_adapter(AdapterModel::Ch340);
-    assert!(!b.s.pipelining(), "nothing learnt yet");
+    assert!(!b.s.usb_clock_known(), "nothing learnt yet");
     for k in 0..40u64 {
         b.s.arrival(b.now + Duration::from_micros(1_000 * k + 20));
     }
-    assert!(b.s.pipelining());
+    assert!(b.s.usb_clock_known());
     (b, t0)
 }
 
@@ -157,6 +157,29 @@ fn once_the_usb_frame_clock_is_known_polls_go_out_before_their_replies() {
         writes.iter().skip(1).all(|w| w.broadcasts == 2),
         "{writes:?}"
     );
+}
+
+#[test]
+fn before_the_usb_frame_clock_is_known_polls_still_go_out_before_their_replies() {
+    let ids: Vec<u8> = (1..=16).collect();
+    let mut b = Bus::new(&ids, &ids);
+    // A 16 ms latency timer: waiting for each reply would cost 16 ms a poll.
+    b.s.set_adapter(AdapterModel::Ftdi { latency_ms: 16 });
+    assert!(!b.s.usb_clock_known());
+    // The owner writes polls blind (does not wait for their replies).
+    assert!(b.s.pipelining());
+    let writes = pipeline_writes(&mut b, 6);
+    assert_eq!(b.s.in_flight(), 6, "none waited for");
+    for w in writes.windows(2) {
+        let (first, next) = (w[0], w[1]);
+        // Each is taken to leave as late as it may: a 1 ms frame and the
+        // write's 200 µs reach after it was made.
+        assert_eq!(first.released - first.at, Duration::from_micros(1_200));
+        // The next is written once the wire is free of the first's frames,
+        // the poll's turnaround and reply, and the 50 µs guard.
+        let wire = FRAME * (first.broadcasts as u32 + 2) + Duration::from_micros(100);
+        assert_eq!(next.at - first.released, wire + Duration::from_micros(50));
+    }
 }
 
 #[test]
