@@ -2,6 +2,11 @@
 //! simulator, the bench's clients): precise timers and the FIFO class. One
 //! copy, so the daemon and the simulator it is measured against ask the
 //! kernel for the same thing.
+//!
+//! - [`wake`]: how late a thread wakes from a timed sleep, learnt from its
+//!   own sleeps (how early to stop sleeping and spin).
+
+pub(crate) mod wake;
 
 /// Makes this thread's timed waits precise: Linux otherwise lets a timer fire
 /// up to 50 µs late (timer slack), an eighth of a frame at 500000 baud.

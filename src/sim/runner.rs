@@ -1,17 +1,18 @@
 //! The simulator's one OS thread: reads host bytes with precise timeouts,
 //! timestamps them, runs the engine, and writes each reply at the instant
 //! the model says its last byte arrives: it sleeps (`ppoll`, timer slack
-//! 1 ns) to just before that instant, then spins the rest of the way.
+//! 1 ns) to just before that instant, by as much as its own sleeps have
+//! ended late lately ([`WakeLateness`]), then spins the rest of the way.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
+use crate::rt::wake::WakeLateness;
+
 use super::engine::{Delivery, Engine};
 use super::line::Line;
 
-/// Spin (instead of sleeping) for this long before a delivery is due.
-const SPIN: Duration = Duration::from_micros(100);
 /// Longest wait without an event, so requests and shutdown are seen promptly.
 const MAX_IDLE: Duration = Duration::from_millis(2);
 /// Host frames the simulated transmit path (driver buffer, adapter FIFO)
@@ -99,6 +100,11 @@ struct Runner {
     line: Box<dyn Line>,
     ctl: Arc<Control>,
     buf: Vec<u8>,
+    /// How late this thread wakes: it stops sleeping that much before a
+    /// delivery is due and spins the rest (a fixed 100 µs was too little
+    /// on a host whose idle CPU takes 200 µs to wake, and CPU wasted on a
+    /// quiet one).
+    wake: WakeLateness,
 }
 
 /// The thread body: runs until shutdown is requested.
@@ -117,6 +123,7 @@ pub(crate) fn run(
         line,
         ctl,
         buf: vec![0; READ_BUF],
+        wake: WakeLateness::default(),
     };
     while !r.ctl.stopping() {
         r.do_line_ops();
@@ -144,11 +151,16 @@ impl Runner {
         // Only bytes due at the host need the spin; the engine's own events
         // carry their modelled instants, so running them a little late is harmless.
         let spin_from = match (delivery, release) {
-            (Some(d), _) | (_, Some(d)) if d == due => due.checked_sub(SPIN).unwrap_or(due),
+            (Some(d), _) | (_, Some(d)) if d == due => {
+                due.checked_sub(self.wake.lead()).unwrap_or(due)
+            }
             _ => due,
         };
         if now < spin_from {
-            self.wait(spin_from.min(now + MAX_IDLE), can_read);
+            let until = spin_from.min(now + MAX_IDLE);
+            if self.wait(until, can_read) {
+                self.wake.observe(until, Instant::now());
+            }
             return;
         }
         while Instant::now() < due {
@@ -160,19 +172,23 @@ impl Runner {
         self.run_due();
     }
 
-    /// Sleeps until `until`, returning early if host bytes arrive.
-    fn wait(&mut self, until: Instant, can_read: bool) {
+    /// Sleeps until `until`, returning early if host bytes arrive; true
+    /// when it slept the whole way (how late it woke is then worth knowing).
+    fn wait(&mut self, until: Instant, can_read: bool) -> bool {
         let left = until.saturating_duration_since(Instant::now());
         if can_read {
-            self.read(left);
+            self.read(left) == Some(0)
         } else {
             std::thread::sleep(left);
+            true
         }
     }
 
-    fn read(&mut self, timeout: Duration) {
+    /// Reads host bytes for up to `timeout`; returns how many came (`None`
+    /// when the line failed and the thread slept instead).
+    fn read(&mut self, timeout: Duration) -> Option<usize> {
         match self.line.read_timeout(&mut self.buf, timeout) {
-            Ok(0) => {}
+            Ok(0) => Some(0),
             Ok(n) => {
                 let at = self.line.take_read_at().unwrap_or_else(Instant::now);
                 let baud = self.line.host_baud();
@@ -180,10 +196,12 @@ impl Runner {
                 let mut engine = lock_engine(&self.engine);
                 engine.count_undated_reads(undated);
                 engine.on_host_bytes(&self.buf[..n], at, baud);
+                Some(n)
             }
             Err(e) => {
                 tracing::debug!("simulator read: {e}");
                 std::thread::sleep(MAX_IDLE);
+                None
             }
         }
     }

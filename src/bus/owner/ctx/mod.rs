@@ -6,12 +6,10 @@
 //! - `io`: the wire primitives: listening, frames out, transactions.
 //! - `port`: the port lost and reopened, the bus down.
 //! - `publish`: rates and the snapshot.
-//! - `wake`: how late the thread wakes from a sleep (how early to stop sleeping).
 
 mod io;
 mod port;
 mod publish;
-mod wake;
 
 use std::sync::atomic::Ordering;
 use std::sync::mpsc::Receiver;
@@ -45,7 +43,7 @@ pub(crate) struct Ctx {
     next_motion_sample: Instant,
     /// How late this thread wakes: it stops sleeping that much before a
     /// reply is due.
-    wake: wake::WakeLateness,
+    wake: crate::rt::wake::WakeLateness,
 }
 
 impl Ctx {
@@ -68,7 +66,7 @@ impl Ctx {
             thread_notes: Vec::new(),
             held: None,
             next_motion_sample: now,
-            wake: wake::WakeLateness::default(),
+            wake: crate::rt::wake::WakeLateness::default(),
         }
     }
 

@@ -1,6 +1,7 @@
-//! How late the owner thread wakes from a timed sleep, learnt from its own
-//! sleeps, so it can go to sleep that much before a reply is due and spin
-//! only for the rest.
+//! How late a thread wakes from a timed sleep, learnt from its own sleeps,
+//! so it can stop sleeping that much before an instant that matters (a
+//! reply due at the bus owner, a byte due on the simulator's wire) and
+//! spin only for the rest.
 //!
 //! A thread woken by a timer (on a VM, a halted virtual CPU woken by the
 //! hypervisor) runs tens of µs after the time it asked for. A fixed lead
@@ -12,7 +13,7 @@
 
 use std::time::{Duration, Instant};
 
-/// The least lead: a wake on time still needs a moment to look at the port.
+/// The least lead: a wake on time still needs a moment to look at the line.
 pub(crate) const MIN_LEAD: Duration = Duration::from_micros(10);
 /// The most lead (and the largest sample taken): a wake later than this was
 /// preemption, not timer lateness, and spinning through it would cost more
@@ -40,7 +41,7 @@ impl Default for WakeLateness {
 }
 
 impl WakeLateness {
-    /// How long before an instant the owner should stop sleeping.
+    /// How long before an instant the thread should stop sleeping.
     pub(crate) fn lead(&self) -> Duration {
         Duration::from_secs_f64(self.estimate_us / 1e6).clamp(MIN_LEAD, MAX_LEAD)
     }
