@@ -44,6 +44,18 @@ pub struct Report {
     /// Host writes the adapter model found waiting after a stall of the
     /// simulator's thread (dated to the earliest they may have been written).
     pub referee_undated: u64,
+    /// Behind a latent adapter, over the whole run (warm-up included):
+    /// polls written blind, those written before the USB frame clock was
+    /// known, and writes held for a later frame.
+    pub pipeline: PipelineCounts,
+}
+
+/// The USB pipeline's counters over a run (see `BusCounters`).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PipelineCounts {
+    pub polls_pipelined: u64,
+    pub unclocked: u64,
+    pub ambiguous: u64,
 }
 
 impl Report {
@@ -212,7 +224,7 @@ impl Report {
             )
         };
         let d = &self.daemon;
-        vec![
+        let mut rows = vec![
             (
                 "host frames/s on the wire",
                 format!(
@@ -251,7 +263,19 @@ impl Report {
                     ms(d.setpoint_age_p99_us)
                 ),
             ),
-        ]
+        ];
+        if self.adapter.is_latent() {
+            let p = self.pipeline;
+            rows.push((
+                "USB pipeline (whole run)",
+                format!(
+                    "{} polls written blind: {} before the frame clock was known, \
+                     {} held for a later frame",
+                    p.polls_pipelined, p.unclocked, p.ambiguous
+                ),
+            ));
+        }
+        rows
     }
 }
 
