@@ -5,7 +5,7 @@
 
 use std::collections::VecDeque;
 use std::io;
-use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -16,6 +16,12 @@ use super::Transport;
 struct Channel {
     bytes: Mutex<Queue>,
     ready: Condvar,
+    /// Bytes in `bytes`, readable without the lock: a reader that only
+    /// looks (a zero timeout, as the bus owner does many times while it
+    /// spins for a reply) must not take the lock each time, or the writer
+    /// (the simulator with that reply) loses the lock to it again and
+    /// again until the spin ends.
+    queued: AtomicUsize,
 }
 
 /// The bytes in one direction, and when each write of them was made
@@ -27,9 +33,10 @@ struct Queue {
 }
 
 impl Queue {
-    fn clear(&mut self) {
+    fn clear(&mut self, queued: &AtomicUsize) {
         self.bytes.clear();
         self.writes.clear();
+        queued.store(0, Ordering::Release);
     }
 }
 
@@ -101,7 +108,7 @@ impl MemoryPort {
     pub fn set_hung_up(&self, hung_up: bool) {
         self.line.hung_up.store(hung_up, Ordering::SeqCst);
         for ch in [&self.line.to_device, &self.line.to_host] {
-            lock(ch).clear();
+            lock(ch).clear(&ch.queued);
             ch.ready.notify_all();
         }
     }
@@ -129,6 +136,7 @@ impl Transport for MemoryPort {
         let mut q = lock(ch);
         q.writes.push_back((Instant::now(), bytes.len()));
         q.bytes.extend(bytes);
+        ch.queued.fetch_add(bytes.len(), Ordering::Release);
         drop(q);
         ch.ready.notify_all();
         Ok(())
@@ -142,6 +150,12 @@ impl Transport for MemoryPort {
         } else {
             &line.to_device
         };
+        if timeout.is_zero() && ch.queued.load(Ordering::Acquire) == 0 {
+            if self.is_hung_up() {
+                return Err(hangup_error());
+            }
+            return Ok(0);
+        }
         let mut q = lock(ch);
         loop {
             if self.is_hung_up() {
@@ -153,6 +167,7 @@ impl Transport for MemoryPort {
                 for (dst, src) in buf.iter_mut().zip(q.bytes.drain(..n)) {
                     *dst = src;
                 }
+                ch.queued.fetch_sub(n, Ordering::Release);
                 self.last_written_at = Some(written_at);
                 match q.writes.front_mut() {
                     Some(front) if front.1 > n => front.1 -= n,
@@ -182,7 +197,8 @@ impl Transport for MemoryPort {
     }
 
     fn discard_input(&mut self) -> io::Result<()> {
-        lock(self.incoming()).clear();
+        let ch = self.incoming();
+        lock(ch).clear(&ch.queued);
         Ok(())
     }
 }
@@ -215,6 +231,10 @@ mod tests {
         assert_eq!(buf[0], 3);
         assert!(dev.take_written_at().expect("an instant") >= between);
         assert_eq!(dev.take_written_at(), None, "taken once");
+        // All read: a look finds nothing, and the next write is found.
+        assert_eq!(dev.read_timeout(&mut buf, Duration::ZERO).unwrap(), 0);
+        host.write_all(&[4, 5]).unwrap();
+        assert_eq!(dev.read_timeout(&mut buf, Duration::ZERO).unwrap(), 2);
     }
 
     #[test]
@@ -245,6 +265,9 @@ mod tests {
         let err = host
             .read_timeout(&mut buf, Duration::from_millis(1))
             .unwrap_err();
+        assert!(super::super::is_hangup(&err));
+        // A look without waiting says so too, not "nothing yet".
+        let err = host.read_timeout(&mut buf, Duration::ZERO).unwrap_err();
         assert!(super::super::is_hangup(&err));
         assert!(host.write_all(&[0]).is_err());
     }
