@@ -289,11 +289,7 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
         referee_undated: s1.host_reads_undated.saturating_sub(s0.host_reads_undated),
         referee_late_us: [0.5, 0.99]
             .map(|p| analysis::quantile_i64(&referee_late_ns, p) as f64 / 1e3),
-        pipeline: report::PipelineCounts {
-            polls_pipelined: snapshot.counters.polls_pipelined,
-            unclocked: snapshot.counters.usb_writes_unclocked,
-            ambiguous: snapshot.counters.usb_writes_ambiguous,
-        },
+        counters: snapshot.counters.clone(),
     })
 }
 

@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 use std::fmt;
 use std::time::Duration;
 
-use crate::bus::handle::BusRates;
+use crate::bus::handle::{BusCounters, BusRates};
 
 use super::analysis::{quantile, Analysis};
 
@@ -44,18 +44,9 @@ pub struct Report {
     /// Host writes the adapter model found waiting after a stall of the
     /// simulator's thread (dated to the earliest they may have been written).
     pub referee_undated: u64,
-    /// Behind a latent adapter, over the whole run (warm-up included):
-    /// polls written blind, those written before the USB frame clock was
-    /// known, and writes held for a later frame.
-    pub pipeline: PipelineCounts,
-}
-
-/// The USB pipeline's counters over a run (see `BusCounters`).
-#[derive(Debug, Clone, Copy, Default)]
-pub struct PipelineCounts {
-    pub polls_pipelined: u64,
-    pub unclocked: u64,
-    pub ambiguous: u64,
+    /// The daemon's counters at the end of the run (warm-up included):
+    /// behind a latent adapter, how the USB pipeline wrote.
+    pub counters: BusCounters,
 }
 
 impl Report {
@@ -265,13 +256,13 @@ impl Report {
             ),
         ];
         if self.adapter.is_latent() {
-            let p = self.pipeline;
+            let c = &self.counters;
             rows.push((
                 "USB pipeline (whole run)",
                 format!(
                     "{} polls written blind: {} before the frame clock was known, \
                      {} held for a later frame",
-                    p.polls_pipelined, p.unclocked, p.ambiguous
+                    c.polls_pipelined, c.usb_writes_unclocked, c.usb_writes_ambiguous
                 ),
             ));
         }

@@ -43,10 +43,15 @@ impl ControlBudget {
         self.credit = self.credit.min(self.cap);
     }
 
-    fn refill(&mut self, now: Instant) {
+    /// The credit refilled up to `now`.
+    fn credit_at(&self, now: Instant) -> f64 {
         let dt = now.saturating_duration_since(self.last).as_secs_f64();
+        (self.credit + self.share * dt).min(self.cap)
+    }
+
+    fn refill(&mut self, now: Instant) {
+        self.credit = self.credit_at(now);
         self.last = self.last.max(now);
-        self.credit = (self.credit + self.share * dt).min(self.cap);
     }
 
     /// True when a control frame may go out now.
@@ -58,10 +63,8 @@ impl ControlBudget {
     /// True when, after a control frame of `frame` time sent now, another
     /// would still be allowed once that one has left the line.
     pub(crate) fn allows_another(&self, now: Instant, frame: Duration) -> bool {
-        let dt = now.saturating_duration_since(self.last).as_secs_f64();
-        let credit = (self.credit + self.share * dt).min(self.cap);
         // Spent now, refilled at the share while the frame is on the line.
-        credit - frame.as_secs_f64() * (1.0 - self.share) >= 0.0
+        self.credit_at(now) - frame.as_secs_f64() * (1.0 - self.share) >= 0.0
     }
 
     /// Charges `wire` time of control frames.

@@ -46,6 +46,11 @@ impl WakeLateness {
         Duration::from_secs_f64(self.estimate_us / 1e6).clamp(MIN_LEAD, MAX_LEAD)
     }
 
+    /// When to stop sleeping to be awake by `due`.
+    pub(crate) fn wake_at(&self, due: Instant) -> Instant {
+        due.checked_sub(self.lead()).unwrap_or(due)
+    }
+
     /// A sleep that asked to end at `asked` ended at `woke`.
     pub(crate) fn observe(&mut self, asked: Instant, woke: Instant) {
         let late = woke.saturating_duration_since(asked).min(MAX_LEAD);

@@ -151,9 +151,7 @@ impl Runner {
         // Only bytes due at the host need the spin; the engine's own events
         // carry their modelled instants, so running them a little late is harmless.
         let spin_from = match (delivery, release) {
-            (Some(d), _) | (_, Some(d)) if d == due => {
-                due.checked_sub(self.wake.lead()).unwrap_or(due)
-            }
+            (Some(d), _) | (_, Some(d)) if d == due => self.wake.wake_at(due),
             _ => due,
         };
         if now < spin_from {

@@ -28,6 +28,21 @@ def call(base, method, path, body=None):
         return json.loads(r.read() or b"null")
 
 
+def recording_daemon(tmp_path, joints):
+    """A daemon of its own on `joints` simulated joints, its state in
+    `tmp_path`, recording once they are online: (daemon, the recording)."""
+    from conftest import Daemon
+
+    d = Daemon("--sim", str(joints), "--state-dir", str(tmp_path))
+    try:
+        d.wait("/api/v1/buses/sim0", lambda b: f'"devices_online":{joints}'.encode() in b,
+               f"{joints} joints online")
+        return d, call(d.url + "/api/v1", "POST", "/recordings", {})
+    except BaseException:
+        d.stop()
+        raise
+
+
 def test_a_recording_of_a_moving_joint_reads_back(daemon, tmp_path):
     api = daemon.url + "/api/v1"
     call(api, "POST", "/buses/sim0/control/enable", {"ids": [1, 2, 3, 4]})
@@ -121,14 +136,11 @@ def test_an_api_recording_is_listed_stopped_and_downloaded(daemon):
 
 
 def test_a_kill_loses_at_most_the_last_chunk(tmp_path):
-    from conftest import Daemon
     from mcap.stream_reader import StreamReader
     from mcap.records import Message
 
-    d = Daemon("--sim", "4", "--state-dir", str(tmp_path))
+    d, started = recording_daemon(tmp_path, 4)
     try:
-        d.wait("/api/v1/buses/sim0", lambda b: b'"devices_online":4' in b, "4 joints online")
-        started = call(d.url + "/api/v1", "POST", "/recordings", {})
         time.sleep(3.5)
         d.proc.kill()  # SIGKILL: no footer, no summary, the open chunk lost
         d.proc.wait(10)
@@ -173,12 +185,8 @@ def test_a_bag_compatible_recording_has_one_ros_serialization(daemon, tmp_path):
 
 
 def test_a_recording_running_at_shutdown_is_closed_whole(tmp_path):
-    from conftest import Daemon
-
-    d = Daemon("--sim", "2", "--state-dir", str(tmp_path))
+    d, started = recording_daemon(tmp_path, 2)
     try:
-        d.wait("/api/v1/buses/sim0", lambda b: b'"devices_online":2' in b, "2 joints online")
-        started = call(d.url + "/api/v1", "POST", "/recordings", {})
         time.sleep(1.0)
     finally:
         d.stop()  # SIGTERM: a graceful stop

@@ -255,12 +255,11 @@ impl Ctx {
         due: Instant,
     ) -> std::io::Result<Option<(Reply, Instant)>> {
         let spinning = self.cfg.timing.reply_spin_us > 0;
-        let lead = if spinning {
-            self.wake.lead()
+        let until = if spinning {
+            self.wake.wake_at(due)
         } else {
-            PREPARE_LEAD
+            due.checked_sub(PREPARE_LEAD).unwrap_or(due)
         };
-        let until = due.checked_sub(lead).unwrap_or(due);
         let slept = Instant::now() < until;
         let got = self.link.wait(Some(want), until);
         if spinning && slept && matches!(got, Ok(None)) {
