@@ -1,5 +1,5 @@
 //! `jointd [run]`: config file and flags → buses (serial or an in-process
-//! simulator on a pty) → the HTTP API → on SIGINT/SIGTERM stop accepting,
+//! simulator on a pty, or behind a USB adapter model on an in-memory line) → the HTTP API → on SIGINT/SIGTERM stop accepting,
 //! disable every joint, close the ports, exit 0.
 
 use std::collections::BTreeMap;
@@ -14,7 +14,7 @@ use tokio::net::TcpListener;
 use crate::config_locate::{key_in_table_array, table_array_line};
 use tokio::signal::unix::{signal, SignalKind};
 
-use crate::bus::{spawn_bus, AdapterSetting, BusConfig, BusError, BusHandle};
+use crate::bus::{spawn_bus, spawn_bus_on, AdapterSetting, BusConfig, BusError, BusHandle};
 use crate::http::limits::{LimitError, LimitRule, SoftLimits};
 use crate::http::policy::{RequestPolicy, DEFAULT_MAX_BODY_BYTES};
 use crate::http::state::StateOptions;
@@ -22,11 +22,14 @@ use crate::http::teleop::{WatchdogDefault, MAX_HOLD, MIN_HOLD};
 use crate::http::{app, AppState};
 use crate::protocol::is_device_id;
 use crate::sim::{AdapterModel, Firmware, SimConfig, SimError, SimHandle, Simulator};
+use crate::transport::Transport;
 
 /// Default HTTP address: loopback only.
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8080";
 /// Name of the bus `--sim` starts.
 pub const SIM_BUS_NAME: &str = "sim0";
+/// The path the `--sim` bus shows when it runs over the in-memory line.
+const SIM_MEMORY_PATH: &str = "memory";
 /// Reply slack of the `--sim` bus, µs (see [`crate::bus::Timing`]).
 const SIM_REPLY_MARGIN_US: u64 = 20_000;
 /// How long shutdown waits for each bus to disable its joints and close.
@@ -51,7 +54,8 @@ pub struct RunArgs {
     #[arg(long, value_name = "SPEC", requires = "sim")]
     pub sim_firmware: Option<String>,
     /// The USB adapter the simulated bus sits behind: `native` (default),
-    /// `ftdi[:MS]`, `ch340`, `cp2102`, `ft232h[:MS]`; the bus plans for it.
+    /// `ftdi[:MS]`, `ch340`, `cp2102`, `ft232h[:MS]`; the bus plans for it
+    /// (behind a USB model it runs over an in-memory line, not a pty).
     #[arg(long, value_name = "MODEL", requires = "sim")]
     pub sim_adapter: Option<String>,
     /// A mechanical end stop of a simulated joint, `ID=DEG` (repeatable),
@@ -506,35 +510,55 @@ fn sim_config(joints: u8, args: &RunArgs) -> Result<SimConfig, DaemonError> {
     Ok(cfg)
 }
 
-/// Starts the simulator of `--sim` and the bus config that opens its pty.
-fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusConfig), DaemonError> {
+/// A bus to start: its config, and the transport when it is not opened by
+/// path (the simulator's in-memory line).
+type BusToStart = (BusConfig, Option<Box<dyn Transport>>);
+
+/// Starts the simulator of `--sim` and the config of the bus that reaches
+/// it: over a pty, opened by path like hardware; behind a USB adapter
+/// model, over the in-memory line instead, with the line itself.
+fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusToStart), DaemonError> {
     let (ids, baud, joints) = (sim_cfg.ids.clone(), sim_cfg.baud, sim_cfg.ids.len());
     let firmware = sim_cfg.firmware.to_string();
     let adapter = sim_cfg.adapter;
-    let sim = Simulator::spawn_pty(sim_cfg)?;
-    let path = sim.device_path().ok_or_else(|| DaemonError::Io {
-        what: "simulator".into(),
-        source: std::io::Error::other("the simulator has no device path"),
-    })?;
+    // Behind a USB adapter the owner writes polls without waiting for their
+    // replies, each timed to reach the wire within a USB frame of its write,
+    // as a real adapter takes it. A pty's kernel worker may pass a write on
+    // a millisecond or more late, which no adapter does, and the model's
+    // referee then counts collisions the daemon did not make. The in-memory
+    // line tells the model when each write was made.
+    let (sim, path, port): (SimHandle, PathBuf, Option<Box<dyn Transport>>) = if adapter.is_latent()
+    {
+        let (sim, host) = Simulator::spawn_memory(sim_cfg)?;
+        (sim, PathBuf::from(SIM_MEMORY_PATH), Some(Box::new(host)))
+    } else {
+        let sim = Simulator::spawn_pty(sim_cfg)?;
+        let path = sim.device_path().ok_or_else(|| DaemonError::Io {
+            what: "simulator".into(),
+            source: std::io::Error::other("the simulator has no device path"),
+        })?;
+        (sim, path, None)
+    };
     tracing::info!(path = %path.display(), joints, baud, %firmware, %adapter, "simulated bus started");
     let mut cfg = BusConfig::new(SIM_BUS_NAME, path, baud);
     cfg.ids = ids;
-    // A pty shows no USB in sysfs: the bus is told what the simulator models.
+    // Neither a pty nor the in-memory line shows USB in sysfs: the bus is
+    // told what the simulator models.
     cfg.adapter = AdapterSetting::Fixed(adapter);
     // The simulator shares the CPU with the daemon: on a busy machine its
     // replies can come milliseconds late, which is not a silent device.
     cfg.timing.reply_margin_us = SIM_REPLY_MARGIN_US;
-    Ok((sim, cfg))
+    Ok((sim, (cfg, port)))
 }
 
 /// Runs the daemon until SIGINT or SIGTERM.
 pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     let plan = plan(&args)?;
-    let mut configs = plan.buses;
+    let mut configs: Vec<BusToStart> = plan.buses.into_iter().map(|cfg| (cfg, None)).collect();
     let sim = match plan.sim {
         Some(sim_cfg) => {
-            let (sim, cfg) = start_sim(sim_cfg)?;
-            configs.push(cfg);
+            let (sim, bus) = start_sim(sim_cfg)?;
+            configs.push(bus);
             Some(sim)
         }
         None => None,
@@ -611,13 +635,16 @@ async fn wait_for_ws_close(state: &AppState) {
 
 /// Starts one owner per bus; a port that is not there yet is retried by its owner.
 fn start_buses(
-    configs: Vec<BusConfig>,
+    configs: Vec<BusToStart>,
 ) -> Result<(Vec<BusHandle>, Vec<crate::bus::BusThread>), DaemonError> {
     let mut handles = Vec::with_capacity(configs.len());
     let mut threads = Vec::with_capacity(configs.len());
-    for cfg in configs {
+    for (cfg, port) in configs {
         tracing::info!(bus = %cfg.name, path = %cfg.path.display(), baud = cfg.baud, "starting bus");
-        let (handle, thread) = spawn_bus(cfg)?;
+        let (handle, thread) = match port {
+            Some(port) => spawn_bus_on(cfg, port)?,
+            None => spawn_bus(cfg)?,
+        };
         handles.push(handle);
         threads.push(thread);
     }

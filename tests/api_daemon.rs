@@ -48,18 +48,11 @@ fn an_empty_or_blank_token_stops_the_daemon_at_start() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("JOINTD_TOKEN"));
 }
 
-#[test]
-fn serves_the_simulator_and_stops_cleanly_on_sigterm() {
+/// Starts `jointd` with `args`; returns it and its base URL (the first
+/// line it prints).
+fn spawn_daemon(args: &[&str]) -> (std::process::Child, String) {
     let mut child = Command::new(BIN)
-        .args([
-            "run",
-            "--sim",
-            "3",
-            "--listen",
-            "127.0.0.1:0",
-            "--token",
-            "t0k",
-        ])
+        .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
@@ -74,6 +67,20 @@ fn serves_the_simulator_and_stops_cleanly_on_sigterm() {
         .strip_prefix("listening on ")
         .expect("address line")
         .to_owned();
+    (child, base)
+}
+
+#[test]
+fn serves_the_simulator_and_stops_cleanly_on_sigterm() {
+    let (mut child, base) = spawn_daemon(&[
+        "run",
+        "--sim",
+        "3",
+        "--listen",
+        "127.0.0.1:0",
+        "--token",
+        "t0k",
+    ]);
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
         let client = reqwest::Client::new();
@@ -139,6 +146,51 @@ fn serves_the_simulator_and_stops_cleanly_on_sigterm() {
         std::thread::sleep(Duration::from_millis(20));
     };
     assert!(status.success(), "exit status {status}");
+}
+
+/// `--sim-adapter`: the simulated bus runs over the in-memory line (a pty
+/// may pass a write on later than any USB adapter would), the bus plans
+/// for the model, writes its polls blind, and the simulator's referee
+/// counts no collision while every joint is polled.
+#[test]
+fn the_simulator_behind_an_adapter_model_is_pipelined_without_collisions() {
+    let (mut child, base) = spawn_daemon(&[
+        "--sim",
+        "4",
+        "--sim-adapter",
+        "ch340",
+        "--listen",
+        "127.0.0.1:0",
+    ]);
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let bus = rt.block_on(async {
+        let get = |path: String| async move {
+            reqwest::get(path)
+                .await
+                .unwrap()
+                .json::<serde_json::Value>()
+                .await
+                .unwrap()
+        };
+        let deadline = Instant::now() + WAIT;
+        loop {
+            let bus = get(format!("{base}/api/v1/buses/sim0")).await;
+            if bus["counters"]["polls_pipelined"].as_u64() >= Some(2000) {
+                break bus;
+            }
+            assert!(Instant::now() < deadline, "too few polls: {bus}");
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    });
+    let _ = child.kill();
+    let _ = child.wait();
+    assert_eq!(bus["path"], "memory", "{bus}");
+    assert_eq!(bus["adapter"], "ch340", "{bus}");
+    // A collision corrupts the reply it meets (a CRC error, bytes skipped)
+    // or loses it (a timeout).
+    assert_eq!(bus["counters"]["crc_errors"], 0, "{bus}");
+    assert_eq!(bus["counters"]["timeouts"], 0, "{bus}");
+    assert_eq!(bus["counters"]["skipped_bytes"], 0, "{bus}");
 }
 
 /// A burst of identical failing requests (a bus that is down) logs O(1)

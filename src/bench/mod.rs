@@ -89,8 +89,9 @@ pub struct BenchArgs {
     /// it is made: under load a pty's kernel worker passes bytes on up to
     /// milliseconds late, a delay USB-serial drivers do not add, which the
     /// adapter models then take for a write that missed its USB frame).
-    #[arg(long, default_value = "pty", value_parser = ["pty", "memory"])]
-    pub line: String,
+    /// Default: `pty` on a native line, `memory` behind a USB adapter model.
+    #[arg(long, value_parser = ["pty", "memory"])]
+    pub line: Option<String>,
     /// Measure moves generated in the daemon instead (issue 18): every joint
     /// doing back-to-back minimum-jerk moves of 300 ms; the rate of move
     /// setpoints on the wire per joint, the tracking error, occupancy, CPU.
@@ -305,7 +306,14 @@ pub(crate) fn setup(
     sim_cfg.turnaround = Duration::from_micros(args.turnaround_us);
     let adapter = adapter_of(args)?;
     sim_cfg.adapter = adapter;
-    let (sim, memory) = if args.line == "memory" {
+    // Behind a USB model the bus writes polls blind, each timed to reach the
+    // wire within a USB frame: a pty that passes a write on later would make
+    // collisions no adapter does.
+    let over_memory = match args.line.as_deref() {
+        Some(line) => line == "memory",
+        None => adapter.is_latent(),
+    };
+    let (sim, memory) = if over_memory {
         let (sim, host) = Simulator::spawn_memory(sim_cfg)?;
         (sim, Some(host))
     } else {
