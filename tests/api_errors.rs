@@ -3,6 +3,7 @@
 
 mod support;
 
+use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use jointd::http::limits::{LimitRule, SoftLimits};
@@ -376,14 +377,15 @@ async fn estop_preempts_queued_requests() {
             })
         })
         .collect();
-    // Wait until the owner is busy with the first request before stopping.
+    // Stop once all three are with the bus (the fake owner never takes one
+    // off this count): one being served, two queued behind it. A scan that
+    // reached the bus after the e-stop would rightly run after it.
     let deadline = tokio::time::Instant::now() + Duration::from_secs(5);
-    while bus.handle.snapshot().queue_depth == 0
-        && bus.script().log.is_empty()
-        && tokio::time::Instant::now() < deadline
-    {
+    let sent = || bus.handle.shared().queued.load(Ordering::Relaxed);
+    while sent() < 3 && tokio::time::Instant::now() < deadline {
         tokio::time::sleep(std::time::Duration::from_millis(1)).await;
     }
+    assert_eq!(sent(), 3, "the three scans never reached the bus");
     let r = s.post_empty("/api/v1/estop").await;
     let body = r.ok();
     assert_eq!(body["stopped"], true);
