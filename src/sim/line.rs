@@ -79,6 +79,12 @@ impl Line for MemoryLine {
         self.port.take_written_at()
     }
 
+    /// A UART starts sending a host frame when it is written, not when the
+    /// simulator's thread, waking from its wait, gets to read it.
+    fn take_read_at(&mut self) -> Option<std::time::Instant> {
+        self.port.take_written_at()
+    }
+
     fn host_baud(&self) -> Option<u32> {
         Some(self.port.baud())
     }

@@ -85,8 +85,16 @@ pub(crate) struct Wire {
     host: VecDeque<HostTx>,
     /// Device transmissions not yet off the line, in end order.
     device: Vec<DeviceTx>,
+    /// The last device transmissions that left the line, as spans: a host
+    /// frame dated when it was written, read by a simulator thread that
+    /// woke late, may start before a reply that has already left.
+    ended: VecDeque<(Instant, Instant)>,
     busy: BusyMeter,
 }
+
+/// Device transmissions kept after they left the line, for host frames
+/// dated into the past (a few ms of replies at any baud jointd uses).
+const ENDED_KEPT: usize = 16;
 
 fn overlaps(a: (Instant, Instant), b: (Instant, Instant)) -> bool {
     a.0 < b.1 && b.0 < a.1
@@ -123,6 +131,16 @@ impl Wire {
             .filter(|d| overlaps((d.start, d.end), (start, end)))
         {
             d.collided = true;
+            tx.collided = true;
+            collisions += 1;
+        }
+        // A reply already handed to the host cannot be marked; the host
+        // frame is, and the overlap counted.
+        for _ in self
+            .ended
+            .iter()
+            .filter(|span| overlaps(**span, (start, end)))
+        {
             tx.collided = true;
             collisions += 1;
         }
@@ -187,11 +205,21 @@ impl Wire {
         let h = self.host.front().map(|h| h.end).filter(|e| *e <= now);
         let d = self.device.first().map(|d| d.end).filter(|e| *e <= now);
         match (h, d) {
-            (Some(he), Some(de)) if de < he => Some(WireEvent::Device(self.device.remove(0))),
+            (Some(he), Some(de)) if de < he => Some(self.device_left()),
             (Some(_), _) => self.host.pop_front().map(WireEvent::Host),
-            (None, Some(_)) => Some(WireEvent::Device(self.device.remove(0))),
+            (None, Some(_)) => Some(self.device_left()),
             (None, None) => None,
         }
+    }
+
+    /// The first device transmission leaves the line (remembered a while).
+    fn device_left(&mut self) -> WireEvent {
+        let d = self.device.remove(0);
+        if self.ended.len() == ENDED_KEPT {
+            self.ended.pop_front();
+        }
+        self.ended.push_back((d.start, d.end));
+        WireEvent::Device(d)
     }
 
     /// Host frames waiting for or on the line (the host's UART FIFO depth).
@@ -213,6 +241,7 @@ impl Wire {
     pub(crate) fn clear_in_flight(&mut self) {
         self.host.clear();
         self.device.clear();
+        self.ended.clear();
         self.host_free_at = None;
     }
 }
@@ -277,6 +306,25 @@ mod tests {
             panic!("host next")
         };
         assert!(h.collided);
+    }
+
+    #[test]
+    fn a_host_frame_dated_into_a_reply_that_already_left_collides() {
+        let t0 = Instant::now();
+        let f = frame_time(BAUD);
+        let mut w = Wire::new();
+        w.schedule_device(reply(t0, 0), Duration::ZERO);
+        assert!(matches!(w.pop_due(t0 + f), Some(WireEvent::Device(_))));
+        // Read after the reply left, written while it was on the line.
+        let p = w.place_host([1; 20], t0 + f / 2, Some(BAUD), f);
+        assert_eq!(p.collisions, 1);
+        let Some(WireEvent::Host(h)) = w.pop_due(t0 + 2 * f) else {
+            panic!("the host frame")
+        };
+        assert!(h.collided);
+        // Written after it ended: no collision.
+        let q = w.place_host([2; 20], t0 + 2 * f, Some(BAUD), f);
+        assert_eq!(q.collisions, 0);
     }
 
     #[test]
