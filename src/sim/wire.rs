@@ -136,14 +136,13 @@ impl Wire {
         }
         // A reply already handed to the host cannot be marked; the host
         // frame is, and the overlap counted.
-        for _ in self
+        let met_after_leaving = self
             .ended
             .iter()
             .filter(|span| overlaps(**span, (start, end)))
-        {
-            tx.collided = true;
-            collisions += 1;
-        }
+            .count() as u64;
+        tx.collided |= met_after_leaving > 0;
+        collisions += met_after_leaving;
         self.host_free_at = Some(end);
         self.busy.add(start, end);
         self.host.push_back(tx);
