@@ -516,29 +516,24 @@ type BusToStart = (BusConfig, Option<Box<dyn Transport>>);
 
 /// Starts the simulator of `--sim` and the config of the bus that reaches
 /// it: over a pty, opened by path like hardware; behind a USB adapter
-/// model, over the in-memory line instead, with the line itself.
+/// model, over the in-memory line instead, with the line itself
+/// ([`Simulator::spawn_for`] says why).
 fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusToStart), DaemonError> {
     let (ids, baud, joints) = (sim_cfg.ids.clone(), sim_cfg.baud, sim_cfg.ids.len());
     let firmware = sim_cfg.firmware.to_string();
     let adapter = sim_cfg.adapter;
-    // Behind a USB adapter the owner writes polls without waiting for their
-    // replies, each timed to reach the wire within a USB frame of its write,
-    // as a real adapter takes it. A pty's kernel worker may pass a write on
-    // a millisecond or more late, which no adapter does, and the model's
-    // referee then counts collisions the daemon did not make. The in-memory
-    // line tells the model when each write was made.
-    let (sim, path, port): (SimHandle, PathBuf, Option<Box<dyn Transport>>) = if adapter.is_latent()
-    {
-        let (sim, host) = Simulator::spawn_memory(sim_cfg)?;
-        (sim, PathBuf::from(SIM_MEMORY_PATH), Some(Box::new(host)))
-    } else {
-        let sim = Simulator::spawn_pty(sim_cfg)?;
-        let path = sim.device_path().ok_or_else(|| DaemonError::Io {
-            what: "simulator".into(),
-            source: std::io::Error::other("the simulator has no device path"),
-        })?;
-        (sim, path, None)
+    let (sim, port) = Simulator::spawn_for(sim_cfg)?;
+    let path = match (&port, sim.device_path()) {
+        (Some(_), _) => PathBuf::from(SIM_MEMORY_PATH),
+        (None, Some(path)) => path,
+        (None, None) => {
+            return Err(DaemonError::Io {
+                what: "simulator".into(),
+                source: std::io::Error::other("the simulator has no device path"),
+            })
+        }
     };
+    let port = port.map(|p| Box::new(p) as Box<dyn Transport>);
     tracing::info!(path = %path.display(), joints, baud, %firmware, %adapter, "simulated bus started");
     let mut cfg = BusConfig::new(SIM_BUS_NAME, path, baud);
     cfg.ids = ids;

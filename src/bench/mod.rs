@@ -306,18 +306,13 @@ pub(crate) fn setup(
     sim_cfg.turnaround = Duration::from_micros(args.turnaround_us);
     let adapter = adapter_of(args)?;
     sim_cfg.adapter = adapter;
-    // Behind a USB model the bus writes polls blind, each timed to reach the
-    // wire within a USB frame: a pty that passes a write on later would make
-    // collisions no adapter does.
-    let over_memory = match args.line.as_deref() {
-        Some(line) => line == "memory",
-        None => adapter.is_latent(),
-    };
-    let (sim, memory) = if over_memory {
-        let (sim, host) = Simulator::spawn_memory(sim_cfg)?;
-        (sim, Some(host))
-    } else {
-        (Simulator::spawn_pty(sim_cfg)?, None)
+    let (sim, memory) = match args.line.as_deref() {
+        Some("memory") => {
+            let (sim, host) = Simulator::spawn_memory(sim_cfg)?;
+            (sim, Some(host))
+        }
+        Some(_) => (Simulator::spawn_pty(sim_cfg)?, None),
+        None => Simulator::spawn_for(sim_cfg)?,
     };
     if !args.no_rt {
         referee_realtime()?;

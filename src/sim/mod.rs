@@ -127,6 +127,24 @@ impl Simulator {
         let handle = SimHandle::spawn(&cfg, Box::new(MemoryLine::new(device)), None)?;
         Ok((handle, host))
     }
+
+    /// A bus over the line its adapter model needs: a pty (opened by path,
+    /// like hardware; the host end is `None`) on a native line, the
+    /// in-memory pipe (its host end returned) behind a USB model. Behind a
+    /// USB adapter the bus owner writes polls without waiting for their
+    /// replies, each timed to reach the wire within a USB frame of its
+    /// write, as an adapter takes it; a pty's kernel worker may pass a write
+    /// on a millisecond or more late, which no adapter does, and the referee
+    /// then counts collisions the daemon did not make. The pipe tells the
+    /// model when each write was made.
+    pub fn spawn_for(cfg: SimConfig) -> Result<(SimHandle, Option<MemoryPort>), SimError> {
+        if cfg.adapter.is_latent() {
+            let (sim, host) = Self::spawn_memory(cfg)?;
+            Ok((sim, Some(host)))
+        } else {
+            Ok((Self::spawn_pty(cfg)?, None))
+        }
+    }
 }
 
 /// A running simulator. Clones share it; the last one dropped stops it.
