@@ -15,6 +15,7 @@ const state = {
   selected: null,             // {bus, id}
   ws: null,
   config: null,
+  configFor: null,            // {bus, id} the parameter table was read from
 };
 
 // ---------------------------------------------------------------- messages
@@ -264,6 +265,9 @@ function dev(path = "") {
 
 async function select(bus, id) {
   state.selected = { bus, id };
+  // The parameter table belongs to the joint it was read from: cleared at
+  // once, so nothing shown (or edited) for the last joint is applied to this one.
+  clearConfig();
   $("#panel").hidden = false;
   $("#panel-title").textContent = `${id} on ${bus}`;
   renderDevices();
@@ -350,11 +354,22 @@ async function offeredParams() {
 /** A parameter as a person reads it: at most 4 decimals, no float noise. */
 const shown = (v) => String(Number(Number(v).toFixed(4)));
 
+function clearConfig() {
+  state.config = null;
+  state.configFor = null;
+  $("#config tbody").innerHTML = "";
+}
+
+const sameJoint = (a, b) => !!a && !!b && a.bus === b.bus && a.id === b.id;
+
 async function loadConfig() {
+  const joint = { ...state.selected };
   const rows = await act(null, offeredParams);
   const cfg = rows && await act(null, () => api("GET", dev("/config")));
-  if (!cfg) return;
+  // Another joint was selected meanwhile: this answer is not its table.
+  if (!cfg || !sameJoint(joint, state.selected)) return;
   state.config = cfg;
+  state.configFor = joint;
   const tbody = $("#config tbody");
   tbody.innerHTML = "";
   for (const row of rows) {
@@ -394,6 +409,7 @@ async function loadConfig() {
 
 $("#config-reload").onclick = loadConfig;
 $("#config-apply").onclick = async () => {
+  if (!sameJoint(state.configFor, state.selected)) return say("The parameters of this joint are still loading.");
   const patch = {};
   for (const input of document.querySelectorAll("#config input[data-param]")) {
     const name = input.dataset.param;
