@@ -263,6 +263,9 @@ function dev(path = "") {
   return `buses/${encodeURIComponent(bus)}/devices/${id}${path}`;
 }
 
+/** True when `a` and `b` name the same joint. */
+const sameJoint = (a, b) => !!a && !!b && a.bus === b.bus && a.id === b.id;
+
 async function select(bus, id) {
   state.selected = { bus, id };
   // The parameter table belongs to the joint it was read from: cleared at
@@ -272,6 +275,8 @@ async function select(bus, id) {
   $("#panel-title").textContent = `${id} on ${bus}`;
   renderDevices();
   const detail = await act(null, () => api("GET", dev()));
+  // Another joint was clicked meanwhile: its own select() fills the panel.
+  if (!sameJoint({ bus, id }, state.selected)) return;
   if (detail) {
     const lim = detail.limits || {};
     const slider = $("#target-slider");
@@ -359,8 +364,6 @@ function clearConfig() {
   state.configFor = null;
   $("#config tbody").innerHTML = "";
 }
-
-const sameJoint = (a, b) => !!a && !!b && a.bus === b.bus && a.id === b.id;
 
 async function loadConfig() {
   const joint = { ...state.selected };
