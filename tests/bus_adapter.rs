@@ -67,6 +67,27 @@ async fn a_bus_set_for_ftdi_at_16_ms_says_so_and_keeps_every_joint() {
     assert!(after.counters.frames_tx_batched > before.frames_tx_batched);
 }
 
+/// An adapter set in the config on a tty with no USB device behind it (a
+/// pty here) is planned for, and the note says what that risks.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_usb_adapter_set_on_a_tty_without_usb_is_said_to_risk_collisions() {
+    let rig = rig_with(sim_config(&[1], BAUD), |c| {
+        c.ids = vec![1];
+        c.adapter = AdapterSetting::Fixed(AdapterModel::Ch340);
+    });
+    let snap = rig.online(1).await;
+    assert_eq!(snap.adapter, "ch340");
+    let note = snap
+        .port_notes
+        .iter()
+        .find(|n| n.starts_with("adapter ch340"))
+        .expect("an adapter note");
+    assert!(
+        note.contains("No USB device is behind this tty") && note.contains("adapter = \"native\""),
+        "{note}"
+    );
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_native_line_batches_only_a_control_frame_in_front_of_a_poll() {
     let rig = rig(&[1, 2]);

@@ -105,6 +105,7 @@ impl Link {
                 vec![PortNote::Adapter(AdapterInfo {
                     model: AdapterModel::Native,
                     found_by: "a transport handed in, no tty to look at".into(),
+                    tty_without_usb: false,
                 })]
             }
         };

@@ -152,6 +152,10 @@ pub struct AdapterInfo {
     pub model: AdapterModel,
     /// How it was found: `"usb 0403:6001 (ftdi_sio)"`, `"no USB device (pty or UART)"`.
     pub found_by: String,
+    /// A tty with no USB device behind it (a pty or a UART): a write
+    /// reaches the line whenever that path passes it on, not within a USB
+    /// frame as an adapter takes it.
+    pub tty_without_usb: bool,
 }
 
 /// Finds the adapter behind `tty` (a `/dev` path, links followed) from
@@ -166,6 +170,7 @@ pub fn detect(tty: &Path) -> AdapterInfo {
         None => AdapterInfo {
             model: AdapterModel::Native,
             found_by: "not a device node: taken for native".into(),
+            tty_without_usb: false,
         },
     }
 }
@@ -177,6 +182,7 @@ pub fn detect_in(class_tty: &Path, name: &str) -> AdapterInfo {
         return AdapterInfo {
             model: AdapterModel::Native,
             found_by: "no USB device behind the tty (a pty or a UART)".into(),
+            tty_without_usb: true,
         };
     };
     let id = |f: &str| {
@@ -204,6 +210,7 @@ pub fn detect_in(class_tty: &Path, name: &str) -> AdapterInfo {
     AdapterInfo {
         model,
         found_by: format!("usb {vid}:{pid} ({driver})"),
+        tty_without_usb: false,
     }
 }
 

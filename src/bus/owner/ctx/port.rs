@@ -133,6 +133,7 @@ impl Ctx {
         };
         self.sched.set_adapter(model);
         let mut text = format!("adapter {model} ({why})");
+        let mut warn = false;
         if let Some(timer) = model
             .latency_timer()
             .filter(|t| *t > Duration::from_millis(1))
@@ -160,6 +161,19 @@ impl Ctx {
                 now.as_secs_f64() * 1e3,
                 fast.as_secs_f64() * 1e3,
             );
+            warn = true;
+        }
+        if model.is_latent() && info.tty_without_usb {
+            text = format!(
+                "{text}. No USB device is behind this tty: polls are written without waiting \
+                 for their replies, each timed to reach the wire within a USB frame of its \
+                 write, and a pty or UART path that holds a write longer puts two on the wire \
+                 back to back (collisions: CRC errors, skipped bytes). Set adapter = \"native\" \
+                 unless this path has a USB adapter's timing"
+            );
+            warn = true;
+        }
+        if warn {
             tracing::warn!(bus = %self.cfg.name, "{text}");
         } else {
             tracing::info!(bus = %self.cfg.name, "{text}");
