@@ -1,6 +1,7 @@
 //! `jointd [run]`: config file and flags → buses (serial or an in-process
-//! simulator on a pty, or behind a USB adapter model on an in-memory line) → the HTTP API → on SIGINT/SIGTERM stop accepting,
-//! disable every joint, close the ports, exit 0.
+//! simulator: on a pty, or behind a USB adapter model on an in-memory line)
+//! → the HTTP API → on SIGINT/SIGTERM stop accepting, disable every joint,
+//! close the ports, exit 0.
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -28,8 +29,6 @@ use crate::transport::Transport;
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8080";
 /// Name of the bus `--sim` starts.
 pub const SIM_BUS_NAME: &str = "sim0";
-/// The path the `--sim` bus shows when it runs over the in-memory line.
-const SIM_MEMORY_PATH: &str = "memory";
 /// Reply slack of the `--sim` bus, µs (see [`crate::bus::Timing`]).
 const SIM_REPLY_MARGIN_US: u64 = 20_000;
 /// How long shutdown waits for each bus to disable its joints and close.
@@ -524,7 +523,7 @@ fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusToStart), DaemonError>
     let adapter = sim_cfg.adapter;
     let (sim, port) = Simulator::spawn_for(sim_cfg)?;
     let path = match (&port, sim.device_path()) {
-        (Some(_), _) => PathBuf::from(SIM_MEMORY_PATH),
+        (Some(_), _) => PathBuf::from(crate::sim::MEMORY_LINE_PATH),
         (None, Some(path)) => path,
         (None, None) => {
             return Err(DaemonError::Io {

@@ -11,6 +11,14 @@ use jointd::bus::Setpoint;
 use jointd::transport::adapter::AdapterModel;
 use support::bus::*;
 
+/// The bus's port note about its adapter, which must name `model`.
+fn adapter_note<'a>(snap: &'a jointd::bus::BusSnapshot, model: &str) -> &'a str {
+    snap.port_notes
+        .iter()
+        .find(|n| n.starts_with(&format!("adapter {model}")))
+        .expect("an adapter note")
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_bus_set_for_ftdi_at_16_ms_says_so_and_keeps_every_joint() {
     let ids: Vec<u8> = (1..=8).collect();
@@ -30,11 +38,7 @@ async fn a_bus_set_for_ftdi_at_16_ms_says_so_and_keeps_every_joint() {
     assert_eq!(snap.adapter, "ftdi:16");
     // Two frames at 500000 baud, turnaround, 16 ms timer, a USB frame each way.
     assert!(snap.transaction_us > 18_000, "{}", snap.transaction_us);
-    let note = snap
-        .port_notes
-        .iter()
-        .find(|n| n.starts_with("adapter ftdi:16"))
-        .expect("an adapter note");
+    let note = adapter_note(&snap, "ftdi:16");
     assert!(
         note.contains("at 1 ms it would take") && note.contains("latency_timer"),
         "{note}"
@@ -77,11 +81,7 @@ async fn a_usb_adapter_set_on_a_tty_without_usb_is_said_to_risk_collisions() {
     });
     let snap = rig.online(1).await;
     assert_eq!(snap.adapter, "ch340");
-    let note = snap
-        .port_notes
-        .iter()
-        .find(|n| n.starts_with("adapter ch340"))
-        .expect("an adapter note");
+    let note = adapter_note(&snap, "ch340");
     assert!(
         note.contains("No USB device is behind this tty") && note.contains("adapter = \"native\""),
         "{note}"

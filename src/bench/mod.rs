@@ -318,7 +318,7 @@ pub(crate) fn setup(
         referee_realtime()?;
     }
     let path = match &memory {
-        Some(_) => std::path::PathBuf::from("memory"),
+        Some(_) => std::path::PathBuf::from(crate::sim::MEMORY_LINE_PATH),
         None => sim
             .device_path()
             .ok_or_else(|| BenchError::Setup("the simulator has no pty path".into()))?,

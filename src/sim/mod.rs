@@ -107,6 +107,10 @@ use line::{Line, MemoryLine};
 use pty::PtyLine;
 use runner::{lock_engine, Control, LineOp};
 
+/// What a bus reaching the simulator over the in-memory pipe shows as its
+/// path (there is no tty to name).
+pub const MEMORY_LINE_PATH: &str = "memory";
+
 /// Starts simulated buses.
 #[derive(Debug)]
 pub struct Simulator;
