@@ -332,10 +332,6 @@ async fn a_wrong_reply_is_the_same_502_on_every_route() {
     let calls = [
         s.get(&format!("{DEV}/1?fresh=true")).await,
         s.get(&format!("{DEV}/1/config")).await,
-        s.post(&format!("{DEV}/1/jog"), json!({"direction": "cw"}))
-            .await,
-        s.put(&format!("{DEV}/1/target"), json!({"position_deg": 1.0}))
-            .await,
         s.post_empty(&format!("{DEV}/1/config/persist")).await,
     ];
     for r in &calls {

@@ -234,7 +234,7 @@ async fn a_move_is_stopped_replaced_joint_by_joint_and_aborted_by_an_e_stop() {
         v["state"] == "aborted"
     })
     .await;
-    assert_eq!(view["reason"], "e-stop");
+    assert_eq!(view["reason"], "estopped");
     s.get("/api/v1/moves/999").await.problem(404);
 }
 

@@ -93,6 +93,7 @@ async fn broadcasts_coalesce_and_fill_other_slots_with_target_or_measured_angle(
 async fn wire_acks_follow_setpoints_onto_the_wire() {
     let rig = rig(&[1, 2]);
     rig.online(2).await;
+    rig.enable_all(2).await;
     let mut acks = rig.bus.wire_acks();
     let seq = rig.bus.set_targets(&[(1, target(1.0)), (2, target(2.0))]);
     let waited = tokio::time::timeout(WAIT, acks.wait_for(|a| a.seq >= seq)).await;

@@ -202,6 +202,7 @@ mod tests {
                 },
                 seq,
                 accepted,
+                epoch: crate::bus::authority::Epoch(0),
             },
             since: accepted,
         }

@@ -20,6 +20,7 @@ use tokio::sync::{broadcast, oneshot, watch};
 
 use crate::protocol::{ConfigParam, CtrlMode, InfoBlock, JogDir, Reply};
 
+use super::authority::Revoked;
 use super::error::BusError;
 // The published state and the setpoint store live in their own files; they
 // are part of this contract and reachable under `bus::handle::` as before.
@@ -277,10 +278,13 @@ impl BusHandle {
     /// Returns the sequence number to match against [`Self::wire_acks`].
     /// A client's targets: each joint leaves the move it followed, if any
     /// (see [`Self::take_over`]).
+    /// Each target is admitted now, under its joint's current motion
+    /// epoch: the owner drops it if the joint is not enabled.
     pub fn set_targets(&self, targets: &[(u8, Setpoint)]) -> u64 {
         if self.shared.motion.is_active() {
             let ids: Vec<u8> = targets.iter().map(|(id, _)| *id).collect();
-            self.shared.motion.release(&ids);
+            let released = self.shared.motion.release(&ids);
+            self.say_done(&released.ended);
         }
         let seq = self.shared.setpoints.set(targets);
         if self.shared.setpoint_tap.receiver_count() > 0 {
@@ -297,6 +301,12 @@ impl BusHandle {
     /// returns the ids of the moves they left (a new move replaces a
     /// running one joint by joint).
     pub fn follow(&self, followers: Vec<super::motion::Follower>) -> Vec<u64> {
+        let released = self.follow_inner(followers);
+        self.say_done(&released.ended);
+        released.left
+    }
+
+    fn follow_inner(&self, followers: Vec<super::motion::Follower>) -> super::motion::Released {
         if let Some(first) = followers.first() {
             self.shared.emit(BusEvent::MoveStarted {
                 bus: self.name().to_string(),
@@ -318,7 +328,29 @@ impl BusHandle {
 
     /// Takes joints out of their moves (a newer setpoint); returns those moves.
     pub fn take_over(&self, ids: &[u8]) -> Vec<u64> {
-        self.shared.motion.release(ids)
+        let released = self.shared.motion.release(ids);
+        self.say_done(&released.ended);
+        released.left
+    }
+
+    /// Moves that ended because every joint left them: done, as for subscribers.
+    fn say_done(&self, ended: &[u64]) {
+        for &move_id in ended {
+            self.shared.emit(BusEvent::MoveDone {
+                bus: self.name().to_string(),
+                move_id,
+            });
+        }
+    }
+
+    /// Joint `id`'s standing: its motion epoch, enabled, mode.
+    pub fn grant(&self, id: u8) -> super::authority::Grant {
+        self.shared.setpoints.authority().grant(id)
+    }
+
+    /// Who may move which joint on this bus.
+    pub fn authority(&self) -> &super::authority::MotionAuthority {
+        self.shared.setpoints.authority()
     }
 
     pub fn snapshot(&self) -> Arc<BusSnapshot> {
@@ -359,13 +391,16 @@ impl BusHandle {
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .get_or_insert(now);
-        // Moves stop now, not when the owner gets to the e-stop: no path
-        // sample may reach the store after this.
-        for move_id in self.shared.motion.abort_all("e-stop") {
+        // Every joint's epoch advances now, not when the owner gets to the
+        // e-stop: nothing admitted before (a setpoint, a move, a stream) may
+        // reach a joint after this, and nothing is admitted until an enable.
+        self.shared.setpoints.revoke(None, Revoked::Estopped);
+        let reason = Revoked::Estopped.name();
+        for move_id in self.shared.motion.abort_all(reason) {
             self.shared.emit(BusEvent::MoveAborted {
                 bus: self.name().to_string(),
                 move_id,
-                reason: "e-stop".into(),
+                reason: reason.into(),
             });
         }
         let generation = self.shared.estop_generation.fetch_add(1, Ordering::SeqCst) + 1;
@@ -405,7 +440,14 @@ impl BusHandle {
         self.call(|reply| Request::Enable { targets, reply }).await
     }
 
+    /// The joints' epochs advance at the call, before the owner writes a
+    /// frame: what was admitted for them stops here, even if the disable fails.
     pub async fn disable(&self, targets: Targets) -> Result<(), BusError> {
+        let ids = match &targets {
+            Targets::All => None,
+            Targets::Ids(ids) => Some(ids.as_slice()),
+        };
+        self.shared.setpoints.revoke(ids, Revoked::Disabled);
         self.call(|reply| Request::Disable { targets, reply }).await
     }
 
@@ -417,7 +459,11 @@ impl BusHandle {
         self.call(|reply| Request::Rezero { dev_id, reply }).await
     }
 
+    /// Nothing admitted before the change applies after it, and nothing is
+    /// admitted while it is on its way.
     pub async fn set_mode(&self, dev_id: u8, mode: CtrlMode) -> Result<(), BusError> {
+        self.shared.setpoints.authority().mode_changing(dev_id);
+        self.shared.setpoints.clear(Some(&[dev_id]));
         self.call(|reply| Request::SetMode {
             dev_id,
             mode,
@@ -440,6 +486,10 @@ impl BusHandle {
         dev_id: u8,
         param: ConfigParam,
     ) -> Result<WriteOutcome, BusError> {
+        if matches!(param, ConfigParam::CtrlMode(_)) {
+            self.shared.setpoints.authority().mode_changing(dev_id);
+            self.shared.setpoints.clear(Some(&[dev_id]));
+        }
         self.call(|reply| Request::WriteConfig {
             dev_id,
             param,

@@ -15,7 +15,9 @@
 //!   `Down`, …); the HTTP status of each is chosen in the HTTP layer (`http::error`).
 //! - [`firmware`]: which protocol revision each device speaks, and how the daemon knows.
 //! - [`config`]: [`BusConfig`]: port, baud, expected ids, poll plan, timing, firmware.
-//! - [`setpoints`]: the latest-value store of joint targets.
+//! - [`authority`]: who may move a joint: the motion epoch per joint, advanced by
+//!   e-stop, disable, reset, fault, mode change and enable; stale commands are dropped.
+//! - [`setpoints`]: the latest-value store of joint targets, each with its epoch.
 //! - [`state`]: what the owner publishes: snapshot, events, frame log, wire acks.
 //! - [`handle`]: the cloneable handle and the requests it sends (the API's contract).
 //! - [`motion`]: the joints following a move, sampled by the owner every control cycle.
@@ -37,6 +39,7 @@
 //!   `ctx` (port + scheduler + publication) is all one-shot requests
 //!   (`jobs`, `estop`, `scan`, `baud`, `start`) get to work with.
 
+pub mod authority;
 pub(crate) mod coalesce;
 pub(crate) mod config;
 pub mod error;

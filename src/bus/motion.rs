@@ -6,8 +6,18 @@
 //! move started), coalescing and wire acks are the same as for setpoints.
 //!
 //! A client setpoint for a joint takes it out of its move (the move goes on
-//! for the others); an e-stop, or a joint going offline or faulting, aborts
-//! the whole move.
+//! for the others). Each follower carries the motion epoch its move was
+//! admitted under: when the joint's epoch advances (e-stop, disable, reset,
+//! fault, mode change, enable) the whole move is aborted with that reason,
+//! and its samples could not reach the joint anyway (the owner drops them).
+//! A joint going offline aborts the move too.
+//!
+//! A joint that cannot follow (blocked by an object or a stop) stalls: its
+//! measured angle stays more than [`stall_bound_deg`] from the path for
+//! [`STALL_AFTER`], during the path or after its end. It leaves the move
+//! `stalled` and holds where it stands (its target becomes its measured
+//! angle). A joint arrives when the path has ended and its measured angle
+//! is within [`ARRIVED_DEG`] of the goal.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -16,6 +26,7 @@ use std::time::{Duration, Instant};
 use crate::motion::{MoveState, RunningMove};
 use crate::protocol::units;
 
+use super::authority::Epoch;
 use super::registry::Registry;
 use super::setpoints::{Setpoint, SetpointStore};
 use super::state::BusEvent;
@@ -29,6 +40,43 @@ pub struct Follower {
     pub joint: usize,
     /// The speed limit each of its frames carries (raw).
     pub spd_ref: i16,
+    /// The motion epoch the move was admitted under on this joint.
+    pub epoch: Epoch,
+    /// Since when the joint has been off its path by more than the stall bound.
+    pub off_path_since: Option<Instant>,
+}
+
+impl Follower {
+    pub fn new(dev_id: u8, mv: Arc<RunningMove>, joint: usize, spd_ref: i16, epoch: Epoch) -> Self {
+        Self {
+            dev_id,
+            mv,
+            joint,
+            spd_ref,
+            epoch,
+            off_path_since: None,
+        }
+    }
+}
+
+/// A joint this far from its goal after the path's end has arrived.
+pub(crate) const ARRIVED_DEG: f64 = 1.0;
+/// A joint off its path by more than the stall bound this long has stalled.
+pub(crate) const STALL_AFTER: Duration = Duration::from_millis(300);
+/// Off-path distance that counts towards a stall, degrees: a floor for
+/// measurement and tracking lag, plus what the path covers in 50 ms at the
+/// speed it asks now (the telemetry sample the check reads may be that old).
+pub(crate) fn stall_bound_deg(path_speed_dps: f64) -> f64 {
+    5.0 + path_speed_dps.abs() * 0.05
+}
+
+/// What taking joints out of their moves did.
+#[derive(Debug, Default, Clone, PartialEq, Eq)]
+pub struct Released {
+    /// The moves the joints left.
+    pub left: Vec<u64>,
+    /// Those of them that ended: every joint had left, arrived or stalled.
+    pub ended: Vec<u64>,
 }
 
 /// The followers of one bus (std `Mutex`: never held across an `.await`).
@@ -49,34 +97,37 @@ impl BusMotion {
 
     /// Puts `followers` on their joints, taking each joint out of the move
     /// it followed before; returns the ids of those earlier moves.
-    pub fn follow(&self, followers: Vec<Follower>) -> Vec<u64> {
+    pub fn follow(&self, followers: Vec<Follower>) -> Released {
         let ids: Vec<u8> = followers.iter().map(|f| f.dev_id).collect();
-        let mut replaced = self.release(&ids);
+        let replaced = self.release(&ids);
         let mut list = self.lock();
         list.extend(followers);
         self.active.store(!list.is_empty(), Ordering::Release);
-        replaced.dedup();
         replaced
     }
 
     /// Takes `ids` out of the moves they follow (a newer setpoint or move
-    /// took them over); returns those moves' ids.
-    pub fn release(&self, ids: &[u8]) -> Vec<u64> {
+    /// took them over); returns those moves' ids, and those of the moves
+    /// this ended (no joint left in them).
+    pub fn release(&self, ids: &[u8]) -> Released {
+        let mut out = Released::default();
         if !self.active.load(Ordering::Acquire) {
-            return Vec::new();
+            return out;
         }
         let mut list = self.lock();
-        let mut moves = Vec::new();
         list.retain(|f| {
             if !ids.contains(&f.dev_id) {
                 return true;
             }
-            f.mv.replaced(f.joint);
-            moves.push(f.mv.id);
+            if f.mv.replaced(f.joint) {
+                out.ended.push(f.mv.id);
+            }
+            out.left.push(f.mv.id);
             false
         });
         self.active.store(!list.is_empty(), Ordering::Release);
-        moves
+        out.left.dedup();
+        out
     }
 
     /// Aborts every move a joint of this bus follows (an e-stop, the bus
@@ -109,9 +160,11 @@ impl BusMotion {
     }
 
     /// The owner's step: every follower's position at `wire_at` (when the
-    /// next control frame reaches the wire) written to `store`; joints that
-    /// arrived leave; a move whose joint went offline or faulted is aborted
-    /// (an event says so). Moves stopped or aborted elsewhere are dropped.
+    /// next control frame reaches the wire) written to `store` under the
+    /// epoch its move was admitted with; joints that arrived or stalled
+    /// leave; a move whose joint's epoch advanced, or whose joint went
+    /// offline, is aborted (an event says so). Moves stopped or aborted
+    /// elsewhere are dropped.
     pub(crate) fn tick(
         &self,
         wire_at: Instant,
@@ -124,44 +177,15 @@ impl BusMotion {
         }
         let mut list = self.lock();
         self.say_progress(&list, wire_at, reg.bus(), events);
-        let mut targets: Vec<(u8, Setpoint)> = Vec::with_capacity(list.len());
-        let mut aborted: Vec<(Arc<RunningMove>, String)> = Vec::new();
-        let mut done: Vec<u64> = Vec::new();
-        list.retain(|f| {
-            if !f.mv.is_running() {
-                return false;
-            }
-            if let Some(why) = unfit(reg, f.dev_id) {
-                aborted.push((f.mv.clone(), format!("joint {} {why}", f.dev_id)));
-                return false;
-            }
-            if wire_at < f.mv.start {
-                return true;
-            }
-            let t = f.mv.elapsed_at(wire_at);
-            let sample = f.mv.path.sample(f.joint, t);
-            if let Ok(pos_ref) = units::angle_to_raw(sample.position) {
-                targets.push((
-                    f.dev_id,
-                    Setpoint {
-                        pos_ref,
-                        spd_ref: f.spd_ref,
-                    },
-                ));
-            }
-            let arrived = t >= f.mv.path.duration();
-            if arrived && f.mv.arrived(f.joint) {
-                done.push(f.mv.id);
-            }
-            !arrived
-        });
-        for move_id in done {
+        let mut step = Step::default();
+        list.retain_mut(|f| follow_one(f, wire_at, store, reg, &mut step));
+        for move_id in step.done {
             events.push(BusEvent::MoveDone {
                 bus: reg.bus().to_string(),
                 move_id,
             });
         }
-        for (mv, reason) in aborted {
+        for (mv, reason) in step.aborted {
             if mv.end(MoveState::Aborted, reason.clone()) {
                 events.push(BusEvent::MoveAborted {
                     bus: reg.bus().to_string(),
@@ -174,10 +198,116 @@ impl BusMotion {
         list.retain(|f| f.mv.is_running());
         self.active.store(!list.is_empty(), Ordering::Release);
         drop(list);
-        if !targets.is_empty() {
-            store.set(&targets);
+        if !step.targets.is_empty() {
+            store.set_admitted(&step.targets);
         }
     }
+}
+
+/// What one owner step decided for the followers.
+#[derive(Default)]
+struct Step {
+    targets: Vec<(u8, Setpoint, Epoch)>,
+    aborted: Vec<(Arc<RunningMove>, String)>,
+    /// Moves that ended (every joint arrived, stalled or left).
+    done: Vec<u64>,
+}
+
+/// One follower's step; false when it leaves its move.
+fn follow_one(
+    f: &mut Follower,
+    wire_at: Instant,
+    store: &SetpointStore,
+    reg: &Registry,
+    step: &mut Step,
+) -> bool {
+    if !f.mv.is_running() {
+        return false;
+    }
+    if let Some(why) = revoked(store, f) {
+        step.aborted.push((f.mv.clone(), why));
+        return false;
+    }
+    if let Some(why) = unfit(reg, f.dev_id) {
+        step.aborted
+            .push((f.mv.clone(), format!("joint {} {why}", f.dev_id)));
+        return false;
+    }
+    if wire_at < f.mv.start {
+        return true;
+    }
+    let t = f.mv.elapsed_at(wire_at);
+    let sample = f.mv.path.sample(f.joint, t);
+    let measured = reg.slot_info(f.dev_id).and_then(|i| i.measured);
+    let ended = t >= f.mv.path.duration();
+    let off = measured.map(|m| (units::angle_deg(m) - sample.position).abs());
+    if ended && off.is_some_and(|d| d <= ARRIVED_DEG) {
+        if f.mv.arrived(f.joint) {
+            step.done.push(f.mv.id);
+        }
+        return false;
+    }
+    let bound = if ended {
+        ARRIVED_DEG.max(stall_bound_deg(0.0))
+    } else {
+        stall_bound_deg(sample.velocity)
+    };
+    match off {
+        Some(d) if d > bound && running(reg, f.dev_id) => {
+            let since = *f.off_path_since.get_or_insert(wire_at);
+            if wire_at.saturating_duration_since(since) >= STALL_AFTER {
+                return stall(f, measured, step);
+            }
+        }
+        _ => f.off_path_since = None,
+    }
+    if !ended {
+        if let Ok(pos_ref) = units::angle_to_raw(sample.position) {
+            let sp = Setpoint {
+                pos_ref,
+                spd_ref: f.spd_ref,
+            };
+            step.targets.push((f.dev_id, sp, f.epoch));
+        }
+    }
+    true
+}
+
+/// The joint leaves its move holding where it stands.
+fn stall(f: &Follower, measured: Option<i16>, step: &mut Step) -> bool {
+    if let Some(pos_ref) = measured {
+        let hold = Setpoint {
+            pos_ref,
+            spd_ref: f.spd_ref,
+        };
+        step.targets.push((f.dev_id, hold, f.epoch));
+    }
+    if f.mv.stalled(f.joint) {
+        step.done.push(f.mv.id);
+    }
+    false
+}
+
+/// The joint's last INFO_01 shows it running (not aligning: a joint that
+/// aligns stands still, which is no stall).
+fn running(reg: &Registry, id: u8) -> bool {
+    reg.get(id)
+        .and_then(|e| e.state.info01)
+        .is_some_and(|(info, _)| info.fsm == crate::protocol::status::fsm::RUN)
+}
+
+/// Why the follower's move may no longer drive its joint, if its epoch advanced.
+fn revoked(store: &SetpointStore, f: &Follower) -> Option<String> {
+    let authority = store.authority();
+    if authority.admits(f.dev_id, f.epoch) {
+        return None;
+    }
+    Some(
+        authority
+            .last_revoked(f.dev_id)
+            .map_or("disabled", |r| r.name())
+            .to_string(),
+    )
 }
 
 impl BusMotion {
@@ -201,16 +331,14 @@ impl BusMotion {
 /// How often a running move's progress is published.
 pub(crate) const PROGRESS_EVERY: Duration = Duration::from_millis(100);
 
-/// Why a joint can no longer follow a path, if it cannot.
+/// Why a joint can no longer follow a path, if it cannot (a fault is
+/// seen by the epoch: the owner revokes a joint that faults).
 fn unfit(reg: &Registry, id: u8) -> Option<&'static str> {
     let entry = reg.get(id)?;
     if !entry.state.online {
         return Some("went offline");
     }
-    match entry.state.info01 {
-        Some((info, _)) if info.err_code != 0 => Some("reported a fault"),
-        _ => None,
-    }
+    None
 }
 
 /// How often the owner samples paths at most: a control frame takes this

@@ -1,6 +1,10 @@
 //! The latest-value store of joint targets: writers overwrite, the bus
 //! owner takes what changed since it last looked. A client faster than the
 //! wire overwrites; nothing queues.
+//!
+//! Each target carries the motion epoch it was admitted under, and the
+//! store holds the bus's [`MotionAuthority`]: the owner takes only targets
+//! whose epoch is still their joint's (see [`super::authority`]).
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -8,6 +12,8 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::Instant;
 
 use serde::Serialize;
+
+use super::authority::{Epoch, MotionAuthority, Revoked};
 
 /// A joint target as the wire carries it (raw Q7 degrees, raw Q15 speed).
 /// Units and soft limits are checked before a setpoint gets here.
@@ -25,6 +31,8 @@ pub struct StoredSetpoint {
     pub seq: u64,
     /// When the write was accepted (for setpoint-to-wire latency).
     pub accepted: Instant,
+    /// The motion epoch it was admitted under.
+    pub epoch: Epoch,
 }
 
 /// Latest target per joint. Writers overwrite; the scheduler takes what
@@ -33,6 +41,7 @@ pub struct StoredSetpoint {
 pub struct SetpointStore {
     slots: Mutex<BTreeMap<u8, StoredSetpoint>>,
     next_seq: AtomicU64,
+    authority: MotionAuthority,
 }
 
 impl SetpointStore {
@@ -40,23 +49,56 @@ impl SetpointStore {
         self.slots.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// Stores targets for several joints at once; returns the sequence number
-    /// they share.
+    /// Stores targets for several joints at once, each admitted now (under
+    /// its joint's current epoch); returns the sequence number they share.
     pub fn set(&self, targets: &[(u8, Setpoint)]) -> u64 {
+        let stamped: Vec<(u8, Setpoint, Epoch)> = targets
+            .iter()
+            .map(|&(id, sp)| (id, sp, self.authority.grant(id).epoch))
+            .collect();
+        self.set_admitted(&stamped)
+    }
+
+    /// Stores targets each admitted under the epoch it carries (a move's,
+    /// a homing job's, a stream's); returns the sequence number they share.
+    pub fn set_admitted(&self, targets: &[(u8, Setpoint, Epoch)]) -> u64 {
         let seq = self.next_seq.fetch_add(1, Ordering::Relaxed) + 1;
         let accepted = Instant::now();
         let mut slots = self.lock();
-        for &(id, setpoint) in targets {
+        for &(id, setpoint, epoch) in targets {
             slots.insert(
                 id,
                 StoredSetpoint {
                     setpoint,
                     seq,
                     accepted,
+                    epoch,
                 },
             );
         }
         seq
+    }
+
+    /// Who may move which joint.
+    pub fn authority(&self) -> &MotionAuthority {
+        &self.authority
+    }
+
+    /// True when `sp` may still go to joint `id`.
+    pub fn admits(&self, id: u8, sp: &StoredSetpoint) -> bool {
+        self.authority.admits(id, sp.epoch)
+    }
+
+    /// Advances the epochs of `ids` (every id: `None`) and forgets their
+    /// targets: nothing admitted before may reach them.
+    pub fn revoke(&self, ids: Option<&[u8]>, why: Revoked) {
+        match ids {
+            None => self.authority.revoke_all(why),
+            Some(ids) => ids.iter().for_each(|id| {
+                self.authority.revoke(*id, why);
+            }),
+        }
+        self.clear(ids);
     }
 
     /// The sequence number of the latest write (it may still be landing).

@@ -9,13 +9,14 @@ use std::time::{Duration, Instant};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use crate::bus::handle::DeviceState;
 use crate::bus::motion::Follower;
 use crate::bus::BusHandle;
 use crate::hands::Calibration;
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::move_book::{Booked, JointRef};
 use crate::http::state::{device_id, known_device, AppState};
-use crate::http::targets::ensure_enabled;
+use crate::http::targets::admit_positions;
 use crate::http::telemetry::{commanded_or_measured_raw, firmware_of};
 use crate::motion::{Method, MoveState, Path, RunningMove};
 use crate::protocol::{units, CtrlMode};
@@ -104,6 +105,8 @@ pub(crate) struct MoveView {
     pub replaced: Vec<JointRef>,
     /// Joints that reached the end of the path.
     pub arrived: Vec<JointRef>,
+    /// Joints that could not follow the path (blocked): each holds where it stood.
+    pub stalled: Vec<JointRef>,
     /// Running moves this one took joints from, when it started (each
     /// goes on with its other joints).
     pub took_over_from: Vec<u64>,
@@ -113,12 +116,19 @@ pub(crate) struct MoveView {
 /// took joints from.
 pub(crate) async fn start(state: &AppState, req: &MoveRequest) -> ApiResult<MoveView> {
     let plan = plan(state, req)?;
+    // Each joint's motion epoch now: the move drives it only while that
+    // epoch lasts (an e-stop, disable, reset, fault, mode change or enable
+    // from here on ends it).
+    let mut epochs = Vec::new();
     for (bus, joints) in &plan.by_bus {
         let snap = bus.snapshot();
+        let mut on_bus = Vec::with_capacity(joints.len());
         for (_, dev_id, _) in joints {
             let dev = known_device(&snap, *dev_id)?;
-            ensure_enabled(bus, dev, "a move").await?;
+            on_bus.push(admit_positions(bus, dev, "a move")?);
+            ensure_running(bus, dev)?;
         }
+        epochs.push(on_bus);
     }
     let id = state.moves().next_id();
     let mv = Arc::new(RunningMove::new(
@@ -127,14 +137,12 @@ pub(crate) async fn start(state: &AppState, req: &MoveRequest) -> ApiResult<Move
         Instant::now() + START_DELAY,
     ));
     let mut took_over_from = Vec::new();
-    for (bus, joints) in &plan.by_bus {
+    for ((bus, joints), epochs) in plan.by_bus.iter().zip(&epochs) {
         let followers = joints
             .iter()
-            .map(|(joint, dev_id, spd_ref)| Follower {
-                dev_id: *dev_id,
-                mv: mv.clone(),
-                joint: *joint,
-                spd_ref: *spd_ref,
+            .zip(epochs)
+            .map(|((joint, dev_id, spd_ref), epoch)| {
+                Follower::new(*dev_id, mv.clone(), *joint, *spd_ref, *epoch)
             })
             .collect();
         took_over_from.extend(bus.follow(followers));
@@ -171,6 +179,26 @@ pub(crate) fn get(state: &AppState, id: u64) -> ApiResult<MoveView> {
     Ok(view(&booked.mv, &booked.joints))
 }
 
+/// 409 while the joint aligns after its first enable: it stands still
+/// until it runs, and a path started meanwhile would leave it behind.
+fn ensure_running(bus: &BusHandle, dev: &DeviceState) -> ApiResult<()> {
+    match dev.info01.as_ref() {
+        Some((info, _)) if info.fsm == crate::protocol::status::fsm::ALIGN => {
+            Err(ApiError::conflict(
+                "not-enabled",
+                "Joint still aligning",
+                format!(
+                    "a move needs joint {} of bus `{}` running; it is aligning after its \
+                     enable (wait until its state is `run`)",
+                    dev.dev_id,
+                    bus.name()
+                ),
+            ))
+        }
+        _ => Ok(()),
+    }
+}
+
 fn booked(state: &AppState, id: u64) -> ApiResult<Booked> {
     state
         .moves()
@@ -195,6 +223,7 @@ fn view(mv: &RunningMove, joints: &[JointRef]) -> MoveView {
         joints: joints.to_vec(),
         replaced: pick(&status.replaced),
         arrived: pick(&status.arrived),
+        stalled: pick(&status.stalled),
         took_over_from: Vec::new(),
     }
 }

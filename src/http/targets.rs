@@ -10,15 +10,14 @@ use utoipa::ToSchema;
 
 use super::error::{ApiError, ApiResult};
 use super::limits::JointLimits;
-use super::telemetry::{
-    commanded_or_measured_raw, firmware_of, is_enabled, revision_of, TargetView,
-};
+use super::telemetry::{commanded_or_measured_raw, firmware_of, revision_of, TargetView};
+use crate::bus::authority::Epoch;
 use crate::bus::handle::DeviceState;
-use crate::bus::{BusError, BusHandle, Setpoint};
+use crate::bus::{BusHandle, Setpoint};
 use crate::hands::Calibration;
 use crate::protocol::status::fsm_name_in;
 use crate::protocol::units;
-use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
+use crate::protocol::CtrlMode;
 
 /// Speed limit of a position target that names none, rotor rpm (≈ 32 °/s at
 /// the output): slow enough to be safe, fast enough to see.
@@ -144,34 +143,64 @@ fn speed_setpoint(
     Ok(Setpoint { pos_ref, spd_ref })
 }
 
-/// 409 unless the device runs (or aligns). The cached INFO_01 may predate a
-/// just-made enable, so a "not enabled" answer is confirmed by a fresh read.
+/// 409 unless the daemon enabled the joint and nothing revoked that since
+/// (the bus's motion authority, not a telemetry snapshot that may lag an
+/// e-stop); the joint's motion epoch, under which what follows is admitted.
+pub(crate) fn admit(bus: &BusHandle, dev: &DeviceState, what: &str) -> ApiResult<Epoch> {
+    let id = dev.dev_id;
+    let grant = bus.grant(id);
+    if !grant.mode_settled() {
+        return Err(ApiError::conflict(
+            "not-enabled",
+            "Mode change in progress",
+            format!("{what} waits for the mode change of device {id} to finish; try again"),
+        ));
+    }
+    if grant.enabled {
+        return Ok(grant.epoch);
+    }
+    let since = bus
+        .authority()
+        .last_revoked(id)
+        .map_or(String::new(), |r| format!(" (last: {})", r.name()));
+    let state = dev
+        .info01
+        .as_ref()
+        .map_or("unknown", |(i, _)| fsm_name_in(i.fsm, revision_of(dev)));
+    Err(ApiError::conflict(
+        "not-enabled",
+        "Device not enabled",
+        format!(
+            "{what} needs device {id} enabled by jointd since its last e-stop, disable, \
+             reset or fault{since}; its state is `{state}` (enable it first)"
+        ),
+    ))
+}
+
+/// [`admit`] for a position target, a move or a pose: the joint must also
+/// run position mode.
+pub(crate) fn admit_positions(bus: &BusHandle, dev: &DeviceState, what: &str) -> ApiResult<Epoch> {
+    let epoch = admit(bus, dev, what)?;
+    if !bus.grant(dev.dev_id).takes_positions() {
+        return Err(ApiError::conflict(
+            "wrong-mode",
+            "Joint not in position mode",
+            format!(
+                "{what} needs device {} in position mode (set its mode to position first)",
+                dev.dev_id
+            ),
+        ));
+    }
+    Ok(epoch)
+}
+
+/// 409 unless the joint may take commands ([`admit`]).
 pub(crate) async fn ensure_enabled(
     bus: &BusHandle,
     dev: &DeviceState,
     what: &str,
 ) -> ApiResult<()> {
-    if dev.info01.as_ref().is_some_and(|(i, _)| is_enabled(i)) {
-        return Ok(());
-    }
-    let reply = bus.read_info(dev.dev_id, InfoBlock::Info01).await?;
-    match reply.body() {
-        ReplyBody::Info01(i) if is_enabled(&i) => Ok(()),
-        ReplyBody::Info01(i) => Err(ApiError::conflict(
-            "not-enabled",
-            "Device not enabled",
-            format!(
-                "{what} needs device {} enabled; it is `{}` (enable it first)",
-                dev.dev_id,
-                fsm_name_in(i.fsm, revision_of(dev))
-            ),
-        )),
-        _ => Err(BusError::UnexpectedReply(format!(
-            "device {} answered INFO_01 with another block",
-            dev.dev_id
-        ))
-        .into()),
-    }
+    admit(bus, dev, what).map(drop)
 }
 
 /// Waits (briefly) until the setpoint write `seq` is on the wire.

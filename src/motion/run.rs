@@ -21,8 +21,12 @@ pub enum MoveState {
     Done,
     /// Stopped by its caller (`DELETE`): each joint holds where it was.
     Stopped,
-    /// Cut short: an e-stop, a joint offline or faulted (see `reason`).
+    /// Cut short (see `reason`): `estopped`, `disabled`, `reset`,
+    /// `mode_changed`, `fault`, `reenabled`, or a joint offline.
     Aborted,
+    /// Every joint settled, and at least one stalled: it could not follow
+    /// the path (blocked) and holds where it stood (see `stalled`).
+    Stalled,
 }
 
 /// A move's status as the API reports it.
@@ -36,6 +40,11 @@ pub struct MoveStatus {
     pub replaced: Vec<usize>,
     /// Joints (by index) that reached the end of the path.
     pub arrived: Vec<usize>,
+    /// Joints (by index) that stalled: held where they stood.
+    pub stalled: Vec<usize>,
+    /// When the move ended (its progress stops counting there).
+    #[serde(skip)]
+    pub ended_at: Option<Instant>,
 }
 
 /// A move the bus owners stream.
@@ -59,6 +68,8 @@ impl RunningMove {
                 reason: None,
                 replaced: Vec::new(),
                 arrived: Vec::new(),
+                stalled: Vec::new(),
+                ended_at: None,
             }),
         }
     }
@@ -75,8 +86,10 @@ impl RunningMove {
         self.lock().state == MoveState::Running
     }
 
-    /// Share of the path's time gone at `now` (0..=1).
+    /// Share of the path's time gone at `now` (0..=1); a move that ended
+    /// keeps the share it had then.
     pub fn progress(&self, now: Instant) -> f64 {
+        let now = self.lock().ended_at.map_or(now, |end| end.min(now));
         let total = self.path.duration().as_secs_f64();
         if total <= 0.0 {
             return 1.0;
@@ -112,10 +125,28 @@ impl RunningMove {
         self.finish_if_all_in(&mut s)
     }
 
+    /// Joint `joint` stalled: it left the path where it stood. Returns
+    /// true when that ended the move.
+    pub fn stalled(&self, joint: usize) -> bool {
+        let mut s = self.lock();
+        if s.state != MoveState::Running {
+            return false;
+        }
+        if !s.stalled.contains(&joint) {
+            s.stalled.push(joint);
+        }
+        self.finish_if_all_in(&mut s)
+    }
+
     fn finish_if_all_in(&self, s: &mut MoveStatus) -> bool {
-        let settled = s.arrived.len() + s.replaced.len();
+        let settled = s.arrived.len() + s.replaced.len() + s.stalled.len();
         if s.state == MoveState::Running && settled >= self.path.joints() {
-            s.state = MoveState::Done;
+            s.state = if s.stalled.is_empty() {
+                MoveState::Done
+            } else {
+                MoveState::Stalled
+            };
+            s.ended_at = Some(Instant::now());
             return true;
         }
         false
@@ -130,6 +161,7 @@ impl RunningMove {
         }
         s.state = state;
         s.reason = Some(reason.into());
+        s.ended_at = Some(Instant::now());
         true
     }
 }

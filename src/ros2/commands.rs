@@ -8,7 +8,6 @@
 use crate::bus::{BusHandle, Setpoint};
 use crate::http::state::AppState;
 use crate::http::targets::{setpoint, TargetRequest};
-use crate::http::telemetry::is_enabled;
 use crate::protocol::units;
 use crate::record::cdr::JointState;
 use crate::record::joint_states::Scope;
@@ -81,11 +80,7 @@ pub(crate) fn setpoints(
         if out[group].1.iter().any(|(seen, _)| seen == id) {
             return Err(format!("joint `{name}` is named twice"));
         }
-        if dev
-            .info01
-            .as_ref()
-            .is_some_and(|(info, _)| !is_enabled(info))
-        {
+        if !bus.grant(*id).enabled {
             return Err(format!("joint `{name}` is not enabled"));
         }
         let rad = cmd.position[i];

@@ -9,6 +9,7 @@ use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use jointd::bus::authority::{Epoch, MotionAuthority, Revoked};
 use jointd::bus::error::BusError;
 use jointd::bus::handle::{
     BusShared, DeviceState, EstopReport, LinkState, Request, WriteOutcome, REQUEST_QUEUE_LEN,
@@ -88,6 +89,9 @@ impl FakeBus {
         snap.link = LinkState::Up;
         snap.devices = devices.clone();
         let shared = BusShared::new(name.into(), snap);
+        for (id, dev) in &devices {
+            shared.setpoints.authority().mode_set(*id, dev.mode);
+        }
         let (tx, rx) = sync_channel(REQUEST_QUEUE_LEN);
         let script = Arc::new(Mutex::new(Script::default()));
         let mut owner = Owner {
@@ -170,12 +174,19 @@ impl Owner {
         self.shared.snapshot.send_replace(Arc::new(snap));
     }
 
-    fn set_fsm(&mut self, targets: &Targets, state: u8) -> Result<(), BusError> {
-        let ids: Vec<u8> = match targets {
+    fn ids(&self, targets: &Targets) -> Vec<u8> {
+        match targets {
             Targets::All => self.devices.keys().copied().collect(),
             Targets::Ids(ids) => ids.clone(),
-        };
-        for id in ids {
+        }
+    }
+
+    fn authority(&self) -> &MotionAuthority {
+        self.shared.setpoints.authority()
+    }
+
+    fn set_fsm(&mut self, targets: &Targets, state: u8) -> Result<(), BusError> {
+        for id in self.ids(targets) {
             let dev = self.known(id)?;
             dev.info01 = Some((info01(state), Instant::now()));
         }
@@ -214,12 +225,26 @@ impl Owner {
         self.script.lock().unwrap().log.push(kind);
         match req {
             Request::Enable { targets, reply } => {
+                // As the real owner: a new epoch, taking commands once enabled.
+                let epochs: Vec<(u8, Epoch)> = self
+                    .ids(&targets)
+                    .into_iter()
+                    .map(|id| (id, self.authority().revoke(id, Revoked::Reenabled)))
+                    .collect();
                 let r = self
                     .gate(None)
                     .and_then(|_| self.set_fsm(&targets, fsm::RUN));
+                if r.is_ok() {
+                    for (id, epoch) in epochs {
+                        self.authority().arm(id, epoch);
+                    }
+                }
                 let _ = reply.send(r);
             }
             Request::Disable { targets, reply } => {
+                for id in self.ids(&targets) {
+                    self.authority().revoke(id, Revoked::Disabled);
+                }
                 let r = self
                     .gate(None)
                     .and_then(|_| self.set_fsm(&targets, fsm::READY));
@@ -240,6 +265,9 @@ impl Owner {
                     self.known(dev_id)?.mode = Some(mode);
                     Ok(())
                 });
+                let settled = if r.is_ok() { Some(mode) } else { None };
+                let known = self.devices.get(&dev_id).and_then(|d| d.mode);
+                self.authority().mode_set(dev_id, settled.or(known));
                 let _ = reply.send(r);
             }
             Request::ReadInfo {

@@ -65,6 +65,8 @@ pub(super) fn disable_everything(
     ctx: &mut Ctx,
     reason: DisabledReason,
 ) -> Result<(u32, Instant), BusError> {
+    ctx.setpoints()
+        .revoke(None, super::jobs::revoked_by(reason));
     ctx.drop_all_setpoints();
     for id in ctx.sched().registry().ids() {
         ctx.sched_mut().registry_mut().note_disabled(id, reason);

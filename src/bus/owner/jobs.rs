@@ -4,6 +4,7 @@
 //!   confirmed by the fsm in a fresh INFO_01.
 //! - Config writes and the id change are in `write`; the baud change in `baud`.
 
+use crate::bus::authority::{Epoch, Revoked};
 use crate::bus::error::BusError;
 use crate::bus::handle::Targets;
 use crate::bus::registry::drives_motor;
@@ -12,8 +13,8 @@ use crate::bus::wire::Want;
 use crate::protocol::command::index;
 use crate::protocol::status::{active_fault, fault_name, fsm, fsm_name};
 use crate::protocol::{
-    Command, Config, ConfigParam, Control, Info01, InfoBlock, Jog, JogDir, Reply, ReplyBody,
-    ALL_DEVICES,
+    Command, Config, ConfigParam, Control, CtrlMode, Info01, InfoBlock, Jog, JogDir, Reply,
+    ReplyBody, ALL_DEVICES,
 };
 
 use super::confirm::unverified;
@@ -74,6 +75,19 @@ pub(super) fn enable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
     // on is a new one and goes out (after align, too).
     let reached = addressed(ctx, &targets, &ids);
     forget_targets(ctx, &reached);
+    // Nothing admitted before this enable applies after it; the joint takes
+    // commands again only once the enable is confirmed under this epoch (an
+    // e-stop or disable meanwhile advances it, and the joint stays refused).
+    let epochs: Vec<(u8, Epoch)> = reached
+        .iter()
+        .map(|&id| {
+            (
+                id,
+                ctx.setpoints().authority().revoke(id, Revoked::Reenabled),
+            )
+        })
+        .collect();
+    zero_speed_references(ctx, &reached)?;
     ctx.job_send(&control_frames(&targets, &ids, Control::enable))?;
     for &id in &reached {
         ctx.sched_mut().registry_mut().note_enabled(id);
@@ -83,8 +97,31 @@ pub(super) fn enable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
         if let Err(e) = await_fsm(ctx, id, "enable", drives_motor) {
             enable_after_transit(ctx, id).ok_or(e)??;
         }
+        if let Some((_, epoch)) = epochs.iter().find(|(e_id, _)| *e_id == id) {
+            ctx.setpoints().authority().arm(id, *epoch);
+        }
     }
     Ok(())
+}
+
+/// A joint in speed mode keeps the speed reference it was last sent across
+/// a disable (the device holds it in RAM): a zero goes to it before its
+/// enable, so an enable in speed mode never spins.
+fn zero_speed_references(ctx: &mut Ctx, ids: &[u8]) -> Result<(), BusError> {
+    let speed_mode: Vec<Command> = ids
+        .iter()
+        .filter(|&&id| {
+            ctx.sched()
+                .registry()
+                .get(id)
+                .is_some_and(|e| e.state.mode == Some(CtrlMode::Speed))
+        })
+        .map(|&id| Command::Control(Control::set_ref(id, 0, 0)))
+        .collect();
+    if speed_mode.is_empty() {
+        return Ok(());
+    }
+    ctx.job_send(&speed_mode)
 }
 
 /// Reads of a device in a passing state (rev 2.0.8's stop, brake, init,
@@ -138,8 +175,12 @@ pub(super) fn disable_because(
     reason: DisabledReason,
 ) -> Result<(), BusError> {
     let ids = resolve(ctx, &targets)?;
-    ctx.job_send(&control_frames(&targets, &ids, Control::disable))?;
     let reached = addressed(ctx, &targets, &ids);
+    let why = revoked_by(reason);
+    for &id in &reached {
+        ctx.setpoints().authority().revoke(id, why);
+    }
+    ctx.job_send(&control_frames(&targets, &ids, Control::disable))?;
     forget_targets(ctx, &reached);
     for &id in &reached {
         // Before the read-back: ready from now on is no reset.
@@ -151,6 +192,18 @@ pub(super) fn disable_because(
         await_fsm(ctx, id, "disable", |f| !drives_motor(f))?;
     }
     Ok(())
+}
+
+/// What a disable for `reason` ends a joint's moves and streams with.
+pub(super) fn revoked_by(reason: DisabledReason) -> Revoked {
+    match reason {
+        DisabledReason::Estop => Revoked::Estopped,
+        DisabledReason::Reset => Revoked::Reset,
+        DisabledReason::Fault => Revoked::Fault,
+        DisabledReason::Request | DisabledReason::OnStart | DisabledReason::Shutdown => {
+            Revoked::Disabled
+        }
+    }
 }
 
 /// Every device a control frame reached: `0xFF` reaches offline devices too.

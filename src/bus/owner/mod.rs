@@ -39,7 +39,7 @@ use crate::bus::handle::{BusShared, Request};
 use crate::bus::link::Link;
 use crate::bus::scheduler::Slot;
 use crate::bus::state::DisabledReason;
-use crate::protocol::ConfigParam;
+use crate::protocol::{ConfigParam, CtrlMode};
 use crate::rt::{precise_timers, set_fifo};
 
 use ctx::Ctx;
@@ -212,7 +212,11 @@ fn run_request(ctx: &mut Ctx, req: Request) {
             dev_id,
             mode,
             reply,
-        } => answer(reply, write::set_mode(ctx, dev_id, mode), ctx),
+        } => {
+            let result = write::set_mode(ctx, dev_id, mode);
+            mode_settled(ctx, dev_id, result.is_ok().then_some(mode));
+            answer(reply, result, ctx)
+        }
         Request::ReadInfo {
             dev_id,
             block,
@@ -224,6 +228,9 @@ fn run_request(ctx: &mut Ctx, req: Request) {
             reply,
         } => {
             let result = write::write_config(ctx, dev_id, param);
+            if let ConfigParam::CtrlMode(mode) = param {
+                mode_settled(ctx, dev_id, result.is_ok().then_some(mode));
+            }
             note_written(ctx, result.as_ref().ok());
             answer(reply, result, ctx)
         }
@@ -250,6 +257,27 @@ fn run_request(ctx: &mut Ctx, req: Request) {
         } => answer(reply, write::set_id(ctx, dev_id, new_id), ctx),
         Request::SetBaud { baud, reply } => answer(reply, baud::set_baud(ctx, baud), ctx),
         Request::Scan { first, last, reply } => answer(reply, scan::scan(ctx, first, last), ctx),
+    }
+}
+
+/// A mode write ended: the joint takes commands for `written`, or, when
+/// the write failed, for the mode the daemon last knew it in (the epoch
+/// advanced either way: nothing from before the change applies).
+fn mode_settled(ctx: &mut Ctx, dev_id: u8, written: Option<CtrlMode>) {
+    let known = ctx
+        .sched()
+        .registry()
+        .get(dev_id)
+        .and_then(|e| e.state.mode);
+    let mode = written.or(known);
+    ctx.setpoints().authority().mode_set(dev_id, mode);
+    if written.is_some() {
+        // Entering or leaving speed mode: the speed reference is 0 (the
+        // device keeps it in RAM across the change).
+        let zero = crate::protocol::Control::set_ref(dev_id, 0, 0);
+        if mode == Some(CtrlMode::Speed) {
+            let _ = ctx.job_send(&[crate::protocol::Command::Control(zero)]);
+        }
     }
 }
 

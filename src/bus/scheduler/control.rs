@@ -59,16 +59,36 @@ impl Control {
         if store.latest_seq() <= self.seen_seq {
             return;
         }
+        let mut stale = 0;
         for (id, setpoint) in store.changed_since(self.seen_seq) {
             self.seen_seq = self.seen_seq.max(setpoint.seq);
+            if !store.admits(id, &setpoint) {
+                stale += 1;
+                continue;
+            }
             let since = self.pending.get(&id).map_or(setpoint.accepted, |p| p.since);
             self.pending.insert(id, Pending { setpoint, since });
         }
+        store.authority().count_stale(stale);
     }
 
-    /// The prepared frame, if one was planned since the last decision.
-    pub(super) fn take_prepared(&mut self) -> Option<(Planned, u64)> {
-        self.prepared.take()
+    /// Drops pending setpoints a revoke made stale since they were taken
+    /// (an e-stop pressed, a joint disabled while they waited): checked
+    /// again right before a frame is made of them.
+    fn drop_stale(&mut self, store: &SetpointStore) {
+        let before = self.pending.len();
+        self.pending.retain(|id, p| store.admits(*id, &p.setpoint));
+        store
+            .authority()
+            .count_stale((before - self.pending.len()) as u64);
+    }
+
+    /// The prepared frame, if one was planned since the last decision and
+    /// everything it carries is still admitted.
+    pub(super) fn take_prepared(&mut self, store: &SetpointStore) -> Option<(Planned, u64)> {
+        let (frame, seq) = self.prepared.take()?;
+        let fresh = frame.carries.iter().all(|(id, sp)| store.admits(*id, sp));
+        fresh.then_some((frame, seq))
     }
 
     pub(super) fn set_prepared(&mut self, frame: Option<(Planned, u64)>) {
@@ -82,7 +102,13 @@ impl Control {
     /// The frame carrying the oldest pending setpoint; drops what needs
     /// none (already on the device, or for an id nobody answers to).
     /// Returns the frame and how many setpoints were dropped as unknown.
-    pub(super) fn plan(&mut self, reg: &Registry, now: Instant) -> (Option<Planned>, u32) {
+    pub(super) fn plan(
+        &mut self,
+        reg: &Registry,
+        store: &SetpointStore,
+        now: Instant,
+    ) -> (Option<Planned>, u32) {
+        self.drop_stale(store);
         if self.pending.is_empty() {
             return (None, 0);
         }
@@ -102,7 +128,13 @@ impl Control {
 
     /// Every frame the pending setpoints need, oldest first, at most `max`
     /// (for one USB transfer); drops what needs none, as [`Self::plan`].
-    pub(super) fn plan_up_to(&mut self, reg: &Registry, max: usize) -> (Vec<Planned>, u32) {
+    pub(super) fn plan_up_to(
+        &mut self,
+        reg: &Registry,
+        store: &SetpointStore,
+        max: usize,
+    ) -> (Vec<Planned>, u32) {
+        self.drop_stale(store);
         if self.pending.is_empty() {
             return (Vec::new(), 0);
         }

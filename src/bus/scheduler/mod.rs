@@ -311,7 +311,7 @@ impl Scheduler {
         if self.pipeline.is_some() {
             return self.pipelined_slot(now, store);
         }
-        if let Some((frame, seq)) = self.control.take_prepared() {
+        if let Some((frame, seq)) = self.control.take_prepared(store) {
             if self.budget.allows(now) {
                 if seq == store.latest_seq() {
                     return self.control_slot(now, frame);
@@ -461,7 +461,7 @@ impl Scheduler {
             return Vec::new();
         }
         self.control.collect(store);
-        let (frames, dropped) = self.control.plan_up_to(&self.reg, MAX_BATCHED);
+        let (frames, dropped) = self.control.plan_up_to(&self.reg, store, MAX_BATCHED);
         self.dropped += u64::from(dropped);
         frames
     }
@@ -469,7 +469,7 @@ impl Scheduler {
     /// Collects and plans the frame carrying the oldest pending setpoint.
     fn plan_control(&mut self, now: Instant, store: &SetpointStore) -> Option<Planned> {
         self.control.collect(store);
-        let (frame, dropped) = self.control.plan(&self.reg, now);
+        let (frame, dropped) = self.control.plan(&self.reg, store, now);
         self.dropped += u64::from(dropped);
         frame
     }

@@ -12,7 +12,6 @@ use crate::http::error::ApiError;
 use crate::http::state::AppState;
 use crate::http::state::{device_id, known_device};
 use crate::http::targets::{setpoint, TargetRequest};
-use crate::http::telemetry::is_enabled;
 use crate::http::teleop::JointRef;
 
 /// Most targets one batch may carry (16 joints × a few buses, with room).
@@ -176,19 +175,17 @@ fn one_target(
     field: &str,
 ) -> Result<Setpoint, WsError> {
     let dev = known_device(snap, id)?;
-    // Only a state known to be disabled is refused: checking freshly would
-    // cost a bus round trip per message at teleoperation rates.
-    if let Some((info, _)) = &dev.info01 {
-        if !is_enabled(info) {
-            return Err(WsError::new(
-                ErrorCode::WrongState,
-                format!(
-                    "joint {id} of bus {} is not enabled (enable it first)",
-                    snap.name
-                ),
-            )
-            .with_field(format!("{field}dev_id")));
-        }
+    // The bus's motion authority, an atomic read: no bus round trip at
+    // teleoperation rates, and never a snapshot that lags an e-stop.
+    if !state.bus(&snap.name)?.grant(id).enabled {
+        return Err(WsError::new(
+            ErrorCode::WrongState,
+            format!(
+                "joint {id} of bus {} is not enabled (enable it first)",
+                snap.name
+            ),
+        )
+        .with_field(format!("{field}dev_id")));
     }
     let limits = state.limits(&snap.name, id);
     let req = TargetRequest {

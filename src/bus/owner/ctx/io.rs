@@ -9,7 +9,9 @@
 
 use std::time::{Duration, Instant};
 
+use crate::bus::authority::Revoked;
 use crate::bus::coalesce::Planned;
+use crate::bus::config::StartPolicy;
 use crate::bus::error::BusError;
 use crate::bus::owner::confirm::describe;
 use crate::bus::registry::ReplyEffect;
@@ -323,8 +325,18 @@ impl Ctx {
     /// scheduler already forgot what was pending). Rare: nothing is done
     /// here for an ordinary reply.
     fn after_reply(&mut self, id: u8, effect: ReplyEffect) {
-        if effect.reset || effect.faulted {
-            self.shared.setpoints.clear(Some(&[id]));
+        let store = &self.shared.setpoints;
+        if effect.reset {
+            store.revoke(Some(&[id]), Revoked::Reset);
+            // A power-up runs position mode (SPEC §4.1: the mode is not saved).
+            store.authority().mode_set(id, None);
+        } else if effect.faulted {
+            store.revoke(Some(&[id]), Revoked::Fault);
+        }
+        if effect.found_enabled && self.cfg.on_start == StartPolicy::Keep {
+            // Kept enabled by the configuration's choice: commands may drive it.
+            let epoch = store.authority().grant(id).epoch;
+            store.authority().arm(id, epoch);
         }
         self.resend_if_aligned(id, effect);
     }
@@ -339,7 +351,9 @@ impl Ctx {
         if let Some(latest) = self.shared.setpoints.get(id) {
             // What went out during align does not count as on the device.
             self.sched.registry_mut().forget_target(id);
-            self.shared.setpoints.set(&[(id, latest.setpoint)]);
+            self.shared
+                .setpoints
+                .set_admitted(&[(id, latest.setpoint, latest.epoch)]);
         }
     }
 

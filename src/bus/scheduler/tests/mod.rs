@@ -68,9 +68,16 @@ impl Bus {
         }
         s.drain_events().for_each(drop);
         let now = t0 + LISTEN_ON_OPEN;
+        // Every id is enabled by the daemon as far as the authority knows
+        // (setpoints to ids with no device test the planner's drops).
+        let store = SetpointStore::default();
+        for id in 0..=u8::MAX {
+            let epoch = store.authority().grant(id).epoch;
+            store.authority().arm(id, epoch);
+        }
         Self {
             s,
-            store: SetpointStore::default(),
+            store,
             now,
             estop: 0,
             request: false,

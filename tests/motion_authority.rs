@@ -1,0 +1,267 @@
+//! One authority over motion, against the simulator through REST: a
+//! command admitted before an e-stop, a disable, a mode change or an enable
+//! never drives the joint after it, and a move that cannot follow its path
+//! says so.
+//!
+//! "The joint does not move" is checked without a time window: after the
+//! step under test, a fence (a target for another joint, seen reaching the
+//! simulated device) proves the owner has made frames since; the device's
+//! own target and speed reference then show what reached it.
+
+mod support;
+
+use std::time::Duration;
+
+use jointd::protocol::status::fsm;
+use jointd::sim::Fault;
+use serde_json::{json, Value};
+use support::sim_bus::{start, SimBus, WAIT};
+
+async fn enable(b: &SimBus, id: u8) {
+    let r = b
+        .server
+        .post(
+            &format!("/api/v1/buses/sim0/devices/{id}/enable"),
+            json!({}),
+        )
+        .await;
+    assert!(r.status.is_success(), "enable {id}: {}", r.body);
+    b.wait_fsm(id, fsm::RUN).await;
+}
+
+async fn post_move(b: &SimBus, id: u8, deg: f64, ms: u64) -> (u16, Value) {
+    let r = b
+        .server
+        .post(
+            "/api/v1/moves",
+            json!({"joints": [{"bus": "sim0", "id": id, "position_deg": deg}],
+                   "duration_ms": ms, "method": "linear"}),
+        )
+        .await;
+    (r.status.as_u16(), r.body.clone())
+}
+
+async fn move_view(b: &SimBus, move_id: u64) -> Value {
+    b.server
+        .get(&format!("/api/v1/moves/{move_id}"))
+        .await
+        .ok()
+        .clone()
+}
+
+/// Polls move `move_id` until `ok` holds; returns that view.
+async fn wait_move(b: &SimBus, move_id: u64, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
+    let deadline = tokio::time::Instant::now() + WAIT;
+    loop {
+        let view = move_view(b, move_id).await;
+        if ok(&view) {
+            return view;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "timed out waiting for {what}: {view}"
+        );
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
+/// Waits until the simulator shows `pred` of device `id`.
+fn sim_until(b: &SimBus, what: &str, pred: impl Fn(&jointd::sim::DeviceView) -> bool, id: u8) {
+    let deadline = std::time::Instant::now() + WAIT;
+    loop {
+        if b.sim.device(id).is_some_and(|d| pred(&d)) {
+            return;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "timed out waiting for {what}: {:?}",
+            b.sim.device(id)
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// A target for `fence_id` (enabled), seen on its simulated device: frames
+/// were made after everything before this call.
+async fn fence(b: &SimBus, fence_id: u8, deg: f64) {
+    let r = b
+        .server
+        .put(
+            &format!("/api/v1/buses/sim0/devices/{fence_id}/target"),
+            json!({"position_deg": deg}),
+        )
+        .await;
+    assert!(r.status.is_success(), "fence target: {}", r.body);
+    sim_until(
+        b,
+        "the fence target on its device",
+        |d| (d.target_deg - deg).abs() < 0.1,
+        fence_id,
+    );
+}
+
+fn device_target(b: &SimBus, id: u8) -> f64 {
+    b.sim.device(id).expect("device").target_deg
+}
+
+fn is_running(view: &Value) -> bool {
+    view["state"] == "running"
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_move_racing_an_estop_never_drives_the_joint_after_the_next_enable() {
+    let b = start(2, None).await;
+    enable(&b, 2).await;
+    for attempt in 0..8u64 {
+        enable(&b, 1).await;
+        let held = b.sim.device(1).expect("device 1").angle_deg;
+        let handle = b.handle.clone();
+        let estop = tokio::spawn(async move { handle.estop().await });
+        // The move goes in while the e-stop is on its way (0..7 ms later).
+        tokio::time::sleep(Duration::from_millis(attempt)).await;
+        let (status, body) = post_move(&b, 1, 60.0, 400).await;
+        estop.await.expect("join").expect("e-stop");
+        if status == 201 {
+            let id = body["id"].as_u64().expect("move id");
+            let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+            assert_eq!(view["state"], "aborted", "attempt {attempt}: {view}");
+        } else {
+            assert_eq!(status, 409, "attempt {attempt}: {body}");
+        }
+        enable(&b, 1).await;
+        enable(&b, 2).await;
+        fence(&b, 2, 10.0 + attempt as f64).await;
+        let target = device_target(&b, 1);
+        assert!(
+            (target - held).abs() < 2.0 && target < 30.0,
+            "attempt {attempt}: joint 1 holds a target of {target:.1}° after the enable \
+             (it stood at {held:.1}°; the move went to 60°)"
+        );
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_disable_mid_move_ends_it_and_an_enable_does_not_resume_it() {
+    let b = start(2, None).await;
+    enable(&b, 1).await;
+    enable(&b, 2).await;
+    let (status, body) = post_move(&b, 1, 80.0, 3000).await;
+    assert_eq!(status, 201, "{body}");
+    let id = body["id"].as_u64().expect("move id");
+    sim_until(&b, "joint 1 under way", |d| d.angle_deg > 5.0, 1);
+    let r = b
+        .server
+        .post("/api/v1/buses/sim0/devices/1/disable", json!({}))
+        .await;
+    assert!(r.status.is_success(), "{}", r.body);
+    let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    assert_eq!(view["state"], "aborted", "{view}");
+    assert_eq!(view["reason"], "disabled", "{view}");
+    let progress = view["progress"].as_f64().expect("progress");
+    enable(&b, 1).await;
+    let held = b.sim.device(1).expect("device 1").angle_deg;
+    fence(&b, 2, 12.0).await;
+    let target = device_target(&b, 1);
+    assert!(
+        (target - held).abs() < 2.0,
+        "joint 1 holds {target:.1}° after the enable, not where it stood ({held:.1}°)"
+    );
+    // An ended move's progress stays where it ended.
+    let later = move_view(&b, id).await;
+    assert_eq!(later["progress"].as_f64(), Some(progress), "{later}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_mode_change_mid_move_ends_it_and_the_joint_does_not_spin() {
+    let b = start(2, None).await;
+    enable(&b, 1).await;
+    enable(&b, 2).await;
+    let (status, body) = post_move(&b, 1, 80.0, 3000).await;
+    assert_eq!(status, 201, "{body}");
+    let id = body["id"].as_u64().expect("move id");
+    sim_until(&b, "joint 1 under way", |d| d.angle_deg > 5.0, 1);
+    let r = b
+        .server
+        .put(
+            "/api/v1/buses/sim0/devices/1/mode",
+            json!({"mode": "speed"}),
+        )
+        .await;
+    assert!(r.status.is_success(), "{}", r.body);
+    let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    assert_eq!(view["state"], "aborted", "{view}");
+    assert_eq!(view["reason"], "mode_changed", "{view}");
+    fence(&b, 2, 14.0).await;
+    let d = b.sim.device(1).expect("device 1");
+    assert_eq!(
+        d.spd_ref, 0,
+        "joint 1 in speed mode was left a speed reference of {}: it spins",
+        d.spd_ref
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_enable_in_speed_mode_after_an_estop_does_not_spin() {
+    let b = start(2, None).await;
+    enable(&b, 1).await;
+    enable(&b, 2).await;
+    let r = b
+        .server
+        .put(
+            "/api/v1/buses/sim0/devices/1/mode",
+            json!({"mode": "speed"}),
+        )
+        .await;
+    assert!(r.status.is_success(), "{}", r.body);
+    let r = b
+        .server
+        .put(
+            "/api/v1/buses/sim0/devices/1/target",
+            json!({"speed_rpm": 1000.0}),
+        )
+        .await;
+    assert!(r.status.is_success(), "{}", r.body);
+    sim_until(&b, "joint 1 spinning", |d| d.velocity_deg_s.abs() > 1.0, 1);
+    b.handle.estop().await.expect("e-stop");
+    enable(&b, 1).await;
+    enable(&b, 2).await;
+    fence(&b, 2, 16.0).await;
+    let d = b.sim.device(1).expect("device 1");
+    assert_eq!(
+        d.spd_ref, 0,
+        "joint 1 was enabled in speed mode with a speed reference of {}",
+        d.spd_ref
+    );
+    let target = b
+        .server
+        .get("/api/v1/buses/sim0/devices/1")
+        .await
+        .ok()
+        .clone();
+    assert!(target["target"].is_null(), "{target}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_blocked_joint_stalls_its_move_instead_of_arriving() {
+    let b = start(2, None).await;
+    enable(&b, 1).await;
+    let (status, body) = post_move(&b, 1, 60.0, 1500).await;
+    assert_eq!(status, 201, "{body}");
+    let id = body["id"].as_u64().expect("move id");
+    sim_until(&b, "joint 1 past 10°", |d| d.angle_deg > 10.0, 1);
+    b.sim.inject(Fault::Stall {
+        dev_id: 1,
+        at_deg: None,
+    });
+    let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    assert_eq!(view["state"], "stalled", "{view}");
+    assert_eq!(view["arrived"], json!([]), "{view}");
+    assert_eq!(view["stalled"][0]["id"], 1, "{view}");
+    let d = b.sim.device(1).expect("device 1");
+    assert!(
+        (d.target_deg - d.angle_deg).abs() < 3.0,
+        "a stalled joint holds where it stands: target {:.1}°, angle {:.1}°",
+        d.target_deg,
+        d.angle_deg
+    );
+}
