@@ -1,14 +1,18 @@
-//! Named hands and their poses (issue 18): `[[hand]]` in the config names a
-//! set of joints, possibly on several buses, each with a joint name; poses
+//! Named hands and their poses: `[[hand]]` in the config names a set of
+//! joints, possibly on several buses, each with a joint name; poses
 //! (`open`, `fist`, ...) are joint angles by name, saved in the state file
 //! (`state_dir`) so they survive restarts.
 //!
-//! - [`state_file`]: the state file, written atomically.
+//! - [`state_file`]: the state file, written atomically, set aside when bad.
+//! - [`saved`]: what it holds, read back checked.
 //! - [`calibration`]: a joint's offset, direction and range.
+//! - [`pose`]: a pose as a request gives it, each joint named once.
 //! - this file: the hands from the config, checked, and the store of what
 //!   users saved (poses, calibrations).
 
 pub mod calibration;
+pub mod pose;
+pub mod saved;
 pub mod state_file;
 
 use std::collections::BTreeMap;
@@ -19,6 +23,9 @@ use thiserror::Error;
 
 use crate::protocol::ids::parse_id_list;
 pub use calibration::{Calibration, CalibrationError};
+pub use pose::Pose;
+use saved::Saved;
+pub use saved::{DroppedCalibration, LoadNotes, SetAside};
 pub use state_file::{StateFile, StateFileError};
 
 /// `[[hand]]`: a named set of joints.
@@ -176,20 +183,6 @@ fn joints_of(
     Ok(())
 }
 
-/// A pose: joint angles (degrees) by joint name.
-pub type Pose = BTreeMap<String, f64>;
-
-/// What the state file holds.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-struct Saved {
-    version: u32,
-    /// hand → pose name → pose.
-    poses: BTreeMap<String, BTreeMap<String, Pose>>,
-    /// bus → device id → calibration (absent: the identity).
-    #[serde(default)]
-    calibration: BTreeMap<String, BTreeMap<u8, Calibration>>,
-}
-
 /// The hands, their poses and the joints' calibrations; saved to the state
 /// file on every change when there is one (a std `Mutex`: never held across an `.await`).
 #[derive(Debug)]
@@ -197,25 +190,36 @@ pub struct StateStore {
     hands: Vec<Hand>,
     file: Option<StateFile>,
     saved: Mutex<Saved>,
+    notes: LoadNotes,
 }
 
 impl StateStore {
-    /// The hands with the poses the state file in `state_dir` holds (none
-    /// without a `state_dir`: poses then live until the daemon stops).
+    /// The hands with the poses and calibrations the state file in
+    /// `state_dir` holds (none without a `state_dir`: they then live until
+    /// the daemon stops). Always `Ok`: a bad file is set aside or left
+    /// alone and bad calibrations dropped, each logged and kept in
+    /// [`Self::notes`], so that a bad file never keeps the daemon (and its
+    /// e-stop) from starting.
     pub fn open(
         hands: Vec<Hand>,
         state_dir: Option<&std::path::Path>,
     ) -> Result<Self, StateFileError> {
         let file = state_dir.map(StateFile::new);
-        let saved = match &file {
-            Some(f) => f.load::<Saved>()?.unwrap_or_default(),
-            None => Saved::default(),
+        let (saved, notes) = match &file {
+            Some(f) => saved::load(f, std::time::SystemTime::now()),
+            None => (Saved::default(), LoadNotes::default()),
         };
         Ok(Self {
             hands,
             file,
             saved: Mutex::new(saved),
+            notes,
         })
+    }
+
+    /// What was wrong with the state file when the daemon started.
+    pub fn notes(&self) -> &LoadNotes {
+        &self.notes
     }
 
     fn lock(&self) -> MutexGuard<'_, Saved> {
@@ -309,6 +313,12 @@ impl StateStore {
     }
 
     fn change(&self, edit: impl FnOnce(&mut Saved)) -> Result<(), StateFileError> {
+        if let (Some(f), Some(reason)) = (&self.file, &self.notes.unusable) {
+            return Err(StateFileError::Unusable {
+                path: f.path(),
+                reason: reason.clone(),
+            });
+        }
         let mut saved = self.lock();
         let mut next = saved.clone();
         next.version = 1;
@@ -445,5 +455,23 @@ joints = [{ bus = "l", ids = "1-2", names = ["thumb", "index"] }]"#,
         assert_eq!(again.calibration("l", 3), cal);
         assert_eq!(again.calibration("l", 4), Calibration::IDENTITY);
         assert_eq!(again.calibrations()["l"].len(), 1);
+    }
+
+    #[test]
+    fn a_state_file_that_cannot_be_set_aside_is_never_written_over() {
+        let dir = std::env::temp_dir().join(format!("jointd-stuck-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        // A state_dir that is a file: unreadable, and no rename can move it.
+        let not_a_dir = dir.join("file");
+        std::fs::write(&not_a_dir, "keep").unwrap();
+        let store = StateStore::open(Vec::new(), Some(&not_a_dir)).unwrap();
+        assert!(store.notes().unusable.is_some());
+        let err = store
+            .put("left", "fist", Pose::from([("thumb".into(), 1.0)]))
+            .unwrap_err();
+        assert!(matches!(err, StateFileError::Unusable { .. }), "{err}");
+        assert_eq!(store.pose("left", "fist"), None);
+        assert_eq!(std::fs::read_to_string(&not_a_dir).unwrap(), "keep");
     }
 }
