@@ -34,9 +34,10 @@ pub struct Calibration {
 
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum CalibrationError {
-    #[error("offset_deg = {0} must be a finite angle within ±{MAX_ANGLE_DEG}°")]
+    // `{:?}`: a huge value reads `1e308`, not 309 digits.
+    #[error("offset_deg = {0:?} must be a finite angle within ±{MAX_ANGLE_DEG}° (the device's position range)")]
     Offset(f64),
-    #[error("range_deg = [{0}, {1}] must be two finite angles, the first below the second")]
+    #[error("range_deg = [{0:?}, {1:?}] must be two finite angles, the first below the second")]
     Range(f64, f64),
 }
 
@@ -151,7 +152,14 @@ mod tests {
             offset_deg: 300.0,
             ..Calibration::IDENTITY
         };
-        assert!(far.checked().is_err());
+        let far = far.checked().unwrap_err().to_string();
+        assert!(far.contains("= 300.0 ") && far.contains("±255°"), "{far}");
+        let huge = Calibration {
+            offset_deg: 1e308,
+            ..Calibration::IDENTITY
+        };
+        let huge = huge.checked().unwrap_err().to_string();
+        assert!(huge.starts_with("offset_deg = 1e308 must"), "{huge}");
         let upside_down = Calibration {
             range_deg: Some((10.0, -10.0)),
             ..Calibration::IDENTITY

@@ -1,25 +1,31 @@
-//! Named hands and their poses (issue 18): `[[hand]]` in the config names a
-//! set of joints, possibly on several buses, each with a joint name; poses
+//! Named hands and their poses: `[[hand]]` in the config names a set of
+//! joints, possibly on several buses, each with a joint name; poses
 //! (`open`, `fist`, ...) are joint angles by name, saved in the state file
 //! (`state_dir`) so they survive restarts.
 //!
-//! - [`state_file`]: the state file, written atomically.
+//! - [`state_file`]: the state file, written atomically, set aside when bad.
+//! - [`saved`]: what it holds, read back checked.
 //! - [`calibration`]: a joint's offset, direction and range.
-//! - this file: the hands from the config, checked, and the store of what
-//!   users saved (poses, calibrations).
+//! - [`pose`]: a pose as a request gives it, each joint named once.
+//! - `store`: [`StateStore`], what users saved (poses, calibrations), kept in memory and
+//!   written to the state file on every change.
+//! - this file: the hands from the config, checked.
 
 pub mod calibration;
+pub mod pose;
+pub mod saved;
 pub mod state_file;
-
-use std::collections::BTreeMap;
-use std::sync::{Mutex, MutexGuard};
+mod store;
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::protocol::ids::parse_id_list;
 pub use calibration::{Calibration, CalibrationError};
+pub use pose::Pose;
+pub use saved::{DroppedCalibration, LoadNotes, SetAside};
 pub use state_file::{StateFile, StateFileError};
+pub use store::StateStore;
 
 /// `[[hand]]`: a named set of joints.
 #[derive(Debug, Clone, Deserialize)]
@@ -176,151 +182,6 @@ fn joints_of(
     Ok(())
 }
 
-/// A pose: joint angles (degrees) by joint name.
-pub type Pose = BTreeMap<String, f64>;
-
-/// What the state file holds.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-struct Saved {
-    version: u32,
-    /// hand → pose name → pose.
-    poses: BTreeMap<String, BTreeMap<String, Pose>>,
-    /// bus → device id → calibration (absent: the identity).
-    #[serde(default)]
-    calibration: BTreeMap<String, BTreeMap<u8, Calibration>>,
-}
-
-/// The hands, their poses and the joints' calibrations; saved to the state
-/// file on every change when there is one (a std `Mutex`: never held across an `.await`).
-#[derive(Debug)]
-pub struct StateStore {
-    hands: Vec<Hand>,
-    file: Option<StateFile>,
-    saved: Mutex<Saved>,
-}
-
-impl StateStore {
-    /// The hands with the poses the state file in `state_dir` holds (none
-    /// without a `state_dir`: poses then live until the daemon stops).
-    pub fn open(
-        hands: Vec<Hand>,
-        state_dir: Option<&std::path::Path>,
-    ) -> Result<Self, StateFileError> {
-        let file = state_dir.map(StateFile::new);
-        let saved = match &file {
-            Some(f) => f.load::<Saved>()?.unwrap_or_default(),
-            None => Saved::default(),
-        };
-        Ok(Self {
-            hands,
-            file,
-            saved: Mutex::new(saved),
-        })
-    }
-
-    fn lock(&self) -> MutexGuard<'_, Saved> {
-        self.saved.lock().unwrap_or_else(|p| p.into_inner())
-    }
-
-    pub fn hands(&self) -> &[Hand] {
-        &self.hands
-    }
-
-    pub fn hand(&self, name: &str) -> Option<&Hand> {
-        self.hands.iter().find(|h| h.name == name)
-    }
-
-    /// Where poses are kept, if anywhere but memory.
-    pub fn state_path(&self) -> Option<std::path::PathBuf> {
-        self.file.as_ref().map(StateFile::path)
-    }
-
-    pub fn poses(&self, hand: &str) -> BTreeMap<String, Pose> {
-        self.lock().poses.get(hand).cloned().unwrap_or_default()
-    }
-
-    pub fn pose(&self, hand: &str, name: &str) -> Option<Pose> {
-        self.lock()
-            .poses
-            .get(hand)
-            .and_then(|p| p.get(name))
-            .cloned()
-    }
-
-    /// Saves `pose` as `name` of `hand`; on a failed write nothing changes.
-    pub fn put(&self, hand: &str, name: &str, pose: Pose) -> Result<(), StateFileError> {
-        self.change(|s| {
-            s.poses
-                .entry(hand.to_string())
-                .or_default()
-                .insert(name.to_string(), pose);
-        })
-    }
-
-    /// Forgets a pose; false when there was none.
-    pub fn delete(&self, hand: &str, name: &str) -> Result<bool, StateFileError> {
-        let mut existed = false;
-        self.change(|s| {
-            existed = s.poses.get_mut(hand).and_then(|p| p.remove(name)).is_some();
-        })?;
-        Ok(existed)
-    }
-
-    /// The calibration of joint `id` on `bus` (the identity if none).
-    pub fn calibration(&self, bus: &str, id: u8) -> Calibration {
-        self.lock()
-            .calibration
-            .get(bus)
-            .and_then(|c| c.get(&id))
-            .copied()
-            .unwrap_or(Calibration::IDENTITY)
-    }
-
-    /// Every calibration saved: bus → id → calibration (what the tests
-    /// look at to see that the identity leaves nothing behind).
-    #[cfg(test)]
-    pub fn calibrations(&self) -> BTreeMap<String, BTreeMap<u8, Calibration>> {
-        self.lock().calibration.clone()
-    }
-
-    /// Saves the calibration of joint `id` on `bus` (the identity removes
-    /// it); on a failed write nothing changes.
-    pub fn set_calibration(
-        &self,
-        bus: &str,
-        id: u8,
-        cal: Calibration,
-    ) -> Result<(), StateFileError> {
-        self.change(|s| {
-            if cal.is_identity() {
-                if let Some(c) = s.calibration.get_mut(bus) {
-                    c.remove(&id);
-                    if c.is_empty() {
-                        s.calibration.remove(bus);
-                    }
-                }
-            } else {
-                s.calibration
-                    .entry(bus.to_string())
-                    .or_default()
-                    .insert(id, cal);
-            }
-        })
-    }
-
-    fn change(&self, edit: impl FnOnce(&mut Saved)) -> Result<(), StateFileError> {
-        let mut saved = self.lock();
-        let mut next = saved.clone();
-        next.version = 1;
-        edit(&mut next);
-        if let Some(f) = &self.file {
-            f.save(&next)?;
-        }
-        *saved = next;
-        Ok(())
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -397,53 +258,5 @@ name = "x"
 joints = [{ bus = "l", ids = "one" }]"#),
             HandError::Ids { .. }
         ));
-    }
-
-    #[test]
-    fn poses_survive_a_new_store_on_the_same_state_dir() {
-        let dir = std::env::temp_dir().join(format!("jointd-poses-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let hands = resolve(
-            &config(
-                r#"[[hand]]
-name = "left"
-joints = [{ bus = "l", ids = "1-2", names = ["thumb", "index"] }]"#,
-            ),
-            &buses(),
-        )
-        .unwrap();
-        let store = StateStore::open(hands.clone(), Some(&dir)).unwrap();
-        let fist = Pose::from([("thumb".into(), 40.0), ("index".into(), 80.0)]);
-        store.put("left", "fist", fist.clone()).unwrap();
-        store
-            .put("left", "open", Pose::from([("thumb".into(), 0.0)]))
-            .unwrap();
-        assert!(store.delete("left", "open").unwrap());
-        assert!(!store.delete("left", "open").unwrap());
-        let again = StateStore::open(hands, Some(&dir)).unwrap();
-        assert_eq!(again.pose("left", "fist"), Some(fist));
-        assert_eq!(again.poses("left").len(), 1);
-    }
-
-    #[test]
-    fn calibrations_survive_a_new_store_and_the_identity_removes_one() {
-        let dir = std::env::temp_dir().join(format!("jointd-cal-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let store = StateStore::open(Vec::new(), Some(&dir)).unwrap();
-        let cal = Calibration {
-            offset_deg: 12.0,
-            flip: true,
-            range_deg: Some((-5.0, 80.0)),
-            homed_at_ms: None,
-        };
-        store.set_calibration("l", 3, cal).unwrap();
-        store.set_calibration("l", 4, cal).unwrap();
-        store
-            .set_calibration("l", 4, Calibration::IDENTITY)
-            .unwrap();
-        let again = StateStore::open(Vec::new(), Some(&dir)).unwrap();
-        assert_eq!(again.calibration("l", 3), cal);
-        assert_eq!(again.calibration("l", 4), Calibration::IDENTITY);
-        assert_eq!(again.calibrations()["l"].len(), 1);
     }
 }

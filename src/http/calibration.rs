@@ -62,20 +62,27 @@ pub(crate) struct CalibrationRequest {
 
 impl CalibrationRequest {
     pub(crate) fn checked(&self) -> ApiResult<Calibration> {
-        Calibration {
+        checked(Calibration {
             offset_deg: self.offset_deg.unwrap_or(0.0),
             flip: self.flip.unwrap_or(false),
             range_deg: self.range_deg.map(|[lo, hi]| (lo, hi)),
             homed_at_ms: None,
-        }
-        .checked()
-        .map_err(|e| ApiError::invalid(e.field(), e.to_string()))
+        })
     }
 }
 
+/// A calibration that could be applied, else 422 naming the field.
+fn checked(cal: Calibration) -> ApiResult<Calibration> {
+    cal.checked()
+        .map_err(|e| ApiError::invalid(e.field(), e.to_string()))
+}
+
 /// Saves the calibration of joint `id` on `bus` in the state file (the
-/// identity removes it); 503 when it cannot be written, nothing changed.
+/// identity removes it); 422 when it could not be applied (checked here, so
+/// every way of saving one is: a request, homing), 503 when it cannot be
+/// written; either way nothing changed.
 pub(crate) fn save(state: &AppState, bus: &str, id: u8, cal: Calibration) -> ApiResult<()> {
+    let cal = checked(cal)?;
     let store = state.hands().ok_or_else(|| {
         ApiError::state_unwritable("this daemon keeps no saved state: the calibration was not set")
     })?;

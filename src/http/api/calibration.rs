@@ -14,7 +14,7 @@ use crate::hands::Calibration;
 use crate::http::calibration::{self, CalibrationRequest, CalibrationView};
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
-use crate::http::state::{AppState, DevicePath};
+use crate::http::state::{known_device, AppState, DevicePath};
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
@@ -49,7 +49,8 @@ async fn get_calibration(
 /// the q current turn with it), and a target outside `range_deg` is refused
 /// (422). Soft limits keep applying to the device angle. The device's own
 /// zero is not touched (that is `rezero`). Saved before the answer: it
-/// survives a restart.
+/// survives a restart. Only for a device on the bus (404 otherwise: an id
+/// mistyped would calibrate a joint that is not there).
 #[utoipa::path(put, path = "/api/v1/buses/{bus}/devices/{id}/calibration", tag = TAG_CONTROL,
     params(DevicePath),
     request_body(content = CalibrationRequest, example = json!({"offset_deg": -42.5, "flip": false, "range_deg": [0.0, 90.0]})),
@@ -60,6 +61,7 @@ async fn put_calibration(
     ApiJson(req): ApiJson<CalibrationRequest>,
 ) -> ApiResult<Json<CalibrationView>> {
     let (bus, id) = p.resolve(&state)?;
+    known_device(&bus.snapshot(), id)?;
     let cal = req.checked()?;
     calibration::save(&state, bus.name(), id, cal)?;
     Ok(Json(CalibrationView::new(bus.name(), id, &cal)))
@@ -68,7 +70,8 @@ async fn put_calibration(
 /// Clear a joint's calibration: its angles read as the device's again.
 ///
 /// Removed from the state file before the answer, which gives the
-/// calibration as it was.
+/// calibration as it was. Also for a device no longer on the bus, so a
+/// calibration left behind can be cleared.
 #[utoipa::path(delete, path = "/api/v1/buses/{bus}/devices/{id}/calibration", tag = TAG_CONTROL,
     params(DevicePath),
     responses((status = 200, description = "Calibration cleared; as it was", body = CalibrationView), ErrorResponses))]
