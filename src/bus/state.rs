@@ -158,6 +158,10 @@ pub struct BusCounters {
     pub polls: u64,
     /// Setpoints dropped because their id has no device on the bus.
     pub setpoints_dropped: u64,
+    /// Setpoints (client targets, move samples, homing steps) dropped
+    /// because their joint's motion epoch advanced after they were admitted
+    /// (an e-stop, disable, reset, fault, mode change or enable since).
+    pub setpoints_stale: u64,
     /// Times the owner caught a panic of its own (a bug): each one took the
     /// bus down and reopened the port, as after an unplug.
     pub owner_panics: u64,

@@ -75,6 +75,10 @@ const BUS_COUNTER_HELP: &[(&str, &str)] = &[
         "Setpoints dropped because their id has no device on the bus.",
     ),
     (
+        "setpoints_stale",
+        "Setpoints dropped because their joint's motion epoch advanced after they were admitted (e-stop, disable, reset, fault, mode change, enable).",
+    ),
+    (
         "owner_panics",
         "Panics the bus owner caught (a bug): each reopened the port.",
     ),

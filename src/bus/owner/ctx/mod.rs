@@ -117,6 +117,7 @@ impl Ctx {
     /// What a decision left to hand on: a wire ack, dropped setpoints.
     fn after_decision(&mut self) {
         self.link.counters.setpoints_dropped += self.sched.take_dropped();
+        self.link.counters.setpoints_stale = self.shared.setpoints.authority().stale_dropped();
         if let Some(ack) = self.sched.take_ack() {
             self.shared.wire_acks.send_replace(ack);
         }

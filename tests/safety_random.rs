@@ -1,0 +1,501 @@
+//! The randomized safety test: many random interleavings of enable, disable,
+//! e-stop, mode change, target, a WebSocket setpoint stream ending in its
+//! watchdog, move, pose go, a simulated power cycle and e-stop races, on the
+//! simulator through the daemon's own API. After every step the invariant
+//! is checked on the simulated devices themselves:
+//!
+//! > a joint moves only toward what the last command admitted since its last
+//! > enable asked.
+//!
+//! Per joint the test keeps what was admitted since its last enable (where
+//! it stood when enabled, each accepted target, the span of each accepted
+//! move or pose, the speeds of accepted speed targets). An enabled device's
+//! position target must lie within one of those, and in speed mode its speed
+//! reference must be 0 or an admitted speed. A step is checked once the bus
+//! owner has made frames since it (its poll counter moved on), so what was
+//! pending has reached the wire.
+//!
+//! Seeds: `JOINTD_SAFETY_SEEDS` (count, default 3) and `JOINTD_SAFETY_STEPS`
+//! (per seed, default 60), or one `JOINTD_SAFETY_SEED` to replay; a failure
+//! prints its seed and the steps that led to it.
+
+mod support;
+
+use std::time::Duration;
+
+use futures_util::{SinkExt, StreamExt};
+use jointd::protocol::status::fsm;
+use jointd::protocol::CtrlMode;
+use jointd::sim::Fault;
+use serde_json::{json, Value};
+use support::sim_bus::{start, SimBus, WAIT};
+use tokio_tungstenite::tungstenite::Message;
+
+const JOINTS: [u8; 3] = [1, 2, 3];
+/// Slack on an angle: measurement and the device's own rounding (Q7).
+const SLACK_DEG: f64 = 1.0;
+
+/// A small deterministic generator (xorshift64*): a seed replays a run.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+    fn joint(&mut self) -> u8 {
+        JOINTS[self.below(JOINTS.len() as u64) as usize]
+    }
+    fn angle(&mut self) -> f64 {
+        // Joint 2 has soft limits of ±45° in the fixture.
+        (self.below(81) as f64) - 40.0
+    }
+}
+
+/// What was admitted for one joint since its last enable.
+#[derive(Debug, Default, Clone)]
+struct Admitted {
+    /// Position spans (a point is a span of width 0).
+    spans: Vec<(f64, f64)>,
+    /// Speed references admitted since the last enable or mode change, rpm.
+    speeds: Vec<f64>,
+}
+
+impl Admitted {
+    fn span(&mut self, a: f64, b: f64) {
+        self.spans.push((a.min(b), a.max(b)));
+    }
+    fn allows_position(&self, deg: f64) -> bool {
+        self.spans
+            .iter()
+            .any(|(lo, hi)| deg >= lo - SLACK_DEG && deg <= hi + SLACK_DEG)
+    }
+    /// `raw` is the device's Q15 speed reference; its base speed depends on
+    /// the firmware (50000 rpm, or 40000 before 1.2.4): either may apply.
+    fn allows_speed(&self, raw: i16) -> bool {
+        raw == 0
+            || [50_000.0, 40_000.0].iter().any(|base| {
+                let rpm = f64::from(raw) / 32767.0 * base;
+                self.speeds
+                    .iter()
+                    .any(|s| (s - rpm).abs() <= 0.02 * s.abs() + 1.0)
+            })
+    }
+}
+
+struct World {
+    b: SimBus,
+    rng: Rng,
+    seed: u64,
+    log: Vec<String>,
+    admitted: [Admitted; 4],
+}
+
+impl World {
+    fn device(&self, id: u8) -> jointd::sim::DeviceView {
+        self.b.sim.device(id).expect("simulated device")
+    }
+
+    fn fail(&self, what: String) -> ! {
+        panic!(
+            "seed {} (replay: JOINTD_SAFETY_SEED={}): {what}\nsteps:\n  {}",
+            self.seed,
+            self.seed,
+            self.log.join("\n  ")
+        );
+    }
+
+    /// The owner has polled `n` more times: every setpoint pending when
+    /// this was called has been made into a frame or dropped.
+    async fn fence(&self) {
+        let start = self.b.handle.snapshot().counters.polls;
+        self.b
+            .wait_snapshot("the owner polling on", |s| s.counters.polls >= start + 8)
+            .await;
+    }
+
+    fn check(&self) {
+        for id in JOINTS {
+            let d = self.device(id);
+            if !d.enabled {
+                continue;
+            }
+            let a = &self.admitted[usize::from(id)];
+            if d.mode == CtrlMode::Speed {
+                if !a.allows_speed(d.spd_ref) {
+                    self.fail(format!(
+                        "joint {id} spins with a speed reference of {} (Q15); admitted since its enable (rpm): {:?}",
+                        d.spd_ref, a.speeds
+                    ));
+                }
+            } else if !a.allows_position(d.target_deg) {
+                self.fail(format!(
+                    "joint {id} holds a target of {:.2}° that nothing admitted since its enable asked; admitted: {:?}",
+                    d.target_deg, a.spans
+                ));
+            }
+        }
+    }
+
+    async fn enable(&mut self, id: u8) {
+        let before = self.device(id);
+        let r = self
+            .b
+            .server
+            .post(
+                &format!("/api/v1/buses/sim0/devices/{id}/enable"),
+                json!({}),
+            )
+            .await;
+        self.log.push(format!("enable {id}: {}", r.status));
+        if r.status.is_success() {
+            self.b.wait_fsm(id, fsm::RUN).await;
+        }
+        // An enable whose confirmation was lost (504 on a loaded host) may
+        // still have reached the joint: the device says.
+        if !before.enabled && self.device(id).enabled {
+            // Enabled from rest: it holds where it stood (it may have coasted).
+            let after = self.device(id);
+            let mut a = Admitted::default();
+            a.span(before.angle_deg, after.angle_deg);
+            self.admitted[usize::from(id)] = a;
+        }
+    }
+
+    async fn disable(&mut self, id: u8) {
+        let r = self
+            .b
+            .server
+            .post(
+                &format!("/api/v1/buses/sim0/devices/{id}/disable"),
+                json!({}),
+            )
+            .await;
+        self.log.push(format!("disable {id}: {}", r.status));
+    }
+
+    async fn estop(&mut self) {
+        let r = self.b.server.post_empty("/api/v1/estop").await;
+        self.log.push(format!("estop: {}", r.status));
+    }
+
+    async fn mode(&mut self, id: u8, speed: bool) {
+        let before = self.device(id);
+        let mode = if speed { "speed" } else { "position" };
+        let r = self
+            .b
+            .server
+            .put(
+                &format!("/api/v1/buses/sim0/devices/{id}/mode"),
+                json!({ "mode": mode }),
+            )
+            .await;
+        self.log.push(format!("mode {id} {mode}: {}", r.status));
+        if r.status.is_success() {
+            let after = self.device(id);
+            let a = &mut self.admitted[usize::from(id)];
+            a.speeds.clear();
+            // Into position mode the device holds where it is.
+            a.span(before.angle_deg, after.angle_deg);
+        }
+    }
+
+    async fn target(&mut self, id: u8) {
+        let speed = self.device(id).mode == CtrlMode::Speed;
+        let body = if speed {
+            json!({"speed_rpm": (self.rng.below(1500) as f64) - 750.0})
+        } else {
+            json!({"position_deg": self.rng.angle()})
+        };
+        let r = self
+            .b
+            .server
+            .put(
+                &format!("/api/v1/buses/sim0/devices/{id}/target"),
+                body.clone(),
+            )
+            .await;
+        self.log.push(format!("target {id} {body}: {}", r.status));
+        if r.status.is_success() {
+            let a = &mut self.admitted[usize::from(id)];
+            match (body["speed_rpm"].as_f64(), body["position_deg"].as_f64()) {
+                (Some(rpm), _) => a.speeds.push(rpm),
+                (_, Some(deg)) => a.span(deg, deg),
+                _ => {}
+            }
+        }
+    }
+
+    /// A move of one or two joints; each admitted joint's span is where its
+    /// device target was to where it goes.
+    async fn move_joints(&mut self, ids: &[u8], ms: u64) {
+        let goals: Vec<(u8, f64)> = ids.iter().map(|&id| (id, self.rng.angle())).collect();
+        // A path starts where the joint was last sent, or where it is.
+        let from: Vec<(f64, f64)> = ids
+            .iter()
+            .map(|&id| {
+                let d = self.device(id);
+                (d.target_deg, d.angle_deg)
+            })
+            .collect();
+        let joints: Vec<Value> = goals
+            .iter()
+            .map(|(id, deg)| json!({"bus": "sim0", "id": id, "position_deg": deg}))
+            .collect();
+        let r = self
+            .b
+            .server
+            .post(
+                "/api/v1/moves",
+                json!({"joints": joints, "duration_ms": ms, "method": "min_jerk"}),
+            )
+            .await;
+        self.log
+            .push(format!("move {goals:?} in {ms} ms: {}", r.status));
+        if r.status.as_u16() == 201 {
+            for ((id, deg), (target, angle)) in goals.iter().zip(from) {
+                let a = &mut self.admitted[usize::from(*id)];
+                a.span(target.min(angle), *deg);
+                a.span(target.max(angle), *deg);
+            }
+        }
+    }
+
+    async fn pose_go(&mut self) {
+        let positions: Vec<f64> = (0..2).map(|_| self.rng.angle()).collect();
+        let r = self
+            .b
+            .server
+            .put(
+                "/api/v1/hands/h/poses/p",
+                json!({ "positions_deg": {"a": positions[0], "b": positions[1]} }),
+            )
+            .await;
+        assert!(r.status.is_success(), "saving the pose: {}", r.body);
+        let from: Vec<(f64, f64)> = [1u8, 2]
+            .iter()
+            .map(|&id| {
+                let d = self.device(id);
+                (d.target_deg, d.angle_deg)
+            })
+            .collect();
+        let r = self
+            .b
+            .server
+            .post(
+                "/api/v1/hands/h/poses/p/go",
+                json!({"duration_ms": 1500, "method": "min_jerk"}),
+            )
+            .await;
+        self.log
+            .push(format!("pose go {positions:?}: {}", r.status));
+        if r.status.as_u16() == 201 {
+            for (k, id) in [1u8, 2].into_iter().enumerate() {
+                let (target, angle) = from[k];
+                let a = &mut self.admitted[usize::from(id)];
+                a.span(target.min(angle), positions[k]);
+                a.span(target.max(angle), positions[k]);
+            }
+        }
+    }
+
+    /// A WebSocket client streams a few setpoints under a watchdog, then
+    /// goes silent until the watchdog fires (hold or disable). On a loaded
+    /// host the watchdog may fire between two setpoints too.
+    async fn stream(&mut self, id: u8) {
+        let url = format!(
+            "{}/api/v1/ws",
+            self.b.server.base.replace("http://", "ws://")
+        );
+        let (mut ws, _) = tokio_tungstenite::connect_async(url)
+            .await
+            .expect("ws connect");
+        let disable = self.rng.below(2) == 0;
+        let policy = if disable { "disable" } else { "hold" };
+        let before = self.device(id);
+        let mut hull = vec![before.angle_deg, before.target_deg];
+        let arm = json!({"type": "watchdog", "seq": 1, "hold_timeout_ms": 40, "policy": policy});
+        ws.send(Message::text(arm.to_string())).await.expect("send");
+        let mut accepted = 0;
+        let mut fired_since_ack = false;
+        for seq in 2..6u64 {
+            let deg = self.rng.angle();
+            let msg = json!({"type": "setpoints", "seq": seq, "ack": true,
+                "targets": [{"bus": "sim0", "dev_id": id, "position_deg": deg}]});
+            ws.send(Message::text(msg.to_string())).await.expect("send");
+            let (reply, fired) = reply_to(&mut ws, seq).await;
+            fired_since_ack |= fired;
+            match reply.as_deref() {
+                Some("ack") => {
+                    accepted += 1;
+                    fired_since_ack = false;
+                    hull.push(deg);
+                    self.admitted[usize::from(id)].span(deg, deg);
+                }
+                _ => break,
+            }
+        }
+        self.log
+            .push(format!("stream to {id} ({policy}): {accepted} accepted"));
+        if accepted == 0 {
+            return;
+        }
+        if !fired_since_ack {
+            let fired = tokio::time::timeout(WAIT, async {
+                while let Some(Ok(m)) = ws.next().await {
+                    if is_watchdog(&m) {
+                        return;
+                    }
+                }
+            })
+            .await;
+            assert!(fired.is_ok(), "the watchdog never fired");
+        }
+        if !disable {
+            // Held where it was measured when the watchdog fired: on its way
+            // from where it stood through the streamed targets.
+            let lo = hull.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = hull.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            self.admitted[usize::from(id)].span(lo, hi);
+        }
+        self.log.push(format!("watchdog fired ({policy})"));
+    }
+
+    async fn power_cycle(&mut self, id: u8) {
+        self.b.sim.inject(Fault::PowerCycle { dev_id: id });
+        self.log.push(format!("power cycle {id}"));
+    }
+
+    /// An e-stop with a move or a target in flight beside it.
+    async fn estop_race(&mut self, id: u8) {
+        let handle = self.b.handle.clone();
+        let estop = tokio::spawn(async move { handle.estop().await });
+        tokio::time::sleep(Duration::from_millis(self.rng.below(4))).await;
+        if self.rng.below(2) == 0 {
+            self.move_joints(&[id], 1500).await;
+        } else {
+            self.target(id).await;
+        }
+        let _ = estop.await;
+        self.log.push("estop (raced)".into());
+    }
+
+    async fn step(&mut self) {
+        let id = self.rng.joint();
+        match self.rng.below(100) {
+            0..=19 => self.enable(id).await,
+            20..=25 => self.disable(id).await,
+            26..=29 => self.estop().await,
+            30..=37 => {
+                let speed = self.rng.below(3) == 0;
+                self.mode(id, speed).await
+            }
+            38..=55 => self.target(id).await,
+            // Moves outlast several steps: what happens to them meanwhile
+            // (an e-stop, a disable, a mode change) is the point.
+            56..=67 => {
+                let ms = 300 + self.rng.below(2700);
+                self.move_joints(&[id], ms).await
+            }
+            68..=73 => self.move_joints(&[1, 2], 1500).await,
+            74..=79 => self.pose_go().await,
+            80..=87 => self.stream(id).await,
+            88..=91 => self.power_cycle(id).await,
+            _ => self.estop_race(id).await,
+        }
+        self.fence().await;
+        self.check();
+    }
+}
+
+/// A server message saying a watchdog fired.
+fn is_watchdog(m: &Message) -> bool {
+    matches!(m, Message::Text(t) if t.contains("\"watchdog\"") && t.contains("\"why\""))
+}
+
+/// The type of the server's answer to message `seq` (`ack` or `error`),
+/// and whether a watchdog fired meanwhile.
+async fn reply_to<S>(ws: &mut S, seq: u64) -> (Option<String>, bool)
+where
+    S: StreamExt<Item = Result<Message, tokio_tungstenite::tungstenite::Error>> + Unpin,
+{
+    let mut fired = false;
+    let wait = async {
+        while let Some(Ok(m)) = ws.next().await {
+            fired |= is_watchdog(&m);
+            if let Message::Text(t) = m {
+                let v: Value = serde_json::from_str(t.as_str()).ok()?;
+                if v["ref_seq"] == seq {
+                    return v["type"].as_str().map(str::to_owned);
+                }
+            }
+        }
+        None
+    };
+    let reply = tokio::time::timeout(WAIT, wait).await.ok().flatten();
+    (reply, fired)
+}
+
+fn env_u64(name: &str, default: u64) -> u64 {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+async fn run_seed(seed: u64, steps: u64) {
+    let b = start(3, None).await;
+    let hands = jointd::hands::resolve(
+        &[jointd::hands::HandConfig {
+            name: "h".into(),
+            joints: vec![jointd::hands::HandJoints {
+                bus: "sim0".into(),
+                ids: jointd::hands::Ids::List(vec![1, 2]),
+                names: vec!["a".into(), "b".into()],
+            }],
+        }],
+        &["sim0".to_string()],
+    )
+    .expect("a hand");
+    let store = jointd::hands::StateStore::open(hands, None).expect("store");
+    let options = jointd::http::state::StateOptions {
+        hands: Some(std::sync::Arc::new(store)),
+        ..Default::default()
+    };
+    assert!(b.server_state.set_options(options).is_ok());
+    let mut w = World {
+        b,
+        rng: Rng(seed.max(1)),
+        seed,
+        log: Vec::new(),
+        admitted: Default::default(),
+    };
+    for _ in 0..steps {
+        w.step().await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_joint_moves_only_toward_what_was_admitted_since_its_last_enable() {
+    let steps = env_u64("JOINTD_SAFETY_STEPS", 60);
+    let seeds: Vec<u64> = match std::env::var("JOINTD_SAFETY_SEED") {
+        Ok(s) => vec![s.parse().expect("JOINTD_SAFETY_SEED is a number")],
+        Err(_) => {
+            let base = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(1, |d| d.as_nanos() as u64);
+            (0..env_u64("JOINTD_SAFETY_SEEDS", 3))
+                .map(|k| base.wrapping_add(k.wrapping_mul(0x9E37_79B9_7F4A_7C15)))
+                .collect()
+        }
+    };
+    for seed in seeds {
+        eprintln!("safety seed {seed} ({steps} steps)");
+        run_seed(seed, steps).await;
+    }
+}
