@@ -3,93 +3,11 @@
 //! with its line, a bus that is down answering "bus down" for every device
 //! call, and a shutdown that names the joints it disabled.
 
-use std::io::{BufRead, BufReader, Read};
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc::{channel, Receiver};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_jointd");
-const WAIT: Duration = Duration::from_secs(20);
-
-/// A running daemon: its base URL and its log lines as they come.
-struct Daemon {
-    child: Child,
-    base: String,
-    log: Receiver<String>,
-    seen: Vec<String>,
-}
-
-impl Daemon {
-    fn spawn(args: &[&str]) -> Self {
-        let mut child = Command::new(BIN)
-            .args(args)
-            .env_remove("JOINTD_TOKEN")
-            .env("NO_COLOR", "1")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("spawn jointd");
-        let (tx, log) = channel();
-        let stderr = child.stderr.take().expect("stderr");
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        let mut first = String::new();
-        BufReader::new(child.stdout.take().expect("stdout"))
-            .read_line(&mut first)
-            .expect("first line");
-        let base = first
-            .trim()
-            .strip_prefix("listening on ")
-            .unwrap_or_else(|| panic!("no address line: {first:?}"))
-            .to_owned();
-        Self {
-            child,
-            base,
-            log,
-            seen: Vec::new(),
-        }
-    }
-
-    /// The first log line (seen or to come) holding every one of `parts`.
-    fn log_line(&mut self, parts: &[&str]) -> String {
-        let deadline = Instant::now() + WAIT;
-        loop {
-            if let Some(line) = self
-                .seen
-                .iter()
-                .find(|l| parts.iter().all(|p| l.contains(p)))
-            {
-                return line.clone();
-            }
-            let left = deadline.saturating_duration_since(Instant::now());
-            match self.log.recv_timeout(left) {
-                Ok(line) => self.seen.push(line),
-                Err(_) => panic!(
-                    "no log line with {parts:?}; seen:\n{}",
-                    self.seen.join("\n")
-                ),
-            }
-        }
-    }
-
-    fn stop(&mut self) {
-        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
-        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).expect("SIGTERM");
-        let _ = self.child.wait();
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
+mod support;
+use support::daemon::{Daemon, BIN, WAIT};
 
 fn missing_device_path() -> String {
     format!("/tmp/jointd-test-no-such-tty-{}", std::process::id())
@@ -225,11 +143,7 @@ fn shutdown_logs_the_joints_it_disabled() {
         }
     });
     d.stop();
-    let mut rest = String::new();
-    while let Ok(line) = d.log.recv_timeout(Duration::from_millis(200)) {
-        rest.push_str(&line);
-        rest.push('\n');
-    }
+    let rest = d.log_to_end();
     let line = rest
         .lines()
         .find(|l| l.contains("shutdown: disable sent"))
@@ -238,11 +152,6 @@ fn shutdown_logs_the_joints_it_disabled() {
         line.contains("[1, 2, 3]") && line.contains("enabled_before=[2]"),
         "{line}"
     );
-    let _ = d
-        .child
-        .stdout
-        .take()
-        .map(|mut s| s.read_to_end(&mut Vec::new()));
 }
 
 #[test]
