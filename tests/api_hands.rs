@@ -1,4 +1,4 @@
-//! Named hands and poses (issue 18) through the real binary: a `[[hand]]`
+//! Named hands and poses through the real binary: a `[[hand]]`
 //! of the simulated bus, a pose saved, the daemon stopped and started again
 //! on the same state directory with the pose still there, and going to it
 //! as a move; bad poses and names get a 4xx that says what was wrong.
@@ -234,8 +234,8 @@ max_deg = 45.0
 
 /// A daemon killed (SIGKILL) while eight clients save poses at once, 8
 /// times at different moments: the state file is always whole JSON with no
-/// pose lost that an earlier round saved, never a torn write. (Seen to fail
-/// with a writer that truncates and writes the file in place.)
+/// pose lost that an earlier round saved, never a torn write (a writer that
+/// truncates and writes the file in place fails it).
 #[test]
 fn a_kill_during_pose_writes_leaves_a_whole_state_file() {
     let dir = std::env::temp_dir().join(format!("jointd-hands-kill-{}", std::process::id()));

@@ -1,4 +1,4 @@
-//! What a newcomer meets on the command line (issue 17): the assumed baud
+//! What a newcomer meets on the command line: the assumed baud
 //! said aloud, a taken port that names `--listen`, a refused config value
 //! with its line, a bus that is down answering "bus down" for every device
 //! call, and a shutdown that names the joints it disabled.
