@@ -129,6 +129,25 @@ fn shutdown_logs_the_joints_it_disabled() {
     rt.block_on(async {
         let client = reqwest::Client::new();
         let deadline = Instant::now() + WAIT;
+        let device = |client: reqwest::Client| {
+            let url = format!("{base}/api/v1/buses/sim0/devices/2");
+            async move {
+                let dev: serde_json::Value =
+                    client.get(url).send().await.unwrap().json().await.unwrap();
+                dev
+            }
+        };
+        // Enabled only once the bus has read device 2's state (INFO_01): the
+        // first state read decides whether a joint was found enabled at start
+        // (on_start), and that read must not be of the enable sent here.
+        loop {
+            let dev = device(client.clone()).await;
+            if dev["status"]["state"] == "ready" {
+                break;
+            }
+            assert!(Instant::now() < deadline, "device 2 never read: {dev}");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
         loop {
             let r = client
                 .post(format!("{base}/api/v1/buses/sim0/devices/2/enable"))
@@ -140,6 +159,19 @@ fn shutdown_logs_the_joints_it_disabled() {
             }
             assert!(Instant::now() < deadline, "device 2 never enabled");
             tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        // The shutdown line names the joints by their last reported state:
+        // wait until a status poll has shown device 2 driving its motor.
+        loop {
+            let dev = device(client.clone()).await;
+            if matches!(dev["status"]["state"].as_str(), Some("align" | "run")) {
+                break;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "device 2 never reported enabled: {dev}"
+            );
+            tokio::time::sleep(Duration::from_millis(20)).await;
         }
     });
     d.stop();
