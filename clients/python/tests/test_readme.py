@@ -5,6 +5,7 @@ line docs/rest.md shows failing, which must answer the status it prints.
 The `until curl ...; do sleep 0.2; done` lines that wait for a joint to run
 are run too: they must end (within 30 s) on a 2xx."""
 
+import json
 import os
 import pathlib
 import re
@@ -43,6 +44,12 @@ def test_every_readme_curl_line_works_as_printed():
     d = Daemon("--sim", "16")
     try:
         d.wait("/api/v1/buses/sim0", lambda b: b'"devices_online":16' in b, "16 joints online")
+        # And every joint's state read once (INFO_01): the bus takes a joint
+        # whose first state read shows it enabled for one enabled before the
+        # daemon started (on_start), so the walkthrough's enable must come after.
+        d.wait("/api/v1/buses/sim0/devices",
+               lambda b: all(dev.get("state") for dev in json.loads(b)["devices"]),
+               "every joint's state read")
         env = {**os.environ, "API": d.url + "/api/v1", "J": "content-type: application/json"}
         failures = []
         for line in curl_lines():
