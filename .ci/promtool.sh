@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# `promtool check metrics` on a live daemon's /metrics (issue 17): a
+# `promtool check metrics` on a live daemon's /metrics: a
 # simulated bus with an enabled, moving joint and a few config reads, so the
 # histograms and per-device families are filled. Fails on any problem.
 set -euo pipefail

@@ -10,21 +10,32 @@
 //! - `logcap`: collapsing repeated log lines (one per key per window, with a count), for
 //!   failures a client can repeat at will.
 //! - [`mem`]: giving freed heap memory back to the system (glibc `malloc_trim`).
+//! - [`histogram`]: a latency histogram in Prometheus' shape, cheap enough for the bus
+//!   owner's hot path (no allocation, no lock).
 //! - [`motion`]: moves generated in the daemon: synchronised multi-joint paths
 //!   (linear, minimum-jerk, trapezoid; waypoints; limits) and a move's status. Pure.
-//! - [`hands`]: named hands (`[[hand]]`) and their poses, kept in the state file (`state_dir`),
-//!   written atomically.
-//! - [`rt`]: real-time thread helpers (timer slack, FIFO class) for the bus owner and the simulator.
+//! - [`hands`]: named hands (`[[hand]]`), their poses and the joints' calibrations, kept in
+//!   the state file (`state_dir`), written atomically.
+//! - [`rt`]: real-time thread helpers (timer slack, FIFO class; `rt::wake`: how late a thread
+//!   wakes) for the bus owner and the simulator.
 //! - [`transport`]: the byte lines a bus runs over (tty/pty with RS-485 setup, in-memory pipe).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory), behaviour from the SPEC.
 //! - [`bus`]: one owner thread per bus: the pure scheduler decides, the owner does the I/O;
 //!   the [`bus::BusHandle`] is everything the rest of the daemon sees.
+//! - [`record`]: MCAP recordings of the buses (joint states in CDR, frames, events,
+//!   setpoints) and the `jointd record` client.
 //! - [`http`]: one axum application: state, auth, errors (the one place that picks HTTP
 //!   statuses), and below it the REST areas, the WebSocket and the dashboard, which never
 //!   import each other.
+//! - [`ros2`]: the ROS 2 bridge over Zenoh, as `rmw_zenoh` names and encodes it
+//!   (`joint_states`, `joint_commands`, `/diagnostics`); the bridge itself is compiled in
+//!   with the feature `ros2`.
 //! - [`cli`]: the `jointd frame …` tools for reading a serial capture by hand.
+//! - `config_locate`: the line and key of a config value refused after parsing.
 //! - [`daemon`]: `jointd [run]`: config file and flags, buses, the HTTP server, graceful shutdown.
 //! - `bench` (feature `bench`): `jointd bench`: the bus engine against the simulator, measured.
+//! - `params_reach` (test builds only): a fictitious parameter row reaches every user of the
+//!   table (REST schema, bus verification, simulator).
 //!
 //! # Where a behaviour lives
 //! | behaviour | room |

@@ -34,6 +34,15 @@ enum Command {
     /// per-joint rates, setpoint-to-wire latency, daemon CPU.
     #[cfg(feature = "bench")]
     Bench(jointd::bench::BenchArgs),
+    /// Not in this build: the bench is compiled in with `--features bench`.
+    /// Taken here (hidden, any arguments) so that `jointd bench` says how
+    /// to get it instead of clap's "unrecognized subcommand".
+    #[cfg(not(feature = "bench"))]
+    #[command(hide = true, disable_help_flag = true)]
+    Bench {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<std::ffi::OsString>,
+    },
 }
 
 #[derive(Subcommand, Debug)]
@@ -54,7 +63,8 @@ enum FrameCommand {
     },
 }
 
-/// Bad input to a `frame` command: message on stderr, exit status 2.
+/// Bad input to a `frame` command, or a subcommand this build lacks:
+/// message on stderr, exit status 2.
 const EXIT_BAD_INPUT: u8 = 2;
 
 fn main() -> ExitCode {
@@ -93,6 +103,14 @@ fn main() -> ExitCode {
                 ExitCode::FAILURE
             }
         },
+        #[cfg(not(feature = "bench"))]
+        Some(Command::Bench { .. }) => {
+            eprintln!(
+                "jointd bench needs a build with --features bench: \
+                 cargo run --release --features bench -- bench [ARGS]"
+            );
+            ExitCode::from(EXIT_BAD_INPUT)
+        }
     }
 }
 

@@ -4,7 +4,7 @@
 //! one arena per thread that allocated concurrently (tokio's workers get
 //! several). After a crowd of WebSocket clients has come and gone, almost all
 //! of their buffers are free again, yet the process stays as large as at the
-//! peak (issue 13: 10 MiB idle, 90 MiB after 500 clients left, for good).
+//! peak (measured: 10 MiB idle, 90 MiB after 500 clients left, for good).
 //! `malloc_trim(0)` returns the free pages of every arena; the daemon calls
 //! it when the last WebSocket client leaves, a moment when nothing is
 //! streaming. Elsewhere (musl, other systems) this does nothing.

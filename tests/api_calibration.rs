@@ -1,4 +1,4 @@
-//! Joint calibration and homing (issue 18) against the simulator: an
+//! Joint calibration and homing against the simulator: an
 //! offset, a flip and a range set through the API are applied in both
 //! directions, for REST targets, moves, device views and WebSocket
 //! telemetry, while the simulated device turns to the *device* angle they

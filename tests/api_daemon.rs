@@ -1,12 +1,11 @@
 //! The `jointd` binary: `--sim` serves the API, a non-loopback bind needs a
 //! token, SIGTERM stops it cleanly (joints disabled, exit 0).
 
-use std::io::{BufRead, BufReader};
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_jointd");
-const WAIT: Duration = Duration::from_secs(20);
+mod support;
+use support::daemon::{Daemon, BIN, WAIT};
 
 #[test]
 fn refuses_a_public_bind_without_a_token() {
@@ -48,31 +47,9 @@ fn an_empty_or_blank_token_stops_the_daemon_at_start() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("JOINTD_TOKEN"));
 }
 
-/// Starts `jointd` with `args`; returns it and its base URL (the first
-/// line it prints).
-fn spawn_daemon(args: &[&str]) -> (std::process::Child, String) {
-    let mut child = Command::new(BIN)
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("spawn jointd");
-    let mut first = String::new();
-    let stdout = child.stdout.take().expect("stdout");
-    BufReader::new(stdout)
-        .read_line(&mut first)
-        .expect("first line");
-    let base = first
-        .trim()
-        .strip_prefix("listening on ")
-        .expect("address line")
-        .to_owned();
-    (child, base)
-}
-
 #[test]
 fn serves_the_simulator_and_stops_cleanly_on_sigterm() {
-    let (mut child, base) = spawn_daemon(&[
+    let mut d = Daemon::spawn(&[
         "run",
         "--sim",
         "3",
@@ -81,6 +58,7 @@ fn serves_the_simulator_and_stops_cleanly_on_sigterm() {
         "--token",
         "t0k",
     ]);
+    let base = d.base.clone();
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
         let client = reqwest::Client::new();
@@ -129,22 +107,7 @@ fn serves_the_simulator_and_stops_cleanly_on_sigterm() {
             200
         );
     });
-    nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(child.id() as i32),
-        nix::sys::signal::Signal::SIGTERM,
-    )
-    .unwrap();
-    let deadline = Instant::now() + WAIT;
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        assert!(
-            Instant::now() < deadline,
-            "jointd did not exit after SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let status = d.stop();
     assert!(status.success(), "exit status {status}");
 }
 
@@ -154,7 +117,7 @@ fn serves_the_simulator_and_stops_cleanly_on_sigterm() {
 /// counts no collision while every joint is polled.
 #[test]
 fn the_simulator_behind_an_adapter_model_is_pipelined_without_collisions() {
-    let (mut child, base) = spawn_daemon(&[
+    let mut d = Daemon::spawn(&[
         "--sim",
         "4",
         "--sim-adapter",
@@ -162,6 +125,7 @@ fn the_simulator_behind_an_adapter_model_is_pipelined_without_collisions() {
         "--listen",
         "127.0.0.1:0",
     ]);
+    let base = d.base.clone();
     let rt = tokio::runtime::Runtime::new().unwrap();
     let bus = rt.block_on(async {
         let get = |path: String| async move {
@@ -182,8 +146,7 @@ fn the_simulator_behind_an_adapter_model_is_pipelined_without_collisions() {
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
     });
-    let _ = child.kill();
-    let _ = child.wait();
+    d.kill();
     assert_eq!(bus["path"], "memory", "{bus}");
     assert_eq!(bus["adapter"], "ch340", "{bus}");
     // A collision corrupts the reply it meets (a CRC error, bytes skipped)
@@ -197,29 +160,16 @@ fn the_simulator_behind_an_adapter_model_is_pipelined_without_collisions() {
 /// lines: the answers are 503, the log says so once, collapsed.
 #[test]
 fn a_burst_of_failing_requests_logs_one_line() {
-    let mut child = Command::new(BIN)
-        .args([
-            "run",
-            "--bus",
-            "x=/dev/jointd-test-nonexistent@500000",
-            "--listen",
-            "127.0.0.1:0",
-        ])
-        .env("RUST_LOG", "info")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn jointd");
-    let mut first = String::new();
-    let stdout = child.stdout.take().expect("stdout");
-    BufReader::new(stdout)
-        .read_line(&mut first)
-        .expect("first line");
-    let base = first
-        .trim()
-        .strip_prefix("listening on ")
-        .expect("address line")
-        .to_owned();
+    let mut cmd = Daemon::command(&[
+        "run",
+        "--bus",
+        "x=/dev/jointd-test-nonexistent@500000",
+        "--listen",
+        "127.0.0.1:0",
+    ]);
+    cmd.env("RUST_LOG", "info");
+    let mut d = Daemon::start(cmd);
+    let base = d.base.clone();
     const BURST: usize = 50;
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
@@ -234,13 +184,8 @@ fn a_burst_of_failing_requests_logs_one_line() {
             assert_eq!(r.status(), 503);
         }
     });
-    nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(child.id() as i32),
-        nix::sys::signal::Signal::SIGTERM,
-    )
-    .unwrap();
-    let out = child.wait_with_output().expect("jointd exits");
-    let err = String::from_utf8_lossy(&out.stderr);
+    d.stop();
+    let err = d.log_to_end();
     // "status=503", not "503": a timestamp's digits hold 503 now and then.
     let failures: Vec<&str> = err.lines().filter(|l| l.contains("status=503")).collect();
     assert_eq!(failures.len(), 1, "{err}");

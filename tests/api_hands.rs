@@ -1,56 +1,21 @@
-//! Named hands and poses (issue 18) through the real binary: a `[[hand]]`
+//! Named hands and poses through the real binary: a `[[hand]]`
 //! of the simulated bus, a pose saved, the daemon stopped and started again
 //! on the same state directory with the pose still there, and going to it
 //! as a move; bad poses and names get a 4xx that says what was wrong.
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use serde_json::{json, Value};
 
-const BIN: &str = env!("CARGO_BIN_EXE_jointd");
-const WAIT: Duration = Duration::from_secs(20);
+mod support;
+use support::daemon::{Daemon, WAIT};
 
-struct Daemon {
-    child: Child,
-    base: String,
-}
-
-impl Daemon {
-    fn start(config: &std::path::Path) -> Self {
-        let mut child = Command::new(BIN)
-            .args(["--sim", "4", "--listen", "127.0.0.1:0", "--config"])
-            .arg(config)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("spawn jointd");
-        let mut first = String::new();
-        BufReader::new(child.stdout.take().expect("stdout"))
-            .read_line(&mut first)
-            .expect("first line");
-        let base = first
-            .trim()
-            .strip_prefix("listening on ")
-            .unwrap_or_else(|| panic!("address line, got {first:?}"))
-            .to_owned();
-        Self { child, base }
-    }
-
-    /// Stops it as a service manager would (SIGTERM) and waits.
-    fn stop(mut self) {
-        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
-        let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
-        let _ = self.child.wait();
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+/// `jointd --sim 4` with `config`.
+fn start(config: &std::path::Path) -> Daemon {
+    let config = config.to_str().expect("utf-8 path");
+    Daemon::spawn(&["--sim", "4", "--listen", "127.0.0.1:0", "--config", config])
 }
 
 async fn call(method: reqwest::Method, url: String, body: Option<Value>) -> (u16, Value) {
@@ -108,7 +73,7 @@ max_deg = 45.0
     let rt = tokio::runtime::Runtime::new().unwrap();
     let fist = json!({"thumb": 20.0, "index": 30.0, "sim0_3": -10.0});
 
-    let d = Daemon::start(&config);
+    let mut d = start(&config);
     rt.block_on(async {
         let base = &d.base;
         wait_online(base).await;
@@ -165,7 +130,7 @@ max_deg = 45.0
     d.stop();
 
     // Started again on the same state directory: the pose is there.
-    let d = Daemon::start(&config);
+    let mut d = start(&config);
     rt.block_on(async {
         let base = &d.base;
         wait_online(base).await;
@@ -269,8 +234,8 @@ max_deg = 45.0
 
 /// A daemon killed (SIGKILL) while eight clients save poses at once, 8
 /// times at different moments: the state file is always whole JSON with no
-/// pose lost that an earlier round saved, never a torn write. (Seen to fail
-/// with a writer that truncates and writes the file in place.)
+/// pose lost that an earlier round saved, never a torn write (a writer that
+/// truncates and writes the file in place fails it).
 #[test]
 fn a_kill_during_pose_writes_leaves_a_whole_state_file() {
     let dir = std::env::temp_dir().join(format!("jointd-hands-kill-{}", std::process::id()));
@@ -289,19 +254,20 @@ fn a_kill_during_pose_writes_leaves_a_whole_state_file() {
     let rt = tokio::runtime::Runtime::new().unwrap();
     let mut saved_before = 0usize;
     for round in 0..8u64 {
-        let mut d = Daemon::start(&config);
+        let mut d = start(&config);
         let base = d.base.clone();
-        let kill_at = Instant::now() + Duration::from_millis(60 + 17 * round);
         let sent = rt.block_on(async move {
             // Eight clients saving poses at once, so a write is under way
-            // when the kill comes.
+            // when the kill comes; each goes on until the daemon is gone.
+            let answered = Arc::new(AtomicU64::new(0));
             let mut clients = Vec::new();
             for c in 0..8u64 {
                 let base = base.clone();
+                let answered = answered.clone();
                 clients.push(tokio::spawn(async move {
                     let client = reqwest::Client::new();
                     let mut k = 0u64;
-                    while Instant::now() < kill_at + Duration::from_millis(50) {
+                    loop {
                         let positions: serde_json::Map<String, Value> = (1..=4)
                             .map(|j| (format!("sim0_{j}"), json!(((c * 7 + k) % 90) as f64 + 0.25)))
                             .collect();
@@ -310,24 +276,33 @@ fn a_kill_during_pose_writes_leaves_a_whole_state_file() {
                             .json(&json!({ "positions_deg": positions }))
                             .send()
                             .await;
-                        if r.is_err() {
+                        let Ok(r) = r else {
                             break; // the daemon is gone
+                        };
+                        if r.status() == 200 {
+                            answered.fetch_add(1, Ordering::Relaxed);
                         }
                         k += 1;
                     }
                     k
                 }));
             }
-            tokio::time::sleep(kill_at.saturating_duration_since(Instant::now())).await;
-            let _ = d.child.kill();
+            // The kill comes a different time after the first pose was
+            // saved in each round, while the clients keep writing: however
+            // slowly a loaded host starts the daemon, there is a file.
+            let deadline = Instant::now() + WAIT;
+            while answered.load(Ordering::Relaxed) == 0 {
+                assert!(Instant::now() < deadline, "round {round}: no pose saved");
+                tokio::time::sleep(Duration::from_millis(5)).await;
+            }
+            tokio::time::sleep(Duration::from_millis(17 * round)).await;
+            d.kill();
             let mut sent = 0;
             for c in clients {
                 sent += c.await.unwrap_or(0);
             }
-            (sent, d)
+            sent
         });
-        let (sent, mut d) = sent;
-        let _ = d.child.wait();
         let Ok(text) = std::fs::read_to_string(state.join("state.json")) else {
             // Killed before its first write completed: nothing to tear yet.
             assert_eq!(saved_before, 0, "round {round}: the state file vanished");

@@ -1,4 +1,4 @@
-//! Moves generated in the daemon (issue 18), against the simulator: a
+//! Moves generated in the daemon, against the simulator: a
 //! 16-joint move arrives in the simulator within 0.5° of every target; a
 //! path leaving a soft limit is refused whole; a move is stopped, replaced
 //! joint by joint, and aborted by an e-stop; bad requests get a 4xx that

@@ -75,7 +75,7 @@ fn every_operation_documents_examples_and_problem_responses() {
                 let example = &body["content"]["application/json"]["example"];
                 assert!(!example.is_null(), "{what}: request body has no example");
             }
-            // What the linters ask of every operation (issue 17): a
+            // What the linters ask of every operation: a
             // description beside the summary, and a success example.
             let description = op["description"].as_str().unwrap_or("");
             assert!(description.len() > 40, "{what}: no description");

@@ -43,7 +43,7 @@ struct Tally {
     unverified: u32,
     not_written: u32,
     /// Of `not_written`: failures other than a read-back showing another
-    /// value (a timeout, as before the fix). A write that went out is never one.
+    /// value (a timeout). A write that went out is never one.
     other_errors: u32,
     contradictions: Vec<String>,
 }
@@ -75,7 +75,7 @@ async fn no_write_outcome_contradicts_the_device_under_corruption() {
                 t.not_written += 1;
                 has
             }
-            // Any other failure (a timeout, as before the fix) says "not written" too.
+            // Any other failure (a timeout) says "not written" too.
             Err(_) => {
                 t.not_written += 1;
                 t.other_errors += 1;

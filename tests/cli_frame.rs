@@ -100,8 +100,8 @@ fn encode_refuses_set_ref_without_a_target_and_unknown_fields() {
 
 #[test]
 fn decode_names_every_index_of_the_table() {
-    // INFO_07_R (rev 2.0.8) used to decode as "UNKNOWN": the names now come
-    // from the parameter table.
+    // Every index gets its name from the parameter table, INFO_07_R (rev
+    // 2.0.8) included, never "UNKNOWN".
     let hex = "55 AA 00 14 A0 00 00 00 02 20 00 00 00 00 00 00 A8 A1 00 00";
     let o = jointd(&["frame", "decode", hex]);
     assert!(o.status.success(), "{o:?}");

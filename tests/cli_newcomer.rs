@@ -1,95 +1,13 @@
-//! What a newcomer meets on the command line (issue 17): the assumed baud
+//! What a newcomer meets on the command line: the assumed baud
 //! said aloud, a taken port that names `--listen`, a refused config value
 //! with its line, a bus that is down answering "bus down" for every device
 //! call, and a shutdown that names the joints it disabled.
 
-use std::io::{BufRead, BufReader, Read};
-use std::process::{Child, Command, Stdio};
-use std::sync::mpsc::{channel, Receiver};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_jointd");
-const WAIT: Duration = Duration::from_secs(20);
-
-/// A running daemon: its base URL and its log lines as they come.
-struct Daemon {
-    child: Child,
-    base: String,
-    log: Receiver<String>,
-    seen: Vec<String>,
-}
-
-impl Daemon {
-    fn spawn(args: &[&str]) -> Self {
-        let mut child = Command::new(BIN)
-            .args(args)
-            .env_remove("JOINTD_TOKEN")
-            .env("NO_COLOR", "1")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("spawn jointd");
-        let (tx, log) = channel();
-        let stderr = child.stderr.take().expect("stderr");
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        let mut first = String::new();
-        BufReader::new(child.stdout.take().expect("stdout"))
-            .read_line(&mut first)
-            .expect("first line");
-        let base = first
-            .trim()
-            .strip_prefix("listening on ")
-            .unwrap_or_else(|| panic!("no address line: {first:?}"))
-            .to_owned();
-        Self {
-            child,
-            base,
-            log,
-            seen: Vec::new(),
-        }
-    }
-
-    /// The first log line (seen or to come) holding every one of `parts`.
-    fn log_line(&mut self, parts: &[&str]) -> String {
-        let deadline = Instant::now() + WAIT;
-        loop {
-            if let Some(line) = self
-                .seen
-                .iter()
-                .find(|l| parts.iter().all(|p| l.contains(p)))
-            {
-                return line.clone();
-            }
-            let left = deadline.saturating_duration_since(Instant::now());
-            match self.log.recv_timeout(left) {
-                Ok(line) => self.seen.push(line),
-                Err(_) => panic!(
-                    "no log line with {parts:?}; seen:\n{}",
-                    self.seen.join("\n")
-                ),
-            }
-        }
-    }
-
-    fn stop(&mut self) {
-        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
-        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).expect("SIGTERM");
-        let _ = self.child.wait();
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
+mod support;
+use support::daemon::{Daemon, BIN, WAIT};
 
 fn missing_device_path() -> String {
     format!("/tmp/jointd-test-no-such-tty-{}", std::process::id())
@@ -211,6 +129,25 @@ fn shutdown_logs_the_joints_it_disabled() {
     rt.block_on(async {
         let client = reqwest::Client::new();
         let deadline = Instant::now() + WAIT;
+        let device = |client: reqwest::Client| {
+            let url = format!("{base}/api/v1/buses/sim0/devices/2");
+            async move {
+                let dev: serde_json::Value =
+                    client.get(url).send().await.unwrap().json().await.unwrap();
+                dev
+            }
+        };
+        // Enabled only once the bus has read device 2's state (INFO_01): the
+        // first state read decides whether a joint was found enabled at start
+        // (on_start), and that read must not be of the enable sent here.
+        loop {
+            let dev = device(client.clone()).await;
+            if dev["status"]["state"] == "ready" {
+                break;
+            }
+            assert!(Instant::now() < deadline, "device 2 never read: {dev}");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
         loop {
             let r = client
                 .post(format!("{base}/api/v1/buses/sim0/devices/2/enable"))
@@ -223,13 +160,22 @@ fn shutdown_logs_the_joints_it_disabled() {
             assert!(Instant::now() < deadline, "device 2 never enabled");
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
+        // The shutdown line names the joints by their last reported state:
+        // wait until a status poll has shown device 2 driving its motor.
+        loop {
+            let dev = device(client.clone()).await;
+            if matches!(dev["status"]["state"].as_str(), Some("align" | "run")) {
+                break;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "device 2 never reported enabled: {dev}"
+            );
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
     });
     d.stop();
-    let mut rest = String::new();
-    while let Ok(line) = d.log.recv_timeout(Duration::from_millis(200)) {
-        rest.push_str(&line);
-        rest.push('\n');
-    }
+    let rest = d.log_to_end();
     let line = rest
         .lines()
         .find(|l| l.contains("shutdown: disable sent"))
@@ -238,11 +184,6 @@ fn shutdown_logs_the_joints_it_disabled() {
         line.contains("[1, 2, 3]") && line.contains("enabled_before=[2]"),
         "{line}"
     );
-    let _ = d
-        .child
-        .stdout
-        .take()
-        .map(|mut s| s.read_to_end(&mut Vec::new()));
 }
 
 #[test]

@@ -138,7 +138,7 @@ fn bad_keys_and_values_are_named() {
 #[test]
 fn a_bad_baud_in_the_file_is_refused_at_load_with_its_line() {
     // Values a bus checks itself (baud, ranges) are refused when the file is
-    // read, with the line of the key (issue 17), not later by the bus.
+    // read, with the line of the key, not later by the bus.
     let (_f, args) = config("[[bus]]\nname = \"b\"\npath = \"/dev/null\"\nbaud = 9600\n");
     let err = plan(&args)
         .expect_err("9600 is not a module baud")

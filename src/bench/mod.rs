@@ -1,6 +1,6 @@
 //! `jointd bench`: the bus engine against the simulator over a pty, with a
 //! client streaming every joint's target, measured by the simulator as
-//! referee (issue 4's workload).
+//! referee: 16 joints, every target written at 1 kHz.
 //!
 //! The simulator runs in this process (its frame log and the client share
 //! one clock), so daemon CPU is the bus owner thread's own run time from
@@ -11,8 +11,8 @@
 //! - [`client`]: the streaming client (angles encode which write they are).
 //! - [`analysis`]: per-joint rates and setpoint-to-wire latency from the frame log.
 //! - [`cpu`]: per-thread CPU time by thread name.
-//! - [`report`]: the result, the issue's targets, the printout.
-//! - `moves`: `--moves`: back-to-back moves generated in the daemon (issue 18).
+//! - [`report`]: the result, the engine's targets, the printout.
+//! - `moves`: `--moves`: back-to-back moves generated in the daemon.
 
 pub mod analysis;
 pub mod client;
@@ -92,12 +92,12 @@ pub struct BenchArgs {
     /// Default: `pty` on a native line, `memory` behind a USB adapter model.
     #[arg(long, value_parser = ["pty", "memory"])]
     pub line: Option<String>,
-    /// Measure moves generated in the daemon instead (issue 18): every joint
+    /// Measure moves generated in the daemon instead: every joint
     /// doing back-to-back minimum-jerk moves of 300 ms; the rate of move
     /// setpoints on the wire per joint, the tracking error, occupancy, CPU.
     #[arg(long)]
     pub moves: bool,
-    /// Measure the WebSocket path instead (issue 6): the engine alone, the
+    /// Measure the WebSocket path instead: the engine alone, the
     /// same stream through /api/v1/ws, then with telemetry clients added.
     #[arg(long)]
     pub ws: bool,

@@ -1,4 +1,4 @@
-//! `jointd bench --moves` (issue 18): every joint doing back-to-back
+//! `jointd bench --moves`: every joint doing back-to-back
 //! minimum-jerk moves of 300 ms, generated and streamed by the daemon.
 //! Reports the rate at which move setpoints reach the wire per joint, the
 //! tracking error (the planned angle against the simulated joint's, sampled

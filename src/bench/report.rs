@@ -1,4 +1,4 @@
-//! One workload's result, checked against issue 4's targets and printed.
+//! One workload's result, checked against the engine's targets and printed.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -8,7 +8,7 @@ use crate::bus::handle::{BusCounters, BusRates};
 
 use super::analysis::{quantile, Analysis};
 
-/// The issue's targets at 500000 baud; rates scale with the baud.
+/// The engine's targets at 500000 baud; rates scale with the baud.
 const REFERENCE_BAUD: f64 = 500_000.0;
 const MIN_OCCUPANCY: f64 = 0.95;
 const MIN_CONTROL_HZ: f64 = 400.0;
@@ -54,8 +54,8 @@ impl Report {
         f64::from(self.baud) / REFERENCE_BAUD
     }
 
-    /// Every target of the issue, scaled for the baud: (what, met). Behind
-    /// a USB adapter the rates are judged against its bound (issue 15).
+    /// Every target, scaled for the baud: (what, met). Behind a USB adapter
+    /// the rates are judged against its pipeline bound instead.
     pub fn checks(&self) -> Vec<(String, bool)> {
         if self.adapter.is_latent() {
             return self.adapter_checks();
@@ -135,7 +135,7 @@ fn ms(us: u64) -> f64 {
 }
 
 impl Report {
-    /// The measured quantities the issue sets targets for.
+    /// The measured quantities that have targets.
     fn result_rows(&self) -> Vec<(&'static str, String)> {
         let a = &self.analysis;
         let rates = |m: &BTreeMap<u8, f64>| {

@@ -1,5 +1,5 @@
 //! `jointd bench --ws`: the WebSocket path, measured in one run against the
-//! engine alone (issue 6). Three phases share one simulated bus:
+//! engine alone. Three phases share one simulated bus:
 //!
 //! 1. **engine**: the in-process client writes every joint's target at the
 //!    rate (the bus engine's own figure);
@@ -37,7 +37,7 @@ const TELEMETRY_THREAD: &str = "bench-tele";
 const SPEED_RPM: f64 = 20_000.0;
 /// Worker threads of the HTTP/WebSocket runtime (the daemon's default on 2 cores).
 const HTTP_WORKERS: usize = 2;
-/// The issue's bounds: WebSocket path cost and load tolerance.
+/// The bounds the WebSocket path is held to: its cost and load tolerance.
 const MAX_WS_COST_US: f64 = 500.0;
 const MAX_P99_US: u64 = 3000;
 const MAX_CHANGE: f64 = 0.10;

@@ -639,8 +639,8 @@ mod tests {
     use crate::protocol::params::PARAMS;
 
     /// Every written value of every row survives decode → JSON → encode,
-    /// through its physical twin alone (SPD_LIMIT's `rpm` used to be printed
-    /// but refused on encode).
+    /// through its physical twin alone (a field that is printed must also be
+    /// taken on encode, SPD_LIMIT's `rpm` included).
     #[test]
     fn every_row_round_trips_through_its_physical_twin() {
         for row in PARAMS.iter().filter(|r| r.access == Access::Write) {

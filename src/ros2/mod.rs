@@ -1,4 +1,4 @@
-//! ROS 2 over Zenoh (issue 16): `sensor_msgs/msg/JointState` on
+//! ROS 2 over Zenoh: `sensor_msgs/msg/JointState` on
 //! `/<namespace>/joint_states` per bus at the telemetry rate,
 //! `diagnostic_msgs/msg/DiagnosticArray` on `/diagnostics`, and
 //! `/<namespace>/joint_commands` taken as setpoints; named, encoded and

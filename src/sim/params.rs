@@ -20,8 +20,8 @@ const PARAM_VER_AT: usize = 2;
 /// Config indices are below this (the table's tests keep it so).
 const SLOTS: usize = 64;
 
-/// Names the state file used before the parameter table (version 1), so a
-/// flash image saved by an older simulator still loads.
+/// The key names of a version 1 state file, which named each saved
+/// parameter by hand instead of by its table row: such a flash image loads.
 const LEGACY_KEYS: [(&str, u8); 11] = [
     ("max_cur", index::MAX_CUR),
     ("protect_limit", index::PROTECT_CUR_LIMIT),

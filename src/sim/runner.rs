@@ -101,9 +101,9 @@ struct Runner {
     ctl: Arc<Control>,
     buf: Vec<u8>,
     /// How late this thread wakes: it stops sleeping that much before a
-    /// delivery is due and spins the rest (a fixed 100 µs was too little
-    /// on a host whose idle CPU takes 200 µs to wake, and CPU wasted on a
-    /// quiet one).
+    /// delivery is due and spins the rest. Learnt, not fixed: a host whose
+    /// idle CPU takes 200 µs to wake needs a long lead, and on a quiet one a
+    /// long lead is CPU spent spinning.
     wake: WakeLateness,
 }
 

@@ -1,9 +1,9 @@
 // The dashboard in real headless Chromium (Debian's), driven by playwright-core,
 // against `jointd --sim 16`: live device table, a slider moving a joint, a
 // configuration change applied and read back, e-stop disabling everything.
-// Screenshots go to $SCREENSHOT_DIR (default screenshots-out/ at the repo root);
-// docs/dashboard.png is rewritten by every run, at the 1366×768 of a laptop,
-// so the README always shows the current page.
+// Screenshots go to $SCREENSHOT_DIR (default target/screenshots/ in the repo),
+// never into tracked files: dashboard.png there is the page at the 1366×768 of
+// a laptop, the picture the README shows once copied over docs/dashboard.png.
 
 import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
@@ -16,7 +16,7 @@ import { chromium } from "playwright-core";
 
 const ROOT = new URL("../../", import.meta.url).pathname;
 const BIN = process.env.JOINTD_BIN || `${ROOT}target/debug/jointd`;
-const SHOTS = process.env.SCREENSHOT_DIR || `${ROOT}screenshots-out`;
+const SHOTS = process.env.SCREENSHOT_DIR || `${ROOT}target/screenshots`;
 const CHROMIUM = process.env.CHROMIUM || "/usr/bin/chromium";
 const WAIT = 20_000;
 /** A common laptop screen: the joint panel must be usable without scrolling. */
@@ -129,7 +129,6 @@ test("moving the slider moves the joint", async () => {
   await page.screenshot({ path: `${SHOTS}/joint-panel.png`, fullPage: true });
   await page.evaluate(() => window.scrollTo(0, 0));
   await page.screenshot({ path: `${SHOTS}/dashboard.png` });
-  await page.screenshot({ path: `${ROOT}docs/dashboard.png` });
 });
 
 test("a move with a duration goes through the daemon's path generator", async () => {

@@ -7,9 +7,11 @@
 //! - [`http`]: the API served on `127.0.0.1:0` and a client that reads problems.
 //! - [`sim_bus`]: the API in front of the real bus engine and the simulator, as `--sim` runs it.
 //! - [`fake_bus`]: a scripted bus owner for exact control of what the bus answers.
+//! - [`daemon`]: the `jointd` binary as a daemon: spawned, its address and log, killed on drop.
 #![allow(dead_code)]
 
 pub mod bus;
+pub mod daemon;
 pub mod fake_bus;
 pub mod http;
 pub mod sim;
