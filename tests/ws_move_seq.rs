@@ -42,7 +42,9 @@ async fn a_move_with_a_seq_that_is_no_integer_is_a_bad_message_and_starts_nothin
             }
         }
     };
-    tokio::time::timeout(WAIT, until_pong).await.expect("a pong");
+    tokio::time::timeout(WAIT, until_pong)
+        .await
+        .expect("a pong");
     let errors: Vec<&Value> = seen.iter().filter(|v| v["type"] == "error").collect();
     assert_eq!(errors.len(), 1, "{seen:?}");
     assert_eq!(errors[0]["code"], "bad_message", "{seen:?}");
@@ -57,5 +59,10 @@ async fn a_move_with_a_seq_that_is_no_integer_is_a_bad_message_and_starts_nothin
         "{seen:?}"
     );
     let none = bus.server.get("/api/v1/moves/1").await;
-    assert_eq!(none.status.as_u16(), 404, "no move was started: {}", none.body);
+    assert_eq!(
+        none.status.as_u16(),
+        404,
+        "no move was started: {}",
+        none.body
+    );
 }

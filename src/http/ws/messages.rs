@@ -345,7 +345,11 @@ mod tests {
         ] {
             let e = parse(text).unwrap_err();
             assert_eq!((e.code, e.seq), (ErrorCode::BadMessage, None), "{text}");
-            assert!(e.message.contains("`seq` must be an integer"), "{}", e.message);
+            assert!(
+                e.message.contains("`seq` must be an integer"),
+                "{}",
+                e.message
+            );
         }
         let s = parse(r#"{"type":"subscribe","fields":["angle_deg"],"rate_hz":10}"#);
         assert!(
