@@ -238,18 +238,25 @@ fn busy(b: &Busy) -> ApiError {
 
 /// A joint aligning its encoder after its first enable stands still
 /// (fsm `align`), which the search would take for its stop: homing starts
-/// only on a joint that runs. Read from the device, not the snapshot: the
-/// snapshot may not have seen the enable yet.
+/// only on a joint that runs. The latest poll tells when it says `run` or
+/// `align` (an enable confirms the state it reached, so the snapshot has
+/// seen it); otherwise the device is asked.
 async fn ensure_running(bus: &BusHandle, dev: &DeviceState) -> ApiResult<()> {
-    let reply = bus.read_info(dev.dev_id, InfoBlock::Info01).await?;
-    let ReplyBody::Info01(info) = reply.body() else {
-        return Err(crate::bus::BusError::UnexpectedReply(format!(
-            "device {} answered INFO_01 with another block",
-            dev.dev_id
-        ))
-        .into());
+    let cached = dev.info01.as_ref().map(|(i, _)| i.fsm);
+    let state = match cached {
+        Some(s @ (fsm::RUN | fsm::ALIGN)) => s,
+        _ => match bus.read_info(dev.dev_id, InfoBlock::Info01).await?.body() {
+            ReplyBody::Info01(info) => info.fsm,
+            _ => {
+                return Err(crate::bus::BusError::UnexpectedReply(format!(
+                    "device {} answered INFO_01 with another block",
+                    dev.dev_id
+                ))
+                .into())
+            }
+        },
     };
-    match info.fsm {
+    match state {
         fsm::RUN => Ok(()),
         fsm::ALIGN => Err(ApiError::conflict(
             "not-aligned",
