@@ -311,6 +311,8 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
         watchdog: checked_watchdog(file.watchdog, args)?,
         policy,
         recordings_dir: state_dir.as_ref().map(|d| d.join("recordings")),
+        // Filled in when the buses start (the simulator's bus is added then).
+        managed: Default::default(),
     };
     Ok(Plan {
         listen,
@@ -557,6 +559,10 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
         }
         None => None,
     };
+    let managed = configs
+        .iter()
+        .map(|(cfg, _)| (cfg.name.clone(), cfg.ids.clone()))
+        .collect();
     let (handles, threads) = start_buses(configs)?;
     let listener = TcpListener::bind(plan.listen)
         .await
@@ -571,6 +577,7 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     let state = AppState::new(handles, plan.limits, plan.token);
     let mut options = plan.options;
     options.policy.listen = Some(addr);
+    options.managed = managed;
     let ros2_stats = options.ros2.clone();
     // A fresh state has no options yet: this cannot be refused.
     let _ = state.set_options(options);

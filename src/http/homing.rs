@@ -1,24 +1,33 @@
-//! Homing (issue 18): an opt-in routine per joint (or every joint of a
-//! hand) that finds the joint's hard stop and records it as the joint's
-//! calibration offset. Per joint, in its own task:
+//! Homing: an opt-in routine per joint (or every joint of a hand) that
+//! finds the joint's hard stop and records it as the joint's calibration
+//! offset. It starts only on joints that run (fsm `run`: a joint still
+//! aligning stands still, which would look like its stop) and are in no
+//! other running homing job. Per joint, in its own task:
 //!
 //! 1. read the current limit (INFO_04) and write a reduced one (RAM only,
 //!    verified by read-back): a joint pushing into its stop must not hurt
 //!    the finger or the gearbox;
-//! 2. speed mode, a slow speed towards the stop; watch the telemetry until
-//!    the joint stalls (its speed drops under a fifth of the asked speed for
-//!    [`STALL_CONFIRM`], after it moved) or pushes (the same, with the q
-//!    current near the reduced limit);
+//! 2. speed 0 on the wire, then speed mode, then a slow speed towards the
+//!    stop; watch the telemetry until the joint stalls (its speed drops
+//!    under a fifth of the asked speed for [`STALL_CONFIRM`], after it
+//!    moved) or pushes (the same, with the q current near the reduced
+//!    limit). The search is bounded: by the joint's soft limits and by
+//!    `max_travel_deg` from where it started; reaching either ends the job
+//!    `failed` ("no hard stop within ..."), nothing saved;
 //! 3. the stall's angle becomes the calibration offset (the stop reads
 //!    `stop_at_deg` from then on); speed 0, position mode, back off by
 //!    `backoff_deg`;
 //! 4. the previous current limit is written back **whatever happened**
-//!    (found, timed out, e-stopped, faulted, offline), and the answer says
-//!    whether that write was verified.
+//!    (found, timed out, out of travel, e-stopped, faulted, offline), and
+//!    read back: the answer says `current_limit_restored` only when the
+//!    read-back shows the previous limit.
 //!
-//! An e-stop, a fault, the joint disabled or offline abort at once: after
-//! an e-stop nothing that moves is written (only the mode and the current
-//! limit are put back). A job is polled with `GET /api/v1/homing/{id}`.
+//! Speed 0 is written (and seen on the wire) before the joint leaves speed
+//! mode, whichever way the search ended; a task that ends without getting
+//! there (a panic) writes it as it unwinds. An e-stop, a fault, the joint
+//! disabled or offline abort at once: after an e-stop nothing but speed 0,
+//! the mode and the current limit is written. A job is polled with
+//! `GET /api/v1/homing/{id}`.
 
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -31,13 +40,14 @@ use crate::bus::handle::{BusEvent, DeviceState};
 use crate::bus::{BusHandle, Setpoint};
 use crate::http::calibration;
 use crate::http::error::{ApiError, ApiResult};
-use crate::http::homing_book::{lock, HomingState, HomingView, JointHoming, Slot};
+use crate::http::homing_book::{lock, Busy, HomingState, HomingView, JointHoming, Slot};
+use crate::http::limits::JointLimits;
 use crate::http::move_book::JointRef;
 use crate::http::moves::resolve_joint;
 use crate::http::state::{known_device, AppState};
-use crate::http::targets::ensure_enabled;
+use crate::http::targets::wait_on_wire;
 use crate::http::telemetry::{firmware_of, is_enabled, measured_angle_raw};
-use crate::protocol::status::{active_fault, fault_name, fsm};
+use crate::protocol::status::{active_fault, fault_name, fsm, fsm_name};
 use crate::protocol::units;
 use crate::protocol::{ConfigParam, CtrlMode, InfoBlock, ReplyBody};
 
@@ -60,6 +70,14 @@ const BACKOFF_TOLERANCE_DEG: f64 = 0.5;
 const BACKOFF_RPM: f64 = 1000.0;
 /// Tries at writing the previous current limit back.
 const RESTORE_TRIES: usize = 3;
+/// The search ends this long (at the asked speed) before a bound, so
+/// that the joint, still coasting while speed 0 reaches it, stays inside.
+const BOUND_LOOKAHEAD: Duration = Duration::from_millis(100);
+/// How far inside the device's ±255° a stop may read (`stop_at_deg`):
+/// room for the largest back-off.
+const STOP_AT_END_MARGIN_DEG: f64 = 30.0;
+/// The largest `max_travel_deg`: the whole angle range.
+const MAX_TRAVEL_DEG: f64 = 2.0 * units::MAX_ANGLE_DEG;
 
 /// Which way the joint turns to find its stop (device angles).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize, ToSchema)]
@@ -113,9 +131,17 @@ pub(crate) struct HomingRequest {
     /// How far to move back off the stop, degrees (0..=30; default 2).
     #[schema(example = 2.0, minimum = 0.0, maximum = 30.0)]
     pub backoff_deg: Option<f64>,
-    /// The joint angle the stop reads from then on (default 0).
-    #[schema(example = 0.0, minimum = -255.0, maximum = 255.0)]
+    /// The joint angle the stop reads from then on (default 0). It must
+    /// lie within the joint's soft range and at least 30° inside the ±255°
+    /// angle range: 422 with the allowed range otherwise.
+    #[schema(example = 0.0, minimum = -225.0, maximum = 225.0)]
     pub stop_at_deg: Option<f64>,
+    /// The search fails ("no hard stop within ...") after the joint turned
+    /// this far from where it started, degrees (0 < d ≤ 510; default: the
+    /// width of the joint's soft range). It also fails at the soft limit
+    /// in the search direction, whichever comes first.
+    #[schema(example = 60.0, exclusive_minimum = 0.0, maximum = 510.0)]
+    pub max_travel_deg: Option<f64>,
     /// Give up the search after this long, ms (0 < t ≤ 120000; default 20000).
     #[schema(example = 20000.0, exclusive_minimum = 0.0, maximum = 120000.0)]
     pub timeout_ms: Option<f64>,
@@ -129,6 +155,8 @@ struct Plan {
     current_limit_a: f64,
     backoff_deg: f64,
     stop_at_deg: f64,
+    /// `None`: the width of each joint's soft range.
+    max_travel_deg: Option<f64>,
     timeout: Duration,
 }
 
@@ -137,11 +165,21 @@ struct Plan {
 pub(crate) async fn start(state: &AppState, req: &HomingRequest) -> ApiResult<HomingView> {
     let plan = plan(req)?;
     let joints = joints(state, req)?;
+    let mut limits = Vec::with_capacity(joints.len());
     for r in &joints {
+        if let Some(job) = state.homings().running_job(&r.bus, r.id) {
+            return Err(busy(&Busy {
+                job,
+                bus: r.bus.clone(),
+                id: r.id,
+            }));
+        }
         let bus = state.bus(&r.bus)?;
         let snap = bus.snapshot();
         let dev = known_device(&snap, r.id)?;
-        ensure_enabled(bus, dev, "homing").await?;
+        let soft = state.limits(&r.bus, r.id);
+        check_stop_at(&plan, &soft, r)?;
+        ensure_running(bus, dev).await?;
         if dev.mode.is_some_and(|m| m != CtrlMode::Position) {
             return Err(ApiError::conflict(
                 "wrong-mode",
@@ -152,6 +190,7 @@ pub(crate) async fn start(state: &AppState, req: &HomingRequest) -> ApiResult<Ho
                 ),
             ));
         }
+        limits.push(soft);
     }
     let slots: Vec<Slot> = joints
         .iter()
@@ -169,17 +208,106 @@ pub(crate) async fn start(state: &AppState, req: &HomingRequest) -> ApiResult<Ho
             }))
         })
         .collect();
-    let id = state.homings().add(slots.clone());
-    for (r, slot) in joints.into_iter().zip(slots) {
+    // Checked again under the book's lock: another request may have
+    // started a job on one of these joints while this one read the bus.
+    let id = state.homings().add(slots.clone()).map_err(|b| busy(&b))?;
+    for ((r, slot), soft) in joints.into_iter().zip(slots).zip(limits) {
         let bus = state.bus(&r.bus)?.clone();
         let state = state.clone();
-        tokio::spawn(async move { home(state, bus, r.id, plan, slot, id).await });
+        tokio::spawn(async move { home(state, bus, r.id, plan, soft, slot, id).await });
     }
     tracing::info!(homing_id = id, ?plan, "homing started");
     state
         .homings()
         .view(id)
         .ok_or_else(|| ApiError::not_found("unknown-homing", format!("no homing with id {id}")))
+}
+
+/// 409 naming the job that homes the joint.
+fn busy(b: &Busy) -> ApiError {
+    ApiError::conflict(
+        "homing-running",
+        "Joint already being homed",
+        format!(
+            "joint {} of bus `{}` is being homed by homing job {} (GET /api/v1/homing/{}): \
+             one homing per joint at a time; start again once it is done",
+            b.id, b.bus, b.job, b.job
+        ),
+    )
+}
+
+/// A joint aligning its encoder after its first enable stands still
+/// (fsm `align`), which the search would take for its stop: homing starts
+/// only on a joint that runs. The latest poll tells when it says `run` or
+/// `align` (an enable confirms the state it reached, so the snapshot has
+/// seen it); otherwise the device is asked.
+async fn ensure_running(bus: &BusHandle, dev: &DeviceState) -> ApiResult<()> {
+    let cached = dev.info01.as_ref().map(|(i, _)| i.fsm);
+    let state = match cached {
+        Some(s @ (fsm::RUN | fsm::ALIGN)) => s,
+        _ => match bus.read_info(dev.dev_id, InfoBlock::Info01).await?.body() {
+            ReplyBody::Info01(info) => info.fsm,
+            _ => {
+                return Err(crate::bus::BusError::UnexpectedReply(format!(
+                    "device {} answered INFO_01 with another block",
+                    dev.dev_id
+                ))
+                .into())
+            }
+        },
+    };
+    match state {
+        fsm::RUN => Ok(()),
+        fsm::ALIGN => Err(ApiError::conflict(
+            "not-aligned",
+            "Joint still aligning",
+            format!(
+                "joint {} of bus `{}` is still aligning its encoder (fsm `align`) and stands \
+                 still while it does, which homing would take for its stop: home it once it \
+                 runs (fsm `run`)",
+                dev.dev_id,
+                bus.name()
+            ),
+        )),
+        other => Err(ApiError::conflict(
+            "not-enabled",
+            "Device not enabled",
+            format!(
+                "homing needs joint {} of bus `{}` enabled and running; it is `{}` (enable it first)",
+                dev.dev_id,
+                bus.name(),
+                fsm_name(other)
+            ),
+        )),
+    }
+}
+
+/// `stop_at_deg` within the joint's soft range and not at the end of the
+/// angle range: a stop reading ±255° leaves no angle beyond it for the
+/// back-off, and an offset that puts it there cannot be saved.
+fn check_stop_at(plan: &Plan, soft: &JointLimits, r: &JointRef) -> ApiResult<()> {
+    let lo = soft
+        .min_deg
+        .max(-units::MAX_ANGLE_DEG + STOP_AT_END_MARGIN_DEG);
+    let hi = soft
+        .max_deg
+        .min(units::MAX_ANGLE_DEG - STOP_AT_END_MARGIN_DEG);
+    let x = plan.stop_at_deg;
+    if (lo..=hi).contains(&x) {
+        return Ok(());
+    }
+    let mut err = ApiError::out_of_range("stop_at_deg", x, (lo, hi), "deg");
+    err.problem.detail = format!(
+        "stop_at_deg = {x} deg is outside what joint {} of bus `{}` allows, {lo}..={hi} deg: \
+         its soft range ({}..={} deg), at least {STOP_AT_END_MARGIN_DEG} deg inside the \
+         ±{} deg angle range",
+        r.id,
+        r.bus,
+        soft.min_deg,
+        soft.max_deg,
+        units::MAX_ANGLE_DEG
+    );
+    Err(err)
 }
 
 /// Homing job `id` as it stands.
@@ -226,6 +354,10 @@ fn plan(req: &HomingRequest) -> ApiResult<Plan> {
             (-units::MAX_ANGLE_DEG, units::MAX_ANGLE_DEG),
             false,
         )?,
+        max_travel_deg: req
+            .max_travel_deg
+            .map(|d| within("max_travel_deg", Some(d), d, (0.0, MAX_TRAVEL_DEG), true))
+            .transpose()?,
         timeout: Duration::from_secs_f64(
             within(
                 "timeout_ms",
@@ -287,7 +419,7 @@ fn joints(state: &AppState, req: &HomingRequest) -> ApiResult<Vec<JointRef>> {
 /// Why a search ended without finding the stop.
 enum Ended {
     Failed(String),
-    Aborted { reason: String, estop: bool },
+    Aborted(String),
 }
 
 fn set(slot: &Slot, edit: impl FnOnce(&mut JointHoming)) {
@@ -295,8 +427,16 @@ fn set(slot: &Slot, edit: impl FnOnce(&mut JointHoming)) {
 }
 
 /// Homes one joint; whatever happens, its previous current limit is
-/// written back before the job says it ended.
-async fn home(state: AppState, bus: BusHandle, id: u8, plan: Plan, slot: Slot, job: u64) {
+/// written back (and read back) before the job says it ended.
+async fn home(
+    state: AppState,
+    bus: BusHandle,
+    id: u8,
+    plan: Plan,
+    soft: JointLimits,
+    slot: Slot,
+    job: u64,
+) {
     let mut events = bus.events();
     let previous = match read_current_limit(&bus, id).await {
         Ok(raw) => raw,
@@ -313,21 +453,32 @@ async fn home(state: AppState, bus: BusHandle, id: u8, plan: Plan, slot: Slot, j
                 plan.current_limit_a,
                 units::current_limit_a(previous)
             );
+            // Nothing was written: the limit just read is the previous one.
             set(&slot, |s| s.current_limit_restored = true);
             return finish(&slot, job, Err(Ended::Failed(why)));
         }
     };
     bus.take_over(&[id]);
+    let mut guard = SpeedZero {
+        bus: bus.clone(),
+        id,
+        armed: false,
+    };
     let outcome = match bus.write_config(id, ConfigParam::MaxCur(limit)).await {
         Ok(_) => {
             set(&slot, |s| s.phase = "searching");
-            search(&bus, id, &plan, &mut events).await
+            guard.armed = true;
+            search(&bus, id, &plan, &soft, &mut events).await
         }
         Err(e) => Err(Ended::Failed(format!(
             "could not reduce the current limit: {e}"
         ))),
     };
-    let estopped = matches!(outcome, Err(Ended::Aborted { estop: true, .. }));
+    if guard.armed {
+        // Stop pushing and leave speed mode, however the search ended.
+        hold_here(&bus, id).await;
+        guard.armed = false;
+    }
     let outcome = match outcome {
         Ok(stop_deg) => {
             set(&slot, |s| {
@@ -335,20 +486,63 @@ async fn home(state: AppState, bus: BusHandle, id: u8, plan: Plan, slot: Slot, j
                 s.hard_stop_device_deg = Some(stop_deg);
             });
             let offset = record(&state, &bus, id, &plan, stop_deg);
-            back_off(&bus, id, &plan, stop_deg, &mut events).await;
+            back_off(&bus, id, &plan, &soft, stop_deg, &mut events).await;
             offset
         }
-        Err(ended) => {
-            // Stop pushing and leave speed mode; after an e-stop only the
-            // mode is put back (no target: nothing that could move).
-            hold_here(&bus, id, !estopped).await;
-            Err(ended)
-        }
+        Err(ended) => Err(ended),
     };
     set(&slot, |s| s.phase = "restoring");
     let restored = restore(&bus, id, previous).await;
     set(&slot, |s| s.current_limit_restored = restored);
     finish(&slot, job, outcome);
+}
+
+/// Writes speed 0 (holding where the joint is) if the task leaves the
+/// search without [`hold_here`] having done it: a panic unwinding.
+struct SpeedZero {
+    bus: BusHandle,
+    id: u8,
+    armed: bool,
+}
+
+impl Drop for SpeedZero {
+    fn drop(&mut self) {
+        if self.armed {
+            tracing::error!(
+                bus = self.bus.name(),
+                id = self.id,
+                "homing ended mid-search: speed 0 written"
+            );
+            speed_zero(&self.bus, self.id);
+        }
+    }
+}
+
+/// Speed 0, the position target where the joint is; the setpoint's
+/// sequence number (to wait for it on the wire), `None` when the joint's
+/// angle is not known (nothing written).
+fn speed_zero(bus: &BusHandle, id: u8) -> Option<u64> {
+    let here = bus
+        .snapshot()
+        .devices
+        .get(&id)
+        .and_then(measured_angle_raw)?;
+    Some(bus.set_targets(&[(
+        id,
+        Setpoint {
+            pos_ref: here,
+            spd_ref: 0,
+        },
+    )]))
+}
+
+/// Writes speed 0 and waits (briefly) until it is on the wire; false if it
+/// was not seen there.
+async fn speed_zero_on_wire(bus: &BusHandle, id: u8) -> bool {
+    match speed_zero(bus, id) {
+        Some(seq) => wait_on_wire(bus, seq).await,
+        None => false,
+    }
 }
 
 fn finish(slot: &Slot, job: u64, outcome: Result<f64, Ended>) {
@@ -366,7 +560,7 @@ fn finish(slot: &Slot, job: u64, outcome: Result<f64, Ended>) {
             tracing::warn!(homing_id = job, bus = %s.bus, id = s.id, restored = s.current_limit_restored, "homing failed: {why}");
             s.reason = Some(why);
         }
-        Err(Ended::Aborted { reason, .. }) => {
+        Err(Ended::Aborted(reason)) => {
             s.state = HomingState::Aborted;
             tracing::warn!(homing_id = job, bus = %s.bus, id = s.id, restored = s.current_limit_restored, "homing aborted: {reason}");
             s.reason = Some(reason);
@@ -390,25 +584,94 @@ async fn read_current_limit(bus: &BusHandle, id: u8) -> Result<u16, String> {
     }
 }
 
+/// Where the search must end without a stop: the soft limit or the
+/// travel limit in the search direction, whichever comes first.
+#[derive(Debug, Clone, Copy)]
+struct Bound {
+    /// Device degrees.
+    deg: f64,
+    /// Where the search started, device degrees.
+    start_deg: f64,
+    /// The soft limit (not the travel) is the nearer.
+    soft: bool,
+    travel_deg: f64,
+}
+
+impl Bound {
+    fn new(plan: &Plan, soft: &JointLimits, start_deg: f64) -> Self {
+        let travel_deg = plan.max_travel_deg.unwrap_or(soft.max_deg - soft.min_deg);
+        let (by_travel, by_soft) = match plan.direction {
+            Direction::Negative => (start_deg - travel_deg, soft.min_deg),
+            Direction::Positive => (start_deg + travel_deg, soft.max_deg),
+        };
+        let soft_nearer = plan.direction.sign() * (by_travel - by_soft) >= 0.0;
+        Self {
+            deg: if soft_nearer { by_soft } else { by_travel },
+            start_deg,
+            soft: soft_nearer,
+            travel_deg,
+        }
+    }
+
+    /// The joint at `deg`, moving at `speed_dps` the search's way, is at
+    /// the bound (or would pass it before speed 0 reaches it).
+    fn reached(&self, dir: Direction, deg: f64, speed_dps: f64) -> bool {
+        let ahead = speed_dps * BOUND_LOOKAHEAD.as_secs_f64();
+        dir.sign() * (self.deg - deg) <= ahead
+    }
+
+    fn failure(&self, deg: f64) -> Ended {
+        let what = if self.soft {
+            format!(
+                "the soft limits: the joint reached {deg:.1}° at its soft limit ({:.1}°), \
+                 {:.1}° from where it started",
+                self.deg,
+                (deg - self.start_deg).abs()
+            )
+        } else {
+            format!(
+                "max_travel_deg = {}°: the joint reached {deg:.1}° from {:.1}°",
+                self.travel_deg, self.start_deg
+            )
+        };
+        Ended::Failed(format!("no hard stop within {what}"))
+    }
+}
+
 /// Speed mode towards the stop until the joint stalls there; its angle.
+/// Ends (failed) at the soft limit or after `max_travel_deg`.
 async fn search(
     bus: &BusHandle,
     id: u8,
     plan: &Plan,
+    soft: &JointLimits,
     events: &mut broadcast::Receiver<BusEvent>,
 ) -> Result<f64, Ended> {
-    bus.set_mode(id, CtrlMode::Speed)
-        .await
-        .map_err(|e| Ended::Failed(format!("could not switch to speed mode: {e}")))?;
     let snap = bus.snapshot();
     let dev = snap
         .devices
         .get(&id)
         .ok_or_else(|| Ended::Failed("the joint is gone".into()))?;
-    let here = measured_angle_raw(dev).unwrap_or(0);
+    let here = measured_angle_raw(dev)
+        .ok_or_else(|| Ended::Failed("the joint's angle is not known".into()))?;
+    let start_deg = units::angle_deg(here);
+    let bound = Bound::new(plan, soft, start_deg);
+    if bound.reached(plan.direction, start_deg, plan.speed_dps) {
+        return Err(bound.failure(start_deg));
+    }
     let rpm = plan.direction.sign() * plan.speed_dps / units::output_deg_per_s(1.0);
     let spd_ref = units::speed_to_raw(rpm, firmware_of(dev))
         .map_err(|e| Ended::Failed(format!("speed_dps: {e}")))?;
+    // The speed the joint last had stays with it into speed mode (in
+    // position mode it is the speed limit): make it 0 first.
+    if !speed_zero_on_wire(bus, id).await {
+        return Err(Ended::Failed(
+            "speed 0 was not seen on the wire before speed mode: not starting".into(),
+        ));
+    }
+    bus.set_mode(id, CtrlMode::Speed)
+        .await
+        .map_err(|e| Ended::Failed(format!("could not switch to speed mode: {e}")))?;
     bus.set_targets(&[(
         id,
         Setpoint {
@@ -427,6 +690,11 @@ async fn search(
         let snap = watch.borrow_and_update().clone();
         let dev = snap.devices.get(&id);
         unfit(dev)?;
+        if let Some(deg) = dev.and_then(measured_angle_raw).map(units::angle_deg) {
+            if bound.reached(plan.direction, deg, plan.speed_dps) {
+                return Err(bound.failure(deg));
+            }
+        }
         if let Some((info, at)) = dev.and_then(|d| d.info02.as_ref().map(|(i, at)| (*i, *at))) {
             if last_sample.map_or(true, |last| at > last) && at >= started {
                 last_sample = Some(at);
@@ -468,10 +736,7 @@ fn aborted_by_event(
     loop {
         match events.try_recv() {
             Ok(BusEvent::Estop { bus: b }) if b == bus.name() => {
-                return Err(Ended::Aborted {
-                    reason: "e-stop".into(),
-                    estop: true,
-                })
+                return Err(Ended::Aborted("e-stop".into()))
             }
             Ok(_) | Err(broadcast::error::TryRecvError::Lagged(_)) => continue,
             Err(_) => return Ok(()),
@@ -481,24 +746,23 @@ fn aborted_by_event(
 
 /// Offline, faulted or no longer enabled: the search cannot go on.
 fn unfit(dev: Option<&DeviceState>) -> Result<(), Ended> {
-    let aborted = |reason: String, estop: bool| Err(Ended::Aborted { reason, estop });
+    let aborted = |reason: String| Err(Ended::Aborted(reason));
     let Some(dev) = dev.filter(|d| d.online) else {
-        return aborted("the joint went offline".into(), false);
+        return aborted("the joint went offline".into());
     };
     if let Some((info, _)) = &dev.info01 {
         if info.fsm == fsm::FAULT || active_fault(info.err_code) != 0 {
             let name = fault_name(active_fault(info.err_code));
-            return aborted(format!("the joint faulted ({name})"), false);
+            return aborted(format!("the joint faulted ({name})"));
         }
         if !is_enabled(info) {
             let why = dev.disabled_reason.map_or("disabled", |r| r.name());
-            let estop = why == "estop";
-            let reason = if estop {
+            let reason = if why == "estop" {
                 "e-stop".to_string()
             } else {
                 format!("the joint was disabled ({why})")
             };
-            return aborted(reason, estop);
+            return aborted(reason);
         }
     }
     Ok(())
@@ -529,19 +793,16 @@ fn record(
         })
 }
 
-/// Stops pushing and goes back to position mode, holding where it is; with
-/// `target` false (after an e-stop) only the mode is put back.
-async fn hold_here(bus: &BusHandle, id: u8, target: bool) {
-    if target {
-        if let Some(here) = bus.snapshot().devices.get(&id).and_then(measured_angle_raw) {
-            bus.set_targets(&[(
-                id,
-                Setpoint {
-                    pos_ref: here,
-                    spd_ref: 0,
-                },
-            )]);
-        }
+/// Stops pushing and goes back to position mode: speed 0 (holding where
+/// the joint is) on the wire first, then the mode. After an e-stop too:
+/// speed 0 moves nothing, and a disabled joint keeps no speed for later.
+async fn hold_here(bus: &BusHandle, id: u8) {
+    if !speed_zero_on_wire(bus, id).await {
+        tracing::warn!(
+            bus = bus.name(),
+            id,
+            "homing: speed 0 not seen on the wire before leaving speed mode"
+        );
     }
     if let Err(e) = bus.set_mode(id, CtrlMode::Position).await {
         tracing::warn!(bus = bus.name(), id, error = %e, "homing: could not switch back to position mode");
@@ -549,19 +810,29 @@ async fn hold_here(bus: &BusHandle, id: u8, target: bool) {
 }
 
 /// Off the stop by `backoff_deg`, slowly, in position mode; waits (a
-/// little) until it is there. An e-stop meanwhile leaves it where it is.
+/// little) until it is there. An e-stop meanwhile leaves it where it is;
+/// a goal outside the soft limits is not sent.
 async fn back_off(
     bus: &BusHandle,
     id: u8,
     plan: &Plan,
+    soft: &JointLimits,
     stop_deg: f64,
     events: &mut broadcast::Receiver<BusEvent>,
 ) {
-    hold_here(bus, id, true).await;
     if plan.backoff_deg == 0.0 || aborted_by_event(bus, events).is_err() {
         return;
     }
     let goal = stop_deg - plan.direction.sign() * plan.backoff_deg;
+    if goal < soft.min_deg || goal > soft.max_deg {
+        tracing::warn!(
+            bus = bus.name(),
+            id,
+            goal,
+            "homing: the back-off goal is outside the soft limits; the joint stays at its stop"
+        );
+        return;
+    }
     let snap = bus.snapshot();
     let fw = snap.devices.get(&id).map(firmware_of).unwrap_or_default();
     let (Ok(pos_ref), Ok(spd_ref)) = (
@@ -581,13 +852,26 @@ async fn back_off(
     let _ = tokio::time::timeout(BACKOFF_WAIT, reached).await;
 }
 
-/// Writes the previous current limit back (verified), trying a few times.
+/// Writes the previous current limit back, then reads it back: true only
+/// when the read-back shows it. A few tries; a write whose confirmation was
+/// lost may still have taken, which the read-back tells.
 async fn restore(bus: &BusHandle, id: u8, previous: u16) -> bool {
     for attempt in 1..=RESTORE_TRIES {
-        match bus.write_config(id, ConfigParam::MaxCur(previous)).await {
-            Ok(_) => return true,
-            Err(e) => tracing::warn!(bus = bus.name(), id, attempt, error = %e,
-                "homing: writing the previous current limit back failed"),
+        if let Err(e) = bus.write_config(id, ConfigParam::MaxCur(previous)).await {
+            tracing::warn!(bus = bus.name(), id, attempt, error = %e,
+                "homing: writing the previous current limit back failed");
+        }
+        match read_current_limit(bus, id).await {
+            Ok(raw) if raw == previous => return true,
+            Ok(raw) => tracing::warn!(
+                bus = bus.name(),
+                id,
+                attempt,
+                read_back = raw,
+                previous,
+                "homing: the current limit read back is not the previous one"
+            ),
+            Err(why) => tracing::warn!(bus = bus.name(), id, attempt, "homing: {why}"),
         }
     }
     false

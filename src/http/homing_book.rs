@@ -1,6 +1,12 @@
 //! The homing jobs started through the API (`POST /api/v1/homing`): each
 //! joint's progress as its task writes it, for `GET`. A std `Mutex` per
-//! joint and one for the book, never held across an `.await`.
+//! joint and one for the book, never held across an `.await` (the book's
+//! is taken before a joint's, never the other way).
+//!
+//! One job per joint: a job is added only if none of its joints is in a
+//! job still running, checked under the book's lock, so two requests
+//! cannot both start one (two searches would fight over the joint, and
+//! each would write back the limit the other had reduced).
 
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -46,7 +52,8 @@ pub(crate) struct JointHoming {
     /// The joint's current limit before homing, A (INFO_04).
     #[schema(example = 0.75)]
     pub previous_current_limit_a: Option<f64>,
-    /// True once the previous current limit is written back and verified.
+    /// True only when the current limit read back after homing shows the
+    /// previous one (written back, or never changed).
     #[schema(example = true)]
     pub current_limit_restored: bool,
 }
@@ -75,9 +82,44 @@ pub(crate) fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
+/// A joint that is in a running homing job.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct Busy {
+    pub job: u64,
+    pub bus: String,
+    pub id: u8,
+}
+
+fn running_in(book: &BTreeMap<u64, Vec<Slot>>, bus: &str, id: u8) -> Option<u64> {
+    book.iter().find_map(|(job, slots)| {
+        slots
+            .iter()
+            .any(|s| {
+                let j = lock(s);
+                j.state == HomingState::Running && j.bus == bus && j.id == id
+            })
+            .then_some(*job)
+    })
+}
+
 impl HomingBook {
-    pub(crate) fn add(&self, slots: Vec<Slot>) -> u64 {
+    /// The running job that has joint `id` of `bus`, if any.
+    pub(crate) fn running_job(&self, bus: &str, id: u8) -> Option<u64> {
+        running_in(&lock(&self.inner).1, bus, id)
+    }
+
+    /// Adds a job, unless one of its joints is in a running job.
+    pub(crate) fn add(&self, slots: Vec<Slot>) -> Result<u64, Busy> {
         let mut book = lock(&self.inner);
+        for slot in &slots {
+            let (bus, id) = {
+                let j = lock(slot);
+                (j.bus.clone(), j.id)
+            };
+            if let Some(job) = running_in(&book.1, &bus, id) {
+                return Err(Busy { job, bus, id });
+            }
+        }
         book.0 += 1;
         let id = book.0;
         book.1.insert(id, slots);
@@ -92,7 +134,7 @@ impl HomingBook {
                 None => break,
             }
         }
-        id
+        Ok(id)
     }
 
     pub(crate) fn view(&self, id: u64) -> Option<HomingView> {

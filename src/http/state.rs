@@ -33,6 +33,10 @@ pub struct StateOptions {
     pub recordings_dir: Option<std::path::PathBuf>,
     /// The ROS 2 bridge's counters, when it runs.
     pub ros2: Option<Arc<crate::http::ros2_stats::Ros2Stats>>,
+    /// The devices each bus was configured with (its `ids`): the ones the
+    /// daemon manages. A bus absent here, or with no ids (it scans for its
+    /// devices), manages every device it knows.
+    pub managed: BTreeMap<String, Vec<u8>>,
 }
 
 #[derive(Clone)]
@@ -146,6 +150,16 @@ impl AppState {
 
     pub fn limits(&self, bus: &str, id: u8) -> JointLimits {
         self.inner.limits.for_joint(bus, id)
+    }
+
+    /// Whether the daemon manages device `id` of `bus`: one of the bus's
+    /// configured ids, or any device on a bus configured with none.
+    pub(crate) fn managed(&self, bus: &str, id: u8) -> bool {
+        self.options()
+            .managed
+            .get(bus)
+            .filter(|ids| !ids.is_empty())
+            .map_or(true, |ids| ids.contains(&id))
     }
 
     /// The calibration of joint `id` on `bus`: how its angles read at the API.

@@ -4,7 +4,7 @@
 //! publishes snapshots through the same `BusShared`.
 #![allow(dead_code)]
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -40,6 +40,9 @@ pub struct Script {
     /// another block than RES, as a confused or misaddressed device would
     /// (502 wherever it shows).
     pub wrong_block: bool,
+    /// INFO_04 reads answer these max_current values in turn (then the
+    /// default), whatever was written: a limit that does not read back.
+    pub info04_max_current: VecDeque<u16>,
     /// Each request takes this long (to hold the queue busy for e-stop tests).
     pub delay: Duration,
     /// Requests served, by kind, in order.
@@ -393,6 +396,10 @@ impl Owner {
 
     fn read(&mut self, id: u8, block: InfoBlock) -> Result<Reply, BusError> {
         let wrong_block = self.script.lock().unwrap().wrong_block;
+        let max_current = match block {
+            InfoBlock::Info04 => self.script.lock().unwrap().info04_max_current.pop_front(),
+            _ => None,
+        };
         let dev = self.known(id)?;
         let block = if wrong_block {
             InfoBlock::Info07
@@ -413,7 +420,7 @@ impl Owner {
                 baud_level: 0,
                 param_ver: 3,
                 reserved: 0,
-                max_current: 4368,
+                max_current: max_current.unwrap_or(4368),
                 protect_limit: 873,
             }),
             InfoBlock::Info05 => ReplyBody::Info05(Info05 {

@@ -7,6 +7,12 @@
 //! any device runs V2.0.1 or is not known yet, every device gets its own
 //! write. A write whose device answers RES is never sent to 0xFF: every
 //! device would answer at once and the replies collide.
+//!
+//! Every device on the line hears a frame to 0xFF, asked or not: one the
+//! caller left out (a device the daemon does not manage) and one offline
+//! (its replies lost, its receiver maybe not) would take the value
+//! unasked, unverified and unreported. So 0xFF carries the write only when
+//! every device the bus knows is online and asked; else one write each.
 
 use crate::bus::error::BusError;
 use crate::bus::handle::{WriteAllOutcome, WriteOutcome};
@@ -31,8 +37,12 @@ pub(super) fn write_all(
                 .and_then(|e| e.state.firmware)
                 .is_some_and(|f| f.revision >= Revision::V2_0_8)
         });
+    let none_unasked = registry
+        .ids()
+        .iter()
+        .all(|id| ids.contains(id) && registry.is_online(*id));
     let silent = !matches!(how, Confirm::Res);
-    if !(all_2_0_8 && silent) {
+    if !(all_2_0_8 && silent && none_unasked) {
         let per_device = ids
             .into_iter()
             .map(|id| (id, write_config(ctx, id, param)))

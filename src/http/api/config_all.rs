@@ -1,12 +1,14 @@
 //! Configuration of a whole bus in one request: each parameter to every
-//! online device, in one frame to id 0xFF where every device runs rev 2.0.8
-//! (SPEC §4.3), one write per device otherwise; every device verified and
-//! answered for itself.
+//! online device the daemon manages (every online device with
+//! `?include_unmanaged=true`), in one frame to id 0xFF where every device
+//! runs rev 2.0.8 (SPEC §4.3) and no device would hear it unasked, one
+//! write per device otherwise; every device verified and answered for
+//! itself, every device left out named with why.
 
 use axum::extract::State;
 use axum::Json;
-use serde::Serialize;
-use utoipa::ToSchema;
+use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::config_outcome::{NotWritten, PatchOutcomes, Unverified, Written};
@@ -14,11 +16,23 @@ use super::config_params::{check_offered, to_config, ConfigPatch};
 use super::openapi::{ErrorResponses, TAG_CONFIG};
 use crate::bus::BusError;
 use crate::http::error::{ApiError, ApiResult};
-use crate::http::extract::{ApiJson, ApiPath};
+use crate::http::extract::{ApiJson, ApiPath, ApiQuery};
 use crate::http::state::{AppState, BusPath};
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new().routes(routes!(patch_bus_config))
+}
+
+/// Who a bus-wide PATCH goes to.
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub(crate) struct BusPatchQuery {
+    /// Also write the online devices the daemon does not manage (not in the
+    /// bus's configured `ids`); default false: they are skipped and listed
+    /// in `skipped`. Offline devices are skipped either way.
+    #[serde(default)]
+    #[param(example = false)]
+    pub include_unmanaged: bool,
 }
 
 /// What a bus-wide PATCH did.
@@ -26,18 +40,33 @@ pub(crate) fn router() -> OpenApiRouter<AppState> {
 pub(crate) struct BusPatchResult {
     #[schema(example = "sim0")]
     pub bus: String,
-    /// `one_frame` (every device runs rev 2.0.8: each parameter went to id
-    /// 0xFF once, then every device was read back) or `per_device` (at
-    /// least one device runs V2.0.1 or is not known yet: one write each);
-    /// `none` for an empty body.
+    /// `one_frame` (every device runs rev 2.0.8 and every device the bus
+    /// knows was asked and is online: each parameter went to id 0xFF once,
+    /// then every device was read back) or `per_device` (one write each:
+    /// a device runs V2.0.1 or is not known yet, or a skipped device would
+    /// have heard the frame to 0xFF); `none` for an empty body.
     #[schema(example = "one_frame")]
     pub method: &'static str,
-    /// Each online device's outcome, by id.
+    /// Every device written: its outcome per parameter (written and
+    /// verified, unverified, not written), by id.
     pub devices: Vec<DevicePatch>,
-    /// Devices known on the bus but offline: nothing was sent to them
-    /// individually (a frame to 0xFF reaches them if they are listening).
+    /// Every device known on the bus and not written, with why.
+    pub skipped: Vec<SkippedDevice>,
+    /// Devices known on the bus but offline: nothing was sent to them.
     #[schema(example = json!([]))]
     pub offline: Vec<u8>,
+}
+
+/// A device a bus-wide PATCH left out.
+#[derive(Debug, Serialize, ToSchema)]
+pub(crate) struct SkippedDevice {
+    #[schema(example = 7)]
+    pub id: u8,
+    /// `offline` (it does not answer: a write could not be verified), or
+    /// `unmanaged` (not one of the bus's configured `ids`; ask with
+    /// `include_unmanaged=true`).
+    #[schema(example = "unmanaged")]
+    pub reason: &'static str,
 }
 
 /// One device's part of a bus-wide PATCH.
@@ -49,21 +78,28 @@ pub(crate) struct DevicePatch {
     pub outcomes: PatchOutcomes,
 }
 
-/// Change parameters of every online device of a bus in one request.
+/// Change parameters of every online device of a bus that the daemon manages, in one request.
 ///
 /// The body is the device PATCH's: any subset of the parameters, in physical units, every value
-/// checked before anything is written (and every parameter must exist on every online device's
-/// firmware: 422 otherwise). Where every online device runs rev 2.0.8 firmware, each parameter
-/// goes out once, to id 0xFF, and each device is then read back; a device that does not show the
-/// value gets a write of its own. Otherwise every device gets its own verified write. 200 when
-/// every device confirmed every parameter; otherwise a problem (504 `write-unverified`, 502
-/// `verify-mismatch`, ...) whose `partial` is this same per-device answer.
-#[utoipa::path(patch, path = "/api/v1/buses/{bus}/config", tag = TAG_CONFIG, params(BusPath),
+/// checked before anything is written (and every parameter must exist on every written device's
+/// firmware: 422 otherwise). It goes to the online devices the daemon manages (the bus's
+/// configured `ids`, or every device of a bus configured with none); `include_unmanaged=true`
+/// adds the online devices it does not manage. Offline devices are never written. Where every
+/// device written runs rev 2.0.8 firmware and no other device is known on the bus (none skipped,
+/// none offline: every device hears a frame to 0xFF), each parameter goes out once, to id 0xFF,
+/// and each device is then read back; a device that does not show the value gets a write of its
+/// own. Otherwise every device gets its own verified write. The answer lists every device written
+/// (`devices`, each parameter verified or not) and every device skipped, with why (`skipped`:
+/// `offline` or `unmanaged`). 200 when every device written confirmed every parameter; otherwise
+/// a problem (504 `write-unverified`, 502 `verify-mismatch`, ...) whose `partial` is this same
+/// answer; 409 `no-device-online` when no device is left to write.
+#[utoipa::path(patch, path = "/api/v1/buses/{bus}/config", tag = TAG_CONFIG, params(BusPath, BusPatchQuery),
     request_body(content = ConfigPatch, example = json!({"max_current_a": 2.0})),
-    responses((status = 200, description = "Every device confirmed every parameter", body = BusPatchResult), ErrorResponses))]
+    responses((status = 200, description = "Every device written confirmed every parameter", body = BusPatchResult), ErrorResponses))]
 async fn patch_bus_config(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<BusPath>,
+    ApiQuery(q): ApiQuery<BusPatchQuery>,
     ApiJson(patch): ApiJson<ConfigPatch>,
 ) -> ApiResult<Json<BusPatchResult>> {
     let bus = state.bus(&p.bus)?;
@@ -75,25 +111,48 @@ async fn patch_bus_config(
         }
         .into());
     }
-    let online: Vec<_> = snap.devices.values().filter(|d| d.online).collect();
-    if online.is_empty() {
+    let mut skipped = Vec::new();
+    let mut targets = Vec::new();
+    for dev in snap.devices.values() {
+        let managed = state.managed(&snap.name, dev.dev_id);
+        match (dev.online, managed || q.include_unmanaged) {
+            (false, _) => skipped.push(SkippedDevice {
+                id: dev.dev_id,
+                reason: "offline",
+            }),
+            (true, false) => skipped.push(SkippedDevice {
+                id: dev.dev_id,
+                reason: "unmanaged",
+            }),
+            (true, true) => targets.push(dev),
+        }
+    }
+    if targets.is_empty() {
+        let unmanaged = skipped.iter().filter(|s| s.reason == "unmanaged").count();
+        let hint = if unmanaged > 0 {
+            format!(
+                " ({unmanaged} online device(s) not managed: include_unmanaged=true writes them)"
+            )
+        } else {
+            String::new()
+        };
         return Err(ApiError::conflict(
             "no-device-online",
             "No device online",
             format!(
-                "no device of bus {} is online: nothing to configure",
+                "no managed device of bus {} is online: nothing to configure{hint}",
                 snap.name
             ),
         ));
     }
     let mut writes = Vec::new();
     for (param, value) in patch.entries() {
-        for dev in &online {
+        for dev in &targets {
             check_offered(param, dev.dev_id, dev)?;
         }
         writes.push((param, value, to_config(param, value)?));
     }
-    let ids: Vec<u8> = online.iter().map(|d| d.dev_id).collect();
+    let ids: Vec<u8> = targets.iter().map(|d| d.dev_id).collect();
     let mut devices: Vec<DevicePatch> = ids
         .iter()
         .map(|&id| DevicePatch {
@@ -158,12 +217,12 @@ async fn patch_bus_config(
             (false, false) => "per_device",
         },
         devices,
-        offline: snap
-            .devices
-            .values()
-            .filter(|d| !d.online)
-            .map(|d| d.dev_id)
+        offline: skipped
+            .iter()
+            .filter(|s| s.reason == "offline")
+            .map(|s| s.id)
             .collect(),
+        skipped,
     };
     match bus_problem(failed, &result) {
         Some(err) => Err(err),

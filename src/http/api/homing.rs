@@ -31,16 +31,24 @@ pub(crate) struct HomingPath {
 
 /// Home joints: find each one's hard stop and record it as its calibration.
 ///
-/// Opt-in, per joint or for every joint of a hand (`hand`); each joint must
-/// be enabled and in position mode. Per joint: the current limit is read and
-/// a reduced one written (RAM only); the joint turns slowly in speed mode
-/// towards its stop until it stalls there (or pushes, its current near the
-/// reduced limit); that angle becomes its calibration offset (the stop then
-/// reads `stop_at_deg`, flip and range kept); it backs off by `backoff_deg`
-/// in position mode. The previous current limit is written back whatever
-/// happens: found, timed out, e-stopped, faulted, offline
-/// (`current_limit_restored` says it was verified). An e-stop aborts it at
-/// once. Answers 202 at once; poll `GET /api/v1/homing/{id}`.
+/// Opt-in, per joint or for every joint of a hand (`hand`). Each joint must
+/// be enabled and done aligning (fsm `run`: 409 `not-aligned` while it
+/// aligns after its first enable, when it stands still as if at a stop),
+/// in position mode, and in no running homing job (409 `homing-running`
+/// naming that job). `stop_at_deg` must lie within the joint's soft range
+/// and at least 30° inside ±255° (422 with the allowed range). Per joint:
+/// the current limit is read and a reduced one written (RAM only); speed 0
+/// goes on the wire, then the joint turns slowly in speed mode towards its
+/// stop until it stalls there (or pushes, its current near the reduced
+/// limit); that angle becomes its calibration offset (the stop then reads
+/// `stop_at_deg`, flip and range kept); speed 0, position mode, and it
+/// backs off by `backoff_deg`. The search ends `failed` ("no hard stop
+/// within ...", speed 0, nothing saved) at the soft limit in its direction
+/// or after `max_travel_deg` (default: the soft range's width). The
+/// previous current limit is written back whatever happens: found, failed,
+/// e-stopped, faulted, offline; `current_limit_restored` is true only when
+/// reading it back shows the previous limit. An e-stop aborts it at once.
+/// Answers 202 at once; poll `GET /api/v1/homing/{id}`.
 #[utoipa::path(post, path = "/api/v1/homing", tag = TAG_CONTROL,
     request_body(content = HomingRequest, example = json!({"joints": [{"bus": "sim0", "id": 1}],
         "direction": "negative", "speed_dps": 10.0, "current_limit_a": 0.3, "backoff_deg": 2.0})),

@@ -136,6 +136,15 @@ pub(crate) fn parse(text: &str) -> Result<ClientMessage, ParseError> {
         message,
         seq,
     };
+    // Checked here, once for every type: a `move` takes its `seq` out of the
+    // body before the body is parsed, so a `seq` that is no u64 would
+    // otherwise pass as none and the move start unquoted. `null` is no seq.
+    if let Some(other) = value.get("seq").filter(|v| !(v.is_u64() || v.is_null())) {
+        return Err(bad(format!(
+            "`seq` must be an integer 0..=18446744073709551615, not {}",
+            json_kind_or_value(other)
+        )));
+    }
     let obj = value
         .as_object_mut()
         .ok_or_else(|| bad("a message is a JSON object with a `type`".into()))?;
@@ -189,6 +198,14 @@ fn json_kind(v: &Value) -> &'static str {
         Value::String(_) => "a string",
         Value::Array(_) => "an array",
         Value::Object(_) => "an object",
+    }
+}
+
+/// A value's kind, or the value itself for a number (`-1`, `2.5`).
+fn json_kind_or_value(v: &Value) -> String {
+    match v {
+        Value::Number(n) => n.to_string(),
+        other => json_kind(other).to_owned(),
     }
 }
 
@@ -320,6 +337,20 @@ mod tests {
             .unwrap_err()
             .message
             .contains("missing `type`"));
+        for text in [
+            r#"{"type":"move","seq":"a","joints":[{"id":1,"position_deg":5}],"duration_ms":100}"#,
+            r#"{"type":"ping","seq":-1}"#,
+            r#"{"type":"ping","seq":2.5}"#,
+            r#"{"type":"setpoints","seq":"1","targets":[]}"#,
+        ] {
+            let e = parse(text).unwrap_err();
+            assert_eq!((e.code, e.seq), (ErrorCode::BadMessage, None), "{text}");
+            assert!(
+                e.message.contains("`seq` must be an integer"),
+                "{}",
+                e.message
+            );
+        }
         let s = parse(r#"{"type":"subscribe","fields":["angle_deg"],"rate_hz":10}"#);
         assert!(
             matches!(s, Ok(ClientMessage::Subscribe(s)) if s.fields == Some(vec![Field::AngleDeg]))
