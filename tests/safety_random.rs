@@ -1,6 +1,6 @@
 //! The randomized safety test: many random interleavings of enable, disable,
 //! e-stop, mode change, target, a WebSocket setpoint stream ending in its
-//! watchdog, move, pose go, a simulated power cycle and e-stop races, on the
+//! watchdog, move, pose go, homing, a simulated power cycle and e-stop races, on the
 //! simulator through the daemon's own API. After every step the invariant
 //! is checked on the simulated devices themselves:
 //!
@@ -15,7 +15,7 @@
 //! owner has made frames since it (its poll counter moved on), so what was
 //! pending has reached the wire.
 //!
-//! Seeds: `JOINTD_SAFETY_SEEDS` (count, default 3) and `JOINTD_SAFETY_STEPS`
+//! Seeds: `JOINTD_SAFETY_SEEDS` (count, default 5) and `JOINTD_SAFETY_STEPS`
 //! (per seed, default 60), or one `JOINTD_SAFETY_SEED` to replay; a failure
 //! prints its seed and the steps that led to it.
 
@@ -366,6 +366,33 @@ impl World {
         self.log.push(format!("watchdog fired ({policy})"));
     }
 
+    /// Homing on a joint with no hard stop: it turns in speed mode until
+    /// its travel bound, then holds (in position mode) where it ended.
+    async fn homing(&mut self, id: u8) {
+        let d = self.device(id);
+        let (speed_dps, travel) = (30.0, 8.0);
+        let r = self
+            .b
+            .server
+            .post(
+                "/api/v1/homing",
+                json!({"joints": [{"bus": "sim0", "id": id}], "speed_dps": speed_dps,
+                       "max_travel_deg": travel, "timeout_ms": 3000}),
+            )
+            .await;
+        self.log.push(format!("homing {id}: {}", r.status));
+        if r.status.is_success() {
+            let rpm = speed_dps / jointd::protocol::units::output_deg_per_s(1.0);
+            let a = &mut self.admitted[usize::from(id)];
+            a.speeds.extend([rpm, -rpm]);
+            let reach = travel + 2.0;
+            a.span(
+                d.angle_deg.min(d.target_deg) - reach,
+                d.angle_deg.max(d.target_deg) + reach,
+            );
+        }
+    }
+
     async fn power_cycle(&mut self, id: u8) {
         self.b.sim.inject(Fault::PowerCycle { dev_id: id });
         self.log.push(format!("power cycle {id}"));
@@ -405,7 +432,8 @@ impl World {
             68..=73 => self.move_joints(&[1, 2], 1500).await,
             74..=79 => self.pose_go().await,
             80..=87 => self.stream(id).await,
-            88..=91 => self.power_cycle(id).await,
+            88..=90 => self.power_cycle(id).await,
+            91..=94 => self.homing(id).await,
             _ => self.estop_race(id).await,
         }
         self.fence().await;
@@ -478,6 +506,17 @@ async fn run_seed(seed: u64, steps: u64) {
     for _ in 0..steps {
         w.step().await;
     }
+    // What the run exercised: each kind of step, and how many were accepted.
+    let mut kinds: std::collections::BTreeMap<&str, (u32, u32)> = Default::default();
+    for line in &w.log {
+        let kind = line.split([' ', ':']).next().unwrap_or("?");
+        let e = kinds.entry(kind).or_default();
+        e.0 += 1;
+        e.1 += u32::from(
+            line.contains(": 20") || line.contains("accepted") && !line.contains(" 0 accepted"),
+        );
+    }
+    eprintln!("seed {seed}: (steps, accepted) by kind {kinds:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -489,7 +528,7 @@ async fn a_joint_moves_only_toward_what_was_admitted_since_its_last_enable() {
             let base = std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map_or(1, |d| d.as_nanos() as u64);
-            (0..env_u64("JOINTD_SAFETY_SEEDS", 3))
+            (0..env_u64("JOINTD_SAFETY_SEEDS", 5))
                 .map(|k| base.wrapping_add(k.wrapping_mul(0x9E37_79B9_7F4A_7C15)))
                 .collect()
         }

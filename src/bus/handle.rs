@@ -297,6 +297,18 @@ impl BusHandle {
         seq
     }
 
+    /// Stores targets each admitted under the epoch it carries (a job that
+    /// keeps the epoch it started with); the owner drops those whose joint's
+    /// epoch has moved on. Each joint leaves the move it followed, if any.
+    pub fn set_targets_under(&self, targets: &[(u8, Setpoint, super::authority::Epoch)]) -> u64 {
+        if self.shared.motion.is_active() {
+            let ids: Vec<u8> = targets.iter().map(|(id, _, _)| *id).collect();
+            let released = self.shared.motion.release(&ids);
+            self.say_done(&released.ended);
+        }
+        self.shared.setpoints.set_admitted(targets)
+    }
+
     /// Puts joints of this bus on a move (and says so to subscribers);
     /// returns the ids of the moves they left (a new move replaces a
     /// running one joint by joint).

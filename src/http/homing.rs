@@ -36,6 +36,7 @@ use serde::{Deserialize, Serialize};
 use tokio::sync::broadcast;
 use utoipa::ToSchema;
 
+use crate::bus::authority::{Epoch, Revoked};
 use crate::bus::handle::{BusEvent, DeviceState};
 use crate::bus::{BusHandle, Setpoint};
 use crate::http::calibration;
@@ -672,12 +673,18 @@ async fn search(
     bus.set_mode(id, CtrlMode::Speed)
         .await
         .map_err(|e| Ended::Failed(format!("could not switch to speed mode: {e}")))?;
-    bus.set_targets(&[(
+    // The search drives the joint under the epoch its own mode change
+    // began: anything that advances it after (an e-stop, a disable, another
+    // mode change, a reset) ends the search, and its speed cannot reach the
+    // joint after that.
+    let epoch = bus.grant(id).epoch;
+    bus.set_targets_under(&[(
         id,
         Setpoint {
             pos_ref: here,
             spd_ref,
         },
+        epoch,
     )]);
     let started = Instant::now();
     let deadline = started + plan.timeout;
@@ -687,6 +694,7 @@ async fn search(
     let mut stalled_since: Option<Instant> = None;
     loop {
         aborted_by_event(bus, events)?;
+        revoked(bus, id, epoch)?;
         let snap = watch.borrow_and_update().clone();
         let dev = snap.devices.get(&id);
         unfit(dev)?;
@@ -742,6 +750,19 @@ fn aborted_by_event(
             Err(_) => return Ok(()),
         }
     }
+}
+
+/// The joint's motion epoch moved on from the search's own.
+fn revoked(bus: &BusHandle, id: u8, epoch: Epoch) -> Result<(), Ended> {
+    if bus.authority().admits(id, epoch) {
+        return Ok(());
+    }
+    let reason = match bus.authority().last_revoked(id) {
+        Some(Revoked::Estopped) => "e-stop".to_string(),
+        Some(why) => format!("the joint's commands were revoked ({})", why.name()),
+        None => "the joint is no longer enabled".to_string(),
+    };
+    Err(Ended::Aborted(reason))
 }
 
 /// Offline, faulted or no longer enabled: the search cannot go on.
