@@ -265,3 +265,45 @@ async fn a_blocked_joint_stalls_its_move_instead_of_arriving() {
         d.angle_deg
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_move_says_what_it_cannot_apply_and_never_exceeds_a_speed_cap() {
+    let b = start(2, None).await;
+    enable(&b, 2).await;
+    // Waypoints time themselves: a duration beside them would be ignored.
+    let r = b
+        .server
+        .post(
+            "/api/v1/moves",
+            json!({"joints": [{"bus": "sim0", "id": 2}], "duration_ms": 500,
+                   "waypoints": [{"at_ms": 300, "positions_deg": [10.0]}]}),
+        )
+        .await;
+    assert_eq!(r.problem(422)["field"], "duration_ms", "{}", r.body);
+    // Joint 2 is capped at 6000 rpm in the fixture; a path needing 5200
+    // rpm gets frames with 1.25 x that, capped: never above 6000 rpm.
+    let dist = 40.0;
+    let peak_dps = 5200.0 * jointd::protocol::units::output_deg_per_s(1.0);
+    let ms = (1.875 * dist / peak_dps * 1e3).ceil() as u64;
+    let (status, body) = post_move(&b, 2, dist, ms).await;
+    assert_eq!(status, 201, "{body}");
+    let id = body["id"].as_u64().expect("move id");
+    wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    let frames = b
+        .server
+        .get("/api/v1/buses/sim0/frames?limit=512")
+        .await
+        .ok()
+        .clone();
+    let fastest = frames["frames"]
+        .as_array()
+        .expect("frames")
+        .iter()
+        .filter_map(|f| f["decoded"]["spd_rpm"].as_f64())
+        .fold(0.0, f64::max);
+    assert!(fastest > 0.0, "no speed seen in the frames: {frames}");
+    assert!(
+        fastest <= 6000.0,
+        "a frame carried {fastest} rpm against a 6000 rpm cap"
+    );
+}

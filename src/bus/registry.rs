@@ -45,6 +45,9 @@ pub(crate) struct Entry {
     /// and nothing of the daemon's disabled it since. A power-up state
     /// seen meanwhile is a reset.
     believed_enabled: bool,
+    /// The daemon has sent it an enable: a first INFO_01 showing it driving
+    /// is that enable's doing, not a joint found enabled at start.
+    enabled_by_daemon: bool,
     control_updates: u32,
     telemetry_samples: u32,
     /// Firmware probes (INFO_07 reads) in a row it left unanswered while
@@ -63,6 +66,7 @@ impl Entry {
             measured: None,
             last_sent: None,
             believed_enabled: false,
+            enabled_by_daemon: false,
             control_updates: 0,
             telemetry_samples: 0,
             probe_silences: 0,
@@ -197,6 +201,7 @@ impl Registry {
     /// The daemon enabled the device: no reason to call it disabled.
     pub(crate) fn note_enabled(&mut self, id: u8) {
         if let Some(e) = self.entries.get_mut(&id) {
+            e.enabled_by_daemon = true;
             e.state.target_sent = None;
             e.state.target_known = true;
             e.state.disabled_reason = None;
@@ -350,7 +355,7 @@ fn on_info01(
     let driving = drives_motor(info.fsm);
     // The first INFO_01 decides whether the target is known; later, a
     // device not driving its motor holds no target at all.
-    effect.found_enabled = before.is_none() && driving;
+    effect.found_enabled = before.is_none() && driving && !entry.enabled_by_daemon;
     if before.is_none() || !driving {
         entry.state.target_known = !driving;
     }
@@ -490,6 +495,20 @@ mod tests {
         assert!(matches!(ev[1], BusEvent::DeviceOffline { dev_id: 4, .. }));
         r.on_reply(&info01(4, 0, 0), now, true, &mut ev);
         assert!(r.is_online(4), "comes back by itself");
+    }
+
+    #[test]
+    fn a_joint_the_daemon_enabled_before_its_first_status_is_not_found_enabled() {
+        let mut r = Registry::new("b", 3);
+        let mut ev = Vec::new();
+        let now = Instant::now();
+        r.expect(2);
+        r.expect(3);
+        r.note_enabled(2);
+        let ours = r.on_reply(&info01(2, fsm::RUN, 0), now, true, &mut ev);
+        assert!(!ours.found_enabled, "the daemon's own enable");
+        let before_us = r.on_reply(&info01(3, fsm::RUN, 0), now, true, &mut ev);
+        assert!(before_us.found_enabled, "enabled before the daemon started");
     }
 
     #[test]

@@ -377,6 +377,22 @@ fn waypoints(req: &MoveRequest) -> ApiResult<Vec<(Option<f64>, Vec<f64>)>> {
             if list.is_empty() {
                 return Err(ApiError::invalid("waypoints", "waypoints is empty"));
             }
+            // Each waypoint says when it is reached: a duration would be
+            // ignored, and a caller who gave one expects it to count.
+            for (field, given) in [
+                ("duration_ms", req.duration_ms.is_some()),
+                ("max_velocity_dps", req.max_velocity_dps.is_some()),
+                ("max_acceleration_dps2", req.max_acceleration_dps2.is_some()),
+            ] {
+                if given {
+                    return Err(ApiError::invalid(
+                        field,
+                        format!(
+                            "{field} does not apply to waypoints: each waypoint's at_ms times it"
+                        ),
+                    ));
+                }
+            }
             Ok(list
                 .iter()
                 .map(|w| (Some(w.at_ms), w.positions_deg.clone()))
@@ -512,5 +528,13 @@ fn speed_limit(state: &AppState, bus: &BusHandle, r: &JointRef, peak_dps: f64) -
     let rpm = limits.max_rpm.map_or(rpm, |max| rpm.min(max));
     let snap = bus.snapshot();
     let fw = snap.devices.get(&r.id).map(firmware_of).unwrap_or_default();
-    units::speed_limit_to_raw(rpm, fw).map_err(|e| ApiError::from_unit("duration_ms", e))
+    let raw =
+        units::speed_limit_to_raw(rpm, fw).map_err(|e| ApiError::from_unit("duration_ms", e))?;
+    // The wire's Q15 step is ~1.5 rpm: rounding must not carry the frames
+    // past the limit they were capped at.
+    Ok(if units::speed_rpm(raw, fw) > rpm && raw > 0 {
+        raw - 1
+    } else {
+        raw
+    })
 }
