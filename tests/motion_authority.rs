@@ -17,16 +17,28 @@ use jointd::sim::Fault;
 use serde_json::{json, Value};
 use support::sim_bus::{start, SimBus, WAIT};
 
+/// Enables `id` and waits until it runs. A loaded host can lose the
+/// enable's read-back (504 device-timeout) over the pty: asked again then.
 async fn enable(b: &SimBus, id: u8) {
-    let r = b
-        .server
-        .post(
-            &format!("/api/v1/buses/sim0/devices/{id}/enable"),
-            json!({}),
-        )
-        .await;
-    assert!(r.status.is_success(), "enable {id}: {}", r.body);
-    b.wait_fsm(id, fsm::RUN).await;
+    for attempt in 1..=3 {
+        let r = b
+            .server
+            .post(
+                &format!("/api/v1/buses/sim0/devices/{id}/enable"),
+                json!({}),
+            )
+            .await;
+        if r.status.is_success() {
+            b.wait_fsm(id, fsm::RUN).await;
+            return;
+        }
+        assert!(
+            r.status.as_u16() == 504 && attempt < 3,
+            "enable {id}: {} {}",
+            r.status,
+            r.body
+        );
+    }
 }
 
 async fn post_move(b: &SimBus, id: u8, deg: f64, ms: u64) -> (u16, Value) {
