@@ -16,10 +16,10 @@ use crate::config_locate::{key_in_table_array, table_array_line};
 use tokio::signal::unix::{signal, SignalKind};
 
 use crate::bus::{spawn_bus, spawn_bus_on, AdapterSetting, BusConfig, BusError, BusHandle};
-use crate::http::limits::{LimitError, LimitRule, SoftLimits};
+use crate::control::limits::{LimitError, LimitRule, SoftLimits};
+use crate::control::teleop::{WatchdogDefault, MAX_HOLD, MIN_HOLD};
 use crate::http::policy::{RequestPolicy, DEFAULT_MAX_BODY_BYTES};
 use crate::http::state::StateOptions;
-use crate::http::teleop::{WatchdogDefault, MAX_HOLD, MIN_HOLD};
 use crate::http::{app, AppState};
 use crate::protocol::is_device_id;
 use crate::sim::{AdapterModel, Firmware, SimConfig, SimError, SimHandle, Simulator};
@@ -304,7 +304,7 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     let options = StateOptions {
         ros2: ros2
             .as_ref()
-            .map(|_| std::sync::Arc::new(crate::http::ros2_stats::Ros2Stats::default())),
+            .map(|_| std::sync::Arc::new(crate::control::ros2_stats::Ros2Stats::default())),
         hands: Some(std::sync::Arc::new(poses)),
         web_dir: args.web_dir.clone().or(file.web_dir),
         joint_names: joint_names(&file.joints, args)?,
@@ -585,7 +585,7 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     // graph sees its tokens go).
     let bridge = match (plan.ros2, ros2_stats) {
         (Some(cfg), Some(stats)) => Some(
-            crate::ros2::start(state.clone(), cfg, stats)
+            crate::ros2::start(state.control().clone(), cfg, stats)
                 .await
                 .map_err(|e| DaemonError::Policy(e.to_string()))?,
         ),

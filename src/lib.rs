@@ -74,6 +74,7 @@ pub mod bench;
 pub mod bus;
 pub mod cli;
 mod config_locate;
+pub mod control;
 pub mod daemon;
 pub mod hands;
 pub mod histogram;

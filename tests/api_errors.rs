@@ -6,7 +6,7 @@ mod support;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use jointd::http::limits::{LimitRule, SoftLimits};
+use jointd::control::limits::{LimitRule, SoftLimits};
 use jointd::http::AppState;
 use serde_json::json;
 use support::fake_bus::FakeBus;

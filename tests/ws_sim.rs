@@ -366,8 +366,8 @@ async fn auth_applies_to_the_websocket() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn config_default_watchdog_and_joint_names() {
+    use jointd::control::teleop::{WatchdogDefault, WatchdogPolicy};
     use jointd::http::state::StateOptions;
-    use jointd::http::teleop::{WatchdogDefault, WatchdogPolicy};
     let bus = sim_bus::start(2, None).await;
     let mut options = StateOptions::default();
     options

@@ -115,12 +115,8 @@ impl Swing {
             .ids
             .iter()
             .enumerate()
-            .map(|(joint, id)| Follower {
-                dev_id: *id,
-                mv: mv.clone(),
-                joint,
-                spd_ref,
-            })
+            // Under each joint's current epoch, as the control core admits a move.
+            .map(|(joint, id)| Follower::new(*id, mv.clone(), joint, spd_ref, bus.grant(*id).epoch))
             .collect();
         bus.follow(followers);
         let end = mv.start + MOVE;

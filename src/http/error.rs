@@ -30,6 +30,7 @@ use serde::Serialize;
 use utoipa::ToSchema;
 
 use crate::bus::BusError;
+use crate::control::ControlError;
 use crate::protocol::units::UnitError;
 
 /// Media type of every error body.
@@ -416,6 +417,47 @@ fn bus_problem(err: &BusError) -> (StatusCode, &'static str, &'static str) {
             "bus-unavailable",
             "Bus owner unavailable",
         ),
+    }
+}
+
+/// The control core's refusals: each kind its status, once.
+impl From<ControlError> for ApiError {
+    fn from(err: ControlError) -> Self {
+        match err {
+            ControlError::Invalid {
+                kind,
+                field,
+                detail,
+                allowed,
+            } => {
+                let e = Self::new(
+                    StatusCode::UNPROCESSABLE_ENTITY,
+                    kind.name(),
+                    kind.title(),
+                    detail,
+                )
+                .with_field(field);
+                match allowed {
+                    Some(a) => e.with_range(a.min, a.max, &a.unit),
+                    None => e,
+                }
+            }
+            ControlError::NotFound { kind, detail } => Self::not_found(&kind, detail),
+            ControlError::Conflict {
+                kind,
+                title,
+                detail,
+                field,
+            } => {
+                let e = Self::conflict(&kind, &title, detail);
+                match field {
+                    Some(f) => e.with_field(f),
+                    None => e,
+                }
+            }
+            ControlError::StateUnwritable(detail) => Self::state_unwritable(detail),
+            ControlError::Bus(e) => e.into(),
+        }
     }
 }
 

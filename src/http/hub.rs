@@ -10,8 +10,8 @@ use std::sync::{Arc, Mutex};
 
 use tokio::sync::broadcast;
 
-use super::teleop::WatchdogEvent;
 use crate::bus::BusSnapshot;
+use crate::control::teleop::WatchdogEvent;
 
 /// Watchdog events a slow connection may fall behind on before it counts drops.
 const EVENT_BACKLOG: usize = 256;

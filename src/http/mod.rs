@@ -11,42 +11,29 @@
 //! - [`api`]: the REST areas (buses, devices, control, config, e-stop, health) and the OpenAPI document.
 //! - [`ws`]: the WebSocket endpoint: telemetry streams, setpoint batches, teleop watchdog.
 //! - [`web`]: the embedded dashboard (or `--web-dir` while developing).
-//! - [`state`]: [`AppState`]: the bus handles by name, soft limits, token, options; path guards.
+//! - [`state`]: [`AppState`]: the control core ([`crate::control::Control`], by `Deref`)
+//!   and what only HTTP needs: token, WebSocket hub, host/origin policy; path guards.
 //! - [`error`]: [`ApiError`], RFC 9457 problem details; the one place that picks HTTP statuses.
 //! - [`extract`]: JSON/path/query extractors whose rejections are problems.
 //! - [`guard`]: the request guards before auth: Host (DNS rebinding), body size, browser origin.
 //! - [`policy`]: what the guards decide, as pure functions: allow-lists, same-origin, body limit.
 //! - [`auth`]: the bearer-token middleware (everything but the public paths).
 //! - [`paths`]: the URLs outside the OpenAPI routes, and which need no token.
-//! - [`limits`]: per-joint soft limits from the config.
-//! - `move_book`: the moves started through the API, for `GET` and `DELETE` on them.
-//! - `moves`: a move request checked whole and started (REST and WebSocket alike).
 //! - [`telemetry`]: snapshot → physical-unit views (REST and WebSocket).
-//! - [`targets`]: physical targets → raw setpoints, checked (REST and WebSocket).
-//! - [`teleop`]: the watchdog policy, default and event both state and WebSocket use.
 //! - [`hub`]: what all WebSocket connections share (the state holds it).
 
 pub mod api;
 pub(crate) mod auth;
-pub(crate) mod calibration;
 pub(crate) mod error;
 pub(crate) mod extract;
 pub(crate) mod guard;
-pub(crate) mod homing;
-pub(crate) mod homing_book;
 pub(crate) mod hub;
-pub mod limits;
-pub(crate) mod move_book;
-pub(crate) mod moves;
 pub(crate) mod paths;
 pub mod policy;
 pub(crate) mod recording_book;
 pub(crate) mod recordings;
-pub mod ros2_stats;
 pub mod state;
-pub(crate) mod targets;
 pub(crate) mod telemetry;
-pub mod teleop;
 pub(crate) mod web;
 pub mod ws;
 
@@ -192,5 +179,5 @@ fn panic_to_problem(_: Box<dyn std::any::Any + Send + 'static>) -> axum::respons
 /// Convenience for the daemon and tests: state from handles with no limits
 /// and no token.
 pub fn state_for(buses: Vec<BusHandle>) -> AppState {
-    AppState::new(buses, limits::SoftLimits::default(), None)
+    AppState::new(buses, crate::control::limits::SoftLimits::default(), None)
 }

@@ -60,7 +60,7 @@ pub(crate) fn start(state: &AppState, req: &RecordingRequest) -> ApiResult<Recor
         Some(names) => names
             .iter()
             .map(|n| state.bus(n).cloned())
-            .collect::<ApiResult<_>>()?,
+            .collect::<Result<_, crate::control::ControlError>>()?,
         None => state.buses().cloned().collect(),
     };
     let dir = state.recordings_dir();

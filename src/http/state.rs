@@ -5,19 +5,20 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::Instant;
 
-use super::error::{ApiError, ApiResult};
+use super::error::ApiResult;
 use super::hub::WsHub;
-use super::limits::{JointLimits, SoftLimits};
 use super::policy::{RefusalLog, RequestPolicy};
-use super::teleop::WatchdogDefault;
 use crate::bus::firmware::FirmwareSource;
 use crate::bus::handle::DeviceState;
-use crate::bus::handle::LinkState;
-use crate::bus::{BusError, BusHandle, BusSnapshot};
+use crate::bus::BusHandle;
+use crate::control::limits::SoftLimits;
+use crate::control::teleop::WatchdogDefault;
+use crate::control::Control;
 use crate::protocol::params::Revision;
-use crate::protocol::{is_device_id, MAX_DEVICE_ID, MIN_DEVICE_ID};
 
-/// Options of the config file that handlers read.
+pub use crate::control::joints::{device_id, known_device};
+
+/// Options of the config file: the control core's, and the HTTP layer's own.
 #[derive(Debug, Clone, Default)]
 pub struct StateOptions {
     /// The named hands and their saved poses.
@@ -32,82 +33,68 @@ pub struct StateOptions {
     /// directory under the system's temporary one.
     pub recordings_dir: Option<std::path::PathBuf>,
     /// The ROS 2 bridge's counters, when it runs.
-    pub ros2: Option<Arc<crate::http::ros2_stats::Ros2Stats>>,
+    pub ros2: Option<Arc<crate::control::ros2_stats::Ros2Stats>>,
     /// The devices each bus was configured with (its `ids`): the ones the
     /// daemon manages. A bus absent here, or with no ids (it scans for its
     /// devices), manages every device it knows.
     pub managed: BTreeMap<String, Vec<u8>>,
 }
 
+/// The HTTP layer's own options.
+#[derive(Debug, Clone, Default)]
+struct HttpOptions {
+    web_dir: Option<std::path::PathBuf>,
+    policy: RequestPolicy,
+}
+
+/// What every handler shares: the control core (every bus, limit and job,
+/// reached through `Deref`) and what only HTTP needs.
 #[derive(Clone)]
 pub struct AppState {
     inner: Arc<Inner>,
 }
 
 struct Inner {
-    buses: BTreeMap<String, BusHandle>,
-    limits: SoftLimits,
+    control: Arc<Control>,
     token: Option<String>,
     started: Instant,
     ws: WsHub,
     refusals: RefusalLog,
-    options: std::sync::OnceLock<StateOptions>,
-    moves: crate::http::move_book::MoveBook,
-    homings: crate::http::homing_book::HomingBook,
+    options: std::sync::OnceLock<HttpOptions>,
     recordings: crate::http::recording_book::RecordingBook,
+}
+
+impl std::ops::Deref for AppState {
+    type Target = Control;
+
+    fn deref(&self) -> &Control {
+        &self.inner.control
+    }
 }
 
 impl AppState {
     /// An empty token counts as none.
     pub fn new(buses: Vec<BusHandle>, limits: SoftLimits, token: Option<String>) -> Self {
-        let buses = buses
-            .into_iter()
-            .map(|h| (h.name().to_owned(), h))
-            .collect();
         Self {
             inner: Arc::new(Inner {
-                buses,
-                limits,
+                control: Arc::new(Control::new(buses, limits)),
                 token: token.filter(|t| !t.is_empty()),
                 started: Instant::now(),
                 ws: WsHub::default(),
                 refusals: RefusalLog::default(),
                 options: std::sync::OnceLock::new(),
-                moves: Default::default(),
-                homings: Default::default(),
                 recordings: Default::default(),
             }),
         }
     }
 
-    pub fn buses(&self) -> impl Iterator<Item = &BusHandle> {
-        self.inner.buses.values()
-    }
-
-    pub fn bus(&self, name: &str) -> ApiResult<&BusHandle> {
-        self.inner
-            .buses
-            .get(name)
-            .ok_or_else(|| ApiError::unknown_bus(name))
+    /// The control core, shared with the jobs it starts.
+    pub fn control(&self) -> &Arc<Control> {
+        &self.inner.control
     }
 
     pub fn token(&self) -> Option<&str> {
         self.inner.token.as_deref()
-    }
-
-    /// The named hands and their poses (none configured: an empty store).
-    pub(crate) fn hands(&self) -> Option<&crate::hands::StateStore> {
-        self.options().hands.as_deref()
-    }
-
-    /// The moves started through the API.
-    pub(crate) fn moves(&self) -> &crate::http::move_book::MoveBook {
-        &self.inner.moves
-    }
-
-    /// The homing jobs started through the API.
-    pub(crate) fn homings(&self) -> &crate::http::homing_book::HomingBook {
-        &self.inner.homings
     }
 
     /// The recordings started through the API.
@@ -115,93 +102,44 @@ impl AppState {
         &self.inner.recordings
     }
 
-    /// Names and calibrations of the joints as every edge gives them (REST,
-    /// recordings, ROS 2): a hand's joint name, else the configured name,
-    /// else `<bus>_<id>`.
+    /// Names and calibrations of the joints as every edge gives them.
     pub(crate) fn joint_labeler(&self) -> crate::record::joint_states::Labeler {
-        let state = self.clone();
-        Arc::new(move |bus: &str, id: u8| {
-            let hand_name = state.hands().and_then(|store| {
-                store
-                    .hands()
-                    .iter()
-                    .flat_map(|h| h.joints.iter())
-                    .find(|j| j.bus == bus && j.id == id)
-                    .map(|j| j.name.clone())
-            });
-            let name = hand_name
-                .or_else(|| state.joint_name(bus, id).map(str::to_owned))
-                .unwrap_or_else(|| format!("{bus}_{id}"));
-            (name, state.calibration(bus, id))
-        })
-    }
-
-    /// The ROS 2 bridge's counters, when it runs.
-    pub(crate) fn ros2(&self) -> Option<&crate::http::ros2_stats::Ros2Stats> {
-        self.options().ros2.as_deref()
-    }
-
-    /// Where recordings are written.
-    pub(crate) fn recordings_dir(&self) -> std::path::PathBuf {
-        self.options().recordings_dir.clone().unwrap_or_else(|| {
-            std::env::temp_dir().join(format!("jointd-recordings-{}", std::process::id()))
-        })
-    }
-
-    pub fn limits(&self, bus: &str, id: u8) -> JointLimits {
-        self.inner.limits.for_joint(bus, id)
-    }
-
-    /// Whether the daemon manages device `id` of `bus`: one of the bus's
-    /// configured ids, or any device on a bus configured with none.
-    pub(crate) fn managed(&self, bus: &str, id: u8) -> bool {
-        self.options()
-            .managed
-            .get(bus)
-            .filter(|ids| !ids.is_empty())
-            .map_or(true, |ids| ids.contains(&id))
-    }
-
-    /// The calibration of joint `id` on `bus`: how its angles read at the API.
-    pub(crate) fn calibration(&self, bus: &str, id: u8) -> crate::hands::Calibration {
-        self.hands()
-            .map_or(crate::hands::Calibration::IDENTITY, |store| {
-                store.calibration(bus, id)
-            })
+        self.inner.control.joint_labeler()
     }
 
     /// The daemon's options beyond buses, limits and token (set once, at
     /// start; a second call is refused and gets its options back).
     pub fn set_options(&self, options: StateOptions) -> Result<(), Box<StateOptions>> {
-        self.inner.options.set(options).map_err(Box::new)
+        let http = HttpOptions {
+            web_dir: options.web_dir.clone(),
+            policy: options.policy.clone(),
+        };
+        let control = crate::control::Options {
+            hands: options.hands.clone(),
+            joint_names: options.joint_names.clone(),
+            watchdog: options.watchdog,
+            recordings_dir: options.recordings_dir.clone(),
+            ros2: options.ros2.clone(),
+            managed: options.managed.clone(),
+        };
+        if self.inner.control.set_options(control).is_err() || self.inner.options.set(http).is_err()
+        {
+            return Err(Box::new(options));
+        }
+        Ok(())
     }
 
-    fn options(&self) -> &StateOptions {
-        static DEFAULTS: std::sync::OnceLock<StateOptions> = std::sync::OnceLock::new();
+    fn options(&self) -> &HttpOptions {
+        static DEFAULTS: std::sync::OnceLock<HttpOptions> = std::sync::OnceLock::new();
         self.inner
             .options
             .get()
-            .unwrap_or_else(|| DEFAULTS.get_or_init(StateOptions::default))
+            .unwrap_or_else(|| DEFAULTS.get_or_init(HttpOptions::default))
     }
 
     /// Serve the dashboard from this folder instead of the embedded copy.
     pub fn web_dir(&self) -> Option<&std::path::PathBuf> {
         self.options().web_dir.as_ref()
-    }
-
-    /// The configured name of a joint (`[[joint]]` in the config file).
-    pub fn joint_name(&self, bus: &str, id: u8) -> Option<&str> {
-        let names = &self.options().joint_names;
-        names
-            .get(&(Some(bus.to_owned()), id))
-            .or_else(|| names.get(&(None, id)))
-            .map(String::as_str)
-    }
-
-    /// What applies to a WebSocket client that streams setpoints without
-    /// declaring a watchdog of its own.
-    pub fn watchdog_default(&self) -> WatchdogDefault {
-        self.options().watchdog
     }
 
     /// Which hosts and origins are served, and the body limit.
@@ -222,43 +160,6 @@ impl AppState {
     pub fn uptime_s(&self) -> f64 {
         self.inner.started.elapsed().as_secs_f64()
     }
-}
-
-/// A device id from a path or body: 1..=159, else 422 naming the range.
-pub fn device_id(field: &str, id: i64) -> ApiResult<u8> {
-    u8::try_from(id)
-        .ok()
-        .filter(|id| is_device_id(*id))
-        .ok_or_else(|| {
-            ApiError::out_of_range(
-                field,
-                id as f64,
-                (f64::from(MIN_DEVICE_ID), f64::from(MAX_DEVICE_ID)),
-                "",
-            )
-        })
-}
-
-/// The snapshot entry of a device, or 404; 503 when the bus is down (a bus
-/// whose port is missing knows no device, and saying "unknown device" would
-/// send the user scanning instead of plugging the adapter in).
-pub fn known_device(snap: &BusSnapshot, id: u8) -> ApiResult<&DeviceState> {
-    if let (None, LinkState::Down { reason, .. }) = (snap.devices.get(&id), &snap.link) {
-        return Err(BusError::Down {
-            bus: snap.name.clone(),
-            reason: reason.clone(),
-        }
-        .into());
-    }
-    snap.devices.get(&id).ok_or_else(|| {
-        ApiError::not_found(
-            "unknown-device",
-            format!(
-                "device {id} is not known on bus {} (scan the bus to discover devices)",
-                snap.name
-            ),
-        )
-    })
 }
 
 /// `{bus}` path parameter.
@@ -331,7 +232,7 @@ pub(crate) fn require_revision(
     let need_s = need.as_str();
     match dev.firmware {
         Some(f) if f.revision >= need => Ok(()),
-        Some(f) => Err(ApiError::invalid(
+        Some(f) => Err(super::error::ApiError::invalid(
             field,
             format!(
                 "{what} needs rev {need_s} firmware; device {id} runs {} ({})",
@@ -342,7 +243,7 @@ pub(crate) fn require_revision(
                 }
             ),
         )),
-        None => Err(ApiError::conflict(
+        None => Err(super::error::ApiError::conflict(
             "firmware-unknown",
             "Firmware revision not known yet",
             format!(

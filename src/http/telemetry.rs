@@ -11,28 +11,14 @@ use crate::bus::handle::DeviceState;
 use crate::bus::Setpoint;
 use crate::hands::Calibration;
 use crate::protocol::params::Revision;
-use crate::protocol::status::{
-    active_fault, fault_history, fault_name, fsm, fsm_name, fsm_name_in,
-};
+use crate::protocol::status::{active_fault, fault_history, fault_name, fsm_name, fsm_name_in};
 use crate::protocol::units::{self, FirmwareVersion};
 use crate::protocol::CtrlMode;
 use crate::protocol::{Info01, Info02};
 
-/// The speed base to assume before a device has reported its firmware: the
-/// newer 50000 rpm base, so an rpm request maps to at most the asked speed
-/// on older firmware (40000 rpm base), never more.
-pub(crate) const ASSUMED_FIRMWARE: FirmwareVersion = FirmwareVersion::SPEED_BASE_50K;
-
-/// The firmware a device reported in INFO_01, or [`ASSUMED_FIRMWARE`].
-pub(crate) fn firmware_of(dev: &DeviceState) -> FirmwareVersion {
-    dev.firmware_version()
-}
-
-/// Whether the device runs (or is aligning towards running): the states in
-/// which targets and jogs act.
-pub(crate) fn is_enabled(info: &Info01) -> bool {
-    info.fsm == fsm::RUN || info.fsm == fsm::ALIGN
-}
+pub(crate) use crate::control::device::{
+    commanded_or_measured_raw, firmware_of, measured_angle_raw, revision_of, ASSUMED_FIRMWARE,
+};
 
 /// A fault code decoded to names.
 #[derive(Debug, Clone, Serialize, ToSchema)]
@@ -207,11 +193,6 @@ impl RevisionView {
     }
 }
 
-/// The revision a device is known to run, if known.
-pub(crate) fn revision_of(dev: &DeviceState) -> Option<Revision> {
-    dev.firmware.map(|f| f.revision)
-}
-
 /// INFO_01 in the joint's calibrated frame (`cal`).
 pub(crate) fn status_view(
     info: &Info01,
@@ -252,23 +233,5 @@ pub(crate) fn motion_view(
         q_current_a: cal.sign() * units::current_a(info.q_cur),
         raw: hex(&info.to_bytes()),
         age_ms: age_ms(at, now),
-    }
-}
-
-/// Latest angle the daemon knows: INFO_02 if fresher than INFO_01.
-/// Where a joint is headed: the last target sent, else where it was
-/// measured (a move or a pose starts from here).
-pub(crate) fn commanded_or_measured_raw(dev: &DeviceState) -> Option<i16> {
-    dev.target_sent
-        .map(|t| t.pos_ref)
-        .or_else(|| measured_angle_raw(dev))
-}
-
-pub(crate) fn measured_angle_raw(dev: &DeviceState) -> Option<i16> {
-    match (&dev.info01, &dev.info02) {
-        (Some((a, ta)), Some((b, tb))) => Some(if tb >= ta { b.angle } else { a.angle }),
-        (Some((a, _)), None) => Some(a.angle),
-        (None, Some((b, _))) => Some(b.angle),
-        (None, None) => None,
     }
 }

@@ -20,8 +20,8 @@ use super::keys::{self, Kind, NodeIdentity};
 use super::Ros2Stats;
 use crate::bus::BusHandle;
 use crate::bus::BusSnapshot;
-use crate::http::state::AppState;
-use crate::http::teleop::WatchdogPolicy;
+use crate::control::teleop::WatchdogPolicy;
+use crate::control::Control;
 use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
 use crate::record::cdr::{diagnostic_array_cdr, DiagnosticStatus, JointState};
 use crate::record::joint_states::{system_ns, JointStates, Scope};
@@ -66,7 +66,7 @@ fn session_config(cfg: &Ros2Config) -> zenoh::Result<zenoh::Config> {
 
 /// Opens the session and starts publishing and listening.
 pub(super) async fn start(
-    state: AppState,
+    state: Arc<Control>,
     cfg: Ros2Config,
     stats: Arc<Ros2Stats>,
 ) -> zenoh::Result<Bridge> {
@@ -181,7 +181,7 @@ fn now_ns() -> i64 {
 }
 
 /// What gets topics of its own: every bus, or every named hand.
-fn scopes(state: &AppState, cfg: &Ros2Config) -> Vec<(String, Scope)> {
+fn scopes(state: &Arc<Control>, cfg: &Ros2Config) -> Vec<(String, Scope)> {
     match cfg.namespace_by {
         NamespaceBy::Bus => state
             .buses()
@@ -208,7 +208,7 @@ fn scopes(state: &AppState, cfg: &Ros2Config) -> Vec<(String, Scope)> {
 }
 
 /// The buses a scope's joints are on.
-fn buses_of(state: &AppState, scope: &Scope) -> Vec<BusHandle> {
+fn buses_of(state: &Arc<Control>, scope: &Scope) -> Vec<BusHandle> {
     let mut names: Vec<&str> = match scope {
         Scope::Bus(b) => vec![b.as_str()],
         Scope::Hand { joints, .. } => joints.iter().map(|(b, _)| b.as_str()).collect(),
@@ -221,7 +221,7 @@ fn buses_of(state: &AppState, scope: &Scope) -> Vec<BusHandle> {
 }
 
 async fn publish_joint_states(
-    state: AppState,
+    state: Arc<Control>,
     scope: Scope,
     min_gap: Option<Duration>,
     publisher: zenoh::pubsub::Publisher<'static>,
@@ -276,7 +276,7 @@ async fn publish_joint_states(
 
 /// Commands in; the teleoperation watchdog of `[watchdog]` over them.
 async fn take_commands(
-    state: AppState,
+    state: Arc<Control>,
     scope: Scope,
     subscriber: zenoh::pubsub::Subscriber<
         zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>,
@@ -352,11 +352,11 @@ async fn fire_watchdog(bus: &BusHandle, ids: &[u8], policy: WatchdogPolicy) {
         ?policy,
         "ROS 2: joint commands stopped: watchdog"
     );
-    crate::http::teleop::apply_policy(bus, ids.to_vec(), policy).await;
+    crate::control::teleop::apply_policy(bus, ids.to_vec(), policy).await;
 }
 
 async fn publish_diagnostics(
-    state: AppState,
+    state: Arc<Control>,
     publisher: zenoh::pubsub::Publisher<'static>,
     gid: [u8; 16],
     period: Duration,

@@ -6,8 +6,8 @@
 //! joint is refused whole: nothing of it is applied.
 
 use crate::bus::{BusHandle, Setpoint};
-use crate::http::state::AppState;
-use crate::http::targets::{setpoint, TargetRequest};
+use crate::control::targets::{setpoint, TargetRequest};
+use crate::control::Control;
 use crate::protocol::units;
 use crate::record::cdr::JointState;
 use crate::record::joint_states::Scope;
@@ -21,7 +21,7 @@ pub(crate) type BusTargets = (BusHandle, Vec<(u8, Setpoint)>);
 /// The setpoints `cmd` asks of the joints of `scope` (a bus, or a hand on
 /// one or more buses), grouped by bus; or why it is refused.
 pub(crate) fn setpoints(
-    state: &AppState,
+    state: &std::sync::Arc<Control>,
     scope: &Scope,
     cmd: &JointState,
 ) -> Result<Vec<BusTargets>, String> {
@@ -97,7 +97,7 @@ pub(crate) fn setpoints(
         let cal = state.calibration(bus_name, *id);
         let limits = state.limits(bus_name, *id);
         let sp = setpoint(dev, &limits, &cal, &req, &format!("{name}."))
-            .map_err(|e| format!("joint `{name}`: {}", e.problem.detail))?;
+            .map_err(|e| format!("joint `{name}`: {e}"))?;
         out[group].1.push((*id, sp));
     }
     Ok(out)

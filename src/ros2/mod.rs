@@ -30,7 +30,7 @@ use thiserror::Error;
 
 pub use config::{Ros2Config, Ros2Mode};
 
-pub use crate::http::ros2_stats::Ros2Stats;
+pub use crate::control::ros2_stats::Ros2Stats;
 
 #[derive(Debug, Error)]
 pub enum Ros2Error {
@@ -52,7 +52,7 @@ pub struct Bridge;
 /// Starts the bridge for every bus of `state`.
 #[cfg(feature = "ros2")]
 pub async fn start(
-    state: crate::http::AppState,
+    state: std::sync::Arc<crate::control::Control>,
     cfg: Ros2Config,
     stats: Arc<Ros2Stats>,
 ) -> Result<Bridge, Ros2Error> {
@@ -64,7 +64,7 @@ pub async fn start(
 /// Without the `ros2` feature: says so.
 #[cfg(not(feature = "ros2"))]
 pub async fn start(
-    _state: crate::http::AppState,
+    _state: std::sync::Arc<crate::control::Control>,
     _cfg: Ros2Config,
     _stats: Arc<Ros2Stats>,
 ) -> Result<Bridge, Ros2Error> {

@@ -5,7 +5,7 @@
 use std::time::Duration;
 
 use jointd::bus::{spawn_bus, BusConfig, BusHandle, BusSnapshot, BusThread};
-use jointd::http::limits::{LimitRule, SoftLimits};
+use jointd::control::limits::{LimitRule, SoftLimits};
 use jointd::http::AppState;
 use jointd::sim::{SimConfig, SimHandle, Simulator};
 

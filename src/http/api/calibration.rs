@@ -10,8 +10,8 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
+use crate::control::calibration::{self, CalibrationRequest, CalibrationView};
 use crate::hands::Calibration;
-use crate::http::calibration::{self, CalibrationRequest, CalibrationView};
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::state::{known_device, AppState, DevicePath};

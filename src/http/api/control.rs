@@ -11,17 +11,38 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::openapi::{ErrorResponses, TAG_CONTROL};
 use crate::bus::handle::DeviceState;
 use crate::bus::{BusHandle, BusSnapshot, Setpoint, Targets};
+use crate::control::targets::{ensure_enabled, setpoint, wait_on_wire, TargetRequest};
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::state::{
     device_id, known_device, require_revision, AppState, BusPath, DevicePath,
 };
-use crate::http::targets::{
-    ensure_enabled, setpoint, wait_on_wire, JointTarget, TargetAck, TargetRequest,
-};
 use crate::http::telemetry::{firmware_of, TargetView};
 use crate::protocol::params::Revision;
 use crate::protocol::{CtrlMode, JogDir};
+
+/// What a target request did.
+#[derive(Debug, Serialize, ToSchema)]
+pub(crate) struct TargetAck {
+    #[schema(example = "sim0")]
+    pub bus: String,
+    /// Sequence number of this write in the bus's setpoint store.
+    #[schema(example = 42)]
+    pub seq: u64,
+    /// True when the frame carrying the targets has been written to the
+    /// port (status 200); false when still waiting (status 202).
+    #[schema(example = true)]
+    pub on_wire: bool,
+    pub targets: Vec<JointTarget>,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub(crate) struct JointTarget {
+    #[schema(example = 1)]
+    pub id: u8,
+    #[serde(flatten)]
+    pub target: TargetView,
+}
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()

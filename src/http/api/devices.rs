@@ -12,11 +12,11 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::openapi::{ErrorResponses, TAG_DEVICES};
 use crate::bus::handle::DeviceState;
 use crate::bus::BusError;
+use crate::control::calibration::CalibrationView;
+use crate::control::limits::JointLimits;
 use crate::hands::Calibration;
-use crate::http::calibration::CalibrationView;
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiPath, ApiQuery};
-use crate::http::limits::JointLimits;
 use crate::http::state::{known_device, AppState, BusPath, DevicePath};
 use crate::http::telemetry::{
     disabled_reason, firmware_of, motion_view, reset_view, revision_of, status_view, FaultView,

@@ -13,10 +13,10 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
+use crate::control::moves::{self, MoveJoint, MoveRequest, MoveView};
 use crate::hands::{pose, Hand, HandJoint, LoadNotes, Pose, StateStore};
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
-use crate::http::moves::{self, MoveJoint, MoveRequest, MoveView};
 use crate::http::state::AppState;
 use crate::http::telemetry::commanded_or_measured_raw;
 use crate::motion::Method;

@@ -1,5 +1,5 @@
 //! REST of homing: start a job, read it (the routine is in
-//! [`crate::http::homing`]).
+//! [`crate::control::homing`]).
 
 use axum::extract::State;
 use axum::http::StatusCode;
@@ -9,10 +9,10 @@ use utoipa::IntoParams;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
+use crate::control::homing::{self, HomingRequest};
+use crate::control::homing_book::HomingView;
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiJson, ApiPath};
-use crate::http::homing::{self, HomingRequest};
-use crate::http::homing_book::HomingView;
 use crate::http::state::AppState;
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {
@@ -59,7 +59,7 @@ async fn start_homing(
 ) -> ApiResult<(StatusCode, Json<HomingView>)> {
     Ok((
         StatusCode::ACCEPTED,
-        Json(homing::start(&state, &req).await?),
+        Json(homing::start(state.control(), &req).await?),
     ))
 }
 

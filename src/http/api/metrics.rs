@@ -437,7 +437,7 @@ fn bridge_families(m: &mut Exposition, state: &AppState) {
         "",
         if stats.is_some() { 1.0 } else { 0.0 },
     );
-    type Field = fn(&crate::http::ros2_stats::Ros2Stats) -> &std::sync::atomic::AtomicU64;
+    type Field = fn(&crate::control::ros2_stats::Ros2Stats) -> &std::sync::atomic::AtomicU64;
     let counters: [(&str, &str, Field); 7] = [
         (
             "jointd_ros2_joint_states_total",

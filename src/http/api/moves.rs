@@ -1,4 +1,4 @@
-//! REST of moves: start, read, stop (the logic is in [`crate::http::moves`],
+//! REST of moves: start, read, stop (the logic is in [`crate::control::moves`],
 //! shared with the WebSocket's `move` message).
 
 use axum::extract::State;
@@ -9,9 +9,9 @@ use utoipa::IntoParams;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
+use crate::control::moves::{self, MoveRequest, MoveView};
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiJson, ApiPath};
-use crate::http::moves::{self, MoveRequest, MoveView};
 use crate::http::state::AppState;
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {

@@ -58,7 +58,7 @@ pub(crate) struct Ros2View {
     responses((status = 200, description = "The bridge's counters", body = Ros2View), ErrorResponses))]
 async fn ros2_status(State(state): State<AppState>) -> ApiResult<Json<Ros2View>> {
     let stats = state.ros2();
-    let n = |f: fn(&crate::http::ros2_stats::Ros2Stats) -> &std::sync::atomic::AtomicU64| {
+    let n = |f: fn(&crate::control::ros2_stats::Ros2Stats) -> &std::sync::atomic::AtomicU64| {
         stats.map_or(0, |s| f(s).load(Ordering::Relaxed))
     };
     Ok(Json(Ros2View {

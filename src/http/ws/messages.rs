@@ -5,8 +5,8 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::bus::handle::BusEvent;
-use crate::http::moves::{MoveRequest, MoveView};
-use crate::http::teleop::{WatchdogEvent, WatchdogPolicy};
+use crate::control::moves::{MoveRequest, MoveView};
+use crate::control::teleop::{WatchdogEvent, WatchdogPolicy};
 
 /// Name and version of this protocol, sent in `welcome`.
 pub(crate) const PROTOCOL: &str = "jointd.ws.v1";

@@ -18,10 +18,11 @@ use super::setpoints::{self, WsError, MAX_BATCH};
 use super::telemetry::Subscription;
 use super::watchdog::Watchdog;
 use super::writer::{PendingAck, Writer};
+use crate::control::teleop::{WatchdogEvent, WatchdogPolicy, MAX_HOLD, MIN_HOLD};
+use crate::control::JointRef;
 use crate::http::hub::WsHub;
 use crate::http::state::device_id;
 use crate::http::state::AppState;
-use crate::http::teleop::{JointRef, WatchdogEvent, WatchdogPolicy, MAX_HOLD, MIN_HOLD};
 
 /// Replies (acks, errors) a connection may have queued; beyond, they are dropped and counted.
 const OUT_QUEUE: usize = 64;
@@ -174,7 +175,7 @@ impl Connection {
             ClientMessage::Watchdog(w) => self.arm_watchdog(w),
             ClientMessage::Ping { seq } => self.reply(ServerMessage::Pong { ref_seq: seq }),
             ClientMessage::Move { seq, request } => {
-                match crate::http::moves::start(&self.state, &request).await {
+                match crate::control::moves::start(&self.state, &request).await {
                     Ok(started) => self.reply(ServerMessage::MoveStarted {
                         ref_seq: seq,
                         started,
@@ -283,12 +284,12 @@ async fn apply_policy(state: &AppState, policy: WatchdogPolicy, joints: &[JointR
         let ids: Vec<u8> = joints
             .iter()
             .filter(|j| j.bus == bus.name())
-            .map(|j| j.dev_id)
+            .map(|j| j.id)
             .collect();
         if ids.is_empty() {
             continue;
         }
-        crate::http::teleop::apply_policy(bus, ids, policy).await;
+        crate::control::teleop::apply_policy(bus, ids, policy).await;
     }
 }
 

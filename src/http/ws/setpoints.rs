@@ -7,12 +7,13 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use super::messages::{ErrorCode, SetpointBatch, TargetItem};
+use crate::bus::BusError;
 use crate::bus::{BusSnapshot, Setpoint};
-use crate::http::error::ApiError;
+use crate::control::error::{ControlError, InvalidKind};
+use crate::control::targets::{setpoint, TargetRequest};
+use crate::control::JointRef;
 use crate::http::state::AppState;
 use crate::http::state::{device_id, known_device};
-use crate::http::targets::{setpoint, TargetRequest};
-use crate::http::teleop::JointRef;
 
 /// Most targets one batch may carry (16 joints × a few buses, with room).
 pub(crate) const MAX_BATCH: usize = 256;
@@ -40,23 +41,32 @@ impl WsError {
     }
 }
 
-/// The REST API's problem kinds, as WebSocket error codes.
-impl From<ApiError> for WsError {
-    fn from(e: ApiError) -> Self {
-        let p = e.problem;
-        let kind = p.kind.rsplit(':').next().unwrap_or_default();
-        let code = match (p.status, kind) {
-            (404, "unknown-bus") => ErrorCode::UnknownBus,
-            (404, _) => ErrorCode::UnknownDevice,
-            (422, "soft-limit") => ErrorCode::OutOfLimit,
-            (422, _) => ErrorCode::OutOfRange,
-            (409, _) => ErrorCode::WrongState,
-            _ => ErrorCode::BusError,
+/// The control core's refusals as WebSocket error codes: each kind once,
+/// here, not through HTTP statuses.
+impl From<ControlError> for WsError {
+    fn from(e: ControlError) -> Self {
+        let field = e.field().map(str::to_owned);
+        let code = match &e {
+            ControlError::Invalid { kind, .. } => match kind {
+                InvalidKind::SoftLimit => ErrorCode::OutOfLimit,
+                InvalidKind::Duplicate => ErrorCode::BadMessage,
+                InvalidKind::Value | InvalidKind::OutOfRange | InvalidKind::CalibratedRange => {
+                    ErrorCode::OutOfRange
+                }
+            },
+            ControlError::NotFound { kind, .. } if kind == "unknown-bus" => ErrorCode::UnknownBus,
+            ControlError::NotFound { .. } => ErrorCode::UnknownDevice,
+            ControlError::Conflict { .. } => ErrorCode::WrongState,
+            ControlError::Bus(BusError::UnknownDevice { .. }) => ErrorCode::UnknownDevice,
+            ControlError::Bus(
+                BusError::WrongState(_) | BusError::Refused { .. } | BusError::Preempted,
+            ) => ErrorCode::WrongState,
+            ControlError::Bus(_) | ControlError::StateUnwritable(_) => ErrorCode::BusError,
         };
         WsError {
             code,
-            message: p.detail,
-            field: p.field,
+            message: e.to_string(),
+            field,
         }
     }
 }
@@ -92,7 +102,7 @@ pub(crate) fn apply(state: &AppState, batch: &SetpointBatch) -> Result<Applied, 
         let bus = state.bus(&name)?;
         joints.extend(targets.iter().map(|(id, _)| JointRef {
             bus: name.clone(),
-            dev_id: *id,
+            id: *id,
         }));
         writes.push((name, bus.set_targets(&targets)));
     }

@@ -7,7 +7,8 @@ use std::time::Duration;
 
 use tokio::time::Instant;
 
-use crate::http::teleop::{JointRef, WatchdogPolicy};
+use crate::control::teleop::WatchdogPolicy;
+use crate::control::JointRef;
 
 #[derive(Debug, Default)]
 pub(crate) struct Watchdog {
@@ -73,7 +74,7 @@ mod tests {
     fn joint(id: u8) -> JointRef {
         JointRef {
             bus: "b".into(),
-            dev_id: id,
+            id,
         }
     }
 

@@ -8,6 +8,8 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
+use super::JointRef;
+
 /// Shortest and longest hold timeouts a client (or the config) may declare.
 pub const MIN_HOLD: Duration = Duration::from_millis(20);
 pub const MAX_HOLD: Duration = Duration::from_millis(10_000);
@@ -41,13 +43,6 @@ impl Default for WatchdogDefault {
     }
 }
 
-/// A joint, by bus and id.
-#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
-pub struct JointRef {
-    pub bus: String,
-    pub dev_id: u8,
-}
-
 /// Sent to every connection when one connection's stream stopped.
 #[derive(Debug, Clone, Serialize)]
 pub struct WatchdogEvent {
@@ -58,6 +53,7 @@ pub struct WatchdogEvent {
     pub policy: WatchdogPolicy,
     /// `why`: `timeout` or `closed`.
     pub why: &'static str,
+    #[serde(serialize_with = "super::joints::as_dev_ids")]
     pub joints: Vec<JointRef>,
 }
 
@@ -84,7 +80,7 @@ pub(crate) async fn apply_policy(
                     Some((
                         d.dev_id,
                         crate::bus::Setpoint {
-                            pos_ref: crate::http::telemetry::measured_angle_raw(d)?,
+                            pos_ref: crate::control::device::measured_angle_raw(d)?,
                             spd_ref: d.target_sent?.spd_ref,
                         },
                     ))

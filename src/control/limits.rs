@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use utoipa::ToSchema;
 
-use super::error::ApiError;
+use super::error::ControlError;
 use crate::hands::Calibration;
 use crate::protocol::units::MAX_ANGLE_DEG;
 
@@ -127,31 +127,38 @@ impl JointLimits {
         field: &str,
         deg: f64,
         who: &str,
-    ) -> Result<f64, ApiError> {
+    ) -> Result<f64, ControlError> {
         if !deg.is_finite() {
-            return Err(ApiError::invalid(field, format!("{field} must be finite")));
+            return Err(ControlError::invalid(
+                field,
+                format!("{field} must be finite"),
+            ));
         }
         if let Some((lo, hi)) = cal.range_deg.filter(|(lo, hi)| deg < *lo || deg > *hi) {
-            return Err(ApiError::calibrated_range(field, deg, (lo, hi), who));
+            return Err(ControlError::calibrated_range(field, deg, (lo, hi), who));
         }
         let device = cal.to_device(deg);
         if device.abs() > MAX_ANGLE_DEG {
             let range = cal.range_to_joint((-MAX_ANGLE_DEG, MAX_ANGLE_DEG));
-            return Err(ApiError::out_of_range(field, deg, range, "deg"));
+            return Err(ControlError::out_of_range(field, deg, range, "deg"));
         }
         if device < self.min_deg || device > self.max_deg {
             let range = cal.range_to_joint((self.min_deg, self.max_deg));
-            return Err(ApiError::soft_limit(field, deg, range, "deg", who));
+            return Err(ControlError::soft_limit(field, deg, range, "deg", who));
         }
         Ok(device)
     }
 
     /// Refuses a speed whose magnitude exceeds `max_rpm`.
-    pub fn check_speed(&self, field: &str, rpm: f64, who: &str) -> Result<(), ApiError> {
+    pub fn check_speed(&self, field: &str, rpm: f64, who: &str) -> Result<(), ControlError> {
         match self.max_rpm {
-            Some(max) if rpm.abs() > max => {
-                Err(ApiError::soft_limit(field, rpm, (-max, max), "rpm", who))
-            }
+            Some(max) if rpm.abs() > max => Err(ControlError::soft_limit(
+                field,
+                rpm,
+                (-max, max),
+                "rpm",
+                who,
+            )),
             _ => Ok(()),
         }
     }
@@ -192,8 +199,10 @@ mod tests {
             .check_joint_position(&Calibration::IDENTITY, "position_deg", 20.0, "joint 3")
             .is_ok());
         let err = j3.check_speed("speed_rpm", -6000.0, "joint 3").unwrap_err();
-        assert_eq!(err.problem.status, 422);
-        assert_eq!(err.problem.allowed.unwrap().max, 5000.0);
+        let ControlError::Invalid { allowed, .. } = err else {
+            panic!("a refused value, not {err:?}");
+        };
+        assert_eq!(allowed.map(|a| a.max), Some(5000.0));
     }
 
     #[test]

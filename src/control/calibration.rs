@@ -5,9 +5,9 @@
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+use crate::control::error::{ControlError, ControlResult};
+use crate::control::Control;
 use crate::hands::Calibration;
-use crate::http::error::{ApiError, ApiResult};
-use crate::http::state::AppState;
 
 /// A joint's calibration: `joint = sign · (device − offset_deg)`, sign −1
 /// when `flip`.
@@ -61,7 +61,7 @@ pub(crate) struct CalibrationRequest {
 }
 
 impl CalibrationRequest {
-    pub(crate) fn checked(&self) -> ApiResult<Calibration> {
+    pub(crate) fn checked(&self) -> ControlResult<Calibration> {
         checked(Calibration {
             offset_deg: self.offset_deg.unwrap_or(0.0),
             flip: self.flip.unwrap_or(false),
@@ -72,23 +72,25 @@ impl CalibrationRequest {
 }
 
 /// A calibration that could be applied, else 422 naming the field.
-fn checked(cal: Calibration) -> ApiResult<Calibration> {
+fn checked(cal: Calibration) -> ControlResult<Calibration> {
     cal.checked()
-        .map_err(|e| ApiError::invalid(e.field(), e.to_string()))
+        .map_err(|e| ControlError::invalid(e.field(), e.to_string()))
 }
 
 /// Saves the calibration of joint `id` on `bus` in the state file (the
 /// identity removes it); 422 when it could not be applied (checked here, so
 /// every way of saving one is: a request, homing), 503 when it cannot be
 /// written; either way nothing changed.
-pub(crate) fn save(state: &AppState, bus: &str, id: u8, cal: Calibration) -> ApiResult<()> {
+pub(crate) fn save(state: &Control, bus: &str, id: u8, cal: Calibration) -> ControlResult<()> {
     let cal = checked(cal)?;
     let store = state.hands().ok_or_else(|| {
-        ApiError::state_unwritable("this daemon keeps no saved state: the calibration was not set")
+        ControlError::state_unwritable(
+            "this daemon keeps no saved state: the calibration was not set",
+        )
     })?;
-    store
-        .set_calibration(bus, id, cal)
-        .map_err(|e| ApiError::state_unwritable(format!("{e}; the calibration was not saved")))?;
+    store.set_calibration(bus, id, cal).map_err(|e| {
+        ControlError::state_unwritable(format!("{e}; the calibration was not saved"))
+    })?;
     tracing::info!(bus, id, offset_deg = cal.offset_deg, flip = cal.flip, range_deg = ?cal.range_deg,
         homed = cal.homed_at_ms.is_some(), "calibration saved");
     Ok(())

@@ -12,12 +12,13 @@ use utoipa::ToSchema;
 use crate::bus::handle::DeviceState;
 use crate::bus::motion::Follower;
 use crate::bus::BusHandle;
+use crate::control::device::{commanded_or_measured_raw, firmware_of};
+use crate::control::error::{ControlError, ControlResult};
+use crate::control::joints::{known_device, resolve_joint};
+use crate::control::move_book::Booked;
+use crate::control::targets::admit_positions;
+use crate::control::{Control, JointRef};
 use crate::hands::Calibration;
-use crate::http::error::{ApiError, ApiResult};
-use crate::http::move_book::{Booked, JointRef};
-use crate::http::state::{device_id, known_device, AppState};
-use crate::http::targets::admit_positions;
-use crate::http::telemetry::{commanded_or_measured_raw, firmware_of};
 use crate::motion::{Method, MoveState, Path, RunningMove};
 use crate::protocol::{units, CtrlMode};
 
@@ -114,7 +115,7 @@ pub(crate) struct MoveView {
 
 /// Checks `req` whole and starts the move; its view, with the moves it
 /// took joints from.
-pub(crate) async fn start(state: &AppState, req: &MoveRequest) -> ApiResult<MoveView> {
+pub(crate) async fn start(state: &Control, req: &MoveRequest) -> ControlResult<MoveView> {
     let plan = plan(state, req)?;
     // Each joint's motion epoch now: the move drives it only while that
     // epoch lasts (an e-stop, disable, reset, fault, mode change or enable
@@ -158,7 +159,7 @@ pub(crate) async fn start(state: &AppState, req: &MoveRequest) -> ApiResult<Move
 }
 
 /// Stops move `id` (its joints hold where they are); its view.
-pub(crate) fn stop(state: &AppState, id: u64) -> ApiResult<MoveView> {
+pub(crate) fn stop(state: &Control, id: u64) -> ControlResult<MoveView> {
     let booked = booked(state, id)?;
     if booked.mv.end(MoveState::Stopped, "stopped by its caller") {
         tracing::info!(move_id = id, "move stopped by its caller");
@@ -174,17 +175,17 @@ pub(crate) fn stop(state: &AppState, id: u64) -> ApiResult<MoveView> {
 }
 
 /// Move `id` as it stands.
-pub(crate) fn get(state: &AppState, id: u64) -> ApiResult<MoveView> {
+pub(crate) fn get(state: &Control, id: u64) -> ControlResult<MoveView> {
     let booked = booked(state, id)?;
     Ok(view(&booked.mv, &booked.joints))
 }
 
 /// 409 while the joint aligns after its first enable: it stands still
 /// until it runs, and a path started meanwhile would leave it behind.
-fn ensure_running(bus: &BusHandle, dev: &DeviceState) -> ApiResult<()> {
+fn ensure_running(bus: &BusHandle, dev: &DeviceState) -> ControlResult<()> {
     match dev.info01.as_ref() {
         Some((info, _)) if info.fsm == crate::protocol::status::fsm::ALIGN => {
-            Err(ApiError::conflict(
+            Err(ControlError::conflict(
                 "not-enabled",
                 "Joint still aligning",
                 format!(
@@ -199,11 +200,11 @@ fn ensure_running(bus: &BusHandle, dev: &DeviceState) -> ApiResult<()> {
     }
 }
 
-fn booked(state: &AppState, id: u64) -> ApiResult<Booked> {
+fn booked(state: &Control, id: u64) -> ControlResult<Booked> {
     state
         .moves()
         .get(id)
-        .ok_or_else(|| ApiError::not_found("unknown-move", format!("no move with id {id}")))
+        .ok_or_else(|| ControlError::not_found("unknown-move", format!("no move with id {id}")))
 }
 
 fn view(mv: &RunningMove, joints: &[JointRef]) -> MoveView {
@@ -239,9 +240,9 @@ struct Plan<'a> {
     by_bus: Vec<(&'a BusHandle, Vec<OnBus>)>,
 }
 
-fn plan<'a>(state: &'a AppState, req: &MoveRequest) -> ApiResult<Plan<'a>> {
+fn plan<'a>(state: &'a Control, req: &MoveRequest) -> ControlResult<Plan<'a>> {
     if req.joints.is_empty() || req.joints.len() > MAX_JOINTS {
-        return Err(ApiError::invalid(
+        return Err(ControlError::invalid(
             "joints",
             format!(
                 "a move needs 1..={MAX_JOINTS} joints, got {}",
@@ -256,7 +257,7 @@ fn plan<'a>(state: &'a AppState, req: &MoveRequest) -> ApiResult<Plan<'a>> {
         let r = joint_ref(state, i, j)?;
         let (bus, id) = (state.bus(&r.bus)?, r.id);
         if joints.contains(&r) {
-            return Err(ApiError::invalid(
+            return Err(ControlError::invalid(
                 &format!("joints[{i}]"),
                 format!("joint {id} of bus `{}` appears twice", r.bus),
             ));
@@ -264,7 +265,7 @@ fn plan<'a>(state: &'a AppState, req: &MoveRequest) -> ApiResult<Plan<'a>> {
         let snap = bus.snapshot();
         let dev = known_device(&snap, id)?;
         if dev.mode.is_some_and(|m| m != CtrlMode::Position) {
-            return Err(ApiError::conflict(
+            return Err(ControlError::conflict(
                 "wrong-mode",
                 "Joint not in position mode",
                 format!(
@@ -274,7 +275,7 @@ fn plan<'a>(state: &'a AppState, req: &MoveRequest) -> ApiResult<Plan<'a>> {
             ));
         }
         let from = commanded_or_measured_raw(dev).ok_or_else(|| {
-            ApiError::conflict(
+            ControlError::conflict(
                 "no-position",
                 "Position unknown",
                 format!(
@@ -310,7 +311,7 @@ fn plan<'a>(state: &'a AppState, req: &MoveRequest) -> ApiResult<Plan<'a>> {
 }
 
 /// A joint named by bus and id, or by hand and joint name.
-fn joint_ref(state: &AppState, i: usize, j: &MoveJoint) -> ApiResult<JointRef> {
+fn joint_ref(state: &Control, i: usize, j: &MoveJoint) -> ControlResult<JointRef> {
     resolve_joint(
         state,
         &format!("joints[{i}]"),
@@ -321,61 +322,18 @@ fn joint_ref(state: &AppState, i: usize, j: &MoveJoint) -> ApiResult<JointRef> {
     )
 }
 
-/// A joint named by `bus` and `id`, or by `hand` and `joint` (its name in
-/// a `[[hand]]`); `field` names it in errors (`joints[2]`).
-pub(crate) fn resolve_joint(
-    state: &AppState,
-    field: &str,
-    bus: Option<&str>,
-    id: Option<i64>,
-    hand: Option<&str>,
-    joint: Option<&str>,
-) -> ApiResult<JointRef> {
-    match (bus, id, hand, joint) {
-        (Some(bus), Some(id), None, None) => {
-            state.bus(bus)?;
-            Ok(JointRef {
-                bus: bus.to_owned(),
-                id: device_id(&format!("{field}.id"), id)?,
-            })
-        }
-        (None, None, Some(hand), Some(name)) => {
-            let hand_of = state
-                .hands()
-                .and_then(|store| store.hand(hand))
-                .ok_or_else(|| {
-                    ApiError::not_found("unknown-hand", format!("no hand named `{hand}`"))
-                })?;
-            let joint = hand_of.joint(name).ok_or_else(|| {
-                ApiError::invalid(
-                    &format!("{field}.joint"),
-                    format!("hand `{hand}` has no joint `{name}`"),
-                )
-            })?;
-            Ok(JointRef {
-                bus: joint.bus.clone(),
-                id: joint.id,
-            })
-        }
-        _ => Err(ApiError::invalid(
-            field,
-            "name a joint by `bus` and `id`, or by `hand` and `joint`",
-        )),
-    }
-}
-
 /// The request's waypoints, or its targets as the one waypoint (time to be set).
-fn waypoints(req: &MoveRequest) -> ApiResult<Vec<(Option<f64>, Vec<f64>)>> {
+fn waypoints(req: &MoveRequest) -> ControlResult<Vec<(Option<f64>, Vec<f64>)>> {
     match &req.waypoints {
         Some(list) => {
             if let Some(i) = req.joints.iter().position(|j| j.position_deg.is_some()) {
-                return Err(ApiError::invalid(
+                return Err(ControlError::invalid(
                     &format!("joints[{i}].position_deg"),
                     "give either waypoints or each joint's position_deg, not both",
                 ));
             }
             if list.is_empty() {
-                return Err(ApiError::invalid("waypoints", "waypoints is empty"));
+                return Err(ControlError::invalid("waypoints", "waypoints is empty"));
             }
             // Each waypoint says when it is reached: a duration would be
             // ignored, and a caller who gave one expects it to count.
@@ -385,7 +343,7 @@ fn waypoints(req: &MoveRequest) -> ApiResult<Vec<(Option<f64>, Vec<f64>)>> {
                 ("max_acceleration_dps2", req.max_acceleration_dps2.is_some()),
             ] {
                 if given {
-                    return Err(ApiError::invalid(
+                    return Err(ControlError::invalid(
                         field,
                         format!(
                             "{field} does not apply to waypoints: each waypoint's at_ms times it"
@@ -402,7 +360,7 @@ fn waypoints(req: &MoveRequest) -> ApiResult<Vec<(Option<f64>, Vec<f64>)>> {
             let mut target = Vec::with_capacity(req.joints.len());
             for (i, j) in req.joints.iter().enumerate() {
                 let deg = j.position_deg.ok_or_else(|| {
-                    ApiError::invalid(
+                    ControlError::invalid(
                         &format!("joints[{i}].position_deg"),
                         "position_deg is required (or give waypoints)",
                     )
@@ -414,9 +372,9 @@ fn waypoints(req: &MoveRequest) -> ApiResult<Vec<(Option<f64>, Vec<f64>)>> {
     }
 }
 
-fn positive(field: &str, v: Option<f64>, max: f64) -> ApiResult<Option<f64>> {
+fn positive(field: &str, v: Option<f64>, max: f64) -> ControlResult<Option<f64>> {
     match v {
-        Some(x) if !(x.is_finite() && x > 0.0 && x <= max) => Err(ApiError::out_of_range(
+        Some(x) if !(x.is_finite() && x > 0.0 && x <= max) => Err(ControlError::out_of_range(
             field,
             x,
             (0.0, max),
@@ -433,7 +391,7 @@ fn timed_path(
     method: Method,
     start: Vec<f64>,
     waypoints: Vec<(Option<f64>, Vec<f64>)>,
-) -> ApiResult<Path> {
+) -> ControlResult<Path> {
     let duration = positive("duration_ms", req.duration_ms, MAX_DURATION_MS)?;
     let vmax = positive("max_velocity_dps", req.max_velocity_dps, 1e6)?;
     let amax = positive("max_acceleration_dps2", req.max_acceleration_dps2, 1e9)?;
@@ -447,14 +405,14 @@ fn timed_path(
             (Some(d), _) => d.max(shortest * 1e3),
             (None, Some(_)) => (shortest * 1e3).max(1.0),
             (None, None) => {
-                return Err(ApiError::invalid(
+                return Err(ControlError::invalid(
                     "duration_ms",
                     "give duration_ms, or max_velocity_dps / max_acceleration_dps2",
                 ))
             }
         };
         if ms > MAX_DURATION_MS {
-            return Err(ApiError::out_of_range(
+            return Err(ControlError::out_of_range(
                 "duration_ms",
                 ms,
                 (0.0, MAX_DURATION_MS),
@@ -471,7 +429,7 @@ fn timed_path(
         }
         out
     };
-    Path::new(method, start, timed).map_err(|e| ApiError::invalid("waypoints", e.to_string()))
+    Path::new(method, start, timed).map_err(|e| ControlError::invalid("waypoints", e.to_string()))
 }
 
 /// Positions as given (each joint's calibrated frame) as device angles:
@@ -492,11 +450,11 @@ fn to_device_frame(
 /// Every position the path passes through within each joint's calibrated
 /// range and soft limits (told in the joint's frame).
 fn check_limits(
-    state: &AppState,
+    state: &Control,
     joints: &[JointRef],
     cals: &[Calibration],
     path: &Path,
-) -> ApiResult<()> {
+) -> ControlResult<()> {
     for ((i, r), cal) in joints.iter().enumerate().zip(cals) {
         let limits = state.limits(&r.bus, r.id);
         let who = format!("joint {} of bus `{}`", r.id, r.bus);
@@ -510,12 +468,17 @@ fn check_limits(
 
 /// The speed limit of a joint's frames: the path's peak with headroom,
 /// within its soft limit (422 when the path needs more than it allows).
-fn speed_limit(state: &AppState, bus: &BusHandle, r: &JointRef, peak_dps: f64) -> ApiResult<i16> {
+fn speed_limit(
+    state: &Control,
+    bus: &BusHandle,
+    r: &JointRef,
+    peak_dps: f64,
+) -> ControlResult<i16> {
     let rpm_per_dps = 1.0 / units::output_deg_per_s(1.0);
     let needed = peak_dps * rpm_per_dps;
     let limits = state.limits(&r.bus, r.id);
     if let Some(max) = limits.max_rpm.filter(|max| needed > *max) {
-        return Err(ApiError::invalid(
+        return Err(ControlError::invalid(
             "duration_ms",
             format!(
                 "the path needs {needed:.0} rpm of joint {} of bus `{}`, its soft limit allows {max:.0} rpm: \
@@ -528,8 +491,8 @@ fn speed_limit(state: &AppState, bus: &BusHandle, r: &JointRef, peak_dps: f64) -
     let rpm = limits.max_rpm.map_or(rpm, |max| rpm.min(max));
     let snap = bus.snapshot();
     let fw = snap.devices.get(&r.id).map(firmware_of).unwrap_or_default();
-    let raw =
-        units::speed_limit_to_raw(rpm, fw).map_err(|e| ApiError::from_unit("duration_ms", e))?;
+    let raw = units::speed_limit_to_raw(rpm, fw)
+        .map_err(|e| ControlError::from_unit("duration_ms", e))?;
     // The wire's Q15 step is ~1.5 rpm: rounding must not carry the frames
     // past the limit they were capped at.
     Ok(if units::speed_rpm(raw, fw) > rpm && raw > 0 {

@@ -8,9 +8,9 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::error::{ApiError, ApiResult};
+use super::device::{commanded_or_measured_raw, firmware_of, revision_of};
+use super::error::{ControlError, ControlResult};
 use super::limits::JointLimits;
-use super::telemetry::{commanded_or_measured_raw, firmware_of, revision_of, TargetView};
 use crate::bus::authority::Epoch;
 use crate::bus::handle::DeviceState;
 use crate::bus::{BusHandle, Setpoint};
@@ -42,29 +42,6 @@ pub(crate) struct TargetRequest {
     pub speed_rpm: Option<f64>,
 }
 
-/// What a target request did.
-#[derive(Debug, Serialize, ToSchema)]
-pub(crate) struct TargetAck {
-    #[schema(example = "sim0")]
-    pub bus: String,
-    /// Sequence number of this write in the bus's setpoint store.
-    #[schema(example = 42)]
-    pub seq: u64,
-    /// True when the frame carrying the targets has been written to the
-    /// port (status 200); false when still waiting (status 202).
-    #[schema(example = true)]
-    pub on_wire: bool,
-    pub targets: Vec<JointTarget>,
-}
-
-#[derive(Debug, Serialize, ToSchema)]
-pub(crate) struct JointTarget {
-    #[schema(example = 1)]
-    pub id: u8,
-    #[serde(flatten)]
-    pub target: TargetView,
-}
-
 /// Converts one joint's target, given in its calibrated frame (`cal`);
 /// `field` prefixes error field names (`targets[2].` in a group request).
 pub(crate) fn setpoint(
@@ -73,14 +50,14 @@ pub(crate) fn setpoint(
     cal: &Calibration,
     req: &TargetRequest,
     field: &str,
-) -> ApiResult<Setpoint> {
+) -> ControlResult<Setpoint> {
     if dev.mode == Some(CtrlMode::Speed) {
         return speed_setpoint(dev, limits, cal, req, field);
     }
     if dev.mode == Some(CtrlMode::Current) {
         // Its reference is a current, which jointd does not stream (yet):
         // a position or speed sent now would be taken as something else.
-        return Err(ApiError::conflict(
+        return Err(ControlError::conflict(
             "wrong-mode",
             "Joint in current mode",
             format!(
@@ -94,21 +71,21 @@ pub(crate) fn setpoint(
     let fw = firmware_of(dev);
     let (pos_field, spd_field) = (format!("{field}position_deg"), format!("{field}speed_rpm"));
     let deg = req.position_deg.ok_or_else(|| {
-        ApiError::invalid(
+        ControlError::invalid(
             &pos_field,
             format!("{who} is in position mode: position_deg is required"),
         )
     })?;
     let device_deg = limits.check_joint_position(cal, &pos_field, deg, &who)?;
     let pos_ref =
-        units::angle_to_raw(device_deg).map_err(|e| ApiError::from_unit(&pos_field, e))?;
+        units::angle_to_raw(device_deg).map_err(|e| ControlError::from_unit(&pos_field, e))?;
     let default_rpm = limits
         .max_rpm
         .map_or(DEFAULT_SPEED_LIMIT_RPM, |m| m.min(DEFAULT_SPEED_LIMIT_RPM));
     let rpm = req.speed_rpm.unwrap_or(default_rpm);
     limits.check_speed(&spd_field, rpm, &who)?;
     let spd_ref =
-        units::speed_limit_to_raw(rpm, fw).map_err(|e| ApiError::from_unit(&spd_field, e))?;
+        units::speed_limit_to_raw(rpm, fw).map_err(|e| ControlError::from_unit(&spd_field, e))?;
     Ok(Setpoint { pos_ref, spd_ref })
 }
 
@@ -120,17 +97,17 @@ fn speed_setpoint(
     cal: &Calibration,
     req: &TargetRequest,
     field: &str,
-) -> ApiResult<Setpoint> {
+) -> ControlResult<Setpoint> {
     let who = format!("joint {}", dev.dev_id);
     let (pos_field, spd_field) = (format!("{field}position_deg"), format!("{field}speed_rpm"));
     if req.position_deg.is_some() {
-        return Err(ApiError::invalid(
+        return Err(ControlError::invalid(
             &pos_field,
             format!("{who} is in speed mode: a position has no effect (set mode to position)"),
         ));
     }
     let rpm = req.speed_rpm.ok_or_else(|| {
-        ApiError::invalid(
+        ControlError::invalid(
             &spd_field,
             format!("{who} is in speed mode: speed_rpm is required"),
         )
@@ -138,7 +115,7 @@ fn speed_setpoint(
     limits.check_speed(&spd_field, rpm, &who)?;
     // A flipped joint turns the device the other way.
     let spd_ref = units::speed_to_raw(cal.sign() * rpm, firmware_of(dev))
-        .map_err(|e| ApiError::from_unit(&spd_field, e))?;
+        .map_err(|e| ControlError::from_unit(&spd_field, e))?;
     let pos_ref = commanded_or_measured_raw(dev).unwrap_or(0);
     Ok(Setpoint { pos_ref, spd_ref })
 }
@@ -146,11 +123,11 @@ fn speed_setpoint(
 /// 409 unless the daemon enabled the joint and nothing revoked that since
 /// (the bus's motion authority, not a telemetry snapshot that may lag an
 /// e-stop); the joint's motion epoch, under which what follows is admitted.
-pub(crate) fn admit(bus: &BusHandle, dev: &DeviceState, what: &str) -> ApiResult<Epoch> {
+pub(crate) fn admit(bus: &BusHandle, dev: &DeviceState, what: &str) -> ControlResult<Epoch> {
     let id = dev.dev_id;
     let grant = bus.grant(id);
     if !grant.mode_settled() {
-        return Err(ApiError::conflict(
+        return Err(ControlError::conflict(
             "not-enabled",
             "Mode change in progress",
             format!("{what} waits for the mode change of device {id} to finish; try again"),
@@ -167,7 +144,7 @@ pub(crate) fn admit(bus: &BusHandle, dev: &DeviceState, what: &str) -> ApiResult
         .info01
         .as_ref()
         .map_or("unknown", |(i, _)| fsm_name_in(i.fsm, revision_of(dev)));
-    Err(ApiError::conflict(
+    Err(ControlError::conflict(
         "not-enabled",
         "Device not enabled",
         format!(
@@ -179,10 +156,14 @@ pub(crate) fn admit(bus: &BusHandle, dev: &DeviceState, what: &str) -> ApiResult
 
 /// [`admit`] for a position target, a move or a pose: the joint must also
 /// run position mode.
-pub(crate) fn admit_positions(bus: &BusHandle, dev: &DeviceState, what: &str) -> ApiResult<Epoch> {
+pub(crate) fn admit_positions(
+    bus: &BusHandle,
+    dev: &DeviceState,
+    what: &str,
+) -> ControlResult<Epoch> {
     let epoch = admit(bus, dev, what)?;
     if !bus.grant(dev.dev_id).takes_positions() {
-        return Err(ApiError::conflict(
+        return Err(ControlError::conflict(
             "wrong-mode",
             "Joint not in position mode",
             format!(
@@ -199,7 +180,7 @@ pub(crate) async fn ensure_enabled(
     bus: &BusHandle,
     dev: &DeviceState,
     what: &str,
-) -> ApiResult<()> {
+) -> ControlResult<()> {
     admit(bus, dev, what).map(drop)
 }
 
@@ -274,7 +255,7 @@ mod tests {
             "",
         )
         .unwrap_err();
-        assert_eq!(err.problem.field.as_deref(), Some("speed_rpm"));
+        assert_eq!(err.field(), Some("speed_rpm"));
         let err = setpoint(
             &new_fw,
             &limits,
@@ -283,7 +264,7 @@ mod tests {
             "t.",
         )
         .unwrap_err();
-        assert_eq!(err.problem.field.as_deref(), Some("t.position_deg"));
+        assert_eq!(err.field(), Some("t.position_deg"));
     }
 
     #[test]
@@ -346,18 +327,19 @@ mod tests {
         assert_eq!(sp.pos_ref, units::angle_to_raw(5.0).unwrap());
         let err = setpoint(&pos, &limits, &cal, &req(Some(61.0), None), "").unwrap_err();
         assert!(
-            err.problem.kind.ends_with("calibrated-range"),
-            "{}",
-            err.problem.kind
+            matches!(
+                err,
+                ControlError::Invalid {
+                    kind: crate::control::error::InvalidKind::CalibratedRange,
+                    ..
+                }
+            ),
+            "{err:?}"
         );
         // joint 55 deg = device -35 deg: inside the range, past the soft limit
         // (-30..=90 device = -70..=50 joint), told in joint degrees.
         let err = setpoint(&pos, &limits, &cal, &req(Some(55.0), None), "").unwrap_err();
-        assert!(
-            err.problem.detail.contains("-70..=50"),
-            "{}",
-            err.problem.detail
-        );
+        assert!(err.to_string().contains("-70..=50"), "{err}");
         let spd = dev(CtrlMode::Speed, Some(128));
         let sp = setpoint(&spd, &limits, &cal, &req(None, Some(-1000.0)), "").unwrap();
         assert!(

@@ -39,15 +39,14 @@ use utoipa::ToSchema;
 use crate::bus::authority::{Epoch, Revoked};
 use crate::bus::handle::{BusEvent, DeviceState};
 use crate::bus::{BusHandle, Setpoint};
-use crate::http::calibration;
-use crate::http::error::{ApiError, ApiResult};
-use crate::http::homing_book::{lock, Busy, HomingState, HomingView, JointHoming, Slot};
-use crate::http::limits::JointLimits;
-use crate::http::move_book::JointRef;
-use crate::http::moves::resolve_joint;
-use crate::http::state::{known_device, AppState};
-use crate::http::targets::wait_on_wire;
-use crate::http::telemetry::{firmware_of, is_enabled, measured_angle_raw};
+use crate::control::calibration;
+use crate::control::device::{firmware_of, is_enabled, measured_angle_raw};
+use crate::control::error::{ControlError, ControlResult};
+use crate::control::homing_book::{lock, Busy, HomingState, HomingView, JointHoming, Slot};
+use crate::control::joints::{known_device, resolve_joint};
+use crate::control::limits::JointLimits;
+use crate::control::targets::wait_on_wire;
+use crate::control::{Control, JointRef};
 use crate::protocol::status::{active_fault, fault_name, fsm, fsm_name};
 use crate::protocol::units;
 use crate::protocol::{ConfigParam, CtrlMode, InfoBlock, ReplyBody};
@@ -163,7 +162,7 @@ struct Plan {
 
 /// Checks the request, then homes each joint in its own task; the job as
 /// it starts.
-pub(crate) async fn start(state: &AppState, req: &HomingRequest) -> ApiResult<HomingView> {
+pub(crate) async fn start(state: &Arc<Control>, req: &HomingRequest) -> ControlResult<HomingView> {
     let plan = plan(req)?;
     let joints = joints(state, req)?;
     let mut limits = Vec::with_capacity(joints.len());
@@ -182,7 +181,7 @@ pub(crate) async fn start(state: &AppState, req: &HomingRequest) -> ApiResult<Ho
         check_stop_at(&plan, &soft, r)?;
         ensure_running(bus, dev).await?;
         if dev.mode.is_some_and(|m| m != CtrlMode::Position) {
-            return Err(ApiError::conflict(
+            return Err(ControlError::conflict(
                 "wrong-mode",
                 "Joint not in position mode",
                 format!(
@@ -221,12 +220,12 @@ pub(crate) async fn start(state: &AppState, req: &HomingRequest) -> ApiResult<Ho
     state
         .homings()
         .view(id)
-        .ok_or_else(|| ApiError::not_found("unknown-homing", format!("no homing with id {id}")))
+        .ok_or_else(|| ControlError::not_found("unknown-homing", format!("no homing with id {id}")))
 }
 
 /// 409 naming the job that homes the joint.
-fn busy(b: &Busy) -> ApiError {
-    ApiError::conflict(
+fn busy(b: &Busy) -> ControlError {
+    ControlError::conflict(
         "homing-running",
         "Joint already being homed",
         format!(
@@ -242,7 +241,7 @@ fn busy(b: &Busy) -> ApiError {
 /// only on a joint that runs. The latest poll tells when it says `run` or
 /// `align` (an enable confirms the state it reached, so the snapshot has
 /// seen it); otherwise the device is asked.
-async fn ensure_running(bus: &BusHandle, dev: &DeviceState) -> ApiResult<()> {
+async fn ensure_running(bus: &BusHandle, dev: &DeviceState) -> ControlResult<()> {
     let cached = dev.info01.as_ref().map(|(i, _)| i.fsm);
     let state = match cached {
         Some(s @ (fsm::RUN | fsm::ALIGN)) => s,
@@ -259,7 +258,7 @@ async fn ensure_running(bus: &BusHandle, dev: &DeviceState) -> ApiResult<()> {
     };
     match state {
         fsm::RUN => Ok(()),
-        fsm::ALIGN => Err(ApiError::conflict(
+        fsm::ALIGN => Err(ControlError::conflict(
             "not-aligned",
             "Joint still aligning",
             format!(
@@ -270,7 +269,7 @@ async fn ensure_running(bus: &BusHandle, dev: &DeviceState) -> ApiResult<()> {
                 bus.name()
             ),
         )),
-        other => Err(ApiError::conflict(
+        other => Err(ControlError::conflict(
             "not-enabled",
             "Device not enabled",
             format!(
@@ -286,7 +285,7 @@ async fn ensure_running(bus: &BusHandle, dev: &DeviceState) -> ApiResult<()> {
 /// `stop_at_deg` within the joint's soft range and not at the end of the
 /// angle range: a stop reading ±255° leaves no angle beyond it for the
 /// back-off, and an offset that puts it there cannot be saved.
-fn check_stop_at(plan: &Plan, soft: &JointLimits, r: &JointRef) -> ApiResult<()> {
+fn check_stop_at(plan: &Plan, soft: &JointLimits, r: &JointRef) -> ControlResult<()> {
     let lo = soft
         .min_deg
         .max(-units::MAX_ANGLE_DEG + STOP_AT_END_MARGIN_DEG);
@@ -297,8 +296,7 @@ fn check_stop_at(plan: &Plan, soft: &JointLimits, r: &JointRef) -> ApiResult<()>
     if (lo..=hi).contains(&x) {
         return Ok(());
     }
-    let mut err = ApiError::out_of_range("stop_at_deg", x, (lo, hi), "deg");
-    err.problem.detail = format!(
+    let err = ControlError::out_of_range("stop_at_deg", x, (lo, hi), "deg").with_detail(format!(
         "stop_at_deg = {x} deg is outside what joint {} of bus `{}` allows, {lo}..={hi} deg: \
          its soft range ({}..={} deg), at least {STOP_AT_END_MARGIN_DEG} deg inside the \
          ±{} deg angle range",
@@ -307,19 +305,19 @@ fn check_stop_at(plan: &Plan, soft: &JointLimits, r: &JointRef) -> ApiResult<()>
         soft.min_deg,
         soft.max_deg,
         units::MAX_ANGLE_DEG
-    );
+    ));
     Err(err)
 }
 
 /// Homing job `id` as it stands.
-pub(crate) fn get(state: &AppState, id: u64) -> ApiResult<HomingView> {
+pub(crate) fn get(state: &Control, id: u64) -> ControlResult<HomingView> {
     state
         .homings()
         .view(id)
-        .ok_or_else(|| ApiError::not_found("unknown-homing", format!("no homing with id {id}")))
+        .ok_or_else(|| ControlError::not_found("unknown-homing", format!("no homing with id {id}")))
 }
 
-fn plan(req: &HomingRequest) -> ApiResult<Plan> {
+fn plan(req: &HomingRequest) -> ControlResult<Plan> {
     let within =
         |field: &str, v: Option<f64>, default: f64, (lo, hi): (f64, f64), open_low: bool| {
             let x = v.unwrap_or(default);
@@ -333,7 +331,7 @@ fn plan(req: &HomingRequest) -> ApiResult<Plan> {
                     "timeout_ms" => "ms",
                     _ => "deg",
                 };
-                Err(ApiError::out_of_range(field, x, (lo, hi), unit))
+                Err(ControlError::out_of_range(field, x, (lo, hi), unit))
             }
         };
     let max_a = units::current_limit_a(u16::MAX >> 1);
@@ -372,7 +370,7 @@ fn plan(req: &HomingRequest) -> ApiResult<Plan> {
 }
 
 /// The joints named, or every joint of the hand; each once.
-fn joints(state: &AppState, req: &HomingRequest) -> ApiResult<Vec<JointRef>> {
+fn joints(state: &Control, req: &HomingRequest) -> ControlResult<Vec<JointRef>> {
     let list: Vec<JointRef> = match (&req.joints, &req.hand) {
         (Some(joints), None) if !joints.is_empty() && joints.len() <= 64 => joints
             .iter()
@@ -387,11 +385,13 @@ fn joints(state: &AppState, req: &HomingRequest) -> ApiResult<Vec<JointRef>> {
                     j.joint.as_deref(),
                 )
             })
-            .collect::<ApiResult<_>>()?,
+            .collect::<ControlResult<_>>()?,
         (None, Some(hand)) => state
             .hands()
             .and_then(|store| store.hand(hand))
-            .ok_or_else(|| ApiError::not_found("unknown-hand", format!("no hand named `{hand}`")))?
+            .ok_or_else(|| {
+                ControlError::not_found("unknown-hand", format!("no hand named `{hand}`"))
+            })?
             .joints
             .iter()
             .map(|j| JointRef {
@@ -400,7 +400,7 @@ fn joints(state: &AppState, req: &HomingRequest) -> ApiResult<Vec<JointRef>> {
             })
             .collect(),
         _ => {
-            return Err(ApiError::invalid(
+            return Err(ControlError::invalid(
                 "joints",
                 "give `joints` (1..=64 joints) or `hand`, not both",
             ))
@@ -408,7 +408,7 @@ fn joints(state: &AppState, req: &HomingRequest) -> ApiResult<Vec<JointRef>> {
     };
     for (i, r) in list.iter().enumerate() {
         if list[..i].contains(r) {
-            return Err(ApiError::invalid(
+            return Err(ControlError::invalid(
                 &format!("joints[{i}]"),
                 format!("joint {} of bus `{}` appears twice", r.id, r.bus),
             ));
@@ -430,7 +430,7 @@ fn set(slot: &Slot, edit: impl FnOnce(&mut JointHoming)) {
 /// Homes one joint; whatever happens, its previous current limit is
 /// written back (and read back) before the job says it ended.
 async fn home(
-    state: AppState,
+    state: Arc<Control>,
     bus: BusHandle,
     id: u8,
     plan: Plan,
@@ -792,7 +792,7 @@ fn unfit(dev: Option<&DeviceState>) -> Result<(), Ended> {
 /// Saves the offset that makes the stop read `stop_at_deg` (flip and range
 /// kept); the offset.
 fn record(
-    state: &AppState,
+    state: &Control,
     bus: &BusHandle,
     id: u8,
     plan: &Plan,
@@ -806,12 +806,7 @@ fn record(
         .map(|d| d.as_millis() as u64);
     calibration::save(state, bus.name(), id, cal)
         .map(|()| cal.offset_deg)
-        .map_err(|e| {
-            Ended::Failed(format!(
-                "the stop was found but not saved: {}",
-                e.problem.detail
-            ))
-        })
+        .map_err(|e| Ended::Failed(format!("the stop was found but not saved: {e}")))
 }
 
 /// Stops pushing and goes back to position mode: speed 0 (holding where

@@ -5,9 +5,7 @@
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 
-use serde::{Deserialize, Serialize};
-use utoipa::ToSchema;
-
+use super::JointRef;
 use crate::motion::RunningMove;
 
 /// Moves kept for `GET` after they ended.
@@ -61,13 +59,4 @@ impl MoveBook {
     pub(crate) fn get(&self, id: u64) -> Option<Booked> {
         self.lock().moves.get(&id).cloned()
     }
-}
-
-/// One joint of a move, by bus and id.
-#[derive(Debug, Clone, PartialEq, Eq, Deserialize, Serialize, ToSchema)]
-pub(crate) struct JointRef {
-    #[schema(example = "sim0")]
-    pub bus: String,
-    #[schema(example = 1)]
-    pub id: u8,
 }
