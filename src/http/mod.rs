@@ -17,6 +17,7 @@
 //! - [`guard`]: the request guards before auth: Host (DNS rebinding), body size, browser origin.
 //! - [`policy`]: what the guards decide, as pure functions: allow-lists, same-origin, body limit.
 //! - [`auth`]: the bearer-token middleware (everything but the public paths).
+//! - [`shed`]: load shedding: a bounded number of requests at once, e-stop exempt.
 //! - [`paths`]: the URLs outside the OpenAPI routes, and which need no token.
 //! - [`limits`]: per-joint soft limits from the config.
 //! - `move_book`: the moves started through the API, for `GET` and `DELETE` on them.
@@ -43,6 +44,7 @@ pub mod policy;
 pub(crate) mod recording_book;
 pub(crate) mod recordings;
 pub mod ros2_stats;
+pub(crate) mod shed;
 pub mod state;
 pub(crate) mod targets;
 pub(crate) mod telemetry;
@@ -90,6 +92,11 @@ pub fn app(state: AppState) -> Router {
     router
         .layer(DefaultBodyLimit::max(state.policy().max_body_bytes))
         .layer(CatchPanicLayer::custom(panic_to_problem))
+        // Before auth, guards and body reading: a shed request costs little.
+        .layer(axum::middleware::from_fn_with_state(
+            shed::InFlight::new(shed::MAX_IN_FLIGHT),
+            shed::shed,
+        ))
         .layer(axum::middleware::from_fn(log_failures))
         // Spans only: a failed answer is logged once, collapsed, below.
         .layer(TraceLayer::new_for_http().on_failure(()))
