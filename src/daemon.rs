@@ -1,9 +1,11 @@
 //! `jointd [run]`: config file and flags → buses (serial or an in-process
 //! simulator: on a pty, or behind a USB adapter model on an in-memory line)
-//! → the HTTP API → on SIGINT/SIGTERM stop accepting, disable every joint,
-//! close the ports, exit 0.
+//! → the HTTP API → on SIGINT/SIGTERM stop accepting, let the requests under
+//! way finish (for a bounded time), disable every joint, close the ports,
+//! close the recordings, exit 0.
 
 use std::collections::BTreeMap;
+use std::future::IntoFuture;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -591,30 +593,73 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
         ),
         _ => None,
     };
+    serve(listener, &state).await?;
+    wait_for_ws_close(&state).await;
+    // The joints first: a recording still closing must not hold them.
+    stop_buses(threads).await;
+    stop_recordings(&state).await;
+    // Leave the ROS graph once the buses are stopped.
+    if let Some(bridge) = bridge {
+        tracing::debug!(?bridge, "ROS 2 bridge closing");
+    }
+    drop(sim);
+    tracing::info!("stopped");
+    Ok(())
+}
+
+/// Serves the API until SIGINT or SIGTERM, then for at most
+/// [`HTTP_DRAIN_TIMEOUT`] while the requests under way finish: a flood of
+/// requests (or one that waits on a slow bus) cannot hold the shutdown,
+/// and with it the joints' disable.
+async fn serve(listener: TcpListener, state: &AppState) -> Result<(), DaemonError> {
+    let (signalled_tx, mut signalled) = tokio::sync::watch::channel(false);
     let ws_state = state.clone();
     let stopping = async move {
         shutdown_signal().await;
         // WebSocket sessions outlive the HTTP connections they upgraded:
         // tell them, so each client gets a close frame (1001).
         ws_state.ws().shut_down();
+        let _ = signalled_tx.send(true);
     };
-    axum::serve(listener, app(state.clone()))
+    let serving = axum::serve(listener, app(state.clone()))
         .with_graceful_shutdown(stopping)
-        .await
-        .map_err(|e| DaemonError::Io {
+        .into_future();
+    let drained = async {
+        if signalled.wait_for(|s| *s).await.is_err() {
+            return std::future::pending().await;
+        }
+        tokio::time::sleep(HTTP_DRAIN_TIMEOUT).await;
+    };
+    tokio::select! {
+        served = serving => served.map_err(|e| DaemonError::Io {
             what: "HTTP server".into(),
             source: e,
-        })?;
-    wait_for_ws_close(&state).await;
-    crate::http::recordings::stop_all(&state).await;
-    // Leave the ROS graph before the buses stop.
-    if let Some(bridge) = bridge {
-        tracing::debug!(?bridge, "ROS 2 bridge closing");
+        }),
+        () = drained => {
+            tracing::warn!("requests still open {HTTP_DRAIN_TIMEOUT:?} after the signal: \
+                stopping without them");
+            Ok(())
+        }
     }
-    stop_buses(threads).await;
-    drop(sim);
-    tracing::info!("stopped");
-    Ok(())
+}
+
+/// How long shutdown lets the requests under way finish.
+const HTTP_DRAIN_TIMEOUT: Duration = Duration::from_secs(2);
+/// How long shutdown waits for the recordings to write their summaries.
+const RECORDINGS_CLOSE_TIMEOUT: Duration = Duration::from_secs(3);
+
+/// Closes the recordings still running (bounded: a slow disk cannot hold
+/// the exit); one not closed in time keeps its chunks, not its summary.
+async fn stop_recordings(state: &AppState) {
+    let closing = crate::http::recordings::stop_all(state);
+    if tokio::time::timeout(RECORDINGS_CLOSE_TIMEOUT, closing)
+        .await
+        .is_err()
+    {
+        tracing::error!(
+            "recordings not closed within {RECORDINGS_CLOSE_TIMEOUT:?}: left as they are"
+        );
+    }
 }
 
 /// How long shutdown waits for WebSocket sessions to send their close frames.
@@ -652,9 +697,10 @@ fn start_buses(
     Ok((handles, threads))
 }
 
-/// Disables every joint and closes each port (the owner does both on stop).
+/// Disables every joint and closes each port (the owner does both on
+/// stop), every bus at once.
 async fn stop_buses(threads: Vec<crate::bus::BusThread>) {
-    for thread in threads {
+    let stops = threads.into_iter().map(|thread| async move {
         let stopping = tokio::task::spawn_blocking(move || thread.stop());
         if tokio::time::timeout(BUS_STOP_TIMEOUT, stopping)
             .await
@@ -662,7 +708,8 @@ async fn stop_buses(threads: Vec<crate::bus::BusThread>) {
         {
             tracing::error!("a bus did not stop within {BUS_STOP_TIMEOUT:?}");
         }
-    }
+    });
+    futures_util::future::join_all(stops).await;
 }
 
 /// Resolves on the first SIGINT or SIGTERM.

@@ -19,8 +19,9 @@
 //! | `GET /api/v1/ws` without a WebSocket upgrade | 426 |
 //! | a bug (handler panicked) | 500 |
 //! | device answered something other than what was asked, or reads back another value than written | 502 |
-//! | bus down, request queue full, bus owner stopped, not ready, e-stop unconfirmed | 503 |
+//! | bus down, request queue full, bus owner stopped, not ready, e-stop unconfirmed, too many requests at once (load shed), a recording's file not writable | 503 |
 //! | device did not answer; a write sent whose RES or read-back was lost (`write-unverified`) | 504 |
+//! | a recording's file cannot be written: the disk (or quota, or file size limit) is full | 507 |
 
 use axum::extract::rejection::{JsonRejection, PathRejection, QueryRejection};
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
@@ -32,12 +33,14 @@ use utoipa::ToSchema;
 use crate::bus::BusError;
 use crate::control::ControlError;
 use crate::protocol::units::UnitError;
+use crate::record::mcap_file::McapFileError;
 
 /// Media type of every error body.
 pub(crate) const PROBLEM_JSON: &str = "application/problem+json";
 /// Prefix of every problem `type` (a URN: no documentation host is implied).
 const TYPE_PREFIX: &str = "urn:jointd:problem:";
-/// Seconds a client should wait before retrying a full request queue.
+/// Seconds a client should wait before retrying a full request queue, or a
+/// request shed because too many were being handled.
 const RETRY_AFTER_BUSY_S: &str = "1";
 
 /// The allowed range of a field that was out of it.
@@ -350,6 +353,67 @@ impl ApiError {
         )
     }
 
+    /// A recording whose file could not be created or written: 507 when
+    /// the storage is full (disk, quota or file size limit: retrying will
+    /// not help until room is made), else 503.
+    pub fn recording_unwritable(err: &McapFileError) -> Self {
+        if err.storage_full() {
+            return Self::new(
+                StatusCode::INSUFFICIENT_STORAGE,
+                "storage-full",
+                "No room for the recording",
+                err.to_string(),
+            );
+        }
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "recording-unwritable",
+            "Recording file not written",
+            err.to_string(),
+        )
+    }
+
+    /// A finished recording's file that cannot be read back: 404 when it is
+    /// no longer on the disk (removed), else 503.
+    pub fn recording_file_unreadable(
+        id: u64,
+        path: &std::path::Path,
+        err: &std::io::Error,
+    ) -> Self {
+        if err.kind() == std::io::ErrorKind::NotFound {
+            return Self::not_found(
+                "recording-file-removed",
+                format!(
+                    "the file of recording {id} ({}) is no longer on the disk: it was removed",
+                    path.display()
+                ),
+            );
+        }
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "recording-unreadable",
+            "Recording file not readable",
+            format!(
+                "the file of recording {id} ({}) cannot be read: {err}",
+                path.display()
+            ),
+        )
+    }
+
+    /// A request shed because `limit` requests were already being handled
+    /// (503 with Retry-After): a flood answers fast instead of queueing.
+    pub fn overloaded(limit: usize) -> Self {
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "overloaded",
+            "Too many requests at once",
+            format!(
+                "{limit} requests are being handled: retry later (e-stop requests are never \
+                 refused for this)"
+            ),
+        )
+    }
+
     /// An e-stop that could not confirm every bus stopped (503; `partial`
     /// carries each bus's result).
     pub fn estop_incomplete(detail: impl Into<String>) -> Self {
@@ -546,7 +610,11 @@ pub(crate) const DOCUMENTED_STATUSES: [(&str, &str); 10] = [
         "The device answered something other than what was asked (unexpected-reply), \
          or a write reads back another value (verify-mismatch)",
     ),
-    ("503", "Bus down, request queue full, or bus owner stopped"),
+    (
+        "503",
+        "Bus down, request queue full, bus owner stopped, or too many requests at once \
+         (overloaded: retry after Retry-After; e-stops are never refused for this)",
+    ),
     (
         "504",
         "Device did not answer (device-timeout), or a write went out and its confirmation \
@@ -590,7 +658,7 @@ impl IntoResponse for ApiError {
         if status == StatusCode::UNAUTHORIZED {
             headers.insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }
-        if self.problem.kind.ends_with("bus-busy") {
+        if self.problem.kind.ends_with("bus-busy") || self.problem.kind.ends_with("overloaded") {
             headers.insert(
                 header::RETRY_AFTER,
                 HeaderValue::from_static(RETRY_AFTER_BUSY_S),

@@ -18,6 +18,7 @@
 //! - [`guard`]: the request guards before auth: Host (DNS rebinding), body size, browser origin.
 //! - [`policy`]: what the guards decide, as pure functions: allow-lists, same-origin, body limit.
 //! - [`auth`]: the bearer-token middleware (everything but the public paths).
+//! - [`shed`]: load shedding: a bounded number of requests at once, e-stop exempt.
 //! - [`paths`]: the URLs outside the OpenAPI routes, and which need no token.
 //! - [`telemetry`]: snapshot → physical-unit views (REST and WebSocket).
 //! - [`hub`]: what all WebSocket connections share (the state holds it).
@@ -32,6 +33,7 @@ pub(crate) mod paths;
 pub mod policy;
 pub(crate) mod recording_book;
 pub(crate) mod recordings;
+pub(crate) mod shed;
 pub mod state;
 pub(crate) mod telemetry;
 pub(crate) mod web;
@@ -77,6 +79,11 @@ pub fn app(state: AppState) -> Router {
     router
         .layer(DefaultBodyLimit::max(state.policy().max_body_bytes))
         .layer(CatchPanicLayer::custom(panic_to_problem))
+        // Before auth, guards and body reading: a shed request costs little.
+        .layer(axum::middleware::from_fn_with_state(
+            shed::InFlight::new(shed::MAX_IN_FLIGHT),
+            shed::shed,
+        ))
         .layer(axum::middleware::from_fn(log_failures))
         // Spans only: a failed answer is logged once, collapsed, below.
         .layer(TraceLayer::new_for_http().on_failure(()))

@@ -47,11 +47,34 @@ pub(crate) struct Entry {
 /// The recordings made through the API.
 #[derive(Default)]
 pub(crate) struct RecordingBook {
-    inner: Mutex<(u64, BTreeMap<u64, Entry>)>,
+    inner: Mutex<Book>,
+}
+
+/// What the book's lock guards.
+#[derive(Default)]
+pub(crate) struct Book {
+    /// The last id handed out.
+    pub last_id: u64,
+    pub entries: BTreeMap<u64, Entry>,
+    /// Recordings whose file is being created (outside the lock): they
+    /// count against the cap like running ones.
+    pub starting: usize,
+}
+
+impl Book {
+    /// Recordings being written now, or about to be.
+    pub(crate) fn running(&self) -> usize {
+        self.starting
+            + self
+                .entries
+                .values()
+                .filter(|e| e.recorder.status().state == RecordState::Recording)
+                .count()
+    }
 }
 
 impl RecordingBook {
-    pub(crate) fn lock(&self) -> MutexGuard<'_, (u64, BTreeMap<u64, Entry>)> {
+    pub(crate) fn lock(&self) -> MutexGuard<'_, Book> {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
     }
 }

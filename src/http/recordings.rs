@@ -12,9 +12,9 @@ use utoipa::ToSchema;
 
 use crate::bus::BusHandle;
 use crate::http::error::{ApiError, ApiResult};
-use crate::http::recording_book::{view, Entry, RecordingView};
+use crate::http::recording_book::{view, Book, Entry, RecordingView};
 use crate::http::state::AppState;
-use crate::record::mcap_file::SideEncoding;
+use crate::record::mcap_file::{McapFileError, SideEncoding};
 use crate::record::{RecordState, Recorder};
 
 /// Recordings running at once, at most.
@@ -41,8 +41,32 @@ pub(crate) struct RecordingRequest {
     pub bag_compatible: Option<bool>,
 }
 
-/// Checks the request and starts the recording.
-pub(crate) fn start(state: &AppState, req: &RecordingRequest) -> ApiResult<RecordingView> {
+/// The buses a request names, each known and named once; all without a list.
+fn requested_buses(state: &AppState, req: &RecordingRequest) -> ApiResult<Vec<BusHandle>> {
+    let Some(names) = &req.buses else {
+        return Ok(state.buses().cloned().collect());
+    };
+    if names.is_empty() {
+        return Err(ApiError::invalid("buses", "buses is empty"));
+    }
+    let mut out: Vec<BusHandle> = Vec::with_capacity(names.len());
+    for (i, name) in names.iter().enumerate() {
+        if let Some(first) = names[..i].iter().position(|n| n == name) {
+            return Err(ApiError::invalid(
+                &format!("buses[{i}]"),
+                format!("bus `{name}` appears twice in buses (buses[{first}] and buses[{i}])"),
+            ));
+        }
+        out.push(state.bus(name)?.clone());
+    }
+    Ok(out)
+}
+
+/// Checks the request, takes a place among the [`MAX_RUNNING`], creates
+/// the file (on a blocking thread: a slow or full disk holds no async
+/// worker) and starts the recording. A file that cannot be made is a
+/// problem naming why (507 when the disk is full), with no file left.
+pub(crate) async fn start(state: &AppState, req: &RecordingRequest) -> ApiResult<RecordingView> {
     if let Some(d) = req.duration_s {
         if !(d.is_finite() && d > 0.0 && d <= MAX_DURATION_S) {
             return Err(ApiError::out_of_range(
@@ -53,51 +77,39 @@ pub(crate) fn start(state: &AppState, req: &RecordingRequest) -> ApiResult<Recor
             ));
         }
     }
-    let buses: Vec<BusHandle> = match &req.buses {
-        Some(names) if names.is_empty() => {
-            return Err(ApiError::invalid("buses", "buses is empty"))
-        }
-        Some(names) => names
-            .iter()
-            .map(|n| state.bus(n).cloned())
-            .collect::<Result<_, crate::control::ControlError>>()?,
-        None => state.buses().cloned().collect(),
-    };
-    let dir = state.recordings_dir();
-    std::fs::create_dir_all(&dir).map_err(|e| {
-        ApiError::state_unwritable(format!("recordings directory {}: {e}", dir.display()))
-    })?;
-    let book = state.recordings();
-    let mut inner = book.lock();
-    // Counted under the same lock as the insert below: two requests at once
-    // cannot both take the last place.
-    let running = running_in(&inner.1);
-    if running >= MAX_RUNNING {
-        return Err(ApiError::conflict(
-            "too-many-recordings",
-            "Too many recordings",
-            format!("{running} recordings are running (at most {MAX_RUNNING}): stop one first"),
-        ));
-    }
-    let id = inner.0 + 1;
-    let started_s = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
-    let path: PathBuf = dir.join(format!("rec-{id}-{started_s}.mcap"));
+    let buses = requested_buses(state, req)?;
+    let place = Place::take(state)?;
+    let id = place.id;
     let names: Vec<String> = buses.iter().map(|b| b.name().to_owned()).collect();
-    let recorder = Recorder::start(
-        buses,
-        state.joint_labeler(),
-        path,
-        req.duration_s.map(Duration::from_secs_f64),
-        if req.bag_compatible.unwrap_or(false) {
-            SideEncoding::RosString
-        } else {
-            SideEncoding::Json
-        },
-    )
-    .map_err(|e| ApiError::state_unwritable(e.to_string()))?;
-    inner.0 = id;
+    let (dir, labeler) = (state.recordings_dir(), state.joint_labeler());
+    let duration = req.duration_s.map(Duration::from_secs_f64);
+    let side = if req.bag_compatible.unwrap_or(false) {
+        SideEncoding::RosString
+    } else {
+        SideEncoding::Json
+    };
+    let made = tokio::task::spawn_blocking(move || {
+        std::fs::create_dir_all(&dir).map_err(|source| McapFileError::Create {
+            path: dir.display().to_string(),
+            source,
+        })?;
+        let started_s = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        let path: PathBuf = dir.join(format!("rec-{id}-{started_s}.mcap"));
+        Recorder::start(buses, labeler, path, duration, side)
+    })
+    .await;
+    let mut book = state.recordings().lock();
+    place.give_back(&mut book);
+    let recorder = match made {
+        Ok(Ok(recorder)) => recorder,
+        Ok(Err(e)) => {
+            tracing::warn!(recording = id, error = %e, "recording not started");
+            return Err(ApiError::recording_unwritable(&e));
+        }
+        Err(_) => return Err(ApiError::internal()),
+    };
     let entry = Entry {
         recorder: Arc::new(recorder),
         buses: names,
@@ -105,34 +117,74 @@ pub(crate) fn start(state: &AppState, req: &RecordingRequest) -> ApiResult<Recor
     };
     let v = view(id, &entry, &entry.recorder.status());
     tracing::info!(recording = id, file = %v.file, buses = ?v.buses, duration_s = ?v.duration_s, "recording started");
-    inner.1.insert(id, entry);
+    book.entries.insert(id, entry);
     Ok(v)
+}
+
+/// A place among the recordings allowed at once while one starts, given
+/// back when it has started or failed, or when the request is dropped
+/// (the client left while the file was being created).
+struct Place {
+    state: AppState,
+    id: u64,
+    held: bool,
+}
+
+impl Place {
+    fn take(state: &AppState) -> ApiResult<Self> {
+        let mut book = state.recordings().lock();
+        // Counted under the same lock as the reservation: two requests at
+        // once cannot both take the last place.
+        let running = book.running();
+        if running >= MAX_RUNNING {
+            return Err(ApiError::conflict(
+                "too-many-recordings",
+                "Too many recordings",
+                format!("{running} recordings are running (at most {MAX_RUNNING}): stop one first"),
+            ));
+        }
+        book.last_id += 1;
+        book.starting += 1;
+        Ok(Self {
+            state: state.clone(),
+            id: book.last_id,
+            held: true,
+        })
+    }
+
+    /// Under the caller's lock, so the recording's entry goes in before
+    /// another request counts.
+    fn give_back(mut self, book: &mut Book) {
+        book.starting = book.starting.saturating_sub(1);
+        self.held = false;
+    }
+}
+
+impl Drop for Place {
+    fn drop(&mut self) {
+        if self.held {
+            let mut book = self.state.recordings().lock();
+            book.starting = book.starting.saturating_sub(1);
+        }
+    }
 }
 
 /// How many recordings are being written now.
 pub(crate) fn running(state: &AppState) -> usize {
-    running_in(&state.recordings().lock().1)
-}
-
-fn running_in(entries: &std::collections::BTreeMap<u64, Entry>) -> usize {
-    entries
-        .values()
-        .filter(|e| e.recorder.status().state == RecordState::Recording)
-        .count()
+    state.recordings().lock().running()
 }
 
 pub(crate) fn list(state: &AppState) -> Vec<RecordingView> {
-    let inner = state.recordings().lock();
-    inner
-        .1
+    let book = state.recordings().lock();
+    book.entries
         .iter()
         .map(|(id, e)| view(*id, e, &e.recorder.status()))
         .collect()
 }
 
 fn entry(state: &AppState, id: u64) -> ApiResult<(Arc<Recorder>, RecordingView)> {
-    let inner = state.recordings().lock();
-    let e = inner.1.get(&id).ok_or_else(|| {
+    let book = state.recordings().lock();
+    let e = book.entries.get(&id).ok_or_else(|| {
         ApiError::not_found("unknown-recording", format!("no recording with id {id}"))
     })?;
     Ok((e.recorder.clone(), view(id, e, &e.recorder.status())))
@@ -156,15 +208,16 @@ pub(crate) async fn stop_all(state: &AppState) {
     let running: Vec<(u64, Arc<Recorder>)> = state
         .recordings()
         .lock()
-        .1
+        .entries
         .iter()
         .filter(|(_, e)| e.recorder.status().state == RecordState::Recording)
         .map(|(id, e)| (*id, e.recorder.clone()))
         .collect();
-    for (id, recorder) in running {
+    let closing = running.into_iter().map(|(id, recorder)| async move {
         let status = recorder.stop().await;
         tracing::info!(recording = id, path = %status.path.display(), "recording closed at shutdown");
-    }
+    });
+    futures_util::future::join_all(closing).await;
 }
 
 /// The complete file of recording `id` (409 while it records).
@@ -178,8 +231,8 @@ pub(crate) async fn file(state: &AppState, id: u64) -> ApiResult<(String, Vec<u8
         ));
     }
     let path = recorder.status().path;
-    let bytes = tokio::fs::read(&path).await.map_err(|e| {
-        ApiError::state_unwritable(format!("recording file {}: {e}", path.display()))
-    })?;
+    let bytes = tokio::fs::read(&path)
+        .await
+        .map_err(|e| ApiError::recording_file_unreadable(id, &path, &e))?;
     Ok((v.file, bytes))
 }

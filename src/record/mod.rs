@@ -4,7 +4,9 @@
 //! - [`cdr`]: `sensor_msgs/msg/JointState` in CDR (shared with the ROS 2 bridge);
 //! - [`joint_states`]: a `JointState` per poll round from a bus's snapshots;
 //! - [`mcap_file`]: the file: schemas, channels, chunks, summary;
-//! - [`recorder`]: the task that taps the buses and writes;
+//! - [`sink`]: the stream under the MCAP writer, which keeps I/O errors
+//!   from it (the writer panics after one) for the file to report;
+//! - [`recorder`]: the thread that taps the buses and writes;
 //! - [`client`]: `jointd record`, which asks a running daemon for one.
 
 pub mod cdr;
@@ -12,5 +14,6 @@ pub mod client;
 pub mod joint_states;
 pub mod mcap_file;
 pub mod recorder;
+pub mod sink;
 
 pub use recorder::{RecordState, RecordStatus, Recorder};

@@ -1,10 +1,17 @@
-//! A recording in progress: a task that taps every bus (its snapshots for
+//! A recording in progress: a thread that taps every bus (its snapshots for
 //! joint states, its frame and setpoint taps, its events) and writes what
 //! it hears to an [`McapFile`], closing a chunk every second, until it is
 //! stopped, its duration is over, or a write fails.
+//!
+//! A thread of its own, not a task: encoding every frame, compressing the
+//! chunks and writing the file are CPU and disk work that would hold an
+//! async worker, and with it the requests (an e-stop among them) queued
+//! behind it. The thread runs at a lower priority than the daemon's others,
+//! so a busy host slows the recording, never the API or the buses.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant, SystemTime};
 
@@ -22,6 +29,8 @@ use super::mcap_file::{McapFile, McapFileError, SideEncoding, Topic, CHUNK_PERIO
 
 /// How often the taps are drained (well under a poll round).
 const DRAIN_EVERY: Duration = Duration::from_millis(5);
+/// The recording thread's nice value: below the API's and the buses' threads.
+const RECORDER_NICE: libc::c_int = 10;
 
 /// Where a recording stands.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -51,7 +60,7 @@ pub struct RecordStatus {
 
 /// A running recording: stop it, read its status.
 pub struct Recorder {
-    stop: watch::Sender<bool>,
+    stop: Arc<AtomicBool>,
     status: Arc<Mutex<RecordStatus>>,
     done: watch::Receiver<bool>,
 }
@@ -62,6 +71,13 @@ impl std::fmt::Debug for Recorder {
         f.debug_struct("Recorder")
             .field("status", &self.status())
             .finish_non_exhaustive()
+    }
+}
+
+/// A recording nobody holds any more is stopped (its file completed).
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
     }
 }
 
@@ -111,13 +127,22 @@ impl Recorder {
             lost: 0,
             error: None,
         }));
-        let (stop, stop_rx) = watch::channel(false);
+        let stop = Arc::new(AtomicBool::new(false));
         let (done_tx, done) = watch::channel(false);
-        let task_status = status.clone();
-        tokio::spawn(async move {
-            run(file, tapped, labeler, duration, stop_rx, &task_status).await;
-            let _ = done_tx.send(true);
-        });
+        let (task_status, task_stop) = (status.clone(), stop.clone());
+        let spawned = std::thread::Builder::new()
+            .name("recording".into())
+            .spawn(move || {
+                lower_priority();
+                run(file, tapped, labeler, duration, &task_stop, &task_status);
+                let _ = done_tx.send(true);
+            });
+        if let Err(source) = spawned {
+            return Err(McapFileError::Thread {
+                path: lock(&status).path.display().to_string(),
+                source,
+            });
+        }
         Ok(Self { stop, status, done })
     }
 
@@ -127,66 +152,83 @@ impl Recorder {
 
     /// Stops it and waits until the file is complete; its final status.
     pub async fn stop(&self) -> RecordStatus {
-        let _ = self.stop.send(true);
+        self.stop.store(true, Ordering::Release);
         let mut done = self.done.clone();
         let _ = done.wait_for(|d| *d).await;
         self.status()
     }
 }
 
-async fn run(
-    mut file: McapFile,
-    mut buses: Vec<Tapped>,
-    labeler: Labeler,
+/// Lowers the calling thread's priority (Linux: nice applies per thread).
+fn lower_priority() {
+    // SAFETY: gettid and setpriority take integers and touch no memory; a
+    // tid names the calling thread for PRIO_PROCESS on Linux.
+    let rc = unsafe {
+        let tid = libc::gettid();
+        libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, RECORDER_NICE)
+    };
+    if rc != 0 {
+        tracing::debug!(
+            "recording thread: setpriority failed: {}",
+            std::io::Error::last_os_error()
+        );
+    }
+}
+
+/// The recording's loop: drain, chunk, until stopped, over or failed.
+fn record(
+    file: &mut McapFile,
+    buses: &mut [Tapped],
+    labeler: &Labeler,
     duration: Option<Duration>,
-    mut stop: watch::Receiver<bool>,
+    stop: &AtomicBool,
     status: &Mutex<RecordStatus>,
-) {
+    lost: &mut u64,
+) -> Result<(), McapFileError> {
     let started = Instant::now();
-    let mut drain = tokio::time::interval(DRAIN_EVERY);
-    drain.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut last_chunk = Instant::now();
-    let mut lost = 0u64;
-    let result: Result<(), McapFileError> = loop {
-        tokio::select! {
-            _ = stop.wait_for(|s| *s) => break Ok(()),
-            _ = drain.tick() => {}
-        }
-        let mut wrote = Ok(());
-        for b in &mut buses {
-            wrote = wrote.and_then(|()| drain_bus(&mut file, b, &labeler, &mut lost));
-        }
-        if let Err(e) = wrote {
-            break Err(e);
+    while !stop.load(Ordering::Acquire) {
+        std::thread::sleep(DRAIN_EVERY);
+        for b in buses.iter_mut() {
+            drain_bus(file, b, labeler, lost)?;
         }
         if last_chunk.elapsed() >= CHUNK_PERIOD {
             last_chunk = Instant::now();
-            if let Err(e) = file.flush() {
-                break Err(e);
-            }
+            file.flush()?;
         }
         {
             let mut s = lock(status);
             s.messages = file.counts().clone();
-            s.lost = lost;
+            s.lost = *lost;
         }
         if duration.is_some_and(|d| started.elapsed() >= d) {
-            break Ok(());
+            break;
         }
-    };
+    }
     // What the taps still hold, then the summary.
-    let result = result.and_then(|()| {
-        for b in &mut buses {
-            drain_bus(&mut file, b, &labeler, &mut lost)?;
-        }
-        Ok(())
-    });
+    for b in buses.iter_mut() {
+        drain_bus(file, b, labeler, lost)?;
+    }
+    Ok(())
+}
+
+fn run(
+    mut file: McapFile,
+    mut buses: Vec<Tapped>,
+    labeler: Labeler,
+    duration: Option<Duration>,
+    stop: &AtomicBool,
+    status: &Mutex<RecordStatus>,
+) {
+    let mut lost = 0u64;
+    let result = record(
+        &mut file, &mut buses, &labeler, duration, stop, status, &mut lost,
+    );
     let counts = file.counts().clone();
     let result = match result {
         Ok(()) => file.finish(),
         Err(e) => {
-            // Keep what was written: close the file as far as it goes.
-            let _ = file.finish();
+            file.close_failed();
             Err(e)
         }
     };

@@ -1,6 +1,7 @@
 //! The `jointd` binary run as a daemon: spawned with arguments, its address
 //! learnt from the first line it prints (`listening on http://…`), its log
 //! (stderr) read line by line as it comes, killed when the test drops it.
+#![allow(dead_code)]
 
 use std::io::{BufRead, BufReader, Read};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -86,6 +87,45 @@ impl Daemon {
         daemon
     }
 
+    /// [`Daemon::start`] of `jointd ARGS`, the command adjusted first
+    /// (environment, resource limits).
+    pub fn start_with(args: &[&str], tweak: impl FnOnce(&mut Command)) -> Self {
+        let mut cmd = Self::command(args);
+        tweak(&mut cmd);
+        Self::start(cmd)
+    }
+
+    pub fn url(&self, path: &str) -> String {
+        format!("{}{path}", self.base)
+    }
+
+    /// Every log line printed so far (no waiting for more).
+    pub fn log(&mut self) -> String {
+        while let Ok(line) = self.log.try_recv() {
+            self.seen.push(line);
+        }
+        self.seen.join("\n")
+    }
+
+    pub fn signal(&self, signal: nix::sys::signal::Signal) {
+        nix::sys::signal::kill(nix::unistd::Pid::from_raw(self.child.id() as i32), signal)
+            .expect("signal jointd");
+    }
+
+    /// Its exit status once it has exited, `None` if it has not `within`.
+    pub fn wait_exit(&mut self, within: Duration) -> Option<ExitStatus> {
+        let deadline = Instant::now() + within;
+        loop {
+            if let Some(status) = self.child.try_wait().expect("try_wait") {
+                return Some(status);
+            }
+            if Instant::now() >= deadline {
+                return None;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
     /// The first log line (seen or to come) holding every one of `parts`.
     pub fn log_line(&mut self, parts: &[&str]) -> String {
         let deadline = Instant::now() + WAIT;
@@ -153,5 +193,29 @@ impl Daemon {
 impl Drop for Daemon {
     fn drop(&mut self) {
         self.kill();
+    }
+}
+
+/// Waits until `n` joints of `sim0` are online.
+pub async fn wait_online(client: &reqwest::Client, d: &mut Daemon, n: usize, within: Duration) {
+    let deadline = Instant::now() + within;
+    loop {
+        let online = match client.get(d.url("/api/v1/buses/sim0/devices")).send().await {
+            Ok(r) => r.json::<serde_json::Value>().await.ok().map_or(0, |v| {
+                v["devices"]
+                    .as_array()
+                    .map_or(0, |d| d.iter().filter(|d| d["online"] == true).count())
+            }),
+            Err(_) => 0,
+        };
+        if online >= n {
+            return;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "joints never came online ({online} of {n})\n{}",
+            d.log()
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }

@@ -107,16 +107,9 @@ async fn stop_one(bus: BusHandle) -> BusStop {
 /// `partial`) unless all of them stopped.
 async fn stop(buses: Vec<BusHandle>) -> ApiResult<Json<EstopResult>> {
     let started = Instant::now();
-    let mut tasks = tokio::task::JoinSet::new();
-    for bus in buses {
-        tasks.spawn(stop_one(bus));
-    }
-    let mut results = Vec::new();
-    while let Some(joined) = tasks.join_next().await {
-        if let Ok(stop) = joined {
-            results.push(stop);
-        }
-    }
+    // Polled here, in this request's task, not spawned: a spawned task
+    // would wait for a worker behind whatever else is queued.
+    let mut results = futures_util::future::join_all(buses.into_iter().map(stop_one)).await;
     results.sort_by(|a, b| a.bus.cmp(&b.bus));
     let result = EstopResult {
         stopped: results.iter().all(|r| r.stopped),

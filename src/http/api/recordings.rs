@@ -10,7 +10,7 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
-use crate::http::error::ApiResult;
+use crate::http::error::{ApiResult, Problem};
 use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::recording_book::RecordingView;
 use crate::http::recordings::{self, RecordingRequest};
@@ -49,15 +49,24 @@ pub(crate) struct RecordingList {
 /// `/jointd/BUS/frames` (every frame with its direction and wire time),
 /// `/jointd/BUS/events` and `/jointd/BUS/setpoints` (JSON). Chunks are
 /// zstd-compressed and closed every second: a kill loses at most the last.
-/// Stops by itself after `duration_s`, or at `DELETE`.
+/// Stops by itself after `duration_s`, or at `DELETE`. Each bus may be
+/// named once (422 naming a repeated one); at most 4 run at once (409). A
+/// file that cannot be made is 507 when the disk is full, else 503, and
+/// leaves no file behind.
 #[utoipa::path(post, path = "/api/v1/recordings", tag = TAG_CONTROL,
     request_body(content = RecordingRequest, example = json!({"duration_s": 5.0})),
-    responses((status = 201, description = "Recording started", body = RecordingView), ErrorResponses))]
+    responses((status = 201, description = "Recording started", body = RecordingView),
+        (status = 507, description = "No room on the disk (or quota, or file size limit) for the recording's file",
+            body = Problem, content_type = "application/problem+json"),
+        ErrorResponses))]
 async fn start_recording(
     State(state): State<AppState>,
     ApiJson(req): ApiJson<RecordingRequest>,
 ) -> ApiResult<(StatusCode, Json<RecordingView>)> {
-    Ok((StatusCode::CREATED, Json(recordings::start(&state, &req)?)))
+    Ok((
+        StatusCode::CREATED,
+        Json(recordings::start(&state, &req).await?),
+    ))
 }
 
 /// The recordings made since the daemon started.
@@ -75,7 +84,8 @@ async fn list_recordings(State(state): State<AppState>) -> ApiResult<Json<Record
 /// A recording: its state, file and message counts.
 ///
 /// `recording`, `finished` (the file is complete) or `failed` (with the
-/// error; the file keeps what was written before it).
+/// error: the disk full, the file removed from the disk; the file keeps
+/// what reached it before, and is removed if nothing did).
 #[utoipa::path(get, path = "/api/v1/recordings/{id}", tag = TAG_CONTROL, params(RecordingPath),
     responses((status = 200, description = "The recording", body = RecordingView), ErrorResponses))]
 async fn get_recording(
@@ -101,7 +111,8 @@ async fn stop_recording(
 /// Download a finished recording's MCAP file.
 ///
 /// The file as written (`application/octet-stream`); 409 while it still
-/// records. Opens in Foxglove and with `ros2 bag play` (storage mcap).
+/// records, 404 (`recording-file-removed`) when the file was removed from
+/// the disk. Opens in Foxglove and with `ros2 bag play` (storage mcap).
 #[utoipa::path(get, path = "/api/v1/recordings/{id}/file", tag = TAG_CONTROL, params(RecordingPath),
     responses((status = 200, description = "The MCAP file", content_type = "application/octet-stream",
         body = McapBytes, example = json!("MCAP bytes: 89 4D 43 41 50 30 0D 0A ...")), ErrorResponses))]
