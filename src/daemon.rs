@@ -505,7 +505,7 @@ fn sim_config(joints: u8, args: &RunArgs) -> Result<SimConfig, DaemonError> {
         .iter()
         .map(|s| crate::sim::cli::parse_hard_stop(s))
         .collect::<Result<_, _>>()?;
-    // The rest (the baud) is checked when the simulator starts, as before.
+    // The rest (the baud) is checked when the simulator starts.
     cfg.firmware.check_ids(&cfg.ids)?;
     if let Some((id, _)) = cfg.hard_stops.iter().find(|(id, _)| !cfg.ids.contains(id)) {
         return Err(SimError::BadHardStop(format!("device {id} is not on the bus")).into());

@@ -319,3 +319,76 @@ async fn a_move_says_what_it_cannot_apply_and_never_exceeds_a_speed_cap() {
         "a frame carried {fastest} rpm against a 6000 rpm cap"
     );
 }
+
+/// The server's next message of `kind` (telemetry and events skipped).
+async fn next_of<S>(ws: &mut S, kind: &str) -> Value
+where
+    S: futures_util::StreamExt<
+            Item = Result<
+                tokio_tungstenite::tungstenite::Message,
+                tokio_tungstenite::tungstenite::Error,
+            >,
+        > + Unpin,
+{
+    let wait = async {
+        while let Some(Ok(m)) = ws.next().await {
+            if let tokio_tungstenite::tungstenite::Message::Text(t) = m {
+                let v: Value = serde_json::from_str(t.as_str()).expect("JSON");
+                if v["type"] == kind {
+                    return v;
+                }
+            }
+        }
+        panic!("socket closed before a `{kind}`");
+    };
+    tokio::time::timeout(WAIT, wait)
+        .await
+        .unwrap_or_else(|_| panic!("no `{kind}` message"))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_teleop_stream_ended_by_an_estop_never_resumes_by_itself() {
+    use futures_util::SinkExt;
+    use tokio_tungstenite::tungstenite::Message;
+    let b = start(2, None).await;
+    enable(&b, 1).await;
+    let url = format!("{}/api/v1/ws", b.server.base.replace("http://", "ws://"));
+    let (mut ws, _) = tokio_tungstenite::connect_async(url)
+        .await
+        .expect("connect");
+    let batch = |seq: u64, deg: f64, restart: bool| {
+        Message::text(
+            json!({"type": "setpoints", "seq": seq, "ack": true, "restart": restart,
+                   "targets": [{"bus": "sim0", "dev_id": 1, "position_deg": deg}]})
+            .to_string(),
+        )
+    };
+    ws.send(batch(1, 5.0, false)).await.expect("send");
+    assert_eq!(next_of(&mut ws, "ack").await["ref_seq"], 1);
+    b.handle.estop().await.expect("e-stop");
+    let ended = next_of(&mut ws, "stream_ended").await;
+    assert_eq!(
+        (ended["dev_id"].as_u64(), ended["reason"].as_str()),
+        (Some(1), Some("estopped")),
+        "{ended}"
+    );
+    enable(&b, 1).await;
+    enable(&b, 2).await;
+    // The client streams on as if nothing happened: refused.
+    ws.send(batch(2, 30.0, false)).await.expect("send");
+    let refused = next_of(&mut ws, "error").await;
+    assert_eq!(
+        (refused["ref_seq"].as_u64(), refused["code"].as_str()),
+        (Some(2), Some("wrong_state")),
+        "{refused}"
+    );
+    fence(&b, 2, 11.0).await;
+    assert!(
+        device_target(&b, 1) < 20.0,
+        "the ended stream drove joint 1 to {:.1}°",
+        device_target(&b, 1)
+    );
+    // A new stream, asked for, is admitted.
+    ws.send(batch(3, 30.0, true)).await.expect("send");
+    assert_eq!(next_of(&mut ws, "ack").await["ref_seq"], 3);
+}

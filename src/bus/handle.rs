@@ -23,7 +23,7 @@ use crate::protocol::{ConfigParam, CtrlMode, InfoBlock, JogDir, Reply};
 use super::authority::Revoked;
 use super::error::BusError;
 // The published state and the setpoint store live in their own files; they
-// are part of this contract and reachable under `bus::handle::` as before.
+// are part of this contract and reachable under `bus::handle::` too.
 pub use super::setpoints::{Setpoint, SetpointStore, StoredSetpoint};
 pub use super::state::{
     BusCounters, BusEvent, BusLatency, BusRates, BusSnapshot, DeviceState, DisabledReason,

@@ -1,4 +1,4 @@
-//! Wire-timed pipelining through a latent USB adapter (issue 15).
+//! Wire-timed pipelining through a latent USB adapter.
 //!
 //! Behind a USB adapter a reply reaches the host a USB frame (CH340,
 //! CP2102), or a latency timer (FTDI), after it left the wire, while the

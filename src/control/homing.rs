@@ -408,7 +408,7 @@ fn joints(state: &Control, req: &HomingRequest) -> ControlResult<Vec<JointRef>> 
     };
     for (i, r) in list.iter().enumerate() {
         if list[..i].contains(r) {
-            return Err(ControlError::invalid(
+            return Err(ControlError::duplicate(
                 &format!("joints[{i}]"),
                 format!("joint {} of bus `{}` appears twice", r.id, r.bus),
             ));

@@ -16,6 +16,7 @@
 //! - [`targets`]: physical targets → raw setpoints, checked; admission under the authority.
 //! - `calibration`: saving a joint's calibration (REST and homing).
 //! - [`teleop`]: the watchdog policy, its default, and what firing it does.
+//! - [`streams`]: teleop streams, each under the epoch it began with; ended streams stay ended.
 //! - `move_book`, [`moves`]: moves checked whole, started, stopped; the book of them.
 //! - `homing_book`, `homing`: homing jobs, one per joint, bounded.
 //! - `ros2_stats`: the ROS 2 bridge's counters (read by `/metrics` and `/api/v1/ros2`).
@@ -31,6 +32,7 @@ pub mod limits;
 pub(crate) mod move_book;
 pub mod moves;
 pub mod ros2_stats;
+pub mod streams;
 pub mod targets;
 pub mod teleop;
 

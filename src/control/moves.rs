@@ -257,7 +257,7 @@ fn plan<'a>(state: &'a Control, req: &MoveRequest) -> ControlResult<Plan<'a>> {
         let r = joint_ref(state, i, j)?;
         let (bus, id) = (state.bus(&r.bus)?, r.id);
         if joints.contains(&r) {
-            return Err(ControlError::invalid(
+            return Err(ControlError::duplicate(
                 &format!("joints[{i}]"),
                 format!("joint {id} of bus `{}` appears twice", r.bus),
             ));

@@ -1,4 +1,4 @@
-//! Motion generated in the daemon (issue 18): a move of several joints,
+//! Motion generated in the daemon: a move of several joints,
 //! possibly on several buses, as one synchronised path that each bus's
 //! owner samples at every control cycle, at the wire time of the frame it
 //! plans, so the setpoints carry no client jitter.

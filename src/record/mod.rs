@@ -1,4 +1,4 @@
-//! Recordings (issue 16): what the joints did, in an MCAP file that
+//! Recordings: what the joints did, in an MCAP file that
 //! Foxglove and `ros2 bag play` (storage plugin mcap) open as is.
 //!
 //! - [`cdr`]: `sensor_msgs/msg/JointState` in CDR (shared with the ROS 2 bridge);

@@ -87,10 +87,12 @@ impl Daemon {
         daemon
     }
 
-    /// [`Daemon::start`] of `jointd ARGS`, the command adjusted first
-    /// (environment, resource limits).
+    /// [`Daemon::start`] of `jointd ARGS --listen 127.0.0.1:0` at log level
+    /// info, the command adjusted first (environment, resource limits).
     pub fn start_with(args: &[&str], tweak: impl FnOnce(&mut Command)) -> Self {
         let mut cmd = Self::command(args);
+        cmd.args(["--listen", "127.0.0.1:0"])
+            .env("RUST_LOG", "info");
         tweak(&mut cmd);
         Self::start(cmd)
     }

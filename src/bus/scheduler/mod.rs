@@ -353,7 +353,7 @@ impl Scheduler {
     /// frames are on the wire in the same order and at the same times as
     /// written one by one. A setpoint arriving while the control frame is
     /// on the wire would have waited for the poll anyway (the budget chose
-    /// it); a request or an e-stop arriving then now waits for the poll's
+    /// it); a request or an e-stop arriving then waits for the poll's
     /// reply too: up to one transaction (0.9 ms at 500000 baud) later.
     fn control_slot(&mut self, now: Instant, frame: Planned) -> Slot {
         if self.budget.allows_another(now, self.clock.frame_time()) {

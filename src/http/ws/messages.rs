@@ -78,6 +78,9 @@ pub(crate) struct SetpointBatch {
     /// Answer with an `ack` once every target is on the wire.
     #[serde(default)]
     pub ack: bool,
+    /// Begin new streams for these joints (after one ended).
+    #[serde(default)]
+    pub restart: bool,
     pub targets: Vec<TargetItem>,
 }
 
@@ -269,6 +272,14 @@ pub(crate) enum ServerMessage {
     },
     Pong {
         ref_seq: Option<u64>,
+    },
+    /// This connection's setpoint stream to a joint ended: its motion
+    /// epoch moved on (`reason`: `estopped`, `disabled`, `reset`, `fault`,
+    /// `mode_changed`, `reenabled`). It never resumes by itself.
+    StreamEnded {
+        bus: String,
+        dev_id: u8,
+        reason: &'static str,
     },
     /// A `move` was accepted: the move as `GET /api/v1/moves/{id}` shows it.
     MoveStarted {

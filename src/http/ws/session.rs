@@ -18,8 +18,9 @@ use super::setpoints::{self, WsError, MAX_BATCH};
 use super::telemetry::Subscription;
 use super::watchdog::Watchdog;
 use super::writer::{PendingAck, Writer};
+use crate::control::streams::Streams;
 use crate::control::teleop::{WatchdogEvent, WatchdogPolicy, MAX_HOLD, MIN_HOLD};
-use crate::control::JointRef;
+use crate::control::{ControlError, JointRef};
 use crate::http::hub::WsHub;
 use crate::http::state::device_id;
 use crate::http::state::AppState;
@@ -33,6 +34,9 @@ pub const MAX_RATE_HZ: f64 = 1000.0;
 const MIN_RATE_HZ: f64 = 1.0;
 const DEFAULT_RATE_HZ: f64 = 50.0;
 
+/// How often a connection looks whether one of its streams was ended
+/// (while it has live streams): an atomic read per joint.
+const STREAM_CHECK: Duration = Duration::from_millis(10);
 /// A close frame's reason holds at most 123 bytes (RFC 6455 §5.5).
 const MAX_CLOSE_REASON: usize = 123;
 
@@ -69,6 +73,7 @@ where
         sub: sub_tx,
         acks: ack_tx,
         watchdog: Watchdog::default(),
+        streams: Streams::default(),
     };
     conn.reply(welcome(&state));
     loop {
@@ -89,6 +94,7 @@ where
             // The writer closed the connection (slow client, shutdown, socket error).
             _ = conn.out.closed() => break,
             _ = sleep_until(deadline), if deadline.is_some() => conn.fire_watchdog("timeout").await,
+            _ = tokio::time::sleep(STREAM_CHECK), if conn.streams.any_live() => conn.end_revoked_streams(),
         }
     }
     if conn.watchdog.is_armed() {
@@ -135,6 +141,7 @@ struct Connection {
     sub: watch::Sender<Option<Subscription>>,
     acks: mpsc::Sender<PendingAck>,
     watchdog: Watchdog,
+    streams: Streams,
 }
 
 impl Connection {
@@ -202,8 +209,21 @@ impl Connection {
         }
     }
 
+    /// Says at once which of this connection's streams an e-stop, a
+    /// disable, a reset, a fault or a mode change ended.
+    fn end_revoked_streams(&mut self) {
+        for (j, why) in self.streams.end_revoked(&self.state) {
+            self.reply(ServerMessage::StreamEnded {
+                bus: j.bus,
+                dev_id: j.id,
+                reason: why.name(),
+            });
+        }
+    }
+
     fn setpoints(&mut self, batch: messages::SetpointBatch) {
-        match setpoints::apply(&self.state, &batch) {
+        self.end_revoked_streams();
+        match setpoints::apply(&self.state, &batch, &mut self.streams) {
             Ok(applied) => {
                 self.arm_default_watchdog();
                 self.watchdog.feed(&applied.joints, Instant::now());
@@ -296,19 +316,35 @@ async fn apply_policy(state: &AppState, policy: WatchdogPolicy, joints: &[JointR
 fn subscription(state: &AppState, s: &Subscribe) -> Result<Subscription, WsError> {
     let buses = match &s.buses {
         Some(names) => {
-            for n in names {
+            for (i, n) in names.iter().enumerate() {
                 state.bus(n)?;
+                if names[..i].contains(n) {
+                    return Err(ControlError::duplicate(
+                        &format!("buses[{i}]"),
+                        format!("bus `{n}` appears twice"),
+                    )
+                    .into());
+                }
             }
             names.clone()
         }
         None => state.buses().map(|b| b.name().to_owned()).collect(),
     };
     let devices = match &s.devices {
-        Some(ids) => Some(
-            ids.iter()
+        Some(ids) => {
+            let ids = ids
+                .iter()
                 .map(|&id| device_id("devices", id))
-                .collect::<Result<Vec<u8>, _>>()?,
-        ),
+                .collect::<Result<Vec<u8>, _>>()?;
+            if let Some(i) = (1..ids.len()).find(|&i| ids[..i].contains(&ids[i])) {
+                return Err(ControlError::duplicate(
+                    &format!("devices[{i}]"),
+                    format!("device {} appears twice", ids[i]),
+                )
+                .into());
+            }
+            Some(ids)
+        }
         None => None,
     };
     let rate_hz = s.rate_hz.unwrap_or(DEFAULT_RATE_HZ);

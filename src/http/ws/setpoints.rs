@@ -10,6 +10,7 @@ use super::messages::{ErrorCode, SetpointBatch, TargetItem};
 use crate::bus::BusError;
 use crate::bus::{BusSnapshot, Setpoint};
 use crate::control::error::{ControlError, InvalidKind};
+use crate::control::streams::Streams;
 use crate::control::targets::{setpoint, TargetRequest};
 use crate::control::JointRef;
 use crate::http::state::AppState;
@@ -80,8 +81,13 @@ pub(crate) struct Applied {
     pub joints: Vec<JointRef>,
 }
 
-/// Validates and stores a batch.
-pub(crate) fn apply(state: &AppState, batch: &SetpointBatch) -> Result<Applied, WsError> {
+/// Validates and stores a batch, each joint's targets under the epoch of
+/// its stream on this connection (`streams`).
+pub(crate) fn apply(
+    state: &AppState,
+    batch: &SetpointBatch,
+    streams: &mut Streams,
+) -> Result<Applied, WsError> {
     if batch.targets.is_empty() {
         return Err(WsError::new(ErrorCode::BadMessage, "`targets` is empty"));
     }
@@ -95,16 +101,26 @@ pub(crate) fn apply(state: &AppState, batch: &SetpointBatch) -> Result<Applied, 
         ));
     }
     let per_bus = validate(state, &batch.targets)?;
+    let joints: Vec<JointRef> = per_bus
+        .iter()
+        .flat_map(|(name, targets)| {
+            targets.iter().map(|(id, _)| JointRef {
+                bus: name.clone(),
+                id: *id,
+            })
+        })
+        .collect();
+    let mut epochs = streams.admit(state, &joints, batch.restart)?.into_iter();
     let accepted = Instant::now();
     let mut writes = Vec::new();
-    let mut joints = Vec::new();
     for (name, targets) in per_bus {
         let bus = state.bus(&name)?;
-        joints.extend(targets.iter().map(|(id, _)| JointRef {
-            bus: name.clone(),
-            id: *id,
-        }));
-        writes.push((name, bus.set_targets(&targets)));
+        let under: Vec<_> = targets
+            .iter()
+            .zip(epochs.by_ref())
+            .map(|(&(id, sp), epoch)| (id, sp, epoch))
+            .collect();
+        writes.push((name, bus.set_targets_under(&under)));
     }
     Ok(Applied {
         accepted,

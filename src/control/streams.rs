@@ -1,0 +1,104 @@
+//! Teleop streams: the joints one client (a WebSocket connection, the ROS 2
+//! bridge) streams setpoints to, each under the motion epoch its stream
+//! began with. When a joint's epoch moves on (an e-stop, a disable, a
+//! reset, a fault, a mode change, an enable) its stream ends with that
+//! reason and never resumes by itself: the client's next setpoints for it
+//! are refused until it asks for a new stream (`restart`). A client that
+//! streams on blindly through an e-stop and a later enable (from the
+//! dashboard, say) therefore cannot drive the joint again unasked.
+
+use std::collections::BTreeMap;
+
+use super::error::{ControlError, ControlResult};
+use super::{Control, JointRef};
+use crate::bus::authority::{Epoch, Revoked};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stream {
+    Live(Epoch),
+    Ended(Revoked),
+}
+
+/// One client's streams, by joint.
+#[derive(Debug, Default)]
+pub struct Streams {
+    joints: BTreeMap<JointRef, Stream>,
+}
+
+impl Streams {
+    /// The epoch each of `joints` streams under, in order: a joint's first
+    /// setpoints (or any with `restart`) begin its stream under its current
+    /// epoch. All or nothing: one ended stream refuses the batch.
+    pub fn admit(
+        &mut self,
+        control: &Control,
+        joints: &[JointRef],
+        restart: bool,
+    ) -> ControlResult<Vec<Epoch>> {
+        let mut epochs = Vec::with_capacity(joints.len());
+        for j in joints {
+            let authority = control.bus(&j.bus)?.authority();
+            let now = authority.grant(j.id).epoch;
+            let stream = match self.joints.get(j) {
+                Some(_) if restart => Stream::Live(now),
+                None => Stream::Live(now),
+                Some(Stream::Live(e)) if *e == now => Stream::Live(now),
+                Some(Stream::Live(_)) => {
+                    Stream::Ended(authority.last_revoked(j.id).unwrap_or(Revoked::Disabled))
+                }
+                Some(ended) => *ended,
+            };
+            match stream {
+                Stream::Live(e) => epochs.push(e),
+                Stream::Ended(why) => {
+                    self.joints.insert(j.clone(), stream);
+                    return Err(ended(j, why));
+                }
+            }
+        }
+        for (j, e) in joints.iter().zip(&epochs) {
+            self.joints.insert(j.clone(), Stream::Live(*e));
+        }
+        Ok(epochs)
+    }
+
+    /// Streams whose joint's epoch moved on since they began: each ends
+    /// now, and is returned once with why.
+    pub fn end_revoked(&mut self, control: &Control) -> Vec<(JointRef, Revoked)> {
+        let mut out = Vec::new();
+        for (j, stream) in self.joints.iter_mut() {
+            let Stream::Live(e) = *stream else { continue };
+            let Ok(bus) = control.bus(&j.bus) else {
+                continue;
+            };
+            if bus.authority().grant(j.id).epoch != e {
+                let why = bus
+                    .authority()
+                    .last_revoked(j.id)
+                    .unwrap_or(Revoked::Disabled);
+                *stream = Stream::Ended(why);
+                out.push((j.clone(), why));
+            }
+        }
+        out
+    }
+
+    /// True while some stream is live (worth watching for its end).
+    pub fn any_live(&self) -> bool {
+        self.joints.values().any(|s| matches!(s, Stream::Live(_)))
+    }
+}
+
+fn ended(j: &JointRef, why: Revoked) -> ControlError {
+    ControlError::conflict(
+        "stream-ended",
+        "Setpoint stream ended",
+        format!(
+            "the setpoint stream to joint {} of bus `{}` ended ({}): send the next setpoints \
+             with \"restart\": true to begin a new one",
+            j.id,
+            j.bus,
+            why.name()
+        ),
+    )
+}
