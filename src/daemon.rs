@@ -651,7 +651,7 @@ const RECORDINGS_CLOSE_TIMEOUT: Duration = Duration::from_secs(3);
 /// Closes the recordings still running (bounded: a slow disk cannot hold
 /// the exit); one not closed in time keeps its chunks, not its summary.
 async fn stop_recordings(state: &AppState) {
-    let closing = crate::http::recordings::stop_all(state);
+    let closing = crate::control::recordings::stop_all(state.control());
     if tokio::time::timeout(RECORDINGS_CLOSE_TIMEOUT, closing)
         .await
         .is_err()

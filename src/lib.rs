@@ -24,6 +24,9 @@
 //!   the [`bus::BusHandle`] is everything the rest of the daemon sees.
 //! - [`record`]: MCAP recordings of the buses (joint states in CDR, frames, events,
 //!   setpoints) and the `jointd record` client.
+//! - [`control`]: the control core REST, WebSocket and ROS 2 call as equals: targets,
+//!   soft limits, moves, homing, calibration, the teleop watchdog and streams; its own
+//!   error ([`control::ControlError`]), which each front-end maps once.
 //! - [`http`]: one axum application: state, auth, errors (the one place that picks HTTP
 //!   statuses), and below it the REST areas, the WebSocket and the dashboard, which never
 //!   import each other.
@@ -54,9 +57,11 @@
 //! | who may call at all: token, Host (DNS rebinding), browser origin, body size | `http::auth`, `http::guard` (checks), `http::policy` (the decisions, pure) |
 //! | a REST route | `http::api` (one file per area), its OpenAPI in the same handler |
 //! | a WebSocket message | `http::ws::messages`, applied in `http::ws::session` |
-//! | soft limits, target checks (REST and WebSocket) | `http::limits`, `http::targets` |
+//! | soft limits, target checks, admission under the motion authority | `control::limits`, `control::targets`, `control::batch` |
+//! | whether a frame may still go out (motion epoch per joint) | `bus::authority`, checked in `bus::scheduler` (control) and `bus::motion` |
 //! | the dashboard | `web/` (files), served by `http::web` |
-//! | moves generated in the daemon; named hands, poses, calibration, homing | `motion`, `bus::motion`, `http::moves`; `hands`; `http::calibration`, `http::homing` |
+//! | moves generated in the daemon; named hands, poses, calibration, homing | `motion`, `bus::motion`, `control::moves`; `hands`; `control::calibration`, `control::homing` |
+//! | the teleop watchdog and streams (WebSocket, ROS 2) | `control::watchdog`, `control::streams` |
 //! | MCAP recordings (what `jointd record` and `POST /api/v1/recordings` write) | `record`, `http::recordings` |
 //! | what a simulated device does with a frame | `sim::device`, `sim::physics`, `sim::faults` |
 //! | collisions and timing on the simulated wire | `sim::wire`, `sim::engine` |

@@ -5,6 +5,7 @@
 
 use crate::bus::BusError;
 use crate::protocol::units::UnitError;
+use crate::record::mcap_file::McapFileError;
 
 /// The range a field must lie in.
 #[derive(Debug, Clone, PartialEq)]
@@ -77,6 +78,16 @@ pub enum ControlError {
     /// The state file could not be written: nothing was changed.
     #[error("{0}")]
     StateUnwritable(String),
+    /// A recording's file could not be made or written; `full`: no room
+    /// (disk, quota, file size limit), retrying will not help.
+    #[error("{detail}")]
+    Storage { full: bool, detail: String },
+    /// A finished recording's file could not be read back.
+    #[error("{0}")]
+    Unreadable(String),
+    /// A bug: something the core cannot go on from.
+    #[error("internal error: {0}")]
+    Internal(String),
     /// The bus could not do it.
     #[error(transparent)]
     Bus(#[from] BusError),
@@ -209,13 +220,50 @@ impl ControlError {
         Self::StateUnwritable(detail.into())
     }
 
+    /// A recording whose file could not be created or written.
+    pub fn recording_unwritable(err: &McapFileError) -> Self {
+        Self::Storage {
+            full: err.storage_full(),
+            detail: err.to_string(),
+        }
+    }
+
+    /// A finished recording's file that cannot be read back: not found
+    /// when it is no longer on the disk (removed).
+    pub fn recording_file_unreadable(
+        id: u64,
+        path: &std::path::Path,
+        err: &std::io::Error,
+    ) -> Self {
+        if err.kind() == std::io::ErrorKind::NotFound {
+            return Self::not_found(
+                "recording-file-removed",
+                format!(
+                    "the file of recording {id} ({}) is no longer on the disk: it was removed",
+                    path.display()
+                ),
+            );
+        }
+        Self::Unreadable(format!(
+            "the file of recording {id} ({}) cannot be read: {err}",
+            path.display()
+        ))
+    }
+
+    pub fn internal(what: impl Into<String>) -> Self {
+        Self::Internal(what.into())
+    }
+
     /// Says what was wrong in other words (the kind, field and range stay).
     pub fn with_detail(mut self, words: impl Into<String>) -> Self {
         match &mut self {
             Self::Invalid { detail, .. }
             | Self::NotFound { detail, .. }
             | Self::Conflict { detail, .. }
-            | Self::StateUnwritable(detail) => *detail = words.into(),
+            | Self::StateUnwritable(detail)
+            | Self::Storage { detail, .. }
+            | Self::Unreadable(detail)
+            | Self::Internal(detail) => *detail = words.into(),
             Self::Bus(_) => {}
         }
         self

@@ -14,14 +14,18 @@
 //! - [`limits`]: per-joint soft limits from the config.
 //! - [`joints`]: [`JointRef`], device ids, known devices, joints named by hand.
 //! - [`targets`]: physical targets → raw setpoints, checked; admission under the authority.
+//! - `batch`: one resolver of target batches for the teleop front-ends (WebSocket, ROS 2).
 //! - `calibration`: saving a joint's calibration (REST and homing).
 //! - [`teleop`]: the watchdog policy, its default, and what firing it does.
+//! - [`watchdog`]: the one teleop watchdog (WebSocket connections and the ROS 2 bridge).
 //! - [`streams`]: teleop streams, each under the epoch it began with; ended streams stay ended.
 //! - `move_book`, [`moves`]: moves checked whole, started, stopped; the book of them.
 //! - `homing_book`, `homing`: homing jobs, one per joint, bounded.
+//! - `recording_book`, `recordings`: recordings' jobs: started, listed, stopped, their files.
 //! - `ros2_stats`: the ROS 2 bridge's counters (read by `/metrics` and `/api/v1/ros2`).
 //! - this file: [`Control`], the state the core works on.
 
+pub(crate) mod batch;
 pub(crate) mod calibration;
 pub mod device;
 pub mod error;
@@ -31,10 +35,13 @@ pub mod joints;
 pub mod limits;
 pub(crate) mod move_book;
 pub mod moves;
+pub(crate) mod recording_book;
+pub(crate) mod recordings;
 pub mod ros2_stats;
 pub mod streams;
 pub mod targets;
 pub mod teleop;
+pub mod watchdog;
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -72,6 +79,7 @@ pub struct Control {
     options: std::sync::OnceLock<Options>,
     moves: move_book::MoveBook,
     homings: homing_book::HomingBook,
+    recordings: recording_book::RecordingBook,
 }
 
 impl Control {
@@ -85,6 +93,7 @@ impl Control {
             options: std::sync::OnceLock::new(),
             moves: Default::default(),
             homings: Default::default(),
+            recordings: Default::default(),
         }
     }
 
@@ -124,6 +133,11 @@ impl Control {
     /// The homing jobs started through any front-end.
     pub(crate) fn homings(&self) -> &homing_book::HomingBook {
         &self.homings
+    }
+
+    /// The recordings started through any front-end.
+    pub(crate) fn recordings(&self) -> &recording_book::RecordingBook {
+        &self.recordings
     }
 
     /// Names and calibrations of the joints as every edge gives them (REST,

@@ -33,7 +33,6 @@ use utoipa::ToSchema;
 use crate::bus::BusError;
 use crate::control::ControlError;
 use crate::protocol::units::UnitError;
-use crate::record::mcap_file::McapFileError;
 
 /// Media type of every error body.
 pub(crate) const PROBLEM_JSON: &str = "application/problem+json";
@@ -353,53 +352,6 @@ impl ApiError {
         )
     }
 
-    /// A recording whose file could not be created or written: 507 when
-    /// the storage is full (disk, quota or file size limit: retrying will
-    /// not help until room is made), else 503.
-    pub fn recording_unwritable(err: &McapFileError) -> Self {
-        if err.storage_full() {
-            return Self::new(
-                StatusCode::INSUFFICIENT_STORAGE,
-                "storage-full",
-                "No room for the recording",
-                err.to_string(),
-            );
-        }
-        Self::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "recording-unwritable",
-            "Recording file not written",
-            err.to_string(),
-        )
-    }
-
-    /// A finished recording's file that cannot be read back: 404 when it is
-    /// no longer on the disk (removed), else 503.
-    pub fn recording_file_unreadable(
-        id: u64,
-        path: &std::path::Path,
-        err: &std::io::Error,
-    ) -> Self {
-        if err.kind() == std::io::ErrorKind::NotFound {
-            return Self::not_found(
-                "recording-file-removed",
-                format!(
-                    "the file of recording {id} ({}) is no longer on the disk: it was removed",
-                    path.display()
-                ),
-            );
-        }
-        Self::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "recording-unreadable",
-            "Recording file not readable",
-            format!(
-                "the file of recording {id} ({}) cannot be read: {err}",
-                path.display()
-            ),
-        )
-    }
-
     /// A request shed because `limit` requests were already being handled
     /// (503 with Retry-After): a flood answers fast instead of queueing.
     pub fn overloaded(limit: usize) -> Self {
@@ -520,6 +472,31 @@ impl From<ControlError> for ApiError {
                 }
             }
             ControlError::StateUnwritable(detail) => Self::state_unwritable(detail),
+            ControlError::Storage { full: true, detail } => Self::new(
+                StatusCode::INSUFFICIENT_STORAGE,
+                "storage-full",
+                "No room for the recording",
+                detail,
+            ),
+            ControlError::Storage {
+                full: false,
+                detail,
+            } => Self::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "recording-unwritable",
+                "Recording file not written",
+                detail,
+            ),
+            ControlError::Unreadable(detail) => Self::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "recording-unreadable",
+                "Recording file not readable",
+                detail,
+            ),
+            ControlError::Internal(detail) => {
+                tracing::error!("internal error: {detail}");
+                Self::internal()
+            }
             ControlError::Bus(e) => e.into(),
         }
     }

@@ -31,8 +31,6 @@ pub(crate) mod guard;
 pub(crate) mod hub;
 pub(crate) mod paths;
 pub mod policy;
-pub(crate) mod recording_book;
-pub(crate) mod recordings;
 pub(crate) mod shed;
 pub mod state;
 pub(crate) mod telemetry;

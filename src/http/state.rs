@@ -61,7 +61,6 @@ struct Inner {
     ws: WsHub,
     refusals: RefusalLog,
     options: std::sync::OnceLock<HttpOptions>,
-    recordings: crate::http::recording_book::RecordingBook,
 }
 
 impl std::ops::Deref for AppState {
@@ -83,7 +82,6 @@ impl AppState {
                 ws: WsHub::default(),
                 refusals: RefusalLog::default(),
                 options: std::sync::OnceLock::new(),
-                recordings: Default::default(),
             }),
         }
     }
@@ -95,16 +93,6 @@ impl AppState {
 
     pub fn token(&self) -> Option<&str> {
         self.inner.token.as_deref()
-    }
-
-    /// The recordings started through the API.
-    pub(crate) fn recordings(&self) -> &crate::http::recording_book::RecordingBook {
-        &self.inner.recordings
-    }
-
-    /// Names and calibrations of the joints as every edge gives them.
-    pub(crate) fn joint_labeler(&self) -> crate::record::joint_states::Labeler {
-        self.inner.control.joint_labeler()
     }
 
     /// The daemon's options beyond buses, limits and token (set once, at

@@ -20,8 +20,9 @@ use super::keys::{self, Kind, NodeIdentity};
 use super::Ros2Stats;
 use crate::bus::BusHandle;
 use crate::bus::BusSnapshot;
-use crate::control::teleop::WatchdogPolicy;
+use crate::control::watchdog::{fire_policy, Watchdog};
 use crate::control::Control;
+use crate::control::JointRef;
 use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
 use crate::record::cdr::{diagnostic_array_cdr, DiagnosticStatus, JointState};
 use crate::record::joint_states::{system_ns, JointStates, Scope};
@@ -283,22 +284,25 @@ async fn take_commands(
     >,
     stats: Arc<Ros2Stats>,
 ) {
-    let watchdog = state.watchdog_default();
-    let hold = Duration::from_millis(watchdog.hold_timeout_ms);
-    let mut commanded: Vec<(BusHandle, Vec<u8>)> = Vec::new();
-    let mut deadline: Option<Instant> = None;
+    // The one teleop watchdog, as a WebSocket client gets it by default.
+    let default = state.watchdog_default();
+    let mut watchdog = Watchdog::default();
+    watchdog.arm(
+        Duration::from_millis(default.hold_timeout_ms),
+        default.policy,
+        tokio::time::Instant::now(),
+    );
     let mut said_bad = false;
     loop {
-        let sample = match deadline {
-            Some(d) => match tokio::time::timeout_at(d.into(), subscriber.recv_async()).await {
+        let sample = match watchdog.deadline() {
+            Some(d) => match tokio::time::timeout_at(d, subscriber.recv_async()).await {
                 Ok(s) => s,
                 Err(_) => {
-                    for (bus, ids) in &commanded {
-                        fire_watchdog(bus, ids, watchdog.policy).await;
+                    if let Some((policy, joints)) = watchdog.fire() {
+                        tracing::warn!(?joints, ?policy, "ROS 2: joint commands stopped: watchdog");
+                        fire_policy(&state, policy, &joints).await;
+                        stats.watchdog_fired.fetch_add(1, Ordering::Relaxed);
                     }
-                    stats.watchdog_fired.fetch_add(1, Ordering::Relaxed);
-                    deadline = None;
-                    commanded.clear();
                     continue;
                 }
             },
@@ -311,25 +315,16 @@ async fn take_commands(
             .and_then(|cmd| commands::setpoints(&state, &scope, &cmd));
         match outcome {
             Ok(per_bus) => {
+                let mut fed = Vec::new();
                 for (bus, targets) in per_bus {
                     bus.set_targets(&targets);
-                    let k = match commanded.iter().position(|(b, _)| b.name() == bus.name()) {
-                        Some(k) => k,
-                        None => {
-                            commanded.push((bus.clone(), Vec::new()));
-                            commanded.len() - 1
-                        }
-                    };
-                    for (id, _) in &targets {
-                        if !commanded[k].1.contains(id) {
-                            commanded[k].1.push(*id);
-                        }
-                    }
+                    fed.extend(targets.iter().map(|(id, _)| JointRef {
+                        bus: bus.name().to_owned(),
+                        id: *id,
+                    }));
                 }
+                watchdog.feed(&fed, tokio::time::Instant::now());
                 stats.commands_applied.fetch_add(1, Ordering::Relaxed);
-                if !hold.is_zero() {
-                    deadline = Some(Instant::now() + hold);
-                }
             }
             Err(why) => {
                 stats.commands_dropped.fetch_add(1, Ordering::Relaxed);
@@ -341,18 +336,6 @@ async fn take_commands(
             }
         }
     }
-}
-
-/// The command stream stopped: hold the commanded joints where they are,
-/// or disable them, as `[watchdog]` says.
-async fn fire_watchdog(bus: &BusHandle, ids: &[u8], policy: WatchdogPolicy) {
-    tracing::warn!(
-        bus = bus.name(),
-        ?ids,
-        ?policy,
-        "ROS 2: joint commands stopped: watchdog"
-    );
-    crate::control::teleop::apply_policy(bus, ids.to_vec(), policy).await;
 }
 
 async fn publish_diagnostics(

@@ -6,8 +6,10 @@
 //! joint is refused whole: nothing of it is applied.
 
 use crate::bus::{BusHandle, Setpoint};
-use crate::control::targets::{setpoint, TargetRequest};
+use crate::control::batch::{self, BatchItem};
+use crate::control::targets::TargetRequest;
 use crate::control::Control;
+use crate::control::JointRef;
 use crate::protocol::units;
 use crate::record::cdr::JointState;
 use crate::record::joint_states::Scope;
@@ -56,49 +58,37 @@ pub(crate) fn setpoints(
             .unwrap_or_default(),
         Scope::Hand { joints, .. } => joints.clone(),
     };
-    let mut out: Vec<BusTargets> = Vec::new();
+    let mut items = Vec::with_capacity(cmd.name.len());
     for (i, name) in cmd.name.iter().enumerate() {
-        let (bus_name, id) = candidates
+        let (bus, id) = candidates
             .iter()
             .find(|(b, id)| label(b, *id).0 == *name)
             .ok_or_else(|| format!("no joint named `{name}` here"))?;
-        let bus = state
-            .bus(bus_name)
-            .map_err(|_| format!("joint `{name}`: no bus `{bus_name}`"))?;
-        let snap = bus.snapshot();
-        let dev = snap
-            .devices
-            .get(id)
-            .ok_or_else(|| format!("joint `{name}` has not been seen on bus `{bus_name}`"))?;
-        let group = match out.iter().position(|(b, _)| b.name() == bus_name) {
-            Some(k) => k,
-            None => {
-                out.push((bus.clone(), Vec::new()));
-                out.len() - 1
-            }
-        };
-        if out[group].1.iter().any(|(seen, _)| seen == id) {
-            return Err(format!("joint `{name}` is named twice"));
-        }
-        if !bus.grant(*id).enabled {
-            return Err(format!("joint `{name}` is not enabled"));
-        }
         let rad = cmd.position[i];
         let dps = cmd.velocity.get(i).map(|v| v.to_degrees().abs());
         if !rad.is_finite() || dps.is_some_and(|v| !v.is_finite()) {
             return Err(format!("joint `{name}`: not a finite number"));
         }
-        let req = TargetRequest {
-            position_deg: Some(rad.to_degrees()),
-            speed_rpm: dps
-                .filter(|v| *v >= MIN_SPEED_DPS)
-                .map(|v| v / units::output_deg_per_s(1.0)),
-        };
-        let cal = state.calibration(bus_name, *id);
-        let limits = state.limits(bus_name, *id);
-        let sp = setpoint(dev, &limits, &cal, &req, &format!("{name}."))
-            .map_err(|e| format!("joint `{name}`: {e}"))?;
-        out[group].1.push((*id, sp));
+        items.push(BatchItem {
+            joint: JointRef {
+                bus: bus.clone(),
+                id: *id,
+            },
+            request: TargetRequest {
+                position_deg: Some(rad.to_degrees()),
+                speed_rpm: dps
+                    .filter(|v| *v >= MIN_SPEED_DPS)
+                    .map(|v| v / units::output_deg_per_s(1.0)),
+            },
+            field: format!("{name}."),
+        });
     }
-    Ok(out)
+    let per_bus = batch::resolve(state, &items).map_err(|e| e.to_string())?;
+    per_bus
+        .into_iter()
+        .map(|(name, targets)| {
+            let bus = state.bus(&name).map_err(|e| e.to_string())?.clone();
+            Ok((bus, targets))
+        })
+        .collect()
 }

@@ -483,7 +483,7 @@ fn bridge_families(m: &mut Exposition, state: &AppState) {
         "jointd_recordings_running",
         "MCAP recordings being written.",
         "",
-        crate::http::recordings::running(state) as f64,
+        crate::control::recordings::running(state.control()) as f64,
     );
 }
 

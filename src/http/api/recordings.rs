@@ -10,10 +10,10 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
+use crate::control::recording_book::RecordingView;
+use crate::control::recordings::{self, RecordingRequest};
 use crate::http::error::{ApiResult, Problem};
 use crate::http::extract::{ApiJson, ApiPath};
-use crate::http::recording_book::RecordingView;
-use crate::http::recordings::{self, RecordingRequest};
 use crate::http::state::AppState;
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {
@@ -65,7 +65,7 @@ async fn start_recording(
 ) -> ApiResult<(StatusCode, Json<RecordingView>)> {
     Ok((
         StatusCode::CREATED,
-        Json(recordings::start(&state, &req).await?),
+        Json(recordings::start(state.control(), &req).await?),
     ))
 }
 
@@ -77,7 +77,7 @@ async fn start_recording(
     responses((status = 200, description = "The recordings", body = RecordingList), ErrorResponses))]
 async fn list_recordings(State(state): State<AppState>) -> ApiResult<Json<RecordingList>> {
     Ok(Json(RecordingList {
-        recordings: recordings::list(&state),
+        recordings: recordings::list(state.control()),
     }))
 }
 
@@ -92,7 +92,7 @@ async fn get_recording(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<RecordingPath>,
 ) -> ApiResult<Json<RecordingView>> {
-    Ok(Json(recordings::get(&state, p.id)?))
+    Ok(Json(recordings::get(state.control(), p.id)?))
 }
 
 /// Stop a recording: its last chunk, summary and footer are written.
@@ -105,7 +105,7 @@ async fn stop_recording(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<RecordingPath>,
 ) -> ApiResult<Json<RecordingView>> {
-    Ok(Json(recordings::stop(&state, p.id).await?))
+    Ok(Json(recordings::stop(state.control(), p.id).await?))
 }
 
 /// Download a finished recording's MCAP file.
@@ -120,7 +120,7 @@ async fn recording_file(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<RecordingPath>,
 ) -> ApiResult<impl IntoResponse> {
-    let (name, bytes) = recordings::file(&state, p.id).await?;
+    let (name, bytes) = recordings::file(state.control(), p.id).await?;
     Ok((
         [
             (header::CONTENT_TYPE, "application/octet-stream".to_string()),

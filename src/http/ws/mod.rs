@@ -4,17 +4,16 @@
 //!
 //! # Layout
 //! - [`messages`]: the message types, parsed strictly.
-//! - [`session`]: one connection's reader: apply messages, run the watchdog.
+//! - [`session`]: one connection's reader: apply messages, run its watchdog
+//!   ([`crate::control::watchdog`]) and its streams ([`crate::control::streams`]).
 //! - [`writer`]: one connection's writer: telemetry, events, acks; bounded.
 //! - [`setpoints`]: validate a batch whole, then store it.
 //! - [`telemetry`]: snapshot → joint fields in physical units.
-//! - [`watchdog`]: the teleop hold-timeout state machine.
 
 pub(crate) mod messages;
 pub mod session;
 pub(crate) mod setpoints;
 pub(crate) mod telemetry;
-pub(crate) mod watchdog;
 pub(crate) mod writer;
 
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;

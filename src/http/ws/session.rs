@@ -16,11 +16,11 @@ use super::messages::{
 };
 use super::setpoints::{self, WsError, MAX_BATCH};
 use super::telemetry::Subscription;
-use super::watchdog::Watchdog;
 use super::writer::{PendingAck, Writer};
 use crate::control::streams::Streams;
-use crate::control::teleop::{WatchdogEvent, WatchdogPolicy, MAX_HOLD, MIN_HOLD};
-use crate::control::{ControlError, JointRef};
+use crate::control::teleop::{WatchdogEvent, MAX_HOLD, MIN_HOLD};
+use crate::control::watchdog::{fire_policy, Watchdog};
+use crate::control::ControlError;
 use crate::http::hub::WsHub;
 use crate::http::state::device_id;
 use crate::http::state::AppState;
@@ -288,7 +288,7 @@ impl Connection {
             joints = joints.len(),
             "teleop watchdog fired"
         );
-        apply_policy(&self.state, policy, &joints).await;
+        fire_policy(&self.state, policy, &joints).await;
         self.state.ws().publish(WatchdogEvent {
             event: "watchdog",
             client: self.client,
@@ -296,20 +296,6 @@ impl Connection {
             why,
             joints,
         });
-    }
-}
-
-async fn apply_policy(state: &AppState, policy: WatchdogPolicy, joints: &[JointRef]) {
-    for bus in state.buses() {
-        let ids: Vec<u8> = joints
-            .iter()
-            .filter(|j| j.bus == bus.name())
-            .map(|j| j.id)
-            .collect();
-        if ids.is_empty() {
-            continue;
-        }
-        crate::control::teleop::apply_policy(bus, ids, policy).await;
     }
 }
 

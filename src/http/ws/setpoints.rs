@@ -3,18 +3,17 @@
 //! them all, one store write per bus. One bad target rejects the batch:
 //! nothing of it is applied.
 
-use std::collections::BTreeMap;
 use std::time::Instant;
 
 use super::messages::{ErrorCode, SetpointBatch, TargetItem};
 use crate::bus::BusError;
-use crate::bus::{BusSnapshot, Setpoint};
+use crate::control::batch::{self, BatchItem, PerBus};
 use crate::control::error::{ControlError, InvalidKind};
+use crate::control::joints::device_id;
 use crate::control::streams::Streams;
-use crate::control::targets::{setpoint, TargetRequest};
+use crate::control::targets::TargetRequest;
 use crate::control::JointRef;
 use crate::http::state::AppState;
-use crate::http::state::{device_id, known_device};
 
 /// Most targets one batch may carry (16 joints × a few buses, with room).
 pub(crate) const MAX_BATCH: usize = 256;
@@ -62,7 +61,11 @@ impl From<ControlError> for WsError {
             ControlError::Bus(
                 BusError::WrongState(_) | BusError::Refused { .. } | BusError::Preempted,
             ) => ErrorCode::WrongState,
-            ControlError::Bus(_) | ControlError::StateUnwritable(_) => ErrorCode::BusError,
+            ControlError::Bus(_)
+            | ControlError::StateUnwritable(_)
+            | ControlError::Storage { .. }
+            | ControlError::Unreadable(_)
+            | ControlError::Internal(_) => ErrorCode::BusError,
         };
         WsError {
             code,
@@ -129,34 +132,23 @@ pub(crate) fn apply(
     })
 }
 
-type PerBus = BTreeMap<String, Vec<(u8, Setpoint)>>;
-
+/// Names each target's joint, then checks the batch whole (the one
+/// resolver every teleop front-end uses).
 fn validate(state: &AppState, targets: &[TargetItem]) -> Result<PerBus, WsError> {
-    let mut snapshots: BTreeMap<String, std::sync::Arc<BusSnapshot>> = BTreeMap::new();
-    let mut per_bus = PerBus::new();
+    let mut items = Vec::with_capacity(targets.len());
     for (i, t) in targets.iter().enumerate() {
         let field = format!("targets[{i}].");
-        let (name, id) = joint_of(state, t, &field)?;
-        let snap = match snapshots.get(&name) {
-            Some(s) => s.clone(),
-            None => {
-                let s = state.bus(&name)?.snapshot();
-                snapshots.insert(name.clone(), s.clone());
-                s
-            }
-        };
-        let sp = one_target(state, &snap, id, t, &field)?;
-        let list = per_bus.entry(name.clone()).or_default();
-        if list.iter().any(|(seen, _)| *seen == id) {
-            return Err(WsError::new(
-                ErrorCode::BadMessage,
-                format!("joint {id} of bus {name} appears twice in one batch"),
-            )
-            .with_field(format!("{field}dev_id")));
-        }
-        list.push((id, sp));
+        let (bus, id) = joint_of(state, t, &field)?;
+        items.push(BatchItem {
+            joint: JointRef { bus, id },
+            request: TargetRequest {
+                position_deg: t.position_deg,
+                speed_rpm: t.speed_rpm,
+            },
+            field,
+        });
     }
-    Ok(per_bus)
+    Ok(batch::resolve(state, &items)?)
 }
 
 /// The bus and id a target names: by `dev_id` (on `bus`, or the only
@@ -191,35 +183,6 @@ fn joint_of(state: &AppState, t: &TargetItem, field: &str) -> Result<(String, u8
         )
         .with_field(field.trim_end_matches('.').to_string())),
     }
-}
-
-fn one_target(
-    state: &AppState,
-    snap: &BusSnapshot,
-    id: u8,
-    t: &TargetItem,
-    field: &str,
-) -> Result<Setpoint, WsError> {
-    let dev = known_device(snap, id)?;
-    // The bus's motion authority, an atomic read: no bus round trip at
-    // teleoperation rates, and never a snapshot that lags an e-stop.
-    if !state.bus(&snap.name)?.grant(id).enabled {
-        return Err(WsError::new(
-            ErrorCode::WrongState,
-            format!(
-                "joint {id} of bus {} is not enabled (enable it first)",
-                snap.name
-            ),
-        )
-        .with_field(format!("{field}dev_id")));
-    }
-    let limits = state.limits(&snap.name, id);
-    let req = TargetRequest {
-        position_deg: t.position_deg,
-        speed_rpm: t.speed_rpm,
-    };
-    let cal = state.calibration(&snap.name, id);
-    Ok(setpoint(dev, &limits, &cal, &req, field)?)
 }
 
 /// The target's bus, or the only bus when it names none.

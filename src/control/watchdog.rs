@@ -1,17 +1,20 @@
-//! The teleoperation watchdog of one connection: armed by a `watchdog`
-//! message, fed by every accepted `setpoints`, fired when the stream stops
-//! for longer than the hold timeout or the socket closes while armed.
+//! The teleoperation watchdog of one client, the same for every front-end
+//! (a WebSocket connection, the ROS 2 bridge): armed with a hold timeout and
+//! a policy, fed by every accepted batch of setpoints, fired when the stream
+//! stops for longer than the hold timeout (or the client goes away while
+//! armed). Pure: the caller says what time it is and does what firing asks
+//! ([`fire_policy`]).
 
 use std::collections::BTreeSet;
 use std::time::Duration;
 
 use tokio::time::Instant;
 
-use crate::control::teleop::WatchdogPolicy;
-use crate::control::JointRef;
+use super::teleop::{apply_policy, WatchdogPolicy};
+use super::{Control, JointRef};
 
 #[derive(Debug, Default)]
-pub(crate) struct Watchdog {
+pub struct Watchdog {
     /// `None`: disarmed.
     armed: Option<(Duration, WatchdogPolicy)>,
     last_fed: Option<Instant>,
@@ -24,7 +27,7 @@ pub(crate) struct Watchdog {
 }
 
 impl Watchdog {
-    pub(crate) fn arm(&mut self, hold: Duration, policy: WatchdogPolicy, now: Instant) {
+    pub fn arm(&mut self, hold: Duration, policy: WatchdogPolicy, now: Instant) {
         self.armed = (!hold.is_zero()).then_some((hold, policy));
         self.last_fed = Some(now);
         self.fired = false;
@@ -33,18 +36,18 @@ impl Watchdog {
 
     /// Whether a watchdog was ever set on this connection (a client's `0`
     /// disarms it for good; the config's default does not override that).
-    pub(crate) fn declared(&self) -> bool {
+    pub fn declared(&self) -> bool {
         self.declared
     }
 
-    pub(crate) fn feed(&mut self, joints: &[JointRef], now: Instant) {
+    pub fn feed(&mut self, joints: &[JointRef], now: Instant) {
         self.joints.extend(joints.iter().cloned());
         self.last_fed = Some(now);
         self.fired = false;
     }
 
     /// When the watchdog fires if nothing feeds it; `None` when it cannot fire.
-    pub(crate) fn deadline(&self) -> Option<Instant> {
+    pub fn deadline(&self) -> Option<Instant> {
         let (hold, _) = self.armed?;
         if self.fired || self.joints.is_empty() {
             return None;
@@ -53,7 +56,7 @@ impl Watchdog {
     }
 
     /// Fires: the policy and the joints it applies to.
-    pub(crate) fn fire(&mut self) -> Option<(WatchdogPolicy, Vec<JointRef>)> {
+    pub fn fire(&mut self) -> Option<(WatchdogPolicy, Vec<JointRef>)> {
         let (_, policy) = self.armed?;
         if self.joints.is_empty() {
             return None;
@@ -62,8 +65,23 @@ impl Watchdog {
         Some((policy, self.joints.iter().cloned().collect()))
     }
 
-    pub(crate) fn is_armed(&self) -> bool {
+    pub fn is_armed(&self) -> bool {
         self.armed.is_some()
+    }
+}
+
+/// What a fired watchdog does to `joints`, bus by bus: hold each where it
+/// is, or disable them.
+pub async fn fire_policy(control: &Control, policy: WatchdogPolicy, joints: &[JointRef]) {
+    for bus in control.buses() {
+        let ids: Vec<u8> = joints
+            .iter()
+            .filter(|j| j.bus == bus.name())
+            .map(|j| j.id)
+            .collect();
+        if !ids.is_empty() {
+            apply_policy(bus, ids, policy).await;
+        }
     }
 }
 

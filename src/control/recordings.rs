@@ -11,9 +11,9 @@ use serde::Deserialize;
 use utoipa::ToSchema;
 
 use crate::bus::BusHandle;
-use crate::http::error::{ApiError, ApiResult};
-use crate::http::recording_book::{view, Book, Entry, RecordingView};
-use crate::http::state::AppState;
+use crate::control::error::{ControlError, ControlResult};
+use crate::control::recording_book::{view, Book, Entry, RecordingView};
+use crate::control::Control;
 use crate::record::mcap_file::{McapFileError, SideEncoding};
 use crate::record::{RecordState, Recorder};
 
@@ -42,17 +42,17 @@ pub(crate) struct RecordingRequest {
 }
 
 /// The buses a request names, each known and named once; all without a list.
-fn requested_buses(state: &AppState, req: &RecordingRequest) -> ApiResult<Vec<BusHandle>> {
+fn requested_buses(state: &Arc<Control>, req: &RecordingRequest) -> ControlResult<Vec<BusHandle>> {
     let Some(names) = &req.buses else {
         return Ok(state.buses().cloned().collect());
     };
     if names.is_empty() {
-        return Err(ApiError::invalid("buses", "buses is empty"));
+        return Err(ControlError::invalid("buses", "buses is empty"));
     }
     let mut out: Vec<BusHandle> = Vec::with_capacity(names.len());
     for (i, name) in names.iter().enumerate() {
         if let Some(first) = names[..i].iter().position(|n| n == name) {
-            return Err(ApiError::invalid(
+            return Err(ControlError::invalid(
                 &format!("buses[{i}]"),
                 format!("bus `{name}` appears twice in buses (buses[{first}] and buses[{i}])"),
             ));
@@ -66,10 +66,13 @@ fn requested_buses(state: &AppState, req: &RecordingRequest) -> ApiResult<Vec<Bu
 /// the file (on a blocking thread: a slow or full disk holds no async
 /// worker) and starts the recording. A file that cannot be made is a
 /// problem naming why (507 when the disk is full), with no file left.
-pub(crate) async fn start(state: &AppState, req: &RecordingRequest) -> ApiResult<RecordingView> {
+pub(crate) async fn start(
+    state: &Arc<Control>,
+    req: &RecordingRequest,
+) -> ControlResult<RecordingView> {
     if let Some(d) = req.duration_s {
         if !(d.is_finite() && d > 0.0 && d <= MAX_DURATION_S) {
-            return Err(ApiError::out_of_range(
+            return Err(ControlError::out_of_range(
                 "duration_s",
                 d,
                 (0.0, MAX_DURATION_S),
@@ -106,9 +109,13 @@ pub(crate) async fn start(state: &AppState, req: &RecordingRequest) -> ApiResult
         Ok(Ok(recorder)) => recorder,
         Ok(Err(e)) => {
             tracing::warn!(recording = id, error = %e, "recording not started");
-            return Err(ApiError::recording_unwritable(&e));
+            return Err(ControlError::recording_unwritable(&e));
         }
-        Err(_) => return Err(ApiError::internal()),
+        Err(_) => {
+            return Err(ControlError::internal(
+                "the recording's file could not be made (its task ended)",
+            ))
+        }
     };
     let entry = Entry {
         recorder: Arc::new(recorder),
@@ -125,19 +132,19 @@ pub(crate) async fn start(state: &AppState, req: &RecordingRequest) -> ApiResult
 /// back when it has started or failed, or when the request is dropped
 /// (the client left while the file was being created).
 struct Place {
-    state: AppState,
+    state: Arc<Control>,
     id: u64,
     held: bool,
 }
 
 impl Place {
-    fn take(state: &AppState) -> ApiResult<Self> {
+    fn take(state: &Arc<Control>) -> ControlResult<Self> {
         let mut book = state.recordings().lock();
         // Counted under the same lock as the reservation: two requests at
         // once cannot both take the last place.
         let running = book.running();
         if running >= MAX_RUNNING {
-            return Err(ApiError::conflict(
+            return Err(ControlError::conflict(
                 "too-many-recordings",
                 "Too many recordings",
                 format!("{running} recordings are running (at most {MAX_RUNNING}): stop one first"),
@@ -170,11 +177,11 @@ impl Drop for Place {
 }
 
 /// How many recordings are being written now.
-pub(crate) fn running(state: &AppState) -> usize {
+pub(crate) fn running(state: &Arc<Control>) -> usize {
     state.recordings().lock().running()
 }
 
-pub(crate) fn list(state: &AppState) -> Vec<RecordingView> {
+pub(crate) fn list(state: &Arc<Control>) -> Vec<RecordingView> {
     let book = state.recordings().lock();
     book.entries
         .iter()
@@ -182,20 +189,20 @@ pub(crate) fn list(state: &AppState) -> Vec<RecordingView> {
         .collect()
 }
 
-fn entry(state: &AppState, id: u64) -> ApiResult<(Arc<Recorder>, RecordingView)> {
+fn entry(state: &Arc<Control>, id: u64) -> ControlResult<(Arc<Recorder>, RecordingView)> {
     let book = state.recordings().lock();
     let e = book.entries.get(&id).ok_or_else(|| {
-        ApiError::not_found("unknown-recording", format!("no recording with id {id}"))
+        ControlError::not_found("unknown-recording", format!("no recording with id {id}"))
     })?;
     Ok((e.recorder.clone(), view(id, e, &e.recorder.status())))
 }
 
-pub(crate) fn get(state: &AppState, id: u64) -> ApiResult<RecordingView> {
+pub(crate) fn get(state: &Arc<Control>, id: u64) -> ControlResult<RecordingView> {
     Ok(entry(state, id)?.1)
 }
 
 /// Stops recording `id` and waits until its file is complete.
-pub(crate) async fn stop(state: &AppState, id: u64) -> ApiResult<RecordingView> {
+pub(crate) async fn stop(state: &Arc<Control>, id: u64) -> ControlResult<RecordingView> {
     let (recorder, _) = entry(state, id)?;
     recorder.stop().await;
     tracing::info!(recording = id, "recording stopped");
@@ -204,7 +211,7 @@ pub(crate) async fn stop(state: &AppState, id: u64) -> ApiResult<RecordingView> 
 
 /// Stops every recording still running (the daemon is stopping): each
 /// file gets its last chunk, summary and footer.
-pub(crate) async fn stop_all(state: &AppState) {
+pub(crate) async fn stop_all(state: &Arc<Control>) {
     let running: Vec<(u64, Arc<Recorder>)> = state
         .recordings()
         .lock()
@@ -221,10 +228,10 @@ pub(crate) async fn stop_all(state: &AppState) {
 }
 
 /// The complete file of recording `id` (409 while it records).
-pub(crate) async fn file(state: &AppState, id: u64) -> ApiResult<(String, Vec<u8>)> {
+pub(crate) async fn file(state: &Arc<Control>, id: u64) -> ControlResult<(String, Vec<u8>)> {
     let (recorder, v) = entry(state, id)?;
     if v.state == RecordState::Recording {
-        return Err(ApiError::conflict(
+        return Err(ControlError::conflict(
             "still-recording",
             "Recording not finished",
             format!("recording {id} is still running: stop it (DELETE) or wait for its duration"),
@@ -233,6 +240,6 @@ pub(crate) async fn file(state: &AppState, id: u64) -> ApiResult<(String, Vec<u8
     let path = recorder.status().path;
     let bytes = tokio::fs::read(&path)
         .await
-        .map_err(|e| ApiError::recording_file_unreadable(id, &path, &e))?;
+        .map_err(|e| ControlError::recording_file_unreadable(id, &path, &e))?;
     Ok((v.file, bytes))
 }
