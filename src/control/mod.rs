@@ -10,6 +10,7 @@
 //! # Layout
 //! One-way layers: each file imports only from files above it.
 //! - [`error`]: [`ControlError`], typed refusals with the field and range at fault.
+//! - [`estop`]: the e-stop's fan-out over buses and its report.
 //! - [`device`]: what a device's published state says (firmware, angle, enabled).
 //! - [`limits`]: per-joint soft limits from the config.
 //! - [`joints`]: [`JointRef`], device ids, known devices, joints named by hand.
@@ -29,6 +30,7 @@ pub(crate) mod batch;
 pub(crate) mod calibration;
 pub mod device;
 pub mod error;
+pub mod estop;
 pub(crate) mod homing;
 pub(crate) mod homing_book;
 pub mod joints;

@@ -147,6 +147,16 @@ def test_joint_states_commands_diagnostics_and_tokens(ros2):
     wait_for("the out-of-range command counted", lambda: call(api, "GET", "/ros2")["commands_dropped"] >= 2)
     assert abs(call(api, "GET", "/buses/sim0/devices/3")["motion"]["angle_deg"]) < 0.5
 
+    # After an e-stop a command is refused whole: no joint moves that
+    # nobody enabled since (the motion authority, as for REST and WebSocket).
+    call(api, "POST", "/estop")
+    dropped = call(api, "GET", "/ros2")["commands_dropped"]
+    publisher.put(command(["sim0_2"], [-0.5]))
+    wait_for("the command after the e-stop counted",
+             lambda: call(api, "GET", "/ros2")["commands_dropped"] > dropped)
+    assert "not enabled" in call(api, "GET", "/ros2")["last_dropped"]
+    assert call(api, "GET", "/buses/sim0/devices/2")["target"] is None
+
     # The graph as rmw_zenoh's graph cache reads it.
     tokens = [str(r.ok.key_expr) for r in client.liveliness().get("@ros2_lv/**")]
     parts = [t.split("/") for t in tokens]
