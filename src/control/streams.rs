@@ -102,3 +102,79 @@ fn ended(j: &JointRef, why: Revoked) -> ControlError {
         ),
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bus::handle::{BusHandle, BusShared, BusSnapshot};
+    use crate::control::limits::SoftLimits;
+
+    fn control() -> Control {
+        let shared = BusShared::new("b".into(), BusSnapshot::new("b", "/dev/null", 500_000));
+        let (tx, _rx) = std::sync::mpsc::sync_channel(1);
+        Control::new(vec![BusHandle::new(shared, tx)], SoftLimits::default())
+    }
+
+    fn enable(c: &Control, id: u8) {
+        let authority = c.bus("b").expect("bus").authority();
+        let epoch = authority.revoke(id, Revoked::Reenabled);
+        assert!(authority.arm(id, epoch));
+    }
+
+    #[test]
+    fn a_stream_ended_by_an_estop_stays_ended_until_restarted() {
+        let c = control();
+        let j = JointRef {
+            bus: "b".into(),
+            id: 1,
+        };
+        enable(&c, 1);
+        let mut streams = Streams::default();
+        let first = streams.admit(&c, &[j.clone()], false).expect("admitted");
+        assert!(streams.any_live());
+        c.bus("b")
+            .expect("bus")
+            .authority()
+            .revoke_all(Revoked::Estopped);
+        assert_eq!(
+            streams.end_revoked(&c),
+            vec![(j.clone(), Revoked::Estopped)]
+        );
+        assert!(streams.end_revoked(&c).is_empty(), "said once");
+        enable(&c, 1);
+        assert!(
+            streams.admit(&c, &[j.clone()], false).is_err(),
+            "not resumed by an enable"
+        );
+        let again = streams.admit(&c, &[j.clone()], true).expect("restarted");
+        assert_ne!(first, again);
+    }
+
+    #[test]
+    fn a_batch_with_one_ended_stream_is_refused_whole() {
+        let c = control();
+        let (j1, j2) = (
+            JointRef {
+                bus: "b".into(),
+                id: 1,
+            },
+            JointRef {
+                bus: "b".into(),
+                id: 2,
+            },
+        );
+        enable(&c, 1);
+        enable(&c, 2);
+        let mut streams = Streams::default();
+        streams.admit(&c, &[j1.clone()], false).expect("admitted");
+        c.bus("b")
+            .expect("bus")
+            .authority()
+            .revoke(1, Revoked::Disabled);
+        assert!(streams.admit(&c, &[j2.clone(), j1.clone()], false).is_err());
+        assert!(
+            !streams.joints.contains_key(&j2),
+            "joint 2's stream did not begin: the batch was refused whole"
+        );
+    }
+}

@@ -189,10 +189,6 @@ impl ApiError {
         Self::new(StatusCode::NOT_FOUND, kind, "Not found", detail)
     }
 
-    pub fn unknown_bus(name: &str) -> Self {
-        Self::not_found("unknown-bus", format!("no bus named `{name}`"))
-    }
-
     pub fn conflict(kind: &str, title: &str, detail: impl Into<String>) -> Self {
         Self::new(StatusCode::CONFLICT, kind, title, detail)
     }
@@ -257,52 +253,9 @@ impl ApiError {
         )
     }
 
-    /// A unit conversion refused a value of `field`.
+    /// A unit conversion's refusal, said of `field` (the control core's words).
     pub fn from_unit(field: &str, err: UnitError) -> Self {
-        match err {
-            UnitError::OutOfRange {
-                value,
-                min,
-                max,
-                unit,
-                ..
-            } => Self::out_of_range(field, value, (min, max), unit),
-            UnitError::NotFinite { .. } => Self::invalid(field, format!("{field} must be finite")),
-            UnitError::NotMultiple { value, step, .. } => Self::invalid(
-                field,
-                format!("{field} = {value} ms is not a multiple of {step} ms"),
-            ),
-            UnitError::NotOneOf { .. } => Self::invalid(field, err.to_string()),
-        }
-    }
-
-    /// A target outside the joint's configured soft limits (422).
-    pub fn soft_limit(field: &str, value: f64, range: (f64, f64), unit: &str, who: &str) -> Self {
-        let (min, max) = range;
-        Self::new(
-            StatusCode::UNPROCESSABLE_ENTITY,
-            "soft-limit",
-            "Target outside the joint's soft limits",
-            format!(
-                "{field} = {value} {unit} is outside the soft limits of {who} ({min}..={max} {unit})"
-            ),
-        )
-        .with_field(field)
-        .with_range(min, max, unit)
-    }
-
-    /// A target outside the usable range its calibration gives a joint.
-    pub fn calibrated_range(field: &str, value: f64, (min, max): (f64, f64), who: &str) -> Self {
-        Self::new(
-            StatusCode::UNPROCESSABLE_ENTITY,
-            "calibrated-range",
-            "Target outside the joint's calibrated range",
-            format!(
-                "{field} = {value} deg is outside the calibrated range of {who} ({min}..={max} deg)"
-            ),
-        )
-        .with_field(field)
-        .with_range(min, max, "deg")
+        ControlError::from_unit(field, err).into()
     }
 
     pub fn method_not_allowed(method: &axum::http::Method) -> Self {

@@ -18,8 +18,11 @@ use super::commands;
 use super::config::{NamespaceBy, Ros2Config, Ros2Mode};
 use super::keys::{self, Kind, NodeIdentity};
 use super::Ros2Stats;
+use crate::bus::authority::Epoch;
 use crate::bus::BusHandle;
 use crate::bus::BusSnapshot;
+use crate::bus::Setpoint;
+use crate::control::streams::Streams;
 use crate::control::watchdog::{fire_policy, Watchdog};
 use crate::control::Control;
 use crate::control::JointRef;
@@ -293,6 +296,8 @@ async fn take_commands(
         tokio::time::Instant::now(),
     );
     let mut said_bad = false;
+    let mut streams = Streams::default();
+    let mut last_command: Option<tokio::time::Instant> = None;
     loop {
         let sample = match watchdog.deadline() {
             Some(d) => match tokio::time::timeout_at(d, subscriber.recv_async()).await {
@@ -310,20 +315,27 @@ async fn take_commands(
         };
         let Ok(sample) = sample else { return };
         let bytes = sample.payload().to_bytes();
+        let now = tokio::time::Instant::now();
+        // A ROS 2 topic has no way to ask for a new stream: commands after
+        // a pause begin one; a controller streaming on through an e-stop and
+        // a later enable does not drive the joints again until it pauses.
+        let restart = last_command.map_or(true, |at| now.duration_since(at) >= STREAM_RESTART_GAP);
+        last_command = Some(now);
         let outcome = JointState::from_cdr(&bytes)
             .map_err(|e| format!("not a sensor_msgs/msg/JointState in CDR: {e}"))
-            .and_then(|cmd| commands::setpoints(&state, &scope, &cmd));
+            .and_then(|cmd| commands::setpoints(&state, &scope, &cmd))
+            .and_then(|per_bus| streamed(&state, &mut streams, per_bus, restart));
         match outcome {
             Ok(per_bus) => {
                 let mut fed = Vec::new();
                 for (bus, targets) in per_bus {
-                    bus.set_targets(&targets);
-                    fed.extend(targets.iter().map(|(id, _)| JointRef {
+                    fed.extend(targets.iter().map(|(id, _, _)| JointRef {
                         bus: bus.name().to_owned(),
                         id: *id,
                     }));
+                    bus.set_targets_under(&targets);
                 }
-                watchdog.feed(&fed, tokio::time::Instant::now());
+                watchdog.feed(&fed, now);
                 stats.commands_applied.fetch_add(1, Ordering::Relaxed);
             }
             Err(why) => {
@@ -336,6 +348,47 @@ async fn take_commands(
             }
         }
     }
+}
+
+/// One bus's targets, each under the epoch of its joint's stream.
+type StreamedTargets = (BusHandle, Vec<(u8, Setpoint, Epoch)>);
+
+/// Commands after this long a pause begin new streams (see [`Streams`]).
+const STREAM_RESTART_GAP: Duration = Duration::from_millis(500);
+
+/// Each bus's targets under the epochs of their joints' streams, or why
+/// the command is refused whole (a stream an e-stop, a disable, a reset, a
+/// fault or a mode change ended).
+fn streamed(
+    state: &Control,
+    streams: &mut Streams,
+    per_bus: Vec<commands::BusTargets>,
+    restart: bool,
+) -> Result<Vec<StreamedTargets>, String> {
+    let joints: Vec<JointRef> = per_bus
+        .iter()
+        .flat_map(|(bus, targets)| {
+            targets.iter().map(|(id, _)| JointRef {
+                bus: bus.name().to_owned(),
+                id: *id,
+            })
+        })
+        .collect();
+    let mut epochs = streams
+        .admit(state, &joints, restart)
+        .map_err(|e| e.to_string())?
+        .into_iter();
+    Ok(per_bus
+        .into_iter()
+        .map(|(bus, targets)| {
+            let under = targets
+                .into_iter()
+                .zip(epochs.by_ref())
+                .map(|((id, sp), epoch)| (id, sp, epoch))
+                .collect();
+            (bus, under)
+        })
+        .collect())
 }
 
 async fn publish_diagnostics(
