@@ -130,7 +130,9 @@ mod tests {
         };
         enable(&c, 1);
         let mut streams = Streams::default();
-        let first = streams.admit(&c, &[j.clone()], false).expect("admitted");
+        let first = streams
+            .admit(&c, std::slice::from_ref(&j), false)
+            .expect("admitted");
         assert!(streams.any_live());
         c.bus("b")
             .expect("bus")
@@ -143,10 +145,12 @@ mod tests {
         assert!(streams.end_revoked(&c).is_empty(), "said once");
         enable(&c, 1);
         assert!(
-            streams.admit(&c, &[j.clone()], false).is_err(),
+            streams.admit(&c, std::slice::from_ref(&j), false).is_err(),
             "not resumed by an enable"
         );
-        let again = streams.admit(&c, &[j.clone()], true).expect("restarted");
+        let again = streams
+            .admit(&c, std::slice::from_ref(&j), true)
+            .expect("restarted");
         assert_ne!(first, again);
     }
 
@@ -166,7 +170,9 @@ mod tests {
         enable(&c, 1);
         enable(&c, 2);
         let mut streams = Streams::default();
-        streams.admit(&c, &[j1.clone()], false).expect("admitted");
+        streams
+            .admit(&c, std::slice::from_ref(&j1), false)
+            .expect("admitted");
         c.bus("b")
             .expect("bus")
             .authority()
