@@ -392,3 +392,113 @@ async fn a_teleop_stream_ended_by_an_estop_never_resumes_by_itself() {
     ws.send(batch(3, 30.0, true)).await.expect("send");
     assert_eq!(next_of(&mut ws, "ack").await["ref_seq"], 3);
 }
+
+/// A WebSocket session on the rig's server.
+async fn ws_connect(
+    b: &SimBus,
+) -> tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>> {
+    let url = format!("{}/api/v1/ws", b.server.base.replace("http://", "ws://"));
+    tokio_tungstenite::connect_async(url)
+        .await
+        .expect("connect")
+        .0
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_websocket_move_racing_an_estop_never_drives_the_joint_after_the_next_enable() {
+    use futures_util::SinkExt;
+    use tokio_tungstenite::tungstenite::Message;
+    let b = start(2, None).await;
+    enable(&b, 2).await;
+    let mut ws = ws_connect(&b).await;
+    for attempt in 0..6u64 {
+        enable(&b, 1).await;
+        let held = b.sim.device(1).expect("device 1").angle_deg;
+        let handle = b.handle.clone();
+        let estop = tokio::spawn(async move { handle.estop().await });
+        tokio::time::sleep(Duration::from_millis(attempt)).await;
+        let seq = 100 + attempt;
+        let mv = json!({"type": "move", "seq": seq, "duration_ms": 400, "method": "linear",
+            "joints": [{"bus": "sim0", "id": 1, "position_deg": 60.0}]});
+        ws.send(Message::text(mv.to_string())).await.expect("send");
+        estop.await.expect("join").expect("e-stop");
+        // Either refused or started (and then aborted by the e-stop).
+        let answer = loop {
+            let v = next_any(&mut ws).await;
+            if v["ref_seq"] == seq {
+                break v;
+            }
+        };
+        if answer["type"] == "move_started" {
+            let id = answer["move"]["id"].as_u64().expect("move id");
+            let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+            assert_eq!(view["state"], "aborted", "attempt {attempt}: {view}");
+        } else {
+            assert_eq!(answer["code"], "wrong_state", "attempt {attempt}: {answer}");
+        }
+        enable(&b, 1).await;
+        enable(&b, 2).await;
+        fence(&b, 2, 20.0 + attempt as f64).await;
+        let target = device_target(&b, 1);
+        assert!(
+            (target - held).abs() < 2.0 && target < 30.0,
+            "attempt {attempt}: joint 1 holds {target:.1}° after the enable (stood at {held:.1}°)"
+        );
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_websocket_speed_stream_does_not_spin_after_an_estop_and_enable() {
+    use futures_util::SinkExt;
+    use tokio_tungstenite::tungstenite::Message;
+    let b = start(2, None).await;
+    enable(&b, 1).await;
+    enable(&b, 2).await;
+    let r = b
+        .server
+        .put(
+            "/api/v1/buses/sim0/devices/1/mode",
+            json!({"mode": "speed"}),
+        )
+        .await;
+    assert!(r.status.is_success(), "{}", r.body);
+    let mut ws = ws_connect(&b).await;
+    let batch = json!({"type": "setpoints", "seq": 1, "ack": true,
+        "targets": [{"bus": "sim0", "dev_id": 1, "speed_rpm": 1000.0}]});
+    ws.send(Message::text(batch.to_string()))
+        .await
+        .expect("send");
+    assert_eq!(next_of(&mut ws, "ack").await["ref_seq"], 1);
+    sim_until(&b, "joint 1 spinning", |d| d.velocity_deg_s.abs() > 1.0, 1);
+    b.handle.estop().await.expect("e-stop");
+    enable(&b, 1).await;
+    enable(&b, 2).await;
+    fence(&b, 2, 13.0).await;
+    let d = b.sim.device(1).expect("device 1");
+    assert_eq!(
+        d.spd_ref, 0,
+        "enabled in speed mode with {} (Q15)",
+        d.spd_ref
+    );
+}
+
+/// The server's next message, whatever its type.
+async fn next_any<S>(ws: &mut S) -> Value
+where
+    S: futures_util::StreamExt<
+            Item = Result<
+                tokio_tungstenite::tungstenite::Message,
+                tokio_tungstenite::tungstenite::Error,
+            >,
+        > + Unpin,
+{
+    let wait = async {
+        while let Some(Ok(m)) = ws.next().await {
+            if let tokio_tungstenite::tungstenite::Message::Text(t) = m {
+                return serde_json::from_str::<Value>(t.as_str()).expect("JSON");
+            }
+        }
+        panic!("socket closed");
+    };
+    tokio::time::timeout(WAIT, wait).await.expect("a message")
+}

@@ -21,6 +21,7 @@
 //! - [`watchdog`]: the one teleop watchdog (WebSocket connections and the ROS 2 bridge).
 //! - [`streams`]: teleop streams, each under the epoch it began with; ended streams stay ended.
 //! - `move_book`, [`moves`]: moves checked whole, started, stopped; the book of them.
+//! - `poses`: going to a hand's saved pose (a move of its joints).
 //! - `homing_book`, `homing`: homing jobs, one per joint, bounded.
 //! - `recording_book`, `recordings`: recordings' jobs: started, listed, stopped, their files.
 //! - `ros2_stats`: the ROS 2 bridge's counters (read by `/metrics` and `/api/v1/ros2`).
@@ -37,6 +38,7 @@ pub mod joints;
 pub mod limits;
 pub(crate) mod move_book;
 pub mod moves;
+pub(crate) mod poses;
 pub(crate) mod recording_book;
 pub(crate) mod recordings;
 pub mod ros2_stats;

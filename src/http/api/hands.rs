@@ -13,7 +13,8 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
-use crate::control::moves::{self, MoveJoint, MoveRequest, MoveView};
+use crate::control::moves::MoveView;
+use crate::control::poses::{self, PoseTiming};
 use crate::hands::{pose, Hand, HandJoint, LoadNotes, Pose, StateStore};
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
@@ -285,29 +286,13 @@ async fn go_to_pose(
     ApiPath(p): ApiPath<PosePath>,
     ApiJson(req): ApiJson<GoRequest>,
 ) -> ApiResult<(StatusCode, Json<MoveView>)> {
-    let (store, hand) = hand(&state, &p.hand)?;
-    let pose = pose(store, &p)?;
-    let joints = pose
-        .iter()
-        .filter_map(|(name, deg)| {
-            hand.joint(name).map(|j| MoveJoint {
-                bus: Some(j.bus.clone()),
-                id: Some(i64::from(j.id)),
-                hand: None,
-                joint: None,
-                position_deg: Some(*deg),
-            })
-        })
-        .collect();
-    let request = MoveRequest {
-        joints,
+    let timing = PoseTiming {
         duration_ms: req.duration_ms,
         max_velocity_dps: req.max_velocity_dps,
         max_acceleration_dps2: req.max_acceleration_dps2,
         method: req.method,
-        waypoints: None,
     };
-    let started = moves::start(&state, &request).await?;
+    let started = poses::go(&state, &p.hand, &p.name, timing).await?;
     Ok((StatusCode::CREATED, Json(started)))
 }
 
