@@ -502,3 +502,29 @@ where
     };
     tokio::time::timeout(WAIT, wait).await.expect("a message")
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_enable_of_a_running_joint_holds_it_where_it_stands() {
+    let b = start(2, None).await;
+    enable(&b, 1).await;
+    enable(&b, 2).await;
+    let r = b
+        .server
+        .put(
+            "/api/v1/buses/sim0/devices/1/target",
+            json!({"position_deg": 80.0, "speed_rpm": 1000.0}),
+        )
+        .await;
+    assert!(r.status.is_success(), "{}", r.body);
+    sim_until(&b, "joint 1 on its way", |d| d.angle_deg > 5.0, 1);
+    // Enabled again while it runs: nothing from before this enable applies.
+    enable(&b, 1).await;
+    fence(&b, 2, 17.0).await;
+    let d = b.sim.device(1).expect("device 1");
+    assert!(
+        d.target_deg < 60.0,
+        "joint 1 still heads for the target set before its enable: {:.1}° (at {:.1}°)",
+        d.target_deg,
+        d.angle_deg
+    );
+}

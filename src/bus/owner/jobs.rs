@@ -87,7 +87,7 @@ pub(super) fn enable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
             )
         })
         .collect();
-    zero_speed_references(ctx, &reached)?;
+    hold_before_enable(ctx, &reached)?;
     ctx.job_send(&control_frames(&targets, &ids, Control::enable))?;
     for &id in &reached {
         ctx.sched_mut().registry_mut().note_enabled(id);
@@ -104,24 +104,44 @@ pub(super) fn enable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
     Ok(())
 }
 
-/// A joint in speed mode keeps the speed reference it was last sent across
-/// a disable (the device holds it in RAM): a zero goes to it before its
-/// enable, so an enable in speed mode never spins.
-fn zero_speed_references(ctx: &mut Ctx, ids: &[u8]) -> Result<(), BusError> {
-    let speed_mode: Vec<Command> = ids
+/// What an enable holds: a joint in speed mode keeps the speed reference it
+/// was last sent across a disable (the device holds it in RAM), so a zero
+/// goes to it before its enable and an enable in speed mode never spins; a
+/// joint that already drives its motor ignores the enable frame and would
+/// go on towards a target admitted before it, so it is told to hold where
+/// it was last measured.
+fn hold_before_enable(ctx: &mut Ctx, ids: &[u8]) -> Result<(), BusError> {
+    let reg = ctx.sched().registry();
+    let holds: Vec<Command> = ids
         .iter()
-        .filter(|&&id| {
-            ctx.sched()
-                .registry()
-                .get(id)
-                .is_some_and(|e| e.state.mode == Some(CtrlMode::Speed))
+        .filter_map(|&id| {
+            let entry = reg.get(id)?;
+            if entry.state.mode == Some(CtrlMode::Speed) {
+                return Some(Control::set_ref(id, 0, 0));
+            }
+            let driving = entry
+                .state
+                .info01
+                .is_some_and(|(info, _)| drives_motor(info.fsm));
+            let here = reg.slot_info(id)?.measured?;
+            driving.then(|| Control::set_ref(id, here, hold_speed_limit()))
         })
-        .map(|&id| Command::Control(Control::set_ref(id, 0, 0)))
+        .map(Command::Control)
         .collect();
-    if speed_mode.is_empty() {
+    if holds.is_empty() {
         return Ok(());
     }
-    ctx.job_send(&speed_mode)
+    ctx.job_send(&holds)
+}
+
+/// The speed limit of a hold: slow (3000 rpm rotor, ~32 °/s at the output),
+/// in the newer speed base, so older firmware reads it slower still.
+fn hold_speed_limit() -> i16 {
+    crate::protocol::units::speed_limit_to_raw(
+        3000.0,
+        crate::protocol::units::FirmwareVersion::SPEED_BASE_50K,
+    )
+    .unwrap_or(0)
 }
 
 /// Reads of a device in a passing state (rev 2.0.8's stop, brake, init,
