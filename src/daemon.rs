@@ -552,6 +552,7 @@ fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusToStart), DaemonError>
 /// Runs the daemon until SIGINT or SIGTERM.
 pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     let plan = plan(&args)?;
+    raise_open_files_limit();
     let mut configs: Vec<BusToStart> = plan.buses.into_iter().map(|cfg| (cfg, None)).collect();
     let sim = match plan.sim {
         Some(sim_cfg) => {
@@ -611,6 +612,22 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
 /// [`HTTP_DRAIN_TIMEOUT`] while the requests under way finish: a flood of
 /// requests (or one that waits on a slow bus) cannot hold the shutdown,
 /// and with it the joints' disable.
+/// Every connection holds a file descriptor: at the common soft limit of
+/// 1024 about a thousand idle connections leave no descriptor to accept the
+/// e-stop's. The soft limit goes up to the hard one (what the service
+/// manager allows); failing that is only logged.
+fn raise_open_files_limit() {
+    use nix::sys::resource::{getrlimit, setrlimit, Resource};
+    match getrlimit(Resource::RLIMIT_NOFILE) {
+        Ok((soft, hard)) if soft < hard => match setrlimit(Resource::RLIMIT_NOFILE, hard, hard) {
+            Ok(()) => tracing::debug!(from = soft, to = hard, "open files limit raised"),
+            Err(e) => tracing::warn!(soft, hard, "open files limit not raised: {e}"),
+        },
+        Ok(_) => {}
+        Err(e) => tracing::warn!("open files limit not read: {e}"),
+    }
+}
+
 async fn serve(listener: TcpListener, state: &AppState) -> Result<(), DaemonError> {
     let (signalled_tx, mut signalled) = tokio::sync::watch::channel(false);
     let ws_state = state.clone();

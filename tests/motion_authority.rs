@@ -528,3 +528,34 @@ async fn an_enable_of_a_running_joint_holds_it_where_it_stands() {
         d.angle_deg
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_rezero_mid_move_ends_the_move_and_the_joint_stays_enabled() {
+    let b = start(2, None).await;
+    enable(&b, 1).await;
+    let (status, body) = post_move(&b, 1, 60.0, 2000).await;
+    assert_eq!(status, 201, "{body}");
+    let id = body["id"].as_u64().expect("move id");
+    sim_until(&b, "joint 1 under way", |d| d.angle_deg > 5.0, 1);
+    let r = b
+        .server
+        .post("/api/v1/buses/sim0/devices/1/rezero", json!({}))
+        .await;
+    assert!(r.status.is_success(), "{}", r.body);
+    // The path's angles meant the old zero: the move ends, not shifted.
+    let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    assert_eq!(
+        (view["state"].as_str(), view["reason"].as_str()),
+        (Some("aborted"), Some("zero_moved")),
+        "{view}"
+    );
+    // Still enabled: a new target is admitted.
+    let r = b
+        .server
+        .put(
+            "/api/v1/buses/sim0/devices/1/target",
+            json!({"position_deg": 1.0}),
+        )
+        .await;
+    assert!(r.status.is_success(), "{}", r.body);
+}

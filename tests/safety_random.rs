@@ -158,8 +158,10 @@ impl World {
         }
         // An enable whose confirmation was lost (504 on a loaded host) may
         // still have reached the joint: the device says.
-        if !before.enabled && self.device(id).enabled {
-            // Enabled from rest: it holds where it stood (it may have coasted).
+        if self.device(id).enabled {
+            // Enabled (from rest, or again while it ran): it holds where it
+            // stood (it may have coasted, or been on its way), and nothing
+            // admitted before applies.
             let after = self.device(id);
             let mut a = Admitted::default();
             a.span(before.angle_deg, after.angle_deg);

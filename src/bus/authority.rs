@@ -23,6 +23,16 @@ use crate::protocol::CtrlMode;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
 pub struct Epoch(pub u64);
 
+impl Epoch {
+    /// The epoch after a mode change made under this one and nothing else:
+    /// [`MotionAuthority::mode_changing`] and [`MotionAuthority::mode_set`]
+    /// advance it once each (a job that changes the mode itself, like
+    /// homing, goes on under this epoch).
+    pub fn after_own_mode_change(self) -> Epoch {
+        Epoch(self.0 + 2)
+    }
+}
+
 /// Why a joint's epoch advanced: what ends a move, a homing job or a
 /// teleop stream of that joint.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -35,6 +45,8 @@ pub enum Revoked {
     Fault,
     /// Enabled again: it holds where it stands, and nothing earlier applies.
     Reenabled,
+    /// Its zero moved (re-zero, jog): earlier angles mean something else.
+    ZeroMoved,
 }
 
 impl Revoked {
@@ -47,6 +59,7 @@ impl Revoked {
             Self::ModeChanged => "mode_changed",
             Self::Fault => "fault",
             Self::Reenabled => "reenabled",
+            Self::ZeroMoved => "zero_moved",
         }
     }
 
@@ -62,6 +75,7 @@ impl Revoked {
             Self::ModeChanged,
             Self::Fault,
             Self::Reenabled,
+            Self::ZeroMoved,
         ]
         .into_iter()
         .find(|r| r.code() == code)
@@ -173,6 +187,14 @@ impl MotionAuthority {
     pub fn revoke(&self, id: u8, why: Revoked) -> Epoch {
         self.reasons[usize::from(id)].store(why.code(), Ordering::Release);
         let old = self.update(id, |w| (w & !ENABLED) + (1 << EPOCH_SHIFT));
+        Epoch((old >> EPOCH_SHIFT) + 1)
+    }
+
+    /// Advances the joint's epoch and keeps its enable (its zero moved:
+    /// angles admitted before mean something else now).
+    pub fn advance(&self, id: u8, why: Revoked) -> Epoch {
+        self.reasons[usize::from(id)].store(why.code(), Ordering::Release);
+        let old = self.update(id, |w| w + (1 << EPOCH_SHIFT));
         Epoch((old >> EPOCH_SHIFT) + 1)
     }
 
@@ -289,6 +311,19 @@ mod tests {
         // Setting the same mode again changes nothing.
         a.mode_set(2, Some(CtrlMode::Speed));
         assert_eq!(a.grant(2).epoch, g.epoch);
+    }
+
+    #[test]
+    fn a_job_knows_the_epoch_its_own_mode_change_leads_to() {
+        let a = MotionAuthority::default();
+        let e = a.revoke(4, Revoked::Reenabled);
+        a.arm(4, e);
+        a.mode_changing(4);
+        a.mode_set(4, Some(CtrlMode::Speed));
+        assert!(a.admits(4, e.after_own_mode_change()));
+        let z = a.advance(4, Revoked::ZeroMoved);
+        assert!(a.grant(4).enabled && a.admits(4, z));
+        assert_eq!(a.last_revoked(4), Some(Revoked::ZeroMoved));
     }
 
     #[test]

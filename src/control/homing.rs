@@ -45,7 +45,7 @@ use crate::control::error::{ControlError, ControlResult};
 use crate::control::homing_book::{lock, Busy, HomingState, HomingView, JointHoming, Slot};
 use crate::control::joints::{known_device, resolve_joint};
 use crate::control::limits::JointLimits;
-use crate::control::targets::wait_on_wire;
+use crate::control::targets::{admit, wait_on_wire};
 use crate::control::{Control, JointRef};
 use crate::protocol::status::{active_fault, fault_name, fsm, fsm_name};
 use crate::protocol::units;
@@ -180,6 +180,9 @@ pub(crate) async fn start(state: &Arc<Control>, req: &HomingRequest) -> ControlR
         let soft = state.limits(&r.bus, r.id);
         check_stop_at(&plan, &soft, r)?;
         ensure_running(bus, dev).await?;
+        // The job drives the joint under the epoch it is admitted with:
+        // anything that advances it from here on ends the job.
+        let epoch = admit(bus, dev, "homing")?;
         if dev.mode.is_some_and(|m| m != CtrlMode::Position) {
             return Err(ControlError::conflict(
                 "wrong-mode",
@@ -190,7 +193,7 @@ pub(crate) async fn start(state: &Arc<Control>, req: &HomingRequest) -> ControlR
                 ),
             ));
         }
-        limits.push(soft);
+        limits.push((soft, epoch));
     }
     let slots: Vec<Slot> = joints
         .iter()
@@ -211,10 +214,11 @@ pub(crate) async fn start(state: &Arc<Control>, req: &HomingRequest) -> ControlR
     // Checked again under the book's lock: another request may have
     // started a job on one of these joints while this one read the bus.
     let id = state.homings().add(slots.clone()).map_err(|b| busy(&b))?;
-    for ((r, slot), soft) in joints.into_iter().zip(slots).zip(limits) {
+    for ((r, slot), (soft, epoch)) in joints.into_iter().zip(slots).zip(limits) {
         let bus = state.bus(&r.bus)?.clone();
         let state = state.clone();
-        tokio::spawn(async move { home(state, bus, r.id, plan, soft, slot, id).await });
+        let joint = Admitted { id: r.id, epoch };
+        tokio::spawn(async move { home(state, bus, joint, plan, soft, slot, id).await });
     }
     tracing::info!(homing_id = id, ?plan, "homing started");
     state
@@ -429,15 +433,23 @@ fn set(slot: &Slot, edit: impl FnOnce(&mut JointHoming)) {
 
 /// Homes one joint; whatever happens, its previous current limit is
 /// written back (and read back) before the job says it ended.
+/// A joint of a homing job and the motion epoch it was admitted under.
+#[derive(Debug, Clone, Copy)]
+struct Admitted {
+    id: u8,
+    epoch: Epoch,
+}
+
 async fn home(
     state: Arc<Control>,
     bus: BusHandle,
-    id: u8,
+    joint: Admitted,
     plan: Plan,
     soft: JointLimits,
     slot: Slot,
     job: u64,
 ) {
+    let id = joint.id;
     let mut events = bus.events();
     let previous = match read_current_limit(&bus, id).await {
         Ok(raw) => raw,
@@ -469,7 +481,7 @@ async fn home(
         Ok(_) => {
             set(&slot, |s| s.phase = "searching");
             guard.armed = true;
-            search(&bus, id, &plan, &soft, &mut events).await
+            search(&bus, joint, &plan, &soft, &mut events).await
         }
         Err(e) => Err(Ended::Failed(format!(
             "could not reduce the current limit: {e}"
@@ -643,11 +655,12 @@ impl Bound {
 /// Ends (failed) at the soft limit or after `max_travel_deg`.
 async fn search(
     bus: &BusHandle,
-    id: u8,
+    joint: Admitted,
     plan: &Plan,
     soft: &JointLimits,
     events: &mut broadcast::Receiver<BusEvent>,
 ) -> Result<f64, Ended> {
+    let id = joint.id;
     let snap = bus.snapshot();
     let dev = snap
         .devices
@@ -670,14 +683,17 @@ async fn search(
             "speed 0 was not seen on the wire before speed mode: not starting".into(),
         ));
     }
+    revoked(bus, id, joint.epoch)?;
     bus.set_mode(id, CtrlMode::Speed)
         .await
         .map_err(|e| Ended::Failed(format!("could not switch to speed mode: {e}")))?;
-    // The search drives the joint under the epoch its own mode change
-    // began: anything that advances it after (an e-stop, a disable, another
-    // mode change, a reset) ends the search, and its speed cannot reach the
+    // The search drives the joint under the epoch its own mode change led
+    // to from the one it was admitted with: anything else that advanced it
+    // (an e-stop, a disable, an enable, another mode change, a reset, since
+    // the job was admitted) ends the search, and its speed cannot reach the
     // joint after that.
-    let epoch = bus.grant(id).epoch;
+    let epoch = joint.epoch.after_own_mode_change();
+    revoked(bus, id, epoch)?;
     bus.set_targets_under(&[(
         id,
         Setpoint {

@@ -322,6 +322,9 @@ pub(super) fn rezero(ctx: &mut Ctx, dev_id: u8) -> Result<(), BusError> {
 
 /// The device's zero moved: targets and angles from before are void.
 pub(super) fn zero_moved(ctx: &mut Ctx, id: u8) {
+    // A move or stream admitted in the old frame would carry on in the new
+    // one, shifted: it ends (the joint stays enabled).
+    ctx.setpoints().authority().advance(id, Revoked::ZeroMoved);
     ctx.sched_mut().registry_mut().zero_moved(id);
     ctx.setpoints().clear(Some(&[id]));
     ctx.sched_mut().forget_setpoint(id);
