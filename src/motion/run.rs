@@ -22,7 +22,7 @@ pub enum MoveState {
     /// Stopped by its caller (`DELETE`): each joint holds where it was.
     Stopped,
     /// Cut short (see `reason`): `estopped`, `disabled`, `reset`,
-    /// `mode_changed`, `fault`, `reenabled`, or a joint offline.
+    /// `mode_changed`, `fault`, `reenabled`, `zero_moved`, or a joint offline.
     Aborted,
     /// Every joint settled, and at least one stalled: it could not follow
     /// the path (blocked) and holds where it stood (see `stalled`).

@@ -275,7 +275,7 @@ pub(crate) enum ServerMessage {
     },
     /// This connection's setpoint stream to a joint ended: its motion
     /// epoch moved on (`reason`: `estopped`, `disabled`, `reset`, `fault`,
-    /// `mode_changed`, `reenabled`). It never resumes by itself.
+    /// `mode_changed`, `reenabled`, `zero_moved`). It never resumes by itself.
     StreamEnded {
         bus: String,
         dev_id: u8,
