@@ -559,3 +559,73 @@ async fn a_rezero_mid_move_ends_the_move_and_the_joint_stays_enabled() {
         .await;
     assert!(r.status.is_success(), "{}", r.body);
 }
+
+/// Starts a move over the WebSocket; its id.
+async fn ws_move<S>(ws: &mut S, seq: u64, deg: f64, ms: u64) -> u64
+where
+    S: futures_util::Sink<tokio_tungstenite::tungstenite::Message>
+        + futures_util::StreamExt<
+            Item = Result<
+                tokio_tungstenite::tungstenite::Message,
+                tokio_tungstenite::tungstenite::Error,
+            >,
+        > + Unpin,
+    <S as futures_util::Sink<tokio_tungstenite::tungstenite::Message>>::Error: std::fmt::Debug,
+{
+    use futures_util::SinkExt;
+    let mv = json!({"type": "move", "seq": seq, "duration_ms": ms, "method": "linear",
+        "joints": [{"bus": "sim0", "id": 1, "position_deg": deg}]});
+    ws.send(tokio_tungstenite::tungstenite::Message::text(
+        mv.to_string(),
+    ))
+    .await
+    .expect("send");
+    let started = next_of(ws, "move_started").await;
+    assert_eq!(started["ref_seq"], seq, "{started}");
+    started["move"]["id"].as_u64().expect("move id")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_websocket_move_ends_at_a_disable_and_an_enable_does_not_resume_it() {
+    let b = start(2, None).await;
+    enable(&b, 1).await;
+    enable(&b, 2).await;
+    let mut ws = ws_connect(&b).await;
+    let id = ws_move(&mut ws, 1, 80.0, 3000).await;
+    sim_until(&b, "joint 1 under way", |d| d.angle_deg > 5.0, 1);
+    let r = b
+        .server
+        .post("/api/v1/buses/sim0/devices/1/disable", json!({}))
+        .await;
+    assert!(r.status.is_success(), "{}", r.body);
+    let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    assert_eq!(
+        (view["state"].as_str(), view["reason"].as_str()),
+        (Some("aborted"), Some("disabled")),
+        "{view}"
+    );
+    enable(&b, 1).await;
+    let held = b.sim.device(1).expect("device 1").angle_deg;
+    fence(&b, 2, 12.0).await;
+    let target = device_target(&b, 1);
+    assert!(
+        (target - held).abs() < 2.0,
+        "joint 1 holds {target:.1}° after the enable, not where it stood ({held:.1}°)"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_websocket_move_of_a_blocked_joint_stalls() {
+    let b = start(2, None).await;
+    enable(&b, 1).await;
+    let mut ws = ws_connect(&b).await;
+    let id = ws_move(&mut ws, 1, 60.0, 1500).await;
+    sim_until(&b, "joint 1 past 10°", |d| d.angle_deg > 10.0, 1);
+    b.sim.inject(Fault::Stall {
+        dev_id: 1,
+        at_deg: None,
+    });
+    let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    assert_eq!(view["state"], "stalled", "{view}");
+    assert_eq!(view["arrived"], json!([]), "{view}");
+}
