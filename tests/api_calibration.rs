@@ -8,13 +8,9 @@
 
 mod support;
 
-use std::sync::Arc;
 use std::time::Duration;
 
 use futures_util::{SinkExt, StreamExt};
-use jointd::hands::StateStore;
-use jointd::http::state::StateOptions;
-use jointd::protocol::status::fsm;
 use serde_json::{json, Value};
 use support::sim_bus::{start, start_sim_with, SimBus, WAIT};
 use tokio_tungstenite::tungstenite::Message;
@@ -23,7 +19,7 @@ const CAL: &str = "/api/v1/buses/sim0/devices/1/calibration";
 
 /// The API with an in-memory store for calibrations, joints 1..=n enabled.
 async fn calibrated_rig(n: u8) -> SimBus {
-    rig_from(start(n, None).await, n).await
+    start(n, None).await.calibrated_and_enabled(n).await
 }
 
 /// [`calibrated_rig`] with joint 1's hard stop at `stop_deg`.
@@ -36,27 +32,7 @@ async fn rig_with_hard_stop(n: u8, stop_deg: f64) -> SimBus {
         |_| {},
     )
     .await;
-    rig_from(b, n).await
-}
-
-async fn rig_from(b: SimBus, n: u8) -> SimBus {
-    let store = StateStore::open(Vec::new(), None).expect("store");
-    b.server_state
-        .set_options(StateOptions {
-            hands: Some(Arc::new(store)),
-            ..Default::default()
-        })
-        .map_err(|_| "options set twice")
-        .unwrap();
-    let ids: Vec<u8> = (1..=n).collect();
-    b.server
-        .post("/api/v1/buses/sim0/control/enable", json!({ "ids": ids }))
-        .await
-        .ok();
-    for id in ids {
-        b.wait_fsm(id, fsm::RUN).await;
-    }
-    b
+    b.calibrated_and_enabled(n).await
 }
 
 /// Waits until the simulated device's own angle is within 0.5° of `deg`.

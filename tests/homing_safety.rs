@@ -7,11 +7,8 @@
 
 mod support;
 
-use std::sync::Arc;
 use std::time::Duration;
 
-use jointd::hands::StateStore;
-use jointd::http::state::StateOptions;
 use jointd::protocol::status::fsm;
 use serde_json::{json, Value};
 use support::http::Server;
@@ -20,24 +17,10 @@ use support::sim_bus::{start_sim_with, SimBus, WAIT};
 /// Joints 1..=n enabled and running, a store for calibrations. Joint 2
 /// has soft limits of ±45° (the harness's), joint 1 none (±255°).
 async fn rig(n: u8, hard_stops: Vec<(u8, f64)>) -> SimBus {
-    let b = start_sim_with(n, None, "2.0.1", |sim| sim.hard_stops = hard_stops, |_| {}).await;
-    let store = StateStore::open(Vec::new(), None).expect("store");
-    b.server_state
-        .set_options(StateOptions {
-            hands: Some(Arc::new(store)),
-            ..Default::default()
-        })
-        .map_err(|_| "options set twice")
-        .unwrap();
-    let ids: Vec<u8> = (1..=n).collect();
-    b.server
-        .post("/api/v1/buses/sim0/control/enable", json!({ "ids": ids }))
+    start_sim_with(n, None, "2.0.1", |sim| sim.hard_stops = hard_stops, |_| {})
         .await
-        .ok();
-    for id in ids {
-        b.wait_fsm(id, fsm::RUN).await;
-    }
-    b
+        .calibrated_and_enabled(n)
+        .await
 }
 
 /// Polls homing job `id` until it is done; its view.

@@ -41,6 +41,18 @@ async fn enable(b: &SimBus, id: u8) {
     }
 }
 
+/// Puts joint `id` in `mode` over REST.
+async fn set_mode(b: &SimBus, id: u8, mode: &str) {
+    let r = b
+        .server
+        .put(
+            &format!("/api/v1/buses/sim0/devices/{id}/mode"),
+            json!({ "mode": mode }),
+        )
+        .await;
+    assert!(r.status.is_success(), "mode {mode}: {}", r.body);
+}
+
 async fn post_move(b: &SimBus, id: u8, deg: f64, ms: u64) -> (u16, Value) {
     let r = b
         .server
@@ -192,14 +204,7 @@ async fn a_mode_change_mid_move_ends_it_and_the_joint_does_not_spin() {
     assert_eq!(status, 201, "{body}");
     let id = body["id"].as_u64().expect("move id");
     sim_until(&b, "joint 1 under way", |d| d.angle_deg > 5.0, 1);
-    let r = b
-        .server
-        .put(
-            "/api/v1/buses/sim0/devices/1/mode",
-            json!({"mode": "speed"}),
-        )
-        .await;
-    assert!(r.status.is_success(), "{}", r.body);
+    set_mode(&b, 1, "speed").await;
     let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
     assert_eq!(view["state"], "aborted", "{view}");
     assert_eq!(view["reason"], "mode_changed", "{view}");
@@ -217,14 +222,7 @@ async fn an_enable_in_speed_mode_after_an_estop_does_not_spin() {
     let b = start(2, None).await;
     enable(&b, 1).await;
     enable(&b, 2).await;
-    let r = b
-        .server
-        .put(
-            "/api/v1/buses/sim0/devices/1/mode",
-            json!({"mode": "speed"}),
-        )
-        .await;
-    assert!(r.status.is_success(), "{}", r.body);
+    set_mode(&b, 1, "speed").await;
     let r = b
         .server
         .put(
@@ -454,14 +452,7 @@ async fn a_websocket_speed_stream_does_not_spin_after_an_estop_and_enable() {
     let b = start(2, None).await;
     enable(&b, 1).await;
     enable(&b, 2).await;
-    let r = b
-        .server
-        .put(
-            "/api/v1/buses/sim0/devices/1/mode",
-            json!({"mode": "speed"}),
-        )
-        .await;
-    assert!(r.status.is_success(), "{}", r.body);
+    set_mode(&b, 1, "speed").await;
     let mut ws = ws_connect(&b).await;
     let batch = json!({"type": "setpoints", "seq": 1, "ack": true,
         "targets": [{"bus": "sim0", "dev_id": 1, "speed_rpm": 1000.0}]});

@@ -103,6 +103,32 @@ pub async fn start_sim_with(
 }
 
 impl SimBus {
+    /// This rig with an in-memory store for poses and calibrations, and
+    /// joints 1..=n enabled and running (homing and calibration need both).
+    pub async fn calibrated_and_enabled(self, n: u8) -> SimBus {
+        let store = jointd::hands::StateStore::open(Vec::new(), None).expect("store");
+        let options = jointd::http::state::StateOptions {
+            hands: Some(std::sync::Arc::new(store)),
+            ..Default::default()
+        };
+        assert!(
+            self.server_state.set_options(options).is_ok(),
+            "options set twice"
+        );
+        let ids: Vec<u8> = (1..=n).collect();
+        self.server
+            .post(
+                "/api/v1/buses/sim0/control/enable",
+                serde_json::json!({ "ids": ids }),
+            )
+            .await
+            .ok();
+        for id in ids {
+            self.wait_fsm(id, jointd::protocol::status::fsm::RUN).await;
+        }
+        self
+    }
+
     /// Waits until a published snapshot satisfies `pred`.
     pub async fn wait_snapshot(&self, what: &str, pred: impl Fn(&BusSnapshot) -> bool) {
         let mut rx = self.handle.watch();
