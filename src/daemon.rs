@@ -59,6 +59,11 @@ pub struct RunArgs {
     /// (behind a USB model it runs over an in-memory line, not a pty).
     #[arg(long, value_name = "MODEL", requires = "sim")]
     pub sim_adapter: Option<String>,
+    /// Host writes reach the simulated adapter late by a random delay with
+    /// these quantiles, µs: `P50,P99,MAX` or `P50,P99,P99.9,MAX` (a busy
+    /// host or USB hub). Needs `--sim-adapter`.
+    #[arg(long, value_name = "P50,P99[,P99.9],MAX", requires = "sim_adapter")]
+    pub sim_write_delay_us: Option<String>,
     /// A mechanical end stop of a simulated joint, `ID=DEG` (repeatable),
     /// e.g. `--sim-hard-stop 1=-40`: what homing finds.
     #[arg(long, value_name = "ID=DEG", requires = "sim")]
@@ -500,6 +505,7 @@ fn sim_config(joints: u8, args: &RunArgs) -> Result<SimConfig, DaemonError> {
     if let Some(model) = &args.sim_adapter {
         cfg.adapter = AdapterModel::parse(model).map_err(SimError::BadAdapter)?;
     }
+    cfg.write_delay = crate::sim::cli::parse_write_delay(args.sim_write_delay_us.as_deref())?;
     cfg.hard_stops = args
         .sim_hard_stop
         .iter()

@@ -31,7 +31,9 @@ use crate::bus::{
     THREAD_PREFIX,
 };
 use crate::protocol::status::fsm;
-use crate::sim::{AdapterModel, SimConfig, SimError, SimHandle, SimStats, Simulator};
+use crate::sim::{
+    AdapterModel, Fault, SimConfig, SimError, SimHandle, SimStats, Simulator, WriteDelay,
+};
 
 use analysis::Analysis;
 use client::{Client, CLIENT_THREAD};
@@ -79,6 +81,12 @@ pub struct BenchArgs {
     /// report gives each rate as a share of what that adapter allows.
     #[arg(long, default_value = "native")]
     pub adapter: String,
+    /// Behind an adapter: from the start of the measured window, host
+    /// writes reach it late by a random delay with these quantiles, µs
+    /// (`P50,P99,MAX` or `P50,P99,P99.9,MAX`, e.g. `38,150,750,1000`); the
+    /// report adds the collisions of each second.
+    #[arg(long, value_name = "P50,P99[,P99.9],MAX")]
+    pub write_delay_us: Option<String>,
     /// Run this many buses at once, each with `--joints` joints on its own
     /// simulator and owner, after one bus carrying all of them: what a
     /// second adapter buys (per-joint rates, the ratio, the CPU).
@@ -245,6 +253,19 @@ fn adapter_of(args: &BenchArgs) -> Result<AdapterModel, BenchError> {
     AdapterModel::parse(&args.adapter).map_err(BenchError::Setup)
 }
 
+/// `--write-delay-us`, checked: it needs an adapter model.
+fn write_delay_of(args: &BenchArgs) -> Result<Option<WriteDelay>, BenchError> {
+    let Some(spec) = args.write_delay_us.as_deref() else {
+        return Ok(None);
+    };
+    if !adapter_of(args)?.is_latent() {
+        return Err(BenchError::Setup(
+            "--write-delay-us needs a USB adapter model (--adapter ch340, ...)".into(),
+        ));
+    }
+    WriteDelay::parse(spec).map(Some).map_err(BenchError::Setup)
+}
+
 /// What splitting the joints over two adapters must at least buy per joint.
 const MIN_SPLIT_GAIN: f64 = 1.95;
 
@@ -282,6 +303,10 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
         warmup: Duration::from_secs_f64(args.warmup),
         occupancy: SimStats::occupancy(s0, s1),
         collisions: s1.collisions.saturating_sub(s0.collisions),
+        write_delay: write_delay_of(args)?,
+        collisions_by_second: run.collisions_by_second,
+        slipped_writes: s1.host_writes_slipped.saturating_sub(s0.host_writes_slipped),
+        pipeline: snapshot.usb_pipeline.clone(),
         analysis: analysis::analyse(&run.log, &run.writes, &ids, s0.at, s1.at),
         cpu_owner: share(0),
         cpu_sim: share(1),
@@ -355,6 +380,8 @@ struct Run {
     cpu: [Vec<Duration>; 2],
     writes: Vec<client::Write>,
     log: Vec<crate::sim::WireFrame>,
+    /// With a write delay: the referee's collisions in each second of the window.
+    collisions_by_second: Vec<u64>,
 }
 
 /// Streams targets through the warm-up and the measured window.
@@ -370,15 +397,41 @@ fn measure(
     std::thread::sleep(Duration::from_secs_f64(args.warmup));
     sim.clear_frame_log();
     let (s0, cpu0) = (sim.stats(), cpu_now());
-    std::thread::sleep(Duration::from_secs_f64(args.seconds));
+    let mut collisions_by_second = Vec::new();
+    match write_delay_of(args)? {
+        Some(delay) => {
+            sim.inject(Fault::WriteDelay(Some(delay)));
+            collisions_by_second = collisions_each_second(sim, &s0, args.seconds);
+        }
+        None => std::thread::sleep(Duration::from_secs_f64(args.seconds)),
+    }
     let (s1, cpu1) = (sim.stats(), cpu_now());
+    sim.inject(Fault::WriteDelay(None));
     let writes = client.finish();
     Ok(Run {
         stats: [s0, s1],
         cpu: [cpu0, cpu1],
         writes,
         log: sim.frame_log(),
+        collisions_by_second,
     })
+}
+
+/// Sleeps through the window, noting the referee's collisions each second
+/// (a last part second included).
+fn collisions_each_second(sim: &SimHandle, start: &SimStats, seconds: f64) -> Vec<u64> {
+    let end = start.at + Duration::from_secs_f64(seconds);
+    let mut last = start.collisions;
+    let mut by_second = Vec::new();
+    let mut next = start.at;
+    while next < end {
+        next = (next + Duration::from_secs(1)).min(end);
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+        let now = sim.stats().collisions;
+        by_second.push(now.saturating_sub(last));
+        last = now;
+    }
+    by_second
 }
 
 /// The simulator's runner thread at real-time priority: a referee the OS

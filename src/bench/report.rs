@@ -18,6 +18,10 @@ const MAX_DAEMON_CPU: f64 = 0.15;
 /// Issue 15: behind a USB adapter, each rate as a share of the adapter's
 /// pipeline bound.
 const MIN_SHARE_OF_BOUND: f64 = 0.9;
+/// With late writes: control as a share of the bound, and how long the
+/// pipeline has to back off before the wire must be clean.
+const MIN_SHARE_LATE: f64 = 0.8;
+const BACKOFF_ALLOWANCE_S: usize = 2;
 
 #[derive(Debug)]
 pub struct Report {
@@ -31,6 +35,14 @@ pub struct Report {
     pub warmup: Duration,
     pub occupancy: f64,
     pub collisions: u64,
+    /// Host writes late by this distribution from the window's start.
+    pub write_delay: Option<crate::sim::WriteDelay>,
+    /// With a write delay: the collisions in each second of the window.
+    pub collisions_by_second: Vec<u64>,
+    /// Writes the delay made miss their USB frame (the referee's count).
+    pub slipped_writes: u64,
+    /// The bus's USB pipeline at the end of the run.
+    pub pipeline: Option<crate::bus::usb_guard::UsbPipelineView>,
     pub analysis: Analysis,
     /// Share of one core over the window: bus owner, simulator, client.
     pub cpu_owner: f64,
@@ -102,8 +114,32 @@ impl Report {
         )
     }
 
+    /// Collisions after the first [`BACKOFF_ALLOWANCE_S`] seconds of the window.
+    fn collisions_after_backoff(&self) -> u64 {
+        self.collisions_by_second
+            .iter()
+            .skip(BACKOFF_ALLOWANCE_S)
+            .sum()
+    }
+
     fn adapter_checks(&self) -> Vec<(String, bool)> {
         let (control, telemetry) = self.shares_of_bound();
+        if self.write_delay.is_some() {
+            return vec![
+                (
+                    format!("zero collisions after the first {BACKOFF_ALLOWANCE_S} s"),
+                    self.collisions_after_backoff() == 0,
+                ),
+                (
+                    format!("control >= {MIN_SHARE_LATE} of the bound every joint"),
+                    control >= MIN_SHARE_LATE,
+                ),
+                (
+                    "telemetry from every joint".into(),
+                    Analysis::min_rate(&self.analysis.telemetry_hz) > 0.0,
+                ),
+            ];
+        }
         vec![
             ("zero collisions".into(), self.collisions == 0),
             (
@@ -255,6 +291,35 @@ impl Report {
                 ),
             ),
         ];
+        if let Some(delay) = &self.write_delay {
+            let by_s = &self.collisions_by_second;
+            let last3: u64 = by_s.iter().rev().take(3).sum();
+            rows.push((
+                "write delay (from the window's start)",
+                format!(
+                    "p50,p99,p99.9,max {delay} µs; {} writes slipped a USB frame",
+                    self.slipped_writes
+                ),
+            ));
+            rows.push((
+                "collisions each second",
+                format!(
+                    "{by_s:?}: first second {}, last 3 s {last3} ({:.1}/s)",
+                    by_s.first().copied().unwrap_or(0),
+                    last3 as f64 / 3.0_f64.min(by_s.len().max(1) as f64)
+                ),
+            ));
+        }
+        if let Some(p) = &self.pipeline {
+            rows.push((
+                "USB pipeline at the end",
+                format!(
+                    "{} (guard {} µs, writes {} µs before their frame); {} backoffs, \
+                     {} recoveries; last change: {}",
+                    p.mode, p.guard_us, p.lead_us, p.backoffs, p.recoveries, p.reason
+                ),
+            ));
+        }
         if self.adapter.is_latent() {
             let c = &self.counters;
             rows.push((

@@ -214,6 +214,10 @@ pub struct Timing {
     /// reply comes it must run within tens of µs, even on a busy machine.
     /// Refused without CAP_SYS_NICE/RLIMIT_RTPRIO: logged, not fatal.
     pub rt_priority: u8,
+    /// Behind a USB adapter: how long a backed-off pipeline must see no
+    /// collision's aftermath before it steps back towards the adapter's
+    /// bound, ms (doubled after a relapse, up to 16 times).
+    pub usb_recover_ms: u64,
 }
 
 impl Default for Timing {
@@ -225,6 +229,7 @@ impl Default for Timing {
             write_lead_us: 300,
             reply_spin_us: 150,
             rt_priority: DEFAULT_RT_PRIORITY,
+            usb_recover_ms: 10_000,
         }
     }
 }

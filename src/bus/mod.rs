@@ -53,6 +53,7 @@ pub(crate) mod registry;
 pub(crate) mod scheduler;
 pub(crate) mod setpoints;
 pub(crate) mod state;
+pub mod usb_guard;
 pub(crate) mod usb_pipeline;
 pub(crate) mod verify;
 pub(crate) mod wire;

@@ -191,6 +191,10 @@ pub struct BusCounters {
     /// frame took them; the wire was held for the later one (a host that
     /// woke late, not a collision).
     pub usb_writes_ambiguous: u64,
+    /// Times the USB pipeline backed off (a collision's aftermath seen)
+    /// and stepped back towards the adapter's bound (clean for a while).
+    pub usb_backoffs: u64,
+    pub usb_recoveries: u64,
 }
 
 /// Latency histograms since start (`/metrics`).
@@ -256,6 +260,8 @@ pub struct BusSnapshot {
     pub adapter: String,
     /// One poll's round trip as the host lives it on that adapter, µs.
     pub transaction_us: u64,
+    /// Behind a USB adapter: the pipeline's mode, guard and why it last changed.
+    pub usb_pipeline: Option<crate::bus::usb_guard::UsbPipelineView>,
 }
 
 impl BusSnapshot {
@@ -277,6 +283,7 @@ impl BusSnapshot {
             port_notes: Vec::new(),
             adapter: "native".into(),
             transaction_us: 0,
+            usb_pipeline: None,
         }
     }
 }
@@ -371,6 +378,17 @@ pub enum BusEvent {
         value: u16,
         /// `res` or `read_back`.
         verified_by: &'static str,
+    },
+    /// Behind a USB adapter: the pipeline changed mode (backed off after
+    /// a collision's aftermath, or stepped back after a clean while).
+    UsbPipeline {
+        bus: String,
+        /// `pipelined`, `guarded` or `lockstep`.
+        mode: &'static str,
+        previous: &'static str,
+        /// How late a write may reach the adapter now, µs.
+        guard_us: u64,
+        reason: String,
     },
     /// A device reset (power cut, reboot): it is disabled, forgot its mode
     /// and target; the daemon forgot its targets too.

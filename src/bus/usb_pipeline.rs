@@ -32,6 +32,7 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
+use super::usb_guard::{PipelineMode, UsbGuard};
 use super::wire::{ReplyWindow, Want};
 
 /// Arrivals the phase estimate is made of.
@@ -58,23 +59,12 @@ const PHASE_DOUBT_SPREAD: f64 = 0.35;
 /// jitter alone is a third of the period, and a write there is always held
 /// for the later microframe anyway.
 const DOUBT_FLOOR_NS: f64 = 60_000.0;
-/// How long a host write may take to reach the adapter (the system call,
-/// the USB stack, a host or adapter thread that is late): a write this
-/// close before a boundary may miss it. At most a period is counted (on a
-/// 125 µs microframe the write is then held for the next one).
-const WRITE_REACH: Duration = Duration::from_micros(200);
 /// A write is still aimed at a boundary this close: whether it makes it
 /// or the next is then not known, and the wire is held for the later one
-/// ([`UsbPipeline::released`]). Below [`WRITE_REACH`] so that a host that
+/// ([`UsbPipeline::released`]). Below the reach so that a host that
 /// wakes a little late still writes instead of chasing the next frame (on
 /// a 125 µs microframe the two are hardly apart).
 const WRITE_LAST_CHANCE: Duration = Duration::from_micros(10);
-/// How far into the frame before its boundary a write is aimed, as a
-/// share of the period from the boundary: early, so that a write (or the
-/// adapter's read of it) may be late by most of a frame and still make its
-/// boundary; not at the very start, where the frame clock's own error
-/// would let it leave a frame early.
-const WRITE_LEAD: f64 = 0.8;
 /// Spacing between the wire's modelled end of one transfer and the next
 /// release, for the device's turnaround jitter.
 const GUARD: Duration = Duration::from_micros(50);
@@ -237,18 +227,39 @@ pub(crate) struct Released {
     pub ambiguous: bool,
 }
 
-/// The pipeline of one latent bus: the frame clock and the replies in flight.
+/// The pipeline of one latent bus: the frame clock, the replies in flight,
+/// and how far it trusts its writes ([`UsbGuard`]).
 #[derive(Debug, Clone)]
 pub(crate) struct UsbPipeline {
     phase: FramePhase,
     inflight: VecDeque<Inflight>,
+    guard: UsbGuard,
 }
 
 impl UsbPipeline {
-    pub(crate) fn new(period: Duration) -> Self {
+    pub(crate) fn new(period: Duration, recover: Duration, now: Instant) -> Self {
         Self {
             phase: FramePhase::new(period),
             inflight: VecDeque::new(),
+            guard: UsbGuard::new(recover, now),
+        }
+    }
+
+    pub(crate) fn guard(&self) -> &UsbGuard {
+        &self.guard
+    }
+
+    pub(crate) fn guard_mut(&mut self) -> &mut UsbGuard {
+        &mut self.guard
+    }
+
+    /// How late a write may reach the adapter and still leave where the
+    /// wire is held for it. Pipelined, at most a period: on a 125 µs
+    /// microframe a write is then held for the next one.
+    fn reach(&self) -> Duration {
+        match self.guard.mode() {
+            PipelineMode::Pipelined => self.guard.reach().min(self.period()),
+            _ => self.guard.reach(),
         }
     }
 
@@ -282,20 +293,20 @@ impl UsbPipeline {
         let by_wire = self.phase.boundary_at_or_after(free_at + GUARD);
         let by_host = self.phase.boundary_after(now + WRITE_LAST_CHANCE);
         let release = by_wire.max(by_host);
-        let lead = self.period().mul_f64(WRITE_LEAD).max(self.period() / 2);
+        let lead = self.period().mul_f64(self.guard.lead()).max(self.period() / 2);
         release.checked_sub(lead).unwrap_or(release)
     }
 
-    /// A write was handed to the port at `handed`: the boundary it leaves
-    /// at (the later one if it came close enough to miss the first).
+    /// A write was handed to the port at `handed`: the latest boundary it
+    /// leaves at if it reaches the adapter within the reach (the later one
+    /// if it came close enough to miss the first). Beyond `pipelined` every
+    /// write is held for a later one by design, not as a late host's.
     pub(crate) fn released(&self, handed: Instant) -> Released {
         let first = self.phase.boundary_after(handed);
-        let latest = self
-            .phase
-            .boundary_after(handed + WRITE_REACH.min(self.period()));
+        let latest = self.phase.boundary_after(handed + self.reach());
         Released {
             at: latest,
-            ambiguous: latest != first,
+            ambiguous: latest != first && self.guard.mode() == PipelineMode::Pipelined,
         }
     }
 
@@ -306,12 +317,13 @@ impl UsbPipeline {
             return self.released(handed);
         }
         Released {
-            at: handed + self.period() + WRITE_REACH.min(self.period()),
+            at: handed + self.period() + self.reach(),
             ambiguous: false,
         }
     }
 
     /// A poll written blind, its reply expected in `window`.
+    /// (Tracked only while writes are blind.)
     pub(crate) fn track(&mut self, want: Want, window: ReplyWindow, handed: Instant) {
         self.inflight.push_back(Inflight {
             want,
@@ -366,8 +378,12 @@ mod tests {
 
     /// A frame clock with boundaries at `t0 + 300 µs + k ms`, learnt from
     /// arrivals `lateness` after boundaries.
+    fn pipeline(period: Duration) -> UsbPipeline {
+        UsbPipeline::new(period, Duration::from_secs(10), Instant::now())
+    }
+
     fn learnt(t0: Instant, lateness: &[u64]) -> UsbPipeline {
-        let mut p = UsbPipeline::new(Duration::from_millis(1));
+        let mut p = pipeline(Duration::from_millis(1));
         for (k, late) in lateness.iter().enumerate() {
             p.arrival(t0 + us(300 + 1000 * (k as u64 + 1) + late));
         }
@@ -460,16 +476,16 @@ mod tests {
     #[test]
     fn without_a_known_clock_a_write_may_leave_a_period_and_its_reach_later() {
         let t0 = Instant::now();
-        let p = UsbPipeline::new(Duration::from_millis(1));
+        let p = pipeline(Duration::from_millis(1));
         assert_eq!(p.latest_release(t0).at, t0 + us(1_200));
-        let hs = UsbPipeline::new(us(125));
+        let hs = pipeline(us(125));
         assert_eq!(hs.latest_release(t0).at, t0 + us(250));
     }
 
     #[test]
     fn replies_are_matched_oldest_first_and_expire_by_deadline() {
         let t0 = Instant::now();
-        let mut p = UsbPipeline::new(Duration::from_millis(1));
+        let mut p = pipeline(Duration::from_millis(1));
         let want = |dev_id| Want { dev_id, index: 1 };
         let window = |ms| ReplyWindow {
             due: t0 + Duration::from_millis(ms),

@@ -48,6 +48,8 @@ use std::time::{Duration, Instant};
 use crate::transport::adapter::AdapterModel;
 
 use super::line::Line;
+use super::rng::Rng;
+use super::write_delay::WriteDelayCell;
 
 /// Bytes an FTDI chip sends at once without waiting for its timer.
 const FTDI_PACKET_PAYLOAD: usize = 62;
@@ -143,6 +145,13 @@ pub(crate) struct AdapterLine {
     seen_empty: Option<Instant>,
     /// Reads whose bytes had waited unwatched (see the module doc).
     undated: u64,
+    /// Host writes held on their way to the chip (a busy host or hub).
+    delay: WriteDelayCell,
+    dice: Rng,
+    /// The frame the last host write left in: a later write never overtakes it.
+    last_release: Option<Instant>,
+    /// Writes the delay made miss the frame they would have made.
+    slipped: u64,
 }
 
 impl AdapterLine {
@@ -151,6 +160,7 @@ impl AdapterLine {
         model: AdapterModel,
         start: Instant,
         seed: u64,
+        delay: WriteDelayCell,
     ) -> Self {
         let period = model.usb_frame().unwrap_or(Duration::from_millis(1));
         // The frame phase: from the seed, reproducible, unknown to the host.
@@ -165,7 +175,29 @@ impl AdapterLine {
             read_at: None,
             seen_empty: None,
             undated: 0,
+            delay,
+            dice: Rng::new(seed ^ 0xD1_7E_DE1A),
+            last_release: None,
+            slipped: 0,
         }
+    }
+
+    /// The frame that takes host bytes written at `at`: the next one after
+    /// they reach the chip (late by the write delay in force), and never
+    /// one before the last write's.
+    fn release_of(&mut self, at: Instant) -> Instant {
+        let on_time = self.clock.next_after(at);
+        let reach = match self.delay.get() {
+            Some(delay) => at + delay.quantile(self.dice.unit()),
+            None => at,
+        };
+        let release = self
+            .clock
+            .next_after(reach)
+            .max(self.last_release.unwrap_or(on_time));
+        self.slipped += u64::from(release > on_time);
+        self.last_release = Some(release);
+        release
     }
 
     /// When host bytes read by a call made at `called` that returned at
@@ -238,7 +270,7 @@ impl Line for AdapterLine {
                     Some(written) => written,
                     None => self.written_at(called, returned),
                 };
-                let release = self.clock.next_after(at);
+                let release = self.release_of(at);
                 match self.to_wire.back_mut() {
                     // Written before that frame began: it takes them too.
                     Some((r, bytes)) if *r == release => {
@@ -301,6 +333,10 @@ impl Line for AdapterLine {
 
     fn take_undated_reads(&mut self) -> u64 {
         std::mem::take(&mut self.undated)
+    }
+
+    fn take_slipped_writes(&mut self) -> u64 {
+        std::mem::take(&mut self.slipped)
     }
 
     fn next_release(&self) -> Option<Instant> {

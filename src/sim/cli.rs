@@ -59,6 +59,11 @@ pub struct SimArgs {
     /// `ftdi[:MS]` (latency timer, default 16), `ch340`, `cp2102`, `ft232h[:MS]`.
     #[arg(long, value_name = "MODEL", default_value = "native")]
     pub adapter: String,
+    /// Host writes reach the adapter late by a random delay with these
+    /// quantiles, µs: `P50,P99,MAX` or `P50,P99,P99.9,MAX`, e.g.
+    /// `38,150,750,1000` (a busy host or USB hub). Needs `--adapter`.
+    #[arg(long, value_name = "P50,P99[,P99.9],MAX")]
+    pub write_delay_us: Option<String>,
     /// Seed of noise and fault dice.
     #[arg(long, default_value_t = super::config::DEFAULT_SEED)]
     pub seed: u64,
@@ -82,6 +87,7 @@ impl SimArgs {
         cfg.realtime = self.realtime;
         cfg.firmware = Firmware::parse(&self.firmware)?;
         cfg.adapter = super::AdapterModel::parse(&self.adapter).map_err(SimError::BadAdapter)?;
+        cfg.write_delay = parse_write_delay(self.write_delay_us.as_deref())?;
         cfg.hard_stops = self
             .hard_stop
             .iter()
@@ -119,6 +125,13 @@ impl SimArgs {
         );
         faults
     }
+}
+
+/// `--write-delay-us`, when given.
+pub fn parse_write_delay(spec: Option<&str>) -> Result<Option<super::WriteDelay>, SimError> {
+    spec.map(super::WriteDelay::parse)
+        .transpose()
+        .map_err(SimError::BadWriteDelay)
 }
 
 /// `ID=DEG`: a device id and a finite angle within the device's range.

@@ -60,6 +60,9 @@ pub struct SimConfig {
     /// current up to the cap and, held long enough, faults with a stall,
     /// like any obstacle. What homing looks for.
     pub hard_stops: Vec<(u8, f64)>,
+    /// Host writes reach the adapter late by this distribution (a busy
+    /// host or USB hub); see [`super::write_delay`]. Only behind an adapter.
+    pub write_delay: Option<super::WriteDelay>,
 }
 
 impl SimConfig {
@@ -79,6 +82,7 @@ impl SimConfig {
             adapter: AdapterModel::Native,
             realtime: false,
             hard_stops: Vec::new(),
+            write_delay: None,
         }
     }
 
@@ -92,6 +96,13 @@ impl SimConfig {
             return Err(SimError::BadIds(format!(
                 "{bad} is not a device id (1..=159)"
             )));
+        }
+        if self.write_delay.is_some() && !self.adapter.is_latent() {
+            return Err(SimError::BadWriteDelay(
+                "it needs a USB adapter model (e.g. --adapter ch340): \
+                 it is the path to the adapter that is late"
+                    .into(),
+            ));
         }
         if BaudLevel::from_baud(self.baud).is_none() {
             return Err(SimError::BadBaud(self.baud));

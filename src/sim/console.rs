@@ -6,6 +6,7 @@
 //! power-cycle ID          under-voltage ID on|off
 //! stall ID [DEG]          corrupt RATE
 //! drop RATE [ID]          extra-turnaround MICROS
+//! write-delay P50,P99[,P99.9],MAX | off     (µs; behind an adapter model)
 //! ```
 //! Answers go to stderr (stdout carries only the device path).
 
@@ -16,7 +17,8 @@ use super::{Fault, SimHandle};
 
 pub(crate) const HELP: &str = "commands: unplug | replug | clear | stats | devices | help | \
 power-cycle ID | under-voltage ID on|off | stall ID [DEG] | corrupt RATE | \
-drop RATE [ID] | extra-turnaround MICROS | miss-control ID COUNT";
+drop RATE [ID] | extra-turnaround MICROS | miss-control ID COUNT | \
+write-delay P50,P99[,P99.9],MAX|off";
 
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum ConsoleCmd {
@@ -72,6 +74,11 @@ pub(crate) fn parse(line: &str) -> Result<ConsoleCmd, String> {
         "miss-control" => Fault::MissControl {
             dev_id: num(words.next(), "device id")?,
             count: num(words.next(), "frame count")?,
+        },
+        "write-delay" => match words.next() {
+            Some("off") => Fault::WriteDelay(None),
+            Some(spec) => Fault::WriteDelay(Some(super::WriteDelay::parse(spec)?)),
+            None => return Err("write-delay P50,P99[,P99.9],MAX | off".into()),
         },
         other => return Err(format!("unknown command `{other}`; {HELP}")),
     };

@@ -337,7 +337,7 @@ impl Engine {
                     d.set_under_voltage(false, now);
                 }
             }
-            Fault::Unplug | Fault::Replug => {}
+            Fault::Unplug | Fault::Replug | Fault::WriteDelay(_) => {}
         }
     }
 
@@ -372,6 +372,10 @@ impl Engine {
 
     pub(crate) fn count_undated_reads(&mut self, reads: u64) {
         self.stats.host_reads_undated += reads;
+    }
+
+    pub(crate) fn count_slipped_writes(&mut self, writes: u64) {
+        self.stats.host_writes_slipped += writes;
     }
 
     pub(crate) fn count_overrun(&mut self, bytes: usize) {

@@ -17,6 +17,8 @@ pub enum SimError {
     BadFirmware(String),
     #[error("bad adapter: {0}")]
     BadAdapter(String),
+    #[error("bad write delay: {0}")]
+    BadWriteDelay(String),
     #[error("bad hard stop: {0}")]
     BadHardStop(String),
     #[error("state file {path}: {why}")]

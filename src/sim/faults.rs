@@ -44,7 +44,11 @@ pub enum Fault {
     Unplug,
     /// Plugged back (a pty gets a new /dev/pts node behind the same link).
     Replug,
-    /// Every fault off, obstacles removed, voltage restored, line plugged.
+    /// Host writes reach the USB adapter late by a random delay of this
+    /// distribution (`None`: on time). Only behind an adapter model.
+    WriteDelay(Option<super::WriteDelay>),
+    /// Every fault off, obstacles removed, voltage restored, line plugged,
+    /// writes on time.
     ClearAll,
 }
 

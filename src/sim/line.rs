@@ -45,6 +45,11 @@ pub(crate) trait Line: Send {
     fn take_undated_reads(&mut self) -> u64 {
         0
     }
+    /// Host writes a write delay made miss the USB frame they would have
+    /// made, since the last call (an adapter model).
+    fn take_slipped_writes(&mut self) -> u64 {
+        0
+    }
     /// When the host wrote the first byte of the last read, if the line
     /// knows (an in-memory pipe does; a pty's kernel may pass bytes on late).
     fn take_written_at(&mut self) -> Option<std::time::Instant> {

@@ -86,6 +86,7 @@ pub(crate) mod runner;
 pub(crate) mod stats;
 pub(crate) mod view;
 pub(crate) mod wire;
+pub(crate) mod write_delay;
 
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
@@ -100,6 +101,7 @@ pub use log::{collision_context, WireFrame};
 pub use params::Params;
 pub use stats::{FrameKinds, SimStats};
 pub use view::DeviceView;
+pub use write_delay::WriteDelay;
 
 use crate::transport::memory::{self, MemoryPort};
 use engine::Engine;
@@ -162,6 +164,7 @@ struct Inner {
     ctl: Arc<Control>,
     thread: Mutex<Option<JoinHandle<()>>>,
     device_path: Option<PathBuf>,
+    write_delay: write_delay::WriteDelayCell,
 }
 
 impl SimHandle {
@@ -171,9 +174,16 @@ impl SimHandle {
         device_path: Option<PathBuf>,
     ) -> Result<Self, SimError> {
         let start = Instant::now();
+        let write_delay = write_delay::WriteDelayCell::new(cfg.write_delay);
         let line: Box<dyn Line> = match cfg.adapter {
             AdapterModel::Native => line,
-            model => Box::new(adapter::AdapterLine::new(line, model, start, cfg.seed)),
+            model => Box::new(adapter::AdapterLine::new(
+                line,
+                model,
+                start,
+                cfg.seed,
+                write_delay.clone(),
+            )),
         };
         let engine = Arc::new(Mutex::new(Engine::new(cfg, start)?));
         let ctl = Arc::new(Control::default());
@@ -188,6 +198,7 @@ impl SimHandle {
                 ctl,
                 thread: Mutex::new(Some(thread)),
                 device_path,
+                write_delay,
             }),
         })
     }
@@ -232,8 +243,10 @@ impl SimHandle {
             Fault::Replug => self.inner.ctl.line_op(LineOp::Replug),
             Fault::ClearAll => {
                 self.engine().inject(fault, Instant::now());
+                self.inner.write_delay.set(None);
                 self.inner.ctl.line_op(LineOp::Replug);
             }
+            Fault::WriteDelay(delay) => self.inner.write_delay.set(delay),
             other => self.engine().inject(other, Instant::now()),
         }
     }

@@ -191,8 +191,10 @@ impl Runner {
                 let at = self.line.take_read_at().unwrap_or_else(Instant::now);
                 let baud = self.line.host_baud();
                 let undated = self.line.take_undated_reads();
+                let slipped = self.line.take_slipped_writes();
                 let mut engine = lock_engine(&self.engine);
                 engine.count_undated_reads(undated);
+                engine.count_slipped_writes(slipped);
                 engine.on_host_bytes(&self.buf[..n], at, baud);
                 Some(n)
             }

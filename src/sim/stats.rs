@@ -79,6 +79,9 @@ pub struct SimStats {
     /// thread had not watched the line for over 100 µs (a stall): dated to
     /// the earliest instant they may have been written.
     pub host_reads_undated: u64,
+    /// Host writes a write delay (a fault) made miss the USB frame they
+    /// would have made: each a chance of a collision.
+    pub host_writes_slipped: u64,
     /// The line is unplugged right now.
     pub unplugged: bool,
 }
@@ -104,6 +107,7 @@ impl SimStats {
             corrupted_replies: 0,
             host_overrun_bytes: 0,
             host_reads_undated: 0,
+            host_writes_slipped: 0,
             unplugged: false,
         }
     }

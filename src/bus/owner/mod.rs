@@ -121,6 +121,7 @@ impl Owner {
         let _ = match ctx.decide(now) {
             Slot::Listen { until } => ctx.wait_until(until),
             Slot::Control(frame) => ctx.send_planned(frame),
+            Slot::ControlBatch(frames) => ctx.send_control_batch(frames),
             Slot::Poll { dev_id, block } => ctx.poll(dev_id, block),
             Slot::Batch {
                 control,

@@ -75,6 +75,9 @@ pub(crate) enum Slot {
     Probe { dev_id: u8 },
     /// Write this control frame (coalesced setpoints).
     Control(Planned),
+    /// Behind a USB adapter whose pipeline is guarded: these control
+    /// frames in one write, without a poll.
+    ControlBatch(Vec<Planned>),
     /// Read `block` of `dev_id`; its reply window follows from
     /// [`Scheduler::sent`] and [`Scheduler::reply_window`].
     Poll { dev_id: u8, block: InfoBlock },
@@ -151,6 +154,13 @@ pub(crate) struct Scheduler {
     pipeline: Option<UsbPipeline>,
     /// Writes that came too close to a USB frame boundary, not yet counted.
     ambiguous_writes: u64,
+    /// How long a backed-off USB pipeline stays clean before stepping down.
+    usb_recover: Duration,
+    /// Changes of the USB pipeline's mode, for the owner to log and count.
+    usb_changes: Vec<crate::bus::usb_guard::Change>,
+    /// The last pipelined transfer carried a poll (in `guarded` mode the
+    /// next one carries only control frames, if any are pending).
+    polled_last: bool,
 }
 
 impl Scheduler {
@@ -183,6 +193,9 @@ impl Scheduler {
             dropped: 0,
             pipeline: None,
             ambiguous_writes: 0,
+            usb_recover: Duration::from_millis(cfg.timing.usb_recover_ms),
+            usb_changes: Vec::new(),
+            polled_last: false,
         }
     }
 
@@ -374,9 +387,23 @@ impl Scheduler {
     /// [`Self::next`]): one transfer a cycle, the pending control frames and
     /// the next poll; its reply is left in flight, matched when the adapter
     /// hands it over.
+    /// Guarded (every transfer holds the wire a frame longer), every other
+    /// transfer carries only control frames when any are pending: control
+    /// keeps its rate, telemetry gives way.
     fn pipelined_slot(&mut self, now: Instant, store: &SetpointStore) -> Slot {
+        let guarded = self
+            .pipeline
+            .as_ref()
+            .is_some_and(|p| p.guard().control_between_polls());
+        if guarded && std::mem::take(&mut self.polled_last) {
+            let control = self.batch_control(store);
+            if !control.is_empty() {
+                return Slot::ControlBatch(control);
+            }
+        }
         let timeout = self.clock.reply_timeout(now);
         if let Some(poll) = self.planner.next(self.reg.poll_states(), now, timeout) {
+            self.polled_last = true;
             return Slot::Batch {
                 control: self.batch_control(store),
                 dev_id: poll.dev_id,
@@ -398,9 +425,51 @@ impl Scheduler {
 
     /// True when polls are written blind: behind any latent (USB)
     /// adapter, timed by its frame clock once that is known, each taken
-    /// to leave as late as it may until then.
+    /// to leave as late as it may until then; not while the pipeline has
+    /// backed off to `lockstep`.
     pub(crate) fn pipelining(&self) -> bool {
-        self.pipeline.is_some()
+        self.pipeline.as_ref().is_some_and(|p| p.guard().blind())
+    }
+
+    /// The link's running total of garbled bytes (CRC errors and bytes
+    /// skipped) is `total` at `now`; also steps a clean pipeline down.
+    pub(crate) fn usb_watch(&mut self, total: u64, now: Instant) {
+        let Some(pipeline) = self.pipeline.as_mut() else {
+            return;
+        };
+        let guard = pipeline.guard_mut();
+        let change = guard.garbled_total(total, now).or_else(|| guard.tick(now));
+        self.usb_changed(change);
+    }
+
+    fn usb_changed(&mut self, change: Option<crate::bus::usb_guard::Change>) {
+        let Some(change) = change else {
+            return;
+        };
+        let view = self.usb_view(Instant::now());
+        self.events.push(BusEvent::UsbPipeline {
+            bus: self.reg.bus().to_string(),
+            mode: change.to.as_str(),
+            previous: change.from.as_str(),
+            guard_us: view.as_ref().map_or(0, |v| v.guard_us),
+            reason: change.reason.clone(),
+        });
+        self.usb_changes.push(change);
+    }
+
+    /// Changes of the pipeline's mode since the last call.
+    pub(crate) fn take_usb_changes(&mut self) -> Vec<crate::bus::usb_guard::Change> {
+        std::mem::take(&mut self.usb_changes)
+    }
+
+    /// The USB pipeline as the bus view shows it (behind a latent adapter).
+    pub(crate) fn usb_view(
+        &mut self,
+        now: Instant,
+    ) -> Option<crate::bus::usb_guard::UsbPipelineView> {
+        let pipeline = self.pipeline.as_mut()?;
+        let period = pipeline.period();
+        Some(pipeline.guard_mut().view(period, now))
     }
 
     /// True once the USB frame clock is known from reply arrivals (writes
@@ -633,7 +702,8 @@ impl Scheduler {
         self.clock.set_adapter(adapter);
         let period = adapter.usb_frame();
         if self.pipeline.as_ref().map(UsbPipeline::period) != period {
-            self.pipeline = period.map(UsbPipeline::new);
+            let (recover, now) = (self.usb_recover, Instant::now());
+            self.pipeline = period.map(|p| UsbPipeline::new(p, recover, now));
         }
     }
 }

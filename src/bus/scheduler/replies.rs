@@ -37,6 +37,7 @@ impl Scheduler {
 
     fn take_reply(&mut self, reply: &Reply, at: Instant, due: Instant) -> ReplyEffect {
         self.clock.observe_reply(due, at);
+        self.usb_answered(reply.dev_id, at);
         let feeds =
             self.reg.get(reply.dev_id).is_some() || matches!(reply.body(), ReplyBody::Info01(_));
         if !feeds {
@@ -63,6 +64,7 @@ impl Scheduler {
         if let Some((_, due)) = late {
             self.clock.observe_reply(due, at);
         }
+        self.usb_answered(reply.dev_id, at);
         let effect = self
             .reg
             .on_reply(reply, at, late.is_some(), &mut self.events);
@@ -106,6 +108,7 @@ impl Scheduler {
     /// against the device (offline after the configured misses), and the
     /// line is free again.
     pub(crate) fn timed_out(&mut self, want: Want, due: Instant, now: Instant) {
+        self.usb_missing(want.dev_id, now);
         self.overdue = Some((want, due));
         self.clock.line_free(now);
         self.reg.on_missed(want.dev_id, &mut self.events);
@@ -113,9 +116,26 @@ impl Scheduler {
 
     /// A poll written blind got no reply by its deadline: missed like any
     /// other, but the line was never held for it beyond the model.
-    pub(crate) fn inflight_timed_out(&mut self, inflight: &Inflight) {
+    pub(crate) fn inflight_timed_out(&mut self, inflight: &Inflight, now: Instant) {
+        self.usb_missing(inflight.want.dev_id, now);
         self.overdue = Some((inflight.want, inflight.window.due));
         self.reg.on_missed(inflight.want.dev_id, &mut self.events);
+    }
+
+    /// Behind a USB adapter: `dev_id` answered at `at`; a reply of it
+    /// missed shortly before was lost on the way.
+    fn usb_answered(&mut self, dev_id: u8, at: Instant) {
+        let change = self
+            .pipeline
+            .as_mut()
+            .and_then(|p| p.guard_mut().answered(dev_id, at));
+        self.usb_changed(change);
+    }
+
+    fn usb_missing(&mut self, dev_id: u8, now: Instant) {
+        if let Some(pipeline) = self.pipeline.as_mut() {
+            pipeline.guard_mut().reply_missing(dev_id, now);
+        }
     }
 
     /// A read that some firmware does not answer (a revision probe) got no
@@ -131,6 +151,7 @@ impl Scheduler {
         self.clock.line_free(now);
         if let Some(pipeline) = self.pipeline.as_mut() {
             pipeline.reset();
+            pipeline.guard_mut().link_up(now);
         }
         self.reopen.opened(now)
     }

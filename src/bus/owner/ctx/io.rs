@@ -96,6 +96,15 @@ impl Ctx {
         Ok(())
     }
 
+    /// Control frames in one write, no poll (a guarded USB pipeline).
+    pub(crate) fn send_control_batch(&mut self, frames: Vec<Planned>) -> Result<(), BusError> {
+        let cmds: Vec<Command> = frames.iter().map(|p| p.command).collect();
+        let end = self.send(&cmds)?;
+        self.link.counters.frames_tx_batched += frames.len() as u64;
+        self.control_frames_sent(&frames, end);
+        Ok(())
+    }
+
     /// One telemetry poll the scheduler picked.
     pub(crate) fn poll(&mut self, dev_id: u8, block: InfoBlock) -> Result<(), BusError> {
         self.poll_behind(Vec::new(), dev_id, block)
@@ -148,9 +157,34 @@ impl Ctx {
     pub(crate) fn expire_inflight(&mut self, now: Instant) {
         for inflight in self.sched.expired_inflight(now) {
             self.link.counters.timeouts += 1;
-            self.sched.inflight_timed_out(&inflight);
+            self.sched.inflight_timed_out(&inflight, now);
         }
         self.link.counters.usb_writes_ambiguous += self.sched.take_ambiguous_writes();
+        let garbled = self.link.counters.crc_errors + self.link.counters.skipped_bytes;
+        self.sched.usb_watch(garbled, now);
+        for change in self.sched.take_usb_changes() {
+            self.usb_changed(&change);
+        }
+    }
+
+    /// One WARN per change of the USB pipeline's mode, never per frame.
+    fn usb_changed(&mut self, change: &crate::bus::usb_guard::Change) {
+        let c = &mut self.link.counters;
+        if change.to > change.from {
+            c.usb_backoffs += 1;
+            tracing::warn!(
+                bus = %self.cfg.name, from = %change.from, to = %change.to,
+                reason = %change.reason,
+                "USB pipeline backed off: writes reach the adapter later than assumed"
+            );
+        } else {
+            c.usb_recoveries += 1;
+            tracing::warn!(
+                bus = %self.cfg.name, from = %change.from, to = %change.to,
+                reason = %change.reason,
+                "USB pipeline stepped back towards the adapter's bound"
+            );
+        }
     }
 
     /// Writes one config/read frame and waits for the reply it asks for;

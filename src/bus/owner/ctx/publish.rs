@@ -48,6 +48,7 @@ impl Ctx {
                 .collect(),
             adapter: self.sched.clock().adapter().to_string(),
             transaction_us: self.sched.clock().transaction_time().as_micros() as u64,
+            usb_pipeline: self.sched.usb_view(now),
         };
         self.shared.snapshot.send_replace(Arc::new(snapshot));
         for event in self.sched.drain_events() {

@@ -205,7 +205,7 @@ fn a_request_waits_for_the_polls_in_flight_and_a_missing_reply_counts_at_its_dea
     let late = b.now + Duration::from_secs(1);
     let expired = b.s.expired_inflight(late);
     assert_eq!(expired.len(), 1);
-    b.s.inflight_timed_out(&expired[0]);
+    b.s.inflight_timed_out(&expired[0], late);
     b.now = late;
     assert_eq!(b.next(), Slot::Request);
 }

@@ -1,0 +1,475 @@
+//! The USB pipeline's self-protection: how much it trusts its writes to
+//! reach the adapter in time, learnt from what collisions leave behind.
+//!
+//! The pipeline ([`super::usb_pipeline`]) writes each transfer blind, aimed
+//! at a USB frame boundary, and holds the wire for the latest boundary the
+//! write may leave at if it reaches the adapter within the *reach*. On a
+//! path whose writes come later than that now and then (a busy host, a hub
+//! shared with a camera, a VM), a write misses its boundary, leaves a frame
+//! later, and collides with the next transfer. Nothing the host sees tells
+//! it in advance; the aftermath does:
+//! - garbled bytes (CRC errors, bytes skipped to find a frame): the host's
+//!   side of a reply that collided;
+//! - a reply lost, or matched after its deadline, from a device that still
+//!   answers (a device that is simply gone never answers again, and is not
+//!   evidence).
+//!
+//! # The ladder
+//! | mode | write aimed | reach held for | per-transfer cost on a 1 ms frame |
+//! |---|---|---|---|
+//! | `pipelined` | 0.8 frame before its boundary | 200 µs | none (the bound) |
+//! | `guarded` | 0.9 frame before | 1.85 ms | one frame: a write late by up to 1.85 ms leaves at most one frame late into a wire held for it; control-only transfers go between polls |
+//! | `lockstep` | after the previous reply | any delay | a USB round trip per transfer |
+//!
+//! A write whose delay can reach a whole USB frame cannot be told from one
+//! that made its boundary until its reply is due, a frame after the next
+//! transfer must be written: no placement inside the frame helps, the
+//! wire must be held one frame longer (`guarded`). Below that a write
+//! aimed earlier in the frame is free.
+//!
+//! # Backing off and back
+//! One incident steps up one mode at the next write (the evidence shows
+//! within a reply deadline, a few ms). Evidence from transfers written
+//! under the previous mode ([`SETTLE`]) does not step again. A mode held
+//! clean for the recovery time steps down one; a step down followed by an
+//! incident within twice the recovery time doubles the next recovery time
+//! (up to [`MAX_RECOVER_FACTOR`] times): a path that is late for good does not
+//! make the pipeline oscillate. The factor halves again after a clean
+//! recovery time at the bottom.
+//!
+//! Pure: every instant is passed in.
+
+use std::collections::VecDeque;
+use std::fmt;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+
+/// The pipeline's modes, least cautious first.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum PipelineMode {
+    /// Writes aimed 0.8 frame before their boundary, trusted to reach the
+    /// adapter within 200 µs: the adapter's bound.
+    Pipelined,
+    /// Writes aimed 0.9 frame before, the wire held for a write late by
+    /// up to 1.85 ms; control-only transfers between polls.
+    Guarded,
+    /// Each transfer waits for the previous one's reply: no write is
+    /// blind, any delay is safe.
+    Lockstep,
+}
+
+impl PipelineMode {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Pipelined => "pipelined",
+            Self::Guarded => "guarded",
+            Self::Lockstep => "lockstep",
+        }
+    }
+
+    const ALL: [Self; 3] = [Self::Pipelined, Self::Guarded, Self::Lockstep];
+
+    fn up(self) -> Option<Self> {
+        match self {
+            Self::Pipelined => Some(Self::Guarded),
+            Self::Guarded => Some(Self::Lockstep),
+            Self::Lockstep => None,
+        }
+    }
+
+    fn down(self) -> Option<Self> {
+        match self {
+            Self::Pipelined => None,
+            Self::Guarded => Some(Self::Pipelined),
+            Self::Lockstep => Some(Self::Guarded),
+        }
+    }
+
+    /// Every mode by name, for metrics.
+    pub fn all() -> [Self; 3] {
+        Self::ALL
+    }
+}
+
+impl fmt::Display for PipelineMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// How long a write made in `pipelined` mode is trusted to take to reach
+/// the adapter (the system call, the USB stack, a thread a little late).
+const PIPELINED_REACH: Duration = Duration::from_micros(200);
+/// In `guarded`: up to 1.85 ms late still leaves at most one frame after
+/// its boundary on a 1 ms frame (aimed 0.9 frame before it).
+const GUARDED_REACH: Duration = Duration::from_micros(1_850);
+/// In `lockstep` the next write waits for the reply, so the reach only
+/// times the wire model of the one transfer out.
+const LOCKSTEP_REACH: Duration = Duration::from_micros(1_850);
+/// How far before its boundary a write is aimed, as a share of the frame.
+const PIPELINED_LEAD: f64 = 0.8;
+const GUARDED_LEAD: f64 = 0.9;
+/// Evidence this soon after a change comes from transfers written before
+/// it: the reply deadline behind a latent adapter, with room.
+pub(crate) const SETTLE: Duration = Duration::from_millis(50);
+/// The recovery time doubles at most this many times over (a path late
+/// for good retries the faster mode every few minutes, not every seconds).
+const MAX_RECOVER_FACTOR: u32 = 16;
+/// The window the incident rate is given over.
+const RATE_WINDOW: Duration = Duration::from_secs(10);
+/// A lost reply is evidence if its device answers again within this.
+const LOST_CONFIRM: Duration = Duration::from_secs(1);
+
+/// What collisions leave behind, as the bus owner sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Evidence {
+    /// Bytes that made no frame: CRC errors and bytes skipped.
+    Garbled { bytes: u64 },
+    /// A device's reply was missing (or matched after its deadline), and
+    /// the device answers again.
+    ReplyLost { dev_id: u8 },
+}
+
+impl fmt::Display for Evidence {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Garbled { bytes } => {
+                write!(f, "{bytes} garbled (CRC errors and bytes skipped)")
+            }
+            Self::ReplyLost { dev_id } => {
+                write!(f, "a reply of device {dev_id} lost while it still answers")
+            }
+        }
+    }
+}
+
+/// A change of mode, to publish and log once.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct Change {
+    pub from: PipelineMode,
+    pub to: PipelineMode,
+    pub reason: String,
+}
+
+/// What the bus view shows of the pipeline.
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
+pub struct UsbPipelineView {
+    pub mode: PipelineMode,
+    /// How late a write may reach the adapter and still leave where the
+    /// wire is held for it, µs.
+    pub guard_us: u64,
+    /// How far before its USB frame boundary a write is aimed, µs.
+    pub lead_us: u64,
+    /// Why the mode last changed (`start` until it has).
+    pub reason: String,
+    /// Seconds since that change.
+    pub since_s: f64,
+    /// Incidents (evidence of a collision) per second over the last 10 s.
+    pub incidents_per_s: f64,
+    /// How long the mode must stay clean before stepping down, ms.
+    pub recover_after_ms: u64,
+    /// Steps up and down since start.
+    pub backoffs: u64,
+    pub recoveries: u64,
+}
+
+/// The self-protection state of one latent bus.
+#[derive(Debug, Clone)]
+pub(crate) struct UsbGuard {
+    mode: PipelineMode,
+    changed_at: Instant,
+    reason: String,
+    /// Since when nothing happened: the last change, incident or forgetting
+    /// of a relapse.
+    clean_from: Instant,
+    /// The last step down, while a relapse would double the recovery time.
+    stepped_down_at: Option<Instant>,
+    recover_base: Duration,
+    recover_factor: u32,
+    incidents: VecDeque<Instant>,
+    /// Garbled bytes seen so far (the link's running total).
+    garbled_seen: u64,
+    /// Garbage right after the port opened is the reconnect's, not a collision's.
+    ignore_until: Option<Instant>,
+    /// Devices whose reply went missing, and when.
+    missed: Vec<(u8, Instant)>,
+    backoffs: u64,
+    recoveries: u64,
+}
+
+impl UsbGuard {
+    pub(crate) fn new(recover: Duration, now: Instant) -> Self {
+        Self {
+            mode: PipelineMode::Pipelined,
+            changed_at: now,
+            reason: "start".into(),
+            clean_from: now,
+            stepped_down_at: None,
+            recover_base: recover.max(Duration::from_millis(1)),
+            recover_factor: 1,
+            incidents: VecDeque::new(),
+            garbled_seen: 0,
+            ignore_until: None,
+            missed: Vec::new(),
+            backoffs: 0,
+            recoveries: 0,
+        }
+    }
+
+    pub(crate) fn mode(&self) -> PipelineMode {
+        self.mode
+    }
+
+    /// True while polls are written blind (every mode but `lockstep`).
+    pub(crate) fn blind(&self) -> bool {
+        self.mode != PipelineMode::Lockstep
+    }
+
+    /// True when control-only transfers go between polls (each transfer
+    /// costs a held frame; one without a poll keeps control at its rate).
+    pub(crate) fn control_between_polls(&self) -> bool {
+        self.mode == PipelineMode::Guarded
+    }
+
+    /// How late a write may reach the adapter and still leave where the
+    /// wire is held for it.
+    pub(crate) fn reach(&self) -> Duration {
+        match self.mode {
+            PipelineMode::Pipelined => PIPELINED_REACH,
+            PipelineMode::Guarded => GUARDED_REACH,
+            PipelineMode::Lockstep => LOCKSTEP_REACH,
+        }
+    }
+
+    /// How far before its boundary a write is aimed, as a share of the frame.
+    pub(crate) fn lead(&self) -> f64 {
+        match self.mode {
+            PipelineMode::Pipelined => PIPELINED_LEAD,
+            PipelineMode::Guarded | PipelineMode::Lockstep => GUARDED_LEAD,
+        }
+    }
+
+    fn recover_after(&self) -> Duration {
+        self.recover_base * self.recover_factor
+    }
+
+    /// The link's running total of garbled bytes is `total` at `now`.
+    pub(crate) fn garbled_total(&mut self, total: u64, now: Instant) -> Option<Change> {
+        let new = total.saturating_sub(self.garbled_seen);
+        self.garbled_seen = total;
+        if self.ignore_until.is_some_and(|until| now < until) {
+            return None;
+        }
+        (new > 0).then(|| self.incident(Evidence::Garbled { bytes: new }, now))?
+    }
+
+    /// A poll of `dev_id` got no reply by its deadline.
+    pub(crate) fn reply_missing(&mut self, dev_id: u8, now: Instant) {
+        self.missed.retain(|(id, at)| *id != dev_id && now.duration_since(*at) < LOST_CONFIRM);
+        self.missed.push((dev_id, now));
+    }
+
+    /// `dev_id` answered at `now`: a reply it missed shortly before was
+    /// lost on the way, not a device gone. Dated to the miss: a miss of a
+    /// transfer written before the last change does not step again.
+    pub(crate) fn answered(&mut self, dev_id: u8, now: Instant) -> Option<Change> {
+        if self.missed.is_empty() {
+            return None;
+        }
+        let missed_at = self
+            .missed
+            .iter()
+            .filter(|(id, at)| *id == dev_id && now.saturating_duration_since(*at) < LOST_CONFIRM)
+            .map(|(_, at)| *at)
+            .min();
+        self.missed
+            .retain(|(id, at)| *id != dev_id && now.saturating_duration_since(*at) < LOST_CONFIRM);
+        let at = missed_at?;
+        self.incident_at(Evidence::ReplyLost { dev_id }, at, now)
+    }
+
+    /// One piece of evidence at `now`: steps up unless it belongs to
+    /// transfers written before the last change.
+    pub(crate) fn incident(&mut self, evidence: Evidence, now: Instant) -> Option<Change> {
+        self.incident_at(evidence, now, now)
+    }
+
+    /// Evidence that showed at `now` of what happened at `seen`.
+    fn incident_at(&mut self, evidence: Evidence, seen: Instant, now: Instant) -> Option<Change> {
+        self.incidents.push_back(now);
+        self.prune(now);
+        self.clean_from = now;
+        if let Some(down) = self.stepped_down_at.take() {
+            if now.saturating_duration_since(down) < self.recover_after() * 2 {
+                self.recover_factor = (self.recover_factor * 2).min(MAX_RECOVER_FACTOR);
+            }
+        }
+        if seen.saturating_duration_since(self.changed_at) < SETTLE {
+            return None;
+        }
+        let to = self.mode.up()?;
+        self.backoffs += 1;
+        Some(self.change(to, format!("backed off: {evidence}"), now))
+    }
+
+    /// Steps down one mode once the current one has been clean for the
+    /// recovery time; at the bottom, forgets a relapse (halves the
+    /// recovery time) per twice that clean.
+    pub(crate) fn tick(&mut self, now: Instant) -> Option<Change> {
+        let clean = now.saturating_duration_since(self.clean_from);
+        let Some(to) = self.mode.down() else {
+            if self.recover_factor > 1 && clean >= self.recover_after() * 2 {
+                self.recover_factor /= 2;
+                self.clean_from = now;
+            }
+            return None;
+        };
+        if clean < self.recover_after() {
+            return None;
+        }
+        self.recoveries += 1;
+        self.stepped_down_at = Some(now);
+        let reason = format!("recovered: clean for {} ms", clean.as_millis());
+        Some(self.change(to, reason, now))
+    }
+
+    fn change(&mut self, to: PipelineMode, reason: String, now: Instant) -> Change {
+        let from = std::mem::replace(&mut self.mode, to);
+        self.changed_at = now;
+        self.clean_from = now;
+        self.reason.clone_from(&reason);
+        Change { from, to, reason }
+    }
+
+    fn prune(&mut self, now: Instant) {
+        while self
+            .incidents
+            .front()
+            .is_some_and(|at| now.saturating_duration_since(*at) > RATE_WINDOW)
+        {
+            self.incidents.pop_front();
+        }
+    }
+
+    /// The port was (re)opened at `now`: the mode stays (a reconnect says
+    /// nothing of the host's timing); what was missed before says nothing,
+    /// nor does garbage while the line settles.
+    pub(crate) fn link_up(&mut self, now: Instant) {
+        self.missed.clear();
+        self.ignore_until = Some(now + SETTLE);
+    }
+
+    pub(crate) fn view(&mut self, period: Duration, now: Instant) -> UsbPipelineView {
+        self.prune(now);
+        UsbPipelineView {
+            mode: self.mode,
+            guard_us: self.reach().as_micros() as u64,
+            lead_us: period.mul_f64(self.lead()).as_micros() as u64,
+            reason: self.reason.clone(),
+            since_s: now.saturating_duration_since(self.changed_at).as_secs_f64(),
+            incidents_per_s: self.incidents.len() as f64 / RATE_WINDOW.as_secs_f64(),
+            recover_after_ms: self.recover_after().as_millis() as u64,
+            backoffs: self.backoffs,
+            recoveries: self.recoveries,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ms(n: u64) -> Duration {
+        Duration::from_millis(n)
+    }
+
+    #[test]
+    fn garbled_bytes_step_up_once_per_settle_and_never_past_lockstep() {
+        let t0 = Instant::now();
+        let mut g = UsbGuard::new(ms(1000), t0);
+        assert_eq!(g.garbled_total(0, t0 + ms(100)), None);
+        let up = g.garbled_total(20, t0 + ms(100)).expect("a step up");
+        assert_eq!((up.from, up.to), (PipelineMode::Pipelined, PipelineMode::Guarded));
+        assert!(up.reason.contains("20 garbled"), "{}", up.reason);
+        // The same collision's aftermath, a moment later: no second step.
+        assert_eq!(g.garbled_total(40, t0 + ms(110)), None);
+        assert_eq!(g.mode(), PipelineMode::Guarded);
+        let up = g.garbled_total(41, t0 + ms(200)).expect("a second step");
+        assert_eq!(up.to, PipelineMode::Lockstep);
+        assert!(!g.blind());
+        assert_eq!(g.garbled_total(60, t0 + ms(400)), None);
+        assert_eq!(g.mode(), PipelineMode::Lockstep);
+    }
+
+    #[test]
+    fn a_device_gone_is_not_evidence_but_a_lost_reply_is() {
+        let t0 = Instant::now();
+        let mut g = UsbGuard::new(ms(1000), t0);
+        // Device 3 stops answering: misses, and never answers again.
+        for k in 1..=5 {
+            g.reply_missing(3, t0 + ms(100 * k));
+            assert_eq!(g.answered(4, t0 + ms(100 * k + 10)), None);
+        }
+        assert_eq!(g.mode(), PipelineMode::Pipelined);
+        // Device 5 misses one reply and answers the next poll.
+        g.reply_missing(5, t0 + ms(700));
+        let up = g.answered(5, t0 + ms(730)).expect("evidence");
+        assert!(up.reason.contains("device 5"), "{}", up.reason);
+        // A miss of a transfer written before the step, confirmed later: no second step.
+        g.reply_missing(6, t0 + ms(740));
+        assert_eq!(g.answered(6, t0 + ms(900)), None);
+        assert_eq!(g.mode(), PipelineMode::Guarded);
+        // An answer long after the miss says nothing.
+        let mut g = UsbGuard::new(ms(1000), t0);
+        g.reply_missing(5, t0 + ms(100));
+        assert_eq!(g.answered(5, t0 + ms(1200)), None);
+    }
+
+    #[test]
+    fn steps_down_after_a_clean_recovery_time_and_doubles_it_on_a_relapse() {
+        let t0 = Instant::now();
+        let mut g = UsbGuard::new(ms(1000), t0);
+        g.garbled_total(1, t0 + ms(100)).expect("up");
+        assert_eq!(g.tick(t0 + ms(1000)), None);
+        let down = g.tick(t0 + ms(1100)).expect("down after 1 s clean");
+        assert_eq!(down.to, PipelineMode::Pipelined);
+        assert!(down.reason.starts_with("recovered"), "{}", down.reason);
+        // Relapse soon after: up again, and the next recovery takes twice as long.
+        g.garbled_total(2, t0 + ms(1500)).expect("up again");
+        assert_eq!(g.tick(t0 + ms(3400)), None);
+        assert!(g.tick(t0 + ms(3600)).is_some());
+        assert_eq!(g.view(Duration::from_millis(1), t0 + ms(3600)).recoveries, 2);
+        // At the bottom nothing steps down.
+        assert_eq!(g.tick(t0 + ms(100_000)), None);
+    }
+
+    #[test]
+    fn the_factor_is_bounded() {
+        let t0 = Instant::now();
+        let mut g = UsbGuard::new(ms(10), t0);
+        let mut t = t0;
+        for total in 1..200 {
+            t += ms(60);
+            g.garbled_total(total, t);
+            t += g.recover_after();
+            g.tick(t);
+        }
+        assert!(g.recover_after() <= ms(10) * MAX_RECOVER_FACTOR);
+    }
+
+    #[test]
+    fn the_view_says_mode_guard_reason_and_rate() {
+        let t0 = Instant::now();
+        let mut g = UsbGuard::new(ms(1000), t0);
+        let v = g.view(Duration::from_millis(1), t0);
+        assert_eq!((v.mode, v.guard_us, v.lead_us), (PipelineMode::Pipelined, 200, 800));
+        assert_eq!(v.reason, "start");
+        g.garbled_total(3, t0 + ms(100));
+        let v = g.view(Duration::from_millis(1), t0 + ms(100));
+        assert_eq!((v.mode, v.guard_us, v.lead_us), (PipelineMode::Guarded, 1850, 900));
+        assert!((v.incidents_per_s - 0.1).abs() < 1e-9);
+        assert_eq!(v.backoffs, 1);
+    }
+}
