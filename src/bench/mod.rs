@@ -305,7 +305,10 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
         collisions: s1.collisions.saturating_sub(s0.collisions),
         write_delay: write_delay_of(args)?,
         collisions_by_second: run.collisions_by_second,
-        slipped_writes: s1.host_writes_slipped.saturating_sub(s0.host_writes_slipped),
+        modes_by_second: run.modes_by_second,
+        slipped_writes: s1
+            .host_writes_slipped
+            .saturating_sub(s0.host_writes_slipped),
         pipeline: snapshot.usb_pipeline.clone(),
         analysis: analysis::analyse(&run.log, &run.writes, &ids, s0.at, s1.at),
         cpu_owner: share(0),
@@ -380,8 +383,10 @@ struct Run {
     cpu: [Vec<Duration>; 2],
     writes: Vec<client::Write>,
     log: Vec<crate::sim::WireFrame>,
-    /// With a write delay: the referee's collisions in each second of the window.
+    /// With a write delay: the referee's collisions in each second of the
+    /// window, and the pipeline's mode at the end of each.
     collisions_by_second: Vec<u64>,
+    modes_by_second: Vec<&'static str>,
 }
 
 /// Streams targets through the warm-up and the measured window.
@@ -398,10 +403,12 @@ fn measure(
     sim.clear_frame_log();
     let (s0, cpu0) = (sim.stats(), cpu_now());
     let mut collisions_by_second = Vec::new();
+    let mut modes_by_second = Vec::new();
     match write_delay_of(args)? {
         Some(delay) => {
             sim.inject(Fault::WriteDelay(Some(delay)));
-            collisions_by_second = collisions_each_second(sim, &s0, args.seconds);
+            (collisions_by_second, modes_by_second) =
+                collisions_each_second(sim, bus, &s0, args.seconds);
         }
         None => std::thread::sleep(Duration::from_secs_f64(args.seconds)),
     }
@@ -414,24 +421,36 @@ fn measure(
         writes,
         log: sim.frame_log(),
         collisions_by_second,
+        modes_by_second,
     })
 }
 
 /// Sleeps through the window, noting the referee's collisions each second
-/// (a last part second included).
-fn collisions_each_second(sim: &SimHandle, start: &SimStats, seconds: f64) -> Vec<u64> {
+/// (a last part second included) and the bus's pipeline mode at its end.
+fn collisions_each_second(
+    sim: &SimHandle,
+    bus: &BusHandle,
+    start: &SimStats,
+    seconds: f64,
+) -> (Vec<u64>, Vec<&'static str>) {
     let end = start.at + Duration::from_secs_f64(seconds);
     let mut last = start.collisions;
-    let mut by_second = Vec::new();
+    let (mut collisions, mut modes) = (Vec::new(), Vec::new());
     let mut next = start.at;
     while next < end {
         next = (next + Duration::from_secs(1)).min(end);
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
         let now = sim.stats().collisions;
-        by_second.push(now.saturating_sub(last));
+        collisions.push(now.saturating_sub(last));
         last = now;
+        let mode = bus
+            .snapshot()
+            .usb_pipeline
+            .as_ref()
+            .map(|p| p.mode.as_str());
+        modes.push(mode.unwrap_or("none"));
     }
-    by_second
+    (collisions, modes)
 }
 
 /// The simulator's runner thread at real-time priority: a referee the OS

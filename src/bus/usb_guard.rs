@@ -18,7 +18,7 @@
 //! | mode | write aimed | reach held for | per-transfer cost on a 1 ms frame |
 //! |---|---|---|---|
 //! | `pipelined` | 0.8 frame before its boundary | 200 µs | none (the bound) |
-//! | `guarded` | 0.9 frame before | 1.85 ms | one frame: a write late by up to 1.85 ms leaves at most one frame late into a wire held for it; control-only transfers go between polls |
+//! | `guarded` | 0.9 frame before | 1.5 ms | one frame: a write late by up to 1.5 ms leaves at most one frame late into a wire held for it; two control-only transfers go between polls |
 //! | `lockstep` | after the previous reply | any delay | a USB round trip per transfer |
 //!
 //! A write whose delay can reach a whole USB frame cannot be told from one
@@ -53,7 +53,7 @@ pub enum PipelineMode {
     /// adapter within 200 µs: the adapter's bound.
     Pipelined,
     /// Writes aimed 0.9 frame before, the wire held for a write late by
-    /// up to 1.85 ms; control-only transfers between polls.
+    /// up to 1.5 ms; control-only transfers between polls.
     Guarded,
     /// Each transfer waits for the previous one's reply: no write is
     /// blind, any delay is safe.
@@ -102,12 +102,13 @@ impl fmt::Display for PipelineMode {
 /// How long a write made in `pipelined` mode is trusted to take to reach
 /// the adapter (the system call, the USB stack, a thread a little late).
 const PIPELINED_REACH: Duration = Duration::from_micros(200);
-/// In `guarded`: up to 1.85 ms late still leaves at most one frame after
-/// its boundary on a 1 ms frame (aimed 0.9 frame before it).
-const GUARDED_REACH: Duration = Duration::from_micros(1_850);
+/// In `guarded`: a write handed over up to half a frame late (aimed 0.9
+/// frame before its boundary) and reaching the adapter up to 1.5 ms after
+/// that still leaves at most one frame after its boundary on a 1 ms frame.
+const GUARDED_REACH: Duration = Duration::from_micros(1_500);
 /// In `lockstep` the next write waits for the reply, so the reach only
 /// times the wire model of the one transfer out.
-const LOCKSTEP_REACH: Duration = Duration::from_micros(1_850);
+const LOCKSTEP_REACH: Duration = Duration::from_micros(1_500);
 /// How far before its boundary a write is aimed, as a share of the frame.
 const PIPELINED_LEAD: f64 = 0.8;
 const GUARDED_LEAD: f64 = 0.9;
@@ -173,6 +174,9 @@ pub struct UsbPipelineView {
     /// Steps up and down since start.
     pub backoffs: u64,
     pub recoveries: u64,
+    /// Writes seen to reach the adapter a frame late while backed off
+    /// (harmless then; each restarts the clean time).
+    pub late_writes: u64,
 }
 
 /// The self-protection state of one latent bus.
@@ -197,6 +201,7 @@ pub(crate) struct UsbGuard {
     missed: Vec<(u8, Instant)>,
     backoffs: u64,
     recoveries: u64,
+    late_writes: u64,
 }
 
 impl UsbGuard {
@@ -215,6 +220,18 @@ impl UsbGuard {
             missed: Vec::new(),
             backoffs: 0,
             recoveries: 0,
+            late_writes: 0,
+        }
+    }
+
+    /// A write was seen to reach the adapter a frame late (its reply came
+    /// a frame after it would have). Backed off, that is no collision, but
+    /// it says the path is still late: the mode is not clean. (Pipelined,
+    /// the collision it makes is the evidence.)
+    pub(crate) fn write_seen_late(&mut self, now: Instant) {
+        if self.mode != PipelineMode::Pipelined {
+            self.late_writes += 1;
+            self.clean_from = now;
         }
     }
 
@@ -267,7 +284,8 @@ impl UsbGuard {
 
     /// A poll of `dev_id` got no reply by its deadline.
     pub(crate) fn reply_missing(&mut self, dev_id: u8, now: Instant) {
-        self.missed.retain(|(id, at)| *id != dev_id && now.duration_since(*at) < LOST_CONFIRM);
+        self.missed
+            .retain(|(id, at)| *id != dev_id && now.duration_since(*at) < LOST_CONFIRM);
         self.missed.push((dev_id, now));
     }
 
@@ -373,6 +391,7 @@ impl UsbGuard {
             recover_after_ms: self.recover_after().as_millis() as u64,
             backoffs: self.backoffs,
             recoveries: self.recoveries,
+            late_writes: self.late_writes,
         }
     }
 }
@@ -391,7 +410,10 @@ mod tests {
         let mut g = UsbGuard::new(ms(1000), t0);
         assert_eq!(g.garbled_total(0, t0 + ms(100)), None);
         let up = g.garbled_total(20, t0 + ms(100)).expect("a step up");
-        assert_eq!((up.from, up.to), (PipelineMode::Pipelined, PipelineMode::Guarded));
+        assert_eq!(
+            (up.from, up.to),
+            (PipelineMode::Pipelined, PipelineMode::Guarded)
+        );
         assert!(up.reason.contains("20 garbled"), "{}", up.reason);
         // The same collision's aftermath, a moment later: no second step.
         assert_eq!(g.garbled_total(40, t0 + ms(110)), None);
@@ -440,9 +462,22 @@ mod tests {
         g.garbled_total(2, t0 + ms(1500)).expect("up again");
         assert_eq!(g.tick(t0 + ms(3400)), None);
         assert!(g.tick(t0 + ms(3600)).is_some());
-        assert_eq!(g.view(Duration::from_millis(1), t0 + ms(3600)).recoveries, 2);
+        assert_eq!(
+            g.view(Duration::from_millis(1), t0 + ms(3600)).recoveries,
+            2
+        );
+        // Backed off, a write seen late restarts the clean time.
+        g.garbled_total(3, t0 + ms(4000)).expect("up");
+        g.write_seen_late(t0 + ms(5500));
+        assert_eq!(g.tick(t0 + ms(6500)), None);
+        assert_eq!(
+            g.view(Duration::from_millis(1), t0 + ms(6500)).late_writes,
+            1
+        );
         // At the bottom nothing steps down.
-        assert_eq!(g.tick(t0 + ms(100_000)), None);
+        assert!(g.tick(t0 + ms(100_000)).is_some());
+        assert_eq!(g.mode(), PipelineMode::Pipelined);
+        assert_eq!(g.tick(t0 + ms(200_000)), None);
     }
 
     #[test]
@@ -464,11 +499,17 @@ mod tests {
         let t0 = Instant::now();
         let mut g = UsbGuard::new(ms(1000), t0);
         let v = g.view(Duration::from_millis(1), t0);
-        assert_eq!((v.mode, v.guard_us, v.lead_us), (PipelineMode::Pipelined, 200, 800));
+        assert_eq!(
+            (v.mode, v.guard_us, v.lead_us),
+            (PipelineMode::Pipelined, 200, 800)
+        );
         assert_eq!(v.reason, "start");
         g.garbled_total(3, t0 + ms(100));
         let v = g.view(Duration::from_millis(1), t0 + ms(100));
-        assert_eq!((v.mode, v.guard_us, v.lead_us), (PipelineMode::Guarded, 1850, 900));
+        assert_eq!(
+            (v.mode, v.guard_us, v.lead_us),
+            (PipelineMode::Guarded, 1500, 900)
+        );
         assert!((v.incidents_per_s - 0.1).abs() < 1e-9);
         assert_eq!(v.backoffs, 1);
     }

@@ -215,6 +215,10 @@ pub(crate) struct Inflight {
     pub window: ReplyWindow,
     /// When its write was handed to the port (for the round-trip histogram).
     pub handed: Instant,
+    /// When its reply reaches the host if the write made the first
+    /// boundary after it (the frame clock known): a reply a frame later
+    /// shows a write that reached the adapter late.
+    pub on_time: Option<Instant>,
 }
 
 /// Where a transfer of host frames went on the wire.
@@ -293,7 +297,10 @@ impl UsbPipeline {
         let by_wire = self.phase.boundary_at_or_after(free_at + GUARD);
         let by_host = self.phase.boundary_after(now + WRITE_LAST_CHANCE);
         let release = by_wire.max(by_host);
-        let lead = self.period().mul_f64(self.guard.lead()).max(self.period() / 2);
+        let lead = self
+            .period()
+            .mul_f64(self.guard.lead())
+            .max(self.period() / 2);
         release.checked_sub(lead).unwrap_or(release)
     }
 
@@ -324,12 +331,46 @@ impl UsbPipeline {
 
     /// A poll written blind, its reply expected in `window`.
     /// (Tracked only while writes are blind.)
-    pub(crate) fn track(&mut self, want: Want, window: ReplyWindow, handed: Instant) {
+    /// `reply_end`: when the reply leaves the wire as the model holds it
+    /// (the write leaving as late as the reach allows).
+    pub(crate) fn track(
+        &mut self,
+        want: Want,
+        window: ReplyWindow,
+        handed: Instant,
+        reply_end: Instant,
+    ) {
+        let on_time = self.active().then(|| {
+            let held = self
+                .released(handed)
+                .at
+                .saturating_duration_since(self.phase.boundary_after(handed));
+            self.phase
+                .boundary_after(reply_end.checked_sub(held).unwrap_or(reply_end))
+        });
         self.inflight.push_back(Inflight {
             want,
             window,
             handed,
+            on_time,
         });
+    }
+
+    /// The reply of `inflight` reached the host at `at`: a frame or more
+    /// after it would have if its write had made its boundary, the write
+    /// reached the adapter late. A backed-off pipeline does not step down
+    /// while it sees that.
+    pub(crate) fn answered(&mut self, inflight: &Inflight, at: Instant) {
+        let Some(on_time) = inflight.on_time else {
+            return;
+        };
+        // Two frames or more late is not a write that slipped (that
+        // collides, or shows as garbage): it is the reply of a newer poll
+        // of the same block matched to an older one whose reply was lost.
+        let late = at.saturating_duration_since(on_time);
+        if late >= self.period() / 2 && late < self.period() * 2 {
+            self.guard.write_seen_late(at);
+        }
     }
 
     /// The oldest poll in flight that `want` answers, taken out.
@@ -491,9 +532,9 @@ mod tests {
             due: t0 + Duration::from_millis(ms),
             deadline: t0 + Duration::from_millis(ms + 5),
         };
-        p.track(want(1), window(1), t0);
-        p.track(want(2), window(2), t0);
-        p.track(want(1), window(3), t0);
+        p.track(want(1), window(1), t0, t0);
+        p.track(want(2), window(2), t0, t0);
+        p.track(want(1), window(3), t0, t0);
         assert_eq!(p.take(want(1)).map(|i| i.window), Some(window(1)));
         assert_eq!(p.next_deadline(), Some(t0 + Duration::from_millis(7)));
         let gone = p.expired(t0 + Duration::from_millis(7));

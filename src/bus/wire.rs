@@ -121,6 +121,12 @@ impl WireClock {
         self.free_at
     }
 
+    /// When the last byte of a reply to a request ending at `request_end`
+    /// leaves the wire.
+    pub(crate) fn reply_end(&self, request_end: Instant) -> Instant {
+        request_end + self.turnaround + self.frame
+    }
+
     /// When a reply to a request ending at `request_end` should reach the
     /// host: its end on the wire, then the adapter's hold (its latency
     /// timer, or one USB frame; nothing on a pty).

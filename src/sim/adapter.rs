@@ -176,7 +176,7 @@ impl AdapterLine {
             seen_empty: None,
             undated: 0,
             delay,
-            dice: Rng::new(seed ^ 0xD1_7E_DE1A),
+            dice: Rng::new(seed ^ 0xD17E_DE1A),
             last_release: None,
             slipped: 0,
         }

@@ -137,10 +137,21 @@ mod tests {
     #[test]
     fn parses_three_or_four_quantiles() {
         let d = WriteDelay::parse("38,150,750,1000").unwrap();
-        assert_eq!((d.p50, d.p99, d.p999, d.max), (us(38), us(150), us(750), us(1000)));
+        assert_eq!(
+            (d.p50, d.p99, d.p999, d.max),
+            (us(38), us(150), us(750), us(1000))
+        );
         let d = WriteDelay::parse("40, 160, 1000").unwrap();
         assert_eq!(d.p999, us(400));
-        for bad in ["", "1,2", "1,2,3,4,5", "3,2,1", "a,2,3", "1,2,2000000", "-1,2,3"] {
+        for bad in [
+            "",
+            "1,2",
+            "1,2,3,4,5",
+            "3,2,1",
+            "a,2,3",
+            "1,2,2000000",
+            "-1,2,3",
+        ] {
             assert!(WriteDelay::parse(bad).is_err(), "{bad:?}");
         }
     }

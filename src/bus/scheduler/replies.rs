@@ -32,6 +32,9 @@ impl Scheduler {
         at: Instant,
         inflight: &Inflight,
     ) -> ReplyEffect {
+        if let Some(pipeline) = self.pipeline.as_mut() {
+            pipeline.answered(inflight, at);
+        }
         self.take_reply(reply, at, inflight.window.due)
     }
 

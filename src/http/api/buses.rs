@@ -77,6 +77,11 @@ pub(crate) struct BusView {
     /// (USB frame wait, both frames, turnaround, the adapter's hold), µs.
     #[schema(example = 2900)]
     pub transaction_us: u64,
+    /// Behind a USB adapter (absent on a native line): the pipeline's
+    /// mode (`pipelined`, `guarded`, `lockstep`), its guard and the
+    /// reason of its last change. It backs off when collisions leave
+    /// garbled bytes or lost replies, and steps back after a clean while.
+    pub usb_pipeline: Option<crate::bus::usb_guard::UsbPipelineView>,
 }
 
 impl BusView {
@@ -104,6 +109,7 @@ impl BusView {
             port_notes: snap.port_notes.clone(),
             adapter: snap.adapter.clone(),
             transaction_us: snap.transaction_us,
+            usb_pipeline: snap.usb_pipeline.clone(),
         }
     }
 }

@@ -114,6 +114,14 @@ const BUS_COUNTER_HELP: &[(&str, &str)] = &[
         "usb_writes_ambiguous",
         "Writes too close to a USB frame boundary to know which frame took them (the wire was held for the later).",
     ),
+    (
+        "usb_backoffs",
+        "Times the USB pipeline backed off (pipelined to guarded to lockstep) after a collision's aftermath: garbled bytes, or a reply lost from a device that still answers.",
+    ),
+    (
+        "usb_recoveries",
+        "Times the USB pipeline stepped back towards the adapter's bound after a clean while.",
+    ),
 ];
 
 /// Builds the exposition: families in order of first use, each with one
@@ -273,6 +281,28 @@ fn bus_families(m: &mut Exposition, snap: &BusSnapshot) {
         &l,
         snap.polls_in_flight as f64,
     );
+    if let Some(p) = &snap.usb_pipeline {
+        for mode in crate::bus::usb_guard::PipelineMode::all() {
+            m.gauge(
+                "jointd_bus_usb_pipeline_mode",
+                "Behind a USB adapter, the pipeline's mode as a state set: 1 on the current mode's line.",
+                &format!("{l},mode=\"{mode}\""),
+                f64::from(u8::from(p.mode == mode)),
+            );
+        }
+        m.gauge(
+            "jointd_bus_usb_guard_seconds",
+            "Behind a USB adapter, how late a write may reach it and still leave where the wire is held for it.",
+            &l,
+            p.guard_us as f64 / 1e6,
+        );
+        m.gauge(
+            "jointd_bus_usb_incidents_per_second",
+            "Behind a USB adapter, evidence of collisions per second over the last 10 s.",
+            &l,
+            p.incidents_per_s,
+        );
+    }
     m.gauge(
         "jointd_bus_devices_online",
         "Devices answering their polls.",

@@ -1,0 +1,164 @@
+//! A USB pipeline on a path whose writes reach the adapter late backs off
+//! after the first collision's aftermath, keeps the wire clean from then
+//! on, and steps back to the adapter's bound once the path is clean.
+//! Counts and orderings only: every wait is on a condition.
+
+mod support;
+
+use std::time::Duration;
+
+use jointd::bus::handle::BusEvent;
+use jointd::bus::usb_guard::PipelineMode;
+use jointd::bus::{AdapterSetting, BusSnapshot};
+use jointd::sim::{Fault, WriteDelay};
+use jointd::transport::adapter::AdapterModel;
+use support::bus::*;
+
+const JOINTS: usize = 8;
+
+fn mode(s: &BusSnapshot) -> Option<PipelineMode> {
+    s.usb_pipeline.as_ref().map(|p| p.mode)
+}
+
+fn polls(s: &BusSnapshot) -> u64 {
+    s.counters.polls
+}
+
+/// The mode a change event names, if it is one.
+fn pipeline_event(ev: &BusEvent) -> Option<(&'static str, &str)> {
+    match ev {
+        BusEvent::UsbPipeline { mode, reason, .. } => Some((*mode, reason.as_str())),
+        _ => None,
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn late_writes_make_the_pipeline_back_off_to_a_clean_wire_and_return_when_they_stop() {
+    let ids: Vec<u8> = (1..=JOINTS as u8).collect();
+    let mut sim_cfg = sim_config(&ids, BAUD);
+    sim_cfg.adapter = AdapterModel::Ch340;
+    let rig = rig_on_memory(sim_cfg, |c| {
+        c.ids = ids.clone();
+        c.adapter = AdapterSetting::Fixed(AdapterModel::Ch340);
+        c.timing.usb_recover_ms = 1_000;
+    });
+    rig.online(JOINTS).await;
+    rig.enable_all(JOINTS).await;
+    let stream = TargetStream::start(rig.bus.clone(), ids.clone(), Duration::from_millis(1));
+
+    // A clean path: the pipeline at the adapter's bound, no collision.
+    let start = rig.bus.snapshot();
+    let clean = rig
+        .until("200 polls on a clean path", |s| {
+            polls(s) >= polls(&start) + 200
+        })
+        .await;
+    assert_eq!(mode(&clean), Some(PipelineMode::Pipelined));
+    assert_eq!(rig.sim.stats().collisions, 0);
+
+    // Writes late by up to a whole USB frame, one in six past 0.85 ms.
+    let mut events = rig.bus.events();
+    let delay = WriteDelay::parse("600,1000,1000,1000").expect("a delay");
+    rig.sim.inject(Fault::WriteDelay(Some(delay)));
+    let ev = event(&mut events, "the pipeline backs off", |e| {
+        pipeline_event(e).is_some_and(|(m, _)| m != "pipelined")
+    })
+    .await;
+    let (_, reason) = pipeline_event(&ev).expect("a pipeline event");
+    assert!(reason.starts_with("backed off"), "{reason}");
+
+    // Transfers written before the change may still collide; after them
+    // the wire stays clean while writes keep slipping a frame.
+    let changed = rig
+        .until("the bus view shows the backoff", |s| {
+            mode(s).is_some_and(|m| m != PipelineMode::Pipelined)
+        })
+        .await;
+    let settled = rig
+        .until("20 polls after the backoff", |s| {
+            polls(s) >= polls(&changed) + 20
+        })
+        .await;
+    let (collisions, slipped) = {
+        let st = rig.sim.stats();
+        (st.collisions, st.host_writes_slipped)
+    };
+    let backed_off = rig
+        .until("300 more polls, backed off", |s| {
+            polls(s) >= polls(&settled) + 300
+        })
+        .await;
+    let st = rig.sim.stats();
+    assert!(
+        st.host_writes_slipped > slipped,
+        "writes kept slipping a frame"
+    );
+    assert_eq!(st.collisions, collisions, "a collision after the backoff");
+    assert!(backed_off.devices.values().all(|d| d.online));
+    let view = backed_off.usb_pipeline.clone().expect("a pipeline view");
+    assert_ne!(
+        view.mode,
+        PipelineMode::Pipelined,
+        "stepped down while late"
+    );
+    assert!(view.late_writes > 0, "late writes seen: {view:?}");
+    assert!(view.guard_us > 200);
+    assert!(backed_off.counters.usb_backoffs >= 1);
+
+    // The path is clean again: back to the bound, after the backoff, and
+    // clean there too.
+    rig.sim.inject(Fault::WriteDelay(None));
+    let ev = event(&mut events, "the pipeline steps back", |e| {
+        pipeline_event(e).is_some_and(|(m, _)| m == "pipelined")
+    })
+    .await;
+    let (_, reason) = pipeline_event(&ev).expect("a pipeline event");
+    assert!(reason.starts_with("recovered"), "{reason}");
+    let back = rig
+        .until("the bus view shows pipelined again", |s| {
+            mode(s) == Some(PipelineMode::Pipelined)
+        })
+        .await;
+    assert!(back.counters.usb_recoveries >= 1);
+    let collisions = rig.sim.stats().collisions;
+    let blind = back.counters.polls_pipelined;
+    let later = rig
+        .until("300 polls back at the bound", |s| {
+            polls(s) >= polls(&back) + 300
+        })
+        .await;
+    assert!(later.counters.polls_pipelined >= blind + 300);
+    assert_eq!(rig.sim.stats().collisions, collisions);
+    assert!(later.devices.values().all(|d| d.online));
+    assert!(stream.finish() > 0);
+}
+
+/// A device that is simply gone is not a collision: its missed polls do
+/// not make the pipeline back off.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_device_gone_does_not_make_the_pipeline_back_off() {
+    let ids: Vec<u8> = (1..=4).collect();
+    let mut sim_cfg = sim_config(&ids, BAUD);
+    sim_cfg.adapter = AdapterModel::Ch340;
+    let rig = rig_on_memory(sim_cfg, |c| {
+        c.ids = ids.clone();
+        c.adapter = AdapterSetting::Fixed(AdapterModel::Ch340);
+        c.timing.reply_margin_us = 20_000;
+    });
+    rig.online(4).await;
+    rig.sim.inject(Fault::DropReplies {
+        dev_id: Some(3),
+        rate: 1.0,
+    });
+    let gone = rig
+        .until("device 3 offline", |s| {
+            s.devices.get(&3).is_some_and(|d| !d.online)
+        })
+        .await;
+    let later = rig
+        .until("100 more polls", |s| polls(s) >= polls(&gone) + 100)
+        .await;
+    assert_eq!(mode(&later), Some(PipelineMode::Pipelined));
+    assert_eq!(later.counters.usb_backoffs, 0);
+    assert_eq!(later.devices.values().filter(|d| d.online).count(), 3);
+}
