@@ -281,28 +281,28 @@ fn bus_families(m: &mut Exposition, snap: &BusSnapshot) {
         &l,
         snap.polls_in_flight as f64,
     );
-    if let Some(p) = &snap.usb_pipeline {
-        for mode in crate::bus::usb_guard::PipelineMode::all() {
-            m.gauge(
-                "jointd_bus_usb_pipeline_mode",
-                "Behind a USB adapter, the pipeline's mode as a state set: 1 on the current mode's line.",
-                &format!("{l},mode=\"{mode}\""),
-                f64::from(u8::from(p.mode == mode)),
-            );
-        }
+    // Behind a native line every line is 0: the families are always there.
+    let usb = snap.usb_pipeline.as_ref();
+    for mode in crate::bus::usb_guard::PipelineMode::all() {
         m.gauge(
-            "jointd_bus_usb_guard_seconds",
-            "Behind a USB adapter, how late a write may reach it and still leave where the wire is held for it.",
-            &l,
-            p.guard_us as f64 / 1e6,
-        );
-        m.gauge(
-            "jointd_bus_usb_incidents_per_second",
-            "Behind a USB adapter, evidence of collisions per second over the last 10 s.",
-            &l,
-            p.incidents_per_s,
+            "jointd_bus_usb_pipeline_mode",
+            "Behind a USB adapter, the pipeline's mode as a state set: 1 on the current mode's line (all 0 on a native line).",
+            &format!("{l},mode=\"{mode}\""),
+            f64::from(u8::from(usb.is_some_and(|p| p.mode == mode))),
         );
     }
+    m.gauge(
+        "jointd_bus_usb_guard_seconds",
+        "Behind a USB adapter, how late a write may reach it and still leave where the wire is held for it (0 on a native line).",
+        &l,
+        usb.map_or(0.0, |p| p.guard_us as f64 / 1e6),
+    );
+    m.gauge(
+        "jointd_bus_usb_incidents_per_second",
+        "Behind a USB adapter, evidence of collisions per second over the last 10 s.",
+        &l,
+        usb.map_or(0.0, |p| p.incidents_per_s),
+    );
     m.gauge(
         "jointd_bus_devices_online",
         "Devices answering their polls.",
