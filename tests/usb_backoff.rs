@@ -16,6 +16,18 @@ use support::bus::*;
 
 const JOINTS: usize = 8;
 
+/// Joints `ids` behind a simulated CH340 on the in-memory line, the bus
+/// told so; `tune` sets the rest of its config.
+fn ch340_rig(ids: &[u8], tune: impl FnOnce(&mut jointd::bus::BusConfig)) -> Rig {
+    let mut sim_cfg = sim_config(ids, BAUD);
+    sim_cfg.adapter = AdapterModel::Ch340;
+    rig_on_memory(sim_cfg, |c| {
+        c.ids = ids.to_vec();
+        c.adapter = AdapterSetting::Fixed(AdapterModel::Ch340);
+        tune(c);
+    })
+}
+
 fn mode(s: &BusSnapshot) -> Option<PipelineMode> {
     s.usb_pipeline.as_ref().map(|p| p.mode)
 }
@@ -35,13 +47,7 @@ fn pipeline_event(ev: &BusEvent) -> Option<(&'static str, &str)> {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn late_writes_make_the_pipeline_back_off_to_a_clean_wire_and_return_when_they_stop() {
     let ids: Vec<u8> = (1..=JOINTS as u8).collect();
-    let mut sim_cfg = sim_config(&ids, BAUD);
-    sim_cfg.adapter = AdapterModel::Ch340;
-    let rig = rig_on_memory(sim_cfg, |c| {
-        c.ids = ids.clone();
-        c.adapter = AdapterSetting::Fixed(AdapterModel::Ch340);
-        c.timing.usb_recover_ms = 1_000;
-    });
+    let rig = ch340_rig(&ids, |c| c.timing.usb_recover_ms = 1_000);
     rig.online(JOINTS).await;
     rig.enable_all(JOINTS).await;
     let stream = TargetStream::start(rig.bus.clone(), ids.clone(), Duration::from_millis(1));
@@ -138,13 +144,7 @@ async fn late_writes_make_the_pipeline_back_off_to_a_clean_wire_and_return_when_
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_device_gone_does_not_make_the_pipeline_back_off() {
     let ids: Vec<u8> = (1..=4).collect();
-    let mut sim_cfg = sim_config(&ids, BAUD);
-    sim_cfg.adapter = AdapterModel::Ch340;
-    let rig = rig_on_memory(sim_cfg, |c| {
-        c.ids = ids.clone();
-        c.adapter = AdapterSetting::Fixed(AdapterModel::Ch340);
-        c.timing.reply_margin_us = 20_000;
-    });
+    let rig = ch340_rig(&ids, |c| c.timing.reply_margin_us = 20_000);
     rig.online(4).await;
     rig.sim.inject(Fault::DropReplies {
         dev_id: Some(3),

@@ -69,8 +69,6 @@ impl PipelineMode {
         }
     }
 
-    const ALL: [Self; 3] = [Self::Pipelined, Self::Guarded, Self::Lockstep];
-
     fn up(self) -> Option<Self> {
         match self {
             Self::Pipelined => Some(Self::Guarded),
@@ -89,7 +87,7 @@ impl PipelineMode {
 
     /// Every mode by name, for metrics.
     pub fn all() -> [Self; 3] {
-        Self::ALL
+        [Self::Pipelined, Self::Guarded, Self::Lockstep]
     }
 }
 

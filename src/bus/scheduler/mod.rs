@@ -455,12 +455,12 @@ impl Scheduler {
         let Some(change) = change else {
             return;
         };
-        let view = self.usb_view(Instant::now());
+        let guard = self.pipeline.as_ref().map(|p| p.guard().reach());
         self.events.push(BusEvent::UsbPipeline {
             bus: self.reg.bus().to_string(),
             mode: change.to.as_str(),
             previous: change.from.as_str(),
-            guard_us: view.as_ref().map_or(0, |v| v.guard_us),
+            guard_us: guard.map_or(0, |g| g.as_micros() as u64),
             reason: change.reason.clone(),
         });
         self.usb_changes.push(change);
