@@ -339,8 +339,17 @@ impl Report {
                 "USB pipeline at the end",
                 format!(
                     "{} (guard {} µs, writes {} µs before their frame); {} backoffs, \
-                     {} recoveries; last change: {}",
-                    p.mode, p.guard_us, p.lead_us, p.backoffs, p.recoveries, p.reason
+                     {} recoveries; {} of {} sentinels late, {} late writes backed off; \
+                     last change: {}",
+                    p.mode,
+                    p.guard_us,
+                    p.lead_us,
+                    p.backoffs,
+                    p.recoveries,
+                    p.sentinels_late,
+                    p.sentinels,
+                    p.late_writes,
+                    p.reason
                 ),
             ));
         }

@@ -195,6 +195,11 @@ pub struct BusCounters {
     /// and stepped back towards the adapter's bound (clean for a while).
     pub usb_backoffs: u64,
     pub usb_recoveries: u64,
+    /// Sentinel transfers whose reply came (written a tenth of a USB frame
+    /// before their boundary, the wire held a frame longer), and those of
+    /// them whose write reached the adapter a frame late.
+    pub usb_sentinels: u64,
+    pub usb_sentinels_late: u64,
 }
 
 /// Latency histograms since start (`/metrics`).

@@ -32,7 +32,9 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use super::usb_guard::{PipelineMode, UsbGuard};
+use super::usb_guard::{
+    Change, PipelineMode, UsbGuard, SENTINEL_EVERY, SENTINEL_LEAD, SENTINEL_MIN_MARGIN,
+};
 use super::wire::{ReplyWindow, Want};
 
 /// Arrivals the phase estimate is made of.
@@ -219,6 +221,9 @@ pub(crate) struct Inflight {
     /// boundary after it (the frame clock known): a reply a frame later
     /// shows a write that reached the adapter late.
     pub on_time: Option<Instant>,
+    /// A sentinel ([`super::usb_guard`]) handed over early enough for its
+    /// lateness to say something of the path.
+    pub sentinel: bool,
 }
 
 /// Where a transfer of host frames went on the wire.
@@ -238,15 +243,51 @@ pub(crate) struct UsbPipeline {
     phase: FramePhase,
     inflight: VecDeque<Inflight>,
     guard: UsbGuard,
+    /// True where a reply's arrival is known to the frame (a frame of 0.5 ms
+    /// or more, no latency timer longer than it): only there can a
+    /// sentinel's reply show its write late.
+    sentinels: bool,
+    /// Poll transfers since the last sentinel.
+    since_sentinel: u32,
+    /// The write being made is a sentinel: the wire is held a frame longer.
+    armed: bool,
 }
 
 impl UsbPipeline {
-    pub(crate) fn new(period: Duration, recover: Duration, now: Instant) -> Self {
+    /// `sentinels`: replies reach the host at the frame after they leave
+    /// the adapter's hold, so a frame's lateness shows (see the field).
+    pub(crate) fn new(period: Duration, recover: Duration, sentinels: bool, now: Instant) -> Self {
         Self {
             phase: FramePhase::new(period),
             inflight: VecDeque::new(),
             guard: UsbGuard::new(recover, now),
+            sentinels,
+            since_sentinel: 0,
+            armed: false,
         }
+    }
+
+    /// True when the next poll transfer should be a sentinel.
+    pub(crate) fn sentinel_due(&self) -> bool {
+        self.sentinels
+            && self.active()
+            && self.guard.blind()
+            && self.since_sentinel + 1 >= SENTINEL_EVERY
+    }
+
+    /// When to hand a sentinel over: [`SENTINEL_LEAD`] of a frame before
+    /// the boundary [`Self::write_at`] aims at.
+    pub(crate) fn sentinel_write_at(&self, free_at: Instant, now: Instant) -> Instant {
+        let release = self.aimed_boundary(free_at, now);
+        release
+            .checked_sub(self.period().mul_f64(SENTINEL_LEAD))
+            .unwrap_or(release)
+    }
+
+    /// The next write is the sentinel: its release holds the wire a frame
+    /// longer, and [`Self::track`] marks its reply.
+    pub(crate) fn arm_sentinel(&mut self) {
+        self.armed = true;
     }
 
     pub(crate) fn guard(&self) -> &UsbGuard {
@@ -261,6 +302,11 @@ impl UsbPipeline {
     /// wire is held for it. Pipelined, at most a period: on a 125 µs
     /// microframe a write is then held for the next one.
     fn reach(&self) -> Duration {
+        if self.armed {
+            // A frame: a write handed a tenth of a frame before its
+            // boundary and late by up to that leaves one frame later.
+            return self.period();
+        }
         match self.guard.mode() {
             PipelineMode::Pipelined => self.guard.reach().min(self.period()),
             _ => self.guard.reach(),
@@ -294,14 +340,19 @@ impl UsbPipeline {
         if !self.active() {
             return free_at + GUARD;
         }
-        let by_wire = self.phase.boundary_at_or_after(free_at + GUARD);
-        let by_host = self.phase.boundary_after(now + WRITE_LAST_CHANCE);
-        let release = by_wire.max(by_host);
+        let release = self.aimed_boundary(free_at, now);
         let lead = self
             .period()
             .mul_f64(self.guard.lead())
             .max(self.period() / 2);
         release.checked_sub(lead).unwrap_or(release)
+    }
+
+    /// The first boundary the wire allows that the host can still make.
+    fn aimed_boundary(&self, free_at: Instant, now: Instant) -> Instant {
+        let by_wire = self.phase.boundary_at_or_after(free_at + GUARD);
+        let by_host = self.phase.boundary_after(now + WRITE_LAST_CHANCE);
+        by_wire.max(by_host)
     }
 
     /// A write was handed to the port at `handed`: the latest boundary it
@@ -313,7 +364,9 @@ impl UsbPipeline {
         let latest = self.phase.boundary_after(handed + self.reach());
         Released {
             at: latest,
-            ambiguous: latest != first && self.guard.mode() == PipelineMode::Pipelined,
+            ambiguous: latest != first
+                && self.guard.mode() == PipelineMode::Pipelined
+                && !self.armed,
         }
     }
 
@@ -331,8 +384,9 @@ impl UsbPipeline {
 
     /// A poll written blind, its reply expected in `window`.
     /// (Tracked only while writes are blind.)
-    /// `reply_end`: when the reply leaves the wire as the model holds it
-    /// (the write leaving as late as the reach allows).
+    /// `reply_end`: when the reply leaves the adapter's hold (the latency
+    /// timer's end, if it has one), the write leaving as late as the reach
+    /// allows. Ends an armed sentinel.
     pub(crate) fn track(
         &mut self,
         want: Want,
@@ -348,29 +402,41 @@ impl UsbPipeline {
             self.phase
                 .boundary_after(reply_end.checked_sub(held).unwrap_or(reply_end))
         });
+        let margin = self
+            .phase
+            .boundary_after(handed)
+            .saturating_duration_since(handed);
+        let sentinel =
+            std::mem::take(&mut self.armed) && on_time.is_some() && margin >= SENTINEL_MIN_MARGIN;
+        self.since_sentinel = if sentinel { 0 } else { self.since_sentinel + 1 };
         self.inflight.push_back(Inflight {
             want,
             window,
             handed,
             on_time,
+            sentinel,
         });
     }
 
     /// The reply of `inflight` reached the host at `at`: a frame or more
     /// after it would have if its write had made its boundary, the write
     /// reached the adapter late. A backed-off pipeline does not step down
-    /// while it sees that.
-    pub(crate) fn answered(&mut self, inflight: &Inflight, at: Instant) {
-        let Some(on_time) = inflight.on_time else {
-            return;
-        };
+    /// while it sees that; sentinels late often enough back it off.
+    pub(crate) fn answered(&mut self, inflight: &Inflight, at: Instant) -> Option<Change> {
+        let on_time = inflight.on_time?;
         // Two frames or more late is not a write that slipped (that
         // collides, or shows as garbage): it is the reply of a newer poll
         // of the same block matched to an older one whose reply was lost.
-        let late = at.saturating_duration_since(on_time);
-        if late >= self.period() / 2 && late < self.period() * 2 {
+        // Under three quarters of a frame is the host reading late.
+        let after = at.saturating_duration_since(on_time);
+        let late = after >= self.period().mul_f64(0.75) && after < self.period() * 2;
+        if inflight.sentinel {
+            return self.guard.sentinel(late, at);
+        }
+        if late {
             self.guard.write_seen_late(at);
         }
+        None
     }
 
     /// The oldest poll in flight that `want` answers, taken out.
@@ -406,6 +472,7 @@ impl UsbPipeline {
     pub(crate) fn reset(&mut self) {
         self.inflight.clear();
         self.phase.forget();
+        self.armed = false;
     }
 }
 
@@ -420,7 +487,7 @@ mod tests {
     /// A frame clock with boundaries at `t0 + 300 µs + k ms`, learnt from
     /// arrivals `lateness` after boundaries.
     fn pipeline(period: Duration) -> UsbPipeline {
-        UsbPipeline::new(period, Duration::from_secs(10), Instant::now())
+        UsbPipeline::new(period, Duration::from_secs(10), true, Instant::now())
     }
 
     fn learnt(t0: Instant, lateness: &[u64]) -> UsbPipeline {
@@ -512,6 +579,46 @@ mod tests {
         let close = p.released(t0 + us(10_150));
         assert_eq!(close.at, t0 + us(11_300));
         assert!(close.ambiguous);
+    }
+
+    #[test]
+    fn a_sentinel_reply_a_frame_late_shows_its_write_late() {
+        let t0 = Instant::now();
+        let mut p = learnt(t0, &[0; PHASE_SAMPLES]);
+        let want = Want {
+            dev_id: 1,
+            index: 2,
+        };
+        let window = ReplyWindow {
+            due: t0 + us(20_000),
+            deadline: t0 + us(30_000),
+        };
+        let view = |p: &mut UsbPipeline| {
+            let v = p.guard_mut().view(Duration::from_millis(1), t0);
+            (v.sentinels, v.sentinels_late)
+        };
+        // Written 100 µs before the 10.3 ms boundary: held for the next.
+        let handed = t0 + us(10_200);
+        p.arm_sentinel();
+        assert_eq!(p.released(handed).at, t0 + us(11_300));
+        assert!(!p.released(handed).ambiguous);
+        // Its reply ends 1.7 ms after the boundary it made (12.0 ms), is
+        // modelled from the later one (13.0 ms), and reaches the host at
+        // the boundary after its end: 12.3 ms if on time.
+        p.track(want, window, handed, t0 + us(13_000));
+        let on_time = p.take(want).expect("tracked");
+        assert!(on_time.sentinel);
+        assert_eq!(on_time.on_time, Some(t0 + us(12_300)));
+        assert_eq!(p.answered(&on_time, t0 + us(12_330)), None);
+        assert_eq!(view(&mut p), (1, 0));
+        assert_eq!(p.answered(&on_time, t0 + us(13_330)), None);
+        assert_eq!(view(&mut p), (2, 1));
+        // Handed 30 µs before its boundary (the host woke late): no sentinel.
+        p.arm_sentinel();
+        p.track(want, window, t0 + us(10_270), t0 + us(13_000));
+        assert!(!p.take(want).expect("tracked").sentinel);
+        // Nor is the next write armed.
+        assert_eq!(p.released(t0 + us(9_800)).at, t0 + us(10_300));
     }
 
     #[test]

@@ -410,9 +410,22 @@ impl Scheduler {
                 return Slot::ControlBatch(control);
             }
         }
+        let sentinel = self.pipeline.as_ref().filter(|p| p.sentinel_due());
+        if let Some(pipeline) = sentinel {
+            // A sentinel is handed over late in its frame: until then the
+            // bus listens (an e-stop or a request still goes first).
+            let at = pipeline.sentinel_write_at(self.clock.free_at(), now);
+            if now < at {
+                return Slot::Listen { until: at };
+            }
+        }
+        let sentinel = sentinel.is_some();
         let timeout = self.clock.reply_timeout(now);
         if let Some(poll) = self.planner.next(self.reg.poll_states(), now, timeout) {
             self.control_only = 0;
+            if let Some(pipeline) = self.pipeline.as_mut().filter(|_| sentinel) {
+                pipeline.arm_sentinel();
+            }
             return Slot::Batch {
                 control: self.batch_control(store),
                 dev_id: poll.dev_id,
@@ -466,6 +479,13 @@ impl Scheduler {
         self.usb_changes.push(change);
     }
 
+    /// Sentinels answered, and late, since the last call.
+    pub(crate) fn take_sentinel_counts(&mut self) -> (u64, u64) {
+        self.pipeline
+            .as_mut()
+            .map_or((0, 0), |p| p.guard_mut().take_sentinel_counts())
+    }
+
     /// Changes of the pipeline's mode since the last call.
     pub(crate) fn take_usb_changes(&mut self) -> Vec<crate::bus::usb_guard::Change> {
         std::mem::take(&mut self.usb_changes)
@@ -500,10 +520,13 @@ impl Scheduler {
     /// `handed` is when the write was handed to the port.
     pub(crate) fn track(&mut self, want: Want, end: Instant, handed: Instant) {
         let window = self.clock.reply_window(end);
-        let reply_end = self.clock.reply_end(end);
+        // Held in the adapter until its latency timer, if it has one, has
+        // run from the reply's bytes (taken from the last: the latest).
+        let timer = self.clock.adapter().latency_timer().unwrap_or_default();
+        let reply_out = self.clock.reply_end(end) + timer;
         self.clock.reply_on_wire(end);
         if let Some(pipeline) = self.pipeline.as_mut() {
-            pipeline.track(want, window, handed, reply_end);
+            pipeline.track(want, window, handed, reply_out);
         }
     }
 
@@ -713,7 +736,13 @@ impl Scheduler {
         let period = adapter.usb_frame();
         if self.pipeline.as_ref().map(UsbPipeline::period) != period {
             let (recover, now) = (self.usb_recover, Instant::now());
-            self.pipeline = period.map(|p| UsbPipeline::new(p, recover, now));
+            // A sentinel's reply shows its write a frame late only where the
+            // reply reaches the host at the frame after the adapter lets it
+            // go: frames of 0.5 ms or more, a latency timer no longer than one.
+            let sentinels = |p: Duration| {
+                p >= Duration::from_micros(500) && adapter.latency_timer().map_or(true, |t| t <= p)
+            };
+            self.pipeline = period.map(|p| UsbPipeline::new(p, recover, sentinels(p), now));
         }
     }
 }

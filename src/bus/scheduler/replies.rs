@@ -32,9 +32,11 @@ impl Scheduler {
         at: Instant,
         inflight: &Inflight,
     ) -> ReplyEffect {
-        if let Some(pipeline) = self.pipeline.as_mut() {
-            pipeline.answered(inflight, at);
-        }
+        let change = self
+            .pipeline
+            .as_mut()
+            .and_then(|p| p.answered(inflight, at));
+        self.usb_changed(change);
         self.take_reply(reply, at, inflight.window.due)
     }
 

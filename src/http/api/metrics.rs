@@ -116,11 +116,19 @@ const BUS_COUNTER_HELP: &[(&str, &str)] = &[
     ),
     (
         "usb_backoffs",
-        "Times the USB pipeline backed off (pipelined to guarded to lockstep) after a collision's aftermath: garbled bytes, or a reply lost from a device that still answers.",
+        "Times the USB pipeline backed off (pipelined to guarded to lockstep) on evidence of late writes: garbled bytes, a reply lost from a device that still answers, or late sentinels.",
     ),
     (
         "usb_recoveries",
         "Times the USB pipeline stepped back towards the adapter's bound after a clean while.",
+    ),
+    (
+        "usb_sentinels",
+        "Sentinel transfers answered: written a tenth of a USB frame before their boundary, the wire held a frame longer, to see late writes without a collision.",
+    ),
+    (
+        "usb_sentinels_late",
+        "Sentinel transfers whose write reached the adapter a frame late.",
     ),
 ];
 

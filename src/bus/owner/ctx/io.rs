@@ -142,8 +142,10 @@ impl Ctx {
             .chain([Command::Config(cmd)])
             .collect();
         let clocked = self.sched.usb_clock_known();
-        let handed = Instant::now();
-        let end = self.send(&cmds)?;
+        // Dated after the write (a thread preempted before it must not
+        // look like a path that delivered it late).
+        let handed = self.link.send(&cmds).map_err(|e| self.lost(e))?;
+        let end = self.sched.sent(handed, cmds.len() as u32);
         self.link.counters.frames_tx_batched += control.len() as u64;
         self.link.counters.polls_pipelined += 1;
         self.link.counters.usb_writes_unclocked += u64::from(!clocked);
@@ -162,6 +164,9 @@ impl Ctx {
         self.link.counters.usb_writes_ambiguous += self.sched.take_ambiguous_writes();
         let garbled = self.link.counters.crc_errors + self.link.counters.skipped_bytes;
         self.sched.usb_watch(garbled, now);
+        let (sentinels, late) = self.sched.take_sentinel_counts();
+        self.link.counters.usb_sentinels += sentinels;
+        self.link.counters.usb_sentinels_late += late;
         for change in self.sched.take_usb_changes() {
             self.usb_changed(&change);
         }
