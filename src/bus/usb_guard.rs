@@ -141,7 +141,7 @@ pub(crate) const SENTINEL_EVERY: u32 = 24;
 /// How far before its boundary a sentinel is aimed, as a share of the frame.
 pub(crate) const SENTINEL_LEAD: f64 = 0.1;
 /// A sentinel handed over closer than this to its boundary (the host woke
-/// late) says nothing of the path.
+/// late) and late says nothing of the path (on time, it still counts).
 pub(crate) const SENTINEL_MIN_MARGIN: Duration = Duration::from_micros(60);
 /// Sentinels late out of the last ones that make evidence (a host that
 /// reads a reply late now and then makes one look late; three in a row

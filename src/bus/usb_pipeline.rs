@@ -249,6 +249,9 @@ pub(crate) struct UsbPipeline {
     sentinels: bool,
     /// Poll transfers since the last sentinel.
     since_sentinel: u32,
+    /// When the sentinel due is to be handed over, once decided (it is
+    /// waited for once: a host that wakes too late writes it then).
+    sentinel_at: Option<Instant>,
     /// The write being made is a sentinel: the wire is held a frame longer.
     armed: bool,
 }
@@ -263,8 +266,15 @@ impl UsbPipeline {
             guard: UsbGuard::new(recover, now),
             sentinels,
             since_sentinel: 0,
+            sentinel_at: None,
             armed: false,
         }
+    }
+
+    /// The adapter was named again with the same frame: whether its
+    /// replies can show a sentinel late may have changed.
+    pub(crate) fn set_sentinels(&mut self, on: bool) {
+        self.sentinels = on;
     }
 
     /// True when the next poll transfer should be a sentinel.
@@ -275,19 +285,33 @@ impl UsbPipeline {
             && self.since_sentinel + 1 >= SENTINEL_EVERY
     }
 
-    /// When to hand a sentinel over: [`SENTINEL_LEAD`] of a frame before
-    /// the boundary [`Self::write_at`] aims at.
-    pub(crate) fn sentinel_write_at(&self, free_at: Instant, now: Instant) -> Instant {
-        let release = self.aimed_boundary(free_at, now);
-        release
-            .checked_sub(self.period().mul_f64(SENTINEL_LEAD))
-            .unwrap_or(release)
+    /// While a sentinel is due: until when to wait before handing it over,
+    /// [`SENTINEL_LEAD`] of a frame before the boundary [`Self::write_at`]
+    /// aims at when first asked. `None` once that time has come (or passed:
+    /// a host that woke late writes it at once rather than chase the next
+    /// frame, which would hold every other write back with it).
+    pub(crate) fn sentinel_wait(&mut self, free_at: Instant, now: Instant) -> Option<Instant> {
+        if !self.sentinel_due() {
+            return None;
+        }
+        let at = match self.sentinel_at {
+            Some(at) => at,
+            None => {
+                let release = self.aimed_boundary(free_at, now);
+                let at = release
+                    .checked_sub(self.period().mul_f64(SENTINEL_LEAD))
+                    .unwrap_or(release);
+                *self.sentinel_at.insert(at)
+            }
+        };
+        (now < at).then_some(at)
     }
 
     /// The next write is the sentinel: its release holds the wire a frame
     /// longer, and [`Self::track`] marks its reply.
     pub(crate) fn arm_sentinel(&mut self) {
         self.armed = true;
+        self.sentinel_at = None;
     }
 
     pub(crate) fn guard(&self) -> &UsbGuard {
@@ -303,9 +327,10 @@ impl UsbPipeline {
     /// microframe a write is then held for the next one.
     fn reach(&self) -> Duration {
         if self.armed {
-            // A frame: a write handed a tenth of a frame before its
-            // boundary and late by up to that leaves one frame later.
-            return self.period();
+            // At least a frame: a write handed a tenth of a frame before
+            // its boundary and late by up to a frame leaves one frame
+            // later. Guarded, no less than any other write is held for.
+            return self.period().max(self.guard.reach());
         }
         match self.guard.mode() {
             PipelineMode::Pipelined => self.guard.reach().min(self.period()),
@@ -399,16 +424,27 @@ impl UsbPipeline {
                 .released(handed)
                 .at
                 .saturating_duration_since(self.phase.boundary_after(handed));
-            self.phase
-                .boundary_after(reply_end.checked_sub(held).unwrap_or(reply_end))
+            // The latest the reply may end (the device's turnaround
+            // varies): a reply ending just before a boundary is not taken
+            // for late when it ends just after.
+            let end = reply_end.checked_sub(held).unwrap_or(reply_end) + GUARD;
+            self.phase.boundary_after(end)
         });
+        let armed = std::mem::take(&mut self.armed);
+        // An attempt counts as one whether or not it can be judged: each
+        // holds the wire a frame.
+        self.since_sentinel = if armed {
+            0
+        } else {
+            self.since_sentinel.saturating_add(1)
+        };
         let margin = self
             .phase
             .boundary_after(handed)
             .saturating_duration_since(handed);
-        let sentinel =
-            std::mem::take(&mut self.armed) && on_time.is_some() && margin >= SENTINEL_MIN_MARGIN;
-        self.since_sentinel = if sentinel { 0 } else { self.since_sentinel + 1 };
+        // Handed over too close to its boundary (the host woke late), its
+        // lateness would be the host's as much as the path's: not judged.
+        let sentinel = armed && on_time.is_some() && margin >= SENTINEL_MIN_MARGIN;
         self.inflight.push_back(Inflight {
             want,
             window,
@@ -428,11 +464,22 @@ impl UsbPipeline {
         // collides, or shows as garbage): it is the reply of a newer poll
         // of the same block matched to an older one whose reply was lost.
         // Under three quarters of a frame is the host reading late.
+        // A write that slipped a frame makes its reply reach the host at the
+        // next boundary, read promptly: a frame after on time, give or take
+        // the estimate's error and the host's usual wake-up. A read later
+        // than that is the host's, not the path's, and says nothing.
         let after = at.saturating_duration_since(on_time);
-        let late = after >= self.period().mul_f64(0.75) && after < self.period() * 2;
+        let period = self.period();
+        let slipped = after >= period.mul_f64(0.9) && after <= period.mul_f64(1.25);
         if inflight.sentinel {
-            return self.guard.sentinel(late, at);
+            let on_time_read = after < period.mul_f64(0.75);
+            return match (slipped, on_time_read) {
+                (true, _) => self.guard.sentinel(true, at),
+                (false, true) => self.guard.sentinel(false, at),
+                (false, false) => None,
+            };
         }
+        let late = slipped;
         if late {
             self.guard.write_seen_late(at);
         }
@@ -473,6 +520,7 @@ impl UsbPipeline {
         self.inflight.clear();
         self.phase.forget();
         self.armed = false;
+        self.sentinel_at = None;
     }
 }
 
@@ -613,10 +661,16 @@ mod tests {
         assert_eq!(view(&mut p), (1, 0));
         assert_eq!(p.answered(&on_time, t0 + us(13_330)), None);
         assert_eq!(view(&mut p), (2, 1));
-        // Handed 30 µs before its boundary (the host woke late): no sentinel.
+        // Read 1.6 ms after on time: the host's lateness, not judged.
+        assert_eq!(p.answered(&on_time, t0 + us(13_900)), None);
+        assert_eq!(view(&mut p), (2, 1));
+        // Handed 30 µs before its boundary (the host woke late): not judged.
         p.arm_sentinel();
         p.track(want, window, t0 + us(10_270), t0 + us(13_000));
-        assert!(!p.take(want).expect("tracked").sentinel);
+        let close = p.take(want).expect("tracked");
+        assert!(!close.sentinel);
+        assert_eq!(p.answered(&close, t0 + us(13_330)), None);
+        assert_eq!(view(&mut p), (2, 1));
         // Nor is the next write armed.
         assert_eq!(p.released(t0 + us(9_800)).at, t0 + us(10_300));
     }

@@ -410,16 +410,18 @@ impl Scheduler {
                 return Slot::ControlBatch(control);
             }
         }
-        let sentinel = self.pipeline.as_ref().filter(|p| p.sentinel_due());
-        if let Some(pipeline) = sentinel {
-            // A sentinel is handed over late in its frame: until then the
-            // bus listens (an e-stop or a request still goes first).
-            let at = pipeline.sentinel_write_at(self.clock.free_at(), now);
-            if now < at {
-                return Slot::Listen { until: at };
+        let free_at = self.clock.free_at();
+        let sentinel = match self.pipeline.as_mut() {
+            Some(pipeline) if pipeline.sentinel_due() => {
+                // A sentinel is handed over late in its frame: until then
+                // the bus listens (an e-stop or a request still goes first).
+                if let Some(until) = pipeline.sentinel_wait(free_at, now) {
+                    return Slot::Listen { until };
+                }
+                true
             }
-        }
-        let sentinel = sentinel.is_some();
+            _ => false,
+        };
         let timeout = self.clock.reply_timeout(now);
         if let Some(poll) = self.planner.next(self.reg.poll_states(), now, timeout) {
             self.control_only = 0;
@@ -734,15 +736,20 @@ impl Scheduler {
     pub(crate) fn set_adapter(&mut self, adapter: crate::transport::adapter::AdapterModel) {
         self.clock.set_adapter(adapter);
         let period = adapter.usb_frame();
-        if self.pipeline.as_ref().map(UsbPipeline::period) != period {
-            let (recover, now) = (self.usb_recover, Instant::now());
-            // A sentinel's reply shows its write a frame late only where the
-            // reply reaches the host at the frame after the adapter lets it
-            // go: frames of 0.5 ms or more, a latency timer no longer than one.
-            let sentinels = |p: Duration| {
-                p >= Duration::from_micros(500) && adapter.latency_timer().map_or(true, |t| t <= p)
-            };
-            self.pipeline = period.map(|p| UsbPipeline::new(p, recover, sentinels(p), now));
+        // A sentinel's reply shows its write a frame late only where the
+        // reply reaches the host at the frame after the adapter lets it go:
+        // frames of 0.5 ms or more, a latency timer no longer than one.
+        let sentinels = |p: Duration| {
+            p >= Duration::from_micros(500) && adapter.latency_timer().map_or(true, |t| t <= p)
+        };
+        match (self.pipeline.as_mut(), period) {
+            (Some(pipeline), Some(p)) if pipeline.period() == p => {
+                pipeline.set_sentinels(sentinels(p));
+            }
+            _ => {
+                let (recover, now) = (self.usb_recover, Instant::now());
+                self.pipeline = period.map(|p| UsbPipeline::new(p, recover, sentinels(p), now));
+            }
         }
     }
 }
