@@ -318,6 +318,51 @@ async fn watchdog_hold_freezes_joints_and_tells_everyone() {
     assert_eq!(bus.sim.device(1).map(|d| d.fsm), Some(fsm::RUN));
 }
 
+/// Held in speed mode, a joint stops: its speed slot is the motion itself,
+/// so the hold sends 0, not the last speed streamed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn watchdog_hold_stops_a_joint_in_speed_mode() {
+    let bus = sim_bus::start(4, None).await;
+    enable(&bus, &[1]).await;
+    let moded = bus
+        .server
+        .put("/api/v1/buses/sim0/devices/1/mode", json!({"mode":"speed"}))
+        .await;
+    assert_eq!(moded.status, 200, "{:?}", moded.body);
+    let mut teleop = connect(&bus).await;
+    teleop
+        .send(json!({"type":"watchdog","seq":1,"hold_timeout_ms":150,"policy":"hold"}))
+        .await;
+    teleop.next_of("watchdog_set").await;
+    teleop
+        .send(json!({"type":"setpoints","seq":2,"ack":true,"targets":[{"dev_id":1,"speed_rpm":3000}]}))
+        .await;
+    teleop.next_of("ack").await;
+    let spinning = |want: bool| {
+        bus.sim
+            .device(1)
+            .is_some_and(|d| (d.spd_ref != 0) == want && d.fsm == fsm::RUN)
+    };
+    let deadline = tokio::time::Instant::now() + WAIT;
+    while !spinning(true) {
+        assert!(tokio::time::Instant::now() < deadline, "joint 1 never spun");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    // The stream stops: the watchdog holds the joint, at speed 0.
+    let event = teleop.next_of("event").await;
+    assert_eq!(event["event"]["event"], "watchdog");
+    while !spinning(false) {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "joint 1 still spinning after the hold: {:?}",
+            bus.sim.device(1).map(|d| d.spd_ref)
+        );
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    let held = bus.handle.shared().setpoints.get(1).expect("a hold target");
+    assert_eq!(held.setpoint.spd_ref, 0);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn watchdog_disable_applies_when_the_socket_closes() {
     let bus = sim_bus::start(4, None).await;

@@ -59,7 +59,8 @@ pub struct WatchdogEvent {
 
 /// What the watchdog does to joints `ids` of `bus` whose stream stopped
 /// (WebSocket clients and the ROS 2 bridge alike): hold each where it is
-/// measured (its speed limit kept), or disable them.
+/// measured, or disable them. Held in position mode, a joint keeps its
+/// speed limit; in speed mode the speed slot *is* the motion, so it is 0.
 pub(crate) async fn apply_policy(
     bus: &crate::bus::BusHandle,
     ids: Vec<u8>,
@@ -77,11 +78,15 @@ pub(crate) async fn apply_policy(
                 .iter()
                 .filter_map(|id| snap.devices.get(id))
                 .filter_map(|d| {
+                    let spd_ref = match d.mode {
+                        Some(crate::protocol::values::CtrlMode::Speed) => 0,
+                        _ => d.target_sent?.spd_ref,
+                    };
                     Some((
                         d.dev_id,
                         crate::bus::Setpoint {
                             pos_ref: crate::control::device::measured_angle_raw(d)?,
-                            spd_ref: d.target_sent?.spd_ref,
+                            spd_ref,
                         },
                     ))
                 })
