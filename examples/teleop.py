@@ -24,6 +24,7 @@ import asyncio
 import math
 import sys
 import time
+from typing import Any, Dict, List, Sequence
 
 try:
     from jointd_client import Jointd
@@ -31,21 +32,22 @@ except ImportError:
     sys.exit("needs the client package: pip install ./clients/python")
 
 
-def percentile(values, p):
+def percentile(values: Sequence[float], p: float) -> float:
     if not values:
         return float("nan")
     s = sorted(values)
     return s[min(len(s) - 1, int(round(p / 100 * (len(s) - 1))))]
 
 
-async def count_telemetry(client, rate_hz, counter, stop):
+async def count_telemetry(client: Jointd, rate_hz: float, counter: List[int],
+                          stop: asyncio.Event) -> None:
     async for _ in client.telemetry(rate_hz=rate_hz):
         if stop.is_set():
             return
         counter[0] += 1
 
 
-async def run(args):
+async def run(args: argparse.Namespace) -> int:
     client = Jointd(args.url, token=args.token)
     joints = [(b.name, d.id) for b in client.buses() for d in client.devices(b.name)]
     if not joints:
@@ -53,17 +55,18 @@ async def run(args):
     print(f"{len(joints)} joints on {len({b for b, _ in joints})} bus(es)")
     if args.enable:
         for bus in {b for b, _ in joints}:
-            client.enable_all(bus)
-        await asyncio.sleep(args.align_s)  # the first enable aligns (~1 s)
+            client.enable_all(bus, wait=True)  # returns once every joint runs (~1 s to align)
 
     telemetry, stop = [0], asyncio.Event()
     counter = asyncio.create_task(count_telemetry(client, args.telemetry_hz, telemetry, stop))
-    server_latency, round_trip, errors = [], [], []
+    server_latency: List[float] = []
+    round_trip: List[float] = []
+    errors: List[BaseException] = []
     period = 1.0 / args.rate_hz
     async with client.setpoints(hold_timeout_ms=200, policy="hold") as stream:
         start = time.perf_counter()
         seq = 0
-        pending = []
+        pending: "List[asyncio.Future[Dict[str, Any]]]" = []
         while (now := time.perf_counter()) - start < args.seconds:
             t = now - start
             targets = [{"bus": b, "dev_id": d,
@@ -73,15 +76,19 @@ async def run(args):
             seq += 1
             sent = time.perf_counter()
             fut = await stream.send_nowait(targets)
-            fut.add_done_callback(lambda f, sent=sent: round_trip.append((time.perf_counter() - sent) * 1e6)
-                                  if not f.exception() else None)
+            def acked(f: "asyncio.Future[Dict[str, Any]]", sent: float = sent) -> None:
+                if not f.exception():
+                    round_trip.append((time.perf_counter() - sent) * 1e6)
+
+            fut.add_done_callback(acked)
             pending.append(fut)
             await asyncio.sleep(max(0.0, start + seq * period - time.perf_counter()))
         elapsed = time.perf_counter() - start
         done, _ = await asyncio.wait(pending, timeout=1.0)  # late acks
         for f in done:
-            if f.exception():
-                errors.append(f.exception())
+            exc = f.exception()
+            if exc is not None:
+                errors.append(exc)
             else:
                 server_latency.append(f.result()["latency_us"])
     stop.set()
@@ -98,12 +105,11 @@ async def run(args):
     return 0 if server_latency and not errors else 1
 
 
-def main():
+def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--url", default="http://127.0.0.1:8080")
     p.add_argument("--token", default=None)
     p.add_argument("--enable", action="store_true", help="enable every joint first (they will move!)")
-    p.add_argument("--align-s", type=float, default=1.5)
     p.add_argument("--rate-hz", type=float, default=500)
     p.add_argument("--seconds", type=float, default=10)
     p.add_argument("--amplitude", type=float, default=30.0, help="degrees")

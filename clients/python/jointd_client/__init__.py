@@ -1,11 +1,21 @@
-"""Python client of jointd: REST (`Jointd`) and WebSocket streams."""
+"""Python client of jointd: REST (`Jointd`) and WebSocket streams.
 
-from .client import Jointd
-from .errors import Conflict, JointdError, NotFound, Problem, Unavailable, Unprocessable
+`Jointd()` reads `JOINTD_URL` and `JOINTD_TOKEN`; every error it raises is
+a `JointdError`; the daemon's schemas are types in `jointd_client.schema`.
+"""
+
+from . import schema
+from .client import Jointd, operation
+from .errors import (Conflict, Invalid, JointdError, NotConnected, NotFound, Problem, Timeout,
+                     TooMany, Unauthorized, Unavailable, Unprocessable)
 from .models import ActionDone, Bus, Device, TargetAck
-from .stream import SetpointStream, Telemetry
+from .moves import Homing, Move
+from .stream import JointSample, SetpointStream, Telemetry
 
 __all__ = [
-    "Jointd", "JointdError", "NotFound", "Conflict", "Unprocessable", "Unavailable", "Problem",
-    "Bus", "Device", "ActionDone", "TargetAck", "SetpointStream", "Telemetry",
+    "Jointd", "operation", "schema",
+    "JointdError", "NotConnected", "Invalid", "Unauthorized", "NotFound", "Conflict",
+    "Unprocessable", "TooMany", "Unavailable", "Timeout", "Problem",
+    "Bus", "Device", "ActionDone", "TargetAck", "Move", "Homing",
+    "SetpointStream", "Telemetry", "JointSample",
 ]

@@ -4,16 +4,19 @@ field against the document, so a renamed field fails there, not in a user's
 script. Fields the client does not model stay reachable in `raw`."""
 
 from dataclasses import dataclass, field, fields
-from typing import Any, List, Optional
+from typing import Any, Dict, List, Mapping, Optional, Type, TypeVar
+
+M = TypeVar("M", bound="_FromJson")
 
 
 class _FromJson:
     """`Model.from_json(answer)`: the modelled fields, the whole answer in `raw`."""
 
     @classmethod
-    def from_json(cls, data: dict):
-        names = {f.name for f in fields(cls)} - {"raw"}
-        return cls(**{n: data.get(n) for n in names}, raw=data)
+    def from_json(cls: Type[M], data: Mapping[str, Any]) -> M:
+        names = {f.name for f in fields(cls)} - {"raw"}  # type: ignore[arg-type]
+        # Every model is a dataclass with these fields and `raw`.
+        return cls(**{n: data.get(n) for n in names}, raw=dict(data))  # type: ignore[call-arg]
 
 
 @dataclass(frozen=True)
@@ -26,7 +29,7 @@ class Bus(_FromJson):
     devices_known: int
     devices_online: int
     queue_depth: int
-    raw: dict = field(repr=False, compare=False)
+    raw: Dict[str, Any] = field(repr=False, compare=False)
 
 
 @dataclass(frozen=True)
@@ -42,7 +45,7 @@ class Device(_FromJson):
     temp_c: Optional[float]
     vbus_v: Optional[float]
     target_known: bool
-    raw: dict = field(repr=False, compare=False)
+    raw: Dict[str, Any] = field(repr=False, compare=False)
 
 
 @dataclass(frozen=True)
@@ -52,7 +55,7 @@ class ActionDone(_FromJson):
     action: str
     ids: Optional[List[int]]
     value: Optional[Any]
-    raw: dict = field(repr=False, compare=False)
+    raw: Dict[str, Any] = field(repr=False, compare=False)
 
 
 @dataclass(frozen=True)
@@ -61,8 +64,8 @@ class TargetAck(_FromJson):
     bus: str
     seq: int
     on_wire: bool
-    targets: List[dict]
-    raw: dict = field(repr=False, compare=False)
+    targets: List[Dict[str, Any]]
+    raw: Dict[str, Any] = field(repr=False, compare=False)
 
 
-MODELS = [Bus, Device, ActionDone, TargetAck]
+MODELS: List[Type[_FromJson]] = [Bus, Device, ActionDone, TargetAck]

@@ -5,11 +5,37 @@ import asyncio
 import itertools
 import json
 from dataclasses import dataclass
-from typing import Any, Dict, Iterable, List, Optional
+from types import TracebackType
+from typing import (TYPE_CHECKING, Any, AsyncIterator, Dict, Iterable, List, Optional, Type,
+                    TypedDict)
 
 import websockets
+from websockets.asyncio.client import ClientConnection, connect
 
-from .errors import JointdError, Problem
+from .errors import NotConnected, ws_error
+
+if TYPE_CHECKING:
+    from .client import Jointd
+
+
+class JointSample(TypedDict, total=False):
+    """One joint of a `telemetry` message (docs/websocket.md): the fields
+    the subscription asked for (all by default)."""
+
+    bus: str
+    dev_id: int
+    online: bool
+    age_ms: float
+    angle_deg: Optional[float]
+    target_deg: Optional[float]
+    target_known: bool
+    speed_rpm: Optional[float]
+    current_a: Optional[float]
+    fsm: Optional[str]
+    disabled_reason: Optional[str]
+    fault: Optional[str]
+    temp_c: Optional[float]
+    vbus_v: Optional[float]
 
 
 @dataclass(frozen=True)
@@ -20,21 +46,21 @@ class Telemetry:
     seq: int
     t_ms: float
     dropped: int
-    joints: List[Dict[str, Any]]
+    joints: List[JointSample]
 
 
-def _connect(client):
+async def _open(client: "Jointd") -> ClientConnection:
     headers = {"Authorization": f"Bearer {client.token}"} if client.token else None
-    return websockets.connect(client.ws_url(), additional_headers=headers, max_queue=None)
+    try:
+        return await connect(client.ws_url(), additional_headers=headers, max_queue=None)
+    except (OSError, websockets.exceptions.InvalidHandshake) as e:
+        raise NotConnected(client.ws_url(), str(e)) from None
 
 
-def _ws_error(msg: dict) -> JointdError:
-    return JointdError(Problem(type=f"urn:jointd:ws:{msg.get('code')}", title=str(msg.get("code")),
-                               status=0, detail=str(msg.get("message")), field=msg.get("field")))
-
-
-async def telemetry(client, devices, rate_hz, buses, fields):
-    async with _connect(client) as ws:
+async def telemetry(client: "Jointd", devices: Optional[Iterable[int]], rate_hz: float,
+                    buses: Optional[Iterable[str]],
+                    fields: Optional[Iterable[str]]) -> AsyncIterator[Telemetry]:
+    async with await _open(client) as ws:
         sub: Dict[str, Any] = {"type": "subscribe", "seq": 1, "rate_hz": rate_hz}
         if devices is not None:
             sub["devices"] = list(devices)
@@ -49,7 +75,7 @@ async def telemetry(client, devices, rate_hz, buses, fields):
                 yield Telemetry(seq=msg["seq"], t_ms=msg["t_ms"], dropped=msg.get("dropped", 0),
                                 joints=msg["joints"])
             elif msg.get("type") == "error":
-                raise _ws_error(msg)
+                raise ws_error(msg)
 
 
 class SetpointStream:
@@ -58,28 +84,35 @@ class SetpointStream:
     disarmed first and the socket closed cleanly, so the daemon logs no
     watchdog firing for a client that simply finished."""
 
-    def __init__(self, client, hold_timeout_ms: int, policy: str):
+    def __init__(self, client: "Jointd", hold_timeout_ms: int, policy: str):
         self._client = client
         self._hold = hold_timeout_ms
         self._policy = policy
         self._seq = itertools.count(1)
-        self._pending: Dict[int, asyncio.Future] = {}
-        self._replies: Dict[int, asyncio.Future] = {}
-        self._ws = None
-        self._reader = None
-        self.errors: List[dict] = []
-        self.welcome: Optional[dict] = None
+        self._pending: Dict[int, "asyncio.Future[Dict[str, Any]]"] = {}
+        self._replies: Dict[int, "asyncio.Future[Dict[str, Any]]"] = {}
+        self._socket: Optional[ClientConnection] = None
+        self._reader: Optional["asyncio.Task[None]"] = None
+        self.errors: List[Dict[str, Any]] = []
+        self.welcome: Optional[Dict[str, Any]] = None
+
+    @property
+    def _ws(self) -> ClientConnection:
+        if self._socket is None:
+            raise RuntimeError("use the stream in `async with client.setpoints() as s:`")
+        return self._socket
 
     async def __aenter__(self) -> "SetpointStream":
-        self._ws = await _connect(self._client).__aenter__()
+        self._socket = await _open(self._client)
         self.welcome = json.loads(await self._ws.recv())
         self._reader = asyncio.create_task(self._read())
         await self._call({"type": "watchdog", "hold_timeout_ms": self._hold, "policy": self._policy})
         return self
 
-    async def __aexit__(self, *exc) -> None:
+    async def __aexit__(self, exc_type: Optional[Type[BaseException]],
+                        exc: Optional[BaseException], tb: Optional[TracebackType]) -> None:
         try:
-            if exc[0] is None:
+            if exc_type is None:
                 await self._call({"type": "watchdog", "hold_timeout_ms": 0, "policy": self._policy})
         finally:
             if self._reader:
@@ -97,28 +130,29 @@ class SetpointStream:
                 self.errors.append(msg)
                 for table in (self._pending, self._replies):
                     if ref in table:
-                        table.pop(ref).set_exception(_ws_error(msg))
+                        table.pop(ref).set_exception(ws_error(msg))
             elif ref in self._replies:
                 self._replies.pop(ref).set_result(msg)
 
-    async def _call(self, msg: dict, timeout: float = 5.0) -> dict:
+    async def _call(self, msg: Dict[str, Any], timeout: float = 5.0) -> Dict[str, Any]:
         seq = next(self._seq)
-        fut = asyncio.get_running_loop().create_future()
+        fut: "asyncio.Future[Dict[str, Any]]" = asyncio.get_running_loop().create_future()
         self._replies[seq] = fut
         await self._ws.send(json.dumps({**msg, "seq": seq}))
         return await asyncio.wait_for(fut, timeout)
 
-    async def send_nowait(self, targets: Iterable[dict]) -> "asyncio.Future":
+    async def send_nowait(self, targets: Iterable[Dict[str, Any]]) -> "asyncio.Future[Dict[str, Any]]":
         """One batch asking for an ack, without waiting for it: the returned
         future resolves to the ack (or raises if the batch was refused). For
         streaming at a fixed rate, where waiting would slow the stream."""
         seq = next(self._seq)
-        fut = asyncio.get_running_loop().create_future()
+        fut: "asyncio.Future[Dict[str, Any]]" = asyncio.get_running_loop().create_future()
         self._pending[seq] = fut
         await self._ws.send(json.dumps({"type": "setpoints", "seq": seq, "ack": True, "targets": list(targets)}))
         return fut
 
-    async def send(self, targets: Iterable[dict], ack: bool = True, timeout: float = 5.0) -> Optional[dict]:
+    async def send(self, targets: Iterable[Dict[str, Any]], ack: bool = True,
+                   timeout: float = 5.0) -> Optional[Dict[str, Any]]:
         """One batch (`[{"bus":..., "dev_id":..., "position_deg":..., "speed_rpm":...}]`).
         With `ack`, waits until every target is on the wire and returns the
         ack (`latency_us` = accepted -> on the wire); a refused batch raises."""
@@ -127,7 +161,7 @@ class SetpointStream:
         if not ack:
             await self._ws.send(json.dumps(msg))
             return None
-        fut = asyncio.get_running_loop().create_future()
+        fut: "asyncio.Future[Dict[str, Any]]" = asyncio.get_running_loop().create_future()
         self._pending[seq] = fut
         await self._ws.send(json.dumps(msg))
         return await asyncio.wait_for(fut, timeout)
