@@ -11,6 +11,8 @@
 //! rates are left to PromQL's `rate()` over the counters, latencies are
 //! histograms, states are labels.
 
+mod build_info;
+
 use std::fmt::Write as _;
 use std::time::Instant;
 
@@ -225,16 +227,7 @@ fn label(value: &str) -> String {
 /// The whole exposition of the daemon now.
 pub(crate) fn render(state: &AppState) -> String {
     let mut m = Exposition::default();
-    let features = if cfg!(feature = "bench") { "bench" } else { "" };
-    m.gauge(
-        "jointd_build_info",
-        "The daemon's version and cargo features (always 1).",
-        &format!(
-            "version=\"{}\",features=\"{features}\"",
-            env!("CARGO_PKG_VERSION")
-        ),
-        1.0,
-    );
+    build_info::family(&mut m);
     m.gauge(
         "jointd_uptime_seconds",
         "Seconds since the daemon started.",
