@@ -12,6 +12,7 @@
 //! histograms, states are labels.
 
 mod build_info;
+mod process;
 
 use std::fmt::Write as _;
 use std::time::Instant;
@@ -228,6 +229,7 @@ fn label(value: &str) -> String {
 pub(crate) fn render(state: &AppState) -> String {
     let mut m = Exposition::default();
     build_info::family(&mut m);
+    process::families(&mut m);
     m.gauge(
         "jointd_uptime_seconds",
         "Seconds since the daemon started.",
