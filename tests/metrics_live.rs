@@ -65,3 +65,71 @@ async fn process_families_are_plausible_for_this_process() {
         assert_eq!(types, 1, "{name}");
     }
 }
+
+const DEVICE: &str = "/api/v1/buses/{bus}/devices/{id}";
+const TARGET: &str = "/api/v1/buses/{bus}/devices/{id}/target";
+
+fn requests(method: &str, route: &str, status: &str) -> String {
+    format!(
+        "jointd_http_requests_total{{method=\"{method}\",route=\"{route}\",status=\"{status}\"}}"
+    )
+}
+
+#[tokio::test]
+async fn requests_count_by_route_template_and_status_class() {
+    let (_bus, s) = setup().await;
+    let dev = "/api/v1/buses/fake/devices";
+    s.get(&format!("{dev}/1")).await.ok();
+    s.get(&format!("{dev}/9")).await.problem(404);
+    s.get(&format!("{dev}/2")).await.ok();
+    // Not JSON (400), then JSON of the wrong shape (422).
+    let not_json = s
+        .client
+        .put(format!("{}{dev}/1/target", s.base))
+        .header("content-type", "application/json")
+        .body("{")
+        .send()
+        .await
+        .expect("request");
+    assert_eq!(not_json.status(), 400);
+    s.put(
+        &format!("{dev}/1/target"),
+        serde_json::json!({"position_deg": "ten"}),
+    )
+    .await
+    .problem(422);
+    s.get("/api/v1/nothing-here/42").await.problem(404);
+    s.call(reqwest::Method::DELETE, "/api/v1/buses", None)
+        .await
+        .problem(405);
+    let ws_url = format!("{}/api/v1/ws", s.base.replace("http://", "ws://"));
+    let (ws, resp) = tokio_tungstenite::connect_async(ws_url)
+        .await
+        .expect("upgrade");
+    assert_eq!(resp.status().as_u16(), 101);
+    drop(ws);
+
+    let text = scrape(&s).await;
+    assert_eq!(must(&text, &requests("GET", DEVICE, "2xx")), 2.0);
+    assert_eq!(must(&text, &requests("GET", DEVICE, "4xx")), 1.0);
+    assert_eq!(must(&text, &requests("PUT", TARGET, "4xx")), 2.0);
+    assert_eq!(must(&text, &requests("GET", "unmatched", "4xx")), 1.0);
+    assert_eq!(
+        must(&text, &requests("DELETE", "/api/v1/buses", "4xx")),
+        1.0
+    );
+    assert_eq!(must(&text, &requests("GET", "/api/v1/ws", "1xx")), 1.0);
+    assert_eq!(sample(&text, &requests("PUT", TARGET, "2xx")), None);
+    // The first scrape is counted once answered: the second sees it.
+    let text = scrape(&s).await;
+    assert_eq!(must(&text, &requests("GET", "/metrics", "2xx")), 1.0);
+    // Never a raw path: no label holds a request's own id or path.
+    for raw in ["/devices/9", "/devices/1\"", "nothing-here"] {
+        assert!(!text.contains(raw), "{raw} in:\n{text}");
+    }
+    let latency = "jointd_http_request_duration_seconds";
+    let count = format!("{latency}_count{{method=\"GET\",route=\"{DEVICE}\"}}");
+    assert_eq!(must(&text, &count), 3.0);
+    let inf = format!("{latency}_bucket{{method=\"PUT\",route=\"{TARGET}\",le=\"+Inf\"}}");
+    assert_eq!(must(&text, &inf), 2.0);
+}

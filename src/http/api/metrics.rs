@@ -12,6 +12,7 @@
 //! histograms, states are labels.
 
 mod build_info;
+mod http_requests;
 mod process;
 
 use std::fmt::Write as _;
@@ -243,6 +244,7 @@ pub(crate) fn render(state: &AppState) -> String {
         device_families(&mut m, &snap, now);
     }
     ws_families(&mut m, state.ws());
+    http_requests::families(&mut m, state);
     bridge_families(&mut m, state);
     m.render()
 }
