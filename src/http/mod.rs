@@ -20,6 +20,7 @@
 //! - [`auth`]: the bearer-token middleware (everything but the public paths).
 //! - [`shed`]: load shedding: a bounded number of requests at once, e-stop exempt.
 //! - [`paths`]: the URLs outside the OpenAPI routes, and which need no token.
+//! - [`request_stats`]: answered requests by route template and status class, for `/metrics`.
 //! - [`telemetry`]: snapshot → physical-unit views (REST and WebSocket).
 //! - [`hub`]: what all WebSocket connections share (the state holds it).
 
@@ -31,6 +32,7 @@ pub(crate) mod guard;
 pub(crate) mod hub;
 pub(crate) mod paths;
 pub mod policy;
+pub(crate) mod request_stats;
 pub(crate) mod shed;
 pub mod state;
 pub(crate) mod telemetry;
@@ -85,6 +87,11 @@ pub fn app(state: AppState) -> Router {
         .layer(axum::middleware::from_fn(log_failures))
         // Spans only: a failed answer is logged once, collapsed, below.
         .layer(TraceLayer::new_for_http().on_failure(()))
+        // Outermost: shed, refused and unauthorised answers count too.
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            request_stats::count,
+        ))
         .with_state(state)
 }
 

@@ -8,6 +8,7 @@ use std::time::Instant;
 use super::error::ApiResult;
 use super::hub::WsHub;
 use super::policy::{RefusalLog, RequestPolicy};
+use super::request_stats::RequestStats;
 use crate::bus::firmware::FirmwareSource;
 use crate::bus::handle::DeviceState;
 use crate::bus::BusHandle;
@@ -59,6 +60,7 @@ struct Inner {
     token: Option<String>,
     started: Instant,
     ws: WsHub,
+    requests: RequestStats,
     refusals: RefusalLog,
     options: std::sync::OnceLock<HttpOptions>,
 }
@@ -80,6 +82,7 @@ impl AppState {
                 token: token.filter(|t| !t.is_empty()),
                 started: Instant::now(),
                 ws: WsHub::default(),
+                requests: RequestStats::default(),
                 refusals: RefusalLog::default(),
                 options: std::sync::OnceLock::new(),
             }),
@@ -143,6 +146,11 @@ impl AppState {
     /// What the WebSocket connections share.
     pub fn ws(&self) -> &WsHub {
         &self.inner.ws
+    }
+
+    /// Answered requests by route and status, for `/metrics`.
+    pub(crate) fn requests(&self) -> &RequestStats {
+        &self.inner.requests
     }
 
     pub fn uptime_s(&self) -> f64 {

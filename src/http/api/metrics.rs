@@ -11,6 +11,10 @@
 //! rates are left to PromQL's `rate()` over the counters, latencies are
 //! histograms, states are labels.
 
+mod build_info;
+mod http_requests;
+mod process;
+
 use std::fmt::Write as _;
 use std::time::Instant;
 
@@ -225,16 +229,8 @@ fn label(value: &str) -> String {
 /// The whole exposition of the daemon now.
 pub(crate) fn render(state: &AppState) -> String {
     let mut m = Exposition::default();
-    let features = if cfg!(feature = "bench") { "bench" } else { "" };
-    m.gauge(
-        "jointd_build_info",
-        "The daemon's version and cargo features (always 1).",
-        &format!(
-            "version=\"{}\",features=\"{features}\"",
-            env!("CARGO_PKG_VERSION")
-        ),
-        1.0,
-    );
+    build_info::family(&mut m);
+    process::families(&mut m);
     m.gauge(
         "jointd_uptime_seconds",
         "Seconds since the daemon started.",
@@ -248,6 +244,7 @@ pub(crate) fn render(state: &AppState) -> String {
         device_families(&mut m, &snap, now);
     }
     ws_families(&mut m, state.ws());
+    http_requests::families(&mut m, state);
     bridge_families(&mut m, state);
     m.render()
 }
