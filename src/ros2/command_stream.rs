@@ -2,6 +2,9 @@
 //! stream: each command checked whole ([`super::commands`]), admitted under
 //! the joints' motion epochs ([`Streams`]) and applied; the `[watchdog]`
 //! over the stream, fired when commands stop and when the session goes.
+//! Velocity commands head for a soft limit until told otherwise, so a
+//! stream that sends them is always watched, at most [`VELOCITY_HOLD`]
+//! (whatever `[watchdog]` says, even off).
 
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
@@ -23,6 +26,11 @@ use crate::record::joint_states::Scope;
 
 type Subscriber =
     zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
+/// The longest a stream of velocity commands may pause before its joints
+/// are stopped (`[watchdog]`'s policy; hold when it has none): a
+/// ros2_control loop sends at 50 Hz or more.
+const VELOCITY_HOLD: Duration = Duration::from_millis(300);
 
 /// Commands after this long a pause begin new streams (see [`Streams`]).
 const STREAM_RESTART_GAP: Duration = Duration::from_millis(500);
@@ -63,6 +71,8 @@ struct CommandStream {
     scope: Scope,
     stats: Arc<Ros2Stats>,
     watchdog: Watchdog,
+    /// The hold timeout the watchdog is armed with (`None`: disarmed).
+    hold: Option<Duration>,
     streams: Streams,
     last_command: Option<tokio::time::Instant>,
     said_bad: bool,
@@ -72,17 +82,15 @@ impl CommandStream {
     fn new(state: &Arc<Control>, scope: Scope, stats: Arc<Ros2Stats>) -> Self {
         // The one teleop watchdog, as a WebSocket client gets it by default.
         let default = state.watchdog_default();
+        let hold = Duration::from_millis(default.hold_timeout_ms);
         let mut watchdog = Watchdog::default();
-        watchdog.arm(
-            Duration::from_millis(default.hold_timeout_ms),
-            default.policy,
-            tokio::time::Instant::now(),
-        );
+        watchdog.arm(hold, default.policy, tokio::time::Instant::now());
         Self {
             state: state.clone(),
             scope,
             stats,
             watchdog,
+            hold: (!hold.is_zero()).then_some(hold),
             streams: Streams::default(),
             last_command: None,
             said_bad: false,
@@ -132,12 +140,17 @@ impl CommandStream {
             .last_command
             .map_or(true, |at| now.duration_since(at) >= STREAM_RESTART_GAP);
         self.last_command = Some(now);
-        let outcome = JointState::from_cdr(bytes)
-            .map_err(|e| format!("not a sensor_msgs/msg/JointState in CDR: {e}"))
-            .and_then(|cmd| commands::setpoints(&self.state, &self.scope, &cmd))
+        let cmd = match JointState::from_cdr(bytes) {
+            Ok(cmd) => cmd,
+            Err(e) => return self.dropped(format!("not a sensor_msgs/msg/JointState in CDR: {e}")),
+        };
+        let outcome = commands::setpoints(&self.state, &self.scope, &cmd)
             .and_then(|per_bus| streamed(&self.state, &mut self.streams, per_bus, restart));
         match outcome {
             Ok(per_bus) => {
+                if commands::by_velocity(&cmd) {
+                    self.watch_velocities(now);
+                }
                 let mut fed = Vec::new();
                 for (bus, targets) in per_bus {
                     fed.extend(targets.iter().map(|(id, _, _)| JointRef {
@@ -151,6 +164,16 @@ impl CommandStream {
             }
             Err(why) => self.dropped(why),
         }
+    }
+
+    /// Arms the watchdog with at most [`VELOCITY_HOLD`].
+    fn watch_velocities(&mut self, now: tokio::time::Instant) {
+        if self.hold.is_some_and(|h| h <= VELOCITY_HOLD) {
+            return;
+        }
+        let policy = self.state.watchdog_default().policy;
+        self.watchdog.arm(VELOCITY_HOLD, policy, now);
+        self.hold = Some(VELOCITY_HOLD);
     }
 
     fn dropped(&mut self, why: String) {
