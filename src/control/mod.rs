@@ -46,6 +46,8 @@ pub mod ros2_stats;
 pub mod streams;
 pub mod targets;
 pub mod teleop;
+// Its one user so far is the ROS 2 bridge (cargo feature `ros2`).
+#[cfg_attr(not(feature = "ros2"), allow(dead_code))]
 pub(crate) mod velocity;
 pub mod watchdog;
 
