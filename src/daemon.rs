@@ -595,7 +595,6 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     let bridge = match (plan.ros2, ros2_stats) {
         (Some(cfg), Some(stats)) => Some(
             crate::ros2::start(state.control().clone(), cfg, stats)
-                .await
                 .map_err(|e| DaemonError::Policy(e.to_string()))?,
         ),
         _ => None,

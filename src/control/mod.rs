@@ -15,6 +15,7 @@
 //! - [`limits`]: per-joint soft limits from the config.
 //! - [`joints`]: [`JointRef`], device ids, known devices, joints named by hand.
 //! - [`targets`]: physical targets → raw setpoints, checked; admission under the authority.
+//! - [`velocity`]: a velocity command as a position target toward the soft limit at that speed.
 //! - `batch`: one resolver of target batches for the teleop front-ends (WebSocket, ROS 2).
 //! - `calibration`: saving a joint's calibration (REST and homing).
 //! - [`teleop`]: the watchdog policy, its default, and what firing it does.
@@ -45,6 +46,9 @@ pub mod ros2_stats;
 pub mod streams;
 pub mod targets;
 pub mod teleop;
+// Its one user so far is the ROS 2 bridge (cargo feature `ros2`).
+#[cfg_attr(not(feature = "ros2"), allow(dead_code))]
+pub(crate) mod velocity;
 pub mod watchdog;
 
 use std::collections::BTreeMap;

@@ -2,7 +2,7 @@
 //! and the app state hold them): here, below both, so neither imports the
 //! other upwards.
 
-use std::sync::atomic::AtomicU64;
+use std::sync::atomic::{AtomicBool, AtomicU64};
 use std::sync::Mutex;
 
 use serde::Serialize;
@@ -10,6 +10,12 @@ use serde::Serialize;
 /// What the bridge did, for `GET /api/v1/ros2`.
 #[derive(Debug, Default, Serialize)]
 pub struct Ros2Stats {
+    /// A Zenoh session is open and (in client mode) a router reachable.
+    pub connected: AtomicBool,
+    /// Sessions opened since start (reconnections included).
+    pub connects: AtomicU64,
+    /// Why the latest attempt failed or the latest session was lost.
+    pub last_error: Mutex<Option<String>>,
     pub joint_states: AtomicU64,
     pub diagnostics: AtomicU64,
     pub commands_applied: AtomicU64,

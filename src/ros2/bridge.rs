@@ -1,43 +1,62 @@
-//! The bridge itself: one Zenoh session, one ROS node (`jointd`), per bus
-//! a `joint_states` publisher and a `joint_commands` subscription, and a
-//! `/diagnostics` publisher; each with its liveliness token so that ROS 2
-//! tools on rmw_zenoh list them. Joint states come from the bus's frame tap
-//! (one message per poll round, as recordings); commands go through
-//! [`super::commands`].
+//! What the bridge declares on one open Zenoh session: one ROS node
+//! (`jointd`), per bus a `joint_states` publisher and a `joint_commands`
+//! subscription, and a `/diagnostics` publisher; each with its liveliness
+//! token so that ROS 2 tools on rmw_zenoh list them. Joint states come from
+//! the bus's frame tap (one message per poll round, as recordings);
+//! commands go to [`super::command_stream`]. Opening the session, and
+//! opening it again, is [`super::supervisor`]'s.
 
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
 use futures_util::StreamExt;
+use tokio::sync::watch;
 use tokio_stream::wrappers::errors::BroadcastStreamRecvError;
 use tokio_stream::wrappers::BroadcastStream;
 use zenoh::liveliness::LivelinessToken;
 
-use super::commands;
+use super::command_stream;
 use super::config::{NamespaceBy, Ros2Config, Ros2Mode};
 use super::keys::{self, Kind, NodeIdentity};
 use super::Ros2Stats;
-use crate::bus::authority::Epoch;
 use crate::bus::BusHandle;
 use crate::bus::BusSnapshot;
-use crate::bus::Setpoint;
-use crate::control::streams::Streams;
-use crate::control::watchdog::{fire_policy, Watchdog};
 use crate::control::Control;
-use crate::control::JointRef;
 use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
-use crate::record::cdr::{diagnostic_array_cdr, DiagnosticStatus, JointState};
+use crate::record::cdr::{diagnostic_array_cdr, DiagnosticStatus};
 use crate::record::joint_states::{system_ns, JointStates, Scope};
 
-/// What keeps the bridge alive: dropping it undeclares everything.
-pub struct Bridge {
-    _session: zenoh::Session,
-    _tokens: Vec<LivelinessToken>,
+/// How long the tasks of a closing session get to finish (the command
+/// stream applies its watchdog's policy) before they are aborted.
+const CLOSE_GRACE: Duration = Duration::from_secs(2);
+
+/// Everything declared on one session: the tokens, and the tasks that
+/// publish and listen.
+pub(super) struct Declared {
+    tokens: Vec<LivelinessToken>,
     tasks: Vec<tokio::task::JoinHandle<()>>,
+    /// `true` tells the tasks the session is going.
+    closing: watch::Sender<bool>,
 }
 
-impl Drop for Bridge {
+impl Declared {
+    /// Stops the tasks (the command stream first applies its watchdog's
+    /// policy to the joints it drove: a lost link must not leave a joint
+    /// heading for its limit) and undeclares the tokens.
+    pub(super) async fn close(mut self) {
+        let _ = self.closing.send(true);
+        let deadline = tokio::time::Instant::now() + CLOSE_GRACE;
+        for task in &mut self.tasks {
+            if tokio::time::timeout_at(deadline, &mut *task).await.is_err() {
+                task.abort();
+            }
+        }
+        self.tokens.clear();
+    }
+}
+
+impl Drop for Declared {
     fn drop(&mut self) {
         for t in &self.tasks {
             t.abort();
@@ -45,15 +64,8 @@ impl Drop for Bridge {
     }
 }
 
-impl std::fmt::Debug for Bridge {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Bridge")
-            .field("tasks", &self.tasks.len())
-            .finish_non_exhaustive()
-    }
-}
-
-fn session_config(cfg: &Ros2Config) -> zenoh::Result<zenoh::Config> {
+/// The Zenoh configuration of the bridge's session.
+pub(super) fn session_config(cfg: &Ros2Config) -> zenoh::Result<zenoh::Config> {
     let mut z = zenoh::Config::default();
     let mode = match cfg.mode {
         Ros2Mode::Client => "\"client\"",
@@ -68,13 +80,14 @@ fn session_config(cfg: &Ros2Config) -> zenoh::Result<zenoh::Config> {
     Ok(z)
 }
 
-/// Opens the session and starts publishing and listening.
-pub(super) async fn start(
-    state: Arc<Control>,
-    cfg: Ros2Config,
-    stats: Arc<Ros2Stats>,
-) -> zenoh::Result<Bridge> {
-    let session = zenoh::open(session_config(&cfg)?).await?;
+/// Declares the node, its topics and their tokens on `session`, and starts
+/// publishing and listening.
+pub(super) async fn declare(
+    session: &zenoh::Session,
+    state: &Arc<Control>,
+    cfg: &Ros2Config,
+    stats: &Arc<Ros2Stats>,
+) -> zenoh::Result<Declared> {
     let zid = session.zid();
     let session_gid: [u8; 16] = zid.to_le_bytes();
     let node = NodeIdentity {
@@ -84,25 +97,33 @@ pub(super) async fn start(
         namespace: String::new(),
         name: cfg.node_name.clone(),
     };
-    let mut tokens = vec![
+    let (closing, closed) = watch::channel(false);
+    // Built as it goes: a declaration refused half-way drops (and so stops)
+    // what was started before it.
+    let mut declared = Declared {
+        tokens: Vec::new(),
+        tasks: Vec::new(),
+        closing,
+    };
+    let (tokens, tasks) = (&mut declared.tokens, &mut declared.tasks);
+    tokens.push(
         session
             .liveliness()
             .declare_token(node.node_token())
             .await?,
-    ];
-    let mut tasks = Vec::new();
+    );
     let mut entity_id = 0u32;
     let mut next_entity = || {
         entity_id += 1;
         entity_id
     };
-    for (name, scope) in scopes(&state, &cfg) {
+    for (name, scope) in scopes(state, cfg) {
         let ns = cfg.namespace(&name);
         let topic = keys::qualified(&ns, "joint_states");
         let (id, key) = (next_entity(), joint_state_key(&node, &topic));
         let publisher = session.declare_publisher(key.clone()).await?;
-        tokens.push(announce(&session, &node, id, Kind::Publisher, &topic, JOINT_STATE).await?);
-        tracing::info!(%name, %key, "ROS 2: publishing joint states");
+        tokens.push(announce(session, &node, id, Kind::Publisher, &topic, JOINT_STATE).await?);
+        tracing::debug!(%name, %key, "ROS 2: publishing joint states");
         tasks.push(tokio::spawn(publish_joint_states(
             state.clone(),
             scope.clone(),
@@ -115,30 +136,21 @@ pub(super) async fn start(
         let topic = keys::qualified(&ns, "joint_commands");
         let (id, key) = (next_entity(), joint_state_key(&node, &topic));
         let subscriber = session.declare_subscriber(key.clone()).await?;
-        tokens.push(announce(&session, &node, id, Kind::Subscription, &topic, JOINT_STATE).await?);
-        tracing::info!(%name, %key, "ROS 2: taking joint commands");
-        tasks.push(tokio::spawn(take_commands(
+        tokens.push(announce(session, &node, id, Kind::Subscription, &topic, JOINT_STATE).await?);
+        tracing::debug!(%name, %key, "ROS 2: taking joint commands");
+        tasks.push(tokio::spawn(command_stream::run(
             state.clone(),
             scope,
             subscriber,
             stats.clone(),
+            closed.clone(),
         )));
     }
     let topic = "/diagnostics";
     let id = next_entity();
     let key = keys::topic_key(node.domain, topic, DIAGNOSTIC_ARRAY.0, DIAGNOSTIC_ARRAY.1);
     let publisher = session.declare_publisher(key).await?;
-    tokens.push(
-        announce(
-            &session,
-            &node,
-            id,
-            Kind::Publisher,
-            topic,
-            DIAGNOSTIC_ARRAY,
-        )
-        .await?,
-    );
+    tokens.push(announce(session, &node, id, Kind::Publisher, topic, DIAGNOSTIC_ARRAY).await?);
     let period = Duration::from_secs_f64(1.0 / cfg.diagnostics_hz);
     tasks.push(tokio::spawn(publish_diagnostics(
         state.clone(),
@@ -147,13 +159,7 @@ pub(super) async fn start(
         period,
         stats.clone(),
     )));
-    tracing::info!(zid = %zid, domain = node.domain, mode = ?cfg.mode, endpoints = ?cfg.endpoints(),
-        node = %cfg.node_name, "ROS 2 bridge up (rmw_zenoh key expressions)");
-    Ok(Bridge {
-        _session: session,
-        _tokens: tokens,
-        tasks,
-    })
+    Ok(declared)
 }
 
 /// A message type on the network: its DDS name and its type hash.
@@ -276,119 +282,6 @@ async fn publish_joint_states(
             }
         }
     }
-}
-
-/// Commands in; the teleoperation watchdog of `[watchdog]` over them.
-async fn take_commands(
-    state: Arc<Control>,
-    scope: Scope,
-    subscriber: zenoh::pubsub::Subscriber<
-        zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>,
-    >,
-    stats: Arc<Ros2Stats>,
-) {
-    // The one teleop watchdog, as a WebSocket client gets it by default.
-    let default = state.watchdog_default();
-    let mut watchdog = Watchdog::default();
-    watchdog.arm(
-        Duration::from_millis(default.hold_timeout_ms),
-        default.policy,
-        tokio::time::Instant::now(),
-    );
-    let mut said_bad = false;
-    let mut streams = Streams::default();
-    let mut last_command: Option<tokio::time::Instant> = None;
-    loop {
-        let sample = match watchdog.deadline() {
-            Some(d) => match tokio::time::timeout_at(d, subscriber.recv_async()).await {
-                Ok(s) => s,
-                Err(_) => {
-                    if let Some((policy, joints)) = watchdog.fire() {
-                        tracing::warn!(?joints, ?policy, "ROS 2: joint commands stopped: watchdog");
-                        fire_policy(&state, policy, &joints).await;
-                        stats.watchdog_fired.fetch_add(1, Ordering::Relaxed);
-                    }
-                    continue;
-                }
-            },
-            None => subscriber.recv_async().await,
-        };
-        let Ok(sample) = sample else { return };
-        let bytes = sample.payload().to_bytes();
-        let now = tokio::time::Instant::now();
-        // A ROS 2 topic has no way to ask for a new stream: commands after
-        // a pause begin one; a controller streaming on through an e-stop and
-        // a later enable does not drive the joints again until it pauses.
-        let restart = last_command.map_or(true, |at| now.duration_since(at) >= STREAM_RESTART_GAP);
-        last_command = Some(now);
-        let outcome = JointState::from_cdr(&bytes)
-            .map_err(|e| format!("not a sensor_msgs/msg/JointState in CDR: {e}"))
-            .and_then(|cmd| commands::setpoints(&state, &scope, &cmd))
-            .and_then(|per_bus| streamed(&state, &mut streams, per_bus, restart));
-        match outcome {
-            Ok(per_bus) => {
-                let mut fed = Vec::new();
-                for (bus, targets) in per_bus {
-                    fed.extend(targets.iter().map(|(id, _, _)| JointRef {
-                        bus: bus.name().to_owned(),
-                        id: *id,
-                    }));
-                    bus.set_targets_under(&targets);
-                }
-                watchdog.feed(&fed, now);
-                stats.commands_applied.fetch_add(1, Ordering::Relaxed);
-            }
-            Err(why) => {
-                stats.commands_dropped.fetch_add(1, Ordering::Relaxed);
-                if !said_bad {
-                    said_bad = true;
-                    tracing::warn!(?scope, "ROS 2: a joint command was dropped whole: {why} (said once; counted in GET /api/v1/ros2)");
-                }
-                *stats.last_dropped.lock().unwrap_or_else(|p| p.into_inner()) = Some(why);
-            }
-        }
-    }
-}
-
-/// One bus's targets, each under the epoch of its joint's stream.
-type StreamedTargets = (BusHandle, Vec<(u8, Setpoint, Epoch)>);
-
-/// Commands after this long a pause begin new streams (see [`Streams`]).
-const STREAM_RESTART_GAP: Duration = Duration::from_millis(500);
-
-/// Each bus's targets under the epochs of their joints' streams, or why
-/// the command is refused whole (a stream an e-stop, a disable, a reset, a
-/// fault or a mode change ended).
-fn streamed(
-    state: &Control,
-    streams: &mut Streams,
-    per_bus: Vec<commands::BusTargets>,
-    restart: bool,
-) -> Result<Vec<StreamedTargets>, String> {
-    let joints: Vec<JointRef> = per_bus
-        .iter()
-        .flat_map(|(bus, targets)| {
-            targets.iter().map(|(id, _)| JointRef {
-                bus: bus.name().to_owned(),
-                id: *id,
-            })
-        })
-        .collect();
-    let mut epochs = streams
-        .admit(state, &joints, restart)
-        .map_err(|e| e.to_string())?
-        .into_iter();
-    Ok(per_bus
-        .into_iter()
-        .map(|(bus, targets)| {
-            let under = targets
-                .into_iter()
-                .zip(epochs.by_ref())
-                .map(|((id, sp), epoch)| (id, sp, epoch))
-                .collect();
-            (bus, under)
-        })
-        .collect())
 }
 
 async fn publish_diagnostics(

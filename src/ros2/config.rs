@@ -53,7 +53,9 @@ pub struct Ros2Config {
     /// `/<namespace>/joint_states` and `/<namespace>/joint_commands`.
     #[serde(default)]
     pub namespace_by: NamespaceBy,
-    /// bus (or hand) → namespace; default: its name.
+    /// bus (or hand) → namespace; default: its name. `""` (or `"/"`): none,
+    /// plain `/joint_states` and `/joint_commands` as `robot_state_publisher`
+    /// and `topic_based_ros2_control` expect them.
     #[serde(default)]
     pub namespaces: BTreeMap<String, String>,
     /// How often `/diagnostics` is published, Hz (0 < r ≤ 50; default 1).
@@ -102,6 +104,13 @@ pub enum Ros2ConfigError {
         value: String,
         why: &'static str,
     },
+    #[error("[ros2] namespaces: {by}s `{first}` and `{second}` would share the namespace `/{namespace}` (their joint_states would interleave and each take the other's commands): give each its own")]
+    SharedNamespace {
+        by: &'static str,
+        first: String,
+        second: String,
+        namespace: String,
+    },
     #[error("[ros2] diagnostics_hz = {0}: give 0 < rate <= 50")]
     Rate(f64),
     #[error(
@@ -133,15 +142,18 @@ impl Ros2Config {
                     name: name.clone(),
                 });
             }
-            let ok = ns.trim_matches('/').split('/').all(is_token);
+            let ns = ns.trim_matches('/');
+            // Empty: topics at the root.
+            let ok = ns.is_empty() || ns.split('/').all(is_token);
             if !ok {
                 return Err(Ros2ConfigError::BadName {
                     name: "namespaces",
-                    value: ns.clone(),
+                    value: ns.to_owned(),
                     why: "a ROS namespace is tokens of letters, digits and `_` separated by `/`",
                 });
             }
         }
+        self.distinct_namespaces(by, known)?;
         if !is_token(&self.node_name) {
             return Err(Ros2ConfigError::BadName {
                 name: "node_name",
@@ -165,6 +177,27 @@ impl Ros2Config {
             return Err(Ros2ConfigError::Domain(d));
         }
         Ok(self)
+    }
+
+    /// Refuses two buses (or hands) under one namespace.
+    fn distinct_namespaces(
+        &self,
+        by: &'static str,
+        known: &[String],
+    ) -> Result<(), Ros2ConfigError> {
+        let mut seen: BTreeMap<String, &String> = BTreeMap::new();
+        for name in known {
+            let namespace = self.namespace(name);
+            if let Some(first) = seen.insert(namespace.clone(), name) {
+                return Err(Ros2ConfigError::SharedNamespace {
+                    by,
+                    first: first.clone(),
+                    second: name.clone(),
+                    namespace,
+                });
+            }
+        }
+        Ok(())
     }
 
     /// The namespace of a bus (or hand), without slashes at either end.
@@ -254,9 +287,68 @@ mod tests {
             Ros2ConfigError::StatesRate(-1.0)
         );
         assert!(parse("nope = 1").is_err(), "unknown keys are refused");
+        assert!(matches!(
+            bad("[namespaces]\nl = \"a//b\""),
+            Ros2ConfigError::BadName { .. }
+        ));
         assert!(parse("[namespaces]\nl = \"hand/left\"")
             .unwrap()
             .checked(&buses, &hands)
             .is_ok());
+    }
+
+    #[test]
+    fn an_empty_namespace_gives_topics_at_the_root() {
+        let buses = vec!["l".to_string(), "r".to_string()];
+        for empty in ["\"\"", "\"/\""] {
+            let cfg = parse(&format!("[namespaces]\nl = {empty}"))
+                .unwrap()
+                .checked(&buses, &[])
+                .unwrap();
+            assert_eq!(cfg.namespace("l"), "");
+            assert_eq!(cfg.namespace("r"), "r");
+            assert_eq!(
+                super::super::keys::qualified(&cfg.namespace("l"), "joint_states"),
+                "/joint_states"
+            );
+        }
+    }
+
+    #[test]
+    fn two_buses_may_not_share_a_namespace() {
+        let buses = vec!["l".to_string(), "r".to_string()];
+        let err = parse("[namespaces]\nl = \"\"\nr = \"/\"")
+            .unwrap()
+            .checked(&buses, &[])
+            .unwrap_err();
+        assert_eq!(
+            err,
+            Ros2ConfigError::SharedNamespace {
+                by: "bus",
+                first: "l".into(),
+                second: "r".into(),
+                namespace: String::new(),
+            }
+        );
+        assert!(err.to_string().contains("`l` and `r`"), "{err}");
+        // A bus mapped onto another's default name collides too.
+        let err = parse("[namespaces]\nl = \"r\"")
+            .unwrap()
+            .checked(&buses, &[])
+            .unwrap_err();
+        assert!(
+            matches!(err, Ros2ConfigError::SharedNamespace { ref namespace, .. } if namespace == "r"),
+            "{err}"
+        );
+        let hands = vec!["left".to_string(), "right".to_string()];
+        let err = parse("namespace_by = \"hand\"\n[namespaces]\nleft = \"x\"\nright = \"/x/\"")
+            .unwrap()
+            .checked(&buses, &hands)
+            .unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("[ros2] namespaces: hands `left` and `right`"),
+            "{err}"
+        );
     }
 }

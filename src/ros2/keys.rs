@@ -191,6 +191,29 @@ mod tests {
     }
 
     #[test]
+    fn no_namespace_gives_root_topics_and_tokens() {
+        assert_eq!(qualified("", "joint_states"), "/joint_states");
+        assert_eq!(qualified("/", "joint_commands"), "/joint_commands");
+        assert_eq!(
+            topic_key(
+                0,
+                &qualified("", "joint_states"),
+                JOINT_STATE_TYPE,
+                JOINT_STATE_HASH
+            ),
+            format!("0/joint_states/{JOINT_STATE_TYPE}/{JOINT_STATE_HASH}")
+        );
+        let token = node().endpoint_token(
+            1,
+            Kind::Subscription,
+            &qualified("", "joint_commands"),
+            JOINT_STATE_TYPE,
+            JOINT_STATE_HASH,
+        );
+        assert!(token.contains("/MS/%/%/talker/%joint_commands/"), "{token}");
+    }
+
+    #[test]
     fn the_attachment_is_33_bytes_in_the_documented_order() {
         let g = gid(&[7; 16], 3);
         let a = attachment(5, 1_700_000_000_000_000_000, &g);

@@ -9,8 +9,14 @@
 //! - [`keys`]: key expressions, liveliness tokens, attachments, type
 //!   hashes (the design document is cited there);
 //! - [`commands`]: a command checked whole and turned into setpoints;
-//! - `bridge` (cargo feature `ros2`: Zenoh adds minutes to a cold build):
-//!   the session, publishers, subscription and tokens.
+//! - [`link`]: when to try the router again and what to log about it;
+//! - with the cargo feature `ros2` (Zenoh adds minutes to a cold build):
+//!   `supervisor` (the one background task: the session, opened and opened
+//!   again), `bridge` (publishers, subscriptions and tokens on a session),
+//!   `command_stream` (one `joint_commands` subscription as a teleop stream).
+//!
+//! The bridge never holds the daemon: without a router the buses and the
+//! API serve as ever, and `GET /api/v1/ros2` says `connected: false`.
 //!
 //! Messages are CDR ([`crate::record::cdr`], shared with MCAP recordings).
 //! Positions are rad, velocities rad/s at the output shaft, and **effort is
@@ -20,9 +26,14 @@
 pub(crate) mod commands;
 pub mod config;
 pub mod keys;
+pub mod link;
 
 #[cfg(feature = "ros2")]
 mod bridge;
+#[cfg(feature = "ros2")]
+mod command_stream;
+#[cfg(feature = "ros2")]
+mod supervisor;
 
 use std::sync::Arc;
 
@@ -42,29 +53,42 @@ pub enum Ros2Error {
 
 /// The running bridge; dropping it leaves the ROS graph.
 #[cfg(feature = "ros2")]
-pub use bridge::Bridge;
+#[derive(Debug)]
+pub struct Bridge {
+    supervisor: tokio::task::JoinHandle<()>,
+}
+
+#[cfg(feature = "ros2")]
+impl Drop for Bridge {
+    fn drop(&mut self) {
+        // The session and its tokens go with the task.
+        self.supervisor.abort();
+    }
+}
 
 /// Without the `ros2` feature there is no bridge to run.
 #[cfg(not(feature = "ros2"))]
 #[derive(Debug)]
 pub struct Bridge;
 
-/// Starts the bridge for every bus of `state`.
+/// Starts the bridge for every bus of `state` in the background: it
+/// connects (and reconnects) on its own; only a configuration Zenoh
+/// refuses is an error here.
 #[cfg(feature = "ros2")]
-pub async fn start(
-    state: std::sync::Arc<crate::control::Control>,
+pub fn start(
+    state: Arc<crate::control::Control>,
     cfg: Ros2Config,
     stats: Arc<Ros2Stats>,
 ) -> Result<Bridge, Ros2Error> {
-    bridge::start(state, cfg, stats)
-        .await
-        .map_err(|e| Ros2Error::Zenoh(e.to_string()))
+    let zenoh_cfg = bridge::session_config(&cfg).map_err(|e| Ros2Error::Zenoh(e.to_string()))?;
+    let supervisor = tokio::spawn(supervisor::supervise(state, cfg, zenoh_cfg, stats));
+    Ok(Bridge { supervisor })
 }
 
 /// Without the `ros2` feature: says so.
 #[cfg(not(feature = "ros2"))]
-pub async fn start(
-    _state: std::sync::Arc<crate::control::Control>,
+pub fn start(
+    _state: Arc<crate::control::Control>,
     _cfg: Ros2Config,
     _stats: Arc<Ros2Stats>,
 ) -> Result<Bridge, Ros2Error> {

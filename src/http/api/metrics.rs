@@ -472,8 +472,20 @@ fn bridge_families(m: &mut Exposition, state: &AppState) {
         "",
         if stats.is_some() { 1.0 } else { 0.0 },
     );
+    let connected = stats.is_some_and(|s| s.connected.load(std::sync::atomic::Ordering::Relaxed));
+    m.gauge(
+        "jointd_ros2_connected",
+        "1 when the ROS 2 bridge has a Zenoh session (in client mode: a router reachable).",
+        "",
+        if connected { 1.0 } else { 0.0 },
+    );
     type Field = fn(&crate::control::ros2_stats::Ros2Stats) -> &std::sync::atomic::AtomicU64;
-    let counters: [(&str, &str, Field); 7] = [
+    let counters: [(&str, &str, Field); 8] = [
+        (
+            "jointd_ros2_connects_total",
+            "Zenoh sessions the ROS 2 bridge opened (reconnections included).",
+            |s| &s.connects,
+        ),
         (
             "jointd_ros2_joint_states_total",
             "JointState messages published.",

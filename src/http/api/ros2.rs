@@ -25,6 +25,17 @@ pub(crate) struct Ros2View {
     /// This build has the bridge (cargo feature `ros2`).
     #[schema(example = true)]
     pub built: bool,
+    /// A Zenoh session is open and, in client mode, its router reachable.
+    /// The bridge retries in the background (0.5 s doubling to 30 s) while
+    /// it is not; the daemon serves regardless.
+    #[schema(example = true)]
+    pub connected: bool,
+    /// Sessions opened since start (a reconnection counts again).
+    #[schema(example = 1)]
+    pub connects: u64,
+    /// Why the latest attempt to connect failed, or the latest session was lost.
+    #[schema(example = "Unable to connect to any of [tcp/127.0.0.1:7447]!")]
+    pub last_error: Option<String>,
     /// `JointState` messages published (all buses).
     #[schema(example = 12840)]
     pub joint_states: u64,
@@ -52,8 +63,10 @@ pub(crate) struct Ros2View {
 
 /// The ROS 2 bridge: whether it runs and what it did.
 ///
-/// Counts of messages published and commands taken or refused (with the
-/// latest reason), since the daemon started; all zero when it does not run.
+/// Whether it is connected to the Zenoh network (with the latest error),
+/// and counts of messages published and commands taken or refused (with
+/// the latest reason), since the daemon started; all zero when it does not
+/// run.
 #[utoipa::path(get, path = "/api/v1/ros2", tag = TAG_CONTROL,
     responses((status = 200, description = "The bridge's counters", body = Ros2View), ErrorResponses))]
 async fn ros2_status(State(state): State<AppState>) -> ApiResult<Json<Ros2View>> {
@@ -64,6 +77,14 @@ async fn ros2_status(State(state): State<AppState>) -> ApiResult<Json<Ros2View>>
     Ok(Json(Ros2View {
         enabled: stats.is_some(),
         built: cfg!(feature = "ros2"),
+        connected: stats.is_some_and(|s| s.connected.load(Ordering::Relaxed)),
+        connects: n(|s| &s.connects),
+        last_error: stats.and_then(|s| {
+            s.last_error
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .clone()
+        }),
         joint_states: n(|s| &s.joint_states),
         diagnostics: n(|s| &s.diagnostics),
         commands_applied: n(|s| &s.commands_applied),

@@ -1,0 +1,229 @@
+//! One namespace's `joint_commands` subscription as a teleoperation
+//! stream: each command checked whole ([`super::commands`]), admitted under
+//! the joints' motion epochs ([`Streams`]) and applied; the `[watchdog]`
+//! over the stream, fired when commands stop and when the session goes.
+//! Velocity commands head for a soft limit until told otherwise, so a
+//! stream that sends them is always watched, at most [`VELOCITY_HOLD`]
+//! (whatever `[watchdog]` says, even off).
+
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio::sync::watch;
+
+use super::commands;
+use super::Ros2Stats;
+use crate::bus::authority::Epoch;
+use crate::bus::BusHandle;
+use crate::bus::Setpoint;
+use crate::control::streams::Streams;
+use crate::control::watchdog::{fire_policy, Watchdog};
+use crate::control::Control;
+use crate::control::JointRef;
+use crate::record::cdr::JointState;
+use crate::record::joint_states::Scope;
+
+type Subscriber =
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
+/// The longest a stream of velocity commands may pause before its joints
+/// are stopped (`[watchdog]`'s policy; hold when it has none): a
+/// ros2_control loop sends at 50 Hz or more.
+const VELOCITY_HOLD: Duration = Duration::from_millis(300);
+
+/// Commands after this long a pause begin new streams (see [`Streams`]).
+const STREAM_RESTART_GAP: Duration = Duration::from_millis(500);
+
+/// Takes commands until the session closes (`closing` turns `true` or the
+/// subscription ends); then the watchdog's policy applies to the joints the
+/// stream drove, as when a WebSocket client goes away.
+pub(super) async fn run(
+    state: Arc<Control>,
+    scope: Scope,
+    subscriber: Subscriber,
+    stats: Arc<Ros2Stats>,
+    mut closing: watch::Receiver<bool>,
+) {
+    let mut stream = CommandStream::new(&state, scope, stats);
+    loop {
+        match stream.next(&subscriber, &mut closing).await {
+            Next::Sample(sample) => stream.take(&sample.payload().to_bytes()).await,
+            Next::Fired => {}
+            Next::Closed => break,
+        }
+    }
+    stream.fire("the ROS 2 session closed").await;
+}
+
+/// What waiting for a command came to.
+enum Next {
+    Sample(zenoh::sample::Sample),
+    /// Commands stopped for longer than the hold timeout: the watchdog fired.
+    Fired,
+    /// The session is closing, or the subscription ended.
+    Closed,
+}
+
+/// The state of one subscription's stream.
+struct CommandStream {
+    state: Arc<Control>,
+    scope: Scope,
+    stats: Arc<Ros2Stats>,
+    watchdog: Watchdog,
+    /// The hold timeout the watchdog is armed with (`None`: disarmed).
+    hold: Option<Duration>,
+    streams: Streams,
+    last_command: Option<tokio::time::Instant>,
+    said_bad: bool,
+}
+
+impl CommandStream {
+    fn new(state: &Arc<Control>, scope: Scope, stats: Arc<Ros2Stats>) -> Self {
+        // The one teleop watchdog, as a WebSocket client gets it by default.
+        let default = state.watchdog_default();
+        let hold = Duration::from_millis(default.hold_timeout_ms);
+        let mut watchdog = Watchdog::default();
+        watchdog.arm(hold, default.policy, tokio::time::Instant::now());
+        Self {
+            state: state.clone(),
+            scope,
+            stats,
+            watchdog,
+            hold: (!hold.is_zero()).then_some(hold),
+            streams: Streams::default(),
+            last_command: None,
+            said_bad: false,
+        }
+    }
+
+    /// Waits for the next command, firing the watchdog if it is due first.
+    async fn next(&mut self, subscriber: &Subscriber, closing: &mut watch::Receiver<bool>) -> Next {
+        let deadline = self.watchdog.deadline();
+        let due = async {
+            match deadline {
+                Some(d) => tokio::time::sleep_until(d).await,
+                None => std::future::pending().await,
+            }
+        };
+        tokio::select! {
+            sample = subscriber.recv_async() => match sample {
+                Ok(s) => Next::Sample(s),
+                Err(_) => Next::Closed,
+            },
+            // The guard `wait_for` returns is not `Send`: dropped at once.
+            () = async { drop(closing.wait_for(|c| *c).await) } => Next::Closed,
+            () = due => {
+                self.fire("joint commands stopped").await;
+                Next::Fired
+            }
+        }
+    }
+
+    /// Applies the watchdog's policy to the joints the stream drove, if it
+    /// is armed and has not fired since the last command.
+    async fn fire(&mut self, why: &str) {
+        if let Some((policy, joints)) = self.watchdog.fire() {
+            tracing::warn!(?joints, ?policy, "ROS 2: {why}: watchdog");
+            fire_policy(&self.state, policy, &joints).await;
+            self.stats.watchdog_fired.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// One command: applied whole, or refused whole and counted.
+    async fn take(&mut self, bytes: &[u8]) {
+        let now = tokio::time::Instant::now();
+        // A ROS 2 topic has no way to ask for a new stream: commands after
+        // a pause begin one; a controller streaming on through an e-stop and
+        // a later enable does not drive the joints again until it pauses.
+        let restart = self
+            .last_command
+            .map_or(true, |at| now.duration_since(at) >= STREAM_RESTART_GAP);
+        self.last_command = Some(now);
+        let cmd = match JointState::from_cdr(bytes) {
+            Ok(cmd) => cmd,
+            Err(e) => return self.dropped(format!("not a sensor_msgs/msg/JointState in CDR: {e}")),
+        };
+        let outcome = commands::setpoints(&self.state, &self.scope, &cmd)
+            .and_then(|per_bus| streamed(&self.state, &mut self.streams, per_bus, restart));
+        match outcome {
+            Ok(per_bus) => {
+                if commands::by_velocity(&cmd) {
+                    self.watch_velocities(now);
+                }
+                let mut fed = Vec::new();
+                for (bus, targets) in per_bus {
+                    fed.extend(targets.iter().map(|(id, _, _)| JointRef {
+                        bus: bus.name().to_owned(),
+                        id: *id,
+                    }));
+                    bus.set_targets_under(&targets);
+                }
+                self.watchdog.feed(&fed, now);
+                self.stats.commands_applied.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(why) => self.dropped(why),
+        }
+    }
+
+    /// Arms the watchdog with at most [`VELOCITY_HOLD`].
+    fn watch_velocities(&mut self, now: tokio::time::Instant) {
+        if self.hold.is_some_and(|h| h <= VELOCITY_HOLD) {
+            return;
+        }
+        let policy = self.state.watchdog_default().policy;
+        self.watchdog.arm(VELOCITY_HOLD, policy, now);
+        self.hold = Some(VELOCITY_HOLD);
+    }
+
+    fn dropped(&mut self, why: String) {
+        self.stats.commands_dropped.fetch_add(1, Ordering::Relaxed);
+        if !self.said_bad {
+            self.said_bad = true;
+            tracing::warn!(scope = ?self.scope, "ROS 2: a joint command was dropped whole: {why} (said once; counted in GET /api/v1/ros2)");
+        }
+        *self
+            .stats
+            .last_dropped
+            .lock()
+            .unwrap_or_else(|p| p.into_inner()) = Some(why);
+    }
+}
+
+/// One bus's targets, each under the epoch of its joint's stream.
+type StreamedTargets = (BusHandle, Vec<(u8, Setpoint, Epoch)>);
+
+/// Each bus's targets under the epochs of their joints' streams, or why
+/// the command is refused whole (a stream an e-stop, a disable, a reset, a
+/// fault or a mode change ended).
+fn streamed(
+    state: &Control,
+    streams: &mut Streams,
+    per_bus: Vec<commands::BusTargets>,
+    restart: bool,
+) -> Result<Vec<StreamedTargets>, String> {
+    let joints: Vec<JointRef> = per_bus
+        .iter()
+        .flat_map(|(bus, targets)| {
+            targets.iter().map(|(id, _)| JointRef {
+                bus: bus.name().to_owned(),
+                id: *id,
+            })
+        })
+        .collect();
+    let mut epochs = streams
+        .admit(state, &joints, restart)
+        .map_err(|e| e.to_string())?
+        .into_iter();
+    Ok(per_bus
+        .into_iter()
+        .map(|(bus, targets)| {
+            let under = targets
+                .into_iter()
+                .zip(epochs.by_ref())
+                .map(|((id, sp), epoch)| (id, sp, epoch))
+                .collect();
+            (bus, under)
+        })
+        .collect())
+}
