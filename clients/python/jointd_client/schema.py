@@ -803,6 +803,10 @@ class _Ros2ViewRequired(TypedDict):
     """`joint_commands` applied."""
     commands_dropped: int
     """`joint_commands` refused whole (unknown joint, out of limits, NaN, not enabled)."""
+    connected: bool
+    """A Zenoh session is open and, in client mode, its router reachable. The bridge retries in the background (0.5 s doubling to 30 s) while it is not; the daemon serves regardless."""
+    connects: int
+    """Sessions opened since start (a reconnection counts again)."""
     diagnostics: int
     """`DiagnosticArray` messages published."""
     enabled: bool
@@ -821,6 +825,8 @@ class Ros2View(_Ros2ViewRequired, total=False):
 
     last_dropped: Optional[str]
     """Why the latest one was refused."""
+    last_error: Optional[str]
+    """Why the latest attempt to connect failed, or the latest session was lost."""
 
 
 class ScanRequest(TypedDict):
