@@ -37,16 +37,16 @@ pub struct JointState {
     pub effort: Vec<f64>,
 }
 
-/// A CDR little-endian writer.
-struct Cdr {
-    buf: Vec<u8>,
+/// A CDR little-endian writer (the ROS 2 bridge's messages use it too).
+pub(crate) struct Cdr {
+    pub(crate) buf: Vec<u8>,
 }
 
 /// The encapsulation header: CDR, little-endian, no options.
 const CDR_LE: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
 
 impl Cdr {
-    fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Self {
             buf: CDR_LE.to_vec(),
         }
@@ -58,7 +58,11 @@ impl Cdr {
         self.buf.extend(std::iter::repeat(0).take(pad));
     }
 
-    fn u32(&mut self, v: u32) {
+    pub(crate) fn u8(&mut self, v: u8) {
+        self.buf.push(v);
+    }
+
+    pub(crate) fn u32(&mut self, v: u32) {
         self.align(4);
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
@@ -68,13 +72,13 @@ impl Cdr {
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
 
-    fn string(&mut self, s: &str) {
+    pub(crate) fn string(&mut self, s: &str) {
         self.u32(len_u32(s.len() + 1));
         self.buf.extend_from_slice(s.as_bytes());
         self.buf.push(0);
     }
 
-    fn f64s(&mut self, v: &[f64]) {
+    pub(crate) fn f64s(&mut self, v: &[f64]) {
         self.u32(len_u32(v.len()));
         if !v.is_empty() {
             self.align(8);
@@ -152,7 +156,7 @@ pub fn diagnostic_array_cdr(stamp_ns: u64, frame_id: &str, status: &[DiagnosticS
 }
 
 impl Cdr {
-    fn stamp(&mut self, stamp_ns: u64, frame_id: &str) {
+    pub(crate) fn stamp(&mut self, stamp_ns: u64, frame_id: &str) {
         let sec = i32::try_from(stamp_ns / 1_000_000_000).unwrap_or(i32::MAX);
         self.i32(sec);
         self.u32((stamp_ns % 1_000_000_000) as u32);
@@ -174,13 +178,13 @@ pub enum CdrError {
 }
 
 /// A CDR little-endian reader (the writer's mirror).
-struct CdrReader<'a> {
+pub(crate) struct CdrReader<'a> {
     buf: &'a [u8],
     at: usize,
 }
 
 impl<'a> CdrReader<'a> {
-    fn new(buf: &'a [u8]) -> Result<Self, CdrError> {
+    pub(crate) fn new(buf: &'a [u8]) -> Result<Self, CdrError> {
         let head: [u8; 4] = buf
             .get(..4)
             .and_then(|h| h.try_into().ok())
@@ -206,13 +210,22 @@ impl<'a> CdrReader<'a> {
         Ok(out)
     }
 
-    fn u32(&mut self) -> Result<u32, CdrError> {
+    pub(crate) fn u8(&mut self) -> Result<u8, CdrError> {
+        Ok(self.take(1)?[0])
+    }
+
+    pub(crate) fn i32(&mut self) -> Result<i32, CdrError> {
+        Ok(self.u32()? as i32)
+    }
+
+    pub(crate) fn u32(&mut self) -> Result<u32, CdrError> {
         self.align(4);
         let b = self.take(4)?;
         Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
     }
 
-    fn count(&mut self, elem: usize) -> Result<usize, CdrError> {
+    /// A sequence's length, refused when `elem`-byte elements could not fit.
+    pub(crate) fn count(&mut self, elem: usize) -> Result<usize, CdrError> {
         let n = self.u32()?;
         let left = self.buf.len().saturating_sub(self.at);
         if (n as usize).saturating_mul(elem.max(1)) > left {
@@ -221,7 +234,7 @@ impl<'a> CdrReader<'a> {
         Ok(n as usize)
     }
 
-    fn string(&mut self) -> Result<String, CdrError> {
+    pub(crate) fn string(&mut self) -> Result<String, CdrError> {
         let n = self.count(1)?;
         let at = self.at;
         let bytes = self.take(n)?;
@@ -233,7 +246,7 @@ impl<'a> CdrReader<'a> {
         }
     }
 
-    fn f64s(&mut self) -> Result<Vec<f64>, CdrError> {
+    pub(crate) fn f64s(&mut self) -> Result<Vec<f64>, CdrError> {
         let n = self.count(8)?;
         if n > 0 {
             self.align(8);

@@ -16,15 +16,15 @@ use tokio_stream::wrappers::errors::BroadcastStreamRecvError;
 use tokio_stream::wrappers::BroadcastStream;
 use zenoh::liveliness::LivelinessToken;
 
-use super::command_stream;
+use super::command_stream::{self, Dropped};
 use super::config::{NamespaceBy, Ros2Config, Ros2Mode};
 use super::keys::{self, Kind, NodeIdentity};
-use super::Ros2Stats;
+use super::rosout::Rosout;
+use super::services::{self, Service, ServiceQueryable};
+use super::{diagnostics, trajectory_stream, Ros2Stats};
 use crate::bus::BusHandle;
 use crate::bus::BusSnapshot;
 use crate::control::Control;
-use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
-use crate::record::cdr::{diagnostic_array_cdr, DiagnosticStatus};
 use crate::record::joint_states::{system_ns, JointStates, Scope};
 
 /// How long the tasks of a closing session get to finish (the command
@@ -80,8 +80,8 @@ pub(super) fn session_config(cfg: &Ros2Config) -> zenoh::Result<zenoh::Config> {
     Ok(z)
 }
 
-/// Declares the node, its topics and their tokens on `session`, and starts
-/// publishing and listening.
+/// Declares the node, its topics, services and their tokens on
+/// `session`, and starts publishing, listening and serving.
 pub(super) async fn declare(
     session: &zenoh::Session,
     state: &Arc<Control>,
@@ -89,102 +89,176 @@ pub(super) async fn declare(
     stats: &Arc<Ros2Stats>,
 ) -> zenoh::Result<Declared> {
     let zid = session.zid();
-    let session_gid: [u8; 16] = zid.to_le_bytes();
-    let node = NodeIdentity {
-        domain: cfg.domain(),
-        session: zid.to_string(),
-        node_id: 0,
-        namespace: String::new(),
-        name: cfg.node_name.clone(),
-    };
     let (closing, closed) = watch::channel(false);
     // Built as it goes: a declaration refused half-way drops (and so stops)
     // what was started before it.
-    let mut declared = Declared {
-        tokens: Vec::new(),
-        tasks: Vec::new(),
-        closing,
+    let mut on = On {
+        session,
+        node: NodeIdentity {
+            domain: cfg.domain(),
+            session: zid.to_string(),
+            node_id: 0,
+            namespace: String::new(),
+            name: cfg.node_name.clone(),
+        },
+        session_gid: zid.to_le_bytes(),
+        entity_id: 0,
+        declared: Declared {
+            tokens: Vec::new(),
+            tasks: Vec::new(),
+            closing,
+        },
     };
-    let (tokens, tasks) = (&mut declared.tokens, &mut declared.tasks);
-    tokens.push(
-        session
-            .liveliness()
-            .declare_token(node.node_token())
-            .await?,
-    );
-    let mut entity_id = 0u32;
-    let mut next_entity = || {
-        entity_id += 1;
-        entity_id
-    };
+    let token = on.node.node_token();
+    on.declared
+        .tokens
+        .push(session.liveliness().declare_token(token).await?);
+    let (publisher, gid) = on.publisher("/rosout", LOG).await?;
+    let (rosout, publish_logs) = Rosout::new(&cfg.node_name, publisher, gid);
+    on.spawn(publish_logs);
     for (name, scope) in scopes(state, cfg) {
         let ns = cfg.namespace(&name);
-        let topic = keys::qualified(&ns, "joint_states");
-        let (id, key) = (next_entity(), joint_state_key(&node, &topic));
-        let publisher = session.declare_publisher(key.clone()).await?;
-        tokens.push(announce(session, &node, id, Kind::Publisher, &topic, JOINT_STATE).await?);
-        tracing::debug!(%name, %key, "ROS 2: publishing joint states");
-        tasks.push(tokio::spawn(publish_joint_states(
+        let (publisher, gid) = on
+            .publisher(&keys::qualified(&ns, "joint_states"), JOINT_STATE)
+            .await?;
+        let min_gap = cfg
+            .joint_states_max_hz
+            .map(|hz| Duration::from_secs_f64(1.0 / hz));
+        on.spawn(publish_joint_states(
             state.clone(),
             scope.clone(),
-            cfg.joint_states_max_hz
-                .map(|hz| Duration::from_secs_f64(1.0 / hz)),
+            min_gap,
             publisher,
-            keys::gid(&session_gid, id),
+            gid,
             stats.clone(),
-        )));
+        ));
         let topic = keys::qualified(&ns, "joint_commands");
-        let (id, key) = (next_entity(), joint_state_key(&node, &topic));
-        let subscriber = session.declare_subscriber(key.clone()).await?;
-        tokens.push(announce(session, &node, id, Kind::Subscription, &topic, JOINT_STATE).await?);
-        tracing::debug!(%name, %key, "ROS 2: taking joint commands");
-        tasks.push(tokio::spawn(command_stream::run(
+        let subscriber = on.subscriber(&topic, JOINT_STATE).await?;
+        let dropped = Dropped::new(rosout.clone(), topic);
+        on.spawn(command_stream::run(
             state.clone(),
-            scope,
+            scope.clone(),
             subscriber,
             stats.clone(),
+            dropped,
             closed.clone(),
-        )));
+        ));
+        let topic = keys::qualified(&ns, "joint_trajectory");
+        let subscriber = on.subscriber(&topic, JOINT_TRAJECTORY).await?;
+        let dropped = Dropped::new(rosout.clone(), topic);
+        on.spawn(trajectory_stream::run(
+            state.clone(),
+            scope.clone(),
+            subscriber,
+            stats.clone(),
+            dropped,
+            closed.clone(),
+        ));
+        for service in [Service::Enable, Service::Estop] {
+            let (queryable, key) = on.service(&ns, service).await?;
+            on.spawn(services::serve(
+                state.clone(),
+                scope.clone(),
+                service,
+                queryable,
+                key,
+                closed.clone(),
+            ));
+        }
+        tracing::debug!(%name, %ns, "ROS 2: topics and services declared");
     }
-    let topic = "/diagnostics";
-    let id = next_entity();
-    let key = keys::topic_key(node.domain, topic, DIAGNOSTIC_ARRAY.0, DIAGNOSTIC_ARRAY.1);
-    let publisher = session.declare_publisher(key).await?;
-    tokens.push(announce(session, &node, id, Kind::Publisher, topic, DIAGNOSTIC_ARRAY).await?);
+    let (publisher, gid) = on.publisher("/diagnostics", DIAGNOSTIC_ARRAY).await?;
     let period = Duration::from_secs_f64(1.0 / cfg.diagnostics_hz);
-    tasks.push(tokio::spawn(publish_diagnostics(
+    on.spawn(diagnostics::publish(
         state.clone(),
         publisher,
-        keys::gid(&session_gid, id),
+        gid,
         period,
         stats.clone(),
-    )));
-    Ok(declared)
+    ));
+    Ok(on.declared)
 }
 
 /// A message type on the network: its DDS name and its type hash.
 type RosType = (&'static str, &'static str);
 const JOINT_STATE: RosType = (keys::JOINT_STATE_TYPE, keys::JOINT_STATE_HASH);
+const JOINT_TRAJECTORY: RosType = (keys::JOINT_TRAJECTORY_TYPE, keys::JOINT_TRAJECTORY_HASH);
 const DIAGNOSTIC_ARRAY: RosType = (keys::DIAGNOSTIC_ARRAY_TYPE, keys::DIAGNOSTIC_ARRAY_HASH);
+const LOG: RosType = (keys::LOG_TYPE, keys::LOG_HASH);
 
-fn joint_state_key(node: &NodeIdentity, topic: &str) -> String {
-    keys::topic_key(node.domain, topic, JOINT_STATE.0, JOINT_STATE.1)
+/// Declaring on one session: each endpoint with its entity id and token.
+struct On<'a> {
+    session: &'a zenoh::Session,
+    node: NodeIdentity,
+    session_gid: [u8; 16],
+    entity_id: u32,
+    declared: Declared,
 }
 
-/// The liveliness token that tells the ROS graph an endpoint exists.
-async fn announce(
-    session: &zenoh::Session,
-    node: &NodeIdentity,
-    id: u32,
-    kind: Kind,
-    topic: &str,
-    (type_name, hash): RosType,
-) -> zenoh::Result<LivelinessToken> {
-    session
-        .liveliness()
-        .declare_token(node.endpoint_token(id, kind, topic, type_name, hash))
-        .await
+impl On<'_> {
+    /// The next entity's id, and its liveliness token declared.
+    async fn announce(
+        &mut self,
+        kind: Kind,
+        topic: &str,
+        (type_name, hash): RosType,
+    ) -> zenoh::Result<u32> {
+        self.entity_id += 1;
+        let token = self
+            .node
+            .endpoint_token(self.entity_id, kind, topic, type_name, hash);
+        let token = self.session.liveliness().declare_token(token).await?;
+        self.declared.tokens.push(token);
+        Ok(self.entity_id)
+    }
+
+    fn key(&self, topic: &str, (type_name, hash): RosType) -> String {
+        keys::topic_key(self.node.domain, topic, type_name, hash)
+    }
+
+    /// A publisher and its GID.
+    async fn publisher(
+        &mut self,
+        topic: &str,
+        ty: RosType,
+    ) -> zenoh::Result<(zenoh::pubsub::Publisher<'static>, [u8; 16])> {
+        let publisher = self.session.declare_publisher(self.key(topic, ty)).await?;
+        let id = self.announce(Kind::Publisher, topic, ty).await?;
+        Ok((publisher, keys::gid(&self.session_gid, id)))
+    }
+
+    async fn subscriber(&mut self, topic: &str, ty: RosType) -> zenoh::Result<Subscriber> {
+        let subscriber = self.session.declare_subscriber(self.key(topic, ty)).await?;
+        self.announce(Kind::Subscription, topic, ty).await?;
+        Ok(subscriber)
+    }
+
+    /// A service's queryable (complete, as rmw_zenoh declares it) and its key.
+    async fn service(
+        &mut self,
+        ns: &str,
+        service: Service,
+    ) -> zenoh::Result<(ServiceQueryable, String)> {
+        let (name, type_name, hash) = service.describe();
+        let topic = keys::qualified(ns, name);
+        let key = self.key(&topic, (type_name, hash));
+        let queryable = self
+            .session
+            .declare_queryable(key.clone())
+            .complete(true)
+            .await?;
+        self.announce(Kind::Service, &topic, (type_name, hash))
+            .await?;
+        Ok((queryable, key))
+    }
+
+    fn spawn(&mut self, task: impl std::future::Future<Output = ()> + Send + 'static) {
+        self.declared.tasks.push(tokio::spawn(task));
+    }
 }
+
+type Subscriber =
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
 
 fn now_ns() -> i64 {
     i64::try_from(system_ns(SystemTime::now())).unwrap_or(i64::MAX)
@@ -281,81 +355,5 @@ async fn publish_joint_states(
                 }
             }
         }
-    }
-}
-
-async fn publish_diagnostics(
-    state: Arc<Control>,
-    publisher: zenoh::pubsub::Publisher<'static>,
-    gid: [u8; 16],
-    period: Duration,
-    stats: Arc<Ros2Stats>,
-) {
-    let mut tick = tokio::time::interval(period);
-    let mut sequence = 0i64;
-    let label = state.joint_labeler();
-    loop {
-        tick.tick().await;
-        let mut status = Vec::new();
-        for bus in state.buses() {
-            let snap = bus.snapshot();
-            for dev in snap.devices.values() {
-                let (name, _) = label(bus.name(), dev.dev_id);
-                status.push(joint_status(bus.name(), &name, dev));
-            }
-        }
-        sequence += 1;
-        let ns = now_ns();
-        let cdr = diagnostic_array_cdr(u64::try_from(ns).unwrap_or(0), "", &status);
-        if publisher
-            .put(cdr)
-            .attachment(keys::attachment(sequence, ns, &gid))
-            .await
-            .is_ok()
-        {
-            stats.diagnostics.fetch_add(1, Ordering::Relaxed);
-        }
-    }
-}
-
-/// One joint as `diagnostic_msgs/DiagnosticStatus`: OK running or ready,
-/// WARN disabled by something, ERROR faulted, STALE offline.
-fn joint_status(bus: &str, name: &str, dev: &crate::bus::handle::DeviceState) -> DiagnosticStatus {
-    let info = dev.info01.as_ref().map(|(i, _)| *i);
-    let fault = info.map_or(0, |i| active_fault(i.err_code));
-    let (level, message) = if !dev.online {
-        (3, "offline".to_string())
-    } else if fault != 0 {
-        (2, format!("fault: {}", fault_name(fault)))
-    } else if let Some(reason) = dev.disabled_reason {
-        (1, format!("disabled ({})", reason.name()))
-    } else {
-        (
-            0,
-            info.map_or("no status yet".into(), |i| {
-                fsm_name_in(i.fsm, dev.firmware.map(|f| f.revision)).to_string()
-            }),
-        )
-    };
-    let mut values = vec![
-        ("bus".to_string(), bus.to_string()),
-        ("id".to_string(), dev.dev_id.to_string()),
-        ("online".to_string(), dev.online.to_string()),
-    ];
-    if let Some(i) = info {
-        values.push((
-            "state".into(),
-            fsm_name_in(i.fsm, dev.firmware.map(|f| f.revision)).into(),
-        ));
-        values.push(("fault".into(), fault_name(fault).into()));
-        values.push(("temperature_c".into(), format!("{:.1}", i.temp_c())));
-        values.push(("voltage_v".into(), format!("{:.2}", i.vbus_v())));
-    }
-    DiagnosticStatus {
-        level,
-        name: format!("jointd: {name}"),
-        message,
-        hardware_id: format!("{bus}/{}", dev.dev_id),
-        values,
     }
 }

@@ -12,7 +12,8 @@ use std::time::Duration;
 
 use tokio::sync::watch;
 
-use super::commands;
+use super::commands::{self, Refused};
+use super::rosout::Rosout;
 use super::Ros2Stats;
 use crate::bus::authority::Epoch;
 use crate::bus::BusHandle;
@@ -43,9 +44,10 @@ pub(super) async fn run(
     scope: Scope,
     subscriber: Subscriber,
     stats: Arc<Ros2Stats>,
+    dropped: Dropped,
     mut closing: watch::Receiver<bool>,
 ) {
-    let mut stream = CommandStream::new(&state, scope, stats);
+    let mut stream = CommandStream::new(&state, scope, stats, dropped);
     loop {
         match stream.next(&subscriber, &mut closing).await {
             Next::Sample(sample) => stream.take(&sample.payload().to_bytes()).await,
@@ -75,11 +77,42 @@ struct CommandStream {
     hold: Option<Duration>,
     streams: Streams,
     last_command: Option<tokio::time::Instant>,
-    said_bad: bool,
+    dropped: Dropped,
+}
+
+/// Where dropped commands are said.
+pub(super) struct Dropped {
+    pub rosout: Rosout,
+    /// The topic the commands came on.
+    pub topic: String,
+    /// The daemon's log has said one (it says the first only).
+    pub logged: bool,
+}
+
+impl Dropped {
+    pub(super) fn new(rosout: Rosout, topic: String) -> Self {
+        Self {
+            rosout,
+            topic,
+            logged: false,
+        }
+    }
+
+    /// Counts a command refused whole, keeps why, says it on `/rosout`
+    /// (throttled per cause) and, the first time, in the daemon's log.
+    pub(super) fn say(&mut self, stats: &Ros2Stats, what: &str, refused: Refused) {
+        stats.commands_dropped.fetch_add(1, Ordering::Relaxed);
+        let msg = format!("{what} on {} dropped whole: {}", self.topic, refused.why);
+        if !std::mem::replace(&mut self.logged, true) {
+            tracing::warn!(cause = %refused.cause, "ROS 2: {msg} (said once here; on /rosout once per cause per 5 s; counted in GET /api/v1/ros2)");
+        }
+        self.rosout.warn(&refused.cause, msg);
+        *stats.last_dropped.lock().unwrap_or_else(|p| p.into_inner()) = Some(refused.why);
+    }
 }
 
 impl CommandStream {
-    fn new(state: &Arc<Control>, scope: Scope, stats: Arc<Ros2Stats>) -> Self {
+    fn new(state: &Arc<Control>, scope: Scope, stats: Arc<Ros2Stats>, dropped: Dropped) -> Self {
         // The one teleop watchdog, as a WebSocket client gets it by default.
         let default = state.watchdog_default();
         let hold = Duration::from_millis(default.hold_timeout_ms);
@@ -93,7 +126,7 @@ impl CommandStream {
             hold: (!hold.is_zero()).then_some(hold),
             streams: Streams::default(),
             last_command: None,
-            said_bad: false,
+            dropped,
         }
     }
 
@@ -142,7 +175,10 @@ impl CommandStream {
         self.last_command = Some(now);
         let cmd = match JointState::from_cdr(bytes) {
             Ok(cmd) => cmd,
-            Err(e) => return self.dropped(format!("not a sensor_msgs/msg/JointState in CDR: {e}")),
+            Err(e) => {
+                let why = format!("not a sensor_msgs/msg/JointState in CDR: {e}");
+                return self.dropped(Refused::new("not-cdr", why));
+            }
         };
         let outcome = commands::setpoints(&self.state, &self.scope, &cmd)
             .and_then(|per_bus| streamed(&self.state, &mut self.streams, per_bus, restart));
@@ -176,17 +212,8 @@ impl CommandStream {
         self.hold = Some(VELOCITY_HOLD);
     }
 
-    fn dropped(&mut self, why: String) {
-        self.stats.commands_dropped.fetch_add(1, Ordering::Relaxed);
-        if !self.said_bad {
-            self.said_bad = true;
-            tracing::warn!(scope = ?self.scope, "ROS 2: a joint command was dropped whole: {why} (said once; counted in GET /api/v1/ros2)");
-        }
-        *self
-            .stats
-            .last_dropped
-            .lock()
-            .unwrap_or_else(|p| p.into_inner()) = Some(why);
+    fn dropped(&mut self, refused: Refused) {
+        self.dropped.say(&self.stats, "a joint command", refused);
     }
 }
 
@@ -201,7 +228,7 @@ fn streamed(
     streams: &mut Streams,
     per_bus: Vec<commands::BusTargets>,
     restart: bool,
-) -> Result<Vec<StreamedTargets>, String> {
+) -> Result<Vec<StreamedTargets>, Refused> {
     let joints: Vec<JointRef> = per_bus
         .iter()
         .flat_map(|(bus, targets)| {
@@ -211,10 +238,7 @@ fn streamed(
             })
         })
         .collect();
-    let mut epochs = streams
-        .admit(state, &joints, restart)
-        .map_err(|e| e.to_string())?
-        .into_iter();
+    let mut epochs = streams.admit(state, &joints, restart)?.into_iter();
     Ok(per_bus
         .into_iter()
         .map(|(bus, targets)| {

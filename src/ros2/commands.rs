@@ -6,9 +6,12 @@
 //! velocities only (rad/s at the output shaft: [`velocity::request`] makes
 //! each a target toward the joint's soft limit at that speed). A command
 //! with one bad joint is refused whole: nothing of it is applied.
+//! [`Refused`] says why, and under which cause (what `/rosout` is
+//! throttled by).
 
 use crate::bus::{BusHandle, Setpoint};
 use crate::control::batch::{self, BatchItem};
+use crate::control::error::ControlError;
 use crate::control::joints::known_device;
 use crate::control::targets::TargetRequest;
 use crate::control::velocity;
@@ -21,16 +24,38 @@ use crate::record::joint_states::Scope;
 /// Targets for joints of one bus.
 pub(crate) type BusTargets = (BusHandle, Vec<(u8, Setpoint)>);
 
-/// The setpoints `cmd` asks of the joints of `scope` (a bus, or a hand on
-/// one or more buses), grouped by bus; or why it is refused.
-pub(crate) fn setpoints(
-    state: &std::sync::Arc<Control>,
-    scope: &Scope,
-    cmd: &JointState,
-) -> Result<Vec<BusTargets>, String> {
-    check_shape(cmd)?;
-    let label = state.joint_labeler();
-    let candidates: Vec<(String, u8)> = match scope {
+/// Why a command (or trajectory) was refused whole: its cause, a short
+/// name (the control core's problem name where it refused), and the words.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Refused {
+    pub cause: String,
+    pub why: String,
+}
+
+impl Refused {
+    pub(crate) fn new(cause: &str, why: impl Into<String>) -> Self {
+        Self {
+            cause: cause.to_owned(),
+            why: why.into(),
+        }
+    }
+}
+
+impl From<ControlError> for Refused {
+    fn from(e: ControlError) -> Self {
+        let cause = match &e {
+            ControlError::Invalid { kind, .. } => kind.name(),
+            ControlError::NotFound { kind, .. } | ControlError::Conflict { kind, .. } => kind,
+            ControlError::Bus(_) => "bus",
+            _ => "internal",
+        };
+        Self::new(cause, e.to_string())
+    }
+}
+
+/// The joints of `scope` a name may mean: (bus, id).
+fn candidates(state: &Control, scope: &Scope) -> Vec<(String, u8)> {
+    match scope {
         Scope::Bus(bus) => state
             .bus(bus)
             .map(|b| {
@@ -42,35 +67,62 @@ pub(crate) fn setpoints(
             })
             .unwrap_or_default(),
         Scope::Hand { joints, .. } => joints.clone(),
-    };
+    }
+}
+
+/// The joints of `scope` named `names` (as `joint_states` names them), in
+/// order; or the first name that is none of them.
+pub(crate) fn joints_named(
+    state: &std::sync::Arc<Control>,
+    scope: &Scope,
+    names: &[String],
+) -> Result<Vec<JointRef>, Refused> {
+    let label = state.joint_labeler();
+    let candidates = candidates(state, scope);
+    names
+        .iter()
+        .map(|name| {
+            candidates
+                .iter()
+                .find(|(b, id)| label(b, *id).0 == *name)
+                .map(|(bus, id)| JointRef {
+                    bus: bus.clone(),
+                    id: *id,
+                })
+                .ok_or_else(|| {
+                    Refused::new("unknown-joint", format!("no joint named `{name}` here"))
+                })
+        })
+        .collect()
+}
+
+/// The setpoints `cmd` asks of the joints of `scope` (a bus, or a hand on
+/// one or more buses), grouped by bus; or why it is refused.
+pub(crate) fn setpoints(
+    state: &std::sync::Arc<Control>,
+    scope: &Scope,
+    cmd: &JointState,
+) -> Result<Vec<BusTargets>, Refused> {
+    check_shape(cmd).map_err(|why| Refused::new("malformed", why))?;
+    let joints = joints_named(state, scope, &cmd.name)?;
     let mut items = Vec::with_capacity(cmd.name.len());
-    for (i, name) in cmd.name.iter().enumerate() {
-        let (bus, id) = candidates
-            .iter()
-            .find(|(b, id)| label(b, *id).0 == *name)
-            .ok_or_else(|| format!("no joint named `{name}` here"))?;
+    for (i, (name, joint)) in cmd.name.iter().zip(joints).enumerate() {
         let field = format!("{name}.");
         let request = if cmd.position.is_empty() {
-            velocity_request(state, bus, *id, cmd.velocity[i], &field)?
+            velocity_request(state, &joint.bus, joint.id, cmd.velocity[i], &field)?
         } else {
             position_request(name, cmd.position[i], cmd.velocity.get(i).copied())?
         };
         items.push(BatchItem {
-            joint: JointRef {
-                bus: bus.clone(),
-                id: *id,
-            },
+            joint,
             request,
             field,
         });
     }
-    let per_bus = batch::resolve(state, &items).map_err(|e| e.to_string())?;
+    let per_bus = batch::resolve(state, &items)?;
     per_bus
         .into_iter()
-        .map(|(name, targets)| {
-            let bus = state.bus(&name).map_err(|e| e.to_string())?.clone();
-            Ok((bus, targets))
-        })
+        .map(|(name, targets)| Ok((state.bus(&name)?.clone(), targets)))
         .collect()
 }
 
@@ -103,10 +155,13 @@ fn check_shape(cmd: &JointState) -> Result<(), String> {
 }
 
 /// A position (rad), its velocity (rad/s) if any as the speed limit.
-fn position_request(name: &str, rad: f64, rad_s: Option<f64>) -> Result<TargetRequest, String> {
+fn position_request(name: &str, rad: f64, rad_s: Option<f64>) -> Result<TargetRequest, Refused> {
     let dps = rad_s.map(|v| v.to_degrees().abs());
     if !rad.is_finite() || dps.is_some_and(|v| !v.is_finite()) {
-        return Err(format!("joint `{name}`: not a finite number"));
+        return Err(Refused::new(
+            "not-finite",
+            format!("joint `{name}`: not a finite number"),
+        ));
     }
     Ok(TargetRequest {
         position_deg: Some(rad.to_degrees()),
@@ -124,11 +179,13 @@ fn velocity_request(
     id: u8,
     rad_s: f64,
     field: &str,
-) -> Result<TargetRequest, String> {
-    let snap = state.bus(bus).map_err(|e| e.to_string())?.snapshot();
-    let dev = known_device(&snap, id).map_err(|e| e.to_string())?;
+) -> Result<TargetRequest, Refused> {
+    let snap = state.bus(bus)?.snapshot();
+    let dev = known_device(&snap, id)?;
     let limits = state.limits(bus, id);
     let cal = state.calibration(bus, id);
-    velocity::request(dev, &limits, &cal, rad_s.to_degrees(), field)
-        .map_err(|e| format!("joint `{}`: {e}", field.trim_end_matches('.')))
+    velocity::request(dev, &limits, &cal, rad_s.to_degrees(), field).map_err(|e| {
+        let words = format!("joint `{}`: {e}", field.trim_end_matches('.'));
+        Refused::from(e.with_detail(words))
+    })
 }

@@ -16,7 +16,21 @@
 //! Type hashes (REP-2016, RIHS01), as `ros2 topic info --verbose` prints
 //! them on Jazzy and as `rosbags` computes them from the definitions:
 //! `sensor_msgs/msg/JointState` [`JOINT_STATE_HASH`],
-//! `diagnostic_msgs/msg/DiagnosticArray` [`DIAGNOSTIC_ARRAY_HASH`].
+//! `diagnostic_msgs/msg/DiagnosticArray` [`DIAGNOSTIC_ARRAY_HASH`],
+//! `trajectory_msgs/msg/JointTrajectory` [`JOINT_TRAJECTORY_HASH`],
+//! `rcl_interfaces/msg/Log` [`LOG_HASH`].
+//!
+//! Services (rmw_zenoh's `rmw_service_data.cpp`): a queryable on
+//! `<domain_id>/<service, no leading />/<DDS service type>/<hash>`, the
+//! type being the service's (`std_srvs::srv::dds_::SetBool_`, not its
+//! `Request_` or `Response_`), its hash the service's type description's
+//! (request, response and event message; REP-2016); a request's
+//! attachment is the client's sequence number, timestamp and GID, and the
+//! reply's carries the same sequence number and GID with the server's
+//! timestamp. Service hashes are computed as `rosbags` computes message
+//! hashes, over the service description; the method gives the design
+//! document's `example_interfaces/srv/AddTwoInts` hash
+//! (`RIHS01_e118de6b…`) to the bit.
 
 pub const JOINT_STATE_TYPE: &str = "sensor_msgs::msg::dds_::JointState_";
 pub const JOINT_STATE_HASH: &str =
@@ -24,6 +38,19 @@ pub const JOINT_STATE_HASH: &str =
 pub const DIAGNOSTIC_ARRAY_TYPE: &str = "diagnostic_msgs::msg::dds_::DiagnosticArray_";
 pub const DIAGNOSTIC_ARRAY_HASH: &str =
     "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e";
+
+pub const JOINT_TRAJECTORY_TYPE: &str = "trajectory_msgs::msg::dds_::JointTrajectory_";
+pub const JOINT_TRAJECTORY_HASH: &str =
+    "RIHS01_179b33eba59d676f6d967ac71fe35e7ca2f64b2f3928f4a018cec115e213796e";
+pub const LOG_TYPE: &str = "rcl_interfaces::msg::dds_::Log_";
+pub const LOG_HASH: &str =
+    "RIHS01_e28ce254ca8abc06abf92773b74602cdbf116ed34fbaf294fb9f81da9f318eac";
+pub const SET_BOOL_TYPE: &str = "std_srvs::srv::dds_::SetBool_";
+pub const SET_BOOL_HASH: &str =
+    "RIHS01_abe9e4bb6b41b40e6789712c00ec8871923e089af3f667a79992a428cff2da0a";
+pub const TRIGGER_TYPE: &str = "std_srvs::srv::dds_::Trigger_";
+pub const TRIGGER_HASH: &str =
+    "RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f";
 
 /// The QoS every jointd endpoint declares, in rmw_zenoh's compact form:
 /// reliability, durability and history kinds left at their defaults
@@ -36,6 +63,8 @@ pub const QOS: &str = "::,10:,:,:,,";
 pub enum Kind {
     Publisher,
     Subscription,
+    /// A service server.
+    Service,
 }
 
 impl Kind {
@@ -43,6 +72,7 @@ impl Kind {
         match self {
             Self::Publisher => "MP",
             Self::Subscription => "MS",
+            Self::Service => "SS",
         }
     }
 }
@@ -141,6 +171,21 @@ pub fn attachment(sequence: i64, source_ns: i64, gid: &[u8; 16]) -> Vec<u8> {
     a
 }
 
+/// A request's attachment: the client's sequence number, its timestamp
+/// and its GID; `None` when it is not in rmw_zenoh's layout.
+pub fn parse_attachment(a: &[u8]) -> Option<(i64, i64, [u8; 16])> {
+    let [seq, ts] = [&a.get(..8)?, &a.get(8..16)?].map(|b| {
+        let mut x = [0u8; 8];
+        x.copy_from_slice(b);
+        i64::from_le_bytes(x)
+    });
+    if *a.get(16)? != 16 {
+        return None;
+    }
+    let gid: [u8; 16] = a.get(17..33)?.try_into().ok()?;
+    Some((seq, ts, gid))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -223,5 +268,13 @@ mod tests {
         assert_eq!(a[16], 16);
         assert_eq!(&a[17..], &g);
         assert_ne!(gid(&[7; 16], 3), gid(&[7; 16], 4), "one GID per entity");
+        assert_eq!(
+            parse_attachment(&a),
+            Some((5, 1_700_000_000_000_000_000, g))
+        );
+        assert_eq!(parse_attachment(&a[..32]), None);
+        let mut odd = a.clone();
+        odd[16] = 8;
+        assert_eq!(parse_attachment(&odd), None);
     }
 }

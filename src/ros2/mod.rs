@@ -1,7 +1,9 @@
 //! ROS 2 over Zenoh: `sensor_msgs/msg/JointState` on
 //! `/<namespace>/joint_states` per bus at the telemetry rate,
 //! `diagnostic_msgs/msg/DiagnosticArray` on `/diagnostics`, and
-//! `/<namespace>/joint_commands` taken as setpoints; named, encoded and
+//! `/<namespace>/joint_commands` taken as setpoints, `joint_trajectory` as
+//! moves, the services `enable` and `estop`, `/rosout` for dropped
+//! commands; named, encoded and
 //! announced as `rmw_zenoh` does, so ROS 2 nodes on rmw_zenoh (and `ros2
 //! topic list` / `echo`) see them with no bridge of their own.
 //!
@@ -9,11 +11,17 @@
 //! - [`keys`]: key expressions, liveliness tokens, attachments, type
 //!   hashes (the design document is cited there);
 //! - [`commands`]: a command checked whole and turned into setpoints;
+//! - [`trajectory`]: a `JointTrajectory` as a move request;
+//! - [`msgs`]: the CDR of the services' requests and responses,
+//!   `JointTrajectory` and `Log`;
+//! - [`throttle`]: each cause on `/rosout` at most once per 5 s;
 //! - [`link`]: when to try the router again and what to log about it;
 //! - with the cargo feature `ros2` (Zenoh adds minutes to a cold build):
 //!   `supervisor` (the one background task: the session, opened and opened
 //!   again), `bridge` (publishers, subscriptions and tokens on a session),
-//!   `command_stream` (one `joint_commands` subscription as a teleop stream).
+//!   `command_stream` (one `joint_commands` subscription as a teleop stream),
+//!   `trajectory_stream` (`joint_trajectory` as moves), `services`
+//!   (`enable`, `estop`), `rosout`, `diagnostics` (per bus and per joint).
 //!
 //! The bridge never holds the daemon: without a router the buses and the
 //! API serve as ever, and `GET /api/v1/ros2` says `connected: false`.
@@ -22,18 +30,33 @@
 //! Positions are rad, velocities rad/s at the output shaft, and **effort is
 //! the q-axis current in A**, in each joint's calibrated frame.
 
-#[cfg(feature = "ros2")]
+// Pure, so tested without the `ros2` feature; only the bridge uses them.
+#[cfg_attr(not(feature = "ros2"), allow(dead_code))]
 pub(crate) mod commands;
 pub mod config;
 pub mod keys;
 pub mod link;
+#[cfg_attr(not(feature = "ros2"), allow(dead_code))]
+pub(crate) mod msgs;
+#[cfg_attr(not(feature = "ros2"), allow(dead_code))]
+pub(crate) mod throttle;
+#[cfg_attr(not(feature = "ros2"), allow(dead_code))]
+pub(crate) mod trajectory;
 
 #[cfg(feature = "ros2")]
 mod bridge;
 #[cfg(feature = "ros2")]
 mod command_stream;
 #[cfg(feature = "ros2")]
+mod diagnostics;
+#[cfg(feature = "ros2")]
+mod rosout;
+#[cfg(feature = "ros2")]
+mod services;
+#[cfg(feature = "ros2")]
 mod supervisor;
+#[cfg(feature = "ros2")]
+mod trajectory_stream;
 
 use std::sync::Arc;
 

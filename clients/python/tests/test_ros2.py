@@ -110,8 +110,8 @@ def test_joint_states_commands_diagnostics_and_tokens(ros2):
 
     diag = TS.deserialize_cdr(diagnostics[-1], DIAGNOSTICS)
     names = [s.name for s in diag.status]
-    assert names == [f"jointd: sim0_{i}" for i in range(1, 5)], names
-    values = {kv.key: kv.value for kv in diag.status[0].values}
+    assert names == ["jointd: bus sim0"] + [f"jointd: sim0_{i}" for i in range(1, 5)], names
+    values = {kv.key: kv.value for kv in diag.status[1].values}
     assert {"state", "fault", "temperature_c", "voltage_v", "online"} <= values.keys(), values
     assert values["online"] == "true"
 
@@ -164,14 +164,16 @@ def test_joint_states_commands_diagnostics_and_tokens(ros2):
     assert len(node) == 1 and node[0][:2] == ["@ros2_lv", "0"] and node[0][6:] == ["%", "%", "jointd"], tokens
     zid = node[0][2]
     endpoints = {(p[5], p[9]): p for p in parts if p[5] in ("MP", "MS")}
-    assert set(endpoints) == {("MP", "%sim0%joint_states"), ("MS", "%sim0%joint_commands"),
-                              ("MP", "%diagnostics")}, tokens
+    types = {("MP", "%sim0%joint_states"): JOINT_STATE, ("MS", "%sim0%joint_commands"): JOINT_STATE,
+             ("MS", "%sim0%joint_trajectory"): "trajectory_msgs/msg/JointTrajectory",
+             ("MP", "%diagnostics"): DIAGNOSTICS, ("MP", "%rosout"): "rcl_interfaces/msg/Log"}
+    assert set(endpoints) == set(types), tokens
     for (kind, topic), p in endpoints.items():
         assert len(p) == 13 and p[2] == zid and p[3] == "0", p
-        ros_type = DIAGNOSTICS if "diagnostics" in topic else JOINT_STATE
+        ros_type = types[(kind, topic)]
         assert p[10] == dds_name(ros_type) and p[11] == TS.hash_rihs01(ros_type), p
         assert len(p[12].split(":")) == 6, p[12]
-    assert len({p[4] for p in endpoints.values()}) == 3, "an entity id each"
+    assert len({p[4] for p in endpoints.values()}) == len(types), "an entity id each"
 
 
 def test_a_namespace_per_hand(tmp_path):

@@ -1,0 +1,180 @@
+//! A namespace's services, served as rmw_zenoh serves them (a queryable
+//! on the service's key expression and an `SS` token; see [`super::keys`]):
+//! `<ns>/enable` (`std_srvs/srv/SetBool`: `true` enables every joint of the
+//! bus or hand, `false` disables them) and `<ns>/estop`
+//! (`std_srvs/srv/Trigger`: the e-stop of the bus, or of every bus a
+//! hand's joints are on). Both through the calls REST makes
+//! (`BusHandle::enable` / `disable`, [`crate::control::estop::stop`]).
+//! Each service has its own task, so an e-stop never waits behind an
+//! enable still confirming.
+
+use std::sync::Arc;
+
+use tokio::sync::watch;
+use zenoh::handlers::FifoChannelHandler;
+use zenoh::query::{Query, Queryable};
+
+use super::keys;
+use super::msgs;
+use crate::bus::{BusHandle, Targets};
+use crate::control::Control;
+use crate::record::joint_states::Scope;
+
+pub(super) type ServiceQueryable = Queryable<FifoChannelHandler<Query>>;
+
+/// Which service a queryable serves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Service {
+    /// `std_srvs/srv/SetBool`.
+    Enable,
+    /// `std_srvs/srv/Trigger`.
+    Estop,
+}
+
+impl Service {
+    /// Its name under the namespace, its DDS type and hash.
+    pub(super) fn describe(self) -> (&'static str, &'static str, &'static str) {
+        match self {
+            Self::Enable => ("enable", keys::SET_BOOL_TYPE, keys::SET_BOOL_HASH),
+            Self::Estop => ("estop", keys::TRIGGER_TYPE, keys::TRIGGER_HASH),
+        }
+    }
+}
+
+/// Answers requests until the session closes.
+pub(super) async fn serve(
+    state: Arc<Control>,
+    scope: Scope,
+    service: Service,
+    queryable: ServiceQueryable,
+    key: String,
+    mut closing: watch::Receiver<bool>,
+) {
+    loop {
+        let query = tokio::select! {
+            q = queryable.recv_async() => match q {
+                Ok(q) => q,
+                Err(_) => return,
+            },
+            // The guard `wait_for` returns is not `Send`: dropped at once.
+            () = async { drop(closing.wait_for(|c| *c).await) } => return,
+        };
+        let payload = query
+            .payload()
+            .map(|p| p.to_bytes().into_owned())
+            .unwrap_or_default();
+        let (success, message) = match service {
+            Service::Enable => match msgs::set_bool_request(&payload) {
+                Ok(on) => set_enabled(&state, &scope, on).await,
+                Err(e) => (false, format!("not a std_srvs/srv/SetBool request: {e}")),
+            },
+            Service::Estop => {
+                // An e-stop is not refused for a malformed request.
+                let _ = msgs::trigger_request(&payload);
+                estop(&state, &scope).await
+            }
+        };
+        tracing::info!(?scope, ?service, success, %message, "ROS 2: service called");
+        reply(&query, &key, success, &message).await;
+    }
+}
+
+/// The response, with the request's sequence number and client GID and
+/// the time now, as rmw_zenoh's clients match replies to requests.
+async fn reply(query: &Query, key: &str, success: bool, message: &str) {
+    let (sequence, _, gid) = query
+        .attachment()
+        .and_then(|a| keys::parse_attachment(&a.to_bytes()))
+        .unwrap_or((0, 0, [0; 16]));
+    let now = i64::try_from(crate::record::joint_states::system_ns(
+        std::time::SystemTime::now(),
+    ))
+    .unwrap_or(i64::MAX);
+    let sent = query
+        .reply(key, msgs::service_response(success, message))
+        .attachment(keys::attachment(sequence, now, &gid))
+        .await;
+    if let Err(e) = sent {
+        tracing::debug!(error = %e, "ROS 2: a service reply could not be sent");
+    }
+}
+
+/// Each bus of the scope with the joints of it the scope has.
+fn groups(state: &Control, scope: &Scope) -> Vec<(BusHandle, Targets)> {
+    match scope {
+        Scope::Bus(name) => state
+            .bus(name)
+            .map(|b| vec![(b.clone(), Targets::All)])
+            .unwrap_or_default(),
+        Scope::Hand { joints, .. } => {
+            let mut out: Vec<(BusHandle, Vec<u8>)> = Vec::new();
+            for (bus, id) in joints {
+                match out.iter_mut().find(|(b, _)| b.name() == bus) {
+                    Some((_, ids)) => ids.push(*id),
+                    None => {
+                        if let Ok(b) = state.bus(bus) {
+                            out.push((b.clone(), vec![*id]));
+                        }
+                    }
+                }
+            }
+            out.into_iter()
+                .map(|(b, ids)| (b, Targets::Ids(ids)))
+                .collect()
+        }
+    }
+}
+
+/// Enables (or disables) every joint of the scope, bus by bus; success
+/// when every bus confirmed it.
+async fn set_enabled(state: &Control, scope: &Scope, on: bool) -> (bool, String) {
+    let verb = if on { "enabled" } else { "disabled" };
+    let mut done = Vec::new();
+    let mut failed = Vec::new();
+    for (bus, targets) in groups(state, scope) {
+        let what = match &targets {
+            Targets::All => format!("every joint of bus `{}`", bus.name()),
+            Targets::Ids(ids) => format!("joints {ids:?} of bus `{}`", bus.name()),
+        };
+        let result = if on {
+            bus.enable(targets).await
+        } else {
+            bus.disable(targets).await
+        };
+        match result {
+            Ok(()) => done.push(what),
+            Err(e) => failed.push(format!("{what}: {e}")),
+        }
+    }
+    if failed.is_empty() && !done.is_empty() {
+        (true, format!("{verb} {}", done.join(", ")))
+    } else if done.is_empty() && failed.is_empty() {
+        (false, "no joints here".into())
+    } else {
+        let mut msg = format!("not {verb}: {}", failed.join("; "));
+        if !done.is_empty() {
+            msg.push_str(&format!(" ({verb}: {})", done.join(", ")));
+        }
+        (false, msg)
+    }
+}
+
+/// The e-stop of the scope's buses, as REST's `POST /buses/{bus}/estop`.
+async fn estop(state: &Control, scope: &Scope) -> (bool, String) {
+    let buses: Vec<BusHandle> = groups(state, scope).into_iter().map(|(b, _)| b).collect();
+    let result = crate::control::estop::stop(buses).await;
+    let each: Vec<String> = result
+        .buses
+        .iter()
+        .map(|b| match &b.error {
+            None => format!(
+                "bus `{}` stopped ({} confirmed, {} unconfirmed)",
+                b.bus,
+                b.confirmed.len(),
+                b.unconfirmed.len()
+            ),
+            Some(e) => format!("bus `{}` NOT confirmed stopped: {e}", b.bus),
+        })
+        .collect();
+    (result.stopped, format!("e-stop: {}", each.join("; ")))
+}

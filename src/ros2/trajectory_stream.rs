@@ -1,0 +1,71 @@
+//! `<ns>/joint_trajectory` (`trajectory_msgs/msg/JointTrajectory`): each
+//! message is a move ([`crate::control::moves`], as `POST /api/v1/moves`
+//! starts one) through its points, each reached at its `time_from_start`
+//! from the moment it arrives, the joints named as in `joint_commands`. The
+//! path is checked whole (soft limits, speed limits, enabled joints,
+//! position mode) before any joint moves; a refused trajectory is dropped
+//! whole, counted and said as a dropped command is. The move is
+//! [`super::trajectory`]'s.
+
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+
+use tokio::sync::watch;
+
+use super::command_stream::Dropped;
+use super::commands::{joints_named, Refused};
+use super::msgs::JointTrajectory;
+use super::trajectory::move_request;
+use super::Ros2Stats;
+use crate::control::moves;
+use crate::control::Control;
+use crate::record::joint_states::Scope;
+
+type Subscriber =
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
+/// Takes trajectories until the session closes.
+pub(super) async fn run(
+    state: Arc<Control>,
+    scope: Scope,
+    subscriber: Subscriber,
+    stats: Arc<Ros2Stats>,
+    mut dropped: Dropped,
+    mut closing: watch::Receiver<bool>,
+) {
+    loop {
+        let sample = tokio::select! {
+            s = subscriber.recv_async() => match s {
+                Ok(s) => s,
+                Err(_) => return,
+            },
+            // The guard `wait_for` returns is not `Send`: dropped at once.
+            () = async { drop(closing.wait_for(|c| *c).await) } => return,
+        };
+        let started = match JointTrajectory::from_cdr(&sample.payload().to_bytes()) {
+            Ok(t) => start(&state, &scope, &t).await,
+            Err(e) => Err(Refused::new(
+                "not-cdr",
+                format!("not a trajectory_msgs/msg/JointTrajectory in CDR: {e}"),
+            )),
+        };
+        match started {
+            Ok(id) => {
+                stats.commands_applied.fetch_add(1, Ordering::Relaxed);
+                tracing::info!(
+                    move_id = id,
+                    ?scope,
+                    "ROS 2: a joint trajectory started a move"
+                );
+            }
+            Err(refused) => dropped.say(&stats, "a joint trajectory", refused),
+        }
+    }
+}
+
+/// Starts the trajectory's move; its id.
+async fn start(state: &Arc<Control>, scope: &Scope, t: &JointTrajectory) -> Result<u64, Refused> {
+    let joints = joints_named(state, scope, &t.joint_names)?;
+    let req = move_request(t, joints)?;
+    Ok(moves::start(state, &req).await?.id)
+}
