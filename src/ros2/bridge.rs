@@ -17,7 +17,7 @@ use tokio_stream::wrappers::BroadcastStream;
 use zenoh::liveliness::LivelinessToken;
 
 use super::command_stream::{self, Dropped};
-use super::config::{NamespaceBy, Ros2Config, Ros2Mode};
+use super::config::{Distro, NamespaceBy, Ros2Config, Ros2Mode};
 use super::keys::{self, Kind, NodeIdentity};
 use super::rosout::Rosout;
 use super::services::{self, Service, ServiceQueryable};
@@ -103,6 +103,7 @@ pub(super) async fn declare(
         },
         session_gid: zid.to_le_bytes(),
         entity_id: 0,
+        distro: cfg.distro,
         declared: Declared {
             tokens: Vec::new(),
             tasks: Vec::new(),
@@ -192,6 +193,8 @@ struct On<'a> {
     node: NodeIdentity,
     session_gid: [u8; 16],
     entity_id: u32,
+    /// Whose key form: Humble's has no type hashes.
+    distro: Distro,
     declared: Declared,
 }
 
@@ -204,6 +207,7 @@ impl On<'_> {
         (type_name, hash): RosType,
     ) -> zenoh::Result<u32> {
         self.entity_id += 1;
+        let hash = keys::type_hash(self.distro, hash);
         let token = self
             .node
             .endpoint_token(self.entity_id, kind, topic, type_name, hash);
@@ -213,6 +217,7 @@ impl On<'_> {
     }
 
     fn key(&self, topic: &str, (type_name, hash): RosType) -> String {
+        let hash = keys::type_hash(self.distro, hash);
         keys::topic_key(self.node.domain, topic, type_name, hash)
     }
 

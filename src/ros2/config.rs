@@ -33,6 +33,17 @@ pub enum NamespaceBy {
     Hand,
 }
 
+/// The ROS 2 distribution the bridge's keys and tokens are written for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Distro {
+    /// Jazzy (and later): each type's RIHS01 hash in keys and tokens.
+    #[default]
+    Jazzy,
+    /// Humble: no type hashes; rmw_zenoh writes `TypeHashNotSupported`.
+    Humble,
+}
+
 /// `[ros2]`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -67,6 +78,9 @@ pub struct Ros2Config {
     /// The ROS node the topics belong to (default `jointd`).
     #[serde(default = "default_node")]
     pub node_name: String,
+    /// Whose key form (default `jazzy`; `humble` has no type hashes).
+    #[serde(default)]
+    pub distro: Distro,
 }
 
 fn one_hz() -> f64 {
@@ -90,6 +104,7 @@ impl Default for Ros2Config {
             diagnostics_hz: one_hz(),
             joint_states_max_hz: None,
             node_name: default_node(),
+            distro: Distro::Jazzy,
         }
     }
 }
@@ -240,6 +255,12 @@ mod tests {
         assert_eq!(cfg.namespace("sim0"), "sim0");
         assert_eq!(cfg.endpoints(), vec![DEFAULT_ROUTER.to_string()]);
         assert_eq!(cfg.node_name, "jointd");
+        assert_eq!(cfg.distro, Distro::Jazzy);
+        assert_eq!(parse("distro = \"humble\"").unwrap().distro, Distro::Humble);
+        assert!(
+            parse("distro = \"iron\"").is_err(),
+            "only the forms written"
+        );
         let peer = parse("mode = \"peer\"\nlisten = [\"tcp/0.0.0.0:7450\"]").unwrap();
         assert!(
             peer.endpoints().is_empty(),

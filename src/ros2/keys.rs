@@ -32,6 +32,8 @@
 //! document's `example_interfaces/srv/AddTwoInts` hash
 //! (`RIHS01_e118de6b…`) to the bit.
 
+use super::config::Distro;
+
 pub const JOINT_STATE_TYPE: &str = "sensor_msgs::msg::dds_::JointState_";
 pub const JOINT_STATE_HASH: &str =
     "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e";
@@ -51,6 +53,18 @@ pub const SET_BOOL_HASH: &str =
 pub const TRIGGER_TYPE: &str = "std_srvs::srv::dds_::Trigger_";
 pub const TRIGGER_HASH: &str =
     "RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f";
+
+/// What rmw_zenoh on Humble writes where Jazzy writes a type hash
+/// (Humble's type support has none).
+pub const HUMBLE_HASH: &str = "TypeHashNotSupported";
+
+/// The hash to write in keys and tokens for `distro`.
+pub fn type_hash(distro: Distro, jazzy: &'static str) -> &'static str {
+    match distro {
+        Distro::Jazzy => jazzy,
+        Distro::Humble => HUMBLE_HASH,
+    }
+}
 
 /// The QoS every jointd endpoint declares, in rmw_zenoh's compact form:
 /// reliability, durability and history kinds left at their defaults
@@ -256,6 +270,29 @@ mod tests {
             JOINT_STATE_HASH,
         );
         assert!(token.contains("/MS/%/%/talker/%joint_commands/"), "{token}");
+    }
+
+    #[test]
+    fn humble_keys_and_tokens_have_no_type_hash() {
+        let hash = type_hash(Distro::Humble, JOINT_STATE_HASH);
+        assert_eq!(
+            topic_key(
+                0,
+                &qualified("sim0", "joint_states"),
+                JOINT_STATE_TYPE,
+                hash
+            ),
+            "0/sim0/joint_states/sensor_msgs::msg::dds_::JointState_/TypeHashNotSupported"
+        );
+        assert_eq!(
+            node().endpoint_token(3, Kind::Service, "/sim0/estop", TRIGGER_TYPE, type_hash(Distro::Humble, TRIGGER_HASH)),
+            "@ros2_lv/2/8b20917502ee955ac4476e0266340d5c/0/3/SS/%/%/talker/%sim0%estop/std_srvs::srv::dds_::Trigger_/TypeHashNotSupported/::,10:,:,:,,"
+        );
+        assert_eq!(type_hash(Distro::Jazzy, SET_BOOL_HASH), SET_BOOL_HASH);
+        assert_eq!(
+            topic_key(0, "/sim0/enable", SET_BOOL_TYPE, type_hash(Distro::Jazzy, SET_BOOL_HASH)),
+            "0/sim0/enable/std_srvs::srv::dds_::SetBool_/RIHS01_abe9e4bb6b41b40e6789712c00ec8871923e089af3f667a79992a428cff2da0a"
+        );
     }
 
     #[test]
