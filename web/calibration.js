@@ -2,7 +2,7 @@
 // offset, direction (flip) and usable range, read, set whole (PUT) and
 // cleared (DELETE). Nothing moves: only how its angles are counted.
 
-import { $, api, act, devicePath } from "./api.js";
+import { $, api, act, say, devicePath } from "./api.js";
 
 let shown = null;          // {bus, id} the panel shows
 let onChanged = () => {};
@@ -44,8 +44,9 @@ function request() {
 
 async function setCalibration() {
   const joint = shown;
-  const cal = await act("Calibration saved.", () => api("PUT", devicePath(joint, "/calibration"), request()));
+  const cal = await act(null, () => api("PUT", devicePath(joint, "/calibration"), request()));
   if (!cal) return;
+  say(`Calibration of joint ${joint.id} on ${joint.bus} saved.`, "info");
   if (shown === joint) fill(cal);
   onChanged(joint);
 }
@@ -53,7 +54,8 @@ async function setCalibration() {
 async function clearCalibration() {
   const joint = shown;
   if (!confirm(`Clear the calibration of joint ${joint.id} on ${joint.bus}? Its angles read as the device's again.`)) return;
-  const was = await act("Calibration cleared.", () => api("DELETE", devicePath(joint, "/calibration")));
+  const was = await act(null, () => api("DELETE", devicePath(joint, "/calibration")));
   if (!was) return;
+  say(`Calibration of joint ${joint.id} on ${joint.bus} cleared.`, "info");
   onChanged(joint);
 }
