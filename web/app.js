@@ -1,13 +1,22 @@
 // jointd dashboard: REST for commands and configuration, the WebSocket
-// (jointd.ws.v1, docs/websocket.md) for live telemetry. No build step.
+// (jointd.ws.v1, docs/websocket.md) for live telemetry. No build step: ES
+// modules, one job each (api.js talks to the daemon; moves, homing,
+// calibration, hands, recordings and ros2 each own their part of the page).
+// This one owns the telemetry, the device table, the joint panel's target,
+// configuration and frames, and the e-stop.
 
-const API = "/api/v1";
+import { $, API, session, say, api, act, whenUnauthorized, devicePath } from "./api.js";
+import { initMoves, showMovesFor, startMove } from "./moves.js";
+import { initHoming, showHomingFor } from "./homing.js";
+import { initCalibration, showCalibration } from "./calibration.js";
+import { initHands } from "./hands.js";
+import { initRecordings } from "./recordings.js";
+import { initRos2 } from "./ros2.js";
+
 const TELEMETRY_HZ = 20;
 const PLOT_SECONDS = 10;
-const $ = (sel) => document.querySelector(sel);
 
 const state = {
-  token: localStorage.getItem("jointd-token") || "",
   joints: new Map(),          // "bus/id" -> latest telemetry joint
   history: new Map(),         // "bus/id" -> [{t, angle, target, current}]
   busHistory: new Map(),      // bus -> [{t, occupancy, fps}]
@@ -18,66 +27,18 @@ const state = {
   configFor: null,            // {bus, id} the parameter table was read from
 };
 
-// ---------------------------------------------------------------- messages
-
-function say(text, kind = "error") {
-  const div = document.createElement("div");
-  div.className = kind;
-  div.textContent = text;
-  $("#messages").prepend(div);
-  setTimeout(() => div.remove(), kind === "error" ? 8000 : 3000);
-  while ($("#messages").children.length > 4) $("#messages").lastChild.remove();
-}
-
-/** A problem-details body (or anything) as one sentence. */
-function describe(body, status) {
-  if (body && typeof body === "object") {
-    let text = body.detail || body.title || JSON.stringify(body);
-    if (body.allowed) text += ` (allowed ${body.allowed.min}..${body.allowed.max} ${body.allowed.unit})`;
-    if (body.partial) text += ` — outcome so far: ${JSON.stringify(body.partial)}`;
-    return text;
-  }
-  return `HTTP ${status}`;
-}
-
-// ---------------------------------------------------------------- REST
-
-async function api(method, path, body) {
-  const headers = { "Accept": "application/json" };
-  if (body !== undefined) headers["Content-Type"] = "application/json";
-  if (state.token) headers["Authorization"] = `Bearer ${state.token}`;
-  const res = await fetch(path.startsWith("/") ? path : `${API}/${path}`, {
-    method, headers, body: body === undefined ? undefined : JSON.stringify(body),
-  });
-  const text = await res.text();
-  let data = null;
-  try { data = text ? JSON.parse(text) : null; } catch { data = text; }
-  if (res.status === 401) askToken();
-  if (!res.ok) throw new Error(describe(data, res.status));
-  return data;
-}
-
-/** Runs a user action; failures are shown in words. */
-async function act(label, fn) {
-  try {
-    const result = await fn();
-    if (label) say(label, "info");
-    return result;
-  } catch (e) {
-    say(`${label ? label.replace(/\.$/, "") + " failed: " : ""}${e.message}`);
-    return null;
-  }
-}
+// ---------------------------------------------------------------- token
 
 function askToken() {
   $("#token-button").hidden = false;
   const dlg = $("#token-dialog");
   if (!dlg.open) dlg.showModal();
 }
+whenUnauthorized(askToken);
 
 $("#token-dialog").addEventListener("close", () => {
-  state.token = $("#token-input").value.trim();
-  localStorage.setItem("jointd-token", state.token);
+  session.token = $("#token-input").value.trim();
+  localStorage.setItem("jointd-token", session.token);
   connect();
   refreshBuses();
 });
@@ -88,7 +49,7 @@ $("#token-button").onclick = askToken;
 function connect() {
   if (state.ws) state.ws.close();
   const proto = location.protocol === "https:" ? "wss" : "ws";
-  const q = state.token ? `?token=${encodeURIComponent(state.token)}` : "";
+  const q = session.token ? `?token=${encodeURIComponent(session.token)}` : "";
   const ws = new WebSocket(`${proto}://${location.host}${API}/ws${q}`);
   state.ws = ws;
   ws.onopen = () => {
@@ -259,8 +220,7 @@ function renderPlot() {
 // ---------------------------------------------------------------- device panel
 
 function dev(path = "") {
-  const { bus, id } = state.selected;
-  return `buses/${encodeURIComponent(bus)}/devices/${id}${path}`;
+  return devicePath(state.selected, path);
 }
 
 /** True when `a` and `b` name the same joint. */
@@ -273,6 +233,7 @@ async function select(bus, id) {
   clearConfig();
   $("#panel").hidden = false;
   $("#panel-title").textContent = `${id} on ${bus}`;
+  showPartsFor({ bus, id });
   renderDevices();
   const detail = await act(null, () => api("GET", dev()));
   // Another joint was clicked meanwhile: its own select() fills the panel.
@@ -291,6 +252,13 @@ async function select(bus, id) {
   loadFrames();
 }
 
+/** The panel's parts that other modules own, told which joint it shows. */
+function showPartsFor(joint) {
+  showMovesFor(joint);
+  showHomingFor(joint);
+  showCalibration(joint);
+}
+
 /** Firmware version, protocol revision (and how the daemon knows), serial;
  *  current mode is offered to rev 2.0.8 devices only. */
 function showFirmware(detail) {
@@ -304,7 +272,6 @@ function showFirmware(detail) {
 }
 
 function sendTarget(deg) {
-  const { bus, id } = state.selected;
   const speed = Number($("#speed-limit").value) || undefined;
   return act(null, () => api("PUT", dev("/target"), { position_deg: deg, speed_rpm: speed }));
 }
@@ -315,21 +282,15 @@ $("#jog-cw").onclick = () => act("Jogged +5°.", () => api("POST", dev("/jog"), 
 $("#jog-ccw").onclick = () => act("Jogged −3°.", () => api("POST", dev("/jog"), { direction: "ccw" }));
 $("#rezero").onclick = () => act("Re-zeroed.", () => api("POST", dev("/rezero")));
 $("#mode").onchange = (e) => act(`Mode set to ${e.target.value}.`, () => api("PUT", dev("/mode"), { mode: e.target.value }));
-/** Move with a duration: the daemon generates the path (POST /api/v1/moves)
- *  and streams it at the bus's control rate; without one, a plain target. */
-function sendMove(deg) {
+
+/** With a duration, a smooth move the daemon generates (moves.js); without
+ *  one, a plain target at the speed limit. */
+$("#move").onclick = () => {
+  const deg = Number($("#target-number").value);
   const ms = Number($("#move-ms").value);
   if (!(ms > 0)) return sendTarget(deg);
-  const { bus, id } = state.selected;
-  const method = $("#move-method").value;
-  return act(null, async () => {
-    const mv = await api("POST", "moves", { joints: [{ bus, id, position_deg: deg }], duration_ms: ms, method });
-    say(`Move ${mv.id}: to ${deg}° in ${mv.duration_ms} ms (${mv.method}).`, "info");
-    return mv;
-  });
-}
-
-$("#move").onclick = () => sendMove(Number($("#target-number").value));
+  return startMove(state.selected, deg, ms, $("#move-method").value);
+};
 $("#target-number").onchange = (e) => { $("#target-slider").value = e.target.value; };
 
 // The slider streams targets while it moves, at most every 50 ms.
@@ -481,106 +442,14 @@ $("#estop").onclick = async () => {
   say(text + ".", r.stopped && !unconfirmed.length ? "info" : "error");
 };
 
-// ---------------------------------------------------------------- hands and poses
-
-/** The configured hands (`[[hand]]`), each with a button per saved pose and
- *  a way to save where it is now; hidden when no hand is configured. */
-async function refreshHands() {
-  let list;
-  try { list = await api("GET", "hands"); } catch { return; }
-  const hands = list.hands || [];
-  $("#poses-section").hidden = hands.length === 0;
-  const box = $("#poses");
-  box.textContent = "";
-  for (const h of hands) {
-    const row = document.createElement("div");
-    row.className = "row";
-    const label = document.createElement("strong");
-    label.textContent = h.name;
-    row.append(label);
-    for (const name of h.poses) {
-      const b = document.createElement("button");
-      b.textContent = name;
-      b.dataset.testid = `pose-${h.name}-${name}`;
-      b.onclick = () => goPose(h.name, name);
-      row.append(b);
-    }
-    const input = document.createElement("input");
-    input.placeholder = "pose name";
-    input.size = 10;
-    input.dataset.testid = `pose-name-${h.name}`;
-    const save = document.createElement("button");
-    save.textContent = "Save current";
-    save.dataset.testid = `pose-save-${h.name}`;
-    save.onclick = () => savePose(h.name, input.value.trim());
-    row.append(input, save);
-    box.append(row);
-  }
-}
-
-const handPath = (hand, name) => `hands/${encodeURIComponent(hand)}/poses/${encodeURIComponent(name)}`;
-
-async function savePose(hand, name) {
-  if (!name) return say("Name the pose first.");
-  const saved = await act(null, () => api("PUT", handPath(hand, name), { from_current: true }));
-  if (saved) {
-    say(`Pose ${name} of ${hand} saved.`, "info");
-    refreshHands();
-  }
-}
-
-function goPose(hand, name) {
-  const ms = Number($("#move-ms").value) || 800;
-  return act(null, async () => {
-    const mv = await api("POST", `${handPath(hand, name)}/go`, { duration_ms: ms, method: $("#move-method").value });
-    say(`Move ${mv.id}: ${hand} to pose ${name} in ${mv.duration_ms} ms.`, "info");
-  });
-}
-
-// ---------------------------------------------------------------- recording
-
-/** One recording at a time from here: Record starts it (an MCAP file in the
- *  daemon's recordings directory), the same button stops it, then the file
- *  can be downloaded (fetched with the token, so it works behind one). */
-let recording = null;
-
-$("#record").onclick = async () => {
-  const button = $("#record");
-  if (!recording) {
-    const r = await act(null, () => api("POST", "recordings", {}));
-    if (!r) return;
-    recording = r;
-    button.textContent = "■ Stop recording";
-    button.classList.add("on");
-    $("#recording-file").hidden = true;
-    say(`Recording ${r.id} to ${r.file}.`, "info");
-    return;
-  }
-  const id = recording.id;
-  const r = await act(null, () => api("DELETE", `recordings/${id}`));
-  recording = null;
-  button.textContent = "● Record";
-  button.classList.remove("on");
-  if (!r) return;
-  const total = Object.values(r.messages).reduce((a, b) => a + b, 0);
-  say(`Recording ${id} finished: ${total} messages in ${r.file}.`, "info");
-  const download = $("#recording-file");
-  download.hidden = false;
-  download.onclick = () => act(null, async () => {
-    const headers = state.token ? { "Authorization": `Bearer ${state.token}` } : {};
-    const res = await fetch(`${API}/recordings/${id}/file`, { headers });
-    if (!res.ok) throw new Error(`HTTP ${res.status}`);
-    const a = document.createElement("a");
-    a.href = URL.createObjectURL(await res.blob());
-    a.download = r.file;
-    a.click();
-    URL.revokeObjectURL(a.href);
-  });
-};
-
 // ---------------------------------------------------------------- start
 
+initMoves();
+initHoming({ onHomed: (joint) => { if (sameJoint(joint, state.selected)) showCalibration(joint); } });
+initCalibration({ onChanged: (joint) => { if (sameJoint(joint, state.selected)) select(joint.bus, joint.id); } });
+initHands();
+initRecordings();
+initRos2();
 connect();
-refreshHands();
 refreshBuses();
 setInterval(refreshBuses, 1000);

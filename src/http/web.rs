@@ -10,31 +10,41 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use axum::Router;
 
-use crate::http::paths::{DASHBOARD_INDEX, DASHBOARD_PAGE, DASHBOARD_SCRIPT, DASHBOARD_STYLE};
+use crate::http::paths::{DASHBOARD_INDEX, DASHBOARD_PAGE, DASHBOARD_STYLE};
 use crate::http::state::AppState;
 
 /// One file of the dashboard.
 type Asset = (&'static str, &'static str, &'static str, &'static str);
 
+const HTML: &str = "text/html; charset=utf-8";
+const JS: &str = "text/javascript; charset=utf-8";
+
+/// A script of `web/`, served at `/<file>` (listed in
+/// `paths::DASHBOARD_SCRIPTS`, which a test keeps equal to these).
+macro_rules! script {
+    ($file:literal) => {
+        (
+            concat!("/", $file),
+            $file,
+            JS,
+            include_str!(concat!("../../web/", $file)),
+        )
+    };
+}
+
 /// (URL path, file name, content type, embedded bytes).
-const ASSETS: [Asset; 4] = [
+const ASSETS: [Asset; 11] = [
     (
         DASHBOARD_PAGE,
         "index.html",
-        "text/html; charset=utf-8",
+        HTML,
         include_str!("../../web/index.html"),
     ),
     (
         DASHBOARD_INDEX,
         "index.html",
-        "text/html; charset=utf-8",
+        HTML,
         include_str!("../../web/index.html"),
-    ),
-    (
-        DASHBOARD_SCRIPT,
-        "app.js",
-        "text/javascript; charset=utf-8",
-        include_str!("../../web/app.js"),
     ),
     (
         DASHBOARD_STYLE,
@@ -42,6 +52,14 @@ const ASSETS: [Asset; 4] = [
         "text/css; charset=utf-8",
         include_str!("../../web/style.css"),
     ),
+    script!("app.js"),
+    script!("api.js"),
+    script!("moves.js"),
+    script!("homing.js"),
+    script!("calibration.js"),
+    script!("hands.js"),
+    script!("recordings.js"),
+    script!("ros2.js"),
 ];
 
 /// One route per file; each handler knows its file, so no request can ask
@@ -75,4 +93,21 @@ async fn asset(state: AppState, (_, file, mime, embedded): Asset) -> Response {
 
 async fn read_from(dir: &Path, file: &str) -> std::io::Result<String> {
     tokio::fs::read_to_string(dir.join(file)).await
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::http::paths::{is_public, DASHBOARD_SCRIPTS};
+
+    #[test]
+    fn every_script_listed_is_served_and_public() {
+        let served: Vec<&str> = ASSETS.iter().map(|a| a.0).collect();
+        for url in DASHBOARD_SCRIPTS {
+            assert!(served.contains(&url), "{url} is listed but not served");
+        }
+        for url in served {
+            assert!(is_public(url), "{url} is served but needs a token");
+        }
+    }
 }
