@@ -82,6 +82,11 @@ def test_a_recording_of_a_moving_joint_reads_back(daemon, tmp_path):
                   for c in summary.channels.values()}
         assert topics["/sim0/joint_states"] == ("cdr", "sensor_msgs/msg/JointState")
         assert topics["/jointd/sim0/frames"] == ("json", "jointd/Frame")
+        # JSON channels: the file is no ros2-profile file; the CDR channel
+        # still carries the QoS a ROS 2 publisher of it offers.
+        assert reader.get_header().profile == ""
+        for c in summary.channels.values():
+            assert ("offered_qos_profiles" in c.metadata) == (c.message_encoding == "cdr"), c
         states = [(m.log_time, d) for _, _, m, d in
                   reader.iter_decoded_messages(topics=["/sim0/joint_states"])]
 
@@ -175,6 +180,15 @@ def test_a_bag_compatible_recording_has_one_ros_serialization(daemon, tmp_path):
         channels = {c.topic: (c.message_encoding, summary.schemas[c.schema_id].encoding,
                               summary.schemas[c.schema_id].name) for c in summary.channels.values()}
         assert all(enc == "cdr" and schema == "ros2msg" for enc, schema, _ in channels.values()), channels
+        # The ros2 profile's requirements: CDR, ros2msg, and each channel's
+        # offered QoS as rosbag2 writes it (a YAML list of profiles).
+        assert reader.get_header().profile == "ros2"
+        for c in summary.channels.values():
+            qos = c.metadata.get("offered_qos_profiles", "")
+            assert qos.startswith("- history: keep_last\n"), (c.topic, qos)
+            for line in ("depth: 10", "reliability: reliable", "durability: volatile",
+                         "liveliness: automatic", "avoid_ros_namespace_conventions: false"):
+                assert f"\n  {line}\n" in qos, (c.topic, line, qos)
         assert channels["/jointd/sim0/frames"][2] == "std_msgs/msg/String"
         frames = [json.loads(d.data) for _, _, _, d in
                   reader.iter_decoded_messages(topics=["/jointd/sim0/frames"])]
