@@ -9,7 +9,9 @@
 //!   "hex"}` (JSON, with its JSON schema);
 //! - `/jointd/B/events`: device and bus events as the WebSocket tells them
 //!   (JSON);
-//! - `/jointd/B/setpoints`: targets as clients commanded them (JSON).
+//! - `/jointd/B/setpoints`: every target the bus's joints were given, with
+//!   who gave it (a client, a stream, a move per control cycle, a homing
+//!   step, a hold) (JSON).
 //!
 //! [`SideEncoding::RosString`] writes the last three as
 //! `std_msgs/msg/String` in CDR holding the same JSON text instead: every
@@ -527,7 +529,10 @@ mod tests {
         assert_eq!(channels.len(), 4);
         for (encoding, schema, qos) in &channels {
             let cdr = encoding == "cdr";
-            assert_eq!(qos, &cdr, "{encoding}/{schema}: QoS on the CDR channel only");
+            assert_eq!(
+                qos, &cdr,
+                "{encoding}/{schema}: QoS on the CDR channel only"
+            );
         }
         let (profile, channels) = profile_and_channels(SideEncoding::RosString);
         assert_eq!(profile, "ros2");

@@ -112,7 +112,7 @@ impl Recorder {
             .map(|bus| Tapped {
                 snapshots: bus.watch(),
                 frames: bus.shared().frame_tap.subscribe(),
-                setpoints: bus.shared().setpoint_tap.subscribe(),
+                setpoints: bus.shared().setpoints.subscribe(),
                 events: bus.events(),
                 joint_states: JointStates::new(bus.name(), labeler.clone()),
                 bus,
@@ -287,7 +287,9 @@ fn drain_bus(
                             "pos_ref_raw": sp.pos_ref, "spd_ref_raw": sp.spd_ref})
                     })
                     .collect();
-                let msg = json!({"seq": c.seq, "targets": targets});
+                let mut msg = serde_json::to_value(c.source).unwrap_or_else(|_| json!({}));
+                msg["seq"] = json!(c.seq);
+                msg["targets"] = json!(targets);
                 let ns = system_ns(c.at);
                 file.write(&bus, Topic::Setpoints, ns, msg.to_string().as_bytes())?;
             }

@@ -66,8 +66,8 @@ def test_a_recording_of_a_moving_joint_reads_back(daemon, tmp_path):
     reading.start()
     time.sleep(1.5)
     call(api, "PATCH", "/buses/sim0/devices/3/config", {"pos_kp": 1.25})
-    call(api, "POST", "/moves", {"joints": [{"bus": "sim0", "id": 1, "position_deg": 30}],
-                                  "duration_ms": 1500, "method": "min_jerk"})
+    move = call(api, "POST", "/moves", {"joints": [{"bus": "sim0", "id": 1, "position_deg": 30}],
+                                         "duration_ms": 1500, "method": "min_jerk"})
     stdout, stderr = rec.communicate(timeout=SECONDS + 30)
     reading.join()
     assert rec.returncode == 0, stderr
@@ -111,6 +111,22 @@ def test_a_recording_of_a_moving_joint_reads_back(daemon, tmp_path):
     written = [e for e in events if e["event"] == "config_written"]
     assert any(e["dev_id"] == 3 and e["name"] == "SET_POS_KP" for e in written), events
     assert any(e["event"] == "move_started" for e in events), events
+
+    # The move's targets, as the daemon sent them each control cycle: on the
+    # setpoints channel with their source, in time order, ending at its goal.
+    with open(out, "rb") as f:
+        setpoints = [(m.log_time, json.loads(m.data)) for _, _, m in
+                     make_reader(f).iter_messages(topics=["/jointd/sim0/setpoints"])]
+    of_move = [(t, s) for t, s in setpoints
+               if s["source"] == "move" and s["move_id"] == move["id"]]
+    assert len(of_move) > 100, f"{len(of_move)} targets of a 1.5 s move"
+    times = [t for t, _ in of_move]
+    seqs = [s["seq"] for _, s in of_move]
+    assert times == sorted(times) and seqs == sorted(seqs), "time-ordered"
+    path = [s["targets"][0]["position_deg"] for _, s in of_move]
+    assert all(s["targets"][0]["id"] == 1 for _, s in of_move)
+    assert path[0] < 1.0 and path == sorted(path), path[:5]
+    assert path[-1] == 30.0, f"the last target {path[-1]} is the goal"
 
     frames = subprocess.run([BIN, "frame", "decode", "--mcap", str(out)], capture_output=True,
                             text=True, timeout=60, check=True).stdout.splitlines()
