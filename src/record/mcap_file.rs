@@ -330,6 +330,23 @@ impl<W: Write> McapFile<W> {
         Ok(())
     }
 
+    /// Writes a Metadata record `name` (before the first message: it closes
+    /// the chunk being built).
+    pub fn write_metadata(
+        &mut self,
+        name: &str,
+        metadata: BTreeMap<String, String>,
+    ) -> Result<(), McapFileError> {
+        let record = mcap::records::Metadata {
+            name: name.to_owned(),
+            metadata,
+        };
+        self.writer
+            .write_metadata(&record)
+            .map_err(|e| self.mcap_err(e))?;
+        self.check()
+    }
+
     /// Messages written so far, by topic.
     pub fn counts(&self) -> &BTreeMap<String, u64> {
         &self.counts

@@ -228,3 +228,49 @@ def test_a_recording_running_at_shutdown_is_closed_whole(tmp_path):
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()
         assert summary is not None and summary.statistics.message_count > 0
+
+
+def test_the_metadata_record_names_every_joint_with_its_firmware_and_calibration(tmp_path):
+    """The `jointd` Metadata record: the daemon's version, and each joint's
+    bus, id, name, hand, firmware and calibration as the API reports them."""
+    from conftest import Daemon
+
+    config = tmp_path / "jointd.toml"
+    config.write_text("""
+[[hand]]
+name = "left"
+joints = [{ bus = "sim0", ids = "2-3", names = ["index", "middle"] }]
+""")
+    d = Daemon("--sim", "4", "--config", str(config), "--state-dir", str(tmp_path))
+    try:
+        d.wait("/api/v1/buses/sim0", lambda b: b'"devices_online":4' in b, "4 joints online")
+        api = d.url + "/api/v1"
+        call(api, "PUT", "/buses/sim0/devices/3/calibration",
+             {"offset_deg": -10.0, "flip": True, "range_deg": [-20.0, 60.0]})
+        devices = {dev["id"]: call(api, "GET", f"/buses/sim0/devices/{dev['id']}")
+                   for dev in call(api, "GET", "/buses/sim0/devices")["devices"]}
+        version = call(d.url, "GET", "/healthz")["version"]
+        started = call(api, "POST", "/recordings", {"duration_s": 0.5})
+        d.wait(f"/api/v1/recordings/{started['id']}", lambda b: b'"finished"' in b, "finished")
+        with urllib.request.urlopen(f"{api}/recordings/{started['id']}/file", timeout=10) as r:
+            body = r.read()
+    finally:
+        d.stop()
+    out = tmp_path / "meta.mcap"
+    out.write_bytes(body)
+    with open(out, "rb") as f:
+        records = [m for m in make_reader(f).iter_metadata() if m.name == "jointd"]
+    assert len(records) == 1, records
+    meta = records[0].metadata
+    assert meta["jointd_version"] == version, meta
+    joints = json.loads(meta["joints"])
+    assert [(j["bus"], j["id"]) for j in joints] == [("sim0", i) for i in (1, 2, 3, 4)], joints
+    by_id = {j["id"]: j for j in joints}
+    assert [by_id[i]["name"] for i in (1, 2, 3, 4)] == ["sim0_1", "index", "middle", "sim0_4"]
+    assert [by_id[i]["hand"] for i in (1, 2, 3, 4)] == [None, "left", "left", None]
+    for i, j in by_id.items():
+        assert j["online"] is True
+        assert j["firmware"] == devices[i]["firmware"] and j["firmware"], (j, devices[i])
+        assert j["protocol_revision"] == (devices[i]["protocol"] or {}).get("revision"), j
+    assert by_id[3]["calibration"] == {"offset_deg": -10.0, "flip": True, "range_deg": [-20.0, 60.0]}
+    assert by_id[1]["calibration"] == {"offset_deg": 0.0, "flip": False, "range_deg": None}
