@@ -6,7 +6,7 @@
 //! Channels, per bus `B`:
 //! - `/B/joint_states`: `sensor_msgs/msg/JointState`, `ros2msg` schema, CDR;
 //! - `/jointd/B/frames`: every frame on the wire, `{"dir", "wire_time_ns",
-//!   "hex"}` (JSON, with its JSON schema);
+//!   "hex"}` (JSON, with its JSON schema: [`schemas`] has them all);
 //! - `/jointd/B/events`: device and bus events as the WebSocket tells them
 //!   (JSON);
 //! - `/jointd/B/setpoints`: every target the bus's joints were given, with
@@ -35,6 +35,7 @@ use mcap::{WriteOptions, Writer};
 use thiserror::Error;
 
 use super::cdr::{string_cdr, JOINT_STATE_MSG, STRING_MSG};
+use super::schemas;
 use super::sink::{Failure, Sink};
 
 /// How long a chunk may collect messages before it is written out.
@@ -110,20 +111,6 @@ impl Topic {
         }
     }
 }
-
-const FRAME_SCHEMA: &str = r#"{"type":"object","title":"jointd wire frame","properties":{
-"dir":{"type":"string","enum":["tx","rx"],"description":"tx: written by the host; rx: received from a device"},
-"wire_time_ns":{"type":"integer","description":"Unix time the frame was on the wire, ns (the host's estimate)"},
-"hex":{"type":"string","description":"The 20 bytes, hex, space-separated (jointd frame decode reads it)"}},
-"required":["dir","wire_time_ns","hex"]}"#;
-const EVENT_SCHEMA: &str = r#"{"type":"object","title":"jointd bus event","properties":{
-"event":{"type":"string","description":"device_online, device_offline, fault, estop, device_reset, move_started, ... as docs/websocket.md lists them"},
-"bus":{"type":"string"}},"required":["event"]}"#;
-const SETPOINT_SCHEMA: &str = r#"{"type":"object","title":"jointd commanded targets","properties":{
-"seq":{"type":"integer","description":"The write's sequence number in the bus's setpoint store"},
-"targets":{"type":"array","items":{"type":"object","properties":{
-"id":{"type":"integer"},"position_deg":{"type":"number","description":"In the joint's calibrated frame"},
-"pos_ref_raw":{"type":"integer"},"spd_ref_raw":{"type":"integer"}}}}},"required":["seq","targets"]}"#;
 
 /// The QoS a ROS 2 publisher of these topics offers, as rosbag2 writes a
 /// channel's `offered_qos_profiles` (a YAML list of profiles, the policies
@@ -428,9 +415,9 @@ fn add_channels<W: Write>(
             writer.add_schema("std_msgs/msg/String", "ros2msg", STRING_MSG.as_bytes())
         }
     };
-    let frame = json_schema("jointd/Frame", FRAME_SCHEMA)?;
-    let event = json_schema("jointd/BusEvent", EVENT_SCHEMA)?;
-    let setpoint = json_schema("jointd/Setpoints", SETPOINT_SCHEMA)?;
+    let frame = json_schema("jointd/Frame", &schemas::frame())?;
+    let event = json_schema("jointd/BusEvent", &schemas::event())?;
+    let setpoint = json_schema("jointd/Setpoints", &schemas::setpoint())?;
     let side_encoding = match side {
         SideEncoding::Json => "json",
         SideEncoding::RosString => "cdr",

@@ -274,3 +274,51 @@ joints = [{ bus = "sim0", ids = "2-3", names = ["index", "middle"] }]
         assert j["protocol_revision"] == (devices[i]["protocol"] or {}).get("revision"), j
     assert by_id[3]["calibration"] == {"offset_deg": -10.0, "flip": True, "range_deg": [-20.0, 60.0]}
     assert by_id[1]["calibration"] == {"offset_deg": 0.0, "flip": False, "range_deg": None}
+
+
+def test_every_json_message_validates_against_its_channels_schema(daemon):
+    """A recording through enables, a config write, a REST target, a move
+    and an e-stop: every message of each JSON channel validates against the
+    JSON schema the file gives that channel (closed schemas: a field a
+    message carries and its schema does not list fails)."""
+    import jsonschema
+
+    api = daemon.url + "/api/v1"
+    started = call(api, "POST", "/recordings", {})
+    call(api, "POST", "/buses/sim0/control/enable", {"ids": [1, 2, 3, 4]})
+    for i in (1, 2):
+        daemon.wait(f"/api/v1/buses/sim0/devices/{i}", lambda b: b'"state":"run"' in b,
+                    f"joint {i} running")
+    call(api, "PATCH", "/buses/sim0/devices/3/config", {"pos_kp": 1.25})
+    call(api, "PUT", "/buses/sim0/control/targets", {"targets": [{"id": 2, "position_deg": -5.0}]})
+    move = call(api, "POST", "/moves", {"joints": [{"bus": "sim0", "id": 1, "position_deg": 10}],
+                                         "duration_ms": 300, "method": "linear"})
+    daemon.wait(f"/api/v1/moves/{move['id']}", lambda b: b'"state":"done"' in b, "the move done")
+    call(api, "POST", "/estop", {})
+    stopped = call(api, "DELETE", f"/recordings/{started['id']}")
+    assert stopped["state"] == "finished", stopped
+    with urllib.request.urlopen(f"{api}/recordings/{started['id']}/file", timeout=10) as r:
+        body = r.read()
+
+    import io
+    reader = make_reader(io.BytesIO(body))
+    summary = reader.get_summary()
+    validators = {}
+    for c in summary.channels.values():
+        schema = summary.schemas[c.schema_id]
+        if c.message_encoding == "json":
+            assert schema.encoding == "jsonschema", (c.topic, schema.encoding)
+            doc = json.loads(schema.data)
+            jsonschema.validators.validator_for(doc).check_schema(doc)
+            validators[c.id] = jsonschema.validators.validator_for(doc)(doc)
+    assert len(validators) == 3, "frames, events, setpoints"
+    seen = {}
+    for _, channel, message in reader.iter_messages():
+        if channel.id in validators:
+            msg = json.loads(message.data)
+            errors = [e.message for e in validators[channel.id].iter_errors(msg)]
+            assert not errors, (channel.topic, msg, errors)
+            seen.setdefault(channel.topic, set()).add(msg.get("event") or msg.get("source") or "frame")
+    assert {"config_written", "move_started", "move_done", "estop"} <= seen["/jointd/sim0/events"], seen
+    assert {"rest", "move"} <= seen["/jointd/sim0/setpoints"], seen
+    assert seen["/jointd/sim0/frames"] == {"frame"}
