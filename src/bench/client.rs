@@ -85,7 +85,7 @@ fn stream(bus: &BusHandle, ids: &[u8], period: Duration, stop: &AtomicBool) -> V
         targets.clear();
         targets.extend(ids.iter().map(|id| (*id, sp)));
         let at = Instant::now();
-        bus.set_targets(&targets);
+        bus.set_targets_as(&targets, crate::bus::Source::Bench);
         writes.push(Write { n, at });
         pacer.wait();
     }

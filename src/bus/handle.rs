@@ -24,7 +24,7 @@ use super::authority::Revoked;
 use super::error::BusError;
 // The published state and the setpoint store live in their own files; they
 // are part of this contract and reachable under `bus::handle::` too.
-pub use super::setpoints::{Setpoint, SetpointStore, StoredSetpoint};
+pub use super::setpoints::{Commanded, Setpoint, SetpointStore, Source, StoredSetpoint};
 pub use super::state::{
     BusCounters, BusEvent, BusLatency, BusRates, BusSnapshot, DeviceState, DisabledReason,
     LinkState, LoggedFrame, ResetRecord, ResetSignal, WireAck,
@@ -193,24 +193,11 @@ pub struct BusShared {
     /// Every frame as it is logged, for recordings (sent only while one
     /// listens: nothing is copied otherwise).
     pub frame_tap: broadcast::Sender<LoggedFrame>,
-    /// Every client write of targets, for recordings (likewise).
-    pub setpoint_tap: broadcast::Sender<Commanded>,
-}
-
-/// Targets as a client commanded them (one `set_targets`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Commanded {
-    pub at: std::time::SystemTime,
-    /// Its sequence number in the setpoint store.
-    pub seq: u64,
-    pub targets: Vec<(u8, Setpoint)>,
 }
 
 /// How many frames a recording may fall behind before it loses some
 /// (counted): ~3 s of a saturated 500000-baud line.
 const FRAME_TAP_LEN: usize = 8192;
-/// Likewise for commanded targets: ~4 s of a 1 kHz client.
-const SETPOINT_TAP_LEN: usize = 4096;
 
 /// How many frames the raw frame view keeps.
 pub const FRAME_LOG_LEN: usize = 512;
@@ -232,7 +219,6 @@ impl BusShared {
             queued: AtomicUsize::new(0),
             motion: Default::default(),
             frame_tap: broadcast::channel(FRAME_TAP_LEN).0,
-            setpoint_tap: broadcast::channel(SETPOINT_TAP_LEN).0,
         })
     }
 
@@ -274,39 +260,41 @@ impl BusHandle {
         &self.shared
     }
 
-    /// Stores targets; the scheduler puts them on the wire at its next chance.
-    /// Returns the sequence number to match against [`Self::wire_acks`].
-    /// A client's targets: each joint leaves the move it followed, if any
+    /// Stores a client's targets (source [`Source::Rest`]); see
+    /// [`Self::set_targets_as`].
+    pub fn set_targets(&self, targets: &[(u8, Setpoint)]) -> u64 {
+        self.set_targets_as(targets, Source::Rest)
+    }
+
+    /// Stores targets written by `source`; the scheduler puts them on the
+    /// wire at its next chance. Returns the sequence number to match against
+    /// [`Self::wire_acks`]. Each joint leaves the move it followed, if any
     /// (see [`Self::take_over`]).
     /// Each target is admitted now, under its joint's current motion
     /// epoch: the owner drops it if the joint is not enabled.
-    pub fn set_targets(&self, targets: &[(u8, Setpoint)]) -> u64 {
+    pub fn set_targets_as(&self, targets: &[(u8, Setpoint)], source: Source) -> u64 {
         if self.shared.motion.is_active() {
             let ids: Vec<u8> = targets.iter().map(|(id, _)| *id).collect();
             let released = self.shared.motion.release(&ids);
             self.say_done(&released.ended);
         }
-        let seq = self.shared.setpoints.set(targets);
-        if self.shared.setpoint_tap.receiver_count() > 0 {
-            let _ = self.shared.setpoint_tap.send(Commanded {
-                at: std::time::SystemTime::now(),
-                seq,
-                targets: targets.to_vec(),
-            });
-        }
-        seq
+        self.shared.setpoints.set(targets, source)
     }
 
     /// Stores targets each admitted under the epoch it carries (a job that
     /// keeps the epoch it started with); the owner drops those whose joint's
     /// epoch has moved on. Each joint leaves the move it followed, if any.
-    pub fn set_targets_under(&self, targets: &[(u8, Setpoint, super::authority::Epoch)]) -> u64 {
+    pub fn set_targets_under(
+        &self,
+        targets: &[(u8, Setpoint, super::authority::Epoch)],
+        source: Source,
+    ) -> u64 {
         if self.shared.motion.is_active() {
             let ids: Vec<u8> = targets.iter().map(|(id, _, _)| *id).collect();
             let released = self.shared.motion.release(&ids);
             self.say_done(&released.ended);
         }
-        self.shared.setpoints.set_admitted(targets)
+        self.shared.setpoints.set_admitted(targets, source)
     }
 
     /// Puts joints of this bus on a move (and says so to subscribers);

@@ -64,7 +64,7 @@ use std::thread::JoinHandle;
 
 pub use config::{AdapterSetting, BusConfig, PollPlan, ShutdownState, StartPolicy, Timing};
 pub use error::BusError;
-pub use handle::{BusHandle, BusShared, BusSnapshot, Setpoint, Targets};
+pub use handle::{BusHandle, BusShared, BusSnapshot, Setpoint, Source, Targets};
 
 use crate::transport::Transport;
 use link::{tty_opener, Link, Opener};

@@ -2,8 +2,11 @@
 //! move, which of its joints, at what speed limit. The owner samples each
 //! path at every control cycle, at the instant the next control frame
 //! reaches the wire, and writes the positions into the setpoint store like
-//! any client would; so soft limits (checked on the whole path before the
-//! move started), coalescing and wire acks are the same as for setpoints.
+//! any client would (one write per move, its source the move); so soft
+//! limits (checked on the whole path before the move started), coalescing,
+//! wire acks and recordings are the same as for setpoints. When the path
+//! has ended, its goal is written once: the last sample inside the path
+//! falls short of it by up to a control cycle's travel.
 //!
 //! A client setpoint for a joint takes it out of its move (the move goes on
 //! for the others). Each follower carries the motion epoch its move was
@@ -28,7 +31,7 @@ use crate::protocol::units;
 
 use super::authority::Epoch;
 use super::registry::Registry;
-use super::setpoints::{Setpoint, SetpointStore};
+use super::setpoints::{Setpoint, SetpointStore, Source};
 use super::state::BusEvent;
 
 /// One joint of this bus following a move.
@@ -44,6 +47,8 @@ pub struct Follower {
     pub epoch: Epoch,
     /// Since when the joint has been off its path by more than the stall bound.
     pub off_path_since: Option<Instant>,
+    /// The path's goal has been written (once, after the path's end).
+    goal_written: bool,
 }
 
 impl Follower {
@@ -55,6 +60,7 @@ impl Follower {
             spd_ref,
             epoch,
             off_path_since: None,
+            goal_written: false,
         }
     }
 }
@@ -198,8 +204,14 @@ impl BusMotion {
         list.retain(|f| f.mv.is_running());
         self.active.store(!list.is_empty(), Ordering::Release);
         drop(list);
-        if !step.targets.is_empty() {
-            store.set_admitted(&step.targets);
+        // One write per move (usually one), so each says whose it is.
+        let mut targets = step.targets;
+        while let Some(&(move_id, _)) = targets.first() {
+            let (this, rest): (Vec<_>, Vec<_>) =
+                targets.into_iter().partition(|(m, _)| *m == move_id);
+            let this: Vec<_> = this.into_iter().map(|(_, t)| t).collect();
+            store.set_admitted(&this, Source::Move { move_id });
+            targets = rest;
         }
     }
 }
@@ -207,7 +219,8 @@ impl BusMotion {
 /// What one owner step decided for the followers.
 #[derive(Default)]
 struct Step {
-    targets: Vec<(u8, Setpoint, Epoch)>,
+    /// Targets, each with the id of the move it comes from.
+    targets: Vec<(u64, (u8, Setpoint, Epoch))>,
     aborted: Vec<(Arc<RunningMove>, String)>,
     /// Moves that ended (every joint arrived, stalled or left).
     done: Vec<u64>,
@@ -240,6 +253,10 @@ fn follow_one(
     let sample = f.mv.path.sample(f.joint, t);
     let measured = reg.slot_info(f.dev_id).and_then(|i| i.measured);
     let ended = t >= f.mv.path.duration();
+    if ended && !f.goal_written {
+        f.goal_written = true;
+        push(f, sample.position, step);
+    }
     let off = measured.map(|m| (units::angle_deg(m) - sample.position).abs());
     if ended && off.is_some_and(|d| d <= ARRIVED_DEG) {
         if f.mv.arrived(f.joint) {
@@ -262,15 +279,20 @@ fn follow_one(
         _ => f.off_path_since = None,
     }
     if !ended {
-        if let Ok(pos_ref) = units::angle_to_raw(sample.position) {
-            let sp = Setpoint {
-                pos_ref,
-                spd_ref: f.spd_ref,
-            };
-            step.targets.push((f.dev_id, sp, f.epoch));
-        }
+        push(f, sample.position, step);
     }
     true
+}
+
+/// The follower's target at `position_deg` (device frame), at its speed limit.
+fn push(f: &Follower, position_deg: f64, step: &mut Step) {
+    if let Ok(pos_ref) = units::angle_to_raw(position_deg) {
+        let sp = Setpoint {
+            pos_ref,
+            spd_ref: f.spd_ref,
+        };
+        step.targets.push((f.mv.id, (f.dev_id, sp, f.epoch)));
+    }
 }
 
 /// The joint leaves its move holding where it stands.
@@ -280,7 +302,7 @@ fn stall(f: &Follower, measured: Option<i16>, step: &mut Step) -> bool {
             pos_ref,
             spd_ref: f.spd_ref,
         };
-        step.targets.push((f.dev_id, hold, f.epoch));
+        step.targets.push((f.mv.id, (f.dev_id, hold, f.epoch)));
     }
     if f.mv.stalled(f.joint) {
         step.done.push(f.mv.id);

@@ -38,7 +38,7 @@ use utoipa::ToSchema;
 
 use crate::bus::authority::{Epoch, Revoked};
 use crate::bus::handle::{BusEvent, DeviceState};
-use crate::bus::{BusHandle, Setpoint};
+use crate::bus::{BusHandle, Setpoint, Source};
 use crate::control::calibration;
 use crate::control::device::{firmware_of, is_enabled, measured_angle_raw};
 use crate::control::error::{ControlError, ControlResult};
@@ -540,13 +540,16 @@ fn speed_zero(bus: &BusHandle, id: u8) -> Option<u64> {
         .devices
         .get(&id)
         .and_then(measured_angle_raw)?;
-    Some(bus.set_targets(&[(
-        id,
-        Setpoint {
-            pos_ref: here,
-            spd_ref: 0,
-        },
-    )]))
+    Some(bus.set_targets_as(
+        &[(
+            id,
+            Setpoint {
+                pos_ref: here,
+                spd_ref: 0,
+            },
+        )],
+        Source::Homing,
+    ))
 }
 
 /// Writes speed 0 and waits (briefly) until it is on the wire; false if it
@@ -694,14 +697,17 @@ async fn search(
     // joint after that.
     let epoch = joint.epoch.after_own_mode_change();
     revoked(bus, id, epoch)?;
-    bus.set_targets_under(&[(
-        id,
-        Setpoint {
-            pos_ref: here,
-            spd_ref,
-        },
-        epoch,
-    )]);
+    bus.set_targets_under(
+        &[(
+            id,
+            Setpoint {
+                pos_ref: here,
+                spd_ref,
+            },
+            epoch,
+        )],
+        Source::Homing,
+    );
     let started = Instant::now();
     let deadline = started + plan.timeout;
     let mut watch = bus.watch();
@@ -873,7 +879,7 @@ async fn back_off(
     ) else {
         return;
     };
-    bus.set_targets(&[(id, Setpoint { pos_ref, spd_ref })]);
+    bus.set_targets_as(&[(id, Setpoint { pos_ref, spd_ref })], Source::Homing);
     let mut watch = bus.watch();
     let reached = watch.wait_for(|s| {
         s.devices

@@ -3,6 +3,7 @@
 //! (`state_dir/recordings`, else a directory under the system's temporary
 //! one); a std `Mutex` guards the book, never held across an `.await`.
 
+use std::collections::BTreeSet;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
@@ -14,7 +15,9 @@ use crate::bus::BusHandle;
 use crate::control::error::{ControlError, ControlResult};
 use crate::control::recording_book::{view, Book, Entry, RecordingView};
 use crate::control::Control;
+use crate::record::joint_states::Labeler;
 use crate::record::mcap_file::{McapFileError, SideEncoding};
+use crate::record::metadata::JointInfo;
 use crate::record::{RecordState, Recorder};
 
 /// Recordings running at once, at most.
@@ -62,6 +65,58 @@ fn requested_buses(state: &Arc<Control>, req: &RecordingRequest) -> ControlResul
     Ok(out)
 }
 
+/// Every joint of `buses` the daemon knows (its devices, and the hands'
+/// joints on them), as the recording's metadata tells them.
+fn joints_of(state: &Arc<Control>, buses: &[BusHandle], labeler: &Labeler) -> Vec<JointInfo> {
+    let hand_joints: Vec<(String, u8, String)> = state
+        .hands()
+        .map(|store| {
+            store
+                .hands()
+                .iter()
+                .flat_map(|h| {
+                    h.joints
+                        .iter()
+                        .map(|j| (j.bus.clone(), j.id, h.name.clone()))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let mut out = Vec::new();
+    for bus in buses {
+        let snap = bus.snapshot();
+        let mut ids: BTreeSet<u8> = snap.devices.keys().copied().collect();
+        ids.extend(
+            hand_joints
+                .iter()
+                .filter(|(b, _, _)| b == bus.name())
+                .map(|(_, id, _)| *id),
+        );
+        for id in ids {
+            let dev = snap.devices.get(&id);
+            let (name, cal) = labeler(bus.name(), id);
+            out.push(JointInfo {
+                bus: bus.name().to_owned(),
+                id,
+                name,
+                hand: hand_joints
+                    .iter()
+                    .find(|(b, i, _)| b == bus.name() && *i == id)
+                    .map(|(_, _, hand)| hand.clone()),
+                online: dev.is_some_and(|d| d.online),
+                firmware: dev
+                    .and_then(|d| d.info01.as_ref())
+                    .map(|(info, _)| info.firmware().dotted()),
+                protocol_revision: dev
+                    .and_then(|d| d.firmware.as_ref())
+                    .map(|f| f.revision.as_str().to_owned()),
+                calibration: (&cal).into(),
+            });
+        }
+    }
+    out
+}
+
 /// Checks the request, takes a place among the [`MAX_RUNNING`], creates
 /// the file (on a blocking thread: a slow or full disk holds no async
 /// worker) and starts the recording. A file that cannot be made is a
@@ -85,6 +140,7 @@ pub(crate) async fn start(
     let id = place.id;
     let names: Vec<String> = buses.iter().map(|b| b.name().to_owned()).collect();
     let (dir, labeler) = (state.recordings_dir(), state.joint_labeler());
+    let joints = joints_of(state, &buses, &labeler);
     let duration = req.duration_s.map(Duration::from_secs_f64);
     let side = if req.bag_compatible.unwrap_or(false) {
         SideEncoding::RosString
@@ -100,7 +156,7 @@ pub(crate) async fn start(
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_secs());
         let path: PathBuf = dir.join(format!("rec-{id}-{started_s}.mcap"));
-        Recorder::start(buses, labeler, path, duration, side)
+        Recorder::start(buses, labeler, &joints, path, duration, side)
     })
     .await;
     let mut book = state.recordings().lock();

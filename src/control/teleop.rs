@@ -91,7 +91,7 @@ pub(crate) async fn apply_policy(
                     ))
                 })
                 .collect();
-            bus.set_targets(&holds);
+            bus.set_targets_as(&holds, crate::bus::Source::Hold);
         }
     }
 }

@@ -6,15 +6,22 @@
 //! Channels, per bus `B`:
 //! - `/B/joint_states`: `sensor_msgs/msg/JointState`, `ros2msg` schema, CDR;
 //! - `/jointd/B/frames`: every frame on the wire, `{"dir", "wire_time_ns",
-//!   "hex"}` (JSON, with its JSON schema);
+//!   "hex"}` (JSON, with its JSON schema: [`schemas`] has them all);
 //! - `/jointd/B/events`: device and bus events as the WebSocket tells them
 //!   (JSON);
-//! - `/jointd/B/setpoints`: targets as clients commanded them (JSON).
+//! - `/jointd/B/setpoints`: every target the bus's joints were given, with
+//!   who gave it (a client, a stream, a move per control cycle, a homing
+//!   step, a hold) (JSON).
 //!
 //! [`SideEncoding::RosString`] writes the last three as
 //! `std_msgs/msg/String` in CDR holding the same JSON text instead: every
 //! channel then has one ROS serialization, which rosbag2 asks of a bag
 //! it plays.
+//!
+//! The header's profile is `ros2` only on such a file: the MCAP `ros2`
+//! profile asks that every channel be CDR with a `ros2msg` schema and carry
+//! `offered_qos_profiles` metadata. A file with JSON channels says no
+//! profile (`""`). Every CDR channel carries [`OFFERED_QOS_PROFILES`].
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -28,6 +35,7 @@ use mcap::{WriteOptions, Writer};
 use thiserror::Error;
 
 use super::cdr::{string_cdr, JOINT_STATE_MSG, STRING_MSG};
+use super::schemas;
 use super::sink::{Failure, Sink};
 
 /// How long a chunk may collect messages before it is written out.
@@ -104,19 +112,29 @@ impl Topic {
     }
 }
 
-const FRAME_SCHEMA: &str = r#"{"type":"object","title":"jointd wire frame","properties":{
-"dir":{"type":"string","enum":["tx","rx"],"description":"tx: written by the host; rx: received from a device"},
-"wire_time_ns":{"type":"integer","description":"Unix time the frame was on the wire, ns (the host's estimate)"},
-"hex":{"type":"string","description":"The 20 bytes, hex, space-separated (jointd frame decode reads it)"}},
-"required":["dir","wire_time_ns","hex"]}"#;
-const EVENT_SCHEMA: &str = r#"{"type":"object","title":"jointd bus event","properties":{
-"event":{"type":"string","description":"device_online, device_offline, fault, estop, device_reset, move_started, ... as docs/websocket.md lists them"},
-"bus":{"type":"string"}},"required":["event"]}"#;
-const SETPOINT_SCHEMA: &str = r#"{"type":"object","title":"jointd commanded targets","properties":{
-"seq":{"type":"integer","description":"The write's sequence number in the bus's setpoint store"},
-"targets":{"type":"array","items":{"type":"object","properties":{
-"id":{"type":"integer"},"position_deg":{"type":"number","description":"In the joint's calibrated frame"},
-"pos_ref_raw":{"type":"integer"},"spd_ref_raw":{"type":"integer"}}}}},"required":["seq","targets"]}"#;
+/// The QoS a ROS 2 publisher of these topics offers, as rosbag2 writes a
+/// channel's `offered_qos_profiles` (a YAML list of profiles, the policies
+/// by name as rosbag2's metadata version 9 and later spell them): what the
+/// ROS 2 bridge offers (reliable, volatile, keep last 10), durations
+/// infinite as the middleware reports them, so `ros2 bag play` republishes
+/// the topics with the QoS a live daemon offers.
+pub const OFFERED_QOS_PROFILES: &str = "\
+- history: keep_last
+  depth: 10
+  reliability: reliable
+  durability: volatile
+  deadline:
+    sec: 9223372036
+    nsec: 854775807
+  lifespan:
+    sec: 9223372036
+    nsec: 854775807
+  liveliness: automatic
+  liveliness_lease_duration:
+    sec: 9223372036
+    nsec: 854775807
+  avoid_ros_namespace_conventions: false
+";
 
 /// How the frames, events and setpoints channels are written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -126,6 +144,17 @@ pub enum SideEncoding {
     Json,
     /// The same JSON text in a `std_msgs/msg/String`, CDR.
     RosString,
+}
+
+impl SideEncoding {
+    /// The header's profile: `ros2` when every channel is CDR with a
+    /// `ros2msg` schema (and its QoS), none otherwise.
+    pub fn profile(self) -> &'static str {
+        match self {
+            Self::Json => "",
+            Self::RosString => "ros2",
+        }
+    }
 }
 
 /// An MCAP file being written (over `W`: the file, or a test's stream).
@@ -198,7 +227,7 @@ impl<W: Write> McapFile<W> {
     ) -> Result<Self, McapFileError> {
         let (sink, failure) = Sink::new(out);
         let options = WriteOptions::new()
-            .profile("ros2")
+            .profile(side.profile())
             .library(concat!("jointd ", env!("CARGO_PKG_VERSION")))
             .compression(Some(mcap::Compression::Zstd))
             .chunk_size(Some(4 << 20))
@@ -288,6 +317,23 @@ impl<W: Write> McapFile<W> {
         Ok(())
     }
 
+    /// Writes a Metadata record `name` (before the first message: it closes
+    /// the chunk being built).
+    pub fn write_metadata(
+        &mut self,
+        name: &str,
+        metadata: BTreeMap<String, String>,
+    ) -> Result<(), McapFileError> {
+        let record = mcap::records::Metadata {
+            name: name.to_owned(),
+            metadata,
+        };
+        self.writer
+            .write_metadata(&record)
+            .map_err(|e| self.mcap_err(e))?;
+        self.check()
+    }
+
     /// Messages written so far, by topic.
     pub fn counts(&self) -> &BTreeMap<String, u64> {
         &self.counts
@@ -369,18 +415,23 @@ fn add_channels<W: Write>(
             writer.add_schema("std_msgs/msg/String", "ros2msg", STRING_MSG.as_bytes())
         }
     };
-    let frame = json_schema("jointd/Frame", FRAME_SCHEMA)?;
-    let event = json_schema("jointd/BusEvent", EVENT_SCHEMA)?;
-    let setpoint = json_schema("jointd/Setpoints", SETPOINT_SCHEMA)?;
+    let frame = json_schema("jointd/Frame", &schemas::frame())?;
+    let event = json_schema("jointd/BusEvent", &schemas::event())?;
+    let setpoint = json_schema("jointd/Setpoints", &schemas::setpoint())?;
     let side_encoding = match side {
         SideEncoding::Json => "json",
         SideEncoding::RosString => "cdr",
     };
     let none = BTreeMap::new();
+    let qos = BTreeMap::from([(
+        "offered_qos_profiles".to_owned(),
+        OFFERED_QOS_PROFILES.to_owned(),
+    )]);
     let mut channels = BTreeMap::new();
     for bus in buses {
         let mut add = |schema, topic: Topic, encoding| {
-            writer.add_channel(schema, &topic.name(bus), encoding, &none)
+            let metadata = if encoding == "cdr" { &qos } else { &none };
+            writer.add_channel(schema, &topic.name(bus), encoding, metadata)
         };
         let ch = BusChannels {
             joint_states: add(joint_state, Topic::JointStates, "cdr")?,
@@ -444,6 +495,58 @@ mod tests {
             summary.chunk_indexes.len()
         );
         let _ = std::fs::remove_dir_all(dir);
+    }
+
+    /// The header's profile and every channel's encoding, schema encoding
+    /// and QoS metadata, of a file written with `side`.
+    fn profile_and_channels(side: SideEncoding) -> (String, Vec<(String, String, bool)>) {
+        let mut file = McapFile::over(Vec::new(), "mem.mcap", &buses(), side).unwrap();
+        file.write("sim0", Topic::Events, 1, b"{\"event\":\"x\"}")
+            .unwrap();
+        file.writer.finish().unwrap();
+        let bytes = file.writer.into_inner().get_ref().clone();
+        let profile = mcap::read::LinearReader::new(&bytes)
+            .unwrap()
+            .find_map(|r| match r {
+                Ok(mcap::records::Record::Header(h)) => Some(h.profile),
+                _ => None,
+            })
+            .expect("a header");
+        let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
+        let channels = summary
+            .channels
+            .values()
+            .map(|c| {
+                let schema = c.schema.as_ref().map(|s| s.encoding.clone());
+                let qos = c.metadata.get("offered_qos_profiles").map(String::as_str)
+                    == Some(OFFERED_QOS_PROFILES);
+                (c.message_encoding.clone(), schema.unwrap_or_default(), qos)
+            })
+            .collect();
+        (profile, channels)
+    }
+
+    #[test]
+    fn the_ros2_profile_only_on_a_file_of_cdr_channels_each_with_its_qos() {
+        let (profile, channels) = profile_and_channels(SideEncoding::Json);
+        assert_eq!(profile, "", "JSON channels: no profile");
+        assert_eq!(channels.len(), 4);
+        for (encoding, schema, qos) in &channels {
+            let cdr = encoding == "cdr";
+            assert_eq!(
+                qos, &cdr,
+                "{encoding}/{schema}: QoS on the CDR channel only"
+            );
+        }
+        let (profile, channels) = profile_and_channels(SideEncoding::RosString);
+        assert_eq!(profile, "ros2");
+        assert_eq!(channels.len(), 4);
+        assert!(
+            channels
+                .iter()
+                .all(|(e, s, qos)| e == "cdr" && s == "ros2msg" && *qos),
+            "{channels:?}"
+        );
     }
 
     #[test]

@@ -4,6 +4,8 @@
 //! - [`cdr`]: `sensor_msgs/msg/JointState` in CDR (shared with the ROS 2 bridge);
 //! - [`joint_states`]: a `JointState` per poll round from a bus's snapshots;
 //! - [`mcap_file`]: the file: schemas, channels, chunks, summary;
+//! - [`metadata`]: its Metadata record `jointd` (version, joints);
+//! - [`schemas`]: the JSON channels' schemas, every field typed;
 //! - [`sink`]: the stream under the MCAP writer, which keeps I/O errors
 //!   from it (the writer panics after one) for the file to report;
 //! - [`recorder`]: the thread that taps the buses and writes;
@@ -13,7 +15,9 @@ pub mod cdr;
 pub mod client;
 pub mod joint_states;
 pub mod mcap_file;
+pub mod metadata;
 pub mod recorder;
+pub mod schemas;
 pub mod sink;
 
 pub use recorder::{RecordState, RecordStatus, Recorder};

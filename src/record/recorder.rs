@@ -26,6 +26,7 @@ use crate::protocol::units;
 
 use super::joint_states::{system_ns, JointStates, Labeler};
 use super::mcap_file::{McapFile, McapFileError, SideEncoding, Topic, CHUNK_PERIOD};
+use super::metadata::{self, JointInfo};
 
 /// How often the taps are drained (well under a poll round).
 const DRAIN_EVERY: Duration = Duration::from_millis(5);
@@ -96,23 +97,32 @@ struct Tapped {
 }
 
 impl Recorder {
-    /// Creates the file and starts recording `buses` (for `duration`, or
-    /// until stopped).
+    /// Creates the file with its metadata record (`joints`: what the
+    /// recording knows of them) and starts recording `buses` (for
+    /// `duration`, or until stopped).
     pub fn start(
         buses: Vec<BusHandle>,
         labeler: Labeler,
+        joints: &[JointInfo],
         path: PathBuf,
         duration: Option<Duration>,
         side: SideEncoding,
     ) -> Result<Self, McapFileError> {
         let names: Vec<String> = buses.iter().map(|b| b.name().to_owned()).collect();
-        let file = McapFile::create(&path, &names, side)?;
+        let mut file = McapFile::create(&path, &names, side)?;
+        let written = file
+            .write_metadata(metadata::NAME, metadata::record(joints))
+            .and_then(|()| file.flush());
+        if let Err(e) = written {
+            file.close_failed();
+            return Err(e);
+        }
         let tapped = buses
             .into_iter()
             .map(|bus| Tapped {
                 snapshots: bus.watch(),
                 frames: bus.shared().frame_tap.subscribe(),
-                setpoints: bus.shared().setpoint_tap.subscribe(),
+                setpoints: bus.shared().setpoints.subscribe(),
                 events: bus.events(),
                 joint_states: JointStates::new(bus.name(), labeler.clone()),
                 bus,
@@ -287,7 +297,9 @@ fn drain_bus(
                             "pos_ref_raw": sp.pos_ref, "spd_ref_raw": sp.spd_ref})
                     })
                     .collect();
-                let msg = json!({"seq": c.seq, "targets": targets});
+                let mut msg = serde_json::to_value(c.source).unwrap_or_else(|_| json!({}));
+                msg["seq"] = json!(c.seq);
+                msg["targets"] = json!(targets);
                 let ns = system_ns(c.at);
                 file.write(&bus, Topic::Setpoints, ns, msg.to_string().as_bytes())?;
             }

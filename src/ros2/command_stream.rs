@@ -193,7 +193,7 @@ impl CommandStream {
                         bus: bus.name().to_owned(),
                         id: *id,
                     }));
-                    bus.set_targets_under(&targets);
+                    bus.set_targets_under(&targets, crate::bus::Source::Ros2);
                 }
                 self.watchdog.feed(&fed, now);
                 self.stats.commands_applied.fetch_add(1, Ordering::Relaxed);

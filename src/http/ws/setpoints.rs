@@ -123,7 +123,10 @@ pub(crate) fn apply(
             .zip(epochs.by_ref())
             .map(|(&(id, sp), epoch)| (id, sp, epoch))
             .collect();
-        writes.push((name, bus.set_targets_under(&under)));
+        writes.push((
+            name,
+            bus.set_targets_under(&under, crate::bus::Source::Websocket),
+        ));
     }
     Ok(Applied {
         accepted,

@@ -390,9 +390,10 @@ impl Ctx {
         if let Some(latest) = self.shared.setpoints.get(id) {
             // What went out during align does not count as on the device.
             self.sched.registry_mut().forget_target(id);
-            self.shared
-                .setpoints
-                .set_admitted(&[(id, latest.setpoint, latest.epoch)]);
+            self.shared.setpoints.set_admitted(
+                &[(id, latest.setpoint, latest.epoch)],
+                crate::bus::Source::Aligned,
+            );
         }
     }
 

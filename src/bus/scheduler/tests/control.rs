@@ -1,6 +1,7 @@
 //! Scheduler tests: control: coalescing, budget, prepared frames, acks.
 
 use super::*;
+use crate::bus::Source;
 
 #[test]
 fn a_first_target_goes_in_its_own_frame() {
@@ -152,20 +153,26 @@ fn a_setpoint_after_preparing_replans_the_frame() {
 #[test]
 fn wire_acks_follow_the_frames() {
     let mut bus = Bus::new(&[1, 2], &[1, 2]);
-    let seq = bus.store.set(&[(
-        1,
-        Setpoint {
-            pos_ref: 1,
-            spd_ref: 100,
-        },
-    )]);
-    bus.store.set(&[(
-        2,
-        Setpoint {
-            pos_ref: 2,
-            spd_ref: 100,
-        },
-    )]);
+    let seq = bus.store.set(
+        &[(
+            1,
+            Setpoint {
+                pos_ref: 1,
+                spd_ref: 100,
+            },
+        )],
+        Source::Rest,
+    );
+    bus.store.set(
+        &[(
+            2,
+            Setpoint {
+                pos_ref: 2,
+                spd_ref: 100,
+            },
+        )],
+        Source::Rest,
+    );
     let Slot::Control(first) = bus.next() else {
         panic!("control expected")
     };

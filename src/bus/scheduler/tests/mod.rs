@@ -106,7 +106,7 @@ impl Bus {
                 )
             })
             .collect();
-        self.store.set(&targets);
+        self.store.set(&targets, crate::bus::Source::Rest);
     }
 
     /// Writes `frame` now; the clock moves to the line's next write time.
