@@ -7,58 +7,17 @@
 
 import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
-import { spawn } from "node:child_process";
-import { mkdirSync, mkdtempSync, writeFileSync } from "node:fs";
-import { tmpdir } from "node:os";
-import { join } from "node:path";
 import { createServer } from "node:http";
-import { chromium } from "playwright-core";
+import { mkdirSync } from "node:fs";
+import { ROOT, WAIT, launchBrowser, rest as restAt, startDaemon } from "./harness.mjs";
 
-const ROOT = new URL("../../", import.meta.url).pathname;
-const BIN = process.env.JOINTD_BIN || `${ROOT}target/debug/jointd`;
 const SHOTS = process.env.SCREENSHOT_DIR || `${ROOT}target/screenshots`;
-const CHROMIUM = process.env.CHROMIUM || "/usr/bin/chromium";
-const WAIT = 20_000;
 /** A common laptop screen: the joint panel must be usable without scrolling. */
 const VIEWPORT = { width: 1366, height: 768 };
 
 let daemon, browser, page, base;
 
-/** The daemon's first stdout line is `listening on <url>` (port 0 picks a free port). */
-function listeningUrl(child) {
-  return new Promise((resolve, reject) => {
-    let buf = "";
-    const timer = setTimeout(() => reject(new Error("jointd did not report its address")), WAIT);
-    child.stdout.on("data", (chunk) => {
-      buf += chunk;
-      const m = buf.match(/^listening on (\S+)/m);
-      if (m) { clearTimeout(timer); resolve(m[1]); }
-    });
-    child.once("exit", (code) => reject(new Error(`jointd exited early with ${code}`)));
-  });
-}
-
-async function waitReady(url) {
-  const deadline = Date.now() + WAIT;
-  while (Date.now() < deadline) {
-    try {
-      const r = await fetch(`${url}/readyz`);
-      if (r.ok) return;
-    } catch { /* not listening yet */ }
-    await new Promise((r) => setTimeout(r, 100));
-  }
-  throw new Error(`daemon not ready at ${url}`);
-}
-
-async function rest(method, path, body) {
-  const r = await fetch(`${base}${path}`, {
-    method, headers: { "Content-Type": "application/json" },
-    body: body === undefined ? undefined : JSON.stringify(body),
-  });
-  const data = await r.json();
-  assert.ok(r.ok, `${method} ${path}: ${JSON.stringify(data)}`);
-  return data;
-}
+const rest = (method, path, body) => restAt(base, method, path, body);
 
 const cell = (id, field) => page.locator(`[data-testid="device-row-sim0-${id}"] td[data-field="${field}"]`);
 
@@ -66,18 +25,10 @@ before(async () => {
   mkdirSync(SHOTS, { recursive: true });
   // Joints 9–16 run rev 2.0.8 firmware, 1–8 V2.0.1: a mixed bus, as in the field.
   // A hand of joint 1, its poses in a state file of a fresh directory.
-  const dir = mkdtempSync(join(tmpdir(), "jointd-browser-"));
-  const config = join(dir, "jointd.toml");
-  writeFileSync(config, `state_dir = "${join(dir, "state")}"\n\n[[hand]]\nname = "left"\njoints = [{ bus = "sim0", ids = 1, names = ["thumb"] }]\n`);
-  daemon = spawn(BIN, ["--sim", "16", "--sim-firmware", "9-16=2.0.8", "--listen", "127.0.0.1:0", "--config", config],
-    { stdio: ["ignore", "pipe", "inherit"] });
-  base = await listeningUrl(daemon);
-  await waitReady(base);
-  browser = await chromium.launch({
-    executablePath: CHROMIUM,
-    args: ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-      "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic"],
-  });
+  daemon = await startDaemon(["--sim", "16", "--sim-firmware", "9-16=2.0.8"],
+    '[[hand]]\nname = "left"\njoints = [{ bus = "sim0", ids = 1, names = ["thumb"] }]\n');
+  base = daemon.base;
+  browser = await launchBrowser();
   page = await browser.newPage({ viewport: VIEWPORT });
   page.on("pageerror", (e) => console.error("page error:", e.message));
   await page.goto(base);
@@ -85,10 +36,7 @@ before(async () => {
 
 after(async () => {
   await browser?.close();
-  if (daemon) {
-    daemon.kill("SIGTERM");
-    await new Promise((r) => daemon.once("exit", r));
-  }
+  await daemon?.stop();
 });
 
 test("the device table lists the simulated joints with live values", async () => {

@@ -4,7 +4,7 @@ and waits for its end by polling (the daemon keeps a finished job's view).
 """
 
 import time
-from typing import TYPE_CHECKING, Callable, Optional, TypeVar
+from typing import TYPE_CHECKING, Generic, Optional, TypeVar
 
 from . import schema
 from .errors import Problem, Timeout
@@ -12,34 +12,46 @@ from .errors import Problem, Timeout
 if TYPE_CHECKING:
     from .client import Jointd
 
-V = TypeVar("V")
-
 POLL_S = 0.02
 
 
-def _wait(fetch: Callable[[], V], running: Callable[[V], bool], what: str,
-          timeout: Optional[float]) -> V:
-    deadline = None if timeout is None else time.monotonic() + timeout
-    while True:
-        view = fetch()
-        if not running(view):
-            return view
-        if deadline is not None and time.monotonic() >= deadline:
-            raise Timeout(Problem(type="urn:jointd:client:timeout", title="Timeout", status=0,
-                                  detail=f"{what} still running after {timeout} s"))
-        time.sleep(POLL_S)
+J = TypeVar("J", schema.MoveView, schema.HomingView)
 
 
-class Move:
-    """A move running in the daemon (`Jointd.move`, `Jointd.go_to_pose`)."""
+class _Job(Generic[J]):
+    """A job's last view, refreshed on request, waited for by polling."""
 
-    def __init__(self, client: "Jointd", view: schema.MoveView):
+    def __init__(self, client: "Jointd", view: J):
         self._client = client
-        self.view = view
+        self.view: J = view
 
     @property
     def id(self) -> int:
         return self.view["id"]
+
+    def _fetch(self) -> J:
+        raise NotImplementedError
+
+    def refresh(self) -> J:
+        self.view = self._fetch()
+        return self.view
+
+    def wait(self, timeout: Optional[float] = None) -> J:
+        """Until it ended (`Timeout` after `timeout` s); its final view."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while self.refresh()["state"] == "running":
+            if deadline is not None and time.monotonic() >= deadline:
+                raise Timeout(Problem(type="urn:jointd:client:timeout", title="Timeout", status=0,
+                                      detail=f"{self!r} still running after {timeout} s"))
+            time.sleep(POLL_S)
+        return self.view
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(id={self.id}, state={self.view['state']!r})"
+
+
+class Move(_Job[schema.MoveView]):
+    """A move running in the daemon (`Jointd.move`, `Jointd.go_to_pose`)."""
 
     @property
     def state(self) -> schema.MoveState:
@@ -47,35 +59,17 @@ class Move:
         (`refresh()` asks again)."""
         return self.view["state"]
 
-    def refresh(self) -> schema.MoveView:
-        self.view = self._client.get_move(self.id)
-        return self.view
-
-    def wait(self, timeout: Optional[float] = None) -> schema.MoveView:
-        """Until the move ended (`Timeout` after `timeout` s); its final view."""
-        self.view = _wait(self.refresh, lambda v: v["state"] == "running", f"move {self.id}",
-                          timeout)
-        return self.view
+    def _fetch(self) -> schema.MoveView:
+        return self._client.get_move(self.id)
 
     def stop(self) -> schema.MoveView:
         """Stop it where the joints are (they hold there, enabled)."""
         self.view = self._client.stop_move(self.id)
         return self.view
 
-    def __repr__(self) -> str:
-        return f"Move(id={self.id}, state={self.state!r})"
 
-
-class Homing:
+class Homing(_Job[schema.HomingView]):
     """A homing job running in the daemon (`Jointd.home`)."""
-
-    def __init__(self, client: "Jointd", view: schema.HomingView):
-        self._client = client
-        self.view = view
-
-    @property
-    def id(self) -> int:
-        return self.view["id"]
 
     @property
     def state(self) -> str:
@@ -83,15 +77,5 @@ class Homing:
         state says how), as last seen."""
         return self.view["state"]
 
-    def refresh(self) -> schema.HomingView:
-        self.view = self._client.get_homing(self.id)
-        return self.view
-
-    def wait(self, timeout: Optional[float] = None) -> schema.HomingView:
-        """Until every joint ended (`Timeout` after `timeout` s); the final view."""
-        self.view = _wait(self.refresh, lambda v: v["state"] == "running", f"homing {self.id}",
-                          timeout)
-        return self.view
-
-    def __repr__(self) -> str:
-        return f"Homing(id={self.id}, state={self.state!r})"
+    def _fetch(self) -> schema.HomingView:
+        return self._client.get_homing(self.id)
