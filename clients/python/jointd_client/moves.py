@@ -4,13 +4,20 @@ and waits for its end by polling (the daemon keeps a finished job's view).
 """
 
 import time
-from typing import TYPE_CHECKING, Generic, Optional, TypeVar
+from typing import Generic, Optional, Protocol, TypeVar
 
 from . import schema
 from .errors import Problem, Timeout
 
-if TYPE_CHECKING:
-    from .client import Jointd
+
+class JobCalls(Protocol):
+    """The calls a job handle makes (`Jointd` has them)."""
+
+    def get_move(self, move_id: int) -> schema.MoveView: ...
+
+    def stop_move(self, move_id: int) -> schema.MoveView: ...
+
+    def get_homing(self, homing_id: int) -> schema.HomingView: ...
 
 POLL_S = 0.02
 
@@ -21,7 +28,7 @@ J = TypeVar("J", schema.MoveView, schema.HomingView)
 class _Job(Generic[J]):
     """A job's last view, refreshed on request, waited for by polling."""
 
-    def __init__(self, client: "Jointd", view: J):
+    def __init__(self, client: JobCalls, view: J):
         self._client = client
         self.view: J = view
 

@@ -6,7 +6,7 @@ import itertools
 import json
 from dataclasses import dataclass
 from types import TracebackType
-from typing import (TYPE_CHECKING, Any, AsyncIterator, Dict, Iterable, List, Optional, Type,
+from typing import (Any, AsyncIterator, Dict, Iterable, List, Optional, Protocol, Type,
                     TypedDict)
 
 import websockets
@@ -14,8 +14,13 @@ from websockets.asyncio.client import ClientConnection, connect
 
 from .errors import NotConnected, ws_error
 
-if TYPE_CHECKING:
-    from .client import Jointd
+
+class Endpoint(Protocol):
+    """Where the socket goes (`Jointd` is one)."""
+
+    token: Optional[str]
+
+    def ws_url(self) -> str: ...
 
 
 class JointSample(TypedDict, total=False):
@@ -49,7 +54,7 @@ class Telemetry:
     joints: List[JointSample]
 
 
-async def _open(client: "Jointd") -> ClientConnection:
+async def _open(client: Endpoint) -> ClientConnection:
     headers = {"Authorization": f"Bearer {client.token}"} if client.token else None
     try:
         return await connect(client.ws_url(), additional_headers=headers, max_queue=None)
@@ -57,7 +62,7 @@ async def _open(client: "Jointd") -> ClientConnection:
         raise NotConnected(client.ws_url(), str(e)) from None
 
 
-async def telemetry(client: "Jointd", devices: Optional[Iterable[int]], rate_hz: float,
+async def telemetry(client: Endpoint, devices: Optional[Iterable[int]], rate_hz: float,
                     buses: Optional[Iterable[str]],
                     fields: Optional[Iterable[str]]) -> AsyncIterator[Telemetry]:
     async with await _open(client) as ws:
@@ -84,7 +89,7 @@ class SetpointStream:
     disarmed first and the socket closed cleanly, so the daemon logs no
     watchdog firing for a client that simply finished."""
 
-    def __init__(self, client: "Jointd", hold_timeout_ms: int, policy: str):
+    def __init__(self, client: Endpoint, hold_timeout_ms: int, policy: str):
         self._client = client
         self._hold = hold_timeout_ms
         self._policy = policy
