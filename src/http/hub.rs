@@ -175,22 +175,22 @@ impl FragmentCache {
     /// The text cached for `shape` and this very `snap`, or `build`'s.
     pub fn get_or_build(
         &self,
-        shape: String,
+        shape: &str,
         snap: &Arc<BusSnapshot>,
         build: impl FnOnce() -> String,
     ) -> Arc<str> {
         let id = Arc::as_ptr(snap) as usize;
         let mut entries = self.entries.lock().unwrap_or_else(|p| p.into_inner());
-        if let Some((cached_id, text)) = entries.get(&shape) {
+        if let Some((cached_id, text)) = entries.get(shape) {
             if *cached_id == id {
                 return text.clone();
             }
         }
         let text: Arc<str> = build().into();
-        if entries.len() >= MAX_FRAGMENTS && !entries.contains_key(&shape) {
+        if entries.len() >= MAX_FRAGMENTS && !entries.contains_key(shape) {
             entries.clear();
         }
-        entries.insert(shape, (id, text.clone()));
+        entries.insert(shape.to_owned(), (id, text.clone()));
         text
     }
 }
@@ -206,7 +206,7 @@ mod tests {
         hub.join();
         hub.join();
         hub.fragments
-            .get_or_build("a".into(), &snap, || "[]".into());
+            .get_or_build("a", &snap, || "[]".into());
         hub.leave();
         assert_eq!(hub.fragments.cached(), 1, "one client still subscribed");
         hub.leave();

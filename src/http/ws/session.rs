@@ -3,6 +3,7 @@
 //! writes to the socket. Generic over `Sink`/`Stream` so tests can drive it
 //! without a network.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use axum::extract::ws::{close_code, Message};
@@ -138,7 +139,7 @@ struct Connection {
     state: AppState,
     client: u64,
     out: mpsc::Sender<ServerMessage>,
-    sub: watch::Sender<Option<Subscription>>,
+    sub: watch::Sender<Option<Arc<Subscription>>>,
     acks: mpsc::Sender<PendingAck>,
     watchdog: Watchdog,
     streams: Streams,
@@ -203,7 +204,7 @@ impl Connection {
                     fields: sub.fields.clone(),
                     rate_hz: sub.rate_hz,
                 });
-                self.sub.send_replace(Some(sub));
+                self.sub.send_replace(Some(Arc::new(sub)));
             }
             Err(e) => self.reject(s.seq, e),
         }
@@ -343,10 +344,5 @@ fn subscription(state: &AppState, s: &Subscribe) -> Result<Subscription, WsError
         return Err(e);
     }
     let fields = s.fields.clone().unwrap_or_else(|| Field::ALL.to_vec());
-    Ok(Subscription {
-        buses,
-        devices,
-        fields,
-        rate_hz,
-    })
+    Ok(Subscription::new(buses, devices, fields, rate_hz))
 }

@@ -23,6 +23,38 @@ pub(crate) struct Subscription {
     pub devices: Option<Vec<u8>>,
     pub fields: Vec<Field>,
     pub rate_hz: f64,
+    /// Per bus (in `buses`' order), the key of its joints' fragment in the
+    /// shared cache: made once here, not at every tick of every client.
+    shapes: Vec<String>,
+}
+
+impl Subscription {
+    pub(crate) fn new(
+        buses: Vec<String>,
+        devices: Option<Vec<u8>>,
+        fields: Vec<Field>,
+        rate_hz: f64,
+    ) -> Self {
+        let shapes = buses
+            .iter()
+            .map(|bus| format!("{bus}|{devices:?}|{fields:?}"))
+            .collect();
+        Self {
+            buses,
+            devices,
+            fields,
+            rate_hz,
+            shapes,
+        }
+    }
+
+    /// Each bus with its fragment's cache key.
+    pub(crate) fn buses_and_shapes(&self) -> impl Iterator<Item = (&str, &str)> {
+        self.buses
+            .iter()
+            .map(String::as_str)
+            .zip(self.shapes.iter().map(String::as_str))
+    }
 }
 
 /// The joints of one bus snapshot that the subscription selects;
@@ -141,12 +173,12 @@ fn field_value(f: Field, dev: &DeviceState, cal: &Calibration) -> Value {
 pub(crate) fn fragment<'a>(
     cache: &FragmentCache,
     sub: &Subscription,
+    shape: &str,
     snap: &Arc<BusSnapshot>,
     name_of: impl Fn(u8) -> Option<&'a str>,
     cal_of: impl Fn(u8) -> Calibration,
     now: Instant,
 ) -> Arc<str> {
-    let shape = format!("{}|{:?}|{:?}", snap.name, sub.devices, sub.fields);
     cache.get_or_build(shape, snap, || {
         let mut list = Vec::new();
         joints(sub, snap, name_of, cal_of, now, &mut list);

@@ -6,6 +6,7 @@
 //! "too slow"; on daemon shutdown every connection is closed with 1001.
 
 use std::collections::HashMap;
+use std::fmt::Write as _;
 use std::pin::Pin;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -89,13 +90,13 @@ where
     pub(crate) async fn run(
         mut self,
         mut out: mpsc::Receiver<ServerMessage>,
-        mut sub: watch::Receiver<Option<Subscription>>,
+        mut sub: watch::Receiver<Option<Arc<Subscription>>>,
         mut acks_in: mpsc::Receiver<PendingAck>,
         mut close_requests: mpsc::Receiver<(u16, String)>,
     ) {
         let mut events = self.event_streams();
         let mut wire = self.ack_streams();
-        let mut ticker = ticker(sub.borrow().as_ref());
+        let mut ticker = ticker(sub.borrow().as_deref());
         let mut sweep = interval(ACK_SWEEP);
         let mut shutdown = self.state.ws().shutdown_signal();
         loop {
@@ -235,20 +236,20 @@ where
         }
     }
 
-    async fn telemetry(&mut self, sub: &watch::Receiver<Option<Subscription>>) -> bool {
+    async fn telemetry(&mut self, sub: &watch::Receiver<Option<Arc<Subscription>>>) -> bool {
         let Some(sub) = sub.borrow().clone() else {
             return true;
         };
         let now = Instant::now();
         self.count_skipped_ticks(&sub, now);
-        let mut parts: Vec<std::sync::Arc<str>> = Vec::with_capacity(sub.buses.len());
-        for name in &sub.buses {
+        let mut parts: Vec<Arc<str>> = Vec::with_capacity(sub.buses.len());
+        for (name, shape) in sub.buses_and_shapes() {
             if let Ok(bus) = self.state.bus(name) {
                 let names = |id| self.state.joint_name(name, id);
                 let cals = |id| self.state.calibration(name, id);
                 let cache = &self.state.ws().fragments;
                 let snap = bus.snapshot();
-                let part = super::telemetry::fragment(cache, &sub, &snap, names, cals, now);
+                let part = super::telemetry::fragment(cache, &sub, shape, &snap, names, cals, now);
                 if !part.is_empty() {
                     parts.push(part);
                 }
@@ -256,14 +257,25 @@ where
         }
         self.telemetry_seq += 1;
         // Written by hand around the shared fragments, in the
-        // shape docs/websocket.md gives for `telemetry`.
-        let text = format!(
-            r#"{{"type":"telemetry","seq":{},"t_ms":{},"dropped":{},"joints":[{}]}}"#,
+        // shape docs/websocket.md gives for `telemetry`: one buffer sized
+        // for all of it, the fragments copied in once.
+        let joints_len: usize = parts.iter().map(|p| p.len() + 1).sum();
+        let mut text = String::with_capacity(joints_len + 96);
+        // Writing to a String cannot fail.
+        let _ = write!(
+            text,
+            r#"{{"type":"telemetry","seq":{},"t_ms":{},"dropped":{},"joints":["#,
             self.telemetry_seq,
             unix_ms(),
             std::mem::take(&mut self.dropped),
-            parts.join(",")
         );
+        for (i, part) in parts.iter().enumerate() {
+            if i > 0 {
+                text.push(',');
+            }
+            text.push_str(part);
+        }
+        text.push_str("]}");
         self.last_sample = Some(now);
         self.put(Message::Text(Utf8Bytes::from(text))).await
     }
@@ -339,8 +351,8 @@ fn lagged(e: BroadcastStreamRecvError) -> u64 {
     }
 }
 
-fn ticker_for(sub: &watch::Receiver<Option<Subscription>>) -> Interval {
-    ticker(sub.borrow().as_ref())
+fn ticker_for(sub: &watch::Receiver<Option<Arc<Subscription>>>) -> Interval {
+    ticker(sub.borrow().as_deref())
 }
 
 /// A ticker at the subscription's rate; an idle one when unsubscribed.
