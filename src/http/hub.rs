@@ -205,8 +205,7 @@ mod tests {
         let snap = Arc::new(BusSnapshot::new("sim0", "/dev/null", 500_000));
         hub.join();
         hub.join();
-        hub.fragments
-            .get_or_build("a", &snap, || "[]".into());
+        hub.fragments.get_or_build("a", &snap, || "[]".into());
         hub.leave();
         assert_eq!(hub.fragments.cached(), 1, "one client still subscribed");
         hub.leave();
