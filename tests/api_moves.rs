@@ -26,27 +26,6 @@ async fn enable(b: &SimBus, ids: &[u8]) {
     }
 }
 
-/// Polls the move until `ok` holds for its view; returns that view.
-async fn wait_move(b: &SimBus, id: u64, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
-    let deadline = tokio::time::Instant::now() + WAIT;
-    loop {
-        let view = b
-            .server
-            .get(&format!("/api/v1/moves/{id}"))
-            .await
-            .ok()
-            .clone();
-        if ok(&view) {
-            return view;
-        }
-        assert!(
-            tokio::time::Instant::now() < deadline,
-            "timed out waiting for {what}: {view}"
-        );
-        tokio::time::sleep(Duration::from_millis(10)).await;
-    }
-}
-
 fn target(id: u8) -> f64 {
     // Joint 2 has soft limits of ±45° in the fixture.
     if id % 2 == 0 {
@@ -77,7 +56,9 @@ async fn a_16_joint_move_arrives_within_half_a_degree_of_every_target() {
     assert_eq!(r.body["method"], "min_jerk");
     assert_eq!(r.body["duration_ms"], 1000.0);
     let id = r.body["id"].as_u64().expect("an id");
-    let done = wait_move(&b, id, "the move done", |v| v["state"] == "done").await;
+    let done = b
+        .wait_move(id, "the move done", |v| v["state"] == "done")
+        .await;
     assert_eq!(done["arrived"].as_array().map(Vec::len), Some(16));
     assert_eq!(done["progress"], 1.0);
     // The simulated joints follow their last setpoints: each settles at its
@@ -205,10 +186,11 @@ async fn a_move_is_stopped_replaced_joint_by_joint_and_aborted_by_an_e_stop() {
     )
     .await
     .ok();
-    let view = wait_move(&b, second_id, "joint 1 replaced", |v| {
-        v["replaced"].as_array().is_some_and(|r| !r.is_empty())
-    })
-    .await;
+    let view = b
+        .wait_move(second_id, "joint 1 replaced", |v| {
+            v["replaced"].as_array().is_some_and(|r| !r.is_empty())
+        })
+        .await;
     assert_eq!(view["state"], "running");
     assert_eq!(view["replaced"], json!([{"bus": "sim0", "id": 1}]));
 
@@ -230,10 +212,9 @@ async fn a_move_is_stopped_replaced_joint_by_joint_and_aborted_by_an_e_stop() {
     // An e-stop aborts the third at once.
     s.post_empty("/api/v1/estop").await;
     let third_id = third["id"].as_u64().expect("id");
-    let view = wait_move(&b, third_id, "the move aborted", |v| {
-        v["state"] == "aborted"
-    })
-    .await;
+    let view = b
+        .wait_move(third_id, "the move aborted", |v| v["state"] == "aborted")
+        .await;
     assert_eq!(view["reason"], "estopped");
     s.get("/api/v1/moves/999").await.problem(404);
 }

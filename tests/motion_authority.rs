@@ -73,22 +73,6 @@ async fn move_view(b: &SimBus, move_id: u64) -> Value {
         .clone()
 }
 
-/// Polls move `move_id` until `ok` holds; returns that view.
-async fn wait_move(b: &SimBus, move_id: u64, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
-    let deadline = tokio::time::Instant::now() + WAIT;
-    loop {
-        let view = move_view(b, move_id).await;
-        if ok(&view) {
-            return view;
-        }
-        assert!(
-            tokio::time::Instant::now() < deadline,
-            "timed out waiting for {what}: {view}"
-        );
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
-}
-
 /// Waits until the simulator shows `pred` of device `id`.
 fn sim_until(b: &SimBus, what: &str, pred: impl Fn(&jointd::sim::DeviceView) -> bool, id: u8) {
     let deadline = std::time::Instant::now() + WAIT;
@@ -147,7 +131,7 @@ async fn a_move_racing_an_estop_never_drives_the_joint_after_the_next_enable() {
         estop.await.expect("join").expect("e-stop");
         if status == 201 {
             let id = body["id"].as_u64().expect("move id");
-            let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+            let view = b.wait_move(id, "the move ended", |v| !is_running(v)).await;
             assert_eq!(view["state"], "aborted", "attempt {attempt}: {view}");
         } else {
             assert_eq!(status, 409, "attempt {attempt}: {body}");
@@ -178,7 +162,7 @@ async fn a_disable_mid_move_ends_it_and_an_enable_does_not_resume_it() {
         .post("/api/v1/buses/sim0/devices/1/disable", json!({}))
         .await;
     assert!(r.status.is_success(), "{}", r.body);
-    let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    let view = b.wait_move(id, "the move ended", |v| !is_running(v)).await;
     assert_eq!(view["state"], "aborted", "{view}");
     assert_eq!(view["reason"], "disabled", "{view}");
     let progress = view["progress"].as_f64().expect("progress");
@@ -205,7 +189,7 @@ async fn a_mode_change_mid_move_ends_it_and_the_joint_does_not_spin() {
     let id = body["id"].as_u64().expect("move id");
     sim_until(&b, "joint 1 under way", |d| d.angle_deg > 5.0, 1);
     set_mode(&b, 1, "speed").await;
-    let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    let view = b.wait_move(id, "the move ended", |v| !is_running(v)).await;
     assert_eq!(view["state"], "aborted", "{view}");
     assert_eq!(view["reason"], "mode_changed", "{view}");
     fence(&b, 2, 14.0).await;
@@ -263,7 +247,7 @@ async fn a_blocked_joint_stalls_its_move_instead_of_arriving() {
         dev_id: 1,
         at_deg: None,
     });
-    let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    let view = b.wait_move(id, "the move ended", |v| !is_running(v)).await;
     assert_eq!(view["state"], "stalled", "{view}");
     assert_eq!(view["arrived"], json!([]), "{view}");
     assert_eq!(view["stalled"][0]["id"], 1, "{view}");
@@ -298,7 +282,7 @@ async fn a_move_says_what_it_cannot_apply_and_never_exceeds_a_speed_cap() {
     let (status, body) = post_move(&b, 2, dist, ms).await;
     assert_eq!(status, 201, "{body}");
     let id = body["id"].as_u64().expect("move id");
-    wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    b.wait_move(id, "the move ended", |v| !is_running(v)).await;
     let frames = b
         .server
         .get("/api/v1/buses/sim0/frames?limit=512")
@@ -429,7 +413,7 @@ async fn a_websocket_move_racing_an_estop_never_drives_the_joint_after_the_next_
         };
         if answer["type"] == "move_started" {
             let id = answer["move"]["id"].as_u64().expect("move id");
-            let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+            let view = b.wait_move(id, "the move ended", |v| !is_running(v)).await;
             assert_eq!(view["state"], "aborted", "attempt {attempt}: {view}");
         } else {
             assert_eq!(answer["code"], "wrong_state", "attempt {attempt}: {answer}");
@@ -534,7 +518,7 @@ async fn a_rezero_mid_move_ends_the_move_and_the_joint_stays_enabled() {
         .await;
     assert!(r.status.is_success(), "{}", r.body);
     // The path's angles meant the old zero: the move ends, not shifted.
-    let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    let view = b.wait_move(id, "the move ended", |v| !is_running(v)).await;
     assert_eq!(
         (view["state"].as_str(), view["reason"].as_str()),
         (Some("aborted"), Some("zero_moved")),
@@ -589,7 +573,7 @@ async fn a_websocket_move_ends_at_a_disable_and_an_enable_does_not_resume_it() {
         .post("/api/v1/buses/sim0/devices/1/disable", json!({}))
         .await;
     assert!(r.status.is_success(), "{}", r.body);
-    let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    let view = b.wait_move(id, "the move ended", |v| !is_running(v)).await;
     assert_eq!(
         (view["state"].as_str(), view["reason"].as_str()),
         (Some("aborted"), Some("disabled")),
@@ -616,7 +600,7 @@ async fn a_websocket_move_of_a_blocked_joint_stalls() {
         dev_id: 1,
         at_deg: None,
     });
-    let view = wait_move(&b, id, "the move ended", |v| !is_running(v)).await;
+    let view = b.wait_move(id, "the move ended", |v| !is_running(v)).await;
     assert_eq!(view["state"], "stalled", "{view}");
     assert_eq!(view["arrived"], json!([]), "{view}");
 }

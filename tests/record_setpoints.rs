@@ -5,36 +5,13 @@
 
 mod support;
 
-use std::time::Duration;
-
 use jointd::bus::handle::Commanded;
 use jointd::bus::Source;
 use jointd::protocol::status::fsm;
 use jointd::protocol::units;
-use serde_json::{json, Value};
-use support::sim_bus::{start, SimBus, WAIT};
+use serde_json::json;
+use support::sim_bus::start;
 use tokio::sync::broadcast;
-
-/// Polls the move until `ok` holds for its view.
-async fn wait_move(b: &SimBus, id: u64, ok: impl Fn(&Value) -> bool) -> Value {
-    let deadline = tokio::time::Instant::now() + WAIT;
-    loop {
-        let view = b
-            .server
-            .get(&format!("/api/v1/moves/{id}"))
-            .await
-            .ok()
-            .clone();
-        if ok(&view) {
-            return view;
-        }
-        assert!(
-            tokio::time::Instant::now() < deadline,
-            "timed out waiting for move {id}: {view}"
-        );
-        tokio::time::sleep(Duration::from_millis(10)).await;
-    }
-}
 
 /// Every write the tap still holds.
 fn drain(tap: &mut broadcast::Receiver<Commanded>) -> Vec<Commanded> {
@@ -73,7 +50,8 @@ async fn a_moves_targets_reach_the_tap_in_order_ending_at_its_goal() {
         .await;
     assert_eq!(r.status.as_u16(), 201, "{}", r.body);
     let move_id = r.body["id"].as_u64().expect("an id");
-    wait_move(&b, move_id, |v| v["state"] == "done").await;
+    b.wait_move(move_id, "the move done", |v| v["state"] == "done")
+        .await;
     let r = b
         .server
         .put(

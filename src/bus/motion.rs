@@ -204,14 +204,13 @@ impl BusMotion {
         list.retain(|f| f.mv.is_running());
         self.active.store(!list.is_empty(), Ordering::Release);
         drop(list);
-        // One write per move (usually one), so each says whose it is.
+        // One write per move (usually one), so each says whose it is. A
+        // joint follows one move, so the order between moves is free.
         let mut targets = step.targets;
-        while let Some(&(move_id, _)) = targets.first() {
-            let (this, rest): (Vec<_>, Vec<_>) =
-                targets.into_iter().partition(|(m, _)| *m == move_id);
-            let this: Vec<_> = this.into_iter().map(|(_, t)| t).collect();
-            store.set_admitted(&this, Source::Move { move_id });
-            targets = rest;
+        targets.sort_by_key(|(move_id, _)| *move_id);
+        for run in targets.chunk_by(|a, b| a.0 == b.0) {
+            let this: Vec<_> = run.iter().map(|(_, t)| *t).collect();
+            store.set_admitted(&this, Source::Move { move_id: run[0].0 });
         }
     }
 }

@@ -103,6 +103,33 @@ pub async fn start_sim_with(
 }
 
 impl SimBus {
+    /// Polls move `id` (`GET /api/v1/moves/{id}`) until `ok` holds for its
+    /// view; returns that view.
+    pub async fn wait_move(
+        &self,
+        id: u64,
+        what: &str,
+        ok: impl Fn(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
+        let deadline = tokio::time::Instant::now() + WAIT;
+        loop {
+            let view = self
+                .server
+                .get(&format!("/api/v1/moves/{id}"))
+                .await
+                .ok()
+                .clone();
+            if ok(&view) {
+                return view;
+            }
+            assert!(
+                tokio::time::Instant::now() < deadline,
+                "timed out waiting for {what}: {view}"
+            );
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+    }
+
     /// This rig with an in-memory store for poses and calibrations, and
     /// joints 1..=n enabled and running (homing and calibration need both).
     pub async fn calibrated_and_enabled(self, n: u8) -> SimBus {

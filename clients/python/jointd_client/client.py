@@ -272,10 +272,7 @@ class Jointd:
                           max_velocity_dps=max_velocity_dps,
                           max_acceleration_dps2=max_acceleration_dps2,
                           waypoints=None if waypoints is None else [dict(w) for w in waypoints])
-        m = Move(self, cast(schema.MoveView, self.request("POST", "/api/v1/moves", body)))
-        if wait:
-            m.wait(timeout)
-        return m
+        return self._started_move("/api/v1/moves", body, wait, timeout)
 
     @operation("get_move")
     def get_move(self, move_id: int) -> schema.MoveView:
@@ -323,7 +320,12 @@ class Jointd:
         """A move of the hand to a saved pose; a `Move` handle (see `move`)."""
         body = _drop_none(duration_ms=duration_ms, method=method, max_velocity_dps=max_velocity_dps,
                           max_acceleration_dps2=max_acceleration_dps2)
-        m = Move(self, cast(schema.MoveView, self.request("POST", self._pose(hand, name) + "/go", body)))
+        return self._started_move(self._pose(hand, name) + "/go", body, wait, timeout)
+
+    def _started_move(self, path: str, body: Dict[str, Any], wait: bool,
+                      timeout: Optional[float]) -> Move:
+        """POSTs a move at `path`; its handle, waited for with `wait`."""
+        m = Move(self, cast(schema.MoveView, self.request("POST", path, body)))
         if wait:
             m.wait(timeout)
         return m
