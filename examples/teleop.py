@@ -69,9 +69,9 @@ async def run(args: argparse.Namespace) -> int:
         pending: "List[asyncio.Future[Dict[str, Any]]]" = []
         while (now := time.perf_counter()) - start < args.seconds:
             t = now - start
-            targets = [{"bus": b, "dev_id": d,
+            targets = [{"bus": b, "id": d,
                         "position_deg": round(args.amplitude * math.sin(2 * math.pi * args.freq * t + i * 0.3), 3),
-                        "speed_rpm": 20000}
+                        "speed_dps": 200}
                        for i, (b, d) in enumerate(joints)]
             seq += 1
             sent = time.perf_counter()

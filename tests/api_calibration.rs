@@ -171,10 +171,10 @@ async fn a_calibrated_joint_takes_and_reports_joint_angles() {
                 continue;
             }
             // The first messages may predate the move's last frame.
-            if let Some(j) = v["joints"].as_array().and_then(|js| {
-                js.iter()
-                    .find(|j| j["dev_id"] == 1 && j["target_deg"] == 30.0)
-            }) {
+            if let Some(j) = v["joints"]
+                .as_array()
+                .and_then(|js| js.iter().find(|j| j["id"] == 1 && j["target_deg"] == 30.0))
+            {
                 return j.clone();
             }
         }

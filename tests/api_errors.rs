@@ -20,7 +20,8 @@ fn limits() -> SoftLimits {
         ids: vec![2],
         min_deg: Some(-90.0),
         max_deg: Some(90.0),
-        max_rpm: Some(4000.0),
+        max_speed_dps: Some(40.0),
+        max_rpm: None,
     }])
     .unwrap()
 }
@@ -135,19 +136,20 @@ async fn targets_need_an_enabled_joint_and_respect_soft_limits() {
     let p = s
         .put(
             &format!("{DEV}/2/target"),
-            json!({"position_deg": 10, "speed_rpm": 5000}),
+            json!({"position_deg": 10, "speed_dps": 50}),
         )
         .await;
-    assert_eq!(p.problem(422)["allowed"]["max"], 4000.0);
+    assert_eq!(p.problem(422)["allowed"]["max"], 40.0);
     assert!(
         bus.handle.shared().setpoints.get(2).is_none(),
         "a refused target is not stored"
     );
-    // Within limits: stored raw (Q7 degrees, Q15 of 50000 rpm for firmware 1.2.8).
+    // Within limits: stored raw (Q7 degrees; Q15 of 50000 rotor rpm for
+    // firmware 1.2.8, and 30 °/s at the output is 2844 rotor rpm).
     let r = s
         .put(
             &format!("{DEV}/2/target"),
-            json!({"position_deg": 45.5, "speed_rpm": 3000}),
+            json!({"position_deg": 45.5, "speed_dps": 30}),
         )
         .await;
     let body = r.ok();
@@ -155,7 +157,7 @@ async fn targets_need_an_enabled_joint_and_respect_soft_limits() {
     let stored = bus.handle.shared().setpoints.get(2).expect("stored");
     assert_eq!(
         (stored.setpoint.pos_ref, stored.setpoint.spd_ref),
-        (5824, 1966)
+        (5824, 1864)
     );
     // Joint 1 has no soft limits, only the device range.
     s.post_empty(&format!("{DEV}/1/enable")).await.ok();

@@ -192,7 +192,7 @@ async fn foreign_websocket_upgrade_is_refused_and_setpoints_never_arrive() {
         .expect("same-origin socket");
     next_of(&mut ws, "welcome").await;
     let batch = json!({"type": "setpoints", "seq": 1, "ack": true,
-        "targets": [{"dev_id": 1, "position_deg": 20.0}]});
+        "targets": [{"id": 1, "position_deg": 20.0}]});
     ws.send(Message::text(batch.to_string()))
         .await
         .expect("send");

@@ -35,7 +35,7 @@ async fn move_a_joint_end_to_end() {
     let r = s
         .put(
             &format!("{DEV}/1/target"),
-            json!({"position_deg": 20, "speed_rpm": 20000}),
+            json!({"position_deg": 20, "speed_dps": 200}),
         )
         .await;
     assert_eq!(r.ok()["targets"][0]["pos_ref_raw"], 2560);
@@ -112,7 +112,7 @@ async fn group_control_and_soft_limits() {
     s.put(&format!("{DEV}/3/target"), json!({"position_deg": 5}))
         .await
         .problem(422);
-    s.put(&format!("{DEV}/3/target"), json!({"speed_rpm": -1000}))
+    s.put(&format!("{DEV}/3/target"), json!({"speed_dps": -10}))
         .await
         .ok();
     s.put(&format!("{DEV}/3/mode"), json!({"mode": "position"}))

@@ -211,7 +211,7 @@ async fn an_enable_in_speed_mode_after_an_estop_does_not_spin() {
         .server
         .put(
             "/api/v1/buses/sim0/devices/1/target",
-            json!({"speed_rpm": 1000.0}),
+            json!({"speed_dps": 10.0}),
         )
         .await;
     assert!(r.status.is_success(), "{}", r.body);
@@ -341,7 +341,7 @@ async fn a_teleop_stream_ended_by_an_estop_never_resumes_by_itself() {
     let batch = |seq: u64, deg: f64, restart: bool| {
         Message::text(
             json!({"type": "setpoints", "seq": seq, "ack": true, "restart": restart,
-                   "targets": [{"bus": "sim0", "dev_id": 1, "position_deg": deg}]})
+                   "targets": [{"bus": "sim0", "id": 1, "position_deg": deg}]})
             .to_string(),
         )
     };
@@ -350,7 +350,7 @@ async fn a_teleop_stream_ended_by_an_estop_never_resumes_by_itself() {
     b.handle.estop().await.expect("e-stop");
     let ended = next_of(&mut ws, "stream_ended").await;
     assert_eq!(
-        (ended["dev_id"].as_u64(), ended["reason"].as_str()),
+        (ended["id"].as_u64(), ended["reason"].as_str()),
         (Some(1), Some("estopped")),
         "{ended}"
     );
@@ -439,7 +439,7 @@ async fn a_websocket_speed_stream_does_not_spin_after_an_estop_and_enable() {
     set_mode(&b, 1, "speed").await;
     let mut ws = ws_connect(&b).await;
     let batch = json!({"type": "setpoints", "seq": 1, "ack": true,
-        "targets": [{"bus": "sim0", "dev_id": 1, "speed_rpm": 1000.0}]});
+        "targets": [{"bus": "sim0", "id": 1, "speed_dps": 10.0}]});
     ws.send(Message::text(batch.to_string()))
         .await
         .expect("send");
@@ -487,7 +487,7 @@ async fn an_enable_of_a_running_joint_holds_it_where_it_stands() {
         .server
         .put(
             "/api/v1/buses/sim0/devices/1/target",
-            json!({"position_deg": 80.0, "speed_rpm": 1000.0}),
+            json!({"position_deg": 80.0, "speed_dps": 10.0}),
         )
         .await;
     assert!(r.status.is_success(), "{}", r.body);

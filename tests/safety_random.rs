@@ -210,7 +210,7 @@ impl World {
     async fn target(&mut self, id: u8) {
         let speed = self.device(id).mode == CtrlMode::Speed;
         let body = if speed {
-            json!({"speed_rpm": (self.rng.below(1500) as f64) - 750.0})
+            json!({"speed_dps": (self.rng.below(160) as f64) - 80.0})
         } else {
             json!({"position_deg": self.rng.angle()})
         };
@@ -225,8 +225,8 @@ impl World {
         self.log.push(format!("target {id} {body}: {}", r.status));
         if r.status.is_success() {
             let a = &mut self.admitted[usize::from(id)];
-            match (body["speed_rpm"].as_f64(), body["position_deg"].as_f64()) {
-                (Some(rpm), _) => a.speeds.push(rpm),
+            match (body["speed_dps"].as_f64(), body["position_deg"].as_f64()) {
+                (Some(dps), _) => a.speeds.push(jointd::protocol::units::rotor_rpm(dps)),
                 (_, Some(deg)) => a.span(deg, deg),
                 _ => {}
             }
@@ -328,7 +328,7 @@ impl World {
         for seq in 2..6u64 {
             let deg = self.rng.angle();
             let msg = json!({"type": "setpoints", "seq": seq, "ack": true,
-                "targets": [{"bus": "sim0", "dev_id": id, "position_deg": deg}]});
+                "targets": [{"bus": "sim0", "id": id, "position_deg": deg}]});
             ws.send(Message::text(msg.to_string())).await.expect("send");
             let (reply, fired) = reply_to(&mut ws, seq).await;
             fired_since_ack |= fired;

@@ -54,7 +54,7 @@ async fn a_batch_already_on_the_wire_is_acked_without_another_write() {
         .expect("session open");
     assert!(welcome.contains("\"welcome\""), "{welcome}");
     tokio::time::sleep(Duration::from_millis(100)).await;
-    let batch = json!({"type":"setpoints","seq":7,"ack":true,"targets":[{"bus":"fake","dev_id":1,"position_deg":5}]});
+    let batch = json!({"type":"setpoints","seq":7,"ack":true,"targets":[{"bus":"fake","id":1,"position_deg":5}]});
     in_tx
         .send(Ok(Message::Text(batch.to_string().into())))
         .expect("session open");

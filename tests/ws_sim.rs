@@ -118,7 +118,7 @@ async fn enable(bus: &SimBus, ids: &[u8]) {
 async fn telemetry_subscription_content_and_rate() {
     let bus = sim_bus::start(4, None).await;
     let mut c = connect(&bus).await;
-    c.send(json!({"type":"subscribe","seq":7,"devices":[1,3],"fields":["angle_deg","fsm"],"rate_hz":20})).await;
+    c.send(json!({"type":"subscribe","seq":7,"devices":[1,3],"fields":["angle_deg","state"],"rate_hz":20})).await;
     let sub = c.next_of("subscribed").await;
     assert_eq!(
         (sub["ref_seq"].as_u64(), sub["rate_hz"].as_f64()),
@@ -130,16 +130,19 @@ async fn telemetry_subscription_content_and_rate() {
     assert_eq!(
         joints
             .iter()
-            .map(|j| j["dev_id"].as_u64().unwrap_or(0))
+            .map(|j| j["id"].as_u64().unwrap_or(0))
             .collect::<Vec<_>>(),
         vec![1, 3]
     );
     for j in joints {
         assert_eq!(j["bus"], "sim0");
         assert_eq!(j["online"], true);
-        assert!(j["angle_deg"].is_number() && j["fsm"] == "ready", "{j}");
+        assert!(j["angle_deg"].is_number() && j["state"] == "ready", "{j}");
         assert!(j["age_ms"].as_f64().is_some_and(|a| a >= 0.0));
-        assert!(j.get("current_a").is_none(), "unsubscribed field sent: {j}");
+        assert!(
+            j.get("q_current_a").is_none(),
+            "unsubscribed field sent: {j}"
+        );
     }
     let mut last = first["seq"].as_u64().expect("seq");
     for _ in 0..10 {
@@ -164,9 +167,9 @@ async fn batch_setpoints_move_joints_and_are_acknowledged() {
     enable(&bus, &[1, 3, 4]).await;
     let mut c = connect(&bus).await;
     c.send(json!({"type":"setpoints","seq":41,"ack":true,"targets":[
-        {"dev_id":1,"position_deg":20.0,"speed_rpm":20000},
-        {"bus":"sim0","dev_id":3,"position_deg":-15.0,"speed_rpm":20000},
-        {"dev_id":4,"position_deg":10.0}]}))
+        {"id":1,"position_deg":20.0,"speed_dps":200},
+        {"bus":"sim0","id":3,"position_deg":-15.0,"speed_dps":200},
+        {"id":4,"position_deg":10.0}]}))
         .await;
     let ack = c.next_of("ack").await;
     assert_eq!(
@@ -201,7 +204,7 @@ async fn every_error_is_reported_and_nothing_partial_is_applied() {
     let cases: Vec<(Value, &str)> = vec![
         (json!({"type":"dance","seq":1}), "bad_message"),
         (
-            json!({"type":"setpoints","seq":2,"targets":[{"dev_id":1,"pos":3}]}),
+            json!({"type":"setpoints","seq":2,"targets":[{"id":1,"pos":3}]}),
             "bad_message",
         ),
         (
@@ -209,35 +212,35 @@ async fn every_error_is_reported_and_nothing_partial_is_applied() {
             "bad_message",
         ),
         (
-            json!({"type":"setpoints","seq":4,"targets":[{"bus":"nope","dev_id":1,"position_deg":1}]}),
+            json!({"type":"setpoints","seq":4,"targets":[{"bus":"nope","id":1,"position_deg":1}]}),
             "unknown_bus",
         ),
         (
-            json!({"type":"setpoints","seq":5,"targets":[{"dev_id":40,"position_deg":1}]}),
+            json!({"type":"setpoints","seq":5,"targets":[{"id":40,"position_deg":1}]}),
             "unknown_device",
         ),
         (
-            json!({"type":"setpoints","seq":6,"targets":[{"dev_id":1,"position_deg":300}]}),
+            json!({"type":"setpoints","seq":6,"targets":[{"id":1,"position_deg":300}]}),
             "out_of_range",
         ),
         (
-            json!({"type":"setpoints","seq":7,"targets":[{"dev_id":200,"position_deg":1}]}),
+            json!({"type":"setpoints","seq":7,"targets":[{"id":200,"position_deg":1}]}),
             "out_of_range",
         ),
         (
-            json!({"type":"setpoints","seq":8,"targets":[{"dev_id":2,"position_deg":60}]}),
+            json!({"type":"setpoints","seq":8,"targets":[{"id":2,"position_deg":60}]}),
             "out_of_limit",
         ),
         (
-            json!({"type":"setpoints","seq":9,"targets":[{"dev_id":4,"position_deg":5}]}),
+            json!({"type":"setpoints","seq":9,"targets":[{"id":4,"position_deg":5}]}),
             "wrong_state",
         ),
         (
-            json!({"type":"setpoints","seq":10,"targets":[{"dev_id":1,"position_deg":5},{"dev_id":1,"position_deg":6}]}),
+            json!({"type":"setpoints","seq":10,"targets":[{"id":1,"position_deg":5},{"id":1,"position_deg":6}]}),
             "bad_message",
         ),
         (
-            json!({"type":"setpoints","seq":11,"targets":(0..300).map(|_| json!({"dev_id":1,"position_deg":1})).collect::<Vec<_>>()}),
+            json!({"type":"setpoints","seq":11,"targets":(0..300).map(|_| json!({"id":1,"position_deg":1})).collect::<Vec<_>>()}),
             "too_many",
         ),
         (
@@ -270,7 +273,7 @@ async fn every_error_is_reported_and_nothing_partial_is_applied() {
     let before = bus.handle.shared().setpoints.get(1);
     let e = c
         .rejected(json!({"type":"setpoints","seq":20,"targets":[
-        {"dev_id":1,"position_deg":10},{"dev_id":2,"position_deg":60}]}))
+        {"id":1,"position_deg":10},{"id":2,"position_deg":60}]}))
         .await;
     assert_eq!(
         (e["code"].as_str(), e["field"].as_str()),
@@ -298,7 +301,7 @@ async fn watchdog_hold_freezes_joints_and_tells_everyone() {
         .await;
     assert_eq!(teleop.next_of("watchdog_set").await["policy"], "hold");
     // Stream towards far targets, then stop streaming mid-move.
-    teleop.send(json!({"type":"setpoints","targets":[{"dev_id":1,"position_deg":200,"speed_rpm":3000},{"dev_id":2,"position_deg":40,"speed_rpm":3000}]})).await;
+    teleop.send(json!({"type":"setpoints","targets":[{"id":1,"position_deg":200,"speed_dps":30},{"id":2,"position_deg":40,"speed_dps":30}]})).await;
     let event = observer.next_of("event").await;
     assert_eq!(
         (
@@ -335,7 +338,7 @@ async fn watchdog_hold_stops_a_joint_in_speed_mode() {
         .await;
     teleop.next_of("watchdog_set").await;
     teleop
-        .send(json!({"type":"setpoints","seq":2,"ack":true,"targets":[{"dev_id":1,"speed_rpm":3000}]}))
+        .send(json!({"type":"setpoints","seq":2,"ack":true,"targets":[{"id":1,"speed_dps":30}]}))
         .await;
     teleop.next_of("ack").await;
     let spinning = |want: bool| {
@@ -373,7 +376,9 @@ async fn watchdog_disable_applies_when_the_socket_closes() {
         .send(json!({"type":"watchdog","hold_timeout_ms":5000,"policy":"disable"}))
         .await;
     teleop.next_of("watchdog_set").await;
-    teleop.send(json!({"type":"setpoints","seq":5,"ack":true,"targets":[{"dev_id":3,"position_deg":5}]})).await;
+    teleop
+        .send(json!({"type":"setpoints","seq":5,"ack":true,"targets":[{"id":3,"position_deg":5}]}))
+        .await;
     teleop.next_of("ack").await;
     drop(teleop); // the network goes away: no close handshake
     let event = observer.next_of("event").await;
@@ -433,7 +438,7 @@ async fn config_default_watchdog_and_joint_names() {
     let mut teleop = connect(&bus).await;
     // No `watchdog` message: the config's default arms on the first batch.
     teleop
-        .send(json!({"type":"setpoints","targets":[{"dev_id":1,"position_deg":3}]}))
+        .send(json!({"type":"setpoints","targets":[{"id":1,"position_deg":3}]}))
         .await;
     let event = observer.next_of("event").await;
     assert_eq!(
@@ -453,7 +458,7 @@ async fn a_power_cut_is_an_event_a_disabled_reason_and_a_metric() {
     enable(&bus, &[2]).await;
     let mut observer = connect(&bus).await;
     observer
-        .send(json!({"type":"subscribe","devices":[2],"fields":["fsm"],"rate_hz":50}))
+        .send(json!({"type":"subscribe","devices":[2],"fields":["state"],"rate_hz":50}))
         .await;
     observer.next_of("subscribed").await;
     bus.sim.inject(jointd::sim::Fault::PowerCycle { dev_id: 2 });
@@ -468,7 +473,7 @@ async fn a_power_cut_is_an_event_a_disabled_reason_and_a_metric() {
         }
     };
     assert_eq!(event["event"]["event"], "device_reset", "{event}");
-    assert_eq!(event["event"]["dev_id"], 2);
+    assert_eq!(event["event"]["id"], 2);
     assert_eq!(event["event"]["state_before"], "run");
     bus.wait_snapshot("reset shown", |s| s.devices[&2].resets == 1)
         .await;
@@ -476,7 +481,7 @@ async fn a_power_cut_is_an_event_a_disabled_reason_and_a_metric() {
     // one built from a snapshot after it says why the joint is disabled.
     loop {
         let t = observer.next_of("telemetry").await;
-        if t["joints"][0]["fsm"] == "ready" {
+        if t["joints"][0]["state"] == "ready" {
             assert_eq!(t["joints"][0]["disabled_reason"], "reset", "{t}");
             break;
         }
@@ -511,7 +516,7 @@ async fn the_watchdog_disable_then_enable_does_not_move_the_joint() {
         .await;
     teleop.next_of("watchdog_set").await;
     // Slowly (~32 °/s at the output) towards 100°, then the stream stops.
-    teleop.send(json!({"type":"setpoints","seq":5,"ack":true,"targets":[{"dev_id":3,"position_deg":100,"speed_rpm":3000}]})).await;
+    teleop.send(json!({"type":"setpoints","seq":5,"ack":true,"targets":[{"id":3,"position_deg":100,"speed_dps":30}]})).await;
     teleop.next_of("ack").await;
     bus.wait_fsm(3, fsm::READY).await;
     let rest = tokio::time::Instant::now();
@@ -689,7 +694,7 @@ async fn setpoints_may_name_joints_by_hand_and_joint_name() {
     assert_eq!(e["field"], "targets[0].joint");
     let e = c
         .rejected(json!({"type": "setpoints", "seq": 3,
-            "targets": [{"hand": "left", "dev_id": 1, "position_deg": 1}]}))
+            "targets": [{"hand": "left", "id": 1, "position_deg": 1}]}))
         .await;
     assert_eq!(
         (e["code"].as_str(), e["field"].as_str()),

@@ -72,10 +72,10 @@ function onMessage(msg) {
   if (msg.type === "telemetry") {
     const now = performance.now() / 1000;
     for (const j of msg.joints) {
-      const key = `${j.bus}/${j.dev_id}`;
+      const key = `${j.bus}/${j.id}`;
       state.joints.set(key, j);
       const h = state.history.get(key) || [];
-      h.push({ t: now, angle: j.angle_deg, target: j.target_deg, current: j.current_a });
+      h.push({ t: now, angle: j.angle_deg, target: j.target_deg, current: j.q_current_a });
       while (h.length && h[0].t < now - PLOT_SECONDS) h.shift();
       state.history.set(key, h);
     }
@@ -83,7 +83,7 @@ function onMessage(msg) {
     renderPlot();
   } else if (msg.type === "event") {
     const e = msg.event;
-    if (e.event === "fault") say(`Joint ${e.dev_id} on ${e.bus}: fault ${e.name}`);
+    if (e.event === "fault") say(`Joint ${e.id} on ${e.bus}: fault ${e.name}`);
     else if (e.event === "bus_down") say(`Bus ${e.bus} is down: ${e.reason}`);
     else if (e.event === "watchdog") say(`Teleop watchdog (${e.why}): ${e.policy} on ${e.joints.length} joints`);
     else if (e.event === "estop") say(`Emergency stop on ${e.bus}`, "info");
@@ -108,15 +108,15 @@ function renderDevices() {
     if (!tr) {
       tr = document.createElement("tr");
       tr.dataset.key = key;
-      tr.dataset.testid = `device-row-${j.bus}-${j.dev_id}`;
-      tr.setAttribute("data-testid", `device-row-${j.bus}-${j.dev_id}`);
+      tr.dataset.testid = `device-row-${j.bus}-${j.id}`;
+      tr.setAttribute("data-testid", `device-row-${j.bus}-${j.id}`);
       tr.innerHTML = "<td></td>".repeat(12);
-      tr.onclick = () => select(j.bus, j.dev_id);
+      tr.onclick = () => select(j.bus, j.id);
       tbody.appendChild(tr);
     }
-    const cells = [j.bus, j.dev_id, j.name ?? "", j.fsm ?? "–", j.fault ?? "–", fmt(j.angle_deg, 2), fmt(j.target_deg, 2),
-      fmt(j.speed_rpm, 0), fmt(j.current_a, 3), fmt(j.vbus_v, 2), fmt(j.temp_c, 0), fmt(j.age_ms, 0)];
-    const fields = ["bus", "dev_id", "name", "fsm", "fault", "angle_deg", "target_deg", "speed_rpm", "current_a", "vbus_v", "temp_c", "age_ms"];
+    const cells = [j.bus, j.id, j.name ?? "", j.state ?? "–", j.fault ?? "–", fmt(j.angle_deg, 2), fmt(j.target_deg, 2),
+      fmt(j.speed_dps, 1), fmt(j.q_current_a, 3), fmt(j.vbus_v, 2), fmt(j.temp_c, 0), fmt(j.age_ms, 0)];
+    const fields = ["bus", "id", "name", "state", "fault", "angle_deg", "target_deg", "speed_dps", "q_current_a", "vbus_v", "temp_c", "age_ms"];
     cells.forEach((c, i) => {
       const td = tr.children[i];
       td.dataset.field = fields[i];
@@ -273,7 +273,7 @@ function showFirmware(detail) {
 
 function sendTarget(deg) {
   const speed = Number($("#speed-limit").value) || undefined;
-  return act(null, () => api("PUT", dev("/target"), { position_deg: deg, speed_rpm: speed }));
+  return act(null, () => api("PUT", dev("/target"), { position_deg: deg, speed_dps: speed }));
 }
 
 $("#enable").onclick = () => act("Enabled (the first enable aligns for about a second).", () => api("POST", dev("/enable")));

@@ -33,8 +33,9 @@ use crate::sim::{SimHandle, SimStats};
 const HTTP_THREAD: &str = "jointd-http";
 const TELEOP_THREAD: &str = "bench-ws";
 const TELEMETRY_THREAD: &str = "bench-tele";
-/// Speed limit the WebSocket client sends, rpm (the vendor's recommended maximum).
-const SPEED_RPM: f64 = 20_000.0;
+/// Speed limit the WebSocket client sends, output °/s (about the vendor's
+/// recommended 20000 rotor rpm).
+const SPEED_DPS: f64 = 200.0;
 /// Worker threads of the HTTP/WebSocket runtime (the daemon's default on 2 cores).
 const HTTP_WORKERS: usize = 2;
 /// The bounds the WebSocket path is held to: its cost and load tolerance.
@@ -257,7 +258,7 @@ fn batch(ids: &[u8], n: u64) -> String {
         let sep = if i == 0 { "" } else { "," };
         let _ = write!(
             s,
-            r#"{sep}{{"dev_id":{id},"position_deg":{deg},"speed_rpm":{SPEED_RPM}}}"#
+            r#"{sep}{{"id":{id},"position_deg":{deg},"speed_dps":{SPEED_DPS}}}"#
         );
     }
     s.push_str("]}");

@@ -299,14 +299,17 @@ impl BusSnapshot {
 pub enum BusEvent {
     DeviceOnline {
         bus: String,
+        #[serde(rename = "id")]
         dev_id: u8,
     },
     DeviceOffline {
         bus: String,
+        #[serde(rename = "id")]
         dev_id: u8,
     },
     Fault {
         bus: String,
+        #[serde(rename = "id")]
         dev_id: u8,
         err_code: u8,
         name: &'static str,
@@ -334,6 +337,7 @@ pub enum BusEvent {
     /// run): what `on_start` does with it.
     FoundEnabled {
         bus: String,
+        #[serde(rename = "id")]
         dev_id: u8,
         state: &'static str,
         /// `keep` (left enabled, target unknown) or `disable`.
@@ -375,6 +379,7 @@ pub enum BusEvent {
     /// INFO block read back): RAM writes, flash writes, mode switches.
     ConfigWritten {
         bus: String,
+        #[serde(rename = "id")]
         dev_id: u8,
         index: u8,
         /// The vendor's name (`MAX_CUR`, `CTRL_MODE_SW`, ...).
@@ -399,6 +404,7 @@ pub enum BusEvent {
     /// and target; the daemon forgot its targets too.
     DeviceReset {
         bus: String,
+        #[serde(rename = "id")]
         dev_id: u8,
         /// `announcement` or `state_dropped`.
         seen: ResetSignal,

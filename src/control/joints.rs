@@ -2,7 +2,7 @@
 //! id is checked, and how a joint named by bus and id or by hand and joint
 //! name is resolved.
 
-use serde::{Deserialize, Serialize, Serializer};
+use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::error::{ControlError, ControlResult};
@@ -18,20 +18,6 @@ pub struct JointRef {
     pub bus: String,
     #[schema(example = 1)]
     pub id: u8,
-}
-
-/// Serializes joints as the WebSocket's watchdog event names them
-/// (`{"bus", "dev_id"}`).
-pub(crate) fn as_dev_ids<S: Serializer>(joints: &[JointRef], s: S) -> Result<S::Ok, S::Error> {
-    #[derive(Serialize)]
-    struct ByDevId<'a> {
-        bus: &'a str,
-        dev_id: u8,
-    }
-    s.collect_seq(joints.iter().map(|j| ByDevId {
-        bus: &j.bus,
-        dev_id: j.id,
-    }))
 }
 
 /// A device id from a path or body: 1..=159, else 422 naming the range.

@@ -8,7 +8,7 @@ use utoipa::ToSchema;
 
 use super::error::ControlError;
 use crate::hands::Calibration;
-use crate::protocol::units::MAX_ANGLE_DEG;
+use crate::protocol::units::{output_deg_per_s, MAX_ANGLE_DEG};
 
 /// One rule of the `[[limit]]` table. Later rules override earlier ones
 /// field by field, so a bus-wide default can be narrowed for single joints.
@@ -23,8 +23,12 @@ pub struct LimitRule {
     pub ids: Vec<u8>,
     pub min_deg: Option<f64>,
     pub max_deg: Option<f64>,
-    /// Largest rotor speed a target may ask for (speed limit in position
-    /// mode, |speed| in speed mode), rpm.
+    /// Largest output speed a target may ask for (speed limit in position
+    /// mode, |speed| in speed mode), °/s.
+    pub max_speed_dps: Option<f64>,
+    /// Not read: rotor rpm gave way to output °/s. Kept so an old config is
+    /// refused with the way to say it now, not as an unknown field.
+    #[serde(default, skip_serializing)]
     pub max_rpm: Option<f64>,
 }
 
@@ -35,9 +39,9 @@ pub struct JointLimits {
     pub min_deg: f64,
     #[schema(example = 90.0)]
     pub max_deg: f64,
-    /// Absent: only the firmware's speed range applies.
-    #[schema(example = 3000.0)]
-    pub max_rpm: Option<f64>,
+    /// Output °/s; absent: only the firmware's speed range applies.
+    #[schema(example = 30.0)]
+    pub max_speed_dps: Option<f64>,
 }
 
 impl Default for JointLimits {
@@ -45,7 +49,7 @@ impl Default for JointLimits {
         Self {
             min_deg: -MAX_ANGLE_DEG,
             max_deg: MAX_ANGLE_DEG,
-            max_rpm: None,
+            max_speed_dps: None,
         }
     }
 }
@@ -73,8 +77,15 @@ impl SoftLimits {
                 }
             }
             if let Some(rpm) = rule.max_rpm {
-                if !rpm.is_finite() || rpm < 0.0 {
-                    return Err(bad(format!("max_rpm {rpm} must be ≥ 0")));
+                return Err(bad(format!(
+                    "max_rpm is no longer read: give max_speed_dps, the output speed in °/s \
+                     ({rpm} rotor rpm is {:.1} °/s)",
+                    output_deg_per_s(rpm)
+                )));
+            }
+            if let Some(dps) = rule.max_speed_dps {
+                if !dps.is_finite() || dps < 0.0 {
+                    return Err(bad(format!("max_speed_dps {dps} must be ≥ 0")));
                 }
             }
         }
@@ -111,7 +122,7 @@ impl SoftLimits {
         for rule in matching {
             j.min_deg = rule.min_deg.unwrap_or(j.min_deg);
             j.max_deg = rule.max_deg.unwrap_or(j.max_deg);
-            j.max_rpm = rule.max_rpm.or(j.max_rpm);
+            j.max_speed_dps = rule.max_speed_dps.or(j.max_speed_dps);
         }
         j
     }
@@ -149,14 +160,14 @@ impl JointLimits {
         Ok(device)
     }
 
-    /// Refuses a speed whose magnitude exceeds `max_rpm`.
-    pub fn check_speed(&self, field: &str, rpm: f64, who: &str) -> Result<(), ControlError> {
-        match self.max_rpm {
-            Some(max) if rpm.abs() > max => Err(ControlError::soft_limit(
+    /// Refuses an output speed (°/s) whose magnitude exceeds `max_speed_dps`.
+    pub fn check_speed(&self, field: &str, dps: f64, who: &str) -> Result<(), ControlError> {
+        match self.max_speed_dps {
+            Some(max) if dps.abs() > max => Err(ControlError::soft_limit(
                 field,
-                rpm,
+                dps,
                 (-max, max),
-                "rpm",
+                "°/s",
                 who,
             )),
             _ => Ok(()),
@@ -168,27 +179,28 @@ impl JointLimits {
 mod tests {
     use super::*;
 
-    fn rule(bus: Option<&str>, ids: &[u8], min: f64, max: f64, rpm: Option<f64>) -> LimitRule {
+    fn rule(bus: Option<&str>, ids: &[u8], min: f64, max: f64, dps: Option<f64>) -> LimitRule {
         LimitRule {
             bus: bus.map(str::to_owned),
             ids: ids.to_vec(),
             min_deg: Some(min),
             max_deg: Some(max),
-            max_rpm: rpm,
+            max_speed_dps: dps,
+            max_rpm: None,
         }
     }
 
     #[test]
     fn later_rules_narrow_earlier_ones() {
         let limits = SoftLimits::new(vec![
-            rule(None, &[], -100.0, 100.0, Some(5000.0)),
+            rule(None, &[], -100.0, 100.0, Some(50.0)),
             rule(Some("left"), &[3], -10.0, 20.0, None),
         ])
         .unwrap();
         let j3 = limits.for_joint("left", 3);
         assert_eq!(
-            (j3.min_deg, j3.max_deg, j3.max_rpm),
-            (-10.0, 20.0, Some(5000.0))
+            (j3.min_deg, j3.max_deg, j3.max_speed_dps),
+            (-10.0, 20.0, Some(50.0))
         );
         let other = limits.for_joint("right", 3);
         assert_eq!((other.min_deg, other.max_deg), (-100.0, 100.0));
@@ -198,11 +210,24 @@ mod tests {
         assert!(j3
             .check_joint_position(&Calibration::IDENTITY, "position_deg", 20.0, "joint 3")
             .is_ok());
-        let err = j3.check_speed("speed_rpm", -6000.0, "joint 3").unwrap_err();
+        let err = j3.check_speed("speed_dps", -60.0, "joint 3").unwrap_err();
         let ControlError::Invalid { allowed, .. } = err else {
             panic!("a refused value, not {err:?}");
         };
-        assert_eq!(allowed.map(|a| a.max), Some(5000.0));
+        assert_eq!(allowed.map(|a| a.max), Some(50.0));
+    }
+
+    #[test]
+    fn a_rotor_rpm_limit_is_refused_with_its_output_speed() {
+        let old = LimitRule {
+            max_rpm: Some(3000.0),
+            ..Default::default()
+        };
+        let err = SoftLimits::new(vec![old]).unwrap_err().to_string();
+        assert!(
+            err.contains("max_speed_dps") && err.contains("31.6 °/s"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -477,18 +477,20 @@ fn speed_limit(
     let rpm_per_dps = 1.0 / units::output_deg_per_s(1.0);
     let needed = peak_dps * rpm_per_dps;
     let limits = state.limits(&r.bus, r.id);
-    if let Some(max) = limits.max_rpm.filter(|max| needed > *max) {
+    if let Some(max) = limits.max_speed_dps.filter(|max| peak_dps > *max) {
         return Err(ControlError::invalid(
             "duration_ms",
             format!(
-                "the path needs {needed:.0} rpm of joint {} of bus `{}`, its soft limit allows {max:.0} rpm: \
+                "the path needs {peak_dps:.1} °/s of joint {} of bus `{}`, its soft limit allows {max:.1} °/s: \
                  give the move more time or a lower max_velocity_dps",
                 r.id, r.bus
             ),
         ));
     }
     let rpm = (needed * SPEED_HEADROOM).max(MIN_SPEED_LIMIT_RPM);
-    let rpm = limits.max_rpm.map_or(rpm, |max| rpm.min(max));
+    let rpm = limits
+        .max_speed_dps
+        .map_or(rpm, |max| rpm.min(max * rpm_per_dps));
     let snap = bus.snapshot();
     let fw = snap.devices.get(&r.id).map(firmware_of).unwrap_or_default();
     let raw = units::speed_limit_to_raw(rpm, fw)

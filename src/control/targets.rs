@@ -19,27 +19,28 @@ use crate::protocol::status::fsm_name_in;
 use crate::protocol::units;
 use crate::protocol::CtrlMode;
 
-/// Speed limit of a position target that names none, rotor rpm (≈ 32 °/s at
-/// the output): slow enough to be safe, fast enough to see.
-pub(crate) const DEFAULT_SPEED_LIMIT_RPM: f64 = 3000.0;
+/// Speed limit of a position target that names none, output °/s (about
+/// 2840 rotor rpm): slow enough to be safe, fast enough to see.
+pub(crate) const DEFAULT_SPEED_LIMIT_DPS: f64 = 30.0;
 /// How long a target request waits to see its frame written before
 /// answering 202 instead of 200.
 pub(crate) const WIRE_ACK_WAIT: Duration = Duration::from_millis(250);
 
 /// A target for one joint. Position mode: `position_deg` (required) and
-/// `speed_rpm` as the speed limit (default 3000 rpm, capped by the soft
-/// limit). Speed mode: `speed_rpm` (signed, required) only.
+/// `speed_dps` as the speed limit (default 30 °/s, capped by the soft
+/// limit). Speed mode: `speed_dps` (signed, required) only.
 #[derive(Debug, Clone, Deserialize, Serialize, ToSchema)]
 #[serde(deny_unknown_fields)]
-#[schema(example = json!({"position_deg": 45.0, "speed_rpm": 3000.0}))]
+#[schema(example = json!({"position_deg": 45.0, "speed_dps": 30.0}))]
 pub(crate) struct TargetRequest {
     /// Output angle, degrees (−255..=255, narrowed by soft limits).
     #[schema(example = 45.0, minimum = -255.0, maximum = 255.0)]
     pub position_deg: Option<f64>,
-    /// Rotor rpm: the speed limit in position mode (≥ 0), the speed in speed
-    /// mode (signed); within the firmware's base speed (50000 rpm from 1.2.4, else 40000).
-    #[schema(example = 3000.0, minimum = -50000.0, maximum = 50000.0)]
-    pub speed_rpm: Option<f64>,
+    /// Output-shaft °/s: the speed limit in position mode (≥ 0), the speed
+    /// in speed mode (signed); within the firmware's base speed (50000 rotor
+    /// rpm, 527 °/s, from 1.2.4; else 40000 rpm, 422 °/s).
+    #[schema(example = 30.0, minimum = -527.0, maximum = 527.0)]
+    pub speed_dps: Option<f64>,
 }
 
 /// Converts one joint's target, given in its calibrated frame (`cal`);
@@ -69,7 +70,7 @@ pub(crate) fn setpoint(
     }
     let who = format!("joint {}", dev.dev_id);
     let fw = firmware_of(dev);
-    let (pos_field, spd_field) = (format!("{field}position_deg"), format!("{field}speed_rpm"));
+    let (pos_field, spd_field) = (format!("{field}position_deg"), format!("{field}speed_dps"));
     let deg = req.position_deg.ok_or_else(|| {
         ControlError::invalid(
             &pos_field,
@@ -79,13 +80,13 @@ pub(crate) fn setpoint(
     let device_deg = limits.check_joint_position(cal, &pos_field, deg, &who)?;
     let pos_ref =
         units::angle_to_raw(device_deg).map_err(|e| ControlError::from_unit(&pos_field, e))?;
-    let default_rpm = limits
-        .max_rpm
-        .map_or(DEFAULT_SPEED_LIMIT_RPM, |m| m.min(DEFAULT_SPEED_LIMIT_RPM));
-    let rpm = req.speed_rpm.unwrap_or(default_rpm);
-    limits.check_speed(&spd_field, rpm, &who)?;
-    let spd_ref =
-        units::speed_limit_to_raw(rpm, fw).map_err(|e| ControlError::from_unit(&spd_field, e))?;
+    let default_dps = limits
+        .max_speed_dps
+        .map_or(DEFAULT_SPEED_LIMIT_DPS, |m| m.min(DEFAULT_SPEED_LIMIT_DPS));
+    let dps = req.speed_dps.unwrap_or(default_dps);
+    limits.check_speed(&spd_field, dps, &who)?;
+    let spd_ref = units::speed_limit_dps_to_raw(dps, fw)
+        .map_err(|e| ControlError::from_unit(&spd_field, e))?;
     Ok(Setpoint { pos_ref, spd_ref })
 }
 
@@ -99,22 +100,22 @@ fn speed_setpoint(
     field: &str,
 ) -> ControlResult<Setpoint> {
     let who = format!("joint {}", dev.dev_id);
-    let (pos_field, spd_field) = (format!("{field}position_deg"), format!("{field}speed_rpm"));
+    let (pos_field, spd_field) = (format!("{field}position_deg"), format!("{field}speed_dps"));
     if req.position_deg.is_some() {
         return Err(ControlError::invalid(
             &pos_field,
             format!("{who} is in speed mode: a position has no effect (set mode to position)"),
         ));
     }
-    let rpm = req.speed_rpm.ok_or_else(|| {
+    let dps = req.speed_dps.ok_or_else(|| {
         ControlError::invalid(
             &spd_field,
-            format!("{who} is in speed mode: speed_rpm is required"),
+            format!("{who} is in speed mode: speed_dps is required"),
         )
     })?;
-    limits.check_speed(&spd_field, rpm, &who)?;
+    limits.check_speed(&spd_field, dps, &who)?;
     // A flipped joint turns the device the other way.
-    let spd_ref = units::speed_to_raw(cal.sign() * rpm, firmware_of(dev))
+    let spd_ref = units::speed_dps_to_raw(cal.sign() * dps, firmware_of(dev))
         .map_err(|e| ControlError::from_unit(&spd_field, e))?;
     let pos_ref = commanded_or_measured_raw(dev).unwrap_or(0);
     Ok(Setpoint { pos_ref, spd_ref })
@@ -220,7 +221,7 @@ mod tests {
     fn req(pos: Option<f64>, spd: Option<f64>) -> TargetRequest {
         TargetRequest {
             position_deg: pos,
-            speed_rpm: spd,
+            speed_dps: spd,
         }
     }
 
@@ -232,7 +233,7 @@ mod tests {
             &new_fw,
             &limits,
             &Calibration::IDENTITY,
-            &req(Some(-10.5), Some(20000.0)),
+            &req(Some(-10.5), Some(units::output_deg_per_s(20000.0))),
             "",
         )
         .unwrap();
@@ -242,7 +243,7 @@ mod tests {
             &old_fw,
             &limits,
             &Calibration::IDENTITY,
-            &req(Some(0.0), Some(20000.0)),
+            &req(Some(0.0), Some(units::output_deg_per_s(20000.0))),
             "",
         )
         .unwrap();
@@ -255,7 +256,7 @@ mod tests {
             "",
         )
         .unwrap_err();
-        assert_eq!(err.field(), Some("speed_rpm"));
+        assert_eq!(err.field(), Some("speed_dps"));
         let err = setpoint(
             &new_fw,
             &limits,
@@ -270,7 +271,7 @@ mod tests {
     #[test]
     fn default_speed_limit_respects_the_soft_limit() {
         let limits = JointLimits {
-            max_rpm: Some(1000.0),
+            max_speed_dps: Some(10.0),
             ..Default::default()
         };
         let sp = setpoint(
@@ -280,7 +281,8 @@ mod tests {
             &req(Some(1.0), None),
             "",
         );
-        let expected = units::speed_limit_to_raw(1000.0, FirmwareVersion::SPEED_BASE_50K).unwrap();
+        let expected =
+            units::speed_limit_dps_to_raw(10.0, FirmwareVersion::SPEED_BASE_50K).unwrap();
         assert_eq!(sp.unwrap().spd_ref, expected);
     }
 
@@ -292,7 +294,7 @@ mod tests {
             &d,
             &limits,
             &Calibration::IDENTITY,
-            &req(None, Some(-1000.0)),
+            &req(None, Some(units::output_deg_per_s(-1000.0))),
             "",
         )
         .unwrap();
@@ -319,7 +321,7 @@ mod tests {
         let limits = JointLimits {
             min_deg: -30.0,
             max_deg: 90.0,
-            max_rpm: None,
+            max_speed_dps: None,
         };
         let pos = dev(CtrlMode::Position, Some(128));
         // joint 15 deg = device 20 - 15 = 5 deg.
@@ -341,7 +343,7 @@ mod tests {
         let err = setpoint(&pos, &limits, &cal, &req(Some(55.0), None), "").unwrap_err();
         assert!(err.to_string().contains("-70..=50"), "{err}");
         let spd = dev(CtrlMode::Speed, Some(128));
-        let sp = setpoint(&spd, &limits, &cal, &req(None, Some(-1000.0)), "").unwrap();
+        let sp = setpoint(&spd, &limits, &cal, &req(None, Some(-10.0)), "").unwrap();
         assert!(
             sp.spd_ref > 0,
             "a flipped joint turns the device the other way"

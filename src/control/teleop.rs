@@ -53,7 +53,6 @@ pub struct WatchdogEvent {
     pub policy: WatchdogPolicy,
     /// `why`: `timeout` or `closed`.
     pub why: &'static str,
-    #[serde(serialize_with = "super::joints::as_dev_ids")]
     pub joints: Vec<JointRef>,
 }
 

@@ -60,7 +60,7 @@ pub(crate) fn request(
         })?;
         return Ok(TargetRequest {
             position_deg: Some(here.clamp(lo + END_MARGIN_DEG, hi - END_MARGIN_DEG)),
-            speed_rpm: None,
+            speed_dps: None,
         });
     }
     let end = if dps > 0.0 {
@@ -70,7 +70,7 @@ pub(crate) fn request(
     };
     Ok(TargetRequest {
         position_deg: Some(end),
-        speed_rpm: Some(dps.abs() / units::output_deg_per_s(1.0)),
+        speed_dps: Some(dps.abs()),
     })
 }
 
@@ -119,7 +119,7 @@ mod tests {
         JointLimits {
             min_deg: -30.0,
             max_deg: 90.0,
-            max_rpm: None,
+            max_speed_dps: None,
         }
     }
 
@@ -134,8 +134,8 @@ mod tests {
         )
         .unwrap();
         assert!((up.position_deg.unwrap() - 90.0).abs() < 1e-3, "{up:?}");
-        let rpm = up.speed_rpm.unwrap();
-        assert!((units::output_deg_per_s(rpm) - 20.0).abs() < 1e-9, "{rpm}");
+        let dps = up.speed_dps.unwrap();
+        assert!((dps - 20.0).abs() < 1e-9, "{dps}");
         let down = request(
             &dev(CtrlMode::Position),
             &limits(),
@@ -180,7 +180,7 @@ mod tests {
         )
         .unwrap();
         assert!((hold.position_deg.unwrap() - 10.0).abs() < 0.01, "{hold:?}");
-        assert_eq!(hold.speed_rpm, None, "the default speed limit");
+        assert_eq!(hold.speed_dps, None, "the default speed limit");
         let err = request(
             &dev(CtrlMode::Speed),
             &limits(),

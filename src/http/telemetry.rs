@@ -47,8 +47,9 @@ impl FaultView {
 /// INFO_01 decoded: state and health.
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub(crate) struct StatusView {
+    /// The fsm code as sent (raw; `state` names it).
     #[schema(example = 7)]
-    pub fsm: u8,
+    pub state_code: u8,
     /// `ready`, `align`, `run`, `fault`, ...
     #[schema(example = "run")]
     pub state: &'static str,
@@ -76,12 +77,12 @@ pub(crate) struct StatusView {
 pub(crate) struct MotionView {
     #[schema(example = 45.5)]
     pub angle_deg: f64,
-    /// Rotor speed (before the 568.81:1 gearbox).
-    #[schema(example = 2000.0)]
-    pub speed_rpm: f64,
-    /// Output-shaft speed.
+    /// Output-shaft speed, °/s.
     #[schema(example = 21.1)]
-    pub output_deg_per_s: f64,
+    pub speed_dps: f64,
+    /// Rotor speed before the 568.81:1 gearbox (raw-side; `speed_dps` is the output's).
+    #[schema(example = 2000.0)]
+    pub rotor_speed_rpm: f64,
     #[schema(example = 0.01)]
     pub d_current_a: f64,
     #[schema(example = 0.25)]
@@ -98,8 +99,9 @@ pub(crate) struct MotionView {
 pub(crate) struct TargetView {
     #[schema(example = 45.0)]
     pub position_deg: f64,
-    #[schema(example = 3000.0)]
-    pub speed_rpm: f64,
+    /// Output-shaft °/s: the speed limit in position mode, the speed in speed mode.
+    #[schema(example = 30.0)]
+    pub speed_dps: f64,
     #[schema(example = 5760)]
     pub pos_ref_raw: i16,
     #[schema(example = 1966)]
@@ -115,13 +117,13 @@ impl TargetView {
         cal: &Calibration,
         mode: Option<CtrlMode>,
     ) -> Self {
-        let rpm = units::speed_rpm(sp.spd_ref, fw);
+        let dps = round3(units::speed_dps(sp.spd_ref, fw));
         Self {
             position_deg: cal.to_joint(units::angle_deg(sp.pos_ref)),
-            speed_rpm: if mode == Some(CtrlMode::Speed) {
-                cal.sign() * rpm
+            speed_dps: if mode == Some(CtrlMode::Speed) {
+                cal.sign() * dps
             } else {
-                rpm
+                dps
             },
             pos_ref_raw: sp.pos_ref,
             spd_ref_raw: sp.spd_ref,
@@ -163,6 +165,11 @@ pub(crate) fn disabled_reason(dev: &DeviceState) -> Option<&'static str> {
 
 pub(crate) use crate::protocol::frame_json::hex;
 
+/// Thousandths are below anything the wire resolves; more digits are noise.
+pub(crate) fn round3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
 fn age_ms(at: Instant, now: Instant) -> f64 {
     now.saturating_duration_since(at).as_secs_f64() * 1000.0
 }
@@ -202,7 +209,7 @@ pub(crate) fn status_view(
     now: Instant,
 ) -> StatusView {
     StatusView {
-        fsm: info.fsm,
+        state_code: info.fsm,
         state: fsm_name_in(info.fsm, revision),
         fault: FaultView::new(info.err_code),
         soft_ver: info.soft_ver,
@@ -227,8 +234,8 @@ pub(crate) fn motion_view(
     let rpm = cal.sign() * info.speed_rpm(fw);
     MotionView {
         angle_deg: cal.to_joint(info.angle_deg()),
-        speed_rpm: rpm,
-        output_deg_per_s: units::output_deg_per_s(rpm),
+        speed_dps: round3(units::output_deg_per_s(rpm)),
+        rotor_speed_rpm: rpm,
         d_current_a: units::current_a(info.d_cur),
         q_current_a: cal.sign() * units::current_a(info.q_cur),
         raw: hex(&info.to_bytes()),

@@ -137,6 +137,26 @@ pub fn output_deg_per_s(rotor_rpm: f64) -> f64 {
     rotor_rpm * 6.0 / GEAR_RATIO
 }
 
+/// Output-shaft °/s of a speed reference (the user-facing speed).
+pub fn speed_dps(raw: i16, fw: FirmwareVersion) -> f64 {
+    output_deg_per_s(speed_rpm(raw, fw))
+}
+
+/// A signed output speed, °/s, within ± the firmware's base speed at the
+/// output (so an error names the range in the unit the user gave).
+pub fn speed_dps_to_raw(dps: f64, fw: FirmwareVersion) -> Result<i16, UnitError> {
+    let base = output_deg_per_s(fw.speed_base_rpm());
+    let raw = to_raw("speed", "°/s", dps, (-base, base), Q15_MAX / base)?;
+    Ok(raw as i16)
+}
+
+/// A position-mode speed limit at the output: 0..=base, °/s.
+pub fn speed_limit_dps_to_raw(dps: f64, fw: FirmwareVersion) -> Result<i16, UnitError> {
+    let base = output_deg_per_s(fw.speed_base_rpm());
+    let raw = to_raw("speed limit", "°/s", dps, (0.0, base), Q15_MAX / base)?;
+    Ok(raw as i16)
+}
+
 // ---- current (Q15 of 5.625 A) ----
 
 pub fn current_a(raw: i16) -> f64 {

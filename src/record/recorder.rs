@@ -20,9 +20,10 @@ use serde_json::json;
 use tokio::sync::{broadcast, watch};
 
 use crate::bus::handle::{BusEvent, Commanded, LoggedFrame};
-use crate::bus::BusHandle;
+use crate::bus::{BusHandle, BusSnapshot};
 use crate::protocol::frame_json::hex;
 use crate::protocol::units;
+use crate::protocol::CtrlMode;
 
 use super::joint_states::{system_ns, JointStates, Labeler};
 use super::mcap_file::{McapFile, McapFileError, SideEncoding, Topic, CHUNK_PERIOD};
@@ -294,6 +295,7 @@ fn drain_bus(
                     .map(|(id, sp)| {
                         let (_, cal) = labeler(&bus, *id);
                         json!({"id": id, "position_deg": cal.to_joint(units::angle_deg(sp.pos_ref)),
+                            "speed_dps": target_speed_dps(&snap, *id, sp.spd_ref, cal.sign()),
                             "pos_ref_raw": sp.pos_ref, "spd_ref_raw": sp.spd_ref})
                     })
                     .collect();
@@ -319,4 +321,17 @@ fn drain_bus(
         }
     }
     Ok(())
+}
+
+/// A target's speed as the REST and WebSocket views give it: output °/s,
+/// the limit in position mode, signed (in the joint's frame) in speed mode.
+fn target_speed_dps(snap: &BusSnapshot, id: u8, spd_ref: i16, sign: f64) -> f64 {
+    let dev = snap.devices.get(&id);
+    let fw = dev.map(|d| d.firmware_version()).unwrap_or_default();
+    let dps = (units::speed_dps(spd_ref, fw) * 1000.0).round() / 1000.0;
+    if dev.and_then(|d| d.mode) == Some(CtrlMode::Speed) {
+        sign * dps
+    } else {
+        dps
+    }
 }

@@ -44,15 +44,15 @@ pub fn frame() -> String {
 
 /// Every event, with the fields it carries besides `event`.
 pub const EVENTS: &[(&str, &[&str])] = &[
-    ("device_online", &["bus", "dev_id"]),
-    ("device_offline", &["bus", "dev_id"]),
-    ("fault", &["bus", "dev_id", "err_code", "name"]),
+    ("device_online", &["bus", "id"]),
+    ("device_offline", &["bus", "id"]),
+    ("fault", &["bus", "id", "err_code", "name"]),
     ("bus_up", &["bus"]),
     ("bus_down", &["bus", "reason"]),
     ("id_changed", &["bus", "old", "new"]),
     ("baud_changed", &["bus", "baud"]),
     ("estop", &["bus"]),
-    ("found_enabled", &["bus", "dev_id", "state", "on_start"]),
+    ("found_enabled", &["bus", "id", "state", "on_start"]),
     ("move_started", &["bus", "move_id", "ids", "duration_ms"]),
     ("move_progress", &["bus", "move_id", "progress"]),
     ("move_done", &["bus", "move_id"]),
@@ -60,7 +60,7 @@ pub const EVENTS: &[(&str, &[&str])] = &[
     ("move_aborted", &["bus", "move_id", "reason"]),
     (
         "config_written",
-        &["bus", "dev_id", "index", "name", "value", "verified_by"],
+        &["bus", "id", "index", "name", "value", "verified_by"],
     ),
     (
         "usb_pipeline",
@@ -68,7 +68,7 @@ pub const EVENTS: &[(&str, &[&str])] = &[
     ),
     (
         "device_reset",
-        &["bus", "dev_id", "seen", "state_before", "state"],
+        &["bus", "id", "seen", "state_before", "state"],
     ),
 ];
 
@@ -79,7 +79,7 @@ fn event_fields() -> Map<String, Value> {
     let fields = json!({
         "event": one_of(&names, "What happened (docs/websocket.md tells each)"),
         "bus": string("The bus it happened on"),
-        "dev_id": {"type": "integer", "minimum": 0, "maximum": 255, "description": "The device"},
+        "id": {"type": "integer", "minimum": 0, "maximum": 255, "description": "The device's id on the bus"},
         "err_code": int("fault: the device's error code (ERR_CODE)"),
         "name": string("fault: the error's name; config_written: the parameter's (MAX_CUR, ...)"),
         "reason": string("bus_down, move_aborted, usb_pipeline: why"),
@@ -163,6 +163,7 @@ pub fn setpoint() -> String {
                 "properties": {
                     "id": {"type": "integer", "minimum": 0, "maximum": 255},
                     "position_deg": {"type": "number", "description": "In the joint's calibrated frame"},
+                    "speed_dps": {"type": "number", "description": "Output-shaft °/s: the speed limit, or the speed (signed) in speed mode"},
                     "pos_ref_raw": {"type": "integer", "description": "As the wire carries it (Q7 degrees, device frame)"},
                     "spd_ref_raw": {"type": "integer", "description": "The speed limit (or speed, in speed mode), raw"},
                 },

@@ -17,7 +17,6 @@ use crate::control::targets::TargetRequest;
 use crate::control::velocity;
 use crate::control::Control;
 use crate::control::JointRef;
-use crate::protocol::units;
 use crate::record::cdr::JointState;
 use crate::record::joint_states::Scope;
 
@@ -166,9 +165,7 @@ fn position_request(name: &str, rad: f64, rad_s: Option<f64>) -> Result<TargetRe
     Ok(TargetRequest {
         position_deg: Some(rad.to_degrees()),
         // A controller at rest sends 0: no speed limit then.
-        speed_rpm: dps
-            .filter(|v| *v >= velocity::MIN_SPEED_DPS)
-            .map(|v| v / units::output_deg_per_s(1.0)),
+        speed_dps: dps.filter(|v| *v >= velocity::MIN_SPEED_DPS),
     })
 }
 

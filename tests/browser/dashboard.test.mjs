@@ -49,7 +49,7 @@ test("the device table lists the simulated joints with live values", async () =>
   }, null, { timeout: WAIT });
   const vbus = Number(await cell(16, "vbus_v").textContent());
   assert.ok(vbus > 5 && vbus < 60, `plausible bus voltage, got ${vbus}`);
-  assert.equal(await cell(1, "fsm").textContent(), "ready");
+  assert.equal(await cell(1, "state").textContent(), "ready");
   // Live: the telemetry age keeps being refreshed.
   const ages = new Set();
   for (let i = 0; i < 10 && ages.size < 2; i++) {
@@ -64,8 +64,8 @@ test("moving the slider moves the joint", async () => {
   await page.locator('[data-testid="device-row-sim0-1"]').click();
   await page.locator('[data-testid="device-panel"]').waitFor({ state: "visible" });
   await page.locator('[data-testid="enable"]').click();
-  await page.waitForFunction(() => document.querySelector('[data-testid="device-row-sim0-1"] td[data-field="fsm"]')?.textContent === "run", null, { timeout: WAIT });
-  await page.locator("#speed-limit").fill("20000");
+  await page.waitForFunction(() => document.querySelector('[data-testid="device-row-sim0-1"] td[data-field="state"]')?.textContent === "run", null, { timeout: WAIT });
+  await page.locator("#speed-limit").fill("200");
   await page.locator('[data-testid="target-slider"]').fill("30");
   await page.waitForFunction(() => {
     const v = Number(document.querySelector('[data-testid="device-row-sim0-1"] td[data-field="angle_deg"]')?.textContent);
@@ -208,10 +208,10 @@ test("the panel shows each joint's firmware revision and offers what it has", as
 
 test("e-stop disables every joint", async () => {
   await rest("POST", "/api/v1/buses/sim0/control/enable", {});
-  await page.waitForFunction(() => [...document.querySelectorAll('[data-testid^="device-row-sim0-"] td[data-field="fsm"]')]
+  await page.waitForFunction(() => [...document.querySelectorAll('[data-testid^="device-row-sim0-"] td[data-field="state"]')]
     .every((td) => td.textContent === "run"), null, { timeout: WAIT });
   await page.locator('[data-testid="estop"]').click();
-  await page.waitForFunction(() => [...document.querySelectorAll('[data-testid^="device-row-sim0-"] td[data-field="fsm"]')]
+  await page.waitForFunction(() => [...document.querySelectorAll('[data-testid^="device-row-sim0-"] td[data-field="state"]')]
     .every((td) => td.textContent === "ready"), null, { timeout: WAIT });
   await page.locator("#messages .info", { hasText: "Emergency stop" }).first().waitFor({ timeout: WAIT });
   await page.screenshot({ path: `${SHOTS}/estop.png`, fullPage: true });
@@ -238,7 +238,7 @@ test("a page of another origin cannot move a joint", async () => {
       const ws = await new Promise((resolve) => {
         const sock = new WebSocket(`${api.replace("http", "ws")}/api/v1/ws`);
         sock.onopen = () => {
-          sock.send(JSON.stringify({ type: "setpoints", seq: 1, targets: [{ dev_id: 5, position_deg: 40 }] }));
+          sock.send(JSON.stringify({ type: "setpoints", seq: 1, targets: [{ id: 5, position_deg: 40 }] }));
           resolve("opened");
         };
         sock.onerror = () => resolve("refused");

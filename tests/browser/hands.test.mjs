@@ -20,7 +20,7 @@ after(async () => {
   await daemon?.stop();
 });
 
-const target = (id, deg) => rest(daemon.base, "PUT", `/api/v1/buses/sim0/devices/${id}/target`, { position_deg: deg, speed_rpm: 20000 });
+const target = (id, deg) => rest(daemon.base, "PUT", `/api/v1/buses/sim0/devices/${id}/target`, { position_deg: deg, speed_dps: 200 });
 
 test("the hand is shown with its joints and no poses yet", async () => {
   const hand = page.locator('[data-testid="hand-left"]');

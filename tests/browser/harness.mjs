@@ -94,7 +94,7 @@ export async function rest(base, method, path, body) {
 /** Waits until joint `id` of sim0 shows `fsm` in the device table. */
 export function waitFsm(page, id, fsm) {
   return page.waitForFunction(([id, fsm]) =>
-    document.querySelector(`[data-testid="device-row-sim0-${id}"] td[data-field="fsm"]`)?.textContent === fsm,
+    document.querySelector(`[data-testid="device-row-sim0-${id}"] td[data-field="state"]`)?.textContent === fsm,
   [id, fsm], { timeout: WAIT });
 }
 

@@ -77,7 +77,7 @@ pub async fn start_sim_with(
         ids: vec![2],
         min_deg: Some(-45.0),
         max_deg: Some(45.0),
-        max_rpm: Some(6000.0),
+        max_speed_dps: Some(60.0),
         ..Default::default()
     }])
     .expect("limits");

@@ -84,8 +84,8 @@ class Jointd:
     def _bus(self, bus: str) -> str:
         return "/api/v1/buses/" + urllib.parse.quote(bus, safe="")
 
-    def _dev(self, bus: str, dev_id: int) -> str:
-        return f"{self._bus(bus)}/devices/{int(dev_id)}"
+    def _dev(self, bus: str, id: int) -> str:
+        return f"{self._bus(bus)}/devices/{int(id)}"
 
     @staticmethod
     def _name(name: str) -> str:
@@ -168,80 +168,80 @@ class Jointd:
         return [Device.from_json(d) for d in self.request("GET", self._bus(bus) + "/devices")["devices"]]
 
     @operation("get_device")
-    def device(self, bus: str, dev_id: int, fresh: bool = False) -> schema.DeviceDetail:
+    def device(self, bus: str, id: int, fresh: bool = False) -> schema.DeviceDetail:
         """The full device view (INFO_01/INFO_02 decoded, raw bytes beside)."""
         return cast(schema.DeviceDetail,
-                    self.request("GET", self._dev(bus, dev_id) + ("?fresh=true" if fresh else "")))
+                    self.request("GET", self._dev(bus, id) + ("?fresh=true" if fresh else "")))
 
     @operation("enable_one")
-    def enable(self, bus: str, dev_id: int, wait: bool = False, timeout: float = 5.0) -> ActionDone:
+    def enable(self, bus: str, id: int, wait: bool = False, timeout: float = 5.0) -> ActionDone:
         """Enable one joint; with `wait`, return once it runs (it aligns for
         about a second first; `Timeout` after `timeout` s)."""
-        done = ActionDone.from_json(self.request("POST", self._dev(bus, dev_id) + "/enable"))
+        done = ActionDone.from_json(self.request("POST", self._dev(bus, id) + "/enable"))
         if wait:
-            self._wait_running(bus, [dev_id], timeout)
+            self._wait_running(bus, [id], timeout)
         return done
 
     @operation("disable_one")
-    def disable(self, bus: str, dev_id: int) -> ActionDone:
-        return ActionDone.from_json(self.request("POST", self._dev(bus, dev_id) + "/disable"))
+    def disable(self, bus: str, id: int) -> ActionDone:
+        return ActionDone.from_json(self.request("POST", self._dev(bus, id) + "/disable"))
 
     @operation("target_one")
-    def target(self, bus: str, dev_id: int, position_deg: Optional[float] = None,
-               speed_rpm: Optional[float] = None) -> TargetAck:
-        body = _drop_none(position_deg=position_deg, speed_rpm=speed_rpm)
-        return TargetAck.from_json(self.request("PUT", self._dev(bus, dev_id) + "/target", body))
+    def target(self, bus: str, id: int, position_deg: Optional[float] = None,
+               speed_dps: Optional[float] = None) -> TargetAck:
+        body = _drop_none(position_deg=position_deg, speed_dps=speed_dps)
+        return TargetAck.from_json(self.request("PUT", self._dev(bus, id) + "/target", body))
 
     @operation("mode_one")
-    def set_mode(self, bus: str, dev_id: int, mode: str) -> ActionDone:
-        return ActionDone.from_json(self.request("PUT", self._dev(bus, dev_id) + "/mode", {"mode": mode}))
+    def set_mode(self, bus: str, id: int, mode: str) -> ActionDone:
+        return ActionDone.from_json(self.request("PUT", self._dev(bus, id) + "/mode", {"mode": mode}))
 
     @operation("jog")
-    def jog(self, bus: str, dev_id: int, direction: str) -> ActionDone:
+    def jog(self, bus: str, id: int, direction: str) -> ActionDone:
         """One jog step, `cw` or `ccw`."""
-        return ActionDone.from_json(self.request("POST", self._dev(bus, dev_id) + "/jog",
+        return ActionDone.from_json(self.request("POST", self._dev(bus, id) + "/jog",
                                                  {"direction": direction}))
 
     @operation("rezero")
-    def rezero(self, bus: str, dev_id: int) -> ActionDone:
+    def rezero(self, bus: str, id: int) -> ActionDone:
         """Make the joint's present angle its zero."""
-        return ActionDone.from_json(self.request("POST", self._dev(bus, dev_id) + "/rezero"))
+        return ActionDone.from_json(self.request("POST", self._dev(bus, id) + "/rezero"))
 
     @operation("change_id")
-    def change_id(self, bus: str, dev_id: int, new_id: int) -> schema.IdResult:
-        return cast(schema.IdResult, self.request("PUT", self._dev(bus, dev_id) + "/id", {"new_id": new_id}))
+    def change_id(self, bus: str, id: int, new_id: int) -> schema.IdResult:
+        return cast(schema.IdResult, self.request("PUT", self._dev(bus, id) + "/id", {"new_id": new_id}))
 
     @operation("read_config")
-    def config(self, bus: str, dev_id: int) -> schema.ConfigView:
+    def config(self, bus: str, id: int) -> schema.ConfigView:
         """Every parameter read from the device now: `{key: {value, raw, unit, index}}`."""
-        return cast(schema.ConfigView, self.request("GET", self._dev(bus, dev_id) + "/config"))
+        return cast(schema.ConfigView, self.request("GET", self._dev(bus, id) + "/config"))
 
     @operation("patch_config")
-    def set_config(self, bus: str, dev_id: int, **params: float) -> schema.PatchResult:
+    def set_config(self, bus: str, id: int, **params: float) -> schema.PatchResult:
         """Write any subset of parameters (RAM), each verified by read-back."""
-        return cast(schema.PatchResult, self.request("PATCH", self._dev(bus, dev_id) + "/config", params))
+        return cast(schema.PatchResult, self.request("PATCH", self._dev(bus, id) + "/config", params))
 
     @operation("persist")
-    def persist(self, bus: str, dev_id: int) -> schema.PersistResult:
+    def persist(self, bus: str, id: int) -> schema.PersistResult:
         """Write the device's RAM parameters to its flash."""
-        return cast(schema.PersistResult, self.request("POST", self._dev(bus, dev_id) + "/config/persist"))
+        return cast(schema.PersistResult, self.request("POST", self._dev(bus, id) + "/config/persist"))
 
     @operation("get_calibration")
-    def calibration(self, bus: str, dev_id: int) -> schema.CalibrationView:
-        return cast(schema.CalibrationView, self.request("GET", self._dev(bus, dev_id) + "/calibration"))
+    def calibration(self, bus: str, id: int) -> schema.CalibrationView:
+        return cast(schema.CalibrationView, self.request("GET", self._dev(bus, id) + "/calibration"))
 
     @operation("put_calibration")
-    def set_calibration(self, bus: str, dev_id: int, offset_deg: Optional[float] = None,
+    def set_calibration(self, bus: str, id: int, offset_deg: Optional[float] = None,
                         flip: Optional[bool] = None,
                         range_deg: Optional[Sequence[float]] = None) -> schema.CalibrationView:
         body = _drop_none(offset_deg=offset_deg, flip=flip,
                           range_deg=None if range_deg is None else list(range_deg))
         return cast(schema.CalibrationView,
-                    self.request("PUT", self._dev(bus, dev_id) + "/calibration", body))
+                    self.request("PUT", self._dev(bus, id) + "/calibration", body))
 
     @operation("delete_calibration")
-    def clear_calibration(self, bus: str, dev_id: int) -> schema.CalibrationView:
-        return cast(schema.CalibrationView, self.request("DELETE", self._dev(bus, dev_id) + "/calibration"))
+    def clear_calibration(self, bus: str, id: int) -> schema.CalibrationView:
+        return cast(schema.CalibrationView, self.request("DELETE", self._dev(bus, id) + "/calibration"))
 
     def _wait_running(self, bus: str, ids: Optional[Iterable[int]], timeout: float) -> None:
         """Until every joint of `ids` (default: every one of the bus) runs."""

@@ -40,7 +40,7 @@ class Device(_FromJson):
     online: bool
     state: Optional[str]
     angle_deg: Optional[float]
-    speed_rpm: Optional[float]
+    speed_dps: Optional[float]
     q_current_a: Optional[float]
     temp_c: Optional[float]
     vbus_v: Optional[float]

@@ -284,8 +284,8 @@ class DeviceSummary(_DeviceSummaryRequired, total=False):
     q_current_a: Optional[float]
     revision: Optional[str]
     """Protocol revision, `2.0.1` or `2.0.8` (absent until known: see the device's `protocol`)."""
-    speed_rpm: Optional[float]
-    """Rotor speed."""
+    speed_dps: Optional[float]
+    """Output-shaft speed, °/s."""
     state: Optional[str]
     """fsm state name from the latest INFO_01."""
     target: Optional["TargetView"]
@@ -368,8 +368,8 @@ class GroupTarget(_GroupTargetRequired, total=False):
 
     position_deg: Optional[float]
     """Output angle, degrees (see `TargetRequest`)."""
-    speed_rpm: Optional[float]
-    """Rotor rpm (see `TargetRequest`)."""
+    speed_dps: Optional[float]
+    """Output-shaft °/s (see `TargetRequest`)."""
 
 
 class GroupTargetRequest(TypedDict):
@@ -501,8 +501,8 @@ class _JointLimitsRequired(TypedDict):
 class JointLimits(_JointLimitsRequired, total=False):
     """The limits that apply to one joint."""
 
-    max_rpm: Optional[float]
-    """Absent: only the firmware's speed range applies."""
+    max_speed_dps: Optional[float]
+    """Output °/s; absent: only the firmware's speed range applies."""
 
 
 class JointRef(TypedDict):
@@ -522,12 +522,12 @@ class MotionView(TypedDict):
     age_ms: float
     angle_deg: float
     d_current_a: float
-    output_deg_per_s: float
-    """Output-shaft speed."""
     q_current_a: float
     raw: str
-    speed_rpm: float
-    """Rotor speed (before the 568.81:1 gearbox)."""
+    rotor_speed_rpm: float
+    """Rotor speed before the 568.81:1 gearbox (raw-side; `speed_dps` is the output's)."""
+    speed_dps: float
+    """Output-shaft speed, °/s."""
 
 
 class MoveJoint(TypedDict, total=False):
@@ -877,12 +877,13 @@ class StatusView(TypedDict):
     angle_deg: float
     fault: "FaultView"
     firmware: str
-    fsm: int
     raw: str
     """The 8 data bytes as received, hex."""
     soft_ver: int
     state: str
     """`ready`, `align`, `run`, `fault`, ..."""
+    state_code: int
+    """The fsm code as sent (raw; `state` names it)."""
     temp_c: float
     vbus_v: float
 
@@ -899,12 +900,12 @@ class TargetAck(TypedDict):
 
 
 class TargetRequest(TypedDict, total=False):
-    """A target for one joint. Position mode: `position_deg` (required) and `speed_rpm` as the speed limit (default 3000 rpm, capped by the soft limit). Speed mode: `speed_rpm` (signed, required) only."""
+    """A target for one joint. Position mode: `position_deg` (required) and `speed_dps` as the speed limit (default 30 °/s, capped by the soft limit). Speed mode: `speed_dps` (signed, required) only."""
 
     position_deg: Optional[float]
     """Output angle, degrees (−255..=255, narrowed by soft limits)."""
-    speed_rpm: Optional[float]
-    """Rotor rpm: the speed limit in position mode (≥ 0), the speed in speed mode (signed); within the firmware's base speed (50000 rpm from 1.2.4, else 40000)."""
+    speed_dps: Optional[float]
+    """Output-shaft °/s: the speed limit in position mode (≥ 0), the speed in speed mode (signed); within the firmware's base speed (50000 rotor rpm, 527 °/s, from 1.2.4; else 40000 rpm, 422 °/s)."""
 
 
 class TargetView(TypedDict):
@@ -913,7 +914,8 @@ class TargetView(TypedDict):
     pos_ref_raw: int
     position_deg: float
     spd_ref_raw: int
-    speed_rpm: float
+    speed_dps: float
+    """Output-shaft °/s: the speed limit in position mode, the speed in speed mode."""
 
 
 class Unverified(TypedDict):

@@ -28,15 +28,15 @@ class JointSample(TypedDict, total=False):
     the subscription asked for (all by default)."""
 
     bus: str
-    dev_id: int
+    id: int
     online: bool
     age_ms: float
     angle_deg: Optional[float]
     target_deg: Optional[float]
     target_known: bool
-    speed_rpm: Optional[float]
-    current_a: Optional[float]
-    fsm: Optional[str]
+    speed_dps: Optional[float]
+    q_current_a: Optional[float]
+    state: Optional[str]
     disabled_reason: Optional[str]
     fault: Optional[str]
     temp_c: Optional[float]
@@ -46,7 +46,7 @@ class JointSample(TypedDict, total=False):
 @dataclass(frozen=True)
 class Telemetry:
     """One `telemetry` message: `joints` is a list of per-joint dicts
-    (`bus`, `dev_id`, `online`, `age_ms`, `angle_deg`, ...)."""
+    (`bus`, `id`, `online`, `age_ms`, `angle_deg`, ...)."""
 
     seq: int
     t_ms: float
@@ -158,7 +158,7 @@ class SetpointStream:
 
     async def send(self, targets: Iterable[Dict[str, Any]], ack: bool = True,
                    timeout: float = 5.0) -> Optional[Dict[str, Any]]:
-        """One batch (`[{"bus":..., "dev_id":..., "position_deg":..., "speed_rpm":...}]`).
+        """One batch (`[{"bus":..., "id":..., "position_deg":..., "speed_dps":...}]`).
         With `ack`, waits until every target is on the wire and returns the
         ack (`latency_us` = accepted -> on the wire); a refused batch raises."""
         seq = next(self._seq)

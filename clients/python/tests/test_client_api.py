@@ -45,7 +45,7 @@ def test_websocket_refusals_raise_the_rest_classes(daemon):
 
     async def target_a_disabled_joint():
         async with j.setpoints() as s:
-            await s.send([{"bus": "sim0", "dev_id": 1, "position_deg": 10}])
+            await s.send([{"bus": "sim0", "id": 1, "position_deg": 10}])
 
     with pytest.raises(Conflict) as e:
         asyncio.run(target_a_disabled_joint())
@@ -53,7 +53,7 @@ def test_websocket_refusals_raise_the_rest_classes(daemon):
 
     async def unknown_device():
         async with j.setpoints() as s:
-            await s.send([{"bus": "sim0", "dev_id": 99, "position_deg": 10}])
+            await s.send([{"bus": "sim0", "id": 99, "position_deg": 10}])
 
     with pytest.raises(NotFound):
         asyncio.run(unknown_device())

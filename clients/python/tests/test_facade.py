@@ -35,7 +35,7 @@ def test_enable_target_mode_disable_move_the_simulated_joint(daemon):
     done = j.enable("sim0", 1)
     assert (done.action, done.ids) == ("enable", [1])
     wait_state(j, "sim0", 1, "run")
-    ack = j.target("sim0", 1, position_deg=20, speed_rpm=20000)
+    ack = j.target("sim0", 1, position_deg=20, speed_dps=200)
     assert ack.targets[0]["position_deg"] == 20
     deadline = time.monotonic() + 20
     while abs((next(d for d in j.devices("sim0") if d.id == 1).angle_deg or 0) - 20) > 1:

@@ -109,7 +109,7 @@ def test_a_recording_of_a_moving_joint_reads_back(daemon, tmp_path):
     with open(out, "rb") as f:
         events = [json.loads(m.data) for _, _, m in make_reader(f).iter_messages(topics=["/jointd/sim0/events"])]
     written = [e for e in events if e["event"] == "config_written"]
-    assert any(e["dev_id"] == 3 and e["name"] == "SET_POS_KP" for e in written), events
+    assert any(e["id"] == 3 and e["name"] == "SET_POS_KP" for e in written), events
     assert any(e["event"] == "move_started" for e in events), events
 
     # The move's targets, as the daemon sent them each control cycle: on the

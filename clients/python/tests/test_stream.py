@@ -20,7 +20,7 @@ def test_telemetry_yields_samples_of_the_asked_devices(daemon):
     samples = asyncio.run(take(5))
     seqs = [s.seq for s in samples]
     assert seqs == sorted(seqs) and len(set(seqs)) == 5
-    assert {jt["dev_id"] for jt in samples[-1].joints} == {1, 2}
+    assert {jt["id"] for jt in samples[-1].joints} == {1, 2}
 
 
 def test_setpoints_are_acked_move_the_joint_and_end_without_a_watchdog_firing(daemon):
@@ -37,7 +37,7 @@ def test_setpoints_are_acked_move_the_joint_and_end_without_a_watchdog_firing(da
         # 2-core CI machine can pause a client for 200 ms).
         async with j.setpoints(hold_timeout_ms=2000) as s:
             for k in range(20):
-                acks.append(await s.send([{"bus": "sim0", "dev_id": 1, "position_deg": k, "speed_rpm": 20000}]))
+                acks.append(await s.send([{"bus": "sim0", "id": 1, "position_deg": k, "speed_dps": 200}]))
                 await asyncio.sleep(0.01)
         return acks
 

@@ -148,9 +148,9 @@ pub(crate) struct GroupTarget {
     /// Output angle, degrees (see `TargetRequest`).
     #[schema(example = 45.0, minimum = -255.0, maximum = 255.0)]
     pub position_deg: Option<f64>,
-    /// Rotor rpm (see `TargetRequest`).
-    #[schema(example = 3000.0, minimum = -50000.0, maximum = 50000.0)]
-    pub speed_rpm: Option<f64>,
+    /// Output-shaft °/s (see `TargetRequest`).
+    #[schema(example = 30.0, minimum = -527.0, maximum = 527.0)]
+    pub speed_dps: Option<f64>,
 }
 
 #[derive(Debug, Deserialize, ToSchema)]
@@ -274,15 +274,15 @@ async fn disable_one(
     Ok(done(bus, "disable", Some(vec![id]), None))
 }
 
-/// Set one joint's target (position in degrees with a speed limit in rpm,
+/// Set one joint's target (position in degrees with a speed limit in °/s,
 /// or a speed in speed mode). Outside the soft limits: 422, never clamped.
 ///
-/// Position mode: `position_deg` with an optional `speed_rpm` limit (the default speed when left
-/// out). Speed mode: `speed_rpm` only. Values outside the configured soft limits are refused with
+/// Position mode: `position_deg` with an optional `speed_dps` limit (output-shaft °/s; 30 when left
+/// out). Speed mode: `speed_dps` only. Values outside the configured soft limits are refused with
 /// 422 and never clamped. 200 when the reference went out on the wire, 202 when it is stored for
 /// the next control frame.
 #[utoipa::path(put, path = "/api/v1/buses/{bus}/devices/{id}/target", tag = TAG_CONTROL, params(DevicePath),
-    request_body(content = TargetRequest, example = json!({"position_deg": 45.0, "speed_rpm": 3000.0})),
+    request_body(content = TargetRequest, example = json!({"position_deg": 45.0, "speed_dps": 30.0})),
     responses((status = 200, description = "Target written to the wire", body = TargetAck),
         (status = 202, description = "Target stored; not yet on the wire", body = TargetAck), ErrorResponses))]
 async fn target_one(
@@ -402,7 +402,7 @@ async fn disable_group(
 /// together in the next control cycle.
 #[utoipa::path(put, path = "/api/v1/buses/{bus}/control/targets", tag = TAG_CONTROL, params(BusPath),
     request_body(content = GroupTargetRequest, example = json!({"targets": [
-        {"id": 1, "position_deg": 30.0, "speed_rpm": 3000.0},
+        {"id": 1, "position_deg": 30.0, "speed_dps": 30.0},
         {"id": 2, "position_deg": -15.5}]})),
     responses((status = 200, description = "Targets written to the wire", body = TargetAck),
         (status = 202, description = "Targets stored; not yet on the wire", body = TargetAck), ErrorResponses))]
@@ -428,7 +428,7 @@ async fn target_group(
         let dev = known_device(&snap, id)?;
         let req = TargetRequest {
             position_deg: t.position_deg,
-            speed_rpm: t.speed_rpm,
+            speed_dps: t.speed_dps,
         };
         out.push((
             id,

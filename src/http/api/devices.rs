@@ -52,9 +52,9 @@ pub(crate) struct DeviceSummary {
     pub mode: Option<&'static str>,
     #[schema(example = 45.5)]
     pub angle_deg: Option<f64>,
-    /// Rotor speed.
-    #[schema(example = 2000.0)]
-    pub speed_rpm: Option<f64>,
+    /// Output-shaft speed, °/s.
+    #[schema(example = 21.1)]
+    pub speed_dps: Option<f64>,
     #[schema(example = 0.25)]
     pub q_current_a: Option<f64>,
     #[schema(example = 31.0)]
@@ -201,7 +201,7 @@ fn summary(
             .as_ref()
             .map(|m| m.angle_deg)
             .or(status.as_ref().map(|s| s.angle_deg)),
-        speed_rpm: motion.as_ref().map(|m| m.speed_rpm),
+        speed_dps: motion.as_ref().map(|m| m.speed_dps),
         q_current_a: motion.as_ref().map(|m| m.q_current_a),
         temp_c: status.as_ref().map(|s| s.temp_c),
         vbus_v: status.as_ref().map(|s| s.vbus_v),

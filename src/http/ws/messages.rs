@@ -50,9 +50,9 @@ pub(crate) struct Subscribe {
 pub(crate) enum Field {
     AngleDeg,
     TargetDeg,
-    SpeedRpm,
-    CurrentA,
-    Fsm,
+    SpeedDps,
+    QCurrentA,
+    State,
     Fault,
     TempC,
     VbusV,
@@ -62,9 +62,9 @@ impl Field {
     pub(crate) const ALL: [Field; 8] = [
         Field::AngleDeg,
         Field::TargetDeg,
-        Field::SpeedRpm,
-        Field::CurrentA,
-        Field::Fsm,
+        Field::SpeedDps,
+        Field::QCurrentA,
+        Field::State,
         Field::Fault,
         Field::TempC,
         Field::VbusV,
@@ -90,11 +90,11 @@ pub(crate) struct TargetItem {
     /// Optional when the daemon has exactly one bus.
     pub bus: Option<String>,
     /// The joint by id on `bus`; or by `hand` and `joint` name instead.
-    pub dev_id: Option<i64>,
+    pub id: Option<i64>,
     pub hand: Option<String>,
     pub joint: Option<String>,
     pub position_deg: Option<f64>,
-    pub speed_rpm: Option<f64>,
+    pub speed_dps: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -278,7 +278,7 @@ pub(crate) enum ServerMessage {
     /// `mode_changed`, `reenabled`, `zero_moved`). It never resumes by itself.
     StreamEnded {
         bus: String,
-        dev_id: u8,
+        id: u8,
         reason: &'static str,
     },
     /// A `move` was accepted: the move as `GET /api/v1/moves/{id}` shows it.
@@ -324,10 +324,9 @@ mod tests {
             parse(r#"{"type":"ping","seq":3}"#),
             Ok(ClientMessage::Ping { seq: Some(3) })
         ));
-        let m = parse(r#"{"type":"setpoints","seq":1,"targets":[{"dev_id":1,"position_deg":5}]}"#);
+        let m = parse(r#"{"type":"setpoints","seq":1,"targets":[{"id":1,"position_deg":5}]}"#);
         assert!(matches!(m, Ok(ClientMessage::Setpoints(b)) if b.targets.len() == 1 && !b.ack));
-        let e =
-            parse(r#"{"type":"setpoints","seq":9,"targets":[{"dev_id":1,"pos":5}]}"#).unwrap_err();
+        let e = parse(r#"{"type":"setpoints","seq":9,"targets":[{"id":1,"pos":5}]}"#).unwrap_err();
         assert_eq!((e.code, e.seq), (ErrorCode::BadMessage, Some(9)));
         assert!(e.message.contains("pos"), "{}", e.message);
         assert_eq!(parse("{").unwrap_err().code, ErrorCode::BadJson);

@@ -216,7 +216,7 @@ impl Connection {
         for (j, why) in self.streams.end_revoked(&self.state) {
             self.reply(ServerMessage::StreamEnded {
                 bus: j.bus,
-                dev_id: j.id,
+                id: j.id,
                 reason: why.name(),
             });
         }

@@ -146,7 +146,7 @@ fn validate(state: &AppState, targets: &[TargetItem]) -> Result<PerBus, WsError>
             joint: JointRef { bus, id },
             request: TargetRequest {
                 position_deg: t.position_deg,
-                speed_rpm: t.speed_rpm,
+                speed_dps: t.speed_dps,
             },
             field,
         });
@@ -154,13 +154,13 @@ fn validate(state: &AppState, targets: &[TargetItem]) -> Result<PerBus, WsError>
     Ok(batch::resolve(state, &items)?)
 }
 
-/// The bus and id a target names: by `dev_id` (on `bus`, or the only
+/// The bus and id a target names: by `id` (on `bus`, or the only
 /// bus), or by `hand` and `joint` name.
 fn joint_of(state: &AppState, t: &TargetItem, field: &str) -> Result<(String, u8), WsError> {
-    match (t.dev_id, &t.hand, &t.joint) {
-        (Some(dev_id), None, None) => {
+    match (t.id, &t.hand, &t.joint) {
+        (Some(id), None, None) => {
             let name = bus_name(state, t).map_err(|e| e.with_field(format!("{field}bus")))?;
-            Ok((name, device_id(&format!("{field}dev_id"), dev_id)?))
+            Ok((name, device_id(&format!("{field}id"), id)?))
         }
         (None, Some(hand), Some(joint)) if t.bus.is_none() => {
             let found = state
@@ -182,7 +182,7 @@ fn joint_of(state: &AppState, t: &TargetItem, field: &str) -> Result<(String, u8
         }
         _ => Err(WsError::new(
             ErrorCode::BadMessage,
-            "name the joint by `dev_id` (and `bus`), or by `hand` and `joint`",
+            "name the joint by `id` (and `bus`), or by `hand` and `joint`",
         )
         .with_field(field.trim_end_matches('.').to_string())),
     }

@@ -11,7 +11,9 @@ use crate::bus::handle::DeviceState;
 use crate::bus::BusSnapshot;
 use crate::hands::Calibration;
 use crate::http::hub::FragmentCache;
-use crate::http::telemetry::{disabled_reason, firmware_of, measured_angle_raw, revision_of};
+use crate::http::telemetry::{
+    disabled_reason, firmware_of, measured_angle_raw, revision_of, round3,
+};
 use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
 use crate::protocol::units;
 
@@ -93,7 +95,7 @@ fn joint(
 ) -> Map<String, Value> {
     let mut m = Map::new();
     m.insert("bus".into(), bus.into());
-    m.insert("dev_id".into(), dev.dev_id.into());
+    m.insert("id".into(), dev.dev_id.into());
     m.insert("online".into(), dev.online.into());
     m.insert(
         "age_ms".into(),
@@ -105,7 +107,7 @@ fn joint(
             // `target_deg: null` with `target_known: false` is unknown, not idle.
             m.insert("target_known".into(), dev.target_known.into());
         }
-        if *f == Field::Fsm {
+        if *f == Field::State {
             // Beside the state: why the joint is disabled, if known.
             let reason = disabled_reason(dev).map_or(Value::Null, Value::from);
             m.insert("disabled_reason".into(), reason);
@@ -128,17 +130,13 @@ fn age_ms(dev: &DeviceState, now: Instant) -> Option<f64> {
     ))
 }
 
-fn round3(x: f64) -> f64 {
-    (x * 1000.0).round() / 1000.0
-}
-
 pub(crate) fn field_name(f: Field) -> &'static str {
     match f {
         Field::AngleDeg => "angle_deg",
         Field::TargetDeg => "target_deg",
-        Field::SpeedRpm => "speed_rpm",
-        Field::CurrentA => "current_a",
-        Field::Fsm => "fsm",
+        Field::SpeedDps => "speed_dps",
+        Field::QCurrentA => "q_current_a",
+        Field::State => "state",
         Field::Fault => "fault",
         Field::TempC => "temp_c",
         Field::VbusV => "vbus_v",
@@ -152,13 +150,15 @@ fn field_value(f: Field, dev: &DeviceState, cal: &Calibration) -> Value {
     let v = match f {
         Field::AngleDeg => measured_angle_raw(dev).map(angle),
         Field::TargetDeg => dev.target_sent.map(|t| angle(t.pos_ref)),
-        Field::SpeedRpm => {
-            info02.map(|i| Value::from(round3(cal.sign() * i.speed_rpm(firmware_of(dev)))))
+        Field::SpeedDps => {
+            let dps =
+                |i: crate::protocol::Info02| units::output_deg_per_s(i.speed_rpm(firmware_of(dev)));
+            info02.map(|i| Value::from(round3(cal.sign() * dps(i))))
         }
-        Field::CurrentA => {
+        Field::QCurrentA => {
             info02.map(|i| Value::from(round3(cal.sign() * units::current_a(i.q_cur))))
         }
-        Field::Fsm => info01.map(|i| Value::from(fsm_name_in(i.fsm, revision_of(dev)))),
+        Field::State => info01.map(|i| Value::from(fsm_name_in(i.fsm, revision_of(dev)))),
         Field::Fault => info01.map(|i| Value::from(fault_name(active_fault(i.err_code)))),
         Field::TempC => info01.map(|i| Value::from(i.temp_c())),
         Field::VbusV => info01.map(|i| Value::from(i.vbus_v())),
