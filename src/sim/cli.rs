@@ -173,9 +173,18 @@ pub fn parse_object(spec: &str) -> Result<super::SimObject, SimError> {
     };
     let (id, rest) = spec.split_once('=').ok_or_else(|| bad("no `=`"))?;
     let (deg, k) = rest.split_once(':').ok_or_else(|| bad("no `:`"))?;
-    let id: u8 = id.trim().parse().map_err(|_| bad("the id is not a number"))?;
-    let at_deg: f64 = deg.trim().parse().map_err(|_| bad("the angle is not a number"))?;
-    let nm_per_deg: f64 = k.trim().parse().map_err(|_| bad("the stiffness is not a number"))?;
+    let id: u8 = id
+        .trim()
+        .parse()
+        .map_err(|_| bad("the id is not a number"))?;
+    let at_deg: f64 = deg
+        .trim()
+        .parse()
+        .map_err(|_| bad("the angle is not a number"))?;
+    let nm_per_deg: f64 = k
+        .trim()
+        .parse()
+        .map_err(|_| bad("the stiffness is not a number"))?;
     if !at_deg.is_finite() || at_deg.abs() > crate::protocol::units::MAX_ANGLE_DEG {
         return Err(bad("the angle is outside ±255°"));
     }

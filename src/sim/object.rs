@@ -114,7 +114,11 @@ mod tests {
         let deepest = (cap - HOLD_CURRENT_A) * OUTPUT_NM_PER_A / 0.1;
         let at = o.limit(10.0, 30.0, 40.0, cap);
         assert!((at - (10.0 + deepest)).abs() < 1e-9, "{at}");
-        assert_eq!(o.limit(10.0, 30.0, 40.0, 0.0), 10.0, "no current: pushed out");
+        assert_eq!(
+            o.limit(10.0, 30.0, 40.0, 0.0),
+            10.0,
+            "no current: pushed out"
+        );
     }
 }
 
@@ -151,17 +155,30 @@ mod joint_tests {
         let p = capped(0.2);
         let mut j = on(20.0, 0.01);
         j.advance(0.6, CLOSE, &p, BOUNDS);
-        assert!(j.pos < 20.0 && j.current < 0.1, "free: {} {}", j.pos, j.current);
+        assert!(
+            j.pos < 20.0 && j.current < 0.1,
+            "free: {} {}",
+            j.pos,
+            j.current
+        );
         let mut last = j.current;
         for _ in 0..10 {
             j.advance(0.05, CLOSE, &p, BOUNDS);
-            assert!(j.current >= last - 0.005, "rising: {last} then {}", j.current);
+            assert!(
+                j.current >= last - 0.005,
+                "rising: {last} then {}",
+                j.current
+            );
             last = j.current;
         }
         j.advance(2.0, CLOSE, &p, BOUNDS);
         let deepest = (0.2 - HOLD_CURRENT_A) * OUTPUT_NM_PER_A / 0.01;
         assert!((j.pos - (20.0 + deepest)).abs() < 0.2, "pos {}", j.pos);
-        assert!((j.current - 0.2).abs() < 0.005, "holds at its cap: {}", j.current);
+        assert!(
+            (j.current - 0.2).abs() < 0.005,
+            "holds at its cap: {}",
+            j.current
+        );
         assert!(!j.blocked && j.blocked_s == 0.0, "no stall");
     }
 
@@ -198,7 +215,11 @@ mod joint_tests {
         c.advance(3.0, Drive::Current { amps: 0.25 }, &p, BOUNDS);
         // It rests where the push leaves no more than the hold current.
         let push = -c.object.unwrap().push_a(c.pos);
-        assert!(c.pos > 20.0 && (0.25 - push) <= HOLD_CURRENT_A + 0.01, "{} {push}", c.pos);
+        assert!(
+            c.pos > 20.0 && (0.25 - push) <= HOLD_CURRENT_A + 0.01,
+            "{} {push}",
+            c.pos
+        );
         assert!((c.current - 0.25).abs() < 1e-9);
     }
 }

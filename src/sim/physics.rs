@@ -250,8 +250,7 @@ impl Joint {
                     }
                     None => sign * HOLD_CURRENT_A,
                 };
-                held + FRICTION_A_PER_DEG_S * self.vel
-                    + INERTIA_A_PER_DEG_S2 * self.acc
+                held + FRICTION_A_PER_DEG_S * self.vel + INERTIA_A_PER_DEG_S2 * self.acc
             }
         };
         if !self.blocked {

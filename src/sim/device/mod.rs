@@ -21,8 +21,8 @@ use crate::protocol::{CtrlMode, FirmwareVersion, InfoBlock, Reply};
 
 use super::config::SimConfig;
 use super::firmware::{self, AlignLoad, Profile, BRAKE_DONE_DEG_S, OT_RECOVERY_C};
-use super::params::{FlashImage, Params};
 use super::object::Object;
+use super::params::{FlashImage, Params};
 use super::physics::{Drive, Joint, Obstacle};
 use super::rng::Rng;
 use super::wire::frame_time;
