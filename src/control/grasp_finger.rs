@@ -312,17 +312,17 @@ async fn drive(f: &Finger, plan: &Plan, mut cmd: watch::Receiver<Command>) -> En
         if let Err(why) = unfit(f, &mut w) {
             return End::Aborted(why);
         }
-        if cmd.has_changed().unwrap_or(true) {
-            let now = cmd.borrow_and_update().clone();
-            match now {
-                Command::Hold => {}
-                Command::Stop => return hold_here(f, "stopped by request"),
-                Command::Release { goals, speed_dps } => {
-                    return match goals.get(f.index).copied().flatten() {
-                        Some(goal) => open(f, &mut w, goal, speed_dps, fw).await,
-                        None => hold_here(f, "nothing to open to"),
-                    };
-                }
+        // Every command but Hold ends the finger's grasp: the latest one
+        // is the one that applies, however many wake-ups it took to see.
+        let now = cmd.borrow().clone();
+        match now {
+            Command::Hold => {}
+            Command::Stop => return hold_here(f, "stopped by request"),
+            Command::Release { goals, speed_dps } => {
+                return match goals.get(f.index).copied().flatten() {
+                    Some(goal) => open(f, &mut w, goal, speed_dps, fw).await,
+                    None => hold_here(f, "nothing to open to"),
+                };
             }
         }
         let snap = w.snaps.borrow_and_update().clone();
@@ -331,6 +331,8 @@ async fn drive(f: &Finger, plan: &Plan, mut cmd: watch::Receiver<Command>) -> En
             return End::Stopped(taken);
         }
         if let Some(x) = fresh_sample(dev, &mut w, started) {
+            let q = w.current;
+            set(&f.slot, |s| s.q_current_a = q);
             phase = step(f, plan, phase, x, settings, &mut w);
         }
         tokio::select! {
