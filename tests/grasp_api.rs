@@ -9,7 +9,7 @@ mod grasp_rig;
 mod support;
 
 use futures_util::StreamExt;
-use grasp_rig::{finger, grasp, hand, limits_restored, sim_limit, state_of, wait_grasp};
+use grasp_rig::{finger, grasp, hand, hand_on, limits_restored, sim_limit, state_of, wait_grasp};
 use jointd::bus::handle::BusEvent;
 use jointd::sim::Fault;
 use serde_json::{json, Value};
@@ -30,8 +30,17 @@ fn holding_near(view: &Value, joint: &str) -> bool {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn fingers_close_on_objects_hold_them_and_let_go() {
+    close_hold_and_let_go("2.0.1").await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn fingers_close_on_objects_hold_them_and_let_go_on_rev_2_0_8() {
+    close_hold_and_let_go("2.0.8").await;
+}
+
+async fn close_hold_and_let_go(firmware: &str) {
     // A stiff object before a, a soft one before b, nothing before c.
-    let b = hand(&[(1, 15.0, 0.05), (2, 20.0, 0.01)]).await;
+    let b = hand_on(firmware, &[(1, 15.0, 0.05), (2, 20.0, 0.01)]).await;
     let id = grasp(
         &b,
         json!({"speed_dps": 30.0, "hold_current_a": HOLD_A, "joints": [

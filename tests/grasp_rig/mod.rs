@@ -17,6 +17,11 @@ use crate::support::sim_bus::{start_sim_with, SimBus, WAIT};
 pub const FACTORY_MAX_CUR: u16 = 4368;
 
 pub async fn hand(objects: &[(u8, f64, f64)]) -> SimBus {
+    hand_on("2.0.1", objects).await
+}
+
+/// [`hand`] on devices running `firmware` (`jointd sim --firmware` syntax).
+pub async fn hand_on(firmware: &str, objects: &[(u8, f64, f64)]) -> SimBus {
     let objects: Vec<SimObject> = objects
         .iter()
         .map(|&(id, at_deg, nm_per_deg)| SimObject {
@@ -25,7 +30,7 @@ pub async fn hand(objects: &[(u8, f64, f64)]) -> SimBus {
             nm_per_deg,
         })
         .collect();
-    let b = start_sim_with(3, None, "2.0.1", |sim| sim.objects = objects, |_| {}).await;
+    let b = start_sim_with(3, None, firmware, |sim| sim.objects = objects, |_| {}).await;
     let hands = jointd::hands::resolve(
         &[jointd::hands::HandConfig {
             name: "h".into(),
