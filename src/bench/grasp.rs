@@ -59,12 +59,13 @@ pub(crate) fn run(args: &BenchArgs) -> Result<bool, BenchError> {
             .worker_threads(2)
             .enable_all()
             .build()?;
+        rt.block_on(daemon_sees_run(&bus, &ids))?;
         for k in STIFFNESS {
             let case = rt.block_on(objects_case(&control, &sim, k))?;
             all &= print_case(firmware, k, &case);
         }
         if firmware == "2.0.1" {
-            let false_contacts = rt.block_on(free_air(&control, &sim))?;
+            let false_contacts = rt.block_on(free_air(&control))?;
             println!(
                 "grasp free air (firmware {firmware}): {FREE_AIR_RUNS} runs x {} fingers at 20..90 deg/s: \
                  {false_contacts} false contacts (goal 0)",
@@ -101,6 +102,28 @@ fn control(bus: &BusHandle) -> Result<Arc<Control>, BenchError> {
         .set_options(options)
         .map_err(|_| BenchError::Setup("options set twice".into()))?;
     Ok(control)
+}
+
+/// Until the daemon's own view says every joint runs (a grasp starts only
+/// then; the simulator says it first).
+async fn daemon_sees_run(bus: &BusHandle, ids: &[u8]) -> Result<(), BenchError> {
+    let mut rx = bus.watch();
+    let runs = rx.wait_for(|s| {
+        ids.iter().all(|id| {
+            s.devices
+                .get(id)
+                .and_then(|d| d.info01.as_ref())
+                .is_some_and(|(i, _)| i.fsm == crate::protocol::status::fsm::RUN)
+        })
+    });
+    let seen = matches!(tokio::time::timeout(RUN_WAIT, runs).await, Ok(Ok(_)));
+    if seen {
+        Ok(())
+    } else {
+        Err(BenchError::Setup(
+            "the daemon never saw every joint run".into(),
+        ))
+    }
 }
 
 fn request(speed_dps: f64, close_to: f64) -> GraspRequest {
@@ -191,7 +214,15 @@ async fn one_grasp(
                 case.hold_error_pct
                     .push((mean - HOLD_A).abs() / HOLD_A * 100.0);
             }
-            _ => case.missed += 1,
+            (state, _) => {
+                println!(
+                    "  missed: finger {} {state:?} ({}) peak {:.3} A",
+                    f.joint,
+                    f.reason.as_deref().unwrap_or("-"),
+                    peaks[k]
+                );
+                case.missed += 1;
+            }
         }
     }
     release(control, id).await
@@ -199,7 +230,7 @@ async fn one_grasp(
 
 /// 100 grasps with nothing in the way, at speeds from 20 to 90 °/s: every
 /// finger that says contact is a false one.
-async fn free_air(control: &Arc<Control>, sim: &SimHandle) -> Result<usize, BenchError> {
+async fn free_air(control: &Arc<Control>) -> Result<usize, BenchError> {
     let mut false_contacts = 0;
     for run in 0..FREE_AIR_RUNS {
         let speed = 20.0 + 70.0 * (run as f64) / (FREE_AIR_RUNS as f64 - 1.0);
@@ -224,7 +255,6 @@ async fn free_air(control: &Arc<Control>, sim: &SimHandle) -> Result<usize, Benc
         };
         false_contacts += v.fingers.iter().filter(|f| f.contact).count();
         release(control, view.id).await?;
-        let _ = sim;
     }
     Ok(false_contacts)
 }

@@ -195,7 +195,7 @@ pub(crate) async fn release(
     req: &ReleaseRequest,
 ) -> ControlResult<GraspView> {
     let job = state.grasps().job(id).ok_or_else(|| unknown(id))?;
-    ended_refused(state, id, &job)?;
+    ended_refused(id, &job)?;
     let speed_dps = match req.speed_dps {
         Some(s) => speed("speed_dps", s)?,
         None => job.settings.speed_dps,
@@ -220,11 +220,10 @@ async fn wait_done(state: &Control, id: u64, job: &Job) -> ControlResult<GraspVi
     get(state, id)
 }
 
-fn ended_refused(state: &Control, id: u64, job: &Job) -> ControlResult<()> {
+fn ended_refused(id: u64, job: &Job) -> ControlResult<()> {
     if !*job.done.borrow() {
         return Ok(());
     }
-    let _ = state;
     Err(ControlError::conflict(
         "grasp-ended",
         "Grasp already ended",
@@ -436,6 +435,7 @@ fn admit(
     let snap = bus.snapshot();
     let dev = known_device(&snap, joint.id)?;
     let epoch = admit_positions(bus, dev, "a grasp")?;
+    running(dev, joint)?;
     let cal = state.calibration(&joint.bus, joint.id);
     let soft = state.limits(&joint.bus, joint.id);
     let field = format!("joints.{}.close_to_deg", joint.name);
@@ -472,6 +472,25 @@ fn admit(
         close_to_deg,
         slot,
     })
+}
+
+/// A joint still aligning (or, under rev 2.0.8, starting) is enabled but
+/// does not follow targets yet, and its finger would read as stalled: a
+/// grasp starts only on joints whose latest state says `run`.
+fn running(dev: &crate::bus::handle::DeviceState, joint: &HandJoint) -> ControlResult<()> {
+    let state = dev.info01.as_ref().map(|(i, _)| i.fsm);
+    if state == Some(crate::protocol::status::fsm::RUN) {
+        return Ok(());
+    }
+    let name = state.map_or("unknown", crate::protocol::status::fsm_name);
+    Err(ControlError::conflict(
+        "not-aligned",
+        "Joint not running yet",
+        format!(
+            "joint `{}` is `{name}`, not `run`: a grasp starts once every finger runs",
+            joint.name
+        ),
+    ))
 }
 
 /// The pose `closed`'s angle for the joint, else the top of its allowed
