@@ -68,6 +68,10 @@ pub struct RunArgs {
     /// e.g. `--sim-hard-stop 1=-40`: what homing finds.
     #[arg(long, value_name = "ID=DEG", requires = "sim")]
     pub sim_hard_stop: Vec<String>,
+    /// An elastic object at a simulated joint, `ID=DEG:NM_PER_DEG`
+    /// (repeatable), e.g. `--sim-object 2=30:0.05`: what a grasp closes on.
+    #[arg(long, value_name = "ID=DEG:NM_PER_DEG", requires = "sim")]
+    pub sim_object: Vec<String>,
     /// HTTP address to listen on [default: 127.0.0.1:8080]; port 0 picks a free
     /// port (the first line on stdout says which).
     #[arg(long, value_name = "ADDR", env = "JOINTD_LISTEN")]
@@ -515,6 +519,14 @@ fn sim_config(joints: u8, args: &RunArgs) -> Result<SimConfig, DaemonError> {
     cfg.firmware.check_ids(&cfg.ids)?;
     if let Some((id, _)) = cfg.hard_stops.iter().find(|(id, _)| !cfg.ids.contains(id)) {
         return Err(SimError::BadHardStop(format!("device {id} is not on the bus")).into());
+    }
+    cfg.objects = args
+        .sim_object
+        .iter()
+        .map(|s| crate::sim::cli::parse_object(s))
+        .collect::<Result<_, _>>()?;
+    if let Some(ob) = cfg.objects.iter().find(|o| !cfg.ids.contains(&o.id)) {
+        return Err(SimError::BadObject(format!("device {} is not on the bus", ob.id)).into());
     }
     Ok(cfg)
 }

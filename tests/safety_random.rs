@@ -1,6 +1,8 @@
 //! The randomized safety test: many random interleavings of enable, disable,
 //! e-stop, mode change, target, a WebSocket setpoint stream ending in its
-//! watchdog, move, pose go, homing, a simulated power cycle and e-stop races, on the
+//! watchdog, move, pose go, homing, grasp (closing on a simulated object or
+//! on nothing, released, stopped or left holding), a simulated power cycle
+//! and e-stop races, on the
 //! simulator through the daemon's own API. After every step the invariant
 //! is checked on the simulated devices themselves:
 //!
@@ -395,6 +397,66 @@ impl World {
         }
     }
 
+    /// A grasp of hand `h` (joints 1 and 2) towards random closing limits,
+    /// sometimes on an object placed on joint 1's way; then released (back
+    /// to where the fingers started), stopped, or left to whatever follows.
+    async fn grasp(&mut self) {
+        let from: Vec<(f64, f64)> = [1u8, 2]
+            .iter()
+            .map(|&id| {
+                let d = self.device(id);
+                (d.target_deg, d.angle_deg)
+            })
+            .collect();
+        let close_to: Vec<f64> = (0..2).map(|_| self.rng.angle()).collect();
+        if self.rng.below(2) == 0 {
+            let at = (from[0].1 + close_to[0]) / 2.0;
+            self.b.sim.inject(Fault::Object {
+                dev_id: 1,
+                at_deg: at,
+                nm_per_deg: 0.05,
+            });
+        }
+        let r = self
+            .b
+            .server
+            .post(
+                "/api/v1/hands/h/grasp",
+                json!({"speed_dps": 60.0, "hold_current_a": 0.2, "joints": [
+                    {"joint": "a", "close_to_deg": close_to[0]},
+                    {"joint": "b", "close_to_deg": close_to[1]}]}),
+            )
+            .await;
+        self.log.push(format!("grasp {close_to:?}: {}", r.status));
+        if r.status.as_u16() == 202 {
+            for (k, id) in [1u8, 2].into_iter().enumerate() {
+                let (target, angle) = from[k];
+                let a = &mut self.admitted[usize::from(id)];
+                a.span(target.min(angle), close_to[k]);
+                a.span(target.max(angle), close_to[k]);
+            }
+            let id = r.body["id"].as_u64().expect("a grasp id");
+            match self.rng.below(3) {
+                0 => {
+                    self.b
+                        .server
+                        .post(&format!("/api/v1/grasps/{id}/release"), json!({}))
+                        .await;
+                    self.log.push(format!("grasp {id} released"));
+                }
+                1 => {
+                    self.b
+                        .server
+                        .post_empty(&format!("/api/v1/grasps/{id}/stop"))
+                        .await;
+                    self.log.push(format!("grasp {id} stopped"));
+                }
+                _ => {}
+            }
+        }
+        self.b.sim.inject(Fault::RemoveObject { dev_id: 1 });
+    }
+
     async fn power_cycle(&mut self, id: u8) {
         self.b.sim.inject(Fault::PowerCycle { dev_id: id });
         self.log.push(format!("power cycle {id}"));
@@ -424,7 +486,8 @@ impl World {
                 let speed = self.rng.below(3) == 0;
                 self.mode(id, speed).await
             }
-            38..=55 => self.target(id).await,
+            38..=52 => self.target(id).await,
+            53..=55 => self.grasp().await,
             // Moves outlast several steps: what happens to them meanwhile
             // (an e-stop, a disable, a mode change) is the point.
             56..=67 => {

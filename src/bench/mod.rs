@@ -13,10 +13,12 @@
 //! - [`cpu`]: per-thread CPU time by thread name.
 //! - [`report`]: the result, the engine's targets, the printout.
 //! - `moves`: `--moves`: back-to-back moves generated in the daemon.
+//! - `grasp`: `--grasp`: grasps on the simulator's objects and in free air.
 
 pub mod analysis;
 pub mod client;
 pub mod cpu;
+mod grasp;
 mod moves;
 pub mod report;
 pub mod ws;
@@ -105,6 +107,12 @@ pub struct BenchArgs {
     /// setpoints on the wire per joint, the tracking error, occupancy, CPU.
     #[arg(long)]
     pub moves: bool,
+    /// Measure grasping instead: three fingers closing on the simulator's
+    /// objects at two stiffnesses, on V2.0.1 and rev 2.0.8 firmware (time
+    /// to contact, force overshoot, hold error), then 100 grasps in free
+    /// air counting false contacts.
+    #[arg(long)]
+    pub grasp: bool,
     /// Measure the WebSocket path instead: the engine alone, the
     /// same stream through /api/v1/ws, then with telemetry clients added.
     #[arg(long)]
@@ -161,6 +169,9 @@ pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
     }
     if args.moves {
         return moves::run(args);
+    }
+    if args.grasp {
+        return grasp::run(args);
     }
     if args.buses > 1 {
         return several_buses(args);
@@ -329,7 +340,18 @@ pub(crate) fn setup(
     baud: u32,
     ids: &[u8],
 ) -> Result<(SimHandle, BusHandle, BusThread), BenchError> {
+    setup_with(args, baud, ids, |_| {})
+}
+
+/// [`setup`] with a last word on the simulator's config.
+pub(crate) fn setup_with(
+    args: &BenchArgs,
+    baud: u32,
+    ids: &[u8],
+    tweak: impl FnOnce(&mut SimConfig),
+) -> Result<(SimHandle, BusHandle, BusThread), BenchError> {
     let mut sim_cfg = SimConfig::new(ids.to_vec(), baud);
+    tweak(&mut sim_cfg);
     sim_cfg.align_time = ALIGN;
     sim_cfg.turnaround = Duration::from_micros(args.turnaround_us);
     let adapter = adapter_of(args)?;

@@ -45,6 +45,9 @@ pub enum Source {
     Move { move_id: u64 },
     /// A homing job's step (its search speed, its stop, its back-off).
     Homing,
+    /// A grasp's finger: closing, holding where an object was lost,
+    /// opening on release, holding where it was stopped.
+    Grasp,
     /// The watchdog holding joints whose stream stopped.
     Hold,
     /// A joint's latest target again, once it finished aligning.

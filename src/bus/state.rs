@@ -400,6 +400,24 @@ pub enum BusEvent {
         guard_us: u64,
         reason: String,
     },
+    /// A finger of a grasp touched something: it holds it from now on.
+    GraspContact {
+        bus: String,
+        grasp_id: u64,
+        /// The joint.
+        id: u8,
+        /// Where contact began, in the joint's calibrated frame.
+        contact_deg: f64,
+    },
+    /// A finger holding an object felt its current fall: the object is
+    /// gone (pulled away, slipped, broke). The finger stays where it was.
+    GraspLost {
+        bus: String,
+        grasp_id: u64,
+        id: u8,
+        /// The q current when it was seen, A.
+        q_current_a: f64,
+    },
     /// A device reset (power cut, reboot): it is disabled, forgot its mode
     /// and target; the daemon forgot its targets too.
     DeviceReset {

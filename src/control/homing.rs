@@ -174,6 +174,16 @@ pub(crate) async fn start(state: &Arc<Control>, req: &HomingRequest) -> ControlR
                 id: r.id,
             }));
         }
+        if let Some(job) = state.grasps().running_job(&r.bus, r.id) {
+            return Err(ControlError::conflict(
+                "grasp-running",
+                "Joint grasping",
+                format!(
+                    "joint {} of bus `{}` is in grasp {job}: home it once the grasp ended",
+                    r.id, r.bus
+                ),
+            ));
+        }
         let bus = state.bus(&r.bus)?;
         let snap = bus.snapshot();
         let dev = known_device(&snap, r.id)?;

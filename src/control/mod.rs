@@ -24,6 +24,8 @@
 //! - `move_book`, [`moves`]: moves checked whole, started, stopped; the book of them.
 //! - `poses`: going to a hand's saved pose (a move of its joints).
 //! - `homing_book`, `homing`: homing jobs, one per joint, bounded.
+//! - `grasp_detect`, `grasp_book`, `grasp_finger`, `grasp`: closing a
+//!   hand's fingers on an object and holding it with a set current.
 //! - `recording_book`, `recordings`: recordings' jobs: started, listed, stopped, their files.
 //! - `ros2_stats`: the ROS 2 bridge's counters (read by `/metrics` and `/api/v1/ros2`).
 //! - this file: [`Control`], the state the core works on.
@@ -33,6 +35,10 @@ pub(crate) mod calibration;
 pub mod device;
 pub mod error;
 pub mod estop;
+pub(crate) mod grasp;
+pub(crate) mod grasp_book;
+pub(crate) mod grasp_detect;
+pub(crate) mod grasp_finger;
 pub(crate) mod homing;
 pub(crate) mod homing_book;
 pub mod joints;
@@ -87,6 +93,7 @@ pub struct Control {
     options: std::sync::OnceLock<Options>,
     moves: move_book::MoveBook,
     homings: homing_book::HomingBook,
+    grasps: grasp_book::GraspBook,
     recordings: recording_book::RecordingBook,
 }
 
@@ -101,6 +108,7 @@ impl Control {
             options: std::sync::OnceLock::new(),
             moves: Default::default(),
             homings: Default::default(),
+            grasps: Default::default(),
             recordings: Default::default(),
         }
     }
@@ -141,6 +149,11 @@ impl Control {
     /// The homing jobs started through any front-end.
     pub(crate) fn homings(&self) -> &homing_book::HomingBook {
         &self.homings
+    }
+
+    /// The grasp jobs started through any front-end.
+    pub(crate) fn grasps(&self) -> &grasp_book::GraspBook {
+        &self.grasps
     }
 
     /// The recordings started through any front-end.

@@ -70,6 +70,8 @@ pub const EVENTS: &[(&str, &[&str])] = &[
         "device_reset",
         &["bus", "id", "seen", "state_before", "state"],
     ),
+    ("grasp_contact", &["bus", "grasp_id", "id", "contact_deg"]),
+    ("grasp_lost", &["bus", "grasp_id", "id", "q_current_a"]),
 ];
 
 /// Every field an event may carry, typed.
@@ -102,6 +104,10 @@ fn event_fields() -> Map<String, Value> {
         "guard_us": int("usb_pipeline: how late a write may reach the adapter now, µs"),
         "seen": one_of(&["announcement", "state_dropped"], "device_reset: what told the daemon"),
         "state_before": string("device_reset: the state before (unknown if never read)"),
+        "grasp_id": int("grasp_*: the grasp job"),
+        "id": {"type": "integer", "minimum": 0, "maximum": 255, "description": "grasp_*: the joint"},
+        "contact_deg": {"type": "number", "description": "grasp_contact: where contact began, degrees (calibrated)"},
+        "q_current_a": {"type": "number", "description": "grasp_lost: the q current when the loss was seen, A"},
     });
     match fields {
         Value::Object(m) => m,
@@ -141,6 +147,7 @@ pub const SOURCES: &[&str] = &[
     "ros2",
     "move",
     "homing",
+    "grasp",
     "hold",
     "aligned",
     "bench",
@@ -154,7 +161,7 @@ pub fn setpoint() -> String {
         "type": "object",
         "properties": {
             "source": one_of(SOURCES, "Who wrote them: a client over REST, a WebSocket or ROS 2 stream, \
-                a move (sampled each control cycle; a pose go is a move), a homing step, the watchdog's \
+                a move (sampled each control cycle; a pose go is a move), a homing step, a grasp's finger, the watchdog's \
                 hold, a joint's target again after it aligned, the bench"),
             "move_id": int("source move: the move"),
             "seq": int("The write's sequence number in the bus's setpoint store"),
@@ -272,6 +279,18 @@ mod tests {
                 state_before: "run",
                 state: "ready",
             },
+            BusEvent::GraspContact {
+                bus: bus(),
+                grasp_id: 1,
+                id: 2,
+                contact_deg: 31.5,
+            },
+            BusEvent::GraspLost {
+                bus: bus(),
+                grasp_id: 1,
+                id: 2,
+                q_current_a: 0.05,
+            },
         ]
     }
 
@@ -320,6 +339,7 @@ mod tests {
             Source::Ros2,
             Source::Move { move_id: 7 },
             Source::Homing,
+            Source::Grasp,
             Source::Hold,
             Source::Aligned,
             Source::Bench,

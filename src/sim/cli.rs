@@ -48,6 +48,11 @@ pub struct SimArgs {
     /// zero), e.g. `--hard-stop 1=-40`; the joint cannot pass it.
     #[arg(long, value_name = "ID=DEG")]
     pub hard_stop: Vec<String>,
+    /// An elastic object a finger closes on: `ID=DEG:NM_PER_DEG` (contact
+    /// angle in output degrees of the factory zero, stiffness in N·m per
+    /// degree pressed in), e.g. `--object 2=30:0.05`; repeatable.
+    #[arg(long, value_name = "ID=DEG:NM_PER_DEG")]
+    pub object: Vec<String>,
     /// Devices whose supply sags below the under-voltage level.
     #[arg(long)]
     pub under_voltage: Vec<u8>,
@@ -92,6 +97,11 @@ impl SimArgs {
             .hard_stop
             .iter()
             .map(|s| parse_hard_stop(s))
+            .collect::<Result<_, _>>()?;
+        cfg.objects = self
+            .object
+            .iter()
+            .map(|s| parse_object(s))
             .collect::<Result<_, _>>()?;
         cfg.validate()?;
         Ok(cfg)
@@ -153,6 +163,41 @@ pub fn parse_hard_stop(spec: &str) -> Result<(u8, f64), SimError> {
     Ok((id, deg))
 }
 
+/// `ID=DEG:NM_PER_DEG`: a device id, a contact angle within the device's
+/// range and a stiffness above 0 (N·m per degree).
+pub fn parse_object(spec: &str) -> Result<super::SimObject, SimError> {
+    let bad = |why: &str| {
+        SimError::BadObject(format!(
+            "`{spec}`: {why} (expected ID=DEG:NM_PER_DEG, e.g. 2=30:0.05)"
+        ))
+    };
+    let (id, rest) = spec.split_once('=').ok_or_else(|| bad("no `=`"))?;
+    let (deg, k) = rest.split_once(':').ok_or_else(|| bad("no `:`"))?;
+    let id: u8 = id
+        .trim()
+        .parse()
+        .map_err(|_| bad("the id is not a number"))?;
+    let at_deg: f64 = deg
+        .trim()
+        .parse()
+        .map_err(|_| bad("the angle is not a number"))?;
+    let nm_per_deg: f64 = k
+        .trim()
+        .parse()
+        .map_err(|_| bad("the stiffness is not a number"))?;
+    if !at_deg.is_finite() || at_deg.abs() > crate::protocol::units::MAX_ANGLE_DEG {
+        return Err(bad("the angle is outside ±255°"));
+    }
+    if !nm_per_deg.is_finite() || nm_per_deg <= 0.0 {
+        return Err(bad("the stiffness must be above 0 N·m/°"));
+    }
+    Ok(super::SimObject {
+        id,
+        at_deg,
+        nm_per_deg,
+    })
+}
+
 /// Runs the simulator until SIGINT/SIGTERM; prints the path first, stats last (stderr).
 pub fn run(args: &SimArgs) -> Result<(), SimError> {
     let cfg = args.config()?;
@@ -189,5 +234,27 @@ pub fn run(args: &SimArgs) -> Result<(), SimError> {
 fn apply_faults(sim: &SimHandle, faults: &[Fault]) {
     for f in faults {
         sim.inject(*f);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_object_parses_and_a_bad_one_says_what_is_wrong() {
+        let ob = parse_object("2=30.5:0.05").unwrap();
+        assert_eq!((ob.id, ob.at_deg, ob.nm_per_deg), (2, 30.5, 0.05));
+        for (bad, why) in [
+            ("2=30", "no `:`"),
+            ("2:30:1", "no `=`"),
+            ("x=1:1", "id"),
+            ("2=300:0.1", "±255"),
+            ("2=30:0", "above 0"),
+            ("2=30:-1", "above 0"),
+        ] {
+            let e = parse_object(bad).unwrap_err().to_string();
+            assert!(e.contains(why), "{bad}: {e}");
+        }
     }
 }

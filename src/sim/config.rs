@@ -60,6 +60,8 @@ pub struct SimConfig {
     /// current up to the cap and, held long enough, faults with a stall,
     /// like any obstacle. What homing looks for.
     pub hard_stops: Vec<(u8, f64)>,
+    /// Compliant objects (what a finger grasps): see [`SimObject`].
+    pub objects: Vec<SimObject>,
     /// Host writes reach the adapter late by this distribution (a busy
     /// host or USB hub); see [`super::write_delay`]. Only behind an adapter.
     pub write_delay: Option<super::WriteDelay>,
@@ -82,6 +84,7 @@ impl SimConfig {
             adapter: AdapterModel::Native,
             realtime: false,
             hard_stops: Vec::new(),
+            objects: Vec::new(),
             write_delay: None,
         }
     }
@@ -116,8 +119,24 @@ impl SimConfig {
                 "device {id} is not on the bus"
             )));
         }
+        if let Some(ob) = self.objects.iter().find(|o| !self.ids.contains(&o.id)) {
+            return Err(SimError::BadObject(format!(
+                "device {} is not on the bus",
+                ob.id
+            )));
+        }
         self.firmware.check_ids(&self.ids)
     }
+}
+
+/// An elastic object at one joint: contact starts at `at_deg` (output
+/// degrees of the factory zero) and pushes back `nm_per_deg` N·m per degree
+/// the joint presses in (see [`super::object`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimObject {
+    pub id: u8,
+    pub at_deg: f64,
+    pub nm_per_deg: f64,
 }
 
 /// Parses `"1-16"`, `"1,2,5-7"`, `"3,3"`: ranges and lists, duplicates kept

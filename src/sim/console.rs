@@ -5,6 +5,7 @@
 //! unplug | replug | clear | stats | devices | help
 //! power-cycle ID          under-voltage ID on|off
 //! stall ID [DEG]          corrupt RATE
+//! object ID DEG NM_PER_DEG | object ID off    (an elastic object; off pulls it away)
 //! drop RATE [ID]          extra-turnaround MICROS
 //! write-delay P50,P99[,P99.9],MAX | off     (µs; behind an adapter model)
 //! ```
@@ -16,7 +17,8 @@ use std::time::Duration;
 use super::{Fault, SimHandle};
 
 pub(crate) const HELP: &str = "commands: unplug | replug | clear | stats | devices | help | \
-power-cycle ID | under-voltage ID on|off | stall ID [DEG] | corrupt RATE | \
+power-cycle ID | under-voltage ID on|off | stall ID [DEG] | \
+object ID DEG NM_PER_DEG | object ID off | corrupt RATE | \
 drop RATE [ID] | extra-turnaround MICROS | miss-control ID COUNT | \
 write-delay P50,P99[,P99.9],MAX|off";
 
@@ -60,6 +62,7 @@ pub(crate) fn parse(line: &str) -> Result<ConsoleCmd, String> {
                 _ => return Err("under-voltage ID on|off".into()),
             },
         },
+        "object" => object(words.next(), words.next(), words.next())?,
         "corrupt" => Fault::CorruptRate(num(words.next(), "rate")?),
         "drop" => Fault::DropReplies {
             rate: num(words.next(), "rate")?,
@@ -83,6 +86,23 @@ pub(crate) fn parse(line: &str) -> Result<ConsoleCmd, String> {
         other => return Err(format!("unknown command `{other}`; {HELP}")),
     };
     Ok(ConsoleCmd::Fault(fault))
+}
+
+/// `object ID DEG NM_PER_DEG` puts an object; `object ID off` removes it.
+fn object(id: Option<&str>, deg: Option<&str>, k: Option<&str>) -> Result<Fault, String> {
+    let dev_id = num(id, "device id")?;
+    if deg == Some("off") {
+        return Ok(Fault::RemoveObject { dev_id });
+    }
+    let (at_deg, nm_per_deg): (f64, f64) = (num(deg, "angle")?, num(k, "stiffness (N·m/°)")?);
+    if !at_deg.is_finite() || !nm_per_deg.is_finite() || nm_per_deg <= 0.0 {
+        return Err("object ID DEG NM_PER_DEG: a finite angle and a stiffness above 0".into());
+    }
+    Ok(Fault::Object {
+        dev_id,
+        at_deg,
+        nm_per_deg,
+    })
 }
 
 /// Executes one line against the simulator; the answer to print.
@@ -151,6 +171,20 @@ mod tests {
             }))
         );
         assert!(parse("miss-control 4").is_err());
+        assert_eq!(
+            parse("object 2 30 0.05"),
+            Ok(ConsoleCmd::Fault(Fault::Object {
+                dev_id: 2,
+                at_deg: 30.0,
+                nm_per_deg: 0.05
+            }))
+        );
+        assert_eq!(
+            parse("object 2 off"),
+            Ok(ConsoleCmd::Fault(Fault::RemoveObject { dev_id: 2 }))
+        );
+        assert!(parse("object 2 30 0").is_err());
+        assert!(parse("object 2 30").is_err());
         assert_eq!(parse("stats"), Ok(ConsoleCmd::Stats));
         assert!(parse("stall x").is_err());
         assert!(parse("explode").is_err());

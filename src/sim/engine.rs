@@ -326,6 +326,12 @@ impl Engine {
                 self.faults.miss_control.insert(dev_id, count);
             }
             Fault::Stall { dev_id, at_deg } => self.each(dev_id, |d| d.set_obstacle(at_deg, now)),
+            Fault::Object {
+                dev_id,
+                at_deg,
+                nm_per_deg,
+            } => self.each(dev_id, |d| d.set_object(at_deg, nm_per_deg, now)),
+            Fault::RemoveObject { dev_id } => self.each(dev_id, |d| d.remove_object(now)),
             Fault::PowerCycle { dev_id } => self.each(dev_id, |d| d.power_up(now, Duration::ZERO)),
             Fault::UnderVoltage { dev_id, on } => {
                 self.each(dev_id, |d| d.set_under_voltage(on, now))
@@ -334,6 +340,7 @@ impl Engine {
                 self.faults = LineFaults::default();
                 for d in &mut self.devices {
                     d.clear_obstacle(now);
+                    d.remove_object(now);
                     d.set_under_voltage(false, now);
                 }
             }

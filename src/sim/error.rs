@@ -21,6 +21,8 @@ pub enum SimError {
     BadWriteDelay(String),
     #[error("bad hard stop: {0}")]
     BadHardStop(String),
+    #[error("bad object: {0}")]
+    BadObject(String),
     #[error("state file {path}: {why}")]
     StateFile { path: PathBuf, why: String },
     #[error("pseudo-terminal: {0}")]

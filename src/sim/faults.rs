@@ -32,6 +32,17 @@ pub enum Fault {
         dev_id: u8,
         at_deg: Option<f64>,
     },
+    /// An elastic object at `at_deg` (reported °) pushing back `nm_per_deg`
+    /// N·m per degree the joint presses in (replaces any earlier one).
+    Object {
+        dev_id: u8,
+        at_deg: f64,
+        nm_per_deg: f64,
+    },
+    /// The object pulled away from the joint.
+    RemoveObject {
+        dev_id: u8,
+    },
     /// Power off and on: RAM from flash, INFO_01 re-announced.
     PowerCycle {
         dev_id: u8,
@@ -47,7 +58,7 @@ pub enum Fault {
     /// Host writes reach the USB adapter late by a random delay of this
     /// distribution (`None`: on time). Only behind an adapter model.
     WriteDelay(Option<super::WriteDelay>),
-    /// Every fault off, obstacles removed, voltage restored, line plugged,
+    /// Every fault off, obstacles and objects removed, voltage restored, line plugged,
     /// writes on time.
     ClearAll,
 }

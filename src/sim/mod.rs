@@ -13,6 +13,7 @@
 //!   that says what each revision does differently, and the assumptions made
 //!   where the SPEC is silent.
 //! - [`physics`]: angle, speed, current, protection, burst, temperature.
+//! - [`object`]: a compliant object a finger closes on (what a grasp holds).
 //! - [`params`]: RAM/flash parameters (storage, defaults and INFO layout from
 //!   [`crate::protocol::params`]) and the JSON state file.
 //! - [`faults`]: run-time fault injection ([`Fault`]).
@@ -55,6 +56,11 @@
 //! - A hard stop ([`SimConfig::hard_stops`], `--hard-stop ID=DEG`) is a
 //!   mechanical end of travel: the joint cannot pass it, and pushing into
 //!   it is a stall (current up to the cap, err 8 after `stall_fault_after`).
+//! - An object ([`SimConfig::objects`], `--object ID=DEG:NM_PER_DEG`, or
+//!   [`Fault::Object`] at run time) is elastic: pressing into it takes q
+//!   current in proportion to the depth ([`object::OUTPUT_NM_PER_A`]), the
+//!   joint presses only as deep as its current cap pays for, and resting
+//!   against it in balance is no stall. [`Fault::RemoveObject`] pulls it away.
 //!
 //! ```no_run
 //! use jointd::sim::{parse_ids, SimConfig, Simulator};
@@ -78,6 +84,7 @@ pub mod firmware;
 pub(crate) mod line;
 pub(crate) mod log;
 pub(crate) mod measure;
+pub mod object;
 pub(crate) mod params;
 pub(crate) mod physics;
 pub(crate) mod pty;
@@ -94,7 +101,7 @@ use std::thread::JoinHandle;
 use std::time::Instant;
 
 pub use crate::transport::adapter::AdapterModel;
-pub use config::{parse_ids, SimConfig, SimError};
+pub use config::{parse_ids, SimConfig, SimError, SimObject};
 pub use faults::Fault;
 pub use firmware::Firmware;
 pub use log::{collision_context, WireFrame};

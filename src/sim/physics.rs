@@ -1,6 +1,7 @@
 //! One joint's mechanics and electrics, integrated in small time steps:
 //! output angle and speed under a position or speed drive shaped by the LPF
-//! level, an optional obstacle, the q-axis current that results, the current
+//! level, an optional obstacle or compliant object ([`super::object`]), the
+//! q-axis current that results, the current
 //! protection and burst of SPEC §4.3 (indices 18–23, 26, 27) and the winding
 //! temperature.
 //!
@@ -9,6 +10,7 @@
 
 use crate::protocol::params::index;
 
+use super::object::Object;
 use super::params::Params;
 
 /// Largest integration step; longer advances are split.
@@ -20,7 +22,7 @@ const LPF_TAU_S: [f64; 6] = [0.004, 0.015, 0.03, 0.06, 0.12, 0.25];
 /// How fast a released joint coasts to rest.
 const COAST_TAU_S: f64 = 0.05;
 /// Current to hold position at rest, A.
-const HOLD_CURRENT_A: f64 = 0.03;
+pub(crate) const HOLD_CURRENT_A: f64 = 0.03;
 /// Friction current per output °/s.
 const FRICTION_A_PER_DEG_S: f64 = 0.0015;
 /// Inertial current per output °/s².
@@ -118,6 +120,8 @@ pub(crate) struct Joint {
     /// A mechanical end stop (a finger's joint limit): an obstacle that no
     /// fault clears and no re-zero moves.
     pub hard_stop: Option<Obstacle>,
+    /// Something elastic the joint closes on (a grasped object).
+    pub object: Option<Object>,
     /// Pushing against the obstacle or the hard stop right now.
     pub blocked: bool,
     /// How long it has been pushing without a break, s.
@@ -135,6 +139,7 @@ impl Default for Joint {
             temp_c: AMBIENT_C,
             obstacle: None,
             hard_stop: None,
+            object: None,
             blocked: false,
             blocked_s: 0.0,
             prot: Protection::default(),
@@ -161,12 +166,16 @@ impl Joint {
                 lpf_tau(p),
             ),
             Drive::Speed { vel } => (vel, lpf_tau(p)),
-            Drive::Current { amps } => (current_speed(amps, self.current_cap(p)), lpf_tau(p)),
+            Drive::Current { amps } => {
+                let push = self.object.map_or(0.0, |o| o.push_a(self.pos));
+                (current_speed(amps, self.current_cap(p), push), lpf_tau(p))
+            }
         };
         let vel = self.vel + (v_des - self.vel) * (dt / tau).min(1.0);
         self.acc = (vel - self.vel) / dt;
         self.vel = vel;
         self.move_by(vel * dt, v_des, bounds);
+        self.press_object(drive, v_des, p);
         self.update_current(dt, drive, v_des, p);
         self.update_protection(dt, p);
         let heat = AMBIENT_C + HEAT_C_PER_A2 * self.current * self.current;
@@ -195,6 +204,24 @@ impl Joint {
         self.pos = next;
     }
 
+    /// A compliant object stops the joint where the current it may draw
+    /// balances the object's push (none when released: it pushes the joint
+    /// out). Under a current drive the push slows the joint instead.
+    fn press_object(&mut self, drive: Drive, v_des: f64, p: &Params) {
+        let cap = match drive {
+            Drive::Off => 0.0,
+            Drive::Current { .. } => f64::INFINITY,
+            _ => self.current_cap(p),
+        };
+        if let Some(ob) = self.object.as_mut() {
+            let at = ob.limit(self.pos, self.pos, v_des, cap);
+            if at != self.pos {
+                self.pos = at;
+                self.vel = 0.0;
+            }
+        }
+    }
+
     fn update_current(&mut self, dt: f64, drive: Drive, v_des: f64, p: &Params) {
         let cap = self.current_cap(p);
         let demand = match drive {
@@ -215,9 +242,15 @@ impl Joint {
                 } else {
                     1.0
                 };
-                sign * HOLD_CURRENT_A
-                    + FRICTION_A_PER_DEG_S * self.vel
-                    + INERTIA_A_PER_DEG_S2 * self.acc
+                // Pressing an object: the holding current and the object's
+                // push, both against it.
+                let held = match self.object.and_then(|o| o.pressing(self.pos)) {
+                    Some(side) => {
+                        -side * HOLD_CURRENT_A - self.object.map_or(0.0, |o| o.push_a(self.pos))
+                    }
+                    None => sign * HOLD_CURRENT_A,
+                };
+                held + FRICTION_A_PER_DEG_S * self.vel + INERTIA_A_PER_DEG_S2 * self.acc
             }
         };
         if !self.blocked {
@@ -276,10 +309,11 @@ impl Joint {
 }
 
 /// The free-running output speed a q-axis current holds, °/s (the inverse
-/// of the current a moving joint draws at steady speed).
-fn current_speed(amps: f64, cap: f64) -> f64 {
-    let amps = amps.clamp(-cap, cap);
-    amps.signum() * (amps.abs() - HOLD_CURRENT_A).max(0.0) / FRICTION_A_PER_DEG_S
+/// of the current a moving joint draws at steady speed), less what an
+/// object's `push` (as a current) takes of it.
+fn current_speed(amps: f64, cap: f64, push: f64) -> f64 {
+    let net = amps.clamp(-cap, cap) + push;
+    net.signum() * (net.abs() - HOLD_CURRENT_A).max(0.0) / FRICTION_A_PER_DEG_S
 }
 
 fn lpf_tau(p: &Params) -> f64 {

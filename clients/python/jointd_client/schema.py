@@ -320,6 +320,37 @@ class FaultView(TypedDict):
     """Name of the latched fault history (high nibble, rev 2.0.8 firmware)."""
 
 
+class _FingerGraspRequired(TypedDict):
+    bus: str
+    close_to_deg: float
+    """Where it closes to at most, degrees."""
+    contact: bool
+    """It touched something (stays true after a loss or a release)."""
+    current_limit_restored: bool
+    """True only when the current limit read back after the grasp ended shows the previous one (written back, or never changed)."""
+    id: int
+    joint: str
+    """The joint's name in the hand."""
+    start_deg: float
+    """Where it stood when the grasp began (a plain release opens back to it), degrees."""
+    state: "FingerState"
+
+
+class FingerGrasp(_FingerGraspRequired, total=False):
+    """One finger of a grasp job. Angles in the joint's calibrated frame."""
+
+    contact_after_ms: Optional[float]
+    """From the grasp's call to contact, ms."""
+    contact_deg: Optional[float]
+    """Where contact began, degrees."""
+    previous_current_limit_a: Optional[float]
+    """Its current limit before the grasp, A (INFO_04)."""
+    q_current_a: Optional[float]
+    """The q current it draws now (smoothed over a few samples), A; the holding current while it holds."""
+    reason: Optional[str]
+    """Why it failed, stopped or was aborted."""
+
+
 class FrameLog(TypedDict):
     frames: List["FrameView"]
 
@@ -343,6 +374,56 @@ class GoRequest(TypedDict, total=False):
     max_acceleration_dps2: Optional[float]
     max_velocity_dps: Optional[float]
     method: Optional["Method"]
+
+
+class _GraspJointRequired(TypedDict):
+    joint: str
+    """The joint's name in the hand."""
+
+
+class GraspJoint(_GraspJointRequired, total=False):
+    """One finger of the hand, by its joint name, and where it closes to."""
+
+    close_to_deg: Optional[float]
+    """Where it closes to at most, degrees (calibrated frame); default: the hand's pose `closed`, else the top of the joint's allowed range."""
+
+
+class _GraspRequestRequired(TypedDict):
+    hold_current_a: float
+    """The force each finger holds with, as a q current, A (0 < I ≤ 5.625, below the joint's own current limit and its protection level)."""
+    speed_dps: float
+    """Closing speed at the output, °/s (0 < s ≤ 180)."""
+
+
+class GraspRequest(_GraspRequestRequired, total=False):
+    """How to grasp."""
+
+    contact_threshold_a: Optional[float]
+    """The rise of q current over what the finger draws moving freely that counts as contact, A (0 < t < hold_current_a; default 30 % of hold_current_a, at least 0.02)."""
+    joints: Optional[List["GraspJoint"]]
+    """The fingers (1..=64, each once); default: every joint of the hand."""
+
+
+class GraspSettings(TypedDict):
+    """What the grasp was asked."""
+
+    contact_threshold_a: float
+    """The rise of q current over the free-air one that counts as contact, A."""
+    hold_current_a: float
+    """The current limit each finger holds with, A."""
+    speed_dps: float
+    """Closing speed at the output, °/s."""
+
+
+class GraspView(TypedDict):
+    """A grasp job as the API reports it."""
+
+    fingers: List["FingerGrasp"]
+    hand: str
+    id: int
+    settings: "GraspSettings"
+    state: str
+    """`running` while any finger is under the grasp's control; then `done` (each finger's state says how it ended)."""
 
 
 class _GroupModeRequestRequired(TypedDict):
@@ -770,6 +851,17 @@ class RecordingView(_RecordingViewRequired, total=False):
     error: Optional[str]
 
 
+class ReleaseRequest(TypedDict, total=False):
+    """How to let go."""
+
+    open_deg: Optional[float]
+    """Open each finger by this much from where it is, degrees (0 < d ≤ 180)."""
+    pose: Optional[str]
+    """Open to this pose of the hand (its angle for each finger)."""
+    speed_dps: Optional[float]
+    """Opening speed, °/s (default: the closing speed)."""
+
+
 class ResetView(TypedDict):
     """A reset (power cut, reboot) the daemon detected."""
 
@@ -975,6 +1067,7 @@ class Written(TypedDict):
 
 DevicePatch = Dict[str, Any]
 Direction = Literal["negative", "positive"]
+FingerState = Literal["starting", "closing", "holding", "no_contact", "lost", "releasing", "released", "stopped", "aborted", "failed"]
 HomingState = Literal["running", "homed", "failed", "aborted"]
 JogDirection = Literal["cw", "ccw"]
 JointTarget = Dict[str, Any]
@@ -1004,9 +1097,15 @@ __all__ = [
     "DroppedCalibrationView",
     "EstopResult",
     "FaultView",
+    "FingerGrasp",
+    "FingerState",
     "FrameLog",
     "FrameView",
     "GoRequest",
+    "GraspJoint",
+    "GraspRequest",
+    "GraspSettings",
+    "GraspView",
     "GroupModeRequest",
     "GroupRequest",
     "GroupTarget",
@@ -1054,6 +1153,7 @@ __all__ = [
     "RecordingList",
     "RecordingRequest",
     "RecordingView",
+    "ReleaseRequest",
     "ResetView",
     "RevisionView",
     "Ros2View",

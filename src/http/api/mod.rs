@@ -10,6 +10,7 @@
 //!   [`estop`], [`health`], [`moves`] (paths generated in the daemon),
 //!   [`hands`] (named hands and their poses), [`calibration`] (joint
 //!   offsets, directions, ranges), [`homing`] (finding hard stops),
+//!   [`grasp`] (closing a hand on an object),
 //!   [`recordings`] (MCAP files), [`ros2`] (the bridge's counters): one
 //!   router per area.
 //! - [`openapi`]: the document's head, the shared failure responses, the docs page.
@@ -24,6 +25,7 @@ pub(crate) mod config_schema;
 pub(crate) mod control;
 pub(crate) mod devices;
 pub(crate) mod estop;
+pub(crate) mod grasp;
 pub(crate) mod hands;
 pub(crate) mod health;
 pub(crate) mod homing;
@@ -51,6 +53,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .merge(hands::router())
         .merge(calibration::router())
         .merge(homing::router())
+        .merge(grasp::router())
         .merge(recordings::router())
         .merge(ros2::router())
 }

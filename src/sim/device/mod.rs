@@ -21,6 +21,7 @@ use crate::protocol::{CtrlMode, FirmwareVersion, InfoBlock, Reply};
 
 use super::config::SimConfig;
 use super::firmware::{self, AlignLoad, Profile, BRAKE_DONE_DEG_S, OT_RECOVERY_C};
+use super::object::Object;
 use super::params::{FlashImage, Params};
 use super::physics::{Drive, Joint, Obstacle};
 use super::rng::Rng;
@@ -188,6 +189,11 @@ impl Device {
                     .iter()
                     .find(|(dev_id, _)| *dev_id == id)
                     .map(|(_, deg)| Obstacle::at(*deg));
+                device.joint.object = cfg
+                    .objects
+                    .iter()
+                    .find(|o| o.id == id)
+                    .map(|o| Object::new(o.at_deg, o.nm_per_deg));
                 device
             })
             .collect()
@@ -466,6 +472,18 @@ impl Device {
         self.advance_to(now);
         self.joint.obstacle = None;
         self.joint.blocked_s = 0.0;
+    }
+
+    /// Puts an elastic object at `at_deg` (reported degrees).
+    pub(crate) fn set_object(&mut self, at_deg: f64, nm_per_deg: f64, now: Instant) {
+        self.advance_to(now);
+        self.joint.object = Some(Object::new(at_deg + self.zero, nm_per_deg));
+    }
+
+    /// Pulls the object away: nothing resists the joint any more.
+    pub(crate) fn remove_object(&mut self, now: Instant) {
+        self.advance_to(now);
+        self.joint.object = None;
     }
 
     pub(crate) fn set_under_voltage(&mut self, on: bool, now: Instant) {

@@ -1,0 +1,332 @@
+//! What a closing or holding finger's samples mean, decided without I/O:
+//! contact (the q current rose over the threshold above what the finger
+//! draws moving freely, or it stalled), no contact (it reached its closing
+//! limit), or, once holding, a lost object (the current fell back).
+//!
+//! Everything is measured along the closing direction: a finger slowing
+//! down draws current *against* it, which never looks like contact. The
+//! free-air current is learnt while the finger cruises at the asked speed
+//! (not while it accelerates: the inertial current of the start would look
+//! like a press), and no press counts before that, unless the finger could
+//! not get going (it may start against the object). A finger that slowed
+//! to a stall after it moved is in contact whatever its current says.
+
+use std::time::Duration;
+
+/// Before the free-air current is known, contact counts only after this
+/// long (a finger that starts pressed never cruises).
+pub(crate) const START_GRACE: Duration = Duration::from_millis(400);
+/// The current must stay over the threshold this long.
+const CONTACT_CONFIRM: Duration = Duration::from_millis(30);
+/// Moving this slowly (share of the asked speed) for this long, after it
+/// moved, is a stall: contact.
+const STALLED_SHARE: f64 = 0.2;
+const STALL_CONFIRM: Duration = Duration::from_millis(80);
+/// It moved once it reached this share of the asked speed.
+const MOVING_SHARE: f64 = 0.5;
+/// Cruising: within this share of the asked speed.
+const CRUISE_SHARE: f64 = 0.1;
+/// The free-air current is the mean of this much cruising.
+const LEARN: Duration = Duration::from_millis(50);
+/// At the closing limit: this close to it, degrees ...
+pub(crate) const LIMIT_TOLERANCE_DEG: f64 = 0.5;
+/// ... and a stall closer than this to it is the position loop settling.
+const STALL_MARGIN_DEG: f64 = 2.0;
+/// Contact began where the rise over the free-air current was last under
+/// this share of the threshold ...
+const ONSET_SHARE: f64 = 0.25;
+/// ... or this much, whichever is more (the current's noise), A.
+const ONSET_MIN_A: f64 = 0.01;
+/// A held object is lost once the current stays this long under the hold
+/// current less the threshold.
+const LOST_CONFIRM: Duration = Duration::from_millis(40);
+
+/// The closing's settings, in device degrees.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Settings {
+    /// +1 closes towards higher device angles, −1 lower.
+    pub dir: f64,
+    pub limit_deg: f64,
+    pub speed_dps: f64,
+    pub threshold_a: f64,
+    pub hold_a: f64,
+}
+
+/// One telemetry sample, device frame, signed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Sample {
+    /// Since the closing began.
+    pub t: Duration,
+    pub deg: f64,
+    pub speed_dps: f64,
+    pub current_a: f64,
+}
+
+/// What the samples say so far.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Verdict {
+    Closing,
+    /// In contact since the finger was at `deg` (device degrees).
+    Contact {
+        deg: f64,
+        stalled: bool,
+    },
+    /// At the closing limit with nothing in the way.
+    NoContact,
+}
+
+/// The contact detector of a closing finger.
+#[derive(Debug, Clone)]
+pub(crate) struct Closing {
+    s: Settings,
+    moved: bool,
+    cruise_since: Option<Duration>,
+    learning: (f64, u32),
+    baseline: Option<f64>,
+    over_since: Option<Duration>,
+    /// Where the rise was last too small to be a press: where contact began.
+    onset_deg: Option<f64>,
+    slow_since: Option<Duration>,
+}
+
+impl Closing {
+    pub(crate) fn new(s: Settings) -> Self {
+        Self {
+            s,
+            moved: false,
+            cruise_since: None,
+            learning: (0.0, 0),
+            baseline: None,
+            over_since: None,
+            onset_deg: None,
+            slow_since: None,
+        }
+    }
+
+    /// The free-air current learnt, A along the closing direction.
+    pub(crate) fn baseline(&self) -> Option<f64> {
+        self.baseline
+    }
+
+    pub(crate) fn sample(&mut self, x: Sample) -> Verdict {
+        let s = self.s;
+        let v = s.dir * x.speed_dps;
+        let i = s.dir * x.current_a;
+        let to_go = s.dir * (s.limit_deg - x.deg);
+        self.moved |= v >= MOVING_SHARE * s.speed_dps;
+        self.learn(x.t, v, i);
+        if let Some(deg) = self.pressed(x, i) {
+            return Verdict::Contact {
+                deg,
+                stalled: false,
+            };
+        }
+        if self.stalled(x.t, v, to_go) {
+            return Verdict::Contact {
+                deg: x.deg,
+                stalled: true,
+            };
+        }
+        if to_go <= LIMIT_TOLERANCE_DEG && v.abs() < STALLED_SHARE * s.speed_dps {
+            return Verdict::NoContact;
+        }
+        Verdict::Closing
+    }
+
+    fn learn(&mut self, t: Duration, v: f64, i: f64) {
+        if self.baseline.is_some() {
+            return;
+        }
+        if (v - self.s.speed_dps).abs() > CRUISE_SHARE * self.s.speed_dps {
+            self.cruise_since = None;
+            self.learning = (0.0, 0);
+            return;
+        }
+        let since = *self.cruise_since.get_or_insert(t);
+        self.learning.0 += i;
+        self.learning.1 += 1;
+        if t.saturating_sub(since) >= LEARN && self.learning.1 >= 3 {
+            self.baseline = Some(self.learning.0 / f64::from(self.learning.1));
+        }
+    }
+
+    /// The current over the threshold long enough: where the rise began.
+    fn pressed(&mut self, x: Sample, i: f64) -> Option<f64> {
+        // Without a baseline, only a finger that never got going (it
+        // started against the object) may count a press: one still
+        // speeding up draws its inertial current.
+        let armed = self.baseline.is_some() || (!self.moved && x.t >= START_GRACE);
+        let base = self.baseline.unwrap_or(0.0).max(0.0);
+        let rise = i - base;
+        if rise < (ONSET_SHARE * self.s.threshold_a).max(ONSET_MIN_A) || self.onset_deg.is_none() {
+            self.onset_deg = Some(x.deg);
+        }
+        if !armed || rise < self.s.threshold_a {
+            self.over_since = None;
+            return None;
+        }
+        let since = *self.over_since.get_or_insert(x.t);
+        (x.t.saturating_sub(since) >= CONTACT_CONFIRM).then_some(self.onset_deg.unwrap_or(x.deg))
+    }
+
+    fn stalled(&mut self, t: Duration, v: f64, to_go: f64) -> bool {
+        let slow = v < STALLED_SHARE * self.s.speed_dps;
+        if !(self.moved && slow && to_go > LIMIT_TOLERANCE_DEG + STALL_MARGIN_DEG) {
+            self.slow_since = None;
+            return false;
+        }
+        let since = *self.slow_since.get_or_insert(t);
+        t.saturating_sub(since) >= STALL_CONFIRM
+    }
+}
+
+/// The lost-object detector of a holding finger.
+#[derive(Debug, Clone)]
+pub(crate) struct Holding {
+    s: Settings,
+    /// The current has come up to the hold level since contact: from then
+    /// on a fall means the object is gone.
+    settled: bool,
+    low_since: Option<Duration>,
+}
+
+impl Holding {
+    pub(crate) fn new(s: Settings) -> Self {
+        Self {
+            s,
+            settled: false,
+            low_since: None,
+        }
+    }
+
+    /// True once the object is gone: the current fell (after it had come
+    /// up to the hold level), or the finger got to its limit unopposed.
+    pub(crate) fn lost(&mut self, x: Sample) -> bool {
+        let s = self.s;
+        let i = s.dir * x.current_a;
+        let to_go = s.dir * (s.limit_deg - x.deg);
+        self.settled |= i >= s.hold_a - s.threshold_a / 2.0;
+        let low = i < s.hold_a - s.threshold_a;
+        if !low {
+            self.low_since = None;
+            return false;
+        }
+        if !self.settled {
+            return to_go <= LIMIT_TOLERANCE_DEG;
+        }
+        let since = *self.low_since.get_or_insert(x.t);
+        x.t.saturating_sub(since) >= LOST_CONFIRM
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const S: Settings = Settings {
+        dir: 1.0,
+        limit_deg: 60.0,
+        speed_dps: 30.0,
+        threshold_a: 0.06,
+        hold_a: 0.2,
+    };
+    const DT: Duration = Duration::from_millis(4);
+
+    /// A finger starting at 0° with a first-order speed lag (tau), free
+    /// current `0.03 + 0.0015 v + 0.00008 a`, and an object at `object`
+    /// of `a_per_deg` (A per degree pressed in) under a cap of `hold_a`.
+    fn run(s: Settings, tau: f64, object: Option<(f64, f64)>, sign: f64) -> (Verdict, f64) {
+        let (mut deg, mut v, mut t) = (0.0f64, 0.0f64, Duration::ZERO);
+        let mut c = Closing::new(s);
+        for _ in 0..5000 {
+            let dt = DT.as_secs_f64();
+            let goal = (40.0 * s.dir * (s.limit_deg - deg)).clamp(-s.speed_dps, s.speed_dps);
+            let nv = v + (goal - v) * (dt / tau).min(1.0);
+            let acc = (nv - v) / dt;
+            v = nv;
+            deg += s.dir * v * dt;
+            let mut i = 0.03 + 0.0015 * v + 0.00008 * acc;
+            if let Some((at, k)) = object {
+                let depth = (s.dir * (deg - at)).max(0.0);
+                let deepest = (s.hold_a - 0.03) / k;
+                if depth > deepest {
+                    deg = at + s.dir * deepest;
+                    v = 0.0;
+                }
+                if depth > 0.0 {
+                    i = 0.03 + k * depth.min(deepest) + 0.0015 * v;
+                }
+            }
+            i = i.min(s.hold_a);
+            t += DT;
+            let x = Sample {
+                t,
+                deg,
+                speed_dps: s.dir * v,
+                current_a: s.dir * sign * i,
+            };
+            match c.sample(x) {
+                Verdict::Closing => {}
+                other => return (other, deg),
+            }
+        }
+        (Verdict::Closing, deg)
+    }
+
+    #[test]
+    fn free_air_ends_without_contact_whatever_the_smoothing_and_direction() {
+        for tau in [0.004, 0.015, 0.06, 0.25] {
+            for dir in [1.0, -1.0] {
+                let s = Settings {
+                    dir,
+                    limit_deg: dir * 60.0,
+                    ..S
+                };
+                let (v, deg) = run(s, tau, None, 1.0);
+                assert_eq!(v, Verdict::NoContact, "tau {tau} dir {dir} at {deg}");
+                assert!(
+                    dir * (dir * 60.0 - deg) <= LIMIT_TOLERANCE_DEG,
+                    "reached: {deg}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_soft_and_a_stiff_object_are_felt_near_where_they_start() {
+        for (k, slack) in [(0.01, 3.0), (0.1, 1.0)] {
+            let (v, _) = run(S, 0.015, Some((25.0, k)), 1.0);
+            let Verdict::Contact { deg, .. } = v else {
+                panic!("k {k}: {v:?}");
+            };
+            assert!(deg > 25.0 && deg < 25.0 + slack, "k {k}: {deg}");
+        }
+    }
+
+    #[test]
+    fn an_object_where_the_finger_starts_is_contact_after_the_grace() {
+        let (v, deg) = run(S, 0.015, Some((0.0, 0.1)), 1.0);
+        assert!(matches!(v, Verdict::Contact { .. }), "{v:?}");
+        assert!(deg < 2.0);
+    }
+
+    #[test]
+    fn holding_loses_the_object_only_once_the_current_falls_after_settling() {
+        let mut h = Holding::new(S);
+        let at = |ms: u64, deg: f64, i: f64| Sample {
+            t: Duration::from_millis(ms),
+            deg,
+            speed_dps: 0.0,
+            current_a: i,
+        };
+        assert!(!h.lost(at(0, 30.0, 0.12)), "still pressing in");
+        assert!(!h.lost(at(10, 31.0, 0.2)));
+        assert!(!h.lost(at(20, 31.0, 0.1)), "not yet confirmed");
+        assert!(!h.lost(at(30, 31.0, 0.19)), "back up: the fall was noise");
+        assert!(!h.lost(at(40, 31.0, 0.08)));
+        assert!(h.lost(at(90, 35.0, 0.08)));
+        let mut early = Holding::new(S);
+        assert!(!early.lost(at(0, 40.0, 0.1)));
+        assert!(early.lost(at(10, 59.8, 0.08)), "at the limit, unopposed");
+    }
+}

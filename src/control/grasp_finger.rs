@@ -1,0 +1,566 @@
+//! One finger of a grasp, as its own task: its current limit reduced to
+//! the hold current (written and verified before any finger of the job
+//! moves: [`prepare`]), then ([`run`]) position mode towards its closing
+//! limit at the closing speed until the samples say contact or no contact
+//! ([`super::grasp_detect`]), holding with the reduced limit, watching for
+//! a lost object, until the job says release or stop, or something ends
+//! it (e-stop, disable, reset, mode change, fault, offline, another
+//! command taking the joint). However it ends, the previous limit is
+//! written back and read back; a task unwinding from a panic still writes
+//! it (from a spawned task) as it goes.
+//!
+//! Every target it sends is admitted under the epoch the grasp started
+//! with: once anything advances the joint's epoch, the bus owner drops
+//! what the finger still sends, and the finger's next look ends it.
+
+use std::time::{Duration, Instant};
+
+use tokio::sync::{broadcast, watch};
+
+use crate::bus::authority::{Epoch, Revoked};
+use crate::bus::handle::{BusEvent, DeviceState};
+use crate::bus::{BusHandle, Setpoint, Source};
+use crate::control::device::{firmware_of, is_enabled, measured_angle_raw};
+use crate::control::grasp_book::{Command, FingerGrasp, FingerState, Slot};
+use crate::control::grasp_detect::{Closing, Holding, Sample, Settings, Verdict};
+use crate::control::homing_book::lock;
+use crate::hands::Calibration;
+use crate::protocol::status::{active_fault, fault_name, fsm};
+use crate::protocol::units;
+use crate::protocol::{ConfigParam, InfoBlock, ReplyBody};
+
+/// Tries at writing the previous current limit back.
+const RESTORE_TRIES: usize = 3;
+/// The longest a finger waits between looks when telemetry is quiet.
+const LOOK: Duration = Duration::from_millis(20);
+/// Opened: this close to the goal, degrees.
+const OPEN_TOLERANCE_DEG: f64 = 1.0;
+/// Opening may take its travel at the speed plus this much.
+const OPEN_SLACK: Duration = Duration::from_secs(2);
+/// Weight of the newest sample in the reported q current.
+const CURRENT_SMOOTHING: f64 = 0.3;
+
+/// One finger as the job started it (device degrees).
+#[derive(Debug, Clone)]
+pub(crate) struct Finger {
+    pub bus: BusHandle,
+    pub id: u8,
+    /// Its place in the job (a release's goals come in that order).
+    pub index: usize,
+    pub epoch: Epoch,
+    pub cal: Calibration,
+    pub close_to_deg: f64,
+    pub slot: Slot,
+}
+
+/// How the job closes its fingers.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Plan {
+    pub grasp_id: u64,
+    pub speed_dps: f64,
+    pub hold_a: f64,
+    pub threshold_a: f64,
+    /// When the grasp was called (contact times count from here).
+    pub called: Instant,
+}
+
+/// How a finger's limit stands after [`prepare`].
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Prepared {
+    /// The limit before, raw (known once INFO_04 was read).
+    pub previous: Option<u16>,
+    /// A write of the reduced limit was tried: the previous one must go back.
+    pub written: bool,
+}
+
+pub(crate) fn set(slot: &Slot, edit: impl FnOnce(&mut FingerGrasp)) {
+    edit(&mut lock(slot));
+}
+
+/// Reads the limit, checks the hold current fits the joint, writes the
+/// hold current as the limit (confirmed by the bus: RES or read-back).
+pub(crate) async fn prepare(f: &Finger, plan: &Plan) -> Result<Prepared, (Prepared, String)> {
+    let mut p = Prepared {
+        previous: None,
+        written: false,
+    };
+    let previous = match read_limit(&f.bus, f.id).await {
+        Ok(raw) => raw,
+        Err(why) => return Err((p, why)),
+    };
+    p.previous = Some(previous);
+    set(&f.slot, |s| {
+        s.previous_current_limit_a = Some(units::current_limit_a(previous));
+    });
+    let limit = match units::current_limit_to_raw(plan.hold_a) {
+        Ok(raw) if raw < previous => raw,
+        _ => {
+            let why = format!(
+                "hold_current_a = {} A is not below the joint's own limit ({:.3} A): a grasp holds \
+                 with a reduced limit",
+                plan.hold_a,
+                units::current_limit_a(previous)
+            );
+            return Err((p, why));
+        }
+    };
+    if let Err(why) = check_protection(f, plan.hold_a).await {
+        return Err((p, why));
+    }
+    p.written = true;
+    match f.bus.write_config(f.id, ConfigParam::MaxCur(limit)).await {
+        Ok(w) if w.value == limit => Ok(p),
+        Ok(w) => Err((
+            p,
+            format!("the limit read back as raw {} not {limit}", w.value),
+        )),
+        Err(e) => Err((p, format!("could not reduce the current limit: {e}"))),
+    }
+}
+
+/// A hold above the joint's protection level would be cut to the
+/// protection's cap after its delay: refused, naming both.
+async fn check_protection(f: &Finger, hold_a: f64) -> Result<(), String> {
+    let reply = f
+        .bus
+        .read_info(f.id, InfoBlock::Info05)
+        .await
+        .map_err(|e| format!("could not read the current protection (INFO_05): {e}"))?;
+    let ReplyBody::Info05(info) = reply.body() else {
+        return Err("the joint answered INFO_05 with another block".into());
+    };
+    let lv1 = units::current_limit_a(info.protect_cur_lv1);
+    if hold_a >= lv1 {
+        return Err(format!(
+            "hold_current_a = {hold_a} A reaches the joint's current protection level \
+             ({lv1:.3} A, PROTECT_CUR_LV1): the protection would cut the hold after its delay"
+        ));
+    }
+    Ok(())
+}
+
+async fn read_limit(bus: &BusHandle, id: u8) -> Result<u16, String> {
+    let reply = bus
+        .read_info(id, InfoBlock::Info04)
+        .await
+        .map_err(|e| format!("could not read the current limit (INFO_04): {e}"))?;
+    match reply.body() {
+        ReplyBody::Info04(i) => Ok(i.max_current),
+        _ => Err("the joint answered INFO_04 with another block".into()),
+    }
+}
+
+/// Writes the previous limit back and reads it back: true only when the
+/// read-back shows it. Nothing written before: nothing to restore.
+pub(crate) async fn restore(bus: &BusHandle, id: u8, p: Prepared) -> bool {
+    let Some(previous) = p.previous else {
+        return !p.written;
+    };
+    if !p.written {
+        return true;
+    }
+    for attempt in 1..=RESTORE_TRIES {
+        if let Err(e) = bus.write_config(id, ConfigParam::MaxCur(previous)).await {
+            tracing::warn!(bus = bus.name(), id, attempt, error = %e,
+                "grasp: writing the previous current limit back failed");
+        }
+        match read_limit(bus, id).await {
+            Ok(raw) if raw == previous => return true,
+            Ok(raw) => tracing::warn!(
+                bus = bus.name(),
+                id,
+                attempt,
+                read_back = raw,
+                previous,
+                "grasp: the current limit read back is not the previous one"
+            ),
+            Err(why) => tracing::warn!(bus = bus.name(), id, attempt, "grasp: {why}"),
+        }
+    }
+    false
+}
+
+/// Writes the previous limit back from a task of its own if the finger's
+/// task leaves without having done it (a panic unwinding).
+struct RestoreOnDrop {
+    bus: BusHandle,
+    id: u8,
+    prepared: Prepared,
+    armed: bool,
+}
+
+impl Drop for RestoreOnDrop {
+    fn drop(&mut self) {
+        if !self.armed {
+            return;
+        }
+        tracing::error!(
+            bus = self.bus.name(),
+            id = self.id,
+            "grasp ended without restoring the current limit: restoring it"
+        );
+        let (bus, id, p) = (self.bus.clone(), self.id, self.prepared);
+        if let Ok(rt) = tokio::runtime::Handle::try_current() {
+            rt.spawn(async move { restore(&bus, id, p).await });
+        }
+    }
+}
+
+/// How a finger's part ended.
+enum End {
+    Released,
+    Stopped(String),
+    Aborted(String),
+}
+
+/// Closes, holds, and ends the finger (see the module's doc); its limit
+/// restored last.
+pub(crate) async fn run(f: Finger, plan: Plan, prepared: Prepared, cmd: watch::Receiver<Command>) {
+    let mut guard = RestoreOnDrop {
+        bus: f.bus.clone(),
+        id: f.id,
+        prepared,
+        armed: true,
+    };
+    let end = drive(&f, &plan, cmd).await;
+    let restored = restore(&f.bus, f.id, prepared).await;
+    guard.armed = false;
+    set(&f.slot, |s| {
+        s.current_limit_restored = restored;
+        let (state, reason) = match end {
+            End::Released => (FingerState::Released, None),
+            End::Stopped(why) => (FingerState::Stopped, Some(why)),
+            End::Aborted(why) => (FingerState::Aborted, Some(why)),
+        };
+        s.state = state;
+        s.reason = reason;
+        if !restored {
+            tracing::error!(grasp_id = plan.grasp_id, bus = %s.bus, id = s.id,
+                previous_a = ?s.previous_current_limit_a,
+                "the joint's current limit could not be written back: it keeps the hold limit until set or power-cycled");
+        }
+    });
+}
+
+/// Where the finger is in its grasp.
+enum Phase {
+    Closing(Closing),
+    Holding(Holding),
+    /// No contact, or the object lost: it stays put until told.
+    Waiting,
+}
+
+/// The finger's watch over its joint.
+struct Watch {
+    snaps: watch::Receiver<std::sync::Arc<crate::bus::BusSnapshot>>,
+    events: broadcast::Receiver<BusEvent>,
+    last_sample: Option<Instant>,
+    /// The finger's latest target, and whether the wire has carried it
+    /// (from then on another target there means another command).
+    sent: Setpoint,
+    seen_sent: bool,
+    current: Option<f64>,
+}
+
+impl Watch {
+    fn sent(&mut self, sp: Setpoint) {
+        self.sent = sp;
+        self.seen_sent = false;
+    }
+}
+
+async fn drive(f: &Finger, plan: &Plan, mut cmd: watch::Receiver<Command>) -> End {
+    let mut w = Watch {
+        snaps: f.bus.watch(),
+        events: f.bus.events(),
+        last_sample: None,
+        sent: Setpoint {
+            pos_ref: 0,
+            spd_ref: 0,
+        },
+        seen_sent: false,
+        current: None,
+    };
+    let dev = f.bus.snapshot().devices.get(&f.id).cloned();
+    let Some(start_deg) = dev
+        .as_ref()
+        .and_then(measured_angle_raw)
+        .map(units::angle_deg)
+    else {
+        return End::Aborted("the joint's angle is not known".into());
+    };
+    let fw = dev.as_ref().map(firmware_of).unwrap_or_default();
+    match send(f, plan.speed_dps, f.close_to_deg, fw) {
+        Ok(sp) => w.sent(sp),
+        Err(why) => return End::Aborted(why),
+    }
+    set(&f.slot, |s| s.state = FingerState::Closing);
+    let started = Instant::now();
+    let settings = Settings {
+        dir: if f.close_to_deg >= start_deg {
+            1.0
+        } else {
+            -1.0
+        },
+        limit_deg: f.close_to_deg,
+        speed_dps: plan.speed_dps,
+        threshold_a: plan.threshold_a,
+        hold_a: plan.hold_a,
+    };
+    let mut phase = Phase::Closing(Closing::new(settings));
+    loop {
+        if let Err(why) = unfit(f, &mut w) {
+            return End::Aborted(why);
+        }
+        // Every command but Hold ends the finger's grasp: the latest one
+        // is the one that applies, however many wake-ups it took to see.
+        let now = cmd.borrow().clone();
+        match now {
+            Command::Hold => {}
+            Command::Stop => return hold_here(f, "stopped by request"),
+            Command::Release { goals, speed_dps } => {
+                return match goals.get(f.index).copied().flatten() {
+                    Some(goal) => open(f, &mut w, goal, speed_dps, fw).await,
+                    None => hold_here(f, "nothing to open to"),
+                };
+            }
+        }
+        let snap = w.snaps.borrow_and_update().clone();
+        let dev = snap.devices.get(&f.id);
+        if let Some(taken) = taken_over(dev, &mut w) {
+            return End::Stopped(taken);
+        }
+        if let Some(x) = fresh_sample(dev, &mut w, started) {
+            let q = w.current;
+            set(&f.slot, |s| s.q_current_a = q);
+            phase = step(f, plan, phase, x, settings, &mut w);
+        }
+        tokio::select! {
+            _ = w.snaps.changed() => {}
+            _ = cmd.changed() => {}
+            _ = tokio::time::sleep(LOOK) => {}
+        }
+    }
+}
+
+/// One sample through the phase's detector; the phase after it.
+fn step(f: &Finger, plan: &Plan, phase: Phase, x: Sample, s: Settings, w: &mut Watch) -> Phase {
+    match phase {
+        Phase::Closing(mut c) => match c.sample(x) {
+            Verdict::Closing => Phase::Closing(c),
+            Verdict::Contact { deg, stalled } => {
+                let joint_deg = f.cal.to_joint(deg);
+                let after_ms = plan.called.elapsed().as_secs_f64() * 1e3;
+                set(&f.slot, |s| {
+                    s.state = FingerState::Holding;
+                    s.contact = true;
+                    s.contact_deg = Some(joint_deg);
+                    s.contact_after_ms = Some(after_ms);
+                });
+                tracing::info!(grasp_id = plan.grasp_id, bus = f.bus.name(), id = f.id,
+                    contact_deg = joint_deg, stalled, baseline_a = ?c.baseline(), "grasp: contact");
+                f.bus.shared().emit(BusEvent::GraspContact {
+                    bus: f.bus.name().to_string(),
+                    grasp_id: plan.grasp_id,
+                    id: f.id,
+                    contact_deg: joint_deg,
+                });
+                Phase::Holding(Holding::new(s))
+            }
+            Verdict::NoContact => {
+                set(&f.slot, |s| s.state = FingerState::NoContact);
+                Phase::Waiting
+            }
+        },
+        Phase::Holding(mut h) => {
+            if !h.lost(x) {
+                return Phase::Holding(h);
+            }
+            let q = x.current_a.abs();
+            set(&f.slot, |s| s.state = FingerState::Lost);
+            tracing::warn!(
+                grasp_id = plan.grasp_id,
+                bus = f.bus.name(),
+                id = f.id,
+                q_current_a = q,
+                "grasp: object lost"
+            );
+            f.bus.shared().emit(BusEvent::GraspLost {
+                bus: f.bus.name().to_string(),
+                grasp_id: plan.grasp_id,
+                id: f.id,
+                q_current_a: q,
+            });
+            if let Some(sp) = hold_at(f, x.deg) {
+                w.sent(sp);
+            }
+            Phase::Waiting
+        }
+        Phase::Waiting => Phase::Waiting,
+    }
+}
+
+/// A new INFO_02 of the joint since the last one, as a sample (and the
+/// smoothed current written to the finger's view).
+fn fresh_sample(dev: Option<&DeviceState>, w: &mut Watch, started: Instant) -> Option<Sample> {
+    let dev = dev?;
+    let (info, at) = dev.info02.as_ref().map(|(i, at)| (*i, *at))?;
+    if at < started || w.last_sample.is_some_and(|last| at <= last) {
+        return None;
+    }
+    w.last_sample = Some(at);
+    let fw = firmware_of(dev);
+    let current = units::current_a(info.q_cur);
+    let smoothed = w.current.map_or(current.abs(), |c| {
+        c + CURRENT_SMOOTHING * (current.abs() - c)
+    });
+    w.current = Some(smoothed);
+    Some(Sample {
+        t: at.duration_since(started),
+        deg: units::angle_deg(info.angle),
+        speed_dps: units::output_deg_per_s(info.speed_rpm(fw)),
+        current_a: current,
+    })
+}
+
+/// Sends a position target at a speed limit, under the grasp's epoch.
+fn send(
+    f: &Finger,
+    speed_dps: f64,
+    deg: f64,
+    fw: units::FirmwareVersion,
+) -> Result<Setpoint, String> {
+    let rpm = speed_dps / units::output_deg_per_s(1.0);
+    let pos_ref = units::angle_to_raw(deg).map_err(|e| format!("target {deg}°: {e}"))?;
+    let spd_ref = units::speed_limit_to_raw(rpm, fw).map_err(|e| format!("speed: {e}"))?;
+    let sp = Setpoint { pos_ref, spd_ref };
+    f.bus.take_over(&[f.id]);
+    f.bus
+        .set_targets_under(&[(f.id, sp, f.epoch)], Source::Grasp);
+    Ok(sp)
+}
+
+/// Holds the finger at `deg` (device), at its current speed limit.
+fn hold_at(f: &Finger, deg: f64) -> Option<Setpoint> {
+    let pos_ref = units::angle_to_raw(deg).ok()?;
+    let spd_ref = f
+        .bus
+        .snapshot()
+        .devices
+        .get(&f.id)
+        .and_then(|d| d.target_sent)
+        .map_or(0, |t| t.spd_ref);
+    let sp = Setpoint { pos_ref, spd_ref };
+    f.bus
+        .set_targets_under(&[(f.id, sp, f.epoch)], Source::Grasp);
+    Some(sp)
+}
+
+fn hold_here(f: &Finger, why: &str) -> End {
+    let here = f
+        .bus
+        .snapshot()
+        .devices
+        .get(&f.id)
+        .and_then(measured_angle_raw);
+    if let Some(raw) = here {
+        let _ = hold_at(f, units::angle_deg(raw));
+    }
+    End::Stopped(why.into())
+}
+
+/// Opens to `goal` (device degrees) and waits (bounded) until it is there.
+async fn open(
+    f: &Finger,
+    w: &mut Watch,
+    goal: f64,
+    speed_dps: f64,
+    fw: units::FirmwareVersion,
+) -> End {
+    set(&f.slot, |s| s.state = FingerState::Releasing);
+    match send(f, speed_dps, goal, fw) {
+        Ok(sp) => w.sent(sp),
+        Err(why) => return End::Aborted(why),
+    }
+    let here = f
+        .bus
+        .snapshot()
+        .devices
+        .get(&f.id)
+        .and_then(measured_angle_raw)
+        .map_or(goal, units::angle_deg);
+    let travel = Duration::from_secs_f64((goal - here).abs() / speed_dps);
+    let deadline = Instant::now() + travel + OPEN_SLACK;
+    loop {
+        if let Err(why) = unfit(f, w) {
+            return End::Aborted(why);
+        }
+        let snap = w.snaps.borrow_and_update().clone();
+        let dev = snap.devices.get(&f.id);
+        if let Some(taken) = taken_over(dev, w) {
+            return End::Stopped(taken);
+        }
+        let at = dev.and_then(measured_angle_raw).map(units::angle_deg);
+        if at.is_some_and(|a| (a - goal).abs() < OPEN_TOLERANCE_DEG) {
+            return End::Released;
+        }
+        if Instant::now() >= deadline {
+            return End::Stopped(format!(
+                "not open within {:.1} s",
+                (travel + OPEN_SLACK).as_secs_f64()
+            ));
+        }
+        tokio::select! {
+            _ = w.snaps.changed() => {}
+            _ = tokio::time::sleep(LOOK) => {}
+        }
+    }
+}
+
+/// Another command replaced the grasp's target on the wire.
+fn taken_over(dev: Option<&DeviceState>, w: &mut Watch) -> Option<String> {
+    let on_wire = dev?.target_sent?;
+    if on_wire == w.sent {
+        w.seen_sent = true;
+        return None;
+    }
+    w.seen_sent
+        .then(|| "another command took the joint".to_string())
+}
+
+/// An e-stop, the epoch moved on, offline, faulted or disabled.
+fn unfit(f: &Finger, w: &mut Watch) -> Result<(), String> {
+    loop {
+        match w.events.try_recv() {
+            Ok(BusEvent::Estop { bus }) if bus == f.bus.name() => return Err("e-stop".into()),
+            Ok(_) | Err(broadcast::error::TryRecvError::Lagged(_)) => continue,
+            Err(_) => break,
+        }
+    }
+    if !f.bus.authority().admits(f.id, f.epoch) {
+        return Err(match f.bus.authority().last_revoked(f.id) {
+            Some(Revoked::Estopped) => "e-stop".to_string(),
+            Some(why) => format!("the joint's commands were revoked ({})", why.name()),
+            None => "the joint is no longer enabled".to_string(),
+        });
+    }
+    let snap = f.bus.snapshot();
+    let Some(dev) = snap.devices.get(&f.id).filter(|d| d.online) else {
+        return Err("the joint went offline".into());
+    };
+    if let Some((info, _)) = &dev.info01 {
+        if info.fsm == fsm::FAULT || active_fault(info.err_code) != 0 {
+            return Err(format!(
+                "the joint faulted ({})",
+                fault_name(active_fault(info.err_code))
+            ));
+        }
+        if !is_enabled(info) {
+            return Err(format!(
+                "the joint was disabled ({})",
+                dev.disabled_reason.map_or("disabled", |r| r.name())
+            ));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,128 @@
+//! A grasp is a motion under the motion authority: an e-stop while the
+//! fingers close and while they hold stops every finger (each `aborted`,
+//! the joints disabled, no finger moves on), a disable ends the finger it
+//! disables, and every limit is written back and read back however the
+//! grasp ended.
+
+mod grasp_rig;
+mod support;
+
+use grasp_rig::{finger, grasp, hand, limits_restored, state_of, wait_grasp};
+use serde_json::{json, Value};
+use support::sim_bus::SimBus;
+
+/// Every finger is `aborted` for an e-stop, its joint disabled.
+async fn all_aborted_by_estop(b: &SimBus, id: u64) -> Value {
+    let view = wait_grasp(b, id, "every finger aborted", |v| v["state"] == "done").await;
+    for f in view["fingers"].as_array().expect("fingers") {
+        assert_eq!(f["state"], "aborted", "{view}");
+        assert_eq!(f["reason"], "e-stop", "{view}");
+        let dev = b
+            .sim
+            .device(f["id"].as_u64().expect("id") as u8)
+            .expect("device");
+        assert!(!dev.enabled, "joint {} still enabled", dev.id);
+    }
+    view
+}
+
+/// No simulated joint moves any more (checked over a few hundred polls).
+async fn nothing_moves(b: &SimBus) {
+    let before: Vec<f64> = (1..=3)
+        .map(|id| b.sim.device(id).expect("d").angle_deg)
+        .collect();
+    let start = b.handle.snapshot().counters.polls;
+    b.wait_snapshot("the owner polling on", |s| s.counters.polls >= start + 200)
+        .await;
+    for (k, id) in (1..=3).enumerate() {
+        let now = b.sim.device(id).expect("d").angle_deg;
+        assert!(
+            (now - before[k]).abs() < 0.5,
+            "joint {id} moved from {} to {now}",
+            before[k]
+        );
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_estop_while_the_fingers_close_stops_every_finger() {
+    let b = hand(&[(1, 35.0, 0.05)]).await;
+    let id = grasp(
+        &b,
+        json!({"speed_dps": 20.0, "hold_current_a": 0.2, "joints": [
+            {"joint": "a", "close_to_deg": 40.0}, {"joint": "b", "close_to_deg": 40.0},
+            {"joint": "c", "close_to_deg": 40.0}]}),
+    )
+    .await;
+    wait_grasp(&b, id, "every finger closing and under way", |v| {
+        ["a", "b", "c"].iter().all(|j| state_of(v, j) == "closing")
+            && (1..=3).all(|id| b.sim.device(id).is_some_and(|d| d.angle_deg > 3.0))
+    })
+    .await;
+    b.server.post_empty("/api/v1/estop").await.ok();
+    let view = all_aborted_by_estop(&b, id).await;
+    limits_restored(&b, &view).await;
+    nothing_moves(&b).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_estop_while_the_fingers_hold_stops_every_finger() {
+    let b = hand(&[(1, 10.0, 0.05), (2, 12.0, 0.02), (3, 8.0, 0.1)]).await;
+    let id = grasp(
+        &b,
+        json!({"speed_dps": 30.0, "hold_current_a": 0.2, "joints": [
+            {"joint": "a", "close_to_deg": 40.0}, {"joint": "b", "close_to_deg": 40.0},
+            {"joint": "c", "close_to_deg": 40.0}]}),
+    )
+    .await;
+    wait_grasp(&b, id, "every finger holding", |v| {
+        ["a", "b", "c"].iter().all(|j| state_of(v, j) == "holding")
+    })
+    .await;
+    b.server.post_empty("/api/v1/estop").await.ok();
+    let view = all_aborted_by_estop(&b, id).await;
+    for j in ["a", "b", "c"] {
+        assert_eq!(finger(&view, j)["contact"], true);
+    }
+    limits_restored(&b, &view).await;
+    nothing_moves(&b).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_disable_ends_its_finger_and_the_others_hold_on() {
+    let b = hand(&[(1, 10.0, 0.05), (2, 10.0, 0.05)]).await;
+    let id = grasp(
+        &b,
+        json!({"speed_dps": 30.0, "hold_current_a": 0.2, "joints": [
+            {"joint": "a", "close_to_deg": 40.0}, {"joint": "b", "close_to_deg": 40.0}]}),
+    )
+    .await;
+    wait_grasp(&b, id, "a and b holding", |v| {
+        state_of(v, "a") == "holding" && state_of(v, "b") == "holding"
+    })
+    .await;
+    b.server
+        .post("/api/v1/buses/sim0/control/disable", json!({"ids": [1]}))
+        .await
+        .ok();
+    let view = wait_grasp(&b, id, "a aborted", |v| state_of(v, "a") == "aborted").await;
+    let a = finger(&view, "a");
+    assert!(
+        a["reason"].as_str().unwrap_or("").contains("disabl")
+            || a["reason"].as_str().unwrap_or("").contains("revoked"),
+        "{a}"
+    );
+    assert_eq!(a["current_limit_restored"], true, "{a}");
+    assert_eq!(state_of(&view, "b"), "holding", "{view}");
+    // A mode change ends the other one.
+    b.server
+        .put(
+            "/api/v1/buses/sim0/devices/2/mode",
+            json!({"mode": "speed"}),
+        )
+        .await
+        .ok();
+    let view = wait_grasp(&b, id, "done", |v| v["state"] == "done").await;
+    assert_eq!(state_of(&view, "b"), "aborted", "{view}");
+    limits_restored(&b, &view).await;
+}
