@@ -127,7 +127,10 @@ where
                 // The bus may have put the batch on the wire before its
                 // pending ack got here: flush now, not on the next write.
                 Some(ack) = acks_in.recv() => { self.pending.push(ack); self.flush_acks().await }
-                Some((bus, ack)) = wire.next() => { self.on_wire.insert(bus, ack); self.flush_acks().await }
+                // Only while an ack waits: the bus moves its wire ack at
+                // every control frame, and a writer with nothing to ack
+                // (every telemetry-only client) need not wake for each.
+                Some((bus, ack)) = wire.next(), if !self.pending.is_empty() => { self.on_wire.insert(bus, ack); self.flush_acks().await }
                 _ = sweep.tick(), if !self.pending.is_empty() => self.expire_acks().await,
                 _ = ticker.tick(), if subscribed => self.telemetry(&sub).await,
             };
