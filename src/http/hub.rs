@@ -155,8 +155,11 @@ impl WsHub {
 pub struct FragmentCache {
     // std Mutex: held only while one fragment is looked up or built, never
     // across an `.await`.
-    entries: Mutex<HashMap<String, (Weak<BusSnapshot>, Arc<str>)>>,
+    entries: Mutex<HashMap<String, Fragment>>,
 }
+
+/// A cached fragment and the snapshot it was built from.
+type Fragment = (Weak<BusSnapshot>, Arc<str>);
 
 /// Distinct subscription shapes kept; beyond, the cache starts over (a
 /// client cannot grow it without bound).
