@@ -6,7 +6,7 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, Weak};
 
 use tokio::sync::broadcast;
 
@@ -148,13 +148,18 @@ impl WsHub {
 /// by every connection with that shape: a hundred dashboards at 100 Hz then
 /// cost one serialization per snapshot, not one per message. The shape is
 /// the caller's key (bus, devices, fields); a snapshot is known by its
-/// address, which changes with every new snapshot.
+/// address, which changes with every new snapshot. The entry holds a weak
+/// reference to its snapshot, so that address is not handed to a later
+/// snapshot while the entry could still be taken for it.
 #[derive(Debug, Default)]
 pub struct FragmentCache {
     // std Mutex: held only while one fragment is looked up or built, never
     // across an `.await`.
-    entries: Mutex<HashMap<String, (usize, Arc<str>)>>,
+    entries: Mutex<HashMap<String, Fragment>>,
 }
+
+/// A cached fragment and the snapshot it was built from.
+type Fragment = (Weak<BusSnapshot>, Arc<str>);
 
 /// Distinct subscription shapes kept; beyond, the cache starts over (a
 /// client cannot grow it without bound).
@@ -179,10 +184,9 @@ impl FragmentCache {
         snap: &Arc<BusSnapshot>,
         build: impl FnOnce() -> String,
     ) -> Arc<str> {
-        let id = Arc::as_ptr(snap) as usize;
         let mut entries = self.entries.lock().unwrap_or_else(|p| p.into_inner());
-        if let Some((cached_id, text)) = entries.get(shape) {
-            if *cached_id == id {
+        if let Some((built_from, text)) = entries.get(shape) {
+            if std::ptr::eq(built_from.as_ptr(), Arc::as_ptr(snap)) {
                 return text.clone();
             }
         }
@@ -190,7 +194,7 @@ impl FragmentCache {
         if entries.len() >= MAX_FRAGMENTS && !entries.contains_key(shape) {
             entries.clear();
         }
-        entries.insert(shape.to_owned(), (id, text.clone()));
+        entries.insert(shape.to_owned(), (Arc::downgrade(snap), text.clone()));
         text
     }
 }
@@ -211,5 +215,25 @@ mod tests {
         hub.leave();
         assert_eq!(hub.connections.load(Ordering::Relaxed), 0);
         assert_eq!(hub.fragments.cached(), 0);
+    }
+
+    #[test]
+    fn a_new_snapshot_at_a_freed_snapshots_address_is_not_served_its_fragment() {
+        let cache = FragmentCache::default();
+        let old = Arc::new(BusSnapshot::new("sim0", "/dev/null", 500_000));
+        let addr = Arc::as_ptr(&old);
+        cache.get_or_build("a", &old, || "old".into());
+        drop(old);
+        // The allocator hands a freed block of the same size straight back;
+        // keep every miss alive so the loop ends on a reuse or gives up.
+        let mut misses = Vec::new();
+        let reused = loop {
+            let snap = Arc::new(BusSnapshot::new("sim0", "/dev/null", 500_000));
+            if Arc::as_ptr(&snap) == addr || misses.len() >= 64 {
+                break snap;
+            }
+            misses.push(snap);
+        };
+        assert_eq!(&*cache.get_or_build("a", &reused, || "new".into()), "new");
     }
 }

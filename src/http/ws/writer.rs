@@ -9,14 +9,14 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::pin::Pin;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use axum::extract::ws::{close_code, CloseFrame, Message, Utf8Bytes};
 use futures_util::stream::{select_all, SelectAll};
-use futures_util::{Sink, SinkExt, Stream, StreamExt};
+use futures_util::{FutureExt, Sink, SinkExt, Stream, StreamExt};
 use tokio::sync::{mpsc, watch};
-use tokio::time::{interval, Interval, MissedTickBehavior};
+use tokio::time::{interval, interval_at, Interval, MissedTickBehavior};
 use tokio_stream::wrappers::{errors::BroadcastStreamRecvError, BroadcastStream, WatchStream};
 
 use super::messages::{EventBody, ServerMessage};
@@ -90,21 +90,26 @@ where
     pub(crate) async fn run(
         mut self,
         mut out: mpsc::Receiver<ServerMessage>,
-        mut sub: watch::Receiver<Option<Arc<Subscription>>>,
+        sub: watch::Receiver<Option<Arc<Subscription>>>,
         mut acks_in: mpsc::Receiver<PendingAck>,
         mut close_requests: mpsc::Receiver<(u16, String)>,
     ) {
         let mut events = self.event_streams();
         let mut wire = self.ack_streams();
-        let mut ticker = ticker(sub.borrow().as_deref());
+        let mut ticker = Ticker::new(sub.borrow().as_deref());
         let mut sweep = interval(ACK_SWEEP);
-        let mut shutdown = self.state.ws().shutdown_signal();
+        let mut shutdown_rx = self.state.ws().shutdown_signal();
+        // Made once, not at every wake-up: each would register a waiter
+        // with the channel and drop it again, once per telemetry tick.
+        // The guard `wait_for` returns is not `Send`: dropped inside.
+        let shutdown = async move { shutdown_rx.wait_for(|&s| s).await.map(drop) }.fuse();
+        let mut shutdown = std::pin::pin!(shutdown);
+        let mut sub_changes = WatchStream::from_changes(sub.clone());
         loop {
             let subscribed = sub.borrow().is_some();
             let ok = tokio::select! {
                 biased;
-                // The guard `wait_for` returns is not `Send`: dropped inside.
-                Ok(()) = async { shutdown.wait_for(|&s| s).await.map(drop) } => {
+                Ok(()) = &mut shutdown => {
                     self.close(close_code::AWAY, "daemon shutting down").await;
                     break;
                 }
@@ -117,9 +122,9 @@ where
                     Some(m) => self.reply(&m).await,
                     None => break,
                 },
-                changed = sub.changed() => {
-                    if changed.is_err() { break; }
-                    ticker = ticker_for(&sub);
+                changed = sub_changes.next() => {
+                    if changed.is_none() { break; }
+                    ticker = Ticker::new(sub.borrow().as_deref());
                     self.last_sample = None;
                     true
                 }
@@ -127,7 +132,10 @@ where
                 // The bus may have put the batch on the wire before its
                 // pending ack got here: flush now, not on the next write.
                 Some(ack) = acks_in.recv() => { self.pending.push(ack); self.flush_acks().await }
-                Some((bus, ack)) = wire.next() => { self.on_wire.insert(bus, ack); self.flush_acks().await }
+                // Only while an ack waits: the bus moves its wire ack at
+                // every control frame, and a writer with nothing to ack
+                // (every telemetry-only client) need not wake for each.
+                Some((bus, ack)) = wire.next(), if !self.pending.is_empty() => { self.on_wire.insert(bus, ack); self.flush_acks().await }
                 _ = sweep.tick(), if !self.pending.is_empty() => self.expire_acks().await,
                 _ = ticker.tick(), if subscribed => self.telemetry(&sub).await,
             };
@@ -351,22 +359,110 @@ fn lagged(e: BroadcastStreamRecvError) -> u64 {
     }
 }
 
-fn ticker_for(sub: &watch::Receiver<Option<Arc<Subscription>>>) -> Interval {
-    ticker(sub.borrow().as_deref())
+/// A subscription's clock: its first tick at once, the next ones on a grid
+/// of its period shared by the connections (multiples of the period since
+/// [`epoch`], in one of [`LANES`] phases). Clients at the same rate then
+/// wake together in a few timer slots per period rather than each at its
+/// own phase (a wake-up of the runtime's threads per client per tick). The
+/// lanes keep one burst from holding a setpoint batch that arrives during
+/// it behind every client's write.
+struct Ticker {
+    first: bool,
+    interval: Interval,
 }
 
-/// A ticker at the subscription's rate; an idle one when unsubscribed.
-fn ticker(sub: Option<&Subscription>) -> Interval {
-    let period = sub.map_or(Duration::from_secs(3600), |s| {
-        Duration::from_secs_f64(1.0 / s.rate_hz)
-    });
-    let mut t = interval(period);
-    t.set_missed_tick_behavior(MissedTickBehavior::Skip);
-    t
+impl Ticker {
+    /// A ticker at the subscription's rate; an idle one when unsubscribed.
+    fn new(sub: Option<&Subscription>) -> Self {
+        let period = sub.map_or(Duration::from_secs(3600), |s| {
+            Duration::from_secs_f64(1.0 / s.rate_hz)
+        });
+        static NEXT_LANE: AtomicU64 = AtomicU64::new(0);
+        let lane = NEXT_LANE.fetch_add(1, Ordering::Relaxed) % LANES;
+        let start = on_grid(tokio::time::Instant::now(), period, lane);
+        let mut interval = interval_at(start, period);
+        interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
+        Self {
+            first: sub.is_some(),
+            interval,
+        }
+    }
+
+    async fn tick(&mut self) {
+        if std::mem::take(&mut self.first) {
+            return;
+        }
+        self.interval.tick().await;
+    }
+}
+
+/// Phases of the grid that connections are dealt to in turn.
+const LANES: u64 = 4;
+
+/// The process's origin of the tick grid.
+fn epoch() -> tokio::time::Instant {
+    static EPOCH: OnceLock<tokio::time::Instant> = OnceLock::new();
+    *EPOCH.get_or_init(tokio::time::Instant::now)
+}
+
+/// The first multiple of `period` since [`epoch`], shifted by `lane` / [`LANES`]
+/// of a period, at or after `now` (`now` itself if the clock reads
+/// earlier than that, as a test's paused clock may).
+fn on_grid(now: tokio::time::Instant, period: Duration, lane: u64) -> tokio::time::Instant {
+    let epoch = epoch() + period.mul_f64(lane as f64 / LANES as f64);
+    let (Some(since), Ok(step)) = (
+        now.checked_duration_since(epoch),
+        u64::try_from(period.as_nanos()),
+    ) else {
+        return now;
+    };
+    if step == 0 {
+        return now;
+    }
+    let since = u64::try_from(since.as_nanos()).unwrap_or(u64::MAX);
+    let ticks = since.div_ceil(step);
+    epoch + Duration::from_nanos(ticks.saturating_mul(step))
 }
 
 fn unix_ms() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_millis() as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clients_at_one_rate_tick_on_one_grid() {
+        let period = Duration::from_millis(10);
+        let e = epoch();
+        let ms = |n| e + Duration::from_millis(n);
+        // Subscribed at different moments of one period: the same next tick.
+        assert_eq!(on_grid(ms(21), period, 0), ms(30));
+        assert_eq!(on_grid(ms(29), period, 0), ms(30));
+        assert_eq!(on_grid(ms(30), period, 0), ms(30));
+        // A rate that does not divide a second still lands on its multiples.
+        let third = Duration::from_nanos(3_333_333);
+        assert_eq!(on_grid(ms(5), third, 0), e + third * 2);
+        // Another lane: the same grid a quarter period later.
+        assert_eq!(
+            on_grid(ms(21), period, 1),
+            ms(22) + Duration::from_micros(500)
+        );
+        assert_eq!(
+            on_grid(ms(23), period, 1),
+            ms(32) + Duration::from_micros(500)
+        );
+    }
+
+    #[test]
+    fn a_clock_before_the_epoch_ticks_from_now() {
+        let e = epoch();
+        let Some(before) = e.checked_sub(Duration::from_millis(5)) else {
+            return;
+        };
+        assert_eq!(on_grid(before, Duration::from_millis(10), 0), before);
+    }
 }
