@@ -121,6 +121,25 @@ impl World {
             .await;
     }
 
+    /// The device as the simulator and the daemon see it, for a failure.
+    fn both_views(&self, id: u8) -> String {
+        let d = self.device(id);
+        let snap = self.b.handle.snapshot();
+        let ours = snap.devices.get(&id);
+        format!(
+            "simulator: fsm {} mode {} aligned {} angle {:.2}° target {:.2}°; daemon: mode {:?} target {:?} reason {:?} resets {}",
+            d.fsm,
+            d.mode,
+            d.aligned,
+            d.angle_deg,
+            d.target_deg,
+            ours.and_then(|s| s.mode),
+            ours.and_then(|s| s.target_sent),
+            ours.and_then(|s| s.disabled_reason),
+            ours.map_or(0, |s| s.resets),
+        )
+    }
+
     fn check(&self) {
         for id in JOINTS {
             let d = self.device(id);
@@ -131,14 +150,14 @@ impl World {
             if d.mode == CtrlMode::Speed {
                 if !a.allows_speed(d.spd_ref) {
                     self.fail(format!(
-                        "joint {id} spins with a speed reference of {} (Q15); admitted since its enable (rpm): {:?}",
-                        d.spd_ref, a.speeds
+                        "joint {id} spins with a speed reference of {} (Q15); admitted since its enable (rpm): {:?}; {}",
+                        d.spd_ref, a.speeds, self.both_views(id)
                     ));
                 }
             } else if !a.allows_position(d.target_deg) {
                 self.fail(format!(
-                    "joint {id} holds a target of {:.2}° that nothing admitted since its enable asked; admitted: {:?}",
-                    d.target_deg, a.spans
+                    "joint {id} holds a target of {:.2}° that nothing admitted since its enable asked; admitted: {:?}; {}",
+                    d.target_deg, a.spans, self.both_views(id)
                 ));
             }
         }

@@ -151,7 +151,9 @@ fn position_broadcast(
             None => match view(id) {
                 None => 0,
                 Some(info) if !info.target_known => return None,
-                Some(info) if info.speed_mode => info.measured.unwrap_or(0),
+                // Where it is, not 0: were it in position mode after all
+                // (a reset the daemon did not see), 0 would be a target.
+                Some(info) if info.speed_mode => info.measured?,
                 Some(info) => info.target.map(|t| t.pos_ref).or(info.measured)?,
             },
         };

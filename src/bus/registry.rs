@@ -45,6 +45,10 @@ pub(crate) struct Entry {
     /// and nothing of the daemon's disabled it since. A power-up state
     /// seen meanwhile is a reset.
     believed_enabled: bool,
+    /// The daemon disabled it and no INFO_01 has shown it stopped yet: a
+    /// reply showing it driving may have left the device before the
+    /// disable reached it, and is no reason to believe it enabled.
+    disable_unconfirmed: bool,
     /// The daemon has sent it an enable: a first INFO_01 showing it driving
     /// is that enable's doing, not a joint found enabled at start.
     enabled_by_daemon: bool,
@@ -66,6 +70,7 @@ impl Entry {
             measured: None,
             last_sent: None,
             believed_enabled: false,
+            disable_unconfirmed: false,
             enabled_by_daemon: false,
             control_updates: 0,
             telemetry_samples: 0,
@@ -77,9 +82,13 @@ impl Entry {
 /// What a reply changed that the owner must act on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub(crate) struct ReplyEffect {
-    /// The device reset (power cut, reboot): it lost its mode, its target
-    /// and its enable; whatever waited to go to it is stale.
+    /// The device reset (power cut, reboot): it lost its target and its
+    /// enable; whatever waited to go to it is stale.
     pub reset: bool,
+    /// ... and it announced its power-up, so it runs the power-up mode
+    /// (position). A reset only inferred from a dropped state may be a
+    /// disable the daemon did not see: the mode the daemon set stands.
+    pub powered_up: bool,
     /// The device just entered its fault state: its target is void.
     pub faulted: bool,
     /// The first INFO_01 heard from it shows it driving its motor: enabled
@@ -195,6 +204,7 @@ impl Registry {
             e.state.target_known = true;
             e.state.disabled_reason = Some(reason);
             e.believed_enabled = false;
+            e.disable_unconfirmed = true;
         }
     }
 
@@ -202,6 +212,7 @@ impl Registry {
     pub(crate) fn note_enabled(&mut self, id: u8) {
         if let Some(e) = self.entries.get_mut(&id) {
             e.enabled_by_daemon = true;
+            e.disable_unconfirmed = false;
             e.state.target_sent = None;
             e.state.target_known = true;
             e.state.disabled_reason = None;
@@ -349,6 +360,7 @@ fn on_info01(
     if let Some(seen) = reset_signal(entry, info, solicited) {
         note_reset(bus, entry, info, seen, now, events);
         effect.reset = true;
+        effect.powered_up = seen == ResetSignal::Announcement;
     }
     effect.faulted = note_fault(bus, entry, info, events);
     effect.now_running = before == Some(fsm::ALIGN) && info.fsm == fsm::RUN;
@@ -359,7 +371,9 @@ fn on_info01(
     if before.is_none() || !driving {
         entry.state.target_known = !driving;
     }
-    if driving {
+    if !driving {
+        entry.disable_unconfirmed = false;
+    } else if !entry.disable_unconfirmed {
         entry.believed_enabled = true;
         entry.state.disabled_reason = None;
     }
@@ -386,7 +400,8 @@ fn reset_signal(entry: &Entry, info: &Info01, solicited: bool) -> Option<ResetSi
     }
 }
 
-/// The device reset: disabled, position mode, no target; reported.
+/// The device reset: disabled, no target (position mode when it announced
+/// its power-up); reported.
 fn note_reset(
     bus: &str,
     entry: &mut Entry,
@@ -397,7 +412,9 @@ fn note_reset(
 ) {
     let fsm_before = entry.state.info01.map(|(i, _)| i.fsm);
     let s = &mut entry.state;
-    s.mode = None;
+    if seen == ResetSignal::Announcement {
+        s.mode = None;
+    }
     s.target_sent = None;
     s.target_known = true;
     s.disabled_reason = Some(DisabledReason::Reset);
@@ -542,6 +559,42 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    #[test]
+    fn a_dropped_state_is_a_reset_that_keeps_the_mode_the_daemon_set() {
+        let mut r = Registry::new("b", 3);
+        let mut ev = Vec::new();
+        let now = Instant::now();
+        r.expect(2);
+        r.note_enabled(2);
+        r.set_mode(2, CtrlMode::Speed);
+        r.on_reply(&info01(2, fsm::RUN, 0), now, true, &mut ev);
+        let fx = r.on_reply(&info01(2, fsm::READY, 0), now, true, &mut ev);
+        assert!(fx.reset && !fx.powered_up, "{fx:?}");
+        // Not known to be a power-up: the device may still run speed mode,
+        // and a position target read as a speed would spin it.
+        assert_eq!(r.get(2).unwrap().state.mode, Some(CtrlMode::Speed));
+    }
+
+    #[test]
+    fn a_status_from_before_the_daemons_disable_is_no_reason_for_a_reset() {
+        let mut r = Registry::new("b", 3);
+        let mut ev = Vec::new();
+        let now = Instant::now();
+        r.expect(2);
+        r.note_enabled(2);
+        r.on_reply(&info01(2, fsm::RUN, 0), now, true, &mut ev);
+        r.note_disabled(2, DisabledReason::Estop);
+        // A reply that left the device before the disable reached it ...
+        r.on_reply(&info01(2, fsm::RUN, 0), now, true, &mut ev);
+        // ... then the disable shows.
+        let fx = r.on_reply(&info01(2, fsm::READY, 0), now, true, &mut ev);
+        assert!(!fx.reset, "the daemon's own disable, not a reset");
+        assert_eq!(
+            r.get(2).unwrap().state.disabled_reason,
+            Some(DisabledReason::Estop)
+        );
     }
 
     #[test]

@@ -117,7 +117,15 @@ fn speed_setpoint(
     // A flipped joint turns the device the other way.
     let spd_ref = units::speed_dps_to_raw(cal.sign() * dps, firmware_of(dev))
         .map_err(|e| ControlError::from_unit(&spd_field, e))?;
-    let pos_ref = commanded_or_measured_raw(dev).unwrap_or(0);
+    // Not 0 when unknown: a device that reset unseen runs position mode,
+    // and takes this slot as its target.
+    let pos_ref = commanded_or_measured_raw(dev).ok_or_else(|| {
+        ControlError::conflict(
+            "no-position",
+            "Position unknown",
+            format!("{who} has not reported its angle yet"),
+        )
+    })?;
     Ok(Setpoint { pos_ref, spd_ref })
 }
 

@@ -106,7 +106,9 @@ pub(super) fn enable(ctx: &mut Ctx, targets: Targets) -> Result<(), BusError> {
 
 /// What an enable holds: a joint in speed mode keeps the speed reference it
 /// was last sent across a disable (the device holds it in RAM), so a zero
-/// goes to it before its enable and an enable in speed mode never spins; a
+/// goes to it before its enable and an enable in speed mode never spins
+/// (with its position slot where it was measured: a device that reset
+/// unseen runs position mode, and reads that slot as its target); a
 /// joint that already drives its motor ignores the enable frame and would
 /// go on towards a target admitted before it, so it is told to hold where
 /// it was last measured.
@@ -116,14 +118,15 @@ fn hold_before_enable(ctx: &mut Ctx, ids: &[u8]) -> Result<(), BusError> {
         .iter()
         .filter_map(|&id| {
             let entry = reg.get(id)?;
+            let here = reg.slot_info(id).and_then(|s| s.measured);
             if entry.state.mode == Some(CtrlMode::Speed) {
-                return Some(Control::set_ref(id, 0, 0));
+                return Some(Control::set_ref(id, here.unwrap_or(0), 0));
             }
             let driving = entry
                 .state
                 .info01
                 .is_some_and(|(info, _)| drives_motor(info.fsm));
-            let here = reg.slot_info(id)?.measured?;
+            let here = here?;
             driving.then(|| Control::set_ref(id, here, hold_speed_limit()))
         })
         .map(Command::Control)

@@ -367,8 +367,10 @@ impl Ctx {
         let store = &self.shared.setpoints;
         if effect.reset {
             store.revoke(Some(&[id]), Revoked::Reset);
-            // A power-up runs position mode (SPEC §4.1: the mode is not saved).
-            store.authority().mode_set(id, None);
+            if effect.powered_up {
+                // A power-up runs position mode (SPEC §4.1: the mode is not saved).
+                store.authority().mode_set(id, None);
+            }
         } else if effect.faulted {
             store.revoke(Some(&[id]), Revoked::Fault);
         }
