@@ -42,7 +42,7 @@ pub(crate) const CLOSED_POSE: &str = "closed";
 const END_WAIT: Duration = Duration::from_secs(20);
 
 /// One finger of the hand, by its joint name, and where it closes to.
-#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[derive(Debug, Clone, PartialEq, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct GraspJoint {
     /// The joint's name in the hand.
@@ -55,7 +55,7 @@ pub(crate) struct GraspJoint {
 }
 
 /// How to grasp.
-#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[derive(Debug, Clone, PartialEq, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 #[schema(example = json!({"speed_dps": 30.0, "hold_current_a": 0.2}))]
 pub(crate) struct GraspRequest {
@@ -76,7 +76,7 @@ pub(crate) struct GraspRequest {
 }
 
 /// How to let go.
-#[derive(Debug, Clone, Default, Deserialize, ToSchema)]
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 #[schema(example = json!({"open_deg": 20.0}))]
 pub(crate) struct ReleaseRequest {
