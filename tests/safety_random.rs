@@ -1,7 +1,8 @@
 //! The randomized safety test: many random interleavings of enable, disable,
 //! e-stop, mode change, target, a WebSocket setpoint stream ending in its
-//! watchdog, move, pose go, homing, grasp (closing on a simulated object or
-//! on nothing, released, stopped or left holding), a simulated power cycle
+//! watchdog, move, pose go, homing, grasp (started over REST or the
+//! WebSocket, closing on a simulated object or on nothing, released,
+//! stopped or left holding), a simulated power cycle
 //! and e-stop races, on the
 //! simulator through the daemon's own API. After every step the invariant
 //! is checked on the simulated devices themselves:
@@ -436,25 +437,23 @@ impl World {
                 nm_per_deg: 0.05,
             });
         }
-        let r = self
-            .b
-            .server
-            .post(
-                "/api/v1/hands/h/grasp",
-                json!({"speed_dps": 60.0, "hold_current_a": 0.2, "joints": [
-                    {"joint": "a", "close_to_deg": close_to[0]},
-                    {"joint": "b", "close_to_deg": close_to[1]}]}),
-            )
-            .await;
-        self.log.push(format!("grasp {close_to:?}: {}", r.status));
-        if r.status.as_u16() == 202 {
+        let body = json!({"speed_dps": 60.0, "hold_current_a": 0.2, "joints": [
+            {"joint": "a", "close_to_deg": close_to[0]},
+            {"joint": "b", "close_to_deg": close_to[1]}]});
+        let started = if self.rng.below(2) == 0 {
+            self.grasp_over_ws(body, close_to.clone()).await
+        } else {
+            let r = self.b.server.post("/api/v1/hands/h/grasp", body).await;
+            self.log.push(format!("grasp {close_to:?}: {}", r.status));
+            (r.status.as_u16() == 202).then(|| r.body["id"].as_u64().expect("a grasp id"))
+        };
+        if let Some(id) = started {
             for (k, id) in [1u8, 2].into_iter().enumerate() {
                 let (target, angle) = from[k];
                 let a = &mut self.admitted[usize::from(id)];
                 a.span(target.min(angle), close_to[k]);
                 a.span(target.max(angle), close_to[k]);
             }
-            let id = r.body["id"].as_u64().expect("a grasp id");
             match self.rng.below(3) {
                 0 => {
                     self.b
@@ -474,6 +473,43 @@ impl World {
             }
         }
         self.b.sim.inject(Fault::RemoveObject { dev_id: 1 });
+    }
+
+    /// The same grasp started over the WebSocket (`grasp`, answered
+    /// `grasp_started` or `error`); the connection closes, the grasp goes on.
+    async fn grasp_over_ws(&mut self, mut body: Value, close_to: Vec<f64>) -> Option<u64> {
+        let url = format!(
+            "{}/api/v1/ws",
+            self.b.server.base.replace("http://", "ws://")
+        );
+        let (mut ws, _) = tokio_tungstenite::connect_async(url)
+            .await
+            .expect("ws connect");
+        body["type"] = json!("grasp");
+        body["seq"] = json!(1);
+        body["hand"] = json!("h");
+        ws.send(Message::text(body.to_string()))
+            .await
+            .expect("send");
+        let answer = tokio::time::timeout(WAIT, async {
+            while let Some(Ok(m)) = ws.next().await {
+                if let Message::Text(t) = m {
+                    let v: Value = serde_json::from_str(t.as_str()).ok()?;
+                    if v["ref_seq"] == 1 {
+                        return Some(v);
+                    }
+                }
+            }
+            None
+        })
+        .await
+        .ok()
+        .flatten()
+        .expect("an answer to the WebSocket grasp");
+        self.log
+            .push(format!("ws grasp {close_to:?}: {}", answer["type"]));
+        (answer["type"] == "grasp_started")
+            .then(|| answer["grasp"]["id"].as_u64().expect("a grasp id"))
     }
 
     async fn power_cycle(&mut self, id: u8) {

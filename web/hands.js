@@ -1,10 +1,12 @@
 // The configured hands (`[[hand]]`, docs/motion.md): each with its joints,
 // its saved poses (Go moves the hand there through the daemon's path
 // generator, × deletes one) and Save current; the move a pose started is
-// followed with a Stop. Hidden when no hand is configured.
+// followed with a Stop; and its grasp controls (grasp.js). Hidden when no
+// hand is configured.
 
 import { $, api, act, say, el } from "./api.js";
 import { MoveTracker } from "./moves.js";
+import { graspRow } from "./grasp.js";
 
 const trackers = new Map();     // hand name -> MoveTracker of its pose moves
 
@@ -31,7 +33,7 @@ function handView(h) {
   const poses = el("div", { className: "row" });
   if (!h.poses.length) poses.append(el("span", { className: "hint", textContent: "no saved poses" }));
   for (const name of h.poses) poses.append(poseChip(h.name, name));
-  card.append(poses, saveRow(h.name), moveRow(h.name));
+  card.append(poses, saveRow(h.name), moveRow(h.name), graspRow(h.name));
   return card;
 }
 

@@ -1,13 +1,14 @@
 //! One finger of a grasp, as its own task: its current limit reduced to
 //! the hold current (written and verified before any finger of the job
-//! moves: [`prepare`]), then ([`run`]) position mode towards its closing
+//! moves: [`super::grasp_limit`]), then ([`run`]) position mode towards its closing
 //! limit at the closing speed until the samples say contact or no contact
 //! ([`super::grasp_detect`]), holding with the reduced limit, watching for
 //! a lost object, until the job says release or stop, or something ends
 //! it (e-stop, disable, reset, mode change, fault, offline, another
-//! command taking the joint). However it ends, the previous limit is
-//! written back and read back; a task unwinding from a panic still writes
-//! it (from a spawned task) as it goes.
+//! command taking the joint; what it watches: [`super::grasp_watch`]).
+//! However it ends, the previous limit is written back and read back; a
+//! task unwinding from a panic still writes it (from a spawned task) as it
+//! goes.
 //!
 //! Every target it sends is admitted under the epoch the grasp started
 //! with: once anything advances the joint's epoch, the bus owner drops
@@ -15,30 +16,26 @@
 
 use std::time::{Duration, Instant};
 
-use tokio::sync::{broadcast, watch};
+use tokio::sync::watch;
 
-use crate::bus::authority::{Epoch, Revoked};
-use crate::bus::handle::{BusEvent, DeviceState};
+use crate::bus::authority::Epoch;
+use crate::bus::handle::BusEvent;
 use crate::bus::{BusHandle, Setpoint, Source};
-use crate::control::device::{firmware_of, is_enabled, measured_angle_raw};
+use crate::control::device::{firmware_of, measured_angle_raw};
 use crate::control::grasp_book::{Command, FingerGrasp, FingerState, Slot};
 use crate::control::grasp_detect::{Closing, Holding, Sample, Settings, Verdict};
+use crate::control::grasp_limit::{restore, Prepared, RestoreOnDrop};
+use crate::control::grasp_watch::{fresh_sample, taken_over, unfit, Watch};
 use crate::control::homing_book::lock;
 use crate::hands::Calibration;
-use crate::protocol::status::{active_fault, fault_name, fsm};
 use crate::protocol::units;
-use crate::protocol::{ConfigParam, InfoBlock, ReplyBody};
 
-/// Tries at writing the previous current limit back.
-const RESTORE_TRIES: usize = 3;
 /// The longest a finger waits between looks when telemetry is quiet.
 const LOOK: Duration = Duration::from_millis(20);
 /// Opened: this close to the goal, degrees.
 const OPEN_TOLERANCE_DEG: f64 = 1.0;
 /// Opening may take its travel at the speed plus this much.
 const OPEN_SLACK: Duration = Duration::from_secs(2);
-/// Weight of the newest sample in the reported q current.
-const CURRENT_SMOOTHING: f64 = 0.3;
 
 /// One finger as the job started it (device degrees).
 #[derive(Debug, Clone)]
@@ -64,146 +61,8 @@ pub(crate) struct Plan {
     pub called: Instant,
 }
 
-/// How a finger's limit stands after [`prepare`].
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Prepared {
-    /// The limit before, raw (known once INFO_04 was read).
-    pub previous: Option<u16>,
-    /// A write of the reduced limit was tried: the previous one must go back.
-    pub written: bool,
-}
-
 pub(crate) fn set(slot: &Slot, edit: impl FnOnce(&mut FingerGrasp)) {
     edit(&mut lock(slot));
-}
-
-/// Reads the limit, checks the hold current fits the joint, writes the
-/// hold current as the limit (confirmed by the bus: RES or read-back).
-pub(crate) async fn prepare(f: &Finger, plan: &Plan) -> Result<Prepared, (Prepared, String)> {
-    let mut p = Prepared {
-        previous: None,
-        written: false,
-    };
-    let previous = match read_limit(&f.bus, f.id).await {
-        Ok(raw) => raw,
-        Err(why) => return Err((p, why)),
-    };
-    p.previous = Some(previous);
-    set(&f.slot, |s| {
-        s.previous_current_limit_a = Some(units::current_limit_a(previous));
-    });
-    let limit = match units::current_limit_to_raw(plan.hold_a) {
-        Ok(raw) if raw < previous => raw,
-        _ => {
-            let why = format!(
-                "hold_current_a = {} A is not below the joint's own limit ({:.3} A): a grasp holds \
-                 with a reduced limit",
-                plan.hold_a,
-                units::current_limit_a(previous)
-            );
-            return Err((p, why));
-        }
-    };
-    if let Err(why) = check_protection(f, plan.hold_a).await {
-        return Err((p, why));
-    }
-    p.written = true;
-    match f.bus.write_config(f.id, ConfigParam::MaxCur(limit)).await {
-        Ok(w) if w.value == limit => Ok(p),
-        Ok(w) => Err((
-            p,
-            format!("the limit read back as raw {} not {limit}", w.value),
-        )),
-        Err(e) => Err((p, format!("could not reduce the current limit: {e}"))),
-    }
-}
-
-/// A hold above the joint's protection level would be cut to the
-/// protection's cap after its delay: refused, naming both.
-async fn check_protection(f: &Finger, hold_a: f64) -> Result<(), String> {
-    let reply = f
-        .bus
-        .read_info(f.id, InfoBlock::Info05)
-        .await
-        .map_err(|e| format!("could not read the current protection (INFO_05): {e}"))?;
-    let ReplyBody::Info05(info) = reply.body() else {
-        return Err("the joint answered INFO_05 with another block".into());
-    };
-    let lv1 = units::current_limit_a(info.protect_cur_lv1);
-    if hold_a >= lv1 {
-        return Err(format!(
-            "hold_current_a = {hold_a} A reaches the joint's current protection level \
-             ({lv1:.3} A, PROTECT_CUR_LV1): the protection would cut the hold after its delay"
-        ));
-    }
-    Ok(())
-}
-
-async fn read_limit(bus: &BusHandle, id: u8) -> Result<u16, String> {
-    let reply = bus
-        .read_info(id, InfoBlock::Info04)
-        .await
-        .map_err(|e| format!("could not read the current limit (INFO_04): {e}"))?;
-    match reply.body() {
-        ReplyBody::Info04(i) => Ok(i.max_current),
-        _ => Err("the joint answered INFO_04 with another block".into()),
-    }
-}
-
-/// Writes the previous limit back and reads it back: true only when the
-/// read-back shows it. Nothing written before: nothing to restore.
-pub(crate) async fn restore(bus: &BusHandle, id: u8, p: Prepared) -> bool {
-    let Some(previous) = p.previous else {
-        return !p.written;
-    };
-    if !p.written {
-        return true;
-    }
-    for attempt in 1..=RESTORE_TRIES {
-        if let Err(e) = bus.write_config(id, ConfigParam::MaxCur(previous)).await {
-            tracing::warn!(bus = bus.name(), id, attempt, error = %e,
-                "grasp: writing the previous current limit back failed");
-        }
-        match read_limit(bus, id).await {
-            Ok(raw) if raw == previous => return true,
-            Ok(raw) => tracing::warn!(
-                bus = bus.name(),
-                id,
-                attempt,
-                read_back = raw,
-                previous,
-                "grasp: the current limit read back is not the previous one"
-            ),
-            Err(why) => tracing::warn!(bus = bus.name(), id, attempt, "grasp: {why}"),
-        }
-    }
-    false
-}
-
-/// Writes the previous limit back from a task of its own if the finger's
-/// task leaves without having done it (a panic unwinding).
-struct RestoreOnDrop {
-    bus: BusHandle,
-    id: u8,
-    prepared: Prepared,
-    armed: bool,
-}
-
-impl Drop for RestoreOnDrop {
-    fn drop(&mut self) {
-        if !self.armed {
-            return;
-        }
-        tracing::error!(
-            bus = self.bus.name(),
-            id = self.id,
-            "grasp ended without restoring the current limit: restoring it"
-        );
-        let (bus, id, p) = (self.bus.clone(), self.id, self.prepared);
-        if let Ok(rt) = tokio::runtime::Handle::try_current() {
-            rt.spawn(async move { restore(&bus, id, p).await });
-        }
-    }
 }
 
 /// How a finger's part ended.
@@ -250,37 +109,8 @@ enum Phase {
     Waiting,
 }
 
-/// The finger's watch over its joint.
-struct Watch {
-    snaps: watch::Receiver<std::sync::Arc<crate::bus::BusSnapshot>>,
-    events: broadcast::Receiver<BusEvent>,
-    last_sample: Option<Instant>,
-    /// The finger's latest target, and whether the wire has carried it
-    /// (from then on another target there means another command).
-    sent: Setpoint,
-    seen_sent: bool,
-    current: Option<f64>,
-}
-
-impl Watch {
-    fn sent(&mut self, sp: Setpoint) {
-        self.sent = sp;
-        self.seen_sent = false;
-    }
-}
-
 async fn drive(f: &Finger, plan: &Plan, mut cmd: watch::Receiver<Command>) -> End {
-    let mut w = Watch {
-        snaps: f.bus.watch(),
-        events: f.bus.events(),
-        last_sample: None,
-        sent: Setpoint {
-            pos_ref: 0,
-            spd_ref: 0,
-        },
-        seen_sent: false,
-        current: None,
-    };
+    let mut w = Watch::new(f);
     let dev = f.bus.snapshot().devices.get(&f.id).cloned();
     let Some(start_deg) = dev
         .as_ref()
@@ -400,29 +230,6 @@ fn step(f: &Finger, plan: &Plan, phase: Phase, x: Sample, s: Settings, w: &mut W
     }
 }
 
-/// A new INFO_02 of the joint since the last one, as a sample (and the
-/// smoothed current written to the finger's view).
-fn fresh_sample(dev: Option<&DeviceState>, w: &mut Watch, started: Instant) -> Option<Sample> {
-    let dev = dev?;
-    let (info, at) = dev.info02.as_ref().map(|(i, at)| (*i, *at))?;
-    if at < started || w.last_sample.is_some_and(|last| at <= last) {
-        return None;
-    }
-    w.last_sample = Some(at);
-    let fw = firmware_of(dev);
-    let current = units::current_a(info.q_cur);
-    let smoothed = w.current.map_or(current.abs(), |c| {
-        c + CURRENT_SMOOTHING * (current.abs() - c)
-    });
-    w.current = Some(smoothed);
-    Some(Sample {
-        t: at.duration_since(started),
-        deg: units::angle_deg(info.angle),
-        speed_dps: units::output_deg_per_s(info.speed_rpm(fw)),
-        current_a: current,
-    })
-}
-
 /// Sends a position target at a speed limit, under the grasp's epoch.
 fn send(
     f: &Finger,
@@ -515,52 +322,4 @@ async fn open(
             _ = tokio::time::sleep(LOOK) => {}
         }
     }
-}
-
-/// Another command replaced the grasp's target on the wire.
-fn taken_over(dev: Option<&DeviceState>, w: &mut Watch) -> Option<String> {
-    let on_wire = dev?.target_sent?;
-    if on_wire == w.sent {
-        w.seen_sent = true;
-        return None;
-    }
-    w.seen_sent
-        .then(|| "another command took the joint".to_string())
-}
-
-/// An e-stop, the epoch moved on, offline, faulted or disabled.
-fn unfit(f: &Finger, w: &mut Watch) -> Result<(), String> {
-    loop {
-        match w.events.try_recv() {
-            Ok(BusEvent::Estop { bus }) if bus == f.bus.name() => return Err("e-stop".into()),
-            Ok(_) | Err(broadcast::error::TryRecvError::Lagged(_)) => continue,
-            Err(_) => break,
-        }
-    }
-    if !f.bus.authority().admits(f.id, f.epoch) {
-        return Err(match f.bus.authority().last_revoked(f.id) {
-            Some(Revoked::Estopped) => "e-stop".to_string(),
-            Some(why) => format!("the joint's commands were revoked ({})", why.name()),
-            None => "the joint is no longer enabled".to_string(),
-        });
-    }
-    let snap = f.bus.snapshot();
-    let Some(dev) = snap.devices.get(&f.id).filter(|d| d.online) else {
-        return Err("the joint went offline".into());
-    };
-    if let Some((info, _)) = &dev.info01 {
-        if info.fsm == fsm::FAULT || active_fault(info.err_code) != 0 {
-            return Err(format!(
-                "the joint faulted ({})",
-                fault_name(active_fault(info.err_code))
-            ));
-        }
-        if !is_enabled(info) {
-            return Err(format!(
-                "the joint was disabled ({})",
-                dev.disabled_reason.map_or("disabled", |r| r.name())
-            ));
-        }
-    }
-    Ok(())
 }

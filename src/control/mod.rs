@@ -24,8 +24,9 @@
 //! - `move_book`, [`moves`]: moves checked whole, started, stopped; the book of them.
 //! - `poses`: going to a hand's saved pose (a move of its joints).
 //! - `homing_book`, `homing`: homing jobs, one per joint, bounded.
-//! - `grasp_detect`, `grasp_book`, `grasp_finger`, `grasp`: closing a
-//!   hand's fingers on an object and holding it with a set current.
+//! - `grasp_detect`, `grasp_book`, `grasp_admit`, `grasp_limit`,
+//!   `grasp_watch`, `grasp_finger`, `grasp_open`, `grasp`: closing a hand's
+//!   fingers on an object and holding it with a set current.
 //! - `recording_book`, `recordings`: recordings' jobs: started, listed, stopped, their files.
 //! - `ros2_stats`: the ROS 2 bridge's counters (read by `/metrics` and `/api/v1/ros2`).
 //! - this file: [`Control`], the state the core works on.
@@ -36,9 +37,13 @@ pub mod device;
 pub mod error;
 pub mod estop;
 pub(crate) mod grasp;
+pub(crate) mod grasp_admit;
 pub(crate) mod grasp_book;
 pub(crate) mod grasp_detect;
 pub(crate) mod grasp_finger;
+pub(crate) mod grasp_limit;
+pub(crate) mod grasp_open;
+pub(crate) mod grasp_watch;
 pub(crate) mod homing;
 pub(crate) mod homing_book;
 pub mod joints;

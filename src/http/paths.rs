@@ -14,13 +14,14 @@ pub(crate) const DOCS_PATH: &str = "/docs";
 pub(crate) const DASHBOARD_PAGE: &str = "/";
 pub(crate) const DASHBOARD_INDEX: &str = "/index.html";
 pub(crate) const DASHBOARD_STYLE: &str = "/style.css";
-pub(crate) const DASHBOARD_SCRIPTS: [&str; 8] = [
+pub(crate) const DASHBOARD_SCRIPTS: [&str; 9] = [
     "/app.js",
     "/api.js",
     "/moves.js",
     "/homing.js",
     "/calibration.js",
     "/hands.js",
+    "/grasp.js",
     "/recordings.js",
     "/ros2.js",
 ];

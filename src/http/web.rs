@@ -33,7 +33,7 @@ macro_rules! script {
 }
 
 /// (URL path, file name, content type, embedded bytes).
-const ASSETS: [Asset; 11] = [
+const ASSETS: [Asset; 12] = [
     (
         DASHBOARD_PAGE,
         "index.html",
@@ -58,6 +58,7 @@ const ASSETS: [Asset; 11] = [
     script!("homing.js"),
     script!("calibration.js"),
     script!("hands.js"),
+    script!("grasp.js"),
     script!("recordings.js"),
     script!("ros2.js"),
 ];

@@ -14,37 +14,28 @@ import time
 import urllib.error
 import urllib.parse
 import urllib.request
-from typing import (Any, AsyncIterator, Callable, Dict, Iterable, List, Mapping, Optional,
-                    Sequence, TypeVar, cast)
+from typing import (Any, AsyncIterator, Dict, Iterable, List, Mapping, Optional, Sequence,
+                    cast)
 
 from . import schema
+from ._ops import operation
 from .errors import NotConnected, Problem, Timeout, error_for
+from .grasps import GraspCalls
 from .models import ActionDone, Bus, Device, TargetAck
 from .moves import Homing, Move
 from .stream import SetpointStream, Telemetry, telemetry
 
-F = TypeVar("F", bound=Callable[..., Any])
-
 DEFAULT_URL = "http://127.0.0.1:8080"
-
-
-def operation(*ids: str) -> Callable[[F], F]:
-    """Marks a method as the client's call of these OpenAPI operations."""
-
-    def mark(f: F) -> F:
-        setattr(f, "operations", ids)
-        return f
-
-    return mark
 
 
 def _drop_none(**fields: Any) -> Dict[str, Any]:
     return {k: v for k, v in fields.items() if v is not None}
 
 
-class Jointd:
+class Jointd(GraspCalls):
     """A daemon at `url` (default: `$JOINTD_URL`, else http://127.0.0.1:8080),
-    with the bearer `token` (default: `$JOINTD_TOKEN`)."""
+    with the bearer `token` (default: `$JOINTD_TOKEN`). Grasping:
+    `jointd_client.grasps`."""
 
     def __init__(self, url: Optional[str] = None, token: Optional[str] = None,
                  timeout: float = 10.0):
@@ -54,7 +45,8 @@ class Jointd:
 
     # ------------------------------------------------------------------ REST
 
-    def _raw(self, method: str, path: str, body: Any = None) -> bytes:
+    def _raw(self, method: str, path: str, body: Any = None,
+             timeout: Optional[float] = None) -> bytes:
         data = None if body is None else json.dumps(body).encode()
         req = urllib.request.Request(self.url + path, method=method, data=data)
         if data is not None:
@@ -62,7 +54,8 @@ class Jointd:
         if self.token:
             req.add_header("Authorization", f"Bearer {self.token}")
         try:
-            with urllib.request.urlopen(req, timeout=self.timeout) as r:
+            wait = self.timeout if timeout is None else max(self.timeout, timeout)
+            with urllib.request.urlopen(req, timeout=wait) as r:
                 return cast(bytes, r.read())
         except urllib.error.HTTPError as e:
             text = e.read()
@@ -76,9 +69,11 @@ class Jointd:
             reason = getattr(e, "reason", e)
             raise NotConnected(self.url, str(reason)) from None
 
-    def request(self, method: str, path: str, body: Any = None) -> Any:
-        """One call; the decoded JSON answer, or a `JointdError`."""
-        text = self._raw(method, path, body)
+    def request(self, method: str, path: str, body: Any = None,
+                timeout: Optional[float] = None) -> Any:
+        """One call; the decoded JSON answer, or a `JointdError`. `timeout`:
+        how long it may take (s), if longer than the client's."""
+        text = self._raw(method, path, body, timeout)
         return json.loads(text) if text else None
 
     def _bus(self, bus: str) -> str:

@@ -1,5 +1,5 @@
 """Handles of jobs that run in the daemon: a `Move` (a move or a go to a
-pose) and a `Homing`. Each knows its last view, refreshes it on request,
+pose) and a `Homing` (and the base of `grasps.Grasp`). Each knows its last view, refreshes it on request,
 and waits for its end by polling (the daemon keeps a finished job's view).
 """
 
@@ -19,10 +19,18 @@ class JobCalls(Protocol):
 
     def get_homing(self, homing_id: int) -> schema.HomingView: ...
 
+    def get_grasp(self, grasp_id: int) -> schema.GraspView: ...
+
+    def release_grasp(self, grasp_id: int, pose: Optional[str] = None,
+                      open_deg: Optional[float] = None,
+                      speed_dps: Optional[float] = None) -> schema.GraspView: ...
+
+    def stop_grasp(self, grasp_id: int) -> schema.GraspView: ...
+
 POLL_S = 0.02
 
 
-J = TypeVar("J", schema.MoveView, schema.HomingView)
+J = TypeVar("J", schema.MoveView, schema.HomingView, schema.GraspView)
 
 
 class _Job(Generic[J]):

@@ -5,11 +5,17 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::bus::handle::BusEvent;
+use crate::control::grasp::{GraspRequest, ReleaseRequest};
+use crate::control::grasp_book::GraspView;
 use crate::control::moves::{MoveRequest, MoveView};
 use crate::control::teleop::{WatchdogEvent, WatchdogPolicy};
 
 /// Name and version of this protocol, sent in `welcome`.
 pub(crate) const PROTOCOL: &str = "jointd.ws.v1";
+
+/// The client message types, as errors list them.
+const TYPES: &str =
+    "subscribe, unsubscribe, setpoints, watchdog, ping, move, grasp, grasp_release, grasp_stop";
 
 /// A message from the client.
 #[derive(Debug, Clone, PartialEq)]
@@ -27,6 +33,23 @@ pub(crate) enum ClientMessage {
     Move {
         seq: Option<u64>,
         request: MoveRequest,
+    },
+    /// Start a grasp of `hand` (the body of `POST /api/v1/hands/{hand}/grasp`).
+    Grasp {
+        seq: Option<u64>,
+        hand: String,
+        request: GraspRequest,
+    },
+    /// Release grasp `id` (the body of `POST /api/v1/grasps/{id}/release`).
+    GraspRelease {
+        seq: Option<u64>,
+        id: u64,
+        request: ReleaseRequest,
+    },
+    /// Stop grasp `id`.
+    GraspStop {
+        seq: Option<u64>,
+        id: u64,
     },
 }
 
@@ -155,15 +178,11 @@ pub(crate) fn parse(text: &str) -> Result<ClientMessage, ParseError> {
         Some(Value::String(s)) => s,
         Some(other) => {
             return Err(bad(format!(
-            "`type` must be a string (subscribe, unsubscribe, setpoints, watchdog, ping, move), not {}",
-            json_kind(&other)
-        )))
+                "`type` must be a string ({TYPES}), not {}",
+                json_kind(&other)
+            )))
         }
-        None => {
-            return Err(bad(
-                "missing `type` (subscribe, unsubscribe, setpoints, watchdog, ping, move)".into(),
-            ))
-        }
+        None => return Err(bad(format!("missing `type` ({TYPES})"))),
     };
     let rest = Value::Object(std::mem::take(obj));
     let field_err = |e: serde_json::Error| bad(format!("`{kind}`: {e}"));
@@ -183,11 +202,8 @@ pub(crate) fn parse(text: &str) -> Result<ClientMessage, ParseError> {
             }
             serde_json::from_value(rest).map(|request| ClientMessage::Move { seq, request })
         }
-        other => {
-            return Err(bad(format!(
-                "unknown type `{other}` (subscribe, unsubscribe, setpoints, watchdog, ping, move)"
-            )))
-        }
+        "grasp" | "grasp_release" | "grasp_stop" => return super::grasp::parse(&kind, rest, seq),
+        other => return Err(bad(format!("unknown type `{other}` ({TYPES})"))),
     }
     .map_err(field_err)
 }
@@ -286,6 +302,26 @@ pub(crate) enum ServerMessage {
         ref_seq: Option<u64>,
         #[serde(rename = "move")]
         started: MoveView,
+    },
+    /// A `grasp` was accepted: the grasp as `GET /api/v1/grasps/{id}` shows it.
+    GraspStarted {
+        ref_seq: Option<u64>,
+        grasp: GraspView,
+    },
+    /// A `grasp_release` ended the grasp (or its bound passed): as it ended.
+    GraspReleased {
+        ref_seq: Option<u64>,
+        grasp: GraspView,
+    },
+    /// A `grasp_stop` ended the grasp: as it ended.
+    GraspStopped {
+        ref_seq: Option<u64>,
+        grasp: GraspView,
+    },
+    /// A grasp this connection started ended, however it ended (released,
+    /// stopped, an e-stop, a disable, ...): each finger's final state.
+    GraspDone {
+        grasp: GraspView,
     },
 }
 

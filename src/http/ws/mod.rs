@@ -8,8 +8,10 @@
 //!   ([`crate::control::watchdog`]) and its streams ([`crate::control::streams`]).
 //! - [`writer`]: one connection's writer: telemetry, events, acks; bounded.
 //! - [`setpoints`]: validate a batch whole, then store it.
+//! - [`grasp`]: start, release and stop grasps; tell the starter when one ended.
 //! - [`telemetry`]: snapshot → joint fields in physical units.
 
+pub(crate) mod grasp;
 pub(crate) mod messages;
 pub mod session;
 pub(crate) mod setpoints;

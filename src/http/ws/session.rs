@@ -11,6 +11,7 @@ use futures_util::{Sink, Stream, StreamExt};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
+use super::grasp::GraspTasks;
 use super::messages::{
     self, BusInfo, ClientMessage, ErrorCode, Field, Limits, ServerMessage, Subscribe,
     WatchdogRequest,
@@ -75,6 +76,7 @@ where
         acks: ack_tx,
         watchdog: Watchdog::default(),
         streams: Streams::default(),
+        grasps: GraspTasks::default(),
     };
     conn.reply(welcome(&state));
     loop {
@@ -143,6 +145,8 @@ struct Connection {
     acks: mpsc::Sender<PendingAck>,
     watchdog: Watchdog,
     streams: Streams,
+    /// Its grasp followers and the grasp releases and stops it waits on.
+    grasps: GraspTasks,
 }
 
 impl Connection {
@@ -189,6 +193,25 @@ impl Connection {
                         started,
                     }),
                     Err(e) => self.reject(seq, e.into()),
+                }
+            }
+            ClientMessage::Grasp { seq, hand, request } => {
+                let (state, out) = (self.state.clone(), self.out.clone());
+                if let Err(e) = self.grasps.start(&state, &out, seq, &hand, &request).await {
+                    self.reject(seq, e);
+                }
+            }
+            ClientMessage::GraspRelease { seq, id, request } => {
+                if let Err(e) = self
+                    .grasps
+                    .end(&self.state, &self.out, seq, id, Some(request))
+                {
+                    self.reject(seq, e);
+                }
+            }
+            ClientMessage::GraspStop { seq, id } => {
+                if let Err(e) = self.grasps.end(&self.state, &self.out, seq, id, None) {
+                    self.reject(seq, e);
                 }
             }
         }

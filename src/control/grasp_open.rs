@@ -1,0 +1,83 @@
+//! Where a release opens each finger still in the grasp to: the hand's
+//! pose, or an angle from where the finger is, or back to where it
+//! started; every goal checked against the finger's limits before any
+//! finger moves.
+
+use super::error::{ControlError, ControlResult};
+use super::grasp::ReleaseRequest;
+use super::grasp_admit::here_joint_deg;
+use super::grasp_book::{FingerGrasp, Job};
+use super::Control;
+
+/// Each finger's opening goal (device degrees), in job order; `None` for
+/// a finger no longer in the grasp.
+pub(super) fn open_goals(
+    state: &Control,
+    job: &Job,
+    req: &ReleaseRequest,
+) -> ControlResult<Vec<Option<f64>>> {
+    if req.pose.is_some() && req.open_deg.is_some() {
+        return Err(ControlError::invalid(
+            "pose",
+            "give `pose` or `open_deg`, not both",
+        ));
+    }
+    let pose = match &req.pose {
+        Some(name) => Some(
+            state
+                .hands()
+                .and_then(|s| s.pose(&job.hand, name))
+                .ok_or_else(|| {
+                    ControlError::not_found(
+                        "unknown-pose",
+                        format!("hand `{}` has no pose named `{name}`", job.hand),
+                    )
+                })?,
+        ),
+        None => None,
+    };
+    if let Some(d) = req.open_deg {
+        if !(d.is_finite() && d > 0.0 && d <= 180.0) {
+            return Err(ControlError::out_of_range(
+                "open_deg",
+                d,
+                (0.0, 180.0),
+                "deg",
+            ));
+        }
+    }
+    job.slots
+        .iter()
+        .map(|slot| {
+            let f = super::homing_book::lock(slot).clone();
+            if !f.state.live() {
+                return Ok(None);
+            }
+            open_goal(state, &f, pose.as_ref(), req.open_deg).map(Some)
+        })
+        .collect()
+}
+
+/// Where one finger opens to (device degrees), checked against its limits.
+fn open_goal(
+    state: &Control,
+    f: &FingerGrasp,
+    pose: Option<&crate::hands::Pose>,
+    open_deg: Option<f64>,
+) -> ControlResult<f64> {
+    let cal = state.calibration(&f.bus, f.id);
+    let soft = state.limits(&f.bus, f.id);
+    let here = here_joint_deg(state, &f.bus, f.id, &cal)?;
+    let field = format!("fingers.{}", f.joint);
+    let goal = match (pose, open_deg) {
+        (Some(p), _) => *p.get(&f.joint).ok_or_else(|| {
+            ControlError::invalid(
+                "pose",
+                format!("the pose has no angle for joint `{}`", f.joint),
+            )
+        })?,
+        (None, Some(d)) => here - (f.close_to_deg - here).signum() * d,
+        (None, None) => f.start_deg,
+    };
+    soft.check_joint_position(&cal, &field, goal, &format!("joint `{}`", f.joint))
+}
