@@ -34,6 +34,8 @@
 #[cfg_attr(not(feature = "ros2"), allow(dead_code))]
 pub(crate) mod commands;
 pub mod config;
+#[cfg_attr(not(feature = "ros2"), allow(dead_code))]
+pub(crate) mod gripper;
 pub mod keys;
 pub mod link;
 #[cfg_attr(not(feature = "ros2"), allow(dead_code))]
