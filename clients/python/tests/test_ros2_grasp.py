@@ -220,3 +220,22 @@ def test_bad_gripper_commands_are_refused_said_and_counted(hand):
     refused(5, b"\x00\x01\x00\x00\x00", "not a control_msgs/msg/GripperCommand")
     assert call(api, "GET", "/ros2")["commands_applied"] == 0
     assert grasp(api, 1) is None, "no grasp started"
+
+
+def test_a_grasp_started_over_rest_is_followed_and_stopped_over_ros2(hand):
+    d, client = hand
+    api = d.url + "/api/v1"
+    enable(api, client)
+    states = Follow(client, "/right/grasp_state", DIAGNOSTICS)
+    ok, message, _ = call_service(client, "/right/grasp_stop", TRIGGER, b"\x00", 1)
+    assert not ok and "no grasp running on hand `right`" in message, message
+    call(api, "POST", "/hands/right/grasp", {"speed_dps": 30.0, "hold_current_a": HOLD_A,
+                                             "joints": [{"joint": "thumb", "close_to_deg": 25.0}]})
+    job, f = wait_for("the REST grasp on grasp_state, holding", latest_state(
+        states, lambda job, f: f.get("thumb", {}).get("message") == "holding"))
+    assert job["grasp_id"] == "1" and list(f) == ["thumb"], (job, f)
+    ok, message, _ = call_service(client, "/right/grasp_stop", TRIGGER, b"\x00", 2)
+    assert ok and message == "grasp 1 stopped: thumb stopped (limit restored)", message
+    assert grasp(api, 1)["fingers"][0]["state"] == "stopped"
+    wait_for("the stop on grasp_state", latest_state(
+        states, lambda job, f: job["state"] == "done" and f["thumb"]["message"] == "stopped"))
