@@ -159,7 +159,10 @@ pub(super) async fn declare(
         ));
         let mut services = vec![Service::Enable, Service::Estop];
         if let Scope::Hand { name: hand, joints } = &scope {
-            declare_grasp(&mut on, state, cfg, stats, &rosout, &ns, hand, joints, &closed).await?;
+            declare_grasp(
+                &mut on, state, cfg, stats, &rosout, &ns, hand, joints, &closed,
+            )
+            .await?;
             services.extend([Service::GraspRelease, Service::GraspStop]);
         }
         for service in services {

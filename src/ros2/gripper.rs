@@ -43,7 +43,10 @@ pub(crate) fn grasp_request(
     if !cmd.max_effort.is_finite() {
         return Err(Refused::new(
             "not-finite",
-            format!("max_effort = {}: give the hold current in A", cmd.max_effort),
+            format!(
+                "max_effort = {}: give the hold current in A",
+                cmd.max_effort
+            ),
         ));
     }
     let joints = if cmd.position.is_nan() {
@@ -162,7 +165,8 @@ pub(crate) fn statuses(view: &GraspView) -> Vec<DiagnosticStatus> {
                 ("contact_rad".into(), rad(f.contact_deg)),
                 (
                     "q_current_a".into(),
-                    f.q_current_a.map_or_else(String::new, |q| format!("{q:.3}")),
+                    f.q_current_a
+                        .map_or_else(String::new, |q| format!("{q:.3}")),
                 ),
                 ("close_to_rad".into(), rad(Some(f.close_to_deg))),
                 ("start_rad".into(), rad(Some(f.start_deg))),
@@ -266,13 +270,17 @@ mod tests {
     #[test]
     fn a_limit_behind_a_finger_or_a_number_that_is_none_is_refused() {
         // 0.5 rad = 28.65 deg: a finger at 30 deg would open.
-        let err = grasp_request(&cmd(0.5, 0.2), &fingers(&[Some(0.0), Some(30.0)]), 30.0)
-            .unwrap_err();
+        let err =
+            grasp_request(&cmd(0.5, 0.2), &fingers(&[Some(0.0), Some(30.0)]), 30.0).unwrap_err();
         assert_eq!(err.cause, "would-open");
         assert!(err.why.contains("joint `f1`"), "{}", err.why);
         // Within the reading's noise of the limit: closes to it.
         assert!(grasp_request(&cmd(0.5, 0.2), &fingers(&[Some(28.9)]), 30.0).is_ok());
-        for bad in [cmd(0.5, f64::NAN), cmd(f64::INFINITY, 0.2), cmd(0.5, f64::NEG_INFINITY)] {
+        for bad in [
+            cmd(0.5, f64::NAN),
+            cmd(f64::INFINITY, 0.2),
+            cmd(0.5, f64::NEG_INFINITY),
+        ] {
             assert_eq!(
                 grasp_request(&bad, &fingers(&[Some(0.0)]), 30.0)
                     .unwrap_err()

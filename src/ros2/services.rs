@@ -200,7 +200,10 @@ async fn estop(state: &Control, scope: &Scope) -> (bool, String) {
 /// Releases (or stops) the hand's running grasp; answers once it ended.
 async fn end_grasp(state: &Control, scope: &Scope, release: bool) -> (bool, String) {
     let Scope::Hand { name, joints } = scope else {
-        return (false, "grasps are per hand (namespace_by = \"hand\")".into());
+        return (
+            false,
+            "grasps are per hand (namespace_by = \"hand\")".into(),
+        );
     };
     let Some(id) = super::grasp_stream::running(state, joints) else {
         return (false, format!("no grasp running on hand `{name}`"));

@@ -148,8 +148,9 @@ def test_a_gripper_command_grasps_and_the_services_end_it(hand):
     assert f["thumb"]["level"] == 0 and f["index"]["level"] == 1, f
     assert f["index"]["contact"] == "false" and f["index"]["contact_rad"] == "", f["index"]
     assert abs(float(f["index"]["close_to_rad"]) - math.radians(25.0)) < 1e-3, f["index"]
+    near_hold = lambda q: q != "" and abs(float(q) - HOLD_A) <= 0.1 * HOLD_A  # noqa: E731
     wait_for("the thumb holding with the hold current", latest_state(
-        states, lambda job, f: f["thumb"]["q_current_a"] and abs(float(f["thumb"]["q_current_a"]) - HOLD_A) <= 0.1 * HOLD_A))
+        states, lambda job, f: near_hold(f["thumb"]["q_current_a"])))
 
     view = grasp(api, 1)
     assert view["hand"] == "right" and view["state"] == "running", view
