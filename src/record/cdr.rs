@@ -78,6 +78,13 @@ impl Cdr {
         self.buf.push(0);
     }
 
+    /// Only test senders write a lone double (no message jointd sends has one).
+    #[cfg(test)]
+    pub(crate) fn f64(&mut self, v: f64) {
+        self.align(8);
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+
     pub(crate) fn f64s(&mut self, v: &[f64]) {
         self.u32(len_u32(v.len()));
         if !v.is_empty() {
@@ -244,6 +251,14 @@ impl<'a> CdrReader<'a> {
                 .map_err(|_| CdrError::BadString(at)),
             _ => Err(CdrError::BadString(at)),
         }
+    }
+
+    pub(crate) fn f64(&mut self) -> Result<f64, CdrError> {
+        self.align(8);
+        let b = self.take(8)?;
+        let mut a = [0u8; 8];
+        a.copy_from_slice(b);
+        Ok(f64::from_le_bytes(a))
     }
 
     pub(crate) fn f64s(&mut self) -> Result<Vec<f64>, CdrError> {

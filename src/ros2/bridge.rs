@@ -1,6 +1,8 @@
 //! What the bridge declares on one open Zenoh session: one ROS node
-//! (`jointd`), per bus a `joint_states` publisher and a `joint_commands`
-//! subscription, and a `/diagnostics` publisher; each with its liveliness
+//! (`jointd`), per bus (or hand) a `joint_states` publisher, a
+//! `joint_commands` and a `joint_trajectory` subscription and the
+//! services; per hand also `gripper_command` and `grasp_state`; and a
+//! `/diagnostics` publisher; each with its liveliness
 //! token so that ROS 2 tools on rmw_zenoh list them. Joint states come from
 //! the bus's frame tap (one message per poll round, as recordings);
 //! commands go to [`super::command_stream`]. Opening the session, and
@@ -21,7 +23,7 @@ use super::config::{Distro, NamespaceBy, Ros2Config, Ros2Mode};
 use super::keys::{self, Kind, NodeIdentity};
 use super::rosout::Rosout;
 use super::services::{self, Service, ServiceQueryable};
-use super::{diagnostics, trajectory_stream, Ros2Stats};
+use super::{diagnostics, grasp_stream, trajectory_stream, Ros2Stats};
 use crate::bus::BusHandle;
 use crate::bus::BusSnapshot;
 use crate::control::Control;
@@ -155,7 +157,15 @@ pub(super) async fn declare(
             dropped,
             closed.clone(),
         ));
-        for service in [Service::Enable, Service::Estop] {
+        let mut services = vec![Service::Enable, Service::Estop];
+        if let Scope::Hand { name: hand, joints } = &scope {
+            declare_grasp(
+                &mut on, state, cfg, stats, &rosout, &ns, hand, joints, &closed,
+            )
+            .await?;
+            services.extend([Service::GraspRelease, Service::GraspStop]);
+        }
+        for service in services {
             let (queryable, key) = on.service(&ns, service).await?;
             on.spawn(services::serve(
                 state.clone(),
@@ -180,12 +190,56 @@ pub(super) async fn declare(
     Ok(on.declared)
 }
 
+/// A hand's grasp: `gripper_command` taken, `grasp_state` published
+/// (its services are declared with the others).
+#[allow(clippy::too_many_arguments)]
+async fn declare_grasp(
+    on: &mut On<'_>,
+    state: &Arc<Control>,
+    cfg: &Ros2Config,
+    stats: &Arc<Ros2Stats>,
+    rosout: &Rosout,
+    ns: &str,
+    hand: &str,
+    joints: &[(String, u8)],
+    closed: &watch::Receiver<bool>,
+) -> zenoh::Result<()> {
+    let (started, follow) = watch::channel(None);
+    let topic = keys::qualified(ns, "gripper_command");
+    let subscriber = on.subscriber(&topic, GRIPPER_COMMAND).await?;
+    let dropped = Dropped::new(rosout.clone(), topic);
+    on.spawn(grasp_stream::run(
+        state.clone(),
+        hand.to_owned(),
+        cfg.grasp_speed_dps,
+        subscriber,
+        stats.clone(),
+        dropped,
+        started,
+        closed.clone(),
+    ));
+    let (publisher, gid) = on
+        .publisher(&keys::qualified(ns, "grasp_state"), DIAGNOSTIC_ARRAY)
+        .await?;
+    on.spawn(grasp_stream::publish_state(
+        state.clone(),
+        hand.to_owned(),
+        joints.to_vec(),
+        publisher,
+        gid,
+        follow,
+        closed.clone(),
+    ));
+    Ok(())
+}
+
 /// A message type on the network: its DDS name and its type hash.
 type RosType = (&'static str, &'static str);
 const JOINT_STATE: RosType = (keys::JOINT_STATE_TYPE, keys::JOINT_STATE_HASH);
 const JOINT_TRAJECTORY: RosType = (keys::JOINT_TRAJECTORY_TYPE, keys::JOINT_TRAJECTORY_HASH);
 const DIAGNOSTIC_ARRAY: RosType = (keys::DIAGNOSTIC_ARRAY_TYPE, keys::DIAGNOSTIC_ARRAY_HASH);
 const LOG: RosType = (keys::LOG_TYPE, keys::LOG_HASH);
+const GRIPPER_COMMAND: RosType = (keys::GRIPPER_COMMAND_TYPE, keys::GRIPPER_COMMAND_HASH);
 
 /// Declaring on one session: each endpoint with its entity id and token.
 struct On<'a> {

@@ -81,10 +81,19 @@ pub struct Ros2Config {
     /// Whose key form (default `jazzy`; `humble` has no type hashes).
     #[serde(default)]
     pub distro: Distro,
+    /// How fast a hand's fingers close on a `gripper_command`, output °/s
+    /// (0 < s <= 180; default 30): `control_msgs/msg/GripperCommand` has
+    /// no speed of its own.
+    #[serde(default = "default_grasp_speed")]
+    pub grasp_speed_dps: f64,
 }
 
 fn one_hz() -> f64 {
     1.0
+}
+
+fn default_grasp_speed() -> f64 {
+    30.0
 }
 
 fn default_node() -> String {
@@ -105,6 +114,7 @@ impl Default for Ros2Config {
             joint_states_max_hz: None,
             node_name: default_node(),
             distro: Distro::Jazzy,
+            grasp_speed_dps: default_grasp_speed(),
         }
     }
 }
@@ -134,6 +144,8 @@ pub enum Ros2ConfigError {
     StatesRate(f64),
     #[error("[ros2] domain_id = {0}: ROS domains are 0..=232")]
     Domain(u32),
+    #[error("[ros2] grasp_speed_dps = {0}: give 0 < speed <= 180 (output degrees per second)")]
+    GraspSpeed(f64),
 }
 
 /// A ROS name token: letters, digits, `_`, not starting with a digit.
@@ -190,6 +202,10 @@ impl Ros2Config {
         }
         if let Some(d) = self.domain_id.filter(|d| *d > 232) {
             return Err(Ros2ConfigError::Domain(d));
+        }
+        let s = self.grasp_speed_dps;
+        if !(s.is_finite() && s > 0.0 && s <= 180.0) {
+            return Err(Ros2ConfigError::GraspSpeed(s));
         }
         Ok(self)
     }
@@ -256,6 +272,7 @@ mod tests {
         assert_eq!(cfg.endpoints(), vec![DEFAULT_ROUTER.to_string()]);
         assert_eq!(cfg.node_name, "jointd");
         assert_eq!(cfg.distro, Distro::Jazzy);
+        assert_eq!(cfg.grasp_speed_dps, 30.0);
         assert_eq!(parse("distro = \"humble\"").unwrap().distro, Distro::Humble);
         assert!(
             parse("distro = \"iron\"").is_err(),
@@ -306,6 +323,14 @@ mod tests {
         assert_eq!(
             bad("joint_states_max_hz = -1.0"),
             Ros2ConfigError::StatesRate(-1.0)
+        );
+        assert_eq!(
+            bad("grasp_speed_dps = 0.0"),
+            Ros2ConfigError::GraspSpeed(0.0)
+        );
+        assert_eq!(
+            bad("grasp_speed_dps = 200.0"),
+            Ros2ConfigError::GraspSpeed(200.0)
         );
         assert!(parse("nope = 1").is_err(), "unknown keys are refused");
         assert!(matches!(

@@ -18,7 +18,12 @@
 //! `sensor_msgs/msg/JointState` [`JOINT_STATE_HASH`],
 //! `diagnostic_msgs/msg/DiagnosticArray` [`DIAGNOSTIC_ARRAY_HASH`],
 //! `trajectory_msgs/msg/JointTrajectory` [`JOINT_TRAJECTORY_HASH`],
-//! `rcl_interfaces/msg/Log` [`LOG_HASH`].
+//! `rcl_interfaces/msg/Log` [`LOG_HASH`],
+//! `control_msgs/msg/GripperCommand` [`GRIPPER_COMMAND_HASH`] (`float64
+//! position`, `float64 max_effort`: computed as `rosbags` computes the
+//! others, from the definition; no published value was found to compare
+//! with, so the Python test derives it from the definition and checks the
+//! same method against the published `JointState` and `AddTwoInts` hashes).
 //!
 //! Services (rmw_zenoh's `rmw_service_data.cpp`): a queryable on
 //! `<domain_id>/<service, no leading />/<DDS service type>/<hash>`, the
@@ -47,6 +52,9 @@ pub const JOINT_TRAJECTORY_HASH: &str =
 pub const LOG_TYPE: &str = "rcl_interfaces::msg::dds_::Log_";
 pub const LOG_HASH: &str =
     "RIHS01_e28ce254ca8abc06abf92773b74602cdbf116ed34fbaf294fb9f81da9f318eac";
+pub const GRIPPER_COMMAND_TYPE: &str = "control_msgs::msg::dds_::GripperCommand_";
+pub const GRIPPER_COMMAND_HASH: &str =
+    "RIHS01_57eb8f326c9889ca8bb34ead82cc94cc09bf6bc5c3b6c09546dca3a00b589890";
 pub const SET_BOOL_TYPE: &str = "std_srvs::srv::dds_::SetBool_";
 pub const SET_BOOL_HASH: &str =
     "RIHS01_abe9e4bb6b41b40e6789712c00ec8871923e089af3f667a79992a428cff2da0a";

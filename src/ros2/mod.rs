@@ -2,8 +2,9 @@
 //! `/<namespace>/joint_states` per bus at the telemetry rate,
 //! `diagnostic_msgs/msg/DiagnosticArray` on `/diagnostics`, and
 //! `/<namespace>/joint_commands` taken as setpoints, `joint_trajectory` as
-//! moves, the services `enable` and `estop`, `/rosout` for dropped
-//! commands; named, encoded and
+//! moves, the services `enable` and `estop`, per hand a grasp
+//! (`gripper_command`, `grasp_state`, `grasp_release`, `grasp_stop`),
+//! `/rosout` for dropped commands; named, encoded and
 //! announced as `rmw_zenoh` does, so ROS 2 nodes on rmw_zenoh (and `ros2
 //! topic list` / `echo`) see them with no bridge of their own.
 //!
@@ -12,6 +13,8 @@
 //!   hashes (the design document is cited there);
 //! - [`commands`]: a command checked whole and turned into setpoints;
 //! - [`trajectory`]: a `JointTrajectory` as a move request;
+//! - [`gripper`]: a `GripperCommand` as a grasp request, a grasp as
+//!   `DiagnosticStatus`es;
 //! - [`msgs`]: the CDR of the services' requests and responses,
 //!   `JointTrajectory` and `Log`;
 //! - [`throttle`]: each cause on `/rosout` at most once per 5 s;
@@ -20,8 +23,9 @@
 //!   `supervisor` (the one background task: the session, opened and opened
 //!   again), `bridge` (publishers, subscriptions and tokens on a session),
 //!   `command_stream` (one `joint_commands` subscription as a teleop stream),
-//!   `trajectory_stream` (`joint_trajectory` as moves), `services`
-//!   (`enable`, `estop`), `rosout`, `diagnostics` (per bus and per joint).
+//!   `trajectory_stream` (`joint_trajectory` as moves), `grasp_stream`
+//!   (`gripper_command` as grasps, `grasp_state`), `services`
+//!   (`enable`, `estop`, `grasp_release`, `grasp_stop`), `rosout`, `diagnostics` (per bus and per joint).
 //!
 //! The bridge never holds the daemon: without a router the buses and the
 //! API serve as ever, and `GET /api/v1/ros2` says `connected: false`.
@@ -34,6 +38,8 @@
 #[cfg_attr(not(feature = "ros2"), allow(dead_code))]
 pub(crate) mod commands;
 pub mod config;
+#[cfg_attr(not(feature = "ros2"), allow(dead_code))]
+pub(crate) mod gripper;
 pub mod keys;
 pub mod link;
 #[cfg_attr(not(feature = "ros2"), allow(dead_code))]
@@ -49,6 +55,8 @@ mod bridge;
 mod command_stream;
 #[cfg(feature = "ros2")]
 mod diagnostics;
+#[cfg(feature = "ros2")]
+mod grasp_stream;
 #[cfg(feature = "ros2")]
 mod rosout;
 #[cfg(feature = "ros2")]

@@ -2,7 +2,8 @@
 //! `DiagnosticArray` (those are [`crate::record::cdr`]'s, shared with
 //! recordings), in CDR as rmw_zenoh carries them: the requests and
 //! responses of `std_srvs/srv/SetBool` and `std_srvs/srv/Trigger`,
-//! `trajectory_msgs/msg/JointTrajectory`, `rcl_interfaces/msg/Log`.
+//! `trajectory_msgs/msg/JointTrajectory`, `rcl_interfaces/msg/Log`,
+//! `control_msgs/msg/GripperCommand`.
 //! Pure: bytes in, bytes out.
 
 use crate::record::cdr::{Cdr, CdrError, CdrReader};
@@ -108,6 +109,34 @@ fn time_ns(r: &mut CdrReader<'_>) -> Result<i64, CdrError> {
     Ok(i64::from(sec) * 1_000_000_000 + i64::from(nanosec))
 }
 
+/// One `control_msgs/msg/GripperCommand`: two float64, nothing else.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub(crate) struct GripperCommand {
+    /// Where the fingers close to, rad (NaN: each finger's default).
+    pub(crate) position: f64,
+    /// The hold current, A (effort is a q current throughout the bridge).
+    pub(crate) max_effort: f64,
+}
+
+impl GripperCommand {
+    pub(crate) fn from_cdr(buf: &[u8]) -> Result<Self, CdrError> {
+        let mut r = CdrReader::new(buf)?;
+        Ok(Self {
+            position: r.f64()?,
+            max_effort: r.f64()?,
+        })
+    }
+
+    /// The message in CDR (what a ROS 2 publisher sends).
+    #[cfg(test)]
+    pub(crate) fn to_cdr(self) -> Vec<u8> {
+        let mut w = Cdr::new();
+        w.f64(self.position);
+        w.f64(self.max_effort);
+        w.buf
+    }
+}
+
 /// One `rcl_interfaces/msg/Log` (what `/rosout` carries).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub(crate) struct Log {
@@ -176,6 +205,38 @@ mod tests {
         let b = t.to_cdr();
         assert_eq!(JointTrajectory::from_cdr(&b), Ok(t));
         assert!(JointTrajectory::from_cdr(&b[..b.len() - 1]).is_err());
+    }
+
+    #[test]
+    fn a_gripper_command_is_two_aligned_doubles() {
+        let mut b = vec![0, 1, 0, 0];
+        b.extend(0.5f64.to_le_bytes()); // 0: position, already 8-aligned
+        b.extend(0.2f64.to_le_bytes()); // 8: max_effort
+        let cmd = GripperCommand {
+            position: 0.5,
+            max_effort: 0.2,
+        };
+        assert_eq!(cmd.to_cdr(), b);
+        assert_eq!(GripperCommand::from_cdr(&b), Ok(cmd));
+        let nan = GripperCommand::from_cdr(
+            &GripperCommand {
+                position: f64::NAN,
+                max_effort: -1.0,
+            }
+            .to_cdr(),
+        )
+        .unwrap();
+        assert!(nan.position.is_nan() && nan.max_effort == -1.0);
+        assert_eq!(
+            GripperCommand::from_cdr(&b[..19]),
+            Err(CdrError::Short(12)),
+            "cut short in max_effort"
+        );
+        assert!(GripperCommand::from_cdr(&[0, 1, 0, 0]).is_err(), "empty");
+        assert!(matches!(
+            GripperCommand::from_cdr(&[1, 0, 0, 0, 0, 0, 0, 0]),
+            Err(CdrError::Encapsulation(_))
+        ));
     }
 
     #[test]

@@ -5,8 +5,14 @@
 //! (`std_srvs/srv/Trigger`: the e-stop of the bus, or of every bus a
 //! hand's joints are on). Both through the calls REST makes
 //! (`BusHandle::enable` / `disable`, [`crate::control::estop::stop`]).
+//! A hand's namespace (`namespace_by = "hand"`) has two more, both
+//! `std_srvs/srv/Trigger`: `<hand>/grasp_release` releases the hand's
+//! running grasp (each finger back to where it started, as REST's
+//! `POST /api/v1/grasps/{id}/release` with `{}`) and `<hand>/grasp_stop`
+//! stops it (each finger holds where it is, as `.../stop`); either answers
+//! once the grasp ended, with every finger's state.
 //! Each service has its own task, so an e-stop never waits behind an
-//! enable still confirming.
+//! enable still confirming or a release still opening.
 
 use std::sync::Arc;
 
@@ -14,9 +20,11 @@ use tokio::sync::watch;
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::query::{Query, Queryable};
 
+use super::gripper;
 use super::keys;
 use super::msgs;
 use crate::bus::{BusHandle, Targets};
+use crate::control::grasp::{self, ReleaseRequest};
 use crate::control::Control;
 use crate::record::joint_states::Scope;
 
@@ -29,6 +37,10 @@ pub(super) enum Service {
     Enable,
     /// `std_srvs/srv/Trigger`.
     Estop,
+    /// `std_srvs/srv/Trigger`: a hand's grasp released.
+    GraspRelease,
+    /// `std_srvs/srv/Trigger`: a hand's grasp stopped.
+    GraspStop,
 }
 
 impl Service {
@@ -37,6 +49,8 @@ impl Service {
         match self {
             Self::Enable => ("enable", keys::SET_BOOL_TYPE, keys::SET_BOOL_HASH),
             Self::Estop => ("estop", keys::TRIGGER_TYPE, keys::TRIGGER_HASH),
+            Self::GraspRelease => ("grasp_release", keys::TRIGGER_TYPE, keys::TRIGGER_HASH),
+            Self::GraspStop => ("grasp_stop", keys::TRIGGER_TYPE, keys::TRIGGER_HASH),
         }
     }
 }
@@ -73,6 +87,10 @@ pub(super) async fn serve(
                 let _ = msgs::trigger_request(&payload);
                 estop(&state, &scope).await
             }
+            Service::GraspRelease | Service::GraspStop => match msgs::trigger_request(&payload) {
+                Ok(()) => end_grasp(&state, &scope, service == Service::GraspRelease).await,
+                Err(e) => (false, format!("not a std_srvs/srv/Trigger request: {e}")),
+            },
         };
         tracing::info!(?scope, ?service, success, %message, "ROS 2: service called");
         reply(&query, &key, success, &message).await;
@@ -177,4 +195,26 @@ async fn estop(state: &Control, scope: &Scope) -> (bool, String) {
         })
         .collect();
     (result.stopped, format!("e-stop: {}", each.join("; ")))
+}
+
+/// Releases (or stops) the hand's running grasp; answers once it ended.
+async fn end_grasp(state: &Control, scope: &Scope, release: bool) -> (bool, String) {
+    let Scope::Hand { name, joints } = scope else {
+        return (
+            false,
+            "grasps are per hand (namespace_by = \"hand\")".into(),
+        );
+    };
+    let Some(id) = super::grasp_stream::running(state, joints) else {
+        return (false, format!("no grasp running on hand `{name}`"));
+    };
+    let ended = if release {
+        grasp::release(state, id, &ReleaseRequest::default()).await
+    } else {
+        grasp::stop(state, id).await
+    };
+    match ended {
+        Ok(view) => gripper::ended(&view, if release { "released" } else { "stopped" }),
+        Err(e) => (false, e.to_string()),
+    }
 }
