@@ -446,8 +446,7 @@ fn admit(
     let who = format!("joint `{}`", joint.name);
     let close_to_deg = soft.check_joint_position(&cal, &field, close_to_joint_deg, &who)?;
     let start_deg = here_joint_deg(state, &joint.bus, joint.id, &cal)?;
-    let rpm = settings.speed_dps / units::output_deg_per_s(1.0);
-    soft.check_speed("speed_dps", rpm, &who)?;
+    soft.check_speed("speed_dps", settings.speed_dps, &who)?;
     let slot = Arc::new(Mutex::new(FingerGrasp {
         bus: joint.bus.clone(),
         id: joint.id,
