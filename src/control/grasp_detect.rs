@@ -15,9 +15,10 @@
 //! a press counts once the rise has stayed over the threshold (at least
 //! 0.02 A, five times the noise) for [`CONTACT_CONFIRM`] and at least
 //! [`CONFIRM_SAMPLES`] reports in a row, so no single noisy report can
-//! make one. The confirmation is short because the finger's momentum
-//! presses on meanwhile: every 10 ms of it is force overshoot on a stiff
-//! object.
+//! make one, unless the finger has also slowed under [`SLOWED_SHARE`] of
+//! its speed (noise on the current does not slow it). The confirmation is
+//! short because the finger's momentum presses on meanwhile: every 10 ms
+//! of it is force overshoot on a stiff object.
 //!
 //! On contact the finger still carries the momentum of its closing: it
 //! presses on into the object past where its current limit balances the
@@ -37,6 +38,9 @@ const CONTACT_CONFIRM: Duration = Duration::from_millis(10);
 /// ... and in this many reports in a row (the bus publishes its snapshot,
 /// with each joint's latest report, every 10 ms: two snapshots).
 const CONFIRM_SAMPLES: u32 = 2;
+/// A finger already slowed under this share of the asked speed needs no
+/// second report: a press that also slows it is no noise.
+const SLOWED_SHARE: f64 = 0.85;
 /// After contact: the share of the closing speed the finger brakes to ...
 pub(crate) const CONTACT_SPEED_SHARE: f64 = 0.1;
 /// ... for this long.
@@ -144,7 +148,7 @@ impl Closing {
         let to_go = s.dir * (s.limit_deg - x.deg);
         self.moved |= v >= MOVING_SHARE * s.speed_dps;
         self.learn(x.t, v, i);
-        if let Some(deg) = self.pressed(x, i) {
+        if let Some(deg) = self.pressed(x, i, v) {
             return Verdict::Contact {
                 deg,
                 stalled: false,
@@ -180,7 +184,7 @@ impl Closing {
     }
 
     /// The current over the threshold long enough: where the rise began.
-    fn pressed(&mut self, x: Sample, i: f64) -> Option<f64> {
+    fn pressed(&mut self, x: Sample, i: f64, v: f64) -> Option<f64> {
         // Without a baseline, only a finger that never got going (it
         // started against the object) may count a press: one still
         // speeding up draws its inertial current.
@@ -197,8 +201,9 @@ impl Closing {
         }
         let since = *self.over_since.get_or_insert(x.t);
         self.over_n += 1;
-        let confirmed =
-            x.t.saturating_sub(since) >= CONTACT_CONFIRM && self.over_n >= CONFIRM_SAMPLES;
+        let confirmed = (x.t.saturating_sub(since) >= CONTACT_CONFIRM
+            && self.over_n >= CONFIRM_SAMPLES)
+            || v < SLOWED_SHARE * self.s.speed_dps;
         confirmed.then_some(self.onset_deg.unwrap_or(x.deg))
     }
 
@@ -431,6 +436,18 @@ mod tests {
         assert_eq!(c.sample(at(128, 0.2)), Verdict::Closing);
         assert_eq!(c.sample(at(134, 0.2)), Verdict::Closing, "6 ms");
         assert!(matches!(c.sample(at(138, 0.2)), Verdict::Contact { .. }));
+        let mut c2 = Closing::new(S);
+        for ms in (0..100).step_by(4) {
+            c2.sample(at(ms, 0.075));
+        }
+        let slow = Sample {
+            speed_dps: 24.0,
+            ..at(120, 0.2)
+        };
+        assert!(
+            matches!(c2.sample(slow), Verdict::Contact { .. }),
+            "one report suffices when the finger slowed too"
+        );
     }
 
     #[test]
