@@ -55,12 +55,17 @@ fn a_stall_engages_protection_bursts_on_a_new_command_then_faults() {
     wait_for("protection", || {
         sim.device(1)?.protection_active.then_some(())
     });
+    let cap = 873.0 / 32767.0 * 5.625;
     let d = sim.device(1).unwrap();
     assert!(d.blocked && (d.angle_deg - 2.0).abs() < 0.01);
     assert!(
-        d.q_current_a.abs() <= 873.0 / 32767.0 * 5.625 + 1e-6,
-        "capped at the protection limit"
+        d.q_current_ref_a.abs() <= cap + 1e-6,
+        "the reference capped at the protection limit"
     );
+    // The current loop follows the lowered cap within a millisecond or so.
+    wait_for("the current down to the protection limit", || {
+        (sim.device(1)?.q_current_a.abs() <= cap + 1e-3).then_some(())
+    });
     host.send(Command::Control(Control::set_ref(
         1,
         angle_to_raw(41.0).unwrap(),

@@ -10,14 +10,44 @@
 //! like a press), and no press counts before that, unless the finger could
 //! not get going (it may start against the object). A finger that slowed
 //! to a stall after it moved is in contact whatever its current says.
+//!
+//! The current is measured with noise (a few mA rms on a small drive):
+//! a press counts once the rise has stayed over the threshold (at least
+//! 0.02 A, five times the noise) for [`CONTACT_CONFIRM`] and at least
+//! [`CONFIRM_SAMPLES`] reports in a row, so no single noisy report can
+//! make one, unless the finger has also slowed under [`SLOWED_SHARE`] of
+//! its speed (noise on the current does not slow it). The confirmation is
+//! short because the finger's momentum presses on meanwhile: every 10 ms
+//! of it is force overshoot on a stiff object.
+//!
+//! On contact the finger still carries the momentum of its closing: it
+//! presses on into the object past where its current limit balances the
+//! push, and the peak force overshoots the set one. Detected, the finger
+//! brakes: its speed limit drops to [`CONTACT_SPEED_SHARE`] of the closing
+//! speed for [`BRAKE`] (its position loop then takes current off while
+//! the object pushes back), then the closing speed again, so a soft
+//! object that is still being pressed in is not pressed slowly.
 
 use std::time::Duration;
 
 /// Before the free-air current is known, contact counts only after this
 /// long (a finger that starts pressed never cruises).
 pub(crate) const START_GRACE: Duration = Duration::from_millis(400);
-/// The current must stay over the threshold this long.
-const CONTACT_CONFIRM: Duration = Duration::from_millis(30);
+/// The current must stay over the threshold this long ...
+const CONTACT_CONFIRM: Duration = Duration::from_millis(10);
+/// ... and in this many reports in a row (the bus publishes its snapshot,
+/// with each joint's latest report, every 10 ms: two snapshots).
+const CONFIRM_SAMPLES: u32 = 2;
+/// A finger already slowed under this share of the asked speed needs no
+/// second report: a press that also slows it is no noise.
+const SLOWED_SHARE: f64 = 0.85;
+/// After contact: the share of the closing speed the finger brakes to ...
+pub(crate) const CONTACT_SPEED_SHARE: f64 = 0.1;
+/// ... for this long.
+pub(crate) const BRAKE: Duration = Duration::from_millis(100);
+/// While braking and this long after, a current under the hold level is
+/// the brake taking current off, not a lost object.
+const BRAKE_SETTLE: Duration = Duration::from_millis(100);
 /// Moving this slowly (share of the asked speed) for this long, after it
 /// moved, is a stall: contact.
 const STALLED_SHARE: f64 = 0.2;
@@ -84,6 +114,8 @@ pub(crate) struct Closing {
     learning: (f64, u32),
     baseline: Option<f64>,
     over_since: Option<Duration>,
+    /// Reports in a row over the threshold.
+    over_n: u32,
     /// Where the rise was last too small to be a press: where contact began.
     onset_deg: Option<f64>,
     slow_since: Option<Duration>,
@@ -98,6 +130,7 @@ impl Closing {
             learning: (0.0, 0),
             baseline: None,
             over_since: None,
+            over_n: 0,
             onset_deg: None,
             slow_since: None,
         }
@@ -115,7 +148,7 @@ impl Closing {
         let to_go = s.dir * (s.limit_deg - x.deg);
         self.moved |= v >= MOVING_SHARE * s.speed_dps;
         self.learn(x.t, v, i);
-        if let Some(deg) = self.pressed(x, i) {
+        if let Some(deg) = self.pressed(x, i, v) {
             return Verdict::Contact {
                 deg,
                 stalled: false,
@@ -151,7 +184,7 @@ impl Closing {
     }
 
     /// The current over the threshold long enough: where the rise began.
-    fn pressed(&mut self, x: Sample, i: f64) -> Option<f64> {
+    fn pressed(&mut self, x: Sample, i: f64, v: f64) -> Option<f64> {
         // Without a baseline, only a finger that never got going (it
         // started against the object) may count a press: one still
         // speeding up draws its inertial current.
@@ -163,10 +196,15 @@ impl Closing {
         }
         if !armed || rise < self.s.threshold_a {
             self.over_since = None;
+            self.over_n = 0;
             return None;
         }
         let since = *self.over_since.get_or_insert(x.t);
-        (x.t.saturating_sub(since) >= CONTACT_CONFIRM).then_some(self.onset_deg.unwrap_or(x.deg))
+        self.over_n += 1;
+        let confirmed = (x.t.saturating_sub(since) >= CONTACT_CONFIRM
+            && self.over_n >= CONFIRM_SAMPLES)
+            || v < SLOWED_SHARE * self.s.speed_dps;
+        confirmed.then_some(self.onset_deg.unwrap_or(x.deg))
     }
 
     fn stalled(&mut self, t: Duration, v: f64, to_go: f64) -> bool {
@@ -180,10 +218,13 @@ impl Closing {
     }
 }
 
-/// The lost-object detector of a holding finger.
+/// The lost-object detector of a holding finger, and when its brake ends.
 #[derive(Debug, Clone)]
 pub(crate) struct Holding {
     s: Settings,
+    /// When contact was detected (since the closing began).
+    contact_t: Duration,
+    braking: bool,
     /// The current has come up to the hold level since contact: from then
     /// on a fall means the object is gone.
     settled: bool,
@@ -191,12 +232,23 @@ pub(crate) struct Holding {
 }
 
 impl Holding {
-    pub(crate) fn new(s: Settings) -> Self {
+    /// Holding since contact was detected at `contact_t`, braking.
+    pub(crate) fn new(s: Settings, contact_t: Duration) -> Self {
         Self {
             s,
+            contact_t,
+            braking: true,
             settled: false,
             low_since: None,
         }
+    }
+
+    /// True once, at the first sample after the brake's time is up: the
+    /// closing speed may come back.
+    pub(crate) fn brake_ends(&mut self, x: Sample) -> bool {
+        let over = self.braking && x.t >= self.contact_t + BRAKE;
+        self.braking &= !over;
+        over
     }
 
     /// True once the object is gone: the current fell (after it had come
@@ -206,7 +258,8 @@ impl Holding {
         let i = s.dir * x.current_a;
         let to_go = s.dir * (s.limit_deg - x.deg);
         self.settled |= i >= s.hold_a - s.threshold_a / 2.0;
-        let low = i < s.hold_a - s.threshold_a;
+        let braked = x.t < self.contact_t + BRAKE + BRAKE_SETTLE;
+        let low = i < s.hold_a - s.threshold_a && !braked;
         if !low {
             self.low_since = None;
             return false;
@@ -236,6 +289,17 @@ mod tests {
     /// current `0.03 + 0.0015 v + 0.00008 a`, and an object at `object`
     /// of `a_per_deg` (A per degree pressed in) under a cap of `hold_a`.
     fn run(s: Settings, tau: f64, object: Option<(f64, f64)>, sign: f64) -> (Verdict, f64) {
+        run_noisy(s, tau, object, sign, &mut || 0.0)
+    }
+
+    /// [`run`] with `noise()` added to every reported current.
+    fn run_noisy(
+        s: Settings,
+        tau: f64,
+        object: Option<(f64, f64)>,
+        sign: f64,
+        noise: &mut dyn FnMut() -> f64,
+    ) -> (Verdict, f64) {
         let (mut deg, mut v, mut t) = (0.0f64, 0.0f64, Duration::ZERO);
         let mut c = Closing::new(s);
         for _ in 0..5000 {
@@ -263,7 +327,7 @@ mod tests {
                 t,
                 deg,
                 speed_dps: s.dir * v,
-                current_a: s.dir * sign * i,
+                current_a: s.dir * sign * i + noise(),
             };
             match c.sample(x) {
                 Verdict::Closing => {}
@@ -310,11 +374,106 @@ mod tests {
         assert!(deg < 2.0);
     }
 
+    /// Normal noise of `sigma` from a fixed seed (xorshift, Box–Muller).
+    fn gauss(seed: u64, sigma: f64) -> impl FnMut() -> f64 {
+        let mut x = seed | 1;
+        let mut unit = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64
+        };
+        move || {
+            let (u, v) = (1.0 - unit(), unit());
+            sigma * (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+        }
+    }
+
+    #[test]
+    fn noise_on_the_current_makes_no_contact_in_free_air_even_at_the_lowest_threshold() {
+        // 5 mA rms: a little over the simulator's 4 mA; the lowest
+        // threshold is four times it.
+        let s = Settings {
+            threshold_a: 0.02,
+            ..S
+        };
+        for seed in 1..=200 {
+            let speed = 20.0 + 70.0 * f64::from(seed as u32 % 8) / 7.0;
+            let s = Settings {
+                speed_dps: speed,
+                ..s
+            };
+            let (v, deg) = run_noisy(s, 0.015, None, 1.0, &mut gauss(seed, 0.005));
+            assert_eq!(v, Verdict::NoContact, "seed {seed} at {deg}");
+        }
+    }
+
+    #[test]
+    fn noisy_objects_are_still_felt() {
+        for seed in 1..=50 {
+            let (v, _) = run_noisy(S, 0.015, Some((25.0, 0.1)), 1.0, &mut gauss(seed, 0.004));
+            assert!(matches!(v, Verdict::Contact { .. }), "seed {seed}: {v:?}");
+        }
+    }
+
+    #[test]
+    fn one_report_over_the_threshold_is_no_contact_two_ten_ms_apart_are() {
+        let mut c = Closing::new(S);
+        let at = |ms: u64, i: f64| Sample {
+            t: Duration::from_millis(ms),
+            deg: f64::from(ms as u32) * 0.03,
+            speed_dps: 30.0,
+            current_a: i,
+        };
+        for ms in (0..100).step_by(4) {
+            assert_eq!(c.sample(at(ms, 0.075)), Verdict::Closing);
+        }
+        assert!(c.baseline().is_some());
+        // One report over the threshold is never enough, however long ago
+        // the rise began; two are, 10 ms apart.
+        assert_eq!(c.sample(at(120, 0.2)), Verdict::Closing);
+        assert_eq!(c.sample(at(124, 0.05)), Verdict::Closing, "back under");
+        assert_eq!(c.sample(at(128, 0.2)), Verdict::Closing);
+        assert_eq!(c.sample(at(134, 0.2)), Verdict::Closing, "6 ms");
+        assert!(matches!(c.sample(at(138, 0.2)), Verdict::Contact { .. }));
+        let mut c2 = Closing::new(S);
+        for ms in (0..100).step_by(4) {
+            c2.sample(at(ms, 0.075));
+        }
+        let slow = Sample {
+            speed_dps: 24.0,
+            ..at(120, 0.2)
+        };
+        assert!(
+            matches!(c2.sample(slow), Verdict::Contact { .. }),
+            "one report suffices when the finger slowed too"
+        );
+    }
+
+    #[test]
+    fn holding_brakes_once_and_a_dip_while_braking_is_no_loss() {
+        let mut h = Holding::new(S, Duration::from_millis(500));
+        let at = |ms: u64, i: f64| Sample {
+            t: Duration::from_millis(ms),
+            deg: 30.0,
+            speed_dps: 0.0,
+            current_a: i,
+        };
+        assert!(!h.brake_ends(at(550, 0.2)));
+        assert!(!h.lost(at(550, 0.2)));
+        assert!(!h.lost(at(560, 0.05)), "the brake takes current off");
+        assert!(!h.lost(at(650, 0.05)));
+        assert!(h.brake_ends(at(601, 0.05)));
+        assert!(!h.brake_ends(at(610, 0.05)), "once");
+        assert!(!h.lost(at(710, 0.05)), "the fall starts counting now");
+        assert!(h.lost(at(760, 0.05)));
+    }
+
     #[test]
     fn holding_loses_the_object_only_once_the_current_falls_after_settling() {
-        let mut h = Holding::new(S);
+        let mut h = Holding::new(S, Duration::ZERO);
         let at = |ms: u64, deg: f64, i: f64| Sample {
-            t: Duration::from_millis(ms),
+            t: Duration::from_millis(ms) + BRAKE + BRAKE_SETTLE,
             deg,
             speed_dps: 0.0,
             current_a: i,
@@ -325,7 +484,7 @@ mod tests {
         assert!(!h.lost(at(30, 31.0, 0.19)), "back up: the fall was noise");
         assert!(!h.lost(at(40, 31.0, 0.08)));
         assert!(h.lost(at(90, 35.0, 0.08)));
-        let mut early = Holding::new(S);
+        let mut early = Holding::new(S, Duration::ZERO);
         assert!(!early.lost(at(0, 40.0, 0.1)));
         assert!(early.lost(at(10, 59.8, 0.08)), "at the limit, unopposed");
     }

@@ -23,7 +23,9 @@ use crate::bus::handle::BusEvent;
 use crate::bus::{BusHandle, Setpoint, Source};
 use crate::control::device::{firmware_of, measured_angle_raw};
 use crate::control::grasp_book::{Command, FingerGrasp, FingerState, Slot};
-use crate::control::grasp_detect::{Closing, Holding, Sample, Settings, Verdict};
+use crate::control::grasp_detect::{
+    Closing, Holding, Sample, Settings, Verdict, CONTACT_SPEED_SHARE,
+};
 use crate::control::grasp_limit::{restore, Prepared, RestoreOnDrop};
 use crate::control::grasp_watch::{fresh_sample, taken_over, unfit, Watch};
 use crate::control::homing_book::lock;
@@ -195,7 +197,8 @@ fn step(f: &Finger, plan: &Plan, phase: Phase, x: Sample, s: Settings, w: &mut W
                     id: f.id,
                     contact_deg: joint_deg,
                 });
-                Phase::Holding(Holding::new(s))
+                set_speed(f, w, plan.speed_dps * CONTACT_SPEED_SHARE);
+                Phase::Holding(Holding::new(s, x.t))
             }
             Verdict::NoContact => {
                 set(&f.slot, |s| s.state = FingerState::NoContact);
@@ -203,6 +206,9 @@ fn step(f: &Finger, plan: &Plan, phase: Phase, x: Sample, s: Settings, w: &mut W
             }
         },
         Phase::Holding(mut h) => {
+            if h.brake_ends(x) {
+                set_speed(f, w, plan.speed_dps);
+            }
             if !h.lost(x) {
                 return Phase::Holding(h);
             }
@@ -245,6 +251,22 @@ fn send(
     f.bus
         .set_targets_under(&[(f.id, sp, f.epoch)], Source::Grasp);
     Ok(sp)
+}
+
+/// Sends the finger's target again at another speed limit (the brake
+/// after contact, and its end).
+fn set_speed(f: &Finger, w: &mut Watch, dps: f64) {
+    let snap = f.bus.snapshot();
+    let fw = snap.devices.get(&f.id).map(firmware_of).unwrap_or_default();
+    if let Ok(spd_ref) = units::speed_limit_dps_to_raw(dps, fw) {
+        let sp = Setpoint {
+            pos_ref: w.last_sent().pos_ref,
+            spd_ref,
+        };
+        f.bus
+            .set_targets_under(&[(f.id, sp, f.epoch)], Source::Grasp);
+        w.sent(sp);
+    }
 }
 
 /// Holds the finger at `deg` (device), at its current speed limit.

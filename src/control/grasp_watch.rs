@@ -53,6 +53,11 @@ impl Watch {
         self.sent = sp;
         self.seen_sent = false;
     }
+
+    /// The finger's latest target.
+    pub(crate) fn last_sent(&self) -> Setpoint {
+        self.sent
+    }
 }
 
 /// A new INFO_02 of the joint since the last one, as a sample (and the

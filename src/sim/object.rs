@@ -41,7 +41,7 @@ impl Object {
         }
     }
 
-    fn learn_side(&mut self, pos: f64, v_des: f64) {
+    pub(crate) fn learn_side(&mut self, pos: f64, v_des: f64) {
         if self.side.is_none() {
             let d = pos - self.at;
             if d.abs() > SIDE_DEG {
@@ -50,6 +50,11 @@ impl Object {
                 self.side = Some(-v_des.signum());
             }
         }
+    }
+
+    /// The side of `at` the joint is free on (+1: above), once known.
+    pub(crate) fn side(&self) -> Option<f64> {
+        self.side
     }
 
     /// How far the joint at `pos` presses in, ° (0 when free of it).
@@ -62,11 +67,6 @@ impl Object {
     pub(crate) fn push_a(&self, pos: f64) -> f64 {
         let side = self.side.unwrap_or(0.0);
         side * self.nm_per_deg * self.depth(pos) / OUTPUT_NM_PER_A
-    }
-
-    /// The side the joint presses from, while it does.
-    pub(crate) fn pressing(&self, pos: f64) -> Option<f64> {
-        self.side.filter(|_| self.depth(pos) > 0.0)
     }
 
     /// Where a joint going to `next` (driven at `v_des`, with `cap` amps to
@@ -103,7 +103,6 @@ mod tests {
         assert!((o.depth(12.0) - 2.0).abs() < 1e-12);
         // 0.05 N·m/° × 2° = 0.1 N·m, pushing the joint back down.
         assert!((o.push_a(12.0) + 0.1 / OUTPUT_NM_PER_A).abs() < 1e-12);
-        assert_eq!(o.pressing(12.0), Some(-1.0));
     }
 
     #[test]

@@ -5,13 +5,26 @@
 //! protection and burst of SPEC §4.3 (indices 18–23, 26, 27) and the winding
 //! temperature.
 //!
+//! Free of an object the joint follows its drive kinematically (the speed
+//! reaches the reference through the LPF level's lag, and the current is
+//! what that motion costs); pressing an object under a position or speed
+//! drive, its momentum and the drive's speed loop are integrated as
+//! dynamics ([`press`]). The current the physics computes is the capped
+//! reference of the drive's current loop; what the winding carries and
+//! the drive measures follows it ([`current_loop`]).
+//!
 //! All angles here are *physical* output degrees (before the device's zero
 //! offset); speeds are output °/s.
+
+pub(crate) mod current_loop;
+pub(crate) mod press;
 
 use crate::protocol::params::index;
 
 use super::object::Object;
 use super::params::Params;
+use current_loop::CurrentLoop;
+use press::Press;
 
 /// Largest integration step; longer advances are split.
 pub(crate) const MAX_STEP_S: f64 = 0.000_5;
@@ -25,7 +38,9 @@ const COAST_TAU_S: f64 = 0.05;
 pub(crate) const HOLD_CURRENT_A: f64 = 0.03;
 /// Friction current per output °/s.
 const FRICTION_A_PER_DEG_S: f64 = 0.0015;
-/// Inertial current per output °/s².
+/// Inertial current per output °/s²: the rotor's inertia reflected
+/// through the 568.81:1 gearbox (≈ 4.6·10⁻³ kg·m² at the output under the
+/// model's 1 N·m/A, a rotor of ≈ 0.14 g·cm², a small BLDC's).
 const INERTIA_A_PER_DEG_S2: f64 = 0.000_08;
 /// How fast the current climbs while pushing against an obstacle, A/s.
 const BLOCKED_RAMP_A_PER_S: f64 = 4.0;
@@ -113,8 +128,14 @@ pub(crate) struct Joint {
     pub pos: f64,
     pub vel: f64,
     pub acc: f64,
-    /// q-axis current, A (signed).
+    /// q-axis current reference, A (signed, capped): what the speed loop
+    /// asks of the current loop.
     pub current: f64,
+    /// The current loop: the q current the winding carries and the drive
+    /// measures.
+    pub q_loop: CurrentLoop,
+    /// The speed loop's state while pressing an object.
+    pub press: Option<Press>,
     pub temp_c: f64,
     pub obstacle: Option<Obstacle>,
     /// A mechanical end stop (a finger's joint limit): an obstacle that no
@@ -136,6 +157,8 @@ impl Default for Joint {
             vel: 0.0,
             acc: 0.0,
             current: 0.0,
+            q_loop: CurrentLoop::default(),
+            press: None,
             temp_c: AMBIENT_C,
             obstacle: None,
             hard_stop: None,
@@ -172,11 +195,19 @@ impl Joint {
             }
         };
         let vel = self.vel + (v_des - self.vel) * (dt / tau).min(1.0);
-        self.acc = (vel - self.vel) / dt;
-        self.vel = vel;
-        self.move_by(vel * dt, v_des, bounds);
-        self.press_object(drive, v_des, p);
-        self.update_current(dt, drive, v_des, p);
+        let driven = matches!(drive, Drive::Position { .. } | Drive::Speed { .. });
+        if driven && self.presses(v_des, vel, dt) {
+            let cap = self.current_cap(p);
+            self.press_step(dt, v_des, tau, cap, bounds);
+        } else {
+            self.press = None;
+            self.acc = (vel - self.vel) / dt;
+            self.vel = vel;
+            self.move_by(vel * dt, v_des, bounds);
+            self.press_object(drive, v_des, p);
+            self.update_current(dt, drive, v_des, p);
+        }
+        self.q_loop.advance(self.current, dt);
         self.update_protection(dt, p);
         let heat = AMBIENT_C + HEAT_C_PER_A2 * self.current * self.current;
         self.temp_c += (heat - self.temp_c) * dt / THERMAL_TAU_S;
@@ -204,9 +235,9 @@ impl Joint {
         self.pos = next;
     }
 
-    /// A compliant object stops the joint where the current it may draw
-    /// balances the object's push (none when released: it pushes the joint
-    /// out). Under a current drive the push slows the joint instead.
+    /// Released, the object pushes the joint out at once; under a current
+    /// drive the push slows the joint instead (position and speed drives
+    /// press it through [`press`]).
     fn press_object(&mut self, drive: Drive, v_des: f64, p: &Params) {
         let cap = match drive {
             Drive::Off => 0.0,
@@ -242,15 +273,9 @@ impl Joint {
                 } else {
                     1.0
                 };
-                // Pressing an object: the holding current and the object's
-                // push, both against it.
-                let held = match self.object.and_then(|o| o.pressing(self.pos)) {
-                    Some(side) => {
-                        -side * HOLD_CURRENT_A - self.object.map_or(0.0, |o| o.push_a(self.pos))
-                    }
-                    None => sign * HOLD_CURRENT_A,
-                };
-                held + FRICTION_A_PER_DEG_S * self.vel + INERTIA_A_PER_DEG_S2 * self.acc
+                sign * HOLD_CURRENT_A
+                    + FRICTION_A_PER_DEG_S * self.vel
+                    + INERTIA_A_PER_DEG_S2 * self.acc
             }
         };
         if !self.blocked {

@@ -33,6 +33,13 @@ impl Rng {
         (self.unit() * 2.0 - 1.0) * amp
     }
 
+    /// Normally distributed with standard deviation `sigma` (Box–Muller).
+    pub(crate) fn gauss(&mut self, sigma: f64) -> f64 {
+        let u = 1.0 - self.unit();
+        let v = self.unit();
+        sigma * (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    }
+
     /// True with probability `p`.
     pub(crate) fn chance(&mut self, p: f64) -> bool {
         p > 0.0 && self.unit() < p
@@ -49,5 +56,15 @@ mod tests {
         let hits = (0..10_000).filter(|_| r.chance(0.25)).count();
         assert!((2_200..2_800).contains(&hits), "{hits}");
         assert!(!Rng::new(0).chance(0.0));
+    }
+
+    #[test]
+    fn gauss_has_its_standard_deviation() {
+        let mut r = Rng::new(7);
+        let xs: Vec<f64> = (0..20_000).map(|_| r.gauss(0.5)).collect();
+        let mean = xs.iter().sum::<f64>() / xs.len() as f64;
+        let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / xs.len() as f64;
+        assert!(mean.abs() < 0.02, "{mean}");
+        assert!((var.sqrt() - 0.5).abs() < 0.02, "{}", var.sqrt());
     }
 }

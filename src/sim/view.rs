@@ -36,7 +36,15 @@ pub struct DeviceView {
     pub spd_ref: i16,
     /// Last current reference (Q15 of 5.625 A): rev 2.0.8 current mode.
     pub cur_ref: i16,
+    /// The q current the winding carries (the current loop's output; the
+    /// reports add measurement noise to it), A.
     pub q_current_a: f64,
+    /// The capped q current reference the current loop follows, A.
+    pub q_current_ref_a: f64,
+    /// How hard the object (if any) pushes back, as the q current that
+    /// balances it (N·m through the model's torque constant), A: the true
+    /// force on the object.
+    pub object_push_a: f64,
     pub temp_c: f64,
     pub vbus_v: f64,
     /// The baud the device listens at.

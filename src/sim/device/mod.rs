@@ -218,6 +218,8 @@ impl Device {
         self.silent = false;
         self.joint.vel = 0.0;
         self.joint.current = 0.0;
+        self.joint.q_loop.reset();
+        self.joint.press = None;
         self.joint.prot = Default::default();
         self.boot_until = now + self.timing.boot_delay + stagger;
         self.announce_at = Some(self.boot_until);

@@ -19,7 +19,11 @@ const VBUS_V: f64 = 12.0;
 const VBUS_SAG_V_PER_A: f64 = 0.3;
 const VBUS_NOISE_V: f64 = 0.02;
 const VBUS_UNDER_V: f64 = 6.0;
-/// d-axis current noise, A; q-axis noise added to the modelled current.
+/// Measurement noise on the reported d and q currents, A (standard
+/// deviation, normally distributed, independent per report). Model
+/// assumption: a small FOC drive measures phase currents with a 12-bit
+/// ADC over about ±5.6 A (the Q15 full scale of 5.625 A), 2.7 mA a
+/// count; a few counts of noise after the Park transform, ≈ 1.5 counts rms.
 const CURRENT_NOISE_A: f64 = 0.004;
 /// Encoder noise on reported angles, degrees.
 const ANGLE_NOISE_DEG: f64 = 0.004;
@@ -82,8 +86,8 @@ impl Device {
         let rotor_rpm = units::rotor_rpm(self.joint.vel);
         let powered = self.enabled() || self.fsm == fsm::BRAKE;
         let noise = if powered { CURRENT_NOISE_A } else { 0.0 };
-        let d = self.rng.noise(noise);
-        let q = self.joint.current + self.rng.noise(noise);
+        let d = self.rng.gauss(noise);
+        let q = self.joint.q_loop.amps + self.rng.gauss(noise);
         Info02 {
             d_cur: units::current_raw_saturating(d),
             q_cur: units::current_raw_saturating(q),
@@ -109,7 +113,12 @@ impl Device {
             velocity_deg_s: self.joint.vel,
             spd_ref: self.spd_ref,
             cur_ref: self.cur_ref,
-            q_current_a: self.joint.current,
+            q_current_a: self.joint.q_loop.amps,
+            q_current_ref_a: self.joint.current,
+            object_push_a: self
+                .joint
+                .object
+                .map_or(0.0, |o| o.push_a(self.joint.pos).abs()),
             temp_c: self.joint.temp_c,
             vbus_v: if self.under_voltage {
                 VBUS_UNDER_V
