@@ -6,12 +6,10 @@
 //! ([`RestoreOnDrop`]).
 
 use crate::bus::BusHandle;
+use crate::control::current_limit;
 use crate::control::grasp_finger::{set, Finger, Plan};
 use crate::protocol::units;
 use crate::protocol::{ConfigParam, InfoBlock, ReplyBody};
-
-/// Tries at writing the previous current limit back.
-const RESTORE_TRIES: usize = 3;
 
 /// How a finger's limit stands after [`prepare`].
 #[derive(Debug, Clone, Copy)]
@@ -29,7 +27,7 @@ pub(crate) async fn prepare(f: &Finger, plan: &Plan) -> Result<Prepared, (Prepar
         previous: None,
         written: false,
     };
-    let previous = match read_limit(&f.bus, f.id).await {
+    let previous = match current_limit::read(&f.bus, f.id).await {
         Ok(raw) => raw,
         Err(why) => return Err((p, why)),
     };
@@ -84,17 +82,6 @@ async fn check_protection(f: &Finger, hold_a: f64) -> Result<(), String> {
     Ok(())
 }
 
-async fn read_limit(bus: &BusHandle, id: u8) -> Result<u16, String> {
-    let reply = bus
-        .read_info(id, InfoBlock::Info04)
-        .await
-        .map_err(|e| format!("could not read the current limit (INFO_04): {e}"))?;
-    match reply.body() {
-        ReplyBody::Info04(i) => Ok(i.max_current),
-        _ => Err("the joint answered INFO_04 with another block".into()),
-    }
-}
-
 /// Writes the previous limit back and reads it back: true only when the
 /// read-back shows it. Nothing written before: nothing to restore.
 pub(crate) async fn restore(bus: &BusHandle, id: u8, p: Prepared) -> bool {
@@ -104,25 +91,7 @@ pub(crate) async fn restore(bus: &BusHandle, id: u8, p: Prepared) -> bool {
     if !p.written {
         return true;
     }
-    for attempt in 1..=RESTORE_TRIES {
-        if let Err(e) = bus.write_config(id, ConfigParam::MaxCur(previous)).await {
-            tracing::warn!(bus = bus.name(), id, attempt, error = %e,
-                "grasp: writing the previous current limit back failed");
-        }
-        match read_limit(bus, id).await {
-            Ok(raw) if raw == previous => return true,
-            Ok(raw) => tracing::warn!(
-                bus = bus.name(),
-                id,
-                attempt,
-                read_back = raw,
-                previous,
-                "grasp: the current limit read back is not the previous one"
-            ),
-            Err(why) => tracing::warn!(bus = bus.name(), id, attempt, "grasp: {why}"),
-        }
-    }
-    false
+    current_limit::restore(bus, id, previous, "grasp").await
 }
 
 /// Writes the previous limit back from a task of its own if the finger's

@@ -39,13 +39,13 @@ use utoipa::ToSchema;
 use crate::bus::authority::{Epoch, Revoked};
 use crate::bus::handle::{BusEvent, DeviceState};
 use crate::bus::{BusHandle, Setpoint, Source};
-use crate::control::calibration;
 use crate::control::device::{firmware_of, is_enabled, measured_angle_raw};
 use crate::control::error::{ControlError, ControlResult};
 use crate::control::homing_book::{lock, Busy, HomingState, HomingView, JointHoming, Slot};
 use crate::control::joints::{known_device, resolve_joint};
 use crate::control::limits::JointLimits;
 use crate::control::targets::{admit, wait_on_wire};
+use crate::control::{calibration, current_limit};
 use crate::control::{Control, JointRef};
 use crate::protocol::status::{active_fault, fault_name, fsm, fsm_name};
 use crate::protocol::units;
@@ -68,8 +68,6 @@ const BACKOFF_WAIT: Duration = Duration::from_secs(5);
 const BACKOFF_TOLERANCE_DEG: f64 = 0.5;
 /// Speed limit of the back-off, rotor rpm (≈ 10 °/s at the output).
 const BACKOFF_RPM: f64 = 1000.0;
-/// Tries at writing the previous current limit back.
-const RESTORE_TRIES: usize = 3;
 /// The search ends this long (at the asked speed) before a bound, so
 /// that the joint, still coasting while speed 0 reaches it, stays inside.
 const BOUND_LOOKAHEAD: Duration = Duration::from_millis(100);
@@ -461,7 +459,7 @@ async fn home(
 ) {
     let id = joint.id;
     let mut events = bus.events();
-    let previous = match read_current_limit(&bus, id).await {
+    let previous = match current_limit::read(&bus, id).await {
         Ok(raw) => raw,
         Err(why) => return finish(&slot, job, Err(Ended::Failed(why))),
     };
@@ -596,17 +594,6 @@ fn finish(slot: &Slot, job: u64, outcome: Result<f64, Ended>) {
         tracing::error!(homing_id = job, bus = %s.bus, id = s.id,
             previous_a = ?s.previous_current_limit_a,
             "the joint's current limit could not be written back: it keeps the reduced limit until set or power-cycled");
-    }
-}
-
-async fn read_current_limit(bus: &BusHandle, id: u8) -> Result<u16, String> {
-    let reply = bus
-        .read_info(id, InfoBlock::Info04)
-        .await
-        .map_err(|e| format!("could not read the current limit (INFO_04): {e}"))?;
-    match reply.body() {
-        ReplyBody::Info04(i) => Ok(i.max_current),
-        _ => Err("the joint answered INFO_04 with another block".into()),
     }
 }
 
@@ -900,27 +887,7 @@ async fn back_off(
     let _ = tokio::time::timeout(BACKOFF_WAIT, reached).await;
 }
 
-/// Writes the previous current limit back, then reads it back: true only
-/// when the read-back shows it. A few tries; a write whose confirmation was
-/// lost may still have taken, which the read-back tells.
+/// Writes the previous current limit back and reads it back.
 async fn restore(bus: &BusHandle, id: u8, previous: u16) -> bool {
-    for attempt in 1..=RESTORE_TRIES {
-        if let Err(e) = bus.write_config(id, ConfigParam::MaxCur(previous)).await {
-            tracing::warn!(bus = bus.name(), id, attempt, error = %e,
-                "homing: writing the previous current limit back failed");
-        }
-        match read_current_limit(bus, id).await {
-            Ok(raw) if raw == previous => return true,
-            Ok(raw) => tracing::warn!(
-                bus = bus.name(),
-                id,
-                attempt,
-                read_back = raw,
-                previous,
-                "homing: the current limit read back is not the previous one"
-            ),
-            Err(why) => tracing::warn!(bus = bus.name(), id, attempt, "homing: {why}"),
-        }
-    }
-    false
+    current_limit::restore(bus, id, previous, "homing").await
 }

@@ -33,6 +33,7 @@
 
 pub(crate) mod batch;
 pub(crate) mod calibration;
+pub(crate) mod current_limit;
 pub mod device;
 pub mod error;
 pub mod estop;
