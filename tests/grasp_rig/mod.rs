@@ -4,7 +4,6 @@
 //! of ±45° (the harness's).
 #![allow(dead_code)]
 
-use std::time::Duration;
 
 use jointd::protocol::params::index;
 use jointd::protocol::status::fsm;
@@ -74,23 +73,8 @@ pub async fn grasp(b: &SimBus, body: Value) -> u64 {
 
 /// Polls grasp `id` until `ok` holds for its view; that view.
 pub async fn wait_grasp(b: &SimBus, id: u64, what: &str, ok: impl Fn(&Value) -> bool) -> Value {
-    let deadline = tokio::time::Instant::now() + WAIT * 2;
-    loop {
-        let view = b
-            .server
-            .get(&format!("/api/v1/grasps/{id}"))
-            .await
-            .ok()
-            .clone();
-        if ok(&view) {
-            return view;
-        }
-        assert!(
-            tokio::time::Instant::now() < deadline,
-            "timed out waiting for {what}: {view}"
-        );
-        tokio::time::sleep(Duration::from_millis(10)).await;
-    }
+    b.wait_view(&format!("/api/v1/grasps/{id}"), WAIT * 2, what, ok)
+        .await
 }
 
 /// Finger `joint` of a grasp view.

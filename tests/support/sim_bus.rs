@@ -111,14 +111,22 @@ impl SimBus {
         what: &str,
         ok: impl Fn(&serde_json::Value) -> bool,
     ) -> serde_json::Value {
-        let deadline = tokio::time::Instant::now() + WAIT;
+        self.wait_view(&format!("/api/v1/moves/{id}"), WAIT, what, ok)
+            .await
+    }
+
+    /// Polls `GET path` until `ok` holds for the answer (within `wait`);
+    /// returns that answer.
+    pub async fn wait_view(
+        &self,
+        path: &str,
+        wait: Duration,
+        what: &str,
+        ok: impl Fn(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
+        let deadline = tokio::time::Instant::now() + wait;
         loop {
-            let view = self
-                .server
-                .get(&format!("/api/v1/moves/{id}"))
-                .await
-                .ok()
-                .clone();
+            let view = self.server.get(path).await.ok().clone();
             if ok(&view) {
                 return view;
             }
