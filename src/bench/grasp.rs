@@ -111,6 +111,7 @@ pub(crate) fn run(args: &BenchArgs) -> Result<bool, BenchError> {
             all &= false_contacts == 0;
         }
     }
+    print!("{}", super::grasp_modes::report());
     Ok(all)
 }
 

@@ -14,11 +14,14 @@
 //! - [`report`]: the result, the engine's targets, the printout.
 //! - `moves`: `--moves`: back-to-back moves generated in the daemon.
 //! - `grasp`: `--grasp`: grasps on the simulator's objects and in free air.
+//! - `grasp_modes`: `--grasp-modes` (and after `--grasp`): position mode
+//!   against current mode on the joint physics.
 
 pub mod analysis;
 pub mod client;
 pub mod cpu;
 mod grasp;
+mod grasp_modes;
 mod moves;
 pub mod report;
 pub mod ws;
@@ -110,9 +113,14 @@ pub struct BenchArgs {
     /// Measure grasping instead: three fingers closing on the simulator's
     /// objects at two stiffnesses, on V2.0.1 and rev 2.0.8 firmware (time
     /// to contact, force overshoot, hold error), then 100 grasps in free
-    /// air counting false contacts.
+    /// air counting false contacts; then the position/current mode
+    /// comparison of `--grasp-modes`.
     #[arg(long)]
     pub grasp: bool,
+    /// Only compare position mode with current mode for grasping, on the
+    /// simulated joint physics directly (no bus, no daemon).
+    #[arg(long)]
+    pub grasp_modes: bool,
     /// Measure the WebSocket path instead: the engine alone, the
     /// same stream through /api/v1/ws, then with telemetry clients added.
     #[arg(long)]
@@ -164,6 +172,10 @@ pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
             format!("real-time priority: simulator {SIM_PRIORITY}, bus owner and client {CLIENT_PRIORITY}")
         }
     );
+    if args.grasp_modes {
+        print!("{}", grasp_modes::report());
+        return Ok(true);
+    }
     if args.ws {
         return ws::run(args);
     }

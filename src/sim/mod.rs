@@ -88,7 +88,7 @@ pub mod object;
 pub(crate) mod params;
 pub(crate) mod physics;
 pub(crate) mod pty;
-mod rng;
+pub(crate) mod rng;
 pub(crate) mod runner;
 pub(crate) mod stats;
 pub(crate) mod view;

@@ -7,9 +7,9 @@
 //!
 //! Free of an object the joint follows its drive kinematically (the speed
 //! reaches the reference through the LPF level's lag, and the current is
-//! what that motion costs); pressing an object under a position or speed
-//! drive, its momentum and the drive's speed loop are integrated as
-//! dynamics ([`press`]). The current the physics computes is the capped
+//! what that motion costs); pressing an object, its momentum (and under a
+//! position or speed drive the drive's speed loop, under a current drive
+//! the fixed current reference) are integrated as dynamics ([`press`]). The current the physics computes is the capped
 //! reference of the drive's current loop; what the winding carries and
 //! the drive measures follows it ([`current_loop`]).
 //!
@@ -24,7 +24,7 @@ use crate::protocol::params::index;
 use super::object::Object;
 use super::params::Params;
 use current_loop::CurrentLoop;
-use press::Press;
+use press::{Press, PressRef};
 
 /// Largest integration step; longer advances are split.
 pub(crate) const MAX_STEP_S: f64 = 0.000_5;
@@ -195,10 +195,18 @@ impl Joint {
             }
         };
         let vel = self.vel + (v_des - self.vel) * (dt / tau).min(1.0);
-        let driven = matches!(drive, Drive::Position { .. } | Drive::Speed { .. });
-        if driven && self.presses(v_des, vel, dt) {
+        let pressing = match drive {
+            Drive::Off => None,
+            Drive::Position { .. } | Drive::Speed { .. } => Some(PressRef::Speed { v_des, tau }),
+            Drive::Current { amps } => Some(PressRef::Current { amps }),
+        };
+        let dir = match drive {
+            Drive::Current { amps } => amps,
+            _ => v_des,
+        };
+        if let Some(r) = pressing.filter(|_| self.presses(dir, vel, dt)) {
             let cap = self.current_cap(p);
-            self.press_step(dt, v_des, tau, cap, bounds);
+            self.press_step(dt, r, cap, bounds);
         } else {
             self.press = None;
             self.acc = (vel - self.vel) / dt;
@@ -235,9 +243,9 @@ impl Joint {
         self.pos = next;
     }
 
-    /// Released, the object pushes the joint out at once; under a current
-    /// drive the push slows the joint instead (position and speed drives
-    /// press it through [`press`]).
+    /// Released, the object pushes the joint out at once (driven, the
+    /// joint presses it through [`press`]; a current drive is never
+    /// limited here).
     fn press_object(&mut self, drive: Drive, v_des: f64, p: &Params) {
         let cap = match drive {
             Drive::Off => 0.0,

@@ -1,5 +1,4 @@
-//! A finger pressing a compliant object under a position or speed drive,
-//! integrated as dynamics: the output's inertia (the rotor's, reflected
+//! A finger pressing a compliant object, integrated as dynamics: the output's inertia (the rotor's, reflected
 //! through the 568.81:1 gearbox: [`INERTIA_A_PER_DEG_S2`]) carries it on
 //! into the object after contact until the object's push and the capped
 //! motor current have stopped it; the object then pushes it back to the
@@ -22,6 +21,10 @@
 //!   friction takes), in either direction; the gearbox's hysteresis (a
 //!   finger that stays pressed in after an overshoot because the object
 //!   cannot back-drive it) is not modelled: here it always settles back.
+//! - Under a current drive (rev 2.0.8 current mode) there is no speed
+//!   loop: the current reference is the asked current, capped the same
+//!   way, and the finger arrives at the free-running speed that current
+//!   holds against friction; the object's push alone decelerates it.
 //! - The object is purely elastic (no damping of its own): only the
 //!   joint's viscous friction damps the rebound, so overshoot is, if
 //!   anything, overstated for foam or rubber.
@@ -38,6 +41,25 @@ const MAX_PHASE_PER_STEP: f64 = 0.05;
 /// Sub-steps of one physics step at most (a very stiff object).
 const MAX_SUBSTEPS: usize = 200;
 
+/// What the drive asks for while pressing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum PressRef {
+    /// A speed reference (position or speed drive) and its LPF lag, s.
+    Speed { v_des: f64, tau: f64 },
+    /// A fixed q-current reference, A (current drive).
+    Current { amps: f64 },
+}
+
+impl PressRef {
+    /// The way the drive pushes (its sign).
+    fn dir(self) -> f64 {
+        match self {
+            Self::Speed { v_des, .. } => v_des,
+            Self::Current { amps } => amps,
+        }
+    }
+}
+
 /// The speed loop's state while the joint presses an object.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub(crate) struct Press {
@@ -50,6 +72,7 @@ pub(crate) struct Press {
 impl Joint {
     /// Whether this step of a position or speed drive is spent pressing
     /// the object (in it, or about to enter it at `v_next`).
+    /// `v_des` gives the drive's way (its sign) while the side is unknown.
     pub(super) fn presses(&mut self, v_des: f64, v_next: f64, dt: f64) -> bool {
         let pos = self.pos;
         let Some(ob) = self.object.as_mut() else {
@@ -61,14 +84,7 @@ impl Joint {
 
     /// One step of the pressing dynamics (split into sub-steps short
     /// enough for the object's stiffness).
-    pub(super) fn press_step(
-        &mut self,
-        dt: f64,
-        v_des: f64,
-        tau: f64,
-        cap: f64,
-        bounds: (f64, f64),
-    ) {
+    pub(super) fn press_step(&mut self, dt: f64, r: PressRef, cap: f64, bounds: (f64, f64)) {
         let Some(ob) = self.object else { return };
         let mut press = self.press.unwrap_or(Press {
             v_ref: self.vel,
@@ -78,7 +94,7 @@ impl Joint {
         let h = dt / n as f64;
         let v0 = self.vel;
         for _ in 0..n {
-            self.press_substep(&mut press, h, v_des, tau, cap, bounds);
+            self.press_substep(&mut press, h, r, cap, bounds);
         }
         self.acc = (self.vel - v0) / dt;
         self.press = Some(press);
@@ -88,28 +104,34 @@ impl Joint {
         &mut self,
         press: &mut Press,
         h: f64,
-        v_des: f64,
-        tau: f64,
+        r: PressRef,
         cap: f64,
         bounds: (f64, f64),
     ) {
         let Some(ob) = self.object else { return };
-        let along = -ob.side().unwrap_or(-v_des.signum());
-        press.v_ref += (v_des - press.v_ref) * (h / tau).min(1.0);
-        let err = press.v_ref - self.vel;
-        let kp = INERTIA_A_PER_DEG_S2 * SPEED_LOOP_RAD_S;
-        let demand =
-            along * HOLD_CURRENT_A + FRICTION_A_PER_DEG_S * self.vel + kp * err + press.load_a;
-        let current = demand.clamp(-cap, cap);
-        let capped_along_err = (demand > cap && err > 0.0) || (demand < -cap && err < 0.0);
-        if !capped_along_err {
-            press.load_a += kp * err * h / SPEED_LOOP_INTEGRAL_S;
-        }
+        let current = match r {
+            PressRef::Speed { v_des, tau } => {
+                let along = -ob.side().unwrap_or(-v_des.signum());
+                press.v_ref += (v_des - press.v_ref) * (h / tau).min(1.0);
+                let err = press.v_ref - self.vel;
+                let kp = INERTIA_A_PER_DEG_S2 * SPEED_LOOP_RAD_S;
+                let demand = along * HOLD_CURRENT_A
+                    + FRICTION_A_PER_DEG_S * self.vel
+                    + kp * err
+                    + press.load_a;
+                let capped_along_err = (demand > cap && err > 0.0) || (demand < -cap && err < 0.0);
+                if !capped_along_err {
+                    press.load_a += kp * err * h / SPEED_LOOP_INTEGRAL_S;
+                }
+                demand.clamp(-cap, cap)
+            }
+            PressRef::Current { amps } => amps.clamp(-cap, cap),
+        };
         let torque = current.signum() * (current.abs() - HOLD_CURRENT_A).max(0.0);
         let acc =
             (torque + ob.push_a(self.pos) - FRICTION_A_PER_DEG_S * self.vel) / INERTIA_A_PER_DEG_S2;
         self.vel += acc * h;
-        self.move_by(self.vel * h, v_des, bounds);
+        self.move_by(self.vel * h, r.dir(), bounds);
         self.current = current;
         if self.blocked {
             self.blocked_s += h;
@@ -191,6 +213,45 @@ mod tests {
             assert!((end - (0.2 - HOLD_CURRENT_A)).abs() < 0.003, "{v}: {end}");
             assert!((current - 0.2).abs() < 1e-4, "{v}: {current}");
         }
+    }
+
+    /// Drives 0.2 A (capped at 0.2 A) from rest at 0° into a stiff object
+    /// at 20° for 3 s: the speed at contact, the peak push, the push and
+    /// the delivered current at the end.
+    fn current_into_stiff_object() -> (f64, f64, f64, f64) {
+        let p = capped(0.2);
+        let mut j = Joint {
+            object: Some(Object::new(20.0, 0.1)),
+            ..Joint::default()
+        };
+        let d = Drive::Current { amps: 0.2 };
+        let (mut arrival, mut peak) = (None, 0.0f64);
+        for _ in 0..3000 {
+            let v = j.vel;
+            j.advance(STEP, d, &p, BOUNDS);
+            let push = -j.object.unwrap().push_a(j.pos);
+            if push > 0.0 {
+                arrival.get_or_insert(v);
+            }
+            peak = peak.max(push);
+        }
+        let end = -j.object.unwrap().push_a(j.pos);
+        (arrival.unwrap_or(0.0), peak, end, j.q_loop.amps)
+    }
+
+    #[test]
+    fn a_current_drive_arrives_at_its_free_speed_and_overshoots_the_balance() {
+        let balance = 0.2 - HOLD_CURRENT_A;
+        let (arrival, peak, end, delivered) = current_into_stiff_object();
+        let free = balance / FRICTION_A_PER_DEG_S;
+        assert!((arrival - free).abs() < 0.05 * free, "arrival {arrival}");
+        assert!(peak > balance * 1.3, "overshoot: peak {peak} vs {balance}");
+        assert!(peak < balance * 2.5, "bounded: peak {peak}");
+        assert!((end - balance).abs() < 0.003, "settled back: {end}");
+        assert!(
+            (delivered - 0.2).abs() < 1e-4,
+            "delivering the ask: {delivered}"
+        );
     }
 
     #[test]
