@@ -4,7 +4,6 @@
 //! of ±45° (the harness's).
 #![allow(dead_code)]
 
-
 use jointd::protocol::params::index;
 use jointd::protocol::status::fsm;
 use jointd::sim::SimObject;
