@@ -40,7 +40,7 @@ for _ in $(seq $((WAIT_S * 10))); do
   sleep 0.1
 done
 curl -sf -X POST "$API/devices/1/enable" >/dev/null
-curl -sf -X PUT "$API/devices/1/target" -H "$J" -d '{"position_deg": 20, "speed_rpm": 3000}' >/dev/null
+curl -sf -X PUT "$API/devices/1/target" -H "$J" -d '{"position_deg": 20, "speed_dps": 30}' >/dev/null
 curl -sf "$API/devices/2/config" >/dev/null
 sleep 1
 

@@ -55,7 +55,11 @@ def test_a_grasp_closes_holds_and_lets_go(hand):
         assert time.monotonic() < deadline, g.view
         time.sleep(0.02)
         g.refresh()
-    assert g.view == j.get_grasp(g.id)
+    # The handle's view is the daemon's (the currents move between reads).
+    def settled(v):
+        return (v["id"], v["state"], [(f["joint"], f["state"], f["contact"], f.get("contact_deg"))
+                                      for f in v["fingers"]])
+    assert settled(g.view) == settled(j.get_grasp(g.id))
 
     done = g.release()
     assert done["state"] == "done" and g.state == "done"
