@@ -84,6 +84,13 @@ pub(crate) async fn run(f: Finger, plan: Plan, prepared: Prepared, cmd: watch::R
         armed: true,
     };
     let end = drive(&f, &plan, cmd).await;
+    if matches!(end, End::Aborted(_)) {
+        // Its target may still lie past the object: with the full limit
+        // back it would squeeze with all the joint has. Held where it is
+        // (dropped by the owner if an e-stop, disable or mode change
+        // already took the joint).
+        hold_measured(&f);
+    }
     let restored = restore(&f.bus, f.id, prepared).await;
     guard.armed = false;
     set(&f.slot, |s| {
@@ -152,7 +159,7 @@ async fn drive(f: &Finger, plan: &Plan, mut cmd: watch::Receiver<Command>) -> En
             Command::Stop => return hold_here(f, "stopped by request"),
             Command::Release { goals, speed_dps } => {
                 return match goals.get(f.index).copied().flatten() {
-                    Some(goal) => open(f, &mut w, goal, speed_dps, fw).await,
+                    Some(goal) => open(f, &mut w, goal, speed_dps, fw, &mut cmd).await,
                     None => hold_here(f, "nothing to open to"),
                 };
             }
@@ -286,6 +293,12 @@ fn hold_at(f: &Finger, deg: f64) -> Option<Setpoint> {
 }
 
 fn hold_here(f: &Finger, why: &str) -> End {
+    hold_measured(f);
+    End::Stopped(why.into())
+}
+
+/// Holds the finger where it was last measured.
+fn hold_measured(f: &Finger) {
     let here = f
         .bus
         .snapshot()
@@ -295,16 +308,17 @@ fn hold_here(f: &Finger, why: &str) -> End {
     if let Some(raw) = here {
         let _ = hold_at(f, units::angle_deg(raw));
     }
-    End::Stopped(why.into())
 }
 
-/// Opens to `goal` (device degrees) and waits (bounded) until it is there.
+/// Opens to `goal` (device degrees) and waits (bounded) until it is there;
+/// a stop meanwhile holds it where it is.
 async fn open(
     f: &Finger,
     w: &mut Watch,
     goal: f64,
     speed_dps: f64,
     fw: units::FirmwareVersion,
+    cmd: &mut watch::Receiver<Command>,
 ) -> End {
     set(&f.slot, |s| s.state = FingerState::Releasing);
     match send(f, speed_dps, goal, fw) {
@@ -324,6 +338,9 @@ async fn open(
         if let Err(why) = unfit(f, w) {
             return End::Aborted(why);
         }
+        if matches!(*cmd.borrow_and_update(), Command::Stop) {
+            return hold_here(f, "stopped by request while opening");
+        }
         let snap = w.snaps.borrow_and_update().clone();
         let dev = snap.devices.get(&f.id);
         if let Some(taken) = taken_over(dev, w) {
@@ -334,13 +351,17 @@ async fn open(
             return End::Released;
         }
         if Instant::now() >= deadline {
-            return End::Stopped(format!(
+            // Blocked on its way: not left aimed at a goal it presses
+            // towards once its full limit is back.
+            let why = format!(
                 "not open within {:.1} s",
                 (travel + OPEN_SLACK).as_secs_f64()
-            ));
+            );
+            return hold_here(f, &why);
         }
         tokio::select! {
             _ = w.snaps.changed() => {}
+            _ = cmd.changed() => {}
             _ = tokio::time::sleep(LOOK) => {}
         }
     }

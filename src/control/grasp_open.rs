@@ -9,6 +9,11 @@ use super::grasp_admit::here_joint_deg;
 use super::grasp_book::{FingerGrasp, Job};
 use super::Control;
 
+/// A release goal may lie this far on the closing side of where the
+/// finger stands (it settles a little past its goal): further is no
+/// release.
+const CLOSING_SLACK_DEG: f64 = 1.0;
+
 /// Each finger's opening goal (device degrees), in job order; `None` for
 /// a finger no longer in the grasp.
 pub(super) fn open_goals(
@@ -69,6 +74,14 @@ fn open_goal(
     let soft = state.limits(&f.bus, f.id);
     let here = here_joint_deg(state, &f.bus, f.id, &cal)?;
     let field = format!("fingers.{}", f.joint);
+    // The way the finger closed (from where it started towards its
+    // limit); opening is the other way, whatever side of its limit it
+    // settled on.
+    let closing = if f.close_to_deg >= f.start_deg {
+        1.0
+    } else {
+        -1.0
+    };
     let goal = match (pose, open_deg) {
         (Some(p), _) => *p.get(&f.joint).ok_or_else(|| {
             ControlError::invalid(
@@ -76,8 +89,18 @@ fn open_goal(
                 format!("the pose has no angle for joint `{}`", f.joint),
             )
         })?,
-        (None, Some(d)) => here - (f.close_to_deg - here).signum() * d,
+        (None, Some(d)) => here - closing * d,
         (None, None) => f.start_deg,
     };
+    if (goal - here) * closing > CLOSING_SLACK_DEG {
+        return Err(ControlError::invalid(
+            &field,
+            format!(
+                "joint `{}`: {goal:.1}° is further closed than where it is ({here:.1}°); \
+                 a release opens",
+                f.joint
+            ),
+        ));
+    }
     soft.check_joint_position(&cal, &field, goal, &format!("joint `{}`", f.joint))
 }
