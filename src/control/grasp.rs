@@ -108,6 +108,32 @@ pub(crate) async fn start(
     let slots: Vec<Slot> = admitted.iter().map(|f| f.slot.clone()).collect();
     let job = Job::new(hand.to_owned(), settings, slots);
     let id = state.grasps().add(job.clone()).map_err(|b| busy(&b))?;
+    // A homing admitted meanwhile on one of these joints passed its check
+    // of this book before the job was in it: whichever of the two sees
+    // the other now stands down, so they never both drive a joint.
+    if let Some((bus, joint, homing)) = admitted.iter().find_map(|f| {
+        // Read out first: no lock of a finger is held while the homing
+        // book takes its own.
+        let (bus, joint) = {
+            let s = super::homing_book::lock(&f.slot);
+            (s.bus.clone(), s.id)
+        };
+        let homing = state.homings().running_job(&bus, joint)?;
+        Some((bus, joint, homing))
+    }) {
+        let why = format!("joint {joint} of bus `{bus}` is being homed by homing job {homing}");
+        for slot in &job.slots {
+            let mut f = super::homing_book::lock(slot);
+            f.state = FingerState::Aborted;
+            f.reason = Some(format!("{why}, started at the same time"));
+        }
+        job.done.send_replace(true);
+        return Err(ControlError::conflict(
+            "homing-running",
+            "Joint being homed",
+            format!("{why}: grasp once it is done"),
+        ));
+    }
     let plan = Plan {
         grasp_id: id,
         speed_dps: settings.speed_dps,

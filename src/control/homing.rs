@@ -222,6 +222,28 @@ pub(crate) async fn start(state: &Arc<Control>, req: &HomingRequest) -> ControlR
     // Checked again under the book's lock: another request may have
     // started a job on one of these joints while this one read the bus.
     let id = state.homings().add(slots.clone()).map_err(|b| busy(&b))?;
+    // A grasp admitted meanwhile on one of these joints passed its check
+    // of this book before the job was in it: whichever of the two sees
+    // the other now stands down, so they never both drive a joint.
+    if let Some((r, grasp)) = joints
+        .iter()
+        .find_map(|r| state.grasps().running_job(&r.bus, r.id).map(|g| (r, g)))
+    {
+        let why = format!(
+            "joint {} of bus `{}` is in grasp {grasp}, started at the same time",
+            r.id, r.bus
+        );
+        for slot in &slots {
+            let mut j = lock(slot);
+            j.state = HomingState::Failed;
+            j.reason = Some(why.clone());
+        }
+        return Err(ControlError::conflict(
+            "grasp-running",
+            "Joint grasping",
+            format!("{why}: home it once the grasp ended"),
+        ));
+    }
     for ((r, slot), (soft, epoch)) in joints.into_iter().zip(slots).zip(limits) {
         let bus = state.bus(&r.bus)?.clone();
         let state = state.clone();
