@@ -25,71 +25,19 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use serde::Deserialize;
-use utoipa::ToSchema;
-
 use super::error::{ControlError, ControlResult};
 use super::grasp_admit::{admit, fingers, hand_named, settings, speed};
-use super::grasp_book::{Busy, Command, FingerState, GraspView, Job, Slot};
-use super::grasp_finger::{self, Finger, Plan};
+use super::grasp_book::{Command, FingerState, GraspView, Job, Slot};
+use super::grasp_finger;
 use super::grasp_limit::{self, Prepared};
 use super::grasp_open::open_goals;
+use super::grasp_plan::{self, Finger, Plan};
+use super::grasp_request::busy;
+pub(crate) use super::grasp_request::{GraspJoint, GraspRequest, ReleaseRequest};
 use super::Control;
 
-/// The pose a finger closes to by default.
-pub(crate) const CLOSED_POSE: &str = "closed";
 /// How long `release` and `stop` wait for the fingers to end.
 const END_WAIT: Duration = Duration::from_secs(20);
-
-/// One finger of the hand, by its joint name, and where it closes to.
-#[derive(Debug, Clone, PartialEq, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct GraspJoint {
-    /// The joint's name in the hand.
-    #[schema(example = "index")]
-    pub joint: String,
-    /// Where it closes to at most, degrees (calibrated frame); default:
-    /// the hand's pose `closed`, else the top of the joint's allowed range.
-    #[schema(example = 90.0)]
-    pub close_to_deg: Option<f64>,
-}
-
-/// How to grasp.
-#[derive(Debug, Clone, PartialEq, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-#[schema(example = json!({"speed_dps": 30.0, "hold_current_a": 0.2}))]
-pub(crate) struct GraspRequest {
-    /// Closing speed at the output, °/s (0 < s ≤ 180).
-    #[schema(example = 30.0, exclusive_minimum = 0.0, maximum = 180.0)]
-    pub speed_dps: f64,
-    /// The force each finger holds with, as a q current, A (0 < I ≤ 5.625,
-    /// below the joint's own current limit and its protection level).
-    #[schema(example = 0.2, exclusive_minimum = 0.0, maximum = 5.625)]
-    pub hold_current_a: f64,
-    /// The rise of q current over what the finger draws moving freely that
-    /// counts as contact, A (0 < t < hold_current_a; default 30 % of
-    /// hold_current_a, at least 0.02).
-    #[schema(example = 0.06, exclusive_minimum = 0.0)]
-    pub contact_threshold_a: Option<f64>,
-    /// The fingers (1..=64, each once); default: every joint of the hand.
-    pub joints: Option<Vec<GraspJoint>>,
-}
-
-/// How to let go.
-#[derive(Debug, Clone, Default, PartialEq, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-#[schema(example = json!({"open_deg": 20.0}))]
-pub(crate) struct ReleaseRequest {
-    /// Open to this pose of the hand (its angle for each finger).
-    #[schema(example = "open")]
-    pub pose: Option<String>,
-    /// Open each finger by this much from where it is, degrees (0 < d ≤ 180).
-    #[schema(example = 20.0, exclusive_minimum = 0.0, maximum = 180.0)]
-    pub open_deg: Option<f64>,
-    /// Opening speed, °/s (default: the closing speed).
-    #[schema(example = 30.0, exclusive_minimum = 0.0, maximum = 180.0)]
-    pub speed_dps: Option<f64>,
-}
 
 /// Checks the request, admits every finger, and starts the job: every
 /// finger's limit first, then the fingers close. The job as it starts.
@@ -170,7 +118,7 @@ async fn run(job: Arc<Job>, fingers: Vec<Finger>, plan: Plan) {
             async move { (f, grasp_limit::restore(&f.bus, f.id, p).await) }
         });
         for (f, restored) in futures_util::future::join_all(restores).await {
-            grasp_finger::set(&f.slot, |s| {
+            grasp_plan::set(&f.slot, |s| {
                 s.state = FingerState::Failed;
                 s.current_limit_restored = restored;
                 s.reason = Some(why.clone());
@@ -251,17 +199,4 @@ fn ended_refused(id: u64, job: &Job) -> ControlResult<()> {
 
 fn unknown(id: u64) -> ControlError {
     ControlError::not_found("unknown-grasp", format!("no grasp with id {id}"))
-}
-
-/// 409 naming the grasp that has the joint.
-pub(super) fn busy(b: &Busy) -> ControlError {
-    ControlError::conflict(
-        "grasp-running",
-        "Joint already grasping",
-        format!(
-            "joint {} of bus `{}` is in grasp {} (GET /api/v1/grasps/{}): one grasp per joint \
-             at a time; release or stop it first",
-            b.id, b.bus, b.job, b.job
-        ),
-    )
 }

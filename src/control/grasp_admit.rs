@@ -7,9 +7,9 @@
 use std::sync::{Arc, Mutex};
 
 use super::error::{ControlError, ControlResult};
-use super::grasp::{busy, GraspRequest, CLOSED_POSE};
 use super::grasp_book::{Busy, FingerGrasp, FingerState, GraspSettings};
-use super::grasp_finger::Finger;
+use super::grasp_plan::Finger;
+use super::grasp_request::{busy, GraspRequest, CLOSED_POSE};
 use super::joints::known_device;
 use super::targets::admit_positions;
 use super::Control;

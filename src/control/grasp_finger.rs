@@ -18,18 +18,16 @@ use std::time::{Duration, Instant};
 
 use tokio::sync::watch;
 
-use crate::bus::authority::Epoch;
 use crate::bus::handle::BusEvent;
-use crate::bus::{BusHandle, Setpoint, Source};
+use crate::bus::{Setpoint, Source};
 use crate::control::device::{firmware_of, measured_angle_raw};
-use crate::control::grasp_book::{Command, FingerGrasp, FingerState, Slot};
+use crate::control::grasp_book::{Command, FingerState};
 use crate::control::grasp_detect::{
     Closing, Holding, Sample, Settings, Verdict, CONTACT_SPEED_SHARE,
 };
 use crate::control::grasp_limit::{restore, Prepared, RestoreOnDrop};
+use crate::control::grasp_plan::{set, Finger, Plan};
 use crate::control::grasp_watch::{fresh_sample, taken_over, unfit, Watch};
-use crate::control::homing_book::lock;
-use crate::hands::Calibration;
 use crate::protocol::units;
 
 /// The longest a finger waits between looks when telemetry is quiet.
@@ -38,34 +36,6 @@ const LOOK: Duration = Duration::from_millis(20);
 const OPEN_TOLERANCE_DEG: f64 = 1.0;
 /// Opening may take its travel at the speed plus this much.
 const OPEN_SLACK: Duration = Duration::from_secs(2);
-
-/// One finger as the job started it (device degrees).
-#[derive(Debug, Clone)]
-pub(crate) struct Finger {
-    pub bus: BusHandle,
-    pub id: u8,
-    /// Its place in the job (a release's goals come in that order).
-    pub index: usize,
-    pub epoch: Epoch,
-    pub cal: Calibration,
-    pub close_to_deg: f64,
-    pub slot: Slot,
-}
-
-/// How the job closes its fingers.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Plan {
-    pub grasp_id: u64,
-    pub speed_dps: f64,
-    pub hold_a: f64,
-    pub threshold_a: f64,
-    /// When the grasp was called (contact times count from here).
-    pub called: Instant,
-}
-
-pub(crate) fn set(slot: &Slot, edit: impl FnOnce(&mut FingerGrasp)) {
-    edit(&mut lock(slot));
-}
 
 /// How a finger's part ended.
 enum End {

@@ -7,7 +7,7 @@
 
 use crate::bus::BusHandle;
 use crate::control::current_limit;
-use crate::control::grasp_finger::{set, Finger, Plan};
+use crate::control::grasp_plan::{set, Finger, Plan};
 use crate::protocol::units;
 use crate::protocol::{ConfigParam, InfoBlock, ReplyBody};
 

@@ -4,9 +4,9 @@
 //! finger moves.
 
 use super::error::{ControlError, ControlResult};
-use super::grasp::ReleaseRequest;
 use super::grasp_admit::here_joint_deg;
 use super::grasp_book::{FingerGrasp, Job};
+use super::grasp_request::ReleaseRequest;
 use super::Control;
 
 /// A release goal may lie this far on the closing side of where the

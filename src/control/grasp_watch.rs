@@ -12,7 +12,7 @@ use crate::bus::handle::{BusEvent, DeviceState};
 use crate::bus::{BusSnapshot, Setpoint};
 use crate::control::device::{firmware_of, is_enabled};
 use crate::control::grasp_detect::Sample;
-use crate::control::grasp_finger::Finger;
+use crate::control::grasp_plan::Finger;
 use crate::protocol::status::{active_fault, fault_name, fsm};
 use crate::protocol::units;
 

@@ -44,6 +44,8 @@ pub(crate) mod grasp_detect;
 pub(crate) mod grasp_finger;
 pub(crate) mod grasp_limit;
 pub(crate) mod grasp_open;
+pub(crate) mod grasp_plan;
+pub(crate) mod grasp_request;
 pub(crate) mod grasp_watch;
 pub(crate) mod homing;
 pub(crate) mod homing_book;

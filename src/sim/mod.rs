@@ -84,6 +84,7 @@ pub mod firmware;
 pub(crate) mod line;
 pub(crate) mod log;
 pub(crate) mod measure;
+mod motor;
 pub mod object;
 pub(crate) mod params;
 pub(crate) mod physics;

@@ -12,7 +12,7 @@
 //! (no err 8): the joint is not held by something rigid it keeps pushing
 //! into, and a hand must be able to hold.
 
-use super::physics::HOLD_CURRENT_A;
+use super::motor::HOLD_CURRENT_A;
 
 /// Output torque per ampere of q-axis current, N·m/A (model constant: a
 /// small BLDC's ≈ 3.5 mN·m/A through the 568.81:1 gearbox at ≈ 50 %).

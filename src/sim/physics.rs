@@ -34,8 +34,7 @@ const POS_GAIN: f64 = 40.0;
 const LPF_TAU_S: [f64; 6] = [0.004, 0.015, 0.03, 0.06, 0.12, 0.25];
 /// How fast a released joint coasts to rest.
 const COAST_TAU_S: f64 = 0.05;
-/// Current to hold position at rest, A.
-pub(crate) const HOLD_CURRENT_A: f64 = 0.03;
+pub(crate) use super::motor::HOLD_CURRENT_A;
 /// Friction current per output °/s.
 const FRICTION_A_PER_DEG_S: f64 = 0.0015;
 /// Inertial current per output °/s²: the rotor's inertia reflected

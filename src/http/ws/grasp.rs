@@ -11,11 +11,10 @@
 //! weak handle on the connection's reply queue, so a connection that
 //! closes is not kept open by them, and they end with it.
 
-use serde_json::{Map, Value};
 use tokio::sync::mpsc;
 use tokio::task::JoinSet;
 
-use super::messages::{ClientMessage, ErrorCode, ParseError, ServerMessage};
+use super::messages::{ErrorCode, ServerMessage};
 use super::setpoints::WsError;
 use crate::control::grasp::{self, GraspRequest, ReleaseRequest};
 use crate::http::hub::WsHub;
@@ -23,64 +22,6 @@ use crate::http::state::AppState;
 
 /// Grasp tasks (followers, releases, stops) one connection may have running.
 pub(crate) const MAX_TASKS: usize = 64;
-
-/// Parses a `grasp`, `grasp_release` or `grasp_stop` (the message's
-/// object without its `type`).
-pub(crate) fn parse(
-    kind: &str,
-    rest: Value,
-    seq: Option<u64>,
-) -> Result<ClientMessage, ParseError> {
-    let mut obj = match rest {
-        Value::Object(obj) => obj,
-        _ => Map::new(),
-    };
-    let bad = |message: String| ParseError {
-        code: ErrorCode::BadMessage,
-        message,
-        seq,
-    };
-    obj.remove("seq");
-    let field_err = |e: serde_json::Error| bad(format!("`{kind}`: {e}"));
-    match kind {
-        "grasp" => {
-            let hand = match obj.remove("hand") {
-                Some(Value::String(h)) => h,
-                Some(_) => return Err(bad("`grasp`: `hand` must be a string".into())),
-                None => return Err(bad("`grasp`: missing `hand` (the hand's name)".into())),
-            };
-            let request: GraspRequest =
-                serde_json::from_value(Value::Object(obj)).map_err(field_err)?;
-            Ok(ClientMessage::Grasp { seq, hand, request })
-        }
-        "grasp_release" => {
-            let id = grasp_id(kind, &mut obj).map_err(bad)?;
-            let request: ReleaseRequest =
-                serde_json::from_value(Value::Object(obj)).map_err(field_err)?;
-            Ok(ClientMessage::GraspRelease { seq, id, request })
-        }
-        _ => {
-            let id = grasp_id(kind, &mut obj).map_err(bad)?;
-            if let Some(other) = obj.keys().next() {
-                return Err(bad(format!(
-                    "`{kind}`: unknown field `{other}`, expected `seq` or `id`"
-                )));
-            }
-            Ok(ClientMessage::GraspStop { seq, id })
-        }
-    }
-}
-
-fn grasp_id(kind: &str, obj: &mut Map<String, Value>) -> Result<u64, String> {
-    match obj.remove("id") {
-        Some(v) => v.as_u64().ok_or_else(|| {
-            format!("`{kind}`: `id` must be a grasp's id (an integer 1..), not {v}")
-        }),
-        None => Err(format!(
-            "`{kind}`: missing `id` (the grasp's id, as `grasp_started` gave it)"
-        )),
-    }
-}
 
 /// One connection's grasp tasks: aborted when the connection ends.
 #[derive(Default)]
@@ -201,7 +142,7 @@ fn send(state: &AppState, out: &mpsc::WeakSender<ServerMessage>, msg: ServerMess
 
 #[cfg(test)]
 mod tests {
-    use super::super::messages::parse as parse_text;
+    use super::super::messages::{parse as parse_text, ClientMessage};
     use super::*;
 
     #[test]

@@ -2,7 +2,7 @@
 //! an unknown type or field is an error naming it, never silently ignored.
 
 use serde::{Deserialize, Serialize};
-use serde_json::Value;
+use serde_json::{Map, Value};
 
 use crate::bus::handle::BusEvent;
 use crate::control::grasp::{GraspRequest, ReleaseRequest};
@@ -202,7 +202,7 @@ pub(crate) fn parse(text: &str) -> Result<ClientMessage, ParseError> {
             }
             serde_json::from_value(rest).map(|request| ClientMessage::Move { seq, request })
         }
-        "grasp" | "grasp_release" | "grasp_stop" => return super::grasp::parse(&kind, rest, seq),
+        "grasp" | "grasp_release" | "grasp_stop" => return parse_grasp(&kind, rest, seq),
         other => return Err(bad(format!("unknown type `{other}` ({TYPES})"))),
     }
     .map_err(field_err)
@@ -348,6 +348,60 @@ pub(crate) struct Limits {
 pub(crate) enum EventBody {
     Bus(BusEvent),
     Watchdog(WatchdogEvent),
+}
+
+/// Parses a `grasp`, `grasp_release` or `grasp_stop` (the message's
+/// object without its `type`).
+fn parse_grasp(kind: &str, rest: Value, seq: Option<u64>) -> Result<ClientMessage, ParseError> {
+    let mut obj = match rest {
+        Value::Object(obj) => obj,
+        _ => Map::new(),
+    };
+    let bad = |message: String| ParseError {
+        code: ErrorCode::BadMessage,
+        message,
+        seq,
+    };
+    obj.remove("seq");
+    let field_err = |e: serde_json::Error| bad(format!("`{kind}`: {e}"));
+    match kind {
+        "grasp" => {
+            let hand = match obj.remove("hand") {
+                Some(Value::String(h)) => h,
+                Some(_) => return Err(bad("`grasp`: `hand` must be a string".into())),
+                None => return Err(bad("`grasp`: missing `hand` (the hand's name)".into())),
+            };
+            let request: GraspRequest =
+                serde_json::from_value(Value::Object(obj)).map_err(field_err)?;
+            Ok(ClientMessage::Grasp { seq, hand, request })
+        }
+        "grasp_release" => {
+            let id = grasp_id(kind, &mut obj).map_err(bad)?;
+            let request: ReleaseRequest =
+                serde_json::from_value(Value::Object(obj)).map_err(field_err)?;
+            Ok(ClientMessage::GraspRelease { seq, id, request })
+        }
+        _ => {
+            let id = grasp_id(kind, &mut obj).map_err(bad)?;
+            if let Some(other) = obj.keys().next() {
+                return Err(bad(format!(
+                    "`{kind}`: unknown field `{other}`, expected `seq` or `id`"
+                )));
+            }
+            Ok(ClientMessage::GraspStop { seq, id })
+        }
+    }
+}
+
+fn grasp_id(kind: &str, obj: &mut Map<String, Value>) -> Result<u64, String> {
+    match obj.remove("id") {
+        Some(v) => v.as_u64().ok_or_else(|| {
+            format!("`{kind}`: `id` must be a grasp's id (an integer 1..), not {v}")
+        }),
+        None => Err(format!(
+            "`{kind}`: missing `id` (the grasp's id, as `grasp_started` gave it)"
+        )),
+    }
 }
 
 #[cfg(test)]
