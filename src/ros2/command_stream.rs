@@ -25,8 +25,21 @@ use crate::control::JointRef;
 use crate::record::cdr::JointState;
 use crate::record::joint_states::Scope;
 
-type Subscriber =
+pub(super) type Subscriber =
     zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
+/// The next message's bytes on a topic the bridge takes commands from;
+/// `None` once the subscription or the bridge ends.
+pub(super) async fn next_payload(
+    subscriber: &Subscriber,
+    closing: &mut watch::Receiver<bool>,
+) -> Option<Vec<u8>> {
+    tokio::select! {
+        s = subscriber.recv_async() => s.ok().map(|s| s.payload().to_bytes().into_owned()),
+        // The guard `wait_for` returns is not `Send`: dropped at once.
+        () = async { drop(closing.wait_for(|c| *c).await) } => None,
+    }
+}
 
 /// The longest a stream of velocity commands may pause before its joints
 /// are stopped (`[watchdog]`'s policy; hold when it has none): a

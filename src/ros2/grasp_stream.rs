@@ -14,7 +14,7 @@ use std::time::{Duration, SystemTime};
 
 use tokio::sync::watch;
 
-use super::command_stream::Dropped;
+use super::command_stream::{next_payload, Dropped, Subscriber};
 use super::commands::Refused;
 use super::gripper::{self, FingerNow};
 use super::keys;
@@ -26,9 +26,6 @@ use crate::control::Control;
 use crate::protocol::units;
 use crate::record::cdr::diagnostic_array_cdr;
 use crate::record::joint_states::system_ns;
-
-type Subscriber =
-    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
 
 /// How often the hand's grasp is looked at for a change.
 const LOOK: Duration = Duration::from_millis(50);
@@ -58,15 +55,10 @@ pub(super) async fn run(
     mut closing: watch::Receiver<bool>,
 ) {
     loop {
-        let sample = tokio::select! {
-            s = subscriber.recv_async() => match s {
-                Ok(s) => s,
-                Err(_) => return,
-            },
-            // The guard `wait_for` returns is not `Send`: dropped at once.
-            () = async { drop(closing.wait_for(|c| *c).await) } => return,
+        let Some(payload) = next_payload(&subscriber, &mut closing).await else {
+            return;
         };
-        let outcome = match GripperCommand::from_cdr(&sample.payload().to_bytes()) {
+        let outcome = match GripperCommand::from_cdr(&payload) {
             Ok(cmd) => start(&state, &hand, &cmd, speed_dps).await,
             Err(e) => Err(Refused::new(
                 "not-cdr",

@@ -12,7 +12,7 @@ use std::sync::Arc;
 
 use tokio::sync::watch;
 
-use super::command_stream::Dropped;
+use super::command_stream::{next_payload, Dropped, Subscriber};
 use super::commands::{joints_named, Refused};
 use super::msgs::JointTrajectory;
 use super::trajectory::move_request;
@@ -20,9 +20,6 @@ use super::Ros2Stats;
 use crate::control::moves;
 use crate::control::Control;
 use crate::record::joint_states::Scope;
-
-type Subscriber =
-    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
 
 /// Takes trajectories until the session closes.
 pub(super) async fn run(
@@ -34,15 +31,10 @@ pub(super) async fn run(
     mut closing: watch::Receiver<bool>,
 ) {
     loop {
-        let sample = tokio::select! {
-            s = subscriber.recv_async() => match s {
-                Ok(s) => s,
-                Err(_) => return,
-            },
-            // The guard `wait_for` returns is not `Send`: dropped at once.
-            () = async { drop(closing.wait_for(|c| *c).await) } => return,
+        let Some(payload) = next_payload(&subscriber, &mut closing).await else {
+            return;
         };
-        let started = match JointTrajectory::from_cdr(&sample.payload().to_bytes()) {
+        let started = match JointTrajectory::from_cdr(&payload) {
             Ok(t) => start(&state, &scope, &t).await,
             Err(e) => Err(Refused::new(
                 "not-cdr",
