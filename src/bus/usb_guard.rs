@@ -32,16 +32,23 @@
 //! | mode | write aimed | reach held for | per-transfer cost on a 1 ms frame |
 //! |---|---|---|---|
 //! | `pipelined` | 0.8 frame before its boundary | 200 µs | none (the bound) |
-//! | `guarded` | 0.9 frame before | 1.5 ms | one frame: a write late by up to 1.5 ms leaves at most one frame late into a wire held for it; two control-only transfers go between polls |
-//! | `lockstep` | after the previous reply | any delay | a USB round trip per transfer |
+//! | `guarded` | 0.9 frame before | 1.5 ms | one frame after each poll's reply: a write late by up to 1.5 ms leaves at most one frame late into a wire held for it; a control-only transfer (no reply to collide with) goes before each poll and is held for its on-time frame |
+//! | `lockstep` | a poll's transfer after the previous reply, a control-only one before it | any delay | a USB round trip per poll: on an adapter without a latency timer the same 3 frames as `guarded` |
 //!
 //! A write whose delay can reach a whole USB frame cannot be told from one
 //! that made its boundary until its reply is due, a frame after the next
 //! transfer must be written: no placement inside the frame helps, the
-//! wire must be held one frame longer (`guarded`). Below that a write
-//! aimed earlier in the frame is free.
+//! wire must be held one frame longer after every reply (`guarded`).
+//! Writes that ask no reply need no such hold: the adapter's transmit
+//! FIFO queues a late one ahead of what follows, and a FIFO whose
+//! arrivals are each at most a frame late finishes each at most a frame
+//! late, which the next poll's hold covers. Below that a write aimed
+//! earlier in the frame is free.
 //!
 //! # Backing off and back
+//! On an adapter that hands a reply over at the next USB frame (no
+//! latency timer: CH340, CP2102), `lockstep` costs what `guarded` does
+//! and no delay can make it collide, so its ladder has no `guarded` step.
 //! One incident steps up one mode at the next write (the evidence shows
 //! within a reply deadline, a few ms). Evidence from transfers written
 //! under the previous mode ([`SETTLE`]) does not step again. A mode held
@@ -66,11 +73,12 @@ pub enum PipelineMode {
     /// Writes aimed 0.8 frame before their boundary, trusted to reach the
     /// adapter within 200 µs: the adapter's bound.
     Pipelined,
-    /// Writes aimed 0.9 frame before, the wire held for a write late by
-    /// up to 1.5 ms; control-only transfers between polls.
+    /// Writes aimed 0.9 frame before, the wire held for a poll's write
+    /// late by up to 1.5 ms; a control-only transfer before each poll.
     Guarded,
-    /// Each transfer waits for the previous one's reply: no write is
-    /// blind, any delay is safe.
+    /// A transfer with a poll waits for the previous poll's reply, a
+    /// control-only transfer goes before each: no poll is written blind,
+    /// any delay is safe.
     Lockstep,
 }
 
@@ -247,11 +255,23 @@ pub(crate) struct UsbGuard {
     sentinels_late: u64,
     /// Of those, not yet handed to the bus counters.
     sentinels_untaken: (u64, u64),
+    /// The ladder goes through `guarded`: only where waiting for a reply
+    /// costs more than guarded's held frame (see [`Self::new`]).
+    guarded_step: bool,
 }
 
 impl UsbGuard {
-    pub(crate) fn new(recover: Duration, now: Instant) -> Self {
+    /// `replies_next_frame`: the adapter hands a reply to the host in the
+    /// USB frame after it left the wire (no latency timer). Then `lockstep`
+    /// with a control-only transfer before each poll costs no more than
+    /// `guarded` (a poll's transfer, its reply seen at the next frame and
+    /// the next write leaving at the frame after: the 3 frames guarded
+    /// holds) and no delay can make it collide, so the ladder skips
+    /// `guarded`. Behind a latency timer a reply takes a millisecond or
+    /// more to come back, and `guarded`'s blind writes keep the rates.
+    pub(crate) fn new(recover: Duration, replies_next_frame: bool, now: Instant) -> Self {
         Self {
+            guarded_step: !replies_next_frame,
             mode: PipelineMode::Pipelined,
             changed_at: now,
             reason: "start".into(),
@@ -324,10 +344,10 @@ impl UsbGuard {
         self.mode != PipelineMode::Lockstep
     }
 
-    /// True when control-only transfers go between polls (each transfer
-    /// costs a held frame; one without a poll keeps control at its rate).
+    /// True when control-only transfers go between polls (each poll costs
+    /// a held frame; a transfer without one keeps control at its rate).
     pub(crate) fn control_between_polls(&self) -> bool {
-        self.mode == PipelineMode::Guarded
+        self.mode != PipelineMode::Pipelined
     }
 
     /// How late a write may reach the adapter and still leave where the
@@ -407,7 +427,7 @@ impl UsbGuard {
         if seen.saturating_duration_since(self.changed_at) < SETTLE {
             return None;
         }
-        let to = self.mode.up()?;
+        let to = self.step_up()?;
         self.backoffs += 1;
         Some(self.change(to, format!("backed off: {evidence}"), now))
     }
@@ -417,7 +437,7 @@ impl UsbGuard {
     /// recovery time) per twice that clean.
     pub(crate) fn tick(&mut self, now: Instant) -> Option<Change> {
         let clean = now.saturating_duration_since(self.clean_from);
-        let Some(to) = self.mode.down() else {
+        let Some(to) = self.step_down() else {
             if self.recover_factor > 1 && clean >= self.recover_after() * 2 {
                 self.recover_factor /= 2;
                 self.clean_from = now;
@@ -431,6 +451,28 @@ impl UsbGuard {
         self.stepped_down_at = Some(now);
         let reason = format!("recovered: clean for {} ms", clean.as_millis());
         Some(self.change(to, reason, now))
+    }
+
+    /// The next mode up this bus's ladder.
+    fn step_up(&self) -> Option<PipelineMode> {
+        match self.mode.up()? {
+            PipelineMode::Guarded if !self.guarded_step => PipelineMode::Guarded.up(),
+            to => Some(to),
+        }
+    }
+
+    /// The next mode down this bus's ladder.
+    fn step_down(&self) -> Option<PipelineMode> {
+        match self.mode.down()? {
+            PipelineMode::Guarded if !self.guarded_step => PipelineMode::Guarded.down(),
+            to => Some(to),
+        }
+    }
+
+    /// Whether the ladder goes through `guarded` (the adapter was named
+    /// again, its latency timer perhaps changed).
+    pub(crate) fn set_replies_next_frame(&mut self, on: bool) {
+        self.guarded_step = !on;
     }
 
     fn change(&mut self, to: PipelineMode, reason: String, now: Instant) -> Change {
@@ -490,7 +532,7 @@ mod tests {
     #[test]
     fn garbled_bytes_step_up_once_per_settle_and_never_past_lockstep() {
         let t0 = Instant::now();
-        let mut g = UsbGuard::new(ms(1000), t0);
+        let mut g = UsbGuard::new(ms(1000), false, t0);
         assert_eq!(g.garbled_total(0, t0 + ms(100)), None);
         let up = g.garbled_total(20, t0 + ms(100)).expect("a step up");
         assert_eq!(
@@ -509,9 +551,30 @@ mod tests {
     }
 
     #[test]
+    fn an_adapter_whose_replies_come_at_the_next_frame_skips_guarded_both_ways() {
+        let t0 = Instant::now();
+        let mut g = UsbGuard::new(ms(1000), true, t0);
+        let up = g.garbled_total(20, t0 + ms(100)).expect("a step up");
+        assert_eq!(
+            (up.from, up.to),
+            (PipelineMode::Pipelined, PipelineMode::Lockstep)
+        );
+        assert_eq!(g.tick(t0 + ms(600)), None);
+        let down = g.tick(t0 + ms(1200)).expect("a step down");
+        assert_eq!(
+            (down.from, down.to),
+            (PipelineMode::Lockstep, PipelineMode::Pipelined)
+        );
+        // Named again behind a latency timer: guarded is back in the ladder.
+        g.set_replies_next_frame(false);
+        let up = g.garbled_total(40, t0 + ms(1300)).expect("a step up");
+        assert_eq!(up.to, PipelineMode::Guarded);
+    }
+
+    #[test]
     fn a_device_gone_is_not_evidence_but_a_lost_reply_is() {
         let t0 = Instant::now();
-        let mut g = UsbGuard::new(ms(1000), t0);
+        let mut g = UsbGuard::new(ms(1000), false, t0);
         // Device 3 stops answering: misses, and never answers again.
         for k in 1..=5 {
             g.reply_missing(3, t0 + ms(100 * k));
@@ -527,7 +590,7 @@ mod tests {
         assert_eq!(g.answered(6, t0 + ms(900)), None);
         assert_eq!(g.mode(), PipelineMode::Guarded);
         // An answer long after the miss says nothing.
-        let mut g = UsbGuard::new(ms(1000), t0);
+        let mut g = UsbGuard::new(ms(1000), false, t0);
         g.reply_missing(5, t0 + ms(100));
         assert_eq!(g.answered(5, t0 + ms(1200)), None);
     }
@@ -535,7 +598,7 @@ mod tests {
     #[test]
     fn steps_down_after_a_clean_recovery_time_and_doubles_it_on_a_relapse() {
         let t0 = Instant::now();
-        let mut g = UsbGuard::new(ms(1000), t0);
+        let mut g = UsbGuard::new(ms(1000), false, t0);
         g.garbled_total(1, t0 + ms(100)).expect("up");
         assert_eq!(g.tick(t0 + ms(1000)), None);
         let down = g.tick(t0 + ms(1100)).expect("down after 1 s clean");
@@ -566,7 +629,7 @@ mod tests {
     #[test]
     fn three_late_sentinels_of_32_back_off_and_a_late_one_keeps_a_backed_off_mode() {
         let t0 = Instant::now();
-        let mut g = UsbGuard::new(ms(1000), t0);
+        let mut g = UsbGuard::new(ms(1000), false, t0);
         // Two late ones among many on time: a host that read late twice.
         for k in 0..100 {
             assert_eq!(g.sentinel(k == 10 || k == 50, t0 + ms(100 + k)), None);
@@ -600,7 +663,7 @@ mod tests {
     #[test]
     fn the_factor_is_bounded() {
         let t0 = Instant::now();
-        let mut g = UsbGuard::new(ms(10), t0);
+        let mut g = UsbGuard::new(ms(10), false, t0);
         let mut t = t0;
         for total in 1..200 {
             t += ms(60);
@@ -614,7 +677,7 @@ mod tests {
     #[test]
     fn the_view_says_mode_guard_reason_and_rate() {
         let t0 = Instant::now();
-        let mut g = UsbGuard::new(ms(1000), t0);
+        let mut g = UsbGuard::new(ms(1000), false, t0);
         let v = g.view(Duration::from_millis(1), t0);
         assert_eq!(
             (v.mode, v.guard_us, v.lead_us),

@@ -259,11 +259,18 @@ pub(crate) struct UsbPipeline {
 impl UsbPipeline {
     /// `sentinels`: replies reach the host at the frame after they leave
     /// the adapter's hold, so a frame's lateness shows (see the field).
-    pub(crate) fn new(period: Duration, recover: Duration, sentinels: bool, now: Instant) -> Self {
+    /// `replies_next_frame`: see [`UsbGuard::new`].
+    pub(crate) fn new(
+        period: Duration,
+        recover: Duration,
+        sentinels: bool,
+        replies_next_frame: bool,
+        now: Instant,
+    ) -> Self {
         Self {
             phase: FramePhase::new(period),
             inflight: VecDeque::new(),
-            guard: UsbGuard::new(recover, now),
+            guard: UsbGuard::new(recover, replies_next_frame, now),
             sentinels,
             since_sentinel: 0,
             sentinel_at: None,
@@ -407,6 +414,25 @@ impl UsbPipeline {
         }
     }
 
+    /// Where the wire is held for a write that asks no reply (control
+    /// frames only), handed over at `handed`. Guarded: the boundary it
+    /// leaves at if it reaches the adapter in time. Late, it leaves a
+    /// frame later and what follows queues behind it in the adapter's
+    /// transmit FIFO; no reply is on its way for that to collide with.
+    /// The next write with a poll is held for its own latest boundary,
+    /// which a FIFO pushes nothing past: a queue whose arrivals are each
+    /// at most a frame late finishes each at most a frame late. Otherwise
+    /// as [`Self::latest_release`].
+    pub(crate) fn release_without_reply(&self, handed: Instant) -> Released {
+        if self.active() && self.guard.mode() != PipelineMode::Pipelined {
+            return Released {
+                at: self.phase.boundary_after(handed),
+                ambiguous: false,
+            };
+        }
+        self.latest_release(handed)
+    }
+
     /// A poll written blind, its reply expected in `window`.
     /// (Tracked only while writes are blind.)
     /// `reply_end`: when the reply leaves the adapter's hold (the latency
@@ -419,17 +445,7 @@ impl UsbPipeline {
         handed: Instant,
         reply_end: Instant,
     ) {
-        let on_time = self.active().then(|| {
-            let held = self
-                .released(handed)
-                .at
-                .saturating_duration_since(self.phase.boundary_after(handed));
-            // The latest the reply may end (the device's turnaround
-            // varies): a reply ending just before a boundary is not taken
-            // for late when it ends just after.
-            let end = reply_end.checked_sub(held).unwrap_or(reply_end) + GUARD;
-            self.phase.boundary_after(end)
-        });
+        let on_time = self.on_time_read(handed, reply_end);
         let armed = std::mem::take(&mut self.armed);
         // An attempt counts as one whether or not it can be judged: each
         // holds the wire a frame.
@@ -454,6 +470,45 @@ impl UsbPipeline {
         });
     }
 
+    /// When the reply to a write handed over at `handed` reaches the host
+    /// if the write made the first boundary after it; `reply_end` is when
+    /// the reply leaves the adapter's hold, the write leaving as late as
+    /// the reach allows. `None` while the frame clock is unknown.
+    fn on_time_read(&self, handed: Instant, reply_end: Instant) -> Option<Instant> {
+        self.active().then(|| {
+            let held = self
+                .released(handed)
+                .at
+                .saturating_duration_since(self.phase.boundary_after(handed));
+            // The latest the reply may end (the device's turnaround
+            // varies): a reply ending just before a boundary is not taken
+            // for late when it ends just after.
+            let end = reply_end.checked_sub(held).unwrap_or(reply_end) + GUARD;
+            self.phase.boundary_after(end)
+        })
+    }
+
+    /// True when a reply read at `at`, due at `on_time`, says its write
+    /// slipped a frame (see [`Self::answered`]).
+    fn slipped(&self, on_time: Instant, at: Instant) -> bool {
+        let after = at.saturating_duration_since(on_time);
+        let period = self.period();
+        after >= period.mul_f64(0.9) && after <= period.mul_f64(1.25)
+    }
+
+    /// A reply waited for (lockstep, or a one-shot request) to a write
+    /// handed over at `handed` (the reply leaving the adapter's hold at
+    /// `reply_end`, see [`Self::track`]) was read at `at`. A write seen a
+    /// frame late keeps a backed-off mode from stepping down, as a blind
+    /// poll's does.
+    pub(crate) fn waited_reply(&mut self, handed: Instant, reply_end: Instant, at: Instant) {
+        if let Some(on_time) = self.on_time_read(handed, reply_end) {
+            if self.slipped(on_time, at) {
+                self.guard.write_seen_late(at);
+            }
+        }
+    }
+
     /// The reply of `inflight` reached the host at `at`: a frame or more
     /// after it would have if its write had made its boundary, the write
     /// reached the adapter late. A backed-off pipeline does not step down
@@ -470,7 +525,7 @@ impl UsbPipeline {
         // than that is the host's, not the path's, and says nothing.
         let after = at.saturating_duration_since(on_time);
         let period = self.period();
-        let slipped = after >= period.mul_f64(0.9) && after <= period.mul_f64(1.25);
+        let slipped = self.slipped(on_time, at);
         if inflight.sentinel {
             let on_time_read = after < period.mul_f64(0.75);
             return match (slipped, on_time_read) {
@@ -535,7 +590,7 @@ mod tests {
     /// A frame clock with boundaries at `t0 + 300 µs + k ms`, learnt from
     /// arrivals `lateness` after boundaries.
     fn pipeline(period: Duration) -> UsbPipeline {
-        UsbPipeline::new(period, Duration::from_secs(10), true, Instant::now())
+        UsbPipeline::new(period, Duration::from_secs(10), true, false, Instant::now())
     }
 
     fn learnt(t0: Instant, lateness: &[u64]) -> UsbPipeline {

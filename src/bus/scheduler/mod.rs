@@ -51,13 +51,15 @@ pub(crate) struct Preempted;
 /// broadcasts of 16 joints.
 pub(crate) const MAX_BATCHED: usize = 2;
 
-/// Guarded, control-only transfers between two polls: a transfer with a
-/// poll holds the wire 3 USB frames (1.7 ms of frames and reply and the
-/// frame a late write may slip), one of two control frames 2. Two of
-/// those between polls: 3 control updates and 1 poll in 7 frames where
-/// the bound has 3.5 of each: control 0.86 of it, telemetry 0.29 (one
-/// control-only transfer: 0.8 and 0.4; none: 0.67 and 0.67).
-pub(crate) const CONTROL_ONLY_PER_POLL: u32 = 2;
+/// Guarded, control-only transfers before each poll. One without a poll
+/// (two broadcasts, 0.8 ms) holds the wire one USB frame: late, it only
+/// queues in the adapter's FIFO, with no reply to collide with. One with
+/// a poll holds it 3 (1.7 ms of frames and reply, and the frame a late
+/// write may slip). One of each: 2 control updates and 1 poll in 4
+/// frames where the bound has 2 of each: control 1.0 of it, telemetry
+/// 0.5. Every mix lies on control/2 + telemetry = 1 (none: 0.67 and
+/// 0.67; two: 1.2 and 0.4): control keeps the bound, telemetry gives way.
+pub(crate) const CONTROL_ONLY_PER_POLL: u32 = 1;
 
 /// How long the owner listens when there is nothing to send. Bounds how
 /// late it notices a request or setpoint on an idle bus.
@@ -395,9 +397,9 @@ impl Scheduler {
     /// [`Self::next`]): one transfer a cycle, the pending control frames and
     /// the next poll; its reply is left in flight, matched when the adapter
     /// hands it over.
-    /// Guarded (every transfer holds the wire a frame longer), every other
-    /// transfer carries only control frames when any are pending: control
-    /// keeps its rate, telemetry gives way.
+    /// Guarded (a transfer with a poll holds the wire a frame longer), a
+    /// transfer of control frames only goes before each poll when any are
+    /// pending: control keeps its rate, telemetry gives way.
     fn pipelined_slot(&mut self, now: Instant, store: &SetpointStore) -> Slot {
         let guarded = self
             .pipeline
@@ -532,6 +534,18 @@ impl Scheduler {
         }
     }
 
+    /// Behind a USB adapter, a reply waited for (lockstep, or a one-shot
+    /// request) to a write handed over at `handed`, its request ending at
+    /// `end`, was read at `at`: a write a frame late is seen as a blind
+    /// poll's is.
+    pub(crate) fn waited_reply(&mut self, end: Instant, handed: Instant, at: Instant) {
+        let timer = self.clock.adapter().latency_timer().unwrap_or_default();
+        let reply_out = self.clock.reply_end(end) + timer;
+        if let Some(pipeline) = self.pipeline.as_mut() {
+            pipeline.waited_reply(handed, reply_out, at);
+        }
+    }
+
     /// The poll in flight `reply` answers, taken out.
     pub(crate) fn take_inflight(&mut self, reply: &crate::protocol::Reply) -> Option<Inflight> {
         let want = Want {
@@ -603,6 +617,20 @@ impl Scheduler {
         match &self.pipeline {
             Some(pipeline) => {
                 let released = pipeline.latest_release(handed);
+                self.ambiguous_writes += u64::from(released.ambiguous);
+                self.clock.host_frames(released.at, n)
+            }
+            None => self.clock.host_frames(handed, n),
+        }
+    }
+
+    /// [`Self::sent`] for a write that asks no reply (control frames
+    /// only): behind a guarded USB pipeline held only for the boundary it
+    /// leaves at on time (see [`UsbPipeline::release_without_reply`]).
+    pub(crate) fn sent_without_reply(&mut self, handed: Instant, n: u32) -> Instant {
+        match &self.pipeline {
+            Some(pipeline) => {
+                let released = pipeline.release_without_reply(handed);
                 self.ambiguous_writes += u64::from(released.ambiguous);
                 self.clock.host_frames(released.at, n)
             }
@@ -742,13 +770,18 @@ impl Scheduler {
         let sentinels = |p: Duration| {
             p >= Duration::from_micros(500) && adapter.latency_timer().map_or(true, |t| t <= p)
         };
+        let replies_next_frame = adapter.latency_timer().is_none();
         match (self.pipeline.as_mut(), period) {
             (Some(pipeline), Some(p)) if pipeline.period() == p => {
                 pipeline.set_sentinels(sentinels(p));
+                pipeline
+                    .guard_mut()
+                    .set_replies_next_frame(replies_next_frame);
             }
             _ => {
                 let (recover, now) = (self.usb_recover, Instant::now());
-                self.pipeline = period.map(|p| UsbPipeline::new(p, recover, sentinels(p), now));
+                self.pipeline = period
+                    .map(|p| UsbPipeline::new(p, recover, sentinels(p), replies_next_frame, now));
             }
         }
     }

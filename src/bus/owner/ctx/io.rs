@@ -64,6 +64,12 @@ impl Ctx {
         Ok(self.sched.sent(handed, cmds.len() as u32))
     }
 
+    /// [`Self::send`] of control frames only: no reply follows them.
+    fn send_without_reply(&mut self, cmds: &[Command]) -> Result<Instant, BusError> {
+        let handed = self.link.send(cmds).map_err(|e| self.lost(e))?;
+        Ok(self.sched.sent_without_reply(handed, cmds.len() as u32))
+    }
+
     /// Accounts control frames written in front of the last frame of a
     /// write that ended on the wire at `end` (each one frame earlier).
     fn control_frames_sent(&mut self, control: &[Planned], end: Instant) {
@@ -85,7 +91,7 @@ impl Ctx {
 
     /// Writes a control frame the scheduler planned.
     pub(crate) fn send_planned(&mut self, frame: Planned) -> Result<(), BusError> {
-        let end = self.send(&[frame.command])?;
+        let end = self.send_without_reply(&[frame.command])?;
         for (_, sp) in &frame.carries {
             self.stats
                 .setpoint_age(end.saturating_duration_since(sp.accepted));
@@ -99,7 +105,7 @@ impl Ctx {
     /// Control frames in one write, no poll (a guarded USB pipeline).
     pub(crate) fn send_control_batch(&mut self, frames: Vec<Planned>) -> Result<(), BusError> {
         let cmds: Vec<Command> = frames.iter().map(|p| p.command).collect();
-        let end = self.send(&cmds)?;
+        let end = self.send_without_reply(&cmds)?;
         self.link.counters.frames_tx_batched += frames.len() as u64;
         self.control_frames_sent(&frames, end);
         Ok(())
@@ -232,13 +238,16 @@ impl Ctx {
         prepare: bool,
         silence: Silence,
     ) -> Result<Option<Reply>, BusError> {
-        let handed = Instant::now();
+        let started = Instant::now();
         let cmds: Vec<Command> = control
             .iter()
             .map(|p| p.command)
             .chain([Command::Config(cmd)])
             .collect();
-        let end = self.send(&cmds)?;
+        // Dated after the write, as a blind poll's (a thread preempted
+        // before it must not look like a path that delivered it late).
+        let handed = self.link.send(&cmds).map_err(|e| self.lost(e))?;
+        let end = self.sched.sent(handed, cmds.len() as u32);
         self.link.counters.frames_tx_batched += control.len() as u64;
         self.control_frames_sent(control, end);
         let window = self.sched.reply_window(end);
@@ -255,7 +264,8 @@ impl Ctx {
         let got = got.map_err(|e| self.lost(e))?;
         if let Some((_, read_at)) = &got {
             self.stats
-                .round_trip(read_at.saturating_duration_since(handed));
+                .round_trip(read_at.saturating_duration_since(started));
+            self.sched.waited_reply(end, handed, *read_at);
         }
         Ok(self.settle_exchange(got, want, window.due, silence))
     }

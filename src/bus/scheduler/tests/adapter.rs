@@ -70,10 +70,15 @@ fn reply_deadlines_cover_the_adapter_hold() {
 /// A CH340 bus whose replies have shown the USB frame clock: boundaries
 /// every ms, 20 µs before each arrival.
 fn pipelining_bus() -> (Bus, Instant) {
+    pipelining_bus_on(AdapterModel::Ch340)
+}
+
+/// [`pipelining_bus`] behind `adapter` (full speed: 1 ms frames).
+fn pipelining_bus_on(adapter: AdapterModel) -> (Bus, Instant) {
     let ids: Vec<u8> = (1..=16).collect();
     let mut b = Bus::new(&ids, &ids);
     let t0 = b.now;
-    b.s.set_adapter(AdapterModel::Ch340);
+    b.s.set_adapter(adapter);
     assert!(!b.s.usb_clock_known(), "nothing learnt yet");
     for k in 0..40u64 {
         b.s.arrival(b.now + Duration::from_micros(1_000 * k + 20));
@@ -228,4 +233,88 @@ fn an_e_stop_does_not_wait_for_the_polls_in_flight() {
     };
     assert_eq!(slot, Slot::EStop { generation: 1 });
     assert_eq!(b.s.in_flight(), 3, "still matched when they come");
+}
+
+/// The first boundary of [`pipelining_bus`]'s frame clock after `t`.
+fn boundary_after(t0: Instant, t: Instant) -> Instant {
+    let phase = Duration::from_micros(20);
+    let since = (t - t0).saturating_sub(phase).as_micros() as u64;
+    t0 + phase + Duration::from_millis(since / 1_000 + 1)
+}
+
+/// Backed off to `guarded` (an FTDI chip with a 1 ms timer keeps that step):
+/// a transfer of control frames only goes before each poll, held only for
+/// the frame it leaves in on time; the poll's transfer is held a frame
+/// longer, its reply too. Cycles of 4 frames carrying 2 control updates
+/// and 1 poll.
+#[test]
+fn guarded_a_control_only_write_goes_before_each_poll_and_holds_only_its_frame() {
+    let (mut b, t0) = pipelining_bus_on(AdapterModel::Ftdi { latency_ms: 1 });
+    b.now += Duration::from_millis(100);
+    b.s.usb_watch(0, b.now);
+    b.s.usb_watch(20, b.now);
+    let mode = b.s.pipeline.as_ref().map(|p| p.guard().mode());
+    assert_eq!(mode, Some(crate::bus::usb_guard::PipelineMode::Guarded));
+    assert!(b.s.pipelining(), "guarded writes blind");
+
+    // (kind, on-time boundary, where the wire is taken free again)
+    let mut written = Vec::new();
+    for k in 0..12 {
+        b.set(1..=16, 200 + k);
+        let slot = loop {
+            match b.next() {
+                Slot::Listen { until } => b.now = until,
+                slot => break slot,
+            }
+        };
+        let on_time = boundary_after(t0, b.now);
+        match slot {
+            Slot::ControlBatch(frames) => {
+                let end = b.s.sent_without_reply(b.now, frames.len() as u32);
+                for c in &frames {
+                    b.s.control_sent(c, end);
+                }
+                // Held for its own frame only: free as it ends, on time.
+                assert_eq!(end, on_time + FRAME * frames.len() as u32, "{k}");
+                written.push(("control", on_time, frames.len()));
+            }
+            Slot::Batch {
+                control,
+                dev_id,
+                block,
+            } => {
+                let n = control.len() as u32 + 1;
+                let end = b.s.sent(b.now, n);
+                for c in &control {
+                    b.s.control_sent(c, end);
+                }
+                // Held as if it left a frame late.
+                assert_eq!(end, on_time + Duration::from_millis(1) + FRAME * n, "{k}");
+                let want = Want {
+                    dev_id,
+                    index: block.index(),
+                };
+                b.s.track(want, end, b.now);
+                written.push(("poll", on_time, control.len()));
+            }
+            other => panic!("write {k}: {other:?}"),
+        }
+    }
+    let kinds: Vec<&str> = written.iter().map(|w| w.0).collect();
+    let expected: Vec<&str> = ["control", "poll"].into_iter().cycle().take(12).collect();
+    assert_eq!(kinds, expected);
+    assert!(
+        written.iter().all(|w| w.2 == 2),
+        "both broadcasts each: {written:?}"
+    );
+    for (k, w) in written.windows(2).enumerate() {
+        let gap = w[1].1 - w[0].1;
+        // On the 1 ms frame clock of the arrivals (20 µs past each ms).
+        assert_eq!((w[1].1 - t0).as_micros() % 1_000, 20, "{k}");
+        // The poll follows its control-only transfer at the next frame;
+        // the next control-only one waits out the poll's reply and the
+        // frame it may slip: 4 frames a cycle.
+        let frames = if w[0].0 == "control" { 1 } else { 3 };
+        assert_eq!(gap, Duration::from_millis(frames), "{k}: {written:?}");
+    }
 }
