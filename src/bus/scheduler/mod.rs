@@ -614,28 +614,27 @@ impl Scheduler {
     /// Before the clock is known, a write is taken to leave as late as it
     /// may: a period and the write's reach after it was made.
     pub(crate) fn sent(&mut self, handed: Instant, n: u32) -> Instant {
-        match &self.pipeline {
-            Some(pipeline) => {
-                let released = pipeline.latest_release(handed);
-                self.ambiguous_writes += u64::from(released.ambiguous);
-                self.clock.host_frames(released.at, n)
-            }
-            None => self.clock.host_frames(handed, n),
-        }
+        self.sent_held(handed, n, true)
     }
 
     /// [`Self::sent`] for a write that asks no reply (control frames
-    /// only): behind a guarded USB pipeline held only for the boundary it
-    /// leaves at on time (see [`UsbPipeline::release_without_reply`]).
+    /// only): behind a backed-off USB pipeline held only for the boundary
+    /// it leaves at on time (see [`UsbPipeline::release_without_reply`]).
     pub(crate) fn sent_without_reply(&mut self, handed: Instant, n: u32) -> Instant {
-        match &self.pipeline {
-            Some(pipeline) => {
-                let released = pipeline.release_without_reply(handed);
-                self.ambiguous_writes += u64::from(released.ambiguous);
-                self.clock.host_frames(released.at, n)
-            }
-            None => self.clock.host_frames(handed, n),
-        }
+        self.sent_held(handed, n, false)
+    }
+
+    fn sent_held(&mut self, handed: Instant, n: u32, asks_reply: bool) -> Instant {
+        let Some(pipeline) = &self.pipeline else {
+            return self.clock.host_frames(handed, n);
+        };
+        let released = if asks_reply {
+            pipeline.latest_release(handed)
+        } else {
+            pipeline.release_without_reply(handed)
+        };
+        self.ambiguous_writes += u64::from(released.ambiguous);
+        self.clock.host_frames(released.at, n)
     }
 
     /// Writes that came too close to a USB frame boundary to know which
