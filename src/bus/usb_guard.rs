@@ -32,7 +32,7 @@
 //! | mode | write aimed | reach held for | per-transfer cost on a 1 ms frame |
 //! |---|---|---|---|
 //! | `pipelined` | 0.8 frame before its boundary | 200 µs | none (the bound) |
-//! | `guarded` | 0.9 frame before | 1.5 ms | one frame after each poll's reply: a write late by up to 1.5 ms leaves at most one frame late into a wire held for it; a control-only transfer (no reply to collide with) goes before each poll and is held for its on-time frame |
+//! | `guarded` | 0.9 frame before | 1.5 ms | one frame after each poll's reply: a write late by up to 1.5 ms leaves at most one frame late into a wire held for it; a control-only transfer (no reply to collide with) goes before each poll and is held for its on-time frame when handed over where it is aimed |
 //! | `lockstep` | a poll's transfer after the previous reply, a control-only one before it | any delay | a USB round trip per poll: on an adapter without a latency timer the same 3 frames as `guarded` |
 //!
 //! A write whose delay can reach a whole USB frame cannot be told from one

@@ -415,18 +415,29 @@ impl UsbPipeline {
     }
 
     /// Where the wire is held for a write that asks no reply (control
-    /// frames only), handed over at `handed`. Guarded: the boundary it
-    /// leaves at if it reaches the adapter in time. Late, it leaves a
-    /// frame later and what follows queues behind it in the adapter's
-    /// transmit FIFO; no reply is on its way for that to collide with.
-    /// The next write with a poll is held for its own latest boundary,
-    /// which a FIFO pushes nothing past: a queue whose arrivals are each
-    /// at most a frame late finishes each at most a frame late. Otherwise
-    /// as [`Self::latest_release`].
+    /// frames only), handed over at `handed`. Backed off: the whole
+    /// frames of the reach earlier than its latest boundary, never before
+    /// the boundary it leaves at on time (for a write aimed 0.9 frame
+    /// before its boundary on a 1 ms frame, that one). Later, what follows
+    /// queues behind it in the adapter's transmit FIFO; no reply is on its
+    /// way for that to collide with. A write with a reply is held at least
+    /// those whole frames past its own boundary, which a FIFO pushes
+    /// nothing past: a queue whose arrivals are each at most that late
+    /// finishes each at most that late. (Held only for its on-time
+    /// boundary, a write handed over late in its frame, such as one that
+    /// goes at a sentinel's hand-over time, would leave two frames late
+    /// within the reach.) Otherwise as [`Self::latest_release`].
     pub(crate) fn release_without_reply(&self, handed: Instant) -> Released {
         if self.active() && self.guard.mode() != PipelineMode::Pipelined {
+            let on_time = self.phase.boundary_after(handed);
+            let latest = self.released(handed).at;
+            let period = self.period();
+            let frames = self.reach().as_nanos() / period.as_nanos().max(1);
+            let covered = period.saturating_mul(u32::try_from(frames).unwrap_or(u32::MAX));
             return Released {
-                at: self.phase.boundary_after(handed),
+                at: latest
+                    .checked_sub(covered)
+                    .map_or(on_time, |t| t.max(on_time)),
                 ambiguous: false,
             };
         }

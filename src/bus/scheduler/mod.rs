@@ -51,7 +51,7 @@ pub(crate) struct Preempted;
 /// broadcasts of 16 joints.
 pub(crate) const MAX_BATCHED: usize = 2;
 
-/// Guarded, control-only transfers before each poll. One without a poll
+/// Backed off (guarded or lockstep), control-only transfers before each poll. One without a poll
 /// (two broadcasts, 0.8 ms) holds the wire one USB frame: late, it only
 /// queues in the adapter's FIFO, with no reply to collide with. One with
 /// a poll holds it 3 (1.7 ms of frames and reply, and the frame a late
@@ -85,8 +85,8 @@ pub(crate) enum Slot {
     Probe { dev_id: u8 },
     /// Write this control frame (coalesced setpoints).
     Control(Planned),
-    /// Behind a USB adapter whose pipeline is guarded: these control
-    /// frames in one write, without a poll.
+    /// Behind a USB adapter whose pipeline backed off (guarded or
+    /// lockstep): these control frames in one write, without a poll.
     ControlBatch(Vec<Planned>),
     /// Read `block` of `dev_id`; its reply window follows from
     /// [`Scheduler::sent`] and [`Scheduler::reply_window`].
@@ -168,7 +168,7 @@ pub(crate) struct Scheduler {
     usb_recover: Duration,
     /// Changes of the USB pipeline's mode, for the owner to log and count.
     usb_changes: Vec<crate::bus::usb_guard::Change>,
-    /// Control-only transfers since the last poll (in `guarded` mode
+    /// Control-only transfers since the last poll (backed off,
     /// [`CONTROL_ONLY_PER_POLL`] go between polls, if setpoints are pending).
     control_only: u32,
 }
@@ -327,10 +327,11 @@ impl Scheduler {
     /// A prepared frame is good for this decision only, and only if no
     /// setpoint came in since it was planned.
     fn wire_slot(&mut self, now: Instant, store: &SetpointStore) -> Slot {
-        // Behind a USB adapter every write carries a poll (with the control
+        // Behind a USB adapter a write carries a poll (with the control
         // frames in front), whether it is timed by the frame clock or waits
-        // for its reply: a control frame alone costs a whole USB round trip,
-        // and without replies the frame clock is never learnt.
+        // for its reply: without replies the frame clock is never learnt.
+        // Only a backed-off pipeline adds control-only transfers between
+        // polls, and setpoints go alone when there is nothing to poll.
         if self.pipeline.is_some() {
             return self.pipelined_slot(now, store);
         }
@@ -618,8 +619,8 @@ impl Scheduler {
     }
 
     /// [`Self::sent`] for a write that asks no reply (control frames
-    /// only): behind a backed-off USB pipeline held only for the boundary
-    /// it leaves at on time (see [`UsbPipeline::release_without_reply`]).
+    /// only): behind a backed-off USB pipeline held a frame less than a
+    /// poll's (see [`UsbPipeline::release_without_reply`]).
     pub(crate) fn sent_without_reply(&mut self, handed: Instant, n: u32) -> Instant {
         self.sent_held(handed, n, false)
     }

@@ -102,7 +102,7 @@ impl Ctx {
         Ok(())
     }
 
-    /// Control frames in one write, no poll (a guarded USB pipeline).
+    /// Control frames in one write, no poll (a backed-off USB pipeline).
     pub(crate) fn send_control_batch(&mut self, frames: Vec<Planned>) -> Result<(), BusError> {
         let cmds: Vec<Command> = frames.iter().map(|p| p.command).collect();
         let end = self.send_without_reply(&cmds)?;

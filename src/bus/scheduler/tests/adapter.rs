@@ -256,6 +256,9 @@ fn guarded_a_control_only_write_goes_before_each_poll_and_holds_only_its_frame()
     let mode = b.s.pipeline.as_ref().map(|p| p.guard().mode());
     assert_eq!(mode, Some(crate::bus::usb_guard::PipelineMode::Guarded));
     assert!(b.s.pipelining(), "guarded writes blind");
+    // The first write handed over as the bus aims the others: 0.9 frame
+    // before its boundary (b.now is 20 µs before one).
+    b.now += Duration::from_micros(120);
 
     // (kind, on-time boundary, where the wire is taken free again)
     let mut written = Vec::new();
@@ -317,4 +320,129 @@ fn guarded_a_control_only_write_goes_before_each_poll_and_holds_only_its_frame()
         let frames = if w[0].0 == "control" { 1 } else { 3 };
         assert_eq!(gap, Duration::from_millis(frames), "{k}: {written:?}");
     }
+}
+
+/// Hands the next slot over: listens (advancing the clock) until one that
+/// writes comes.
+fn next_write(b: &mut Bus) -> Slot {
+    loop {
+        match b.next() {
+            Slot::Listen { until } => b.now = until,
+            slot => return slot,
+        }
+    }
+}
+
+/// Writes `slot` (a control-only transfer or a poll's) at `b.now`, as the
+/// owner does; returns (where its frames end by the model, their count).
+fn write_now(b: &mut Bus, slot: &Slot) -> (Instant, u32) {
+    match slot {
+        Slot::ControlBatch(frames) => {
+            let n = frames.len() as u32;
+            let end = b.s.sent_without_reply(b.now, n);
+            for c in frames {
+                b.s.control_sent(c, end);
+            }
+            (end, n)
+        }
+        Slot::Batch {
+            control,
+            dev_id,
+            block,
+        } => {
+            let n = control.len() as u32 + 1;
+            let end = b.s.sent(b.now, n);
+            for c in control {
+                b.s.control_sent(c, end);
+            }
+            let want = Want {
+                dev_id: *dev_id,
+                index: block.index(),
+            };
+            b.s.track(want, end, b.now);
+            (end, n)
+        }
+        other => panic!("not a write: {other:?}"),
+    }
+}
+
+/// Guarded holds the wire for a write late by up to its reach (1.5 ms)
+/// leaving at most a frame late. A control-only transfer can be handed
+/// over late in its frame without any host lateness: when nothing was
+/// pending as a sentinel came due, the bus listens until a tenth of a
+/// frame before the boundary, and a setpoint that came meanwhile goes
+/// then, control-only, ahead of the sentinel. Late by 1.3 ms (within the
+/// reach) it leaves two frames after its on-time boundary; the poll
+/// behind it queues in the adapter's FIFO, and its reply must still be
+/// off the wire before the next write can leave.
+#[test]
+fn guarded_a_control_only_write_late_within_the_reach_does_not_push_a_reply_into_the_next_write() {
+    let (mut b, t0) = pipelining_bus_on(AdapterModel::Ftdi { latency_ms: 1 });
+    b.now += Duration::from_millis(100);
+    b.s.usb_watch(0, b.now);
+    b.s.usb_watch(20, b.now);
+    let mode = b.s.pipeline.as_ref().map(|p| p.guard().mode());
+    assert_eq!(mode, Some(crate::bus::usb_guard::PipelineMode::Guarded));
+
+    // Cycles with new targets each until the next poll is a sentinel.
+    let mut k = 0;
+    loop {
+        let due = b.s.pipeline.as_ref().is_some_and(|p| p.sentinel_due());
+        let last_was_poll = b.s.control_only == 0;
+        if due && last_was_poll {
+            break;
+        }
+        b.set(1..=16, 200 + k);
+        k += 1;
+        assert!(k < 200, "no sentinel came due");
+        let slot = next_write(&mut b);
+        write_now(&mut b, &slot);
+    }
+    // Nothing pending at the write time: the bus waits for the sentinel's
+    // hand-over time, a tenth of a frame before its boundary.
+    let until = loop {
+        match b.next() {
+            Slot::Listen { until } if b.s.clock().free_at() < until => break until,
+            Slot::Listen { until } => b.now = until,
+            other => panic!("expected the sentinel's wait: {other:?}"),
+        }
+    };
+    // A setpoint comes meanwhile and goes at that time, control-only.
+    b.now = until;
+    b.set(1..=16, 900);
+    let control = b.next();
+    assert!(matches!(control, Slot::ControlBatch(_)), "{control:?}");
+    let handed_c = b.now;
+    let on_time = boundary_after(t0, handed_c);
+    assert!(
+        on_time - handed_c <= Duration::from_micros(150),
+        "handed late in its frame: {:?}",
+        on_time - handed_c
+    );
+    let (_, n_c) = write_now(&mut b, &control);
+
+    // The sentinel poll behind it, handed over when the model says.
+    let poll = next_write(&mut b);
+    assert!(matches!(poll, Slot::Batch { .. }), "{poll:?}");
+    let handed_p = b.now;
+    let (_, n_p) = write_now(&mut b, &poll);
+
+    // The next write, handed over on time and reaching the adapter at once.
+    next_write(&mut b);
+    let next_leaves = boundary_after(t0, b.now);
+
+    // The path: the control-only write reaches the adapter 1.3 ms late,
+    // within guarded's reach; the poll queues behind it in the FIFO.
+    let late = Duration::from_micros(1_300);
+    let control_leaves = boundary_after(t0, handed_c + late);
+    let poll_starts = boundary_after(t0, handed_p).max(control_leaves + FRAME * n_c);
+    let reply_ends = b.s.clock().reply_end(poll_starts + FRAME * n_p);
+    assert!(
+        next_leaves >= reply_ends,
+        "the next write leaves {:?} before the poll's reply is off the wire \
+         (control-only handed {:?} before its boundary, left {} frames late)",
+        reply_ends - next_leaves,
+        on_time - handed_c,
+        (control_leaves - on_time).as_millis(),
+    );
 }
