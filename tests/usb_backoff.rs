@@ -221,8 +221,8 @@ async fn late_sentinels_make_the_pipeline_back_off() {
     let delay = WriteDelay::parse("150,250,300,300").expect("a delay");
     rig.sim.inject(Fault::WriteDelay(Some(delay)));
     // Backed off on the sentinels (three late of the last 32, one of them
-    // perhaps from the clean path), and no further: a backed-off mode
-    // sends none.
+    // perhaps from the clean path): a CH340 backs off to lockstep, which
+    // sends none, so no more need come.
     let late = rig
         .until("backed off", |s| {
             s.usb_pipeline

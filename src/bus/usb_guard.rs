@@ -122,9 +122,11 @@ impl fmt::Display for PipelineMode {
 /// How long a write made in `pipelined` mode is trusted to take to reach
 /// the adapter (the system call, the USB stack, a thread a little late).
 const PIPELINED_REACH: Duration = Duration::from_micros(200);
-/// In `guarded`: a write handed over up to half a frame late (aimed 0.9
-/// frame before its boundary) and reaching the adapter up to 1.5 ms after
-/// that still leaves at most one frame after its boundary on a 1 ms frame.
+/// In `guarded`: a write reaching the adapter up to 1.5 ms after it was
+/// handed over. One handed over where it is aimed (0.9 frame before its
+/// boundary) then leaves at most one frame late on a 1 ms frame; the wire
+/// is held for the latest boundary each write can leave at within it,
+/// wherever it was handed over.
 const GUARDED_REACH: Duration = Duration::from_micros(1_500);
 /// In `lockstep` the next write waits for the reply, so the reach only
 /// times the wire model of the one transfer out.
