@@ -10,7 +10,9 @@
 //!   in the next 1 ms USB frame; received bytes wait in the chip until 62
 //!   are buffered (a 64-byte packet less the two status bytes) or the
 //!   latency timer (16 ms by default) has run since the first of them
-//!   arrived, then reach the host in the next frame. Source: FTDI
+//!   arrived, then reach the host in the next frame: a full packet of
+//!   exactly 62, timed by its 62nd byte, the rest waiting for the next.
+//!   Each byte is taken to have come in a byte time after the one before. Source: FTDI
 //!   application note AN232B-04 "Data Throughput, Latency and
 //!   Handshaking" (the timer is read here as running from the first byte
 //!   buffered, the case of a short reply on an idle chip).
@@ -103,27 +105,37 @@ impl RxRule {
         }
     }
 
-    /// The moment `held` bytes, the first of them received at `first_at`,
-    /// the last at `last_at`, reach the host.
-    pub(crate) fn release(
-        &self,
-        clock: &UsbClock,
-        held: usize,
-        first_at: Instant,
-        last_at: Instant,
-    ) -> Instant {
+    /// The moment the chip sends the host the next packet of the bytes it
+    /// holds, received at `times` (one instant a byte, in order): a full
+    /// packet at the frame after its last byte came in, a shorter one when
+    /// the timer has run from its first. `None` with nothing held.
+    pub(crate) fn release(&self, clock: &UsbClock, times: &[Instant]) -> Option<Instant> {
+        let first = *times.first()?;
+        Some(match self.timer {
+            Some(_) if times.len() >= FTDI_PACKET_PAYLOAD => {
+                clock.next_after(times[FTDI_PACKET_PAYLOAD - 1])
+            }
+            Some(timer) => clock.next_after(first + timer),
+            None => clock.next_after(*times.last()?),
+        })
+    }
+
+    /// How many of `held` bytes one packet takes: an FTDI chip sends at
+    /// most 62 (a 64-byte packet less its two status bytes) and keeps the
+    /// rest; the others are taken as sending all.
+    fn packet(&self, held: usize) -> usize {
         match self.timer {
-            Some(timer) if held < FTDI_PACKET_PAYLOAD => clock.next_after(first_at + timer),
-            _ => clock.next_after(last_at),
+            Some(_) => held.min(FTDI_PACKET_PAYLOAD),
+            None => held,
         }
     }
 }
 
-/// Bytes held in one direction, with the rule that lets them go.
+/// Device bytes held in the chip, each with the instant it came in.
 #[derive(Debug, Default)]
 struct Held {
     bytes: Vec<u8>,
-    first_at: Option<Instant>,
+    times: Vec<Instant>,
     release: Option<Instant>,
 }
 
@@ -217,19 +229,28 @@ impl AdapterLine {
         empty
     }
 
-    /// Hands the chip's held bytes to the host if their time has come.
+    /// Hands the chip's held bytes to the host, a packet at a time, as
+    /// their time comes.
     fn flush_to_host(&mut self, now: Instant) -> io::Result<()> {
-        let Some(release) = self.to_host.release else {
-            return Ok(());
-        };
-        if now < release {
-            return Ok(());
+        while self.to_host.release.is_some_and(|r| r <= now) {
+            let n = self.rx.packet(self.to_host.bytes.len());
+            let packet: Vec<u8> = self.to_host.bytes.drain(..n).collect();
+            self.to_host.times.drain(..n);
+            // A second full packet due by then goes too (each round
+            // takes at least a byte).
+            self.to_host.release = self.rx.release(&self.clock, &self.to_host.times);
+            // The host side of a pty takes what fits; the runner counts no overrun here.
+            self.inner.write(&packet)?;
         }
-        let bytes = std::mem::take(&mut self.to_host.bytes);
-        self.to_host.first_at = None;
-        self.to_host.release = None;
-        // The host side of a pty takes what fits; the runner counts no overrun here.
-        self.inner.write(&bytes).map(drop)
+        Ok(())
+    }
+
+    /// How long one byte takes on the wire at the line's speed (zero when
+    /// the line has none).
+    fn byte_time(&self) -> Duration {
+        self.inner.host_baud().map_or(Duration::ZERO, |baud| {
+            Duration::from_nanos(10_000_000_000 / u64::from(baud.max(1)))
+        })
     }
 }
 
@@ -292,15 +313,18 @@ impl Line for AdapterLine {
     }
 
     /// Device bytes go into the chip; they reach the host by the model's rule.
+    /// The bytes are written when the last of them has come off the wire:
+    /// each came in a byte time after the one before it.
     fn write(&mut self, bytes: &[u8]) -> io::Result<usize> {
         let now = Instant::now();
-        let first = *self.to_host.first_at.get_or_insert(now);
+        let byte = self.byte_time();
+        let previous = self.to_host.times.last().copied();
+        for k in (0..bytes.len()).rev() {
+            let at = now.checked_sub(byte * k as u32).unwrap_or(now);
+            self.to_host.times.push(previous.map_or(at, |p| at.max(p)));
+        }
         self.to_host.bytes.extend_from_slice(bytes);
-        self.to_host.release =
-            Some(
-                self.rx
-                    .release(&self.clock, self.to_host.bytes.len(), first, now),
-            );
+        self.to_host.release = self.rx.release(&self.clock, &self.to_host.times);
         self.flush_to_host(now)?;
         Ok(bytes.len())
     }
@@ -382,20 +406,28 @@ mod tests {
         let c = UsbClock::new(t0, ms(1), Duration::ZERO);
         let ftdi = RxRule::of(AdapterModel::Ftdi { latency_ms: 16 });
         let got = t0 + Duration::from_micros(2500);
+        let held = |n: usize| vec![got; n];
+        assert_eq!(ftdi.release(&c, &[]), None);
         // A 20-byte reply: first byte + 16 ms, then the next frame.
-        assert_eq!(ftdi.release(&c, 20, got, got), t0 + ms(19));
-        // 62 bytes: the next frame.
-        assert_eq!(ftdi.release(&c, 62, got, got), t0 + ms(3));
+        assert_eq!(ftdi.release(&c, &held(20)), Some(t0 + ms(19)));
+        // 62 bytes: the next frame after the 62nd, whatever came after it.
+        assert_eq!(ftdi.release(&c, &held(62)), Some(t0 + ms(3)));
+        let mut times = held(61);
+        times.push(t0 + Duration::from_micros(3100));
+        times.push(t0 + Duration::from_micros(4100));
+        assert_eq!(ftdi.release(&c, &times), Some(t0 + ms(4)));
+        assert_eq!(ftdi.packet(80), 62);
         let ftdi1 = RxRule::of(AdapterModel::Ftdi { latency_ms: 1 });
-        assert_eq!(ftdi1.release(&c, 20, got, got), t0 + ms(4));
-        // No timer: the next frame after the last byte.
+        assert_eq!(ftdi1.release(&c, &held(20)), Some(t0 + ms(4)));
+        // No timer: the next frame after the last byte, all of them.
         let ch340 = RxRule::of(AdapterModel::Ch340);
-        assert_eq!(ch340.release(&c, 20, got, got), t0 + ms(3));
+        assert_eq!(ch340.release(&c, &held(20)), Some(t0 + ms(3)));
+        assert_eq!(ch340.packet(80), 80);
         let hs = UsbClock::new(t0, Duration::from_micros(125), Duration::ZERO);
         let ft232h = RxRule::of(AdapterModel::Ft232h { latency_ms: 1 });
         assert_eq!(
-            ft232h.release(&hs, 20, got, got),
-            t0 + Duration::from_micros(3625)
+            ft232h.release(&hs, &held(20)),
+            Some(t0 + Duration::from_micros(3625))
         );
     }
 }
