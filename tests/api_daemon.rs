@@ -150,7 +150,10 @@ fn the_simulator_behind_an_adapter_model_is_pipelined_without_collisions() {
         }
     });
     d.kill();
-    assert!(bus["counters"]["polls_pipelined"].as_u64() > Some(0), "{bus}");
+    assert!(
+        bus["counters"]["polls_pipelined"].as_u64() > Some(0),
+        "{bus}"
+    );
     assert_eq!(bus["path"], "memory", "{bus}");
     assert_eq!(bus["adapter"], "ch340", "{bus}");
     // A collision corrupts the reply it meets (a CRC error, bytes skipped)

@@ -23,8 +23,17 @@ static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(())
 /// Joints `ids` behind a simulated CH340 on the in-memory line, the bus
 /// told so; `tune` sets the rest of its config.
 fn ch340_rig(ids: &[u8], tune: impl FnOnce(&mut jointd::bus::BusConfig)) -> Rig {
+    adapter_rig(AdapterModel::Ch340, ids, tune)
+}
+
+/// [`ch340_rig`] behind `adapter`.
+fn adapter_rig(
+    adapter: AdapterModel,
+    ids: &[u8],
+    tune: impl FnOnce(&mut jointd::bus::BusConfig),
+) -> Rig {
     let mut sim_cfg = sim_config(ids, BAUD);
-    sim_cfg.adapter = AdapterModel::Ch340;
+    sim_cfg.adapter = adapter;
     // The adapter's timing is hardware's: a simulator thread that a busy
     // host delays would hand replies over late, which the pipeline takes
     // (rightly) for a late path. Real-time where the host allows it, as the
@@ -32,7 +41,7 @@ fn ch340_rig(ids: &[u8], tune: impl FnOnce(&mut jointd::bus::BusConfig)) -> Rig 
     sim_cfg.realtime = true;
     rig_on_memory(sim_cfg, |c| {
         c.ids = ids.to_vec();
-        c.adapter = AdapterSetting::Fixed(AdapterModel::Ch340);
+        c.adapter = AdapterSetting::Fixed(adapter);
         tune(c);
     })
 }
@@ -238,4 +247,44 @@ async fn late_sentinels_make_the_pipeline_back_off() {
     );
     assert!(backed.sentinels_late > view.sentinels_late);
     assert!(late.counters.usb_backoffs >= 1);
+}
+
+/// Behind an FTDI chip with a 16 ms latency timer a reply's arrival says
+/// nothing of when its write left, but the chip sends a full packet (62
+/// bytes) at the frame after its last byte came in: sentinels whose reply
+/// ends one show writes that come late, and the pipeline backs off (to
+/// guarded, which this chip keeps) before the delay's tail can collide.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn late_sentinels_behind_a_long_latency_timer_back_the_pipeline_off() {
+    let _one = ONE_AT_A_TIME.lock().await;
+    let ids: Vec<u8> = (1..=4).collect();
+    let rig = adapter_rig(AdapterModel::Ftdi { latency_ms: 16 }, &ids, |_| {});
+    rig.online(4).await;
+    let sentinels = |s: &BusSnapshot| s.counters.usb_sentinels;
+    let start = rig.bus.snapshot();
+    let clean = rig
+        .until("20 sentinels dated by their packets on a clean path", |s| {
+            sentinels(s) >= sentinels(&start) + 20
+        })
+        .await;
+    let view = clean.usb_pipeline.clone().expect("a pipeline view");
+    assert_eq!(view.mode, PipelineMode::Pipelined);
+
+    let delay = WriteDelay::parse("150,250,300,300").expect("a delay");
+    rig.sim.inject(Fault::WriteDelay(Some(delay)));
+    let late = rig
+        .until("backed off", |s| {
+            s.usb_pipeline
+                .as_ref()
+                .is_some_and(|p| p.mode != PipelineMode::Pipelined)
+        })
+        .await;
+    let backed = late.usb_pipeline.clone().expect("a pipeline view");
+    assert_eq!(backed.mode, PipelineMode::Guarded);
+    assert!(
+        backed.reason.contains("sentinel"),
+        "backed off on: {}",
+        backed.reason
+    );
+    assert!(backed.sentinels_late > view.sentinels_late);
 }

@@ -14,6 +14,7 @@ use crate::transport::Transport;
 
 use super::config::{frame_time, Timing};
 use super::handle::{BusCounters, BusShared, LoggedFrame};
+use super::packets::PacketEnds;
 use super::wire::Want;
 
 /// Opens the port at a baud: a tty by path for real buses.
@@ -51,6 +52,8 @@ pub(super) struct Link {
     shared: Arc<BusShared>,
     /// Replies nobody was waiting for (power-up announcements, late replies).
     pub inbox: Vec<(Reply, Instant)>,
+    /// Which replies ended a full packet of the adapter, and when it was read.
+    pub packets: PacketEnds,
 }
 
 fn not_open() -> io::Error {
@@ -78,6 +81,7 @@ impl Link {
             counters: BusCounters::default(),
             shared,
             inbox: Vec::new(),
+            packets: PacketEnds::default(),
         }
     }
 
@@ -114,6 +118,7 @@ impl Link {
             port.discard_input()?;
         }
         self.decoder.clear();
+        self.packets.reset();
         self.up = true;
         Ok(notes)
     }
@@ -174,7 +179,7 @@ impl Link {
                 (true, Some(port)) => port.read_timeout(&mut self.buf, deadline - now)?,
                 _ => return Err(not_open()),
             };
-            self.decoder.push(&self.buf[..n]);
+            self.pushed(n);
         }
     }
 
@@ -184,8 +189,16 @@ impl Link {
             (true, Some(port)) => port.read_timeout(&mut self.buf, std::time::Duration::ZERO)?,
             _ => return Err(not_open()),
         };
-        self.decoder.push(&self.buf[..n]);
+        self.pushed(n);
         Ok(self.take_decoded(want))
+    }
+
+    /// `n` bytes were read into the buffer: to the decoder, and counted.
+    fn pushed(&mut self, n: usize) {
+        if n > 0 {
+            self.decoder.push(&self.buf[..n]);
+            self.packets.read(n, Instant::now());
+        }
     }
 
     /// Decodes buffered bytes; returns the wanted reply if it is among them.
@@ -200,6 +213,11 @@ impl Link {
                 continue;
             };
             self.counters.wire_busy_us += (self.turnaround + self.frame).as_micros() as u64;
+            let its = Want {
+                dev_id: reply.dev_id,
+                index: reply.index,
+            };
+            self.packets.reply(its, self.decoder.pending());
             let wanted = want.is_some_and(|w| w.dev_id == reply.dev_id && w.index == reply.index);
             if wanted && found.is_none() {
                 found = Some((reply, at));

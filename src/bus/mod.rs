@@ -48,6 +48,7 @@ pub mod handle;
 mod link;
 pub mod motion;
 mod owner;
+mod packets;
 pub(crate) mod poll;
 pub(crate) mod registry;
 pub(crate) mod scheduler;

@@ -32,10 +32,12 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
+use super::packets::PacketMark;
 use super::usb_guard::{
     Change, PipelineMode, UsbGuard, SENTINEL_EVERY, SENTINEL_LEAD, SENTINEL_MIN_MARGIN,
 };
 use super::wire::{ReplyWindow, Want};
+use crate::protocol::FRAME_LEN;
 
 /// Arrivals the phase estimate is made of.
 const PHASE_SAMPLES: usize = 32;
@@ -224,6 +226,17 @@ pub(crate) struct Inflight {
     /// A sentinel ([`super::usb_guard`]) handed over early enough for its
     /// lateness to say something of the path.
     pub sentinel: bool,
+    /// Behind a latency timer longer than a frame: when its reply's last
+    /// byte leaves the wire if the write made the first boundary after it,
+    /// and a byte's time, to date a full packet that a byte of it ends.
+    pub packet_ref: Option<PacketRef>,
+}
+
+/// When a reply's bytes leave the wire on time (see [`Inflight`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct PacketRef {
+    pub reply_end: Instant,
+    pub byte: Duration,
 }
 
 /// Where a transfer of host frames went on the wire.
@@ -243,10 +256,14 @@ pub(crate) struct UsbPipeline {
     phase: FramePhase,
     inflight: VecDeque<Inflight>,
     guard: UsbGuard,
-    /// True where a reply's arrival is known to the frame (a frame of 0.5 ms
-    /// or more, no latency timer longer than it): only there can a
-    /// sentinel's reply show its write late.
+    /// True where a sentinel's reply can show its write late: a frame of
+    /// 0.5 ms or more, and the reply's arrival known to the frame (no
+    /// latency timer longer than it) or [`Self::packets`].
     sentinels: bool,
+    /// Behind a latency timer longer than a frame, replies are dated by
+    /// the full packets their bytes end ([`super::packets`]), not by their
+    /// arrival.
+    packets: bool,
     /// Poll transfers since the last sentinel.
     since_sentinel: u32,
     /// When the sentinel due is to be handed over, once decided (it is
@@ -257,17 +274,18 @@ pub(crate) struct UsbPipeline {
 }
 
 impl UsbPipeline {
-    /// `sentinels`: replies reach the host at the frame after they leave
-    /// the adapter's hold, so a frame's lateness shows (see the field).
+    /// `sentinels`, `packets`: see the fields.
     /// `replies_next_frame`: see [`UsbGuard::new`].
     pub(crate) fn new(
         period: Duration,
         recover: Duration,
         sentinels: bool,
+        packets: bool,
         replies_next_frame: bool,
         now: Instant,
     ) -> Self {
         Self {
+            packets,
             phase: FramePhase::new(period),
             inflight: VecDeque::new(),
             guard: UsbGuard::new(recover, replies_next_frame, now),
@@ -280,8 +298,9 @@ impl UsbPipeline {
 
     /// The adapter was named again with the same frame: whether its
     /// replies can show a sentinel late may have changed.
-    pub(crate) fn set_sentinels(&mut self, on: bool) {
+    pub(crate) fn set_sentinels(&mut self, on: bool, packets: bool) {
         self.sentinels = on;
+        self.packets = packets;
     }
 
     /// True when the next poll transfer should be a sentinel.
@@ -449,14 +468,26 @@ impl UsbPipeline {
     /// `reply_end`: when the reply leaves the adapter's hold (the latency
     /// timer's end, if it has one), the write leaving as late as the reach
     /// allows. Ends an armed sentinel.
+    /// `wire_end`: when the reply's last byte leaves the wire, the write
+    /// leaving as late as the reach allows; `frame`: a frame's wire time.
     pub(crate) fn track(
         &mut self,
         want: Want,
         window: ReplyWindow,
         handed: Instant,
         reply_end: Instant,
+        (wire_end, frame): (Instant, Duration),
     ) {
-        let on_time = self.on_time_read(handed, reply_end);
+        let (on_time, packet_ref) = if self.packets {
+            let held = self.held(handed);
+            let packet_ref = self.active().then(|| PacketRef {
+                reply_end: wire_end.checked_sub(held).unwrap_or(wire_end),
+                byte: frame / FRAME_LEN as u32,
+            });
+            (None, packet_ref)
+        } else {
+            (self.on_time_read(handed, reply_end), None)
+        };
         let armed = std::mem::take(&mut self.armed);
         // An attempt counts as one whether or not it can be judged: each
         // holds the wire a frame.
@@ -471,13 +502,15 @@ impl UsbPipeline {
             .saturating_duration_since(handed);
         // Handed over too close to its boundary (the host woke late), its
         // lateness would be the host's as much as the path's: not judged.
-        let sentinel = armed && on_time.is_some() && margin >= SENTINEL_MIN_MARGIN;
+        let judged = on_time.is_some() || packet_ref.is_some();
+        let sentinel = armed && judged && margin >= SENTINEL_MIN_MARGIN;
         self.inflight.push_back(Inflight {
             want,
             window,
             handed,
             on_time,
             sentinel,
+            packet_ref,
         });
     }
 
@@ -485,12 +518,17 @@ impl UsbPipeline {
     /// if the write made the first boundary after it; `reply_end` is when
     /// the reply leaves the adapter's hold, the write leaving as late as
     /// the reach allows. `None` while the frame clock is unknown.
+    /// How much later than the first boundary after it a write handed
+    /// over at `handed` is held for.
+    fn held(&self, handed: Instant) -> Duration {
+        self.released(handed)
+            .at
+            .saturating_duration_since(self.phase.boundary_after(handed))
+    }
+
     fn on_time_read(&self, handed: Instant, reply_end: Instant) -> Option<Instant> {
         self.active().then(|| {
-            let held = self
-                .released(handed)
-                .at
-                .saturating_duration_since(self.phase.boundary_after(handed));
+            let held = self.held(handed);
             // The latest the reply may end (the device's turnaround
             // varies): a reply ending just before a boundary is not taken
             // for late when it ends just after.
@@ -534,10 +572,34 @@ impl UsbPipeline {
         // next boundary, read promptly: a frame after on time, give or take
         // the estimate's error and the host's usual wake-up. A read later
         // than that is the host's, not the path's, and says nothing.
+        self.verdict(inflight.sentinel, on_time, at)
+    }
+
+    /// Behind a latency timer: byte `mark.byte` of `inflight`'s reply ended
+    /// a full packet, which the host read at `mark.read_at`. The packet
+    /// leaves the adapter at the frame after that byte came in: read a
+    /// frame later than on time, the poll's write slipped a frame.
+    pub(crate) fn answered_packet(
+        &mut self,
+        inflight: &Inflight,
+        mark: PacketMark,
+    ) -> Option<Change> {
+        let r = inflight.packet_ref?;
+        let after_it = FRAME_LEN.saturating_sub(usize::from(mark.byte)) as u32;
+        let byte_in = r.reply_end.checked_sub(r.byte * after_it)?;
+        // As for a reply's end: the device's turnaround varies.
+        let on_time = self.phase.boundary_after(byte_in + GUARD);
+        self.verdict(inflight.sentinel, on_time, mark.read_at)
+    }
+
+    /// What a read at `at` of what was due at `on_time` says: a sentinel
+    /// late or on time (or nothing, read too late to tell), another write
+    /// seen a frame late.
+    fn verdict(&mut self, sentinel: bool, on_time: Instant, at: Instant) -> Option<Change> {
         let after = at.saturating_duration_since(on_time);
         let period = self.period();
         let slipped = self.slipped(on_time, at);
-        if inflight.sentinel {
+        if sentinel {
             let on_time_read = after < period.mul_f64(0.75);
             return match (slipped, on_time_read) {
                 (true, _) => self.guard.sentinel(true, at),
@@ -545,8 +607,7 @@ impl UsbPipeline {
                 (false, false) => None,
             };
         }
-        let late = slipped;
-        if late {
+        if slipped {
             self.guard.write_seen_late(at);
         }
         None
@@ -601,7 +662,14 @@ mod tests {
     /// A frame clock with boundaries at `t0 + 300 µs + k ms`, learnt from
     /// arrivals `lateness` after boundaries.
     fn pipeline(period: Duration) -> UsbPipeline {
-        UsbPipeline::new(period, Duration::from_secs(10), true, false, Instant::now())
+        UsbPipeline::new(
+            period,
+            Duration::from_secs(10),
+            true,
+            false,
+            false,
+            Instant::now(),
+        )
     }
 
     fn learnt(t0: Instant, lateness: &[u64]) -> UsbPipeline {
@@ -719,7 +787,13 @@ mod tests {
         // Its reply ends 1.7 ms after the boundary it made (12.0 ms), is
         // modelled from the later one (13.0 ms), and reaches the host at
         // the boundary after its end: 12.3 ms if on time.
-        p.track(want, window, handed, t0 + us(13_000));
+        p.track(
+            want,
+            window,
+            handed,
+            t0 + us(13_000),
+            (t0 + us(13_000), us(400)),
+        );
         let on_time = p.take(want).expect("tracked");
         assert!(on_time.sentinel);
         assert_eq!(on_time.on_time, Some(t0 + us(12_300)));
@@ -732,13 +806,64 @@ mod tests {
         assert_eq!(view(&mut p), (2, 1));
         // Handed 30 µs before its boundary (the host woke late): not judged.
         p.arm_sentinel();
-        p.track(want, window, t0 + us(10_270), t0 + us(13_000));
+        let end = t0 + us(13_000);
+        p.track(want, window, t0 + us(10_270), end, (end, us(400)));
         let close = p.take(want).expect("tracked");
         assert!(!close.sentinel);
         assert_eq!(p.answered(&close, t0 + us(13_330)), None);
         assert_eq!(view(&mut p), (2, 1));
         // Nor is the next write armed.
         assert_eq!(p.released(t0 + us(9_800)).at, t0 + us(10_300));
+    }
+
+    #[test]
+    fn behind_a_long_timer_a_sentinel_is_dated_by_the_packet_its_reply_ends() {
+        let t0 = Instant::now();
+        let mut p = learnt(t0, &[0; PHASE_SAMPLES]);
+        p.set_sentinels(true, true);
+        let want = Want {
+            dev_id: 1,
+            index: 2,
+        };
+        let window = ReplyWindow {
+            due: t0 + us(30_000),
+            deadline: t0 + us(40_000),
+        };
+        let view = |p: &mut UsbPipeline| {
+            let v = p.guard_mut().view(Duration::from_millis(1), t0);
+            (v.sentinels, v.sentinels_late)
+        };
+        // As above: made the 10.3 ms boundary, its reply ends at 12.0 ms on
+        // time (13.0 ms as modelled from the later boundary), and a 16 ms
+        // timer holds it after that.
+        p.arm_sentinel();
+        let wire_end = t0 + us(13_000);
+        p.track(
+            want,
+            window,
+            t0 + us(10_200),
+            wire_end + us(16_000),
+            (wire_end, us(400)),
+        );
+        let s = p.take(want).expect("tracked");
+        assert!(s.sentinel);
+        assert_eq!(s.on_time, None, "behind the timer its arrival says nothing");
+        assert_eq!(p.answered(&s, t0 + us(12_330)), None);
+        assert_eq!(view(&mut p), (0, 0));
+        // Its 2nd byte ended a full packet: in at 12.0 ms less 18 bytes of
+        // 20 µs (11.64 ms) on time, the packet at the host at 12.3 ms.
+        let mark = |at: u64| PacketMark {
+            byte: 2,
+            read_at: t0 + us(at),
+        };
+        assert_eq!(p.answered_packet(&s, mark(12_340)), None);
+        assert_eq!(view(&mut p), (1, 0));
+        // Read a frame later: the write slipped a frame.
+        assert_eq!(p.answered_packet(&s, mark(13_340)), None);
+        assert_eq!(view(&mut p), (2, 1));
+        // Read 1.6 ms after on time: the host's lateness, not judged.
+        assert_eq!(p.answered_packet(&s, mark(13_900)), None);
+        assert_eq!(view(&mut p), (2, 1));
     }
 
     #[test]
@@ -759,9 +884,9 @@ mod tests {
             due: t0 + Duration::from_millis(ms),
             deadline: t0 + Duration::from_millis(ms + 5),
         };
-        p.track(want(1), window(1), t0, t0);
-        p.track(want(2), window(2), t0, t0);
-        p.track(want(1), window(3), t0, t0);
+        p.track(want(1), window(1), t0, t0, (t0, us(400)));
+        p.track(want(2), window(2), t0, t0, (t0, us(400)));
+        p.track(want(1), window(3), t0, t0, (t0, us(400)));
         assert_eq!(p.take(want(1)).map(|i| i.window), Some(window(1)));
         assert_eq!(p.next_deadline(), Some(t0 + Duration::from_millis(7)));
         let gone = p.expired(t0 + Duration::from_millis(7));

@@ -47,14 +47,12 @@ use std::io;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use crate::transport::adapter::AdapterModel;
+use crate::transport::adapter::{AdapterModel, FTDI_PACKET_PAYLOAD};
 
 use super::line::Line;
 use super::rng::Rng;
 use super::write_delay::WriteDelayCell;
 
-/// Bytes an FTDI chip sends at once without waiting for its timer.
-const FTDI_PACKET_PAYLOAD: usize = 62;
 /// A read that returns sooner than this after it was called did not wait:
 /// its bytes were already there.
 const READ_BLOCKED: Duration = Duration::from_micros(20);

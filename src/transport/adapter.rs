@@ -20,6 +20,9 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+/// Data bytes in a full FTDI packet (64 bytes less the two status bytes).
+pub const FTDI_PACKET_PAYLOAD: usize = 62;
+
 /// USB full-speed frame period.
 const FULL_SPEED_FRAME: Duration = Duration::from_millis(1);
 /// USB high-speed microframe period.
@@ -86,6 +89,13 @@ impl AdapterModel {
             Self::Ftdi { .. } | Self::Ch340 | Self::Cp2102 => Some(FULL_SPEED_FRAME),
             Self::Ft232h { .. } => Some(HIGH_SPEED_FRAME),
         }
+    }
+
+    /// Data bytes in the full packet a chip with a latency timer sends as
+    /// soon as they are in (FTDI: a 64-byte packet less two status bytes;
+    /// AN232B-04), for the chips that have one.
+    pub fn packet_payload(self) -> Option<usize> {
+        self.latency_timer().map(|_| FTDI_PACKET_PAYLOAD)
     }
 
     /// The FTDI latency timer, for the chips that have one.

@@ -528,10 +528,11 @@ impl Scheduler {
         // Held in the adapter until its latency timer, if it has one, has
         // run from the reply's bytes (taken from the last: the latest).
         let timer = self.clock.adapter().latency_timer().unwrap_or_default();
-        let reply_out = self.clock.reply_end(end) + timer;
+        let wire_end = self.clock.reply_end(end);
+        let frame = self.clock.frame_time();
         self.clock.reply_on_wire(end);
         if let Some(pipeline) = self.pipeline.as_mut() {
-            pipeline.track(want, window, handed, reply_out);
+            pipeline.track(want, window, handed, wire_end + timer, (wire_end, frame));
         }
     }
 
@@ -764,24 +765,27 @@ impl Scheduler {
     pub(crate) fn set_adapter(&mut self, adapter: crate::transport::adapter::AdapterModel) {
         self.clock.set_adapter(adapter);
         let period = adapter.usb_frame();
-        // A sentinel's reply shows its write a frame late only where the
-        // reply reaches the host at the frame after the adapter lets it go:
-        // frames of 0.5 ms or more, a latency timer no longer than one.
-        let sentinels = |p: Duration| {
-            p >= Duration::from_micros(500) && adapter.latency_timer().map_or(true, |t| t <= p)
-        };
+        // A sentinel's reply shows its write a frame late only where a
+        // frame is 0.5 ms or more (a host reads replies 30-90 µs late) and
+        // the reply reaches the host at the frame after the adapter lets it
+        // go (a latency timer no longer than one), or, behind a longer
+        // timer, where its bytes end a full packet.
+        let sentinels = |p: Duration| p >= Duration::from_micros(500);
+        let packets = |p: Duration| adapter.latency_timer().is_some_and(|t| t > p);
         let replies_next_frame = adapter.latency_timer().is_none();
         match (self.pipeline.as_mut(), period) {
             (Some(pipeline), Some(p)) if pipeline.period() == p => {
-                pipeline.set_sentinels(sentinels(p));
+                pipeline.set_sentinels(sentinels(p), packets(p));
                 pipeline
                     .guard_mut()
                     .set_replies_next_frame(replies_next_frame);
             }
             _ => {
                 let (recover, now) = (self.usb_recover, Instant::now());
-                self.pipeline = period
-                    .map(|p| UsbPipeline::new(p, recover, sentinels(p), replies_next_frame, now));
+                self.pipeline = period.map(|p| {
+                    let (sentinels, packets) = (sentinels(p), packets(p));
+                    UsbPipeline::new(p, recover, sentinels, packets, replies_next_frame, now)
+                });
             }
         }
     }

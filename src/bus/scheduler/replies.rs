@@ -6,6 +6,7 @@
 use std::time::{Duration, Instant};
 
 use crate::bus::config::StartPolicy;
+use crate::bus::packets::PacketMark;
 use crate::bus::registry::ReplyEffect;
 use crate::bus::state::BusEvent;
 use crate::bus::wire::Want;
@@ -31,11 +32,12 @@ impl Scheduler {
         reply: &Reply,
         at: Instant,
         inflight: &Inflight,
+        packet: Option<PacketMark>,
     ) -> ReplyEffect {
-        let change = self
-            .pipeline
-            .as_mut()
-            .and_then(|p| p.answered(inflight, at));
+        let change = self.pipeline.as_mut().and_then(|p| match packet {
+            Some(mark) => p.answered_packet(inflight, mark),
+            None => p.answered(inflight, at),
+        });
         self.usb_changed(change);
         self.take_reply(reply, at, inflight.window.due)
     }

@@ -45,7 +45,8 @@ impl Ctx {
                 Some(inflight) => {
                     self.stats
                         .round_trip(at.saturating_duration_since(inflight.handed));
-                    self.sched.inflight_reply(reply, *at, &inflight)
+                    let packet = self.link.packets.take(inflight.want);
+                    self.sched.inflight_reply(reply, *at, &inflight, packet)
                 }
                 None => {
                     self.link.counters.unsolicited += 1;

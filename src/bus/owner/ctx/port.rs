@@ -132,6 +132,7 @@ impl Ctx {
             AdapterSetting::Auto => (info.model, format!("detected: {}", info.found_by)),
         };
         self.sched.set_adapter(model);
+        self.link.packets.set_payload(model.packet_payload());
         let mut text = format!("adapter {model} ({why})");
         let mut warn = false;
         if let Some(timer) = model

@@ -1,0 +1,160 @@
+//! Which reply's byte ended a full USB packet, and when the host read it.
+//!
+//! An FTDI chip with a latency timer longer than a USB frame holds a short
+//! reply for its timer, so a reply's arrival says nothing of when its
+//! write left the adapter. But it sends a full packet (62 bytes of data)
+//! as soon as the 62nd byte is in, at the next USB frame: a read that is
+//! exactly one packet dates the byte that ended it to the frame before the
+//! read. That byte belongs to a reply; its offset in the stream of bytes
+//! read says which one, once that reply is decoded. The pipeline
+//! ([`super::usb_pipeline`]) compares the read with the frame the byte
+//! would have left in had its poll's write made its boundary: a sentinel
+//! that slipped shows a frame later, as on adapters without a timer.
+//!
+//! Offsets count every byte read since the port opened, garbage included,
+//! so a frame's place in the stream does not depend on how the bytes
+//! before it decoded. A read of more or less than one packet (two packets
+//! read late together, a short packet sent by the timer) dates nothing.
+
+use std::collections::VecDeque;
+use std::time::Instant;
+
+use crate::protocol::FRAME_LEN;
+
+use super::wire::Want;
+
+/// Packet ends not yet matched to a reply: more than a few means the
+/// stream went astray (a reply that never decoded), and the oldest go.
+const MAX_ENDS: usize = 8;
+/// Marks not yet taken by the owner (replies it did not wait for).
+const MAX_MARKS: usize = 16;
+
+/// A reply whose byte ended a full packet.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct PacketMark {
+    /// Which byte of the reply, 1 for its first, [`FRAME_LEN`] for its last.
+    pub byte: u8,
+    /// When the host read the packet.
+    pub read_at: Instant,
+}
+
+/// The stream of bytes read from an adapter that sends full packets.
+#[derive(Debug, Default)]
+pub(crate) struct PacketEnds {
+    /// Data bytes in a full packet; `None`: the adapter sends none to date.
+    payload: Option<usize>,
+    /// Bytes read since the port opened.
+    total: u64,
+    /// Offsets (exclusive ends) of reads that were exactly one packet.
+    ends: VecDeque<(u64, Instant)>,
+    marks: VecDeque<(Want, PacketMark)>,
+}
+
+impl PacketEnds {
+    /// For an adapter whose full packets carry `payload` data bytes.
+    pub(crate) fn set_payload(&mut self, payload: Option<usize>) {
+        self.payload = payload;
+        self.ends.clear();
+        self.marks.clear();
+    }
+
+    /// The port was (re)opened: offsets start again.
+    pub(crate) fn reset(&mut self) {
+        self.total = 0;
+        self.ends.clear();
+        self.marks.clear();
+    }
+
+    /// `n` bytes were read at `at`.
+    pub(crate) fn read(&mut self, n: usize, at: Instant) {
+        self.total += n as u64;
+        if self.payload == Some(n) {
+            if self.ends.len() == MAX_ENDS {
+                self.ends.pop_front();
+            }
+            self.ends.push_back((self.total, at));
+        }
+    }
+
+    /// The reply `want` was decoded, its last byte `pending` bytes before
+    /// the end of what was read: marked if a packet ended inside it.
+    pub(crate) fn reply(&mut self, want: Want, pending: usize) {
+        let end = self.total.saturating_sub(pending as u64);
+        let start = end.saturating_sub(FRAME_LEN as u64);
+        while let Some(&(at, read_at)) = self.ends.front() {
+            if at > end {
+                break;
+            }
+            self.ends.pop_front();
+            if at > start {
+                if self.marks.len() == MAX_MARKS {
+                    self.marks.pop_front();
+                }
+                let byte = u8::try_from(at - start).unwrap_or(u8::MAX);
+                self.marks.push_back((want, PacketMark { byte, read_at }));
+            }
+        }
+    }
+
+    /// The mark of `want`'s reply, if a packet ended inside it.
+    pub(crate) fn take(&mut self, want: Want) -> Option<PacketMark> {
+        let pos = self.marks.iter().position(|(w, _)| *w == want)?;
+        self.marks.remove(pos).map(|(_, mark)| mark)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    fn want(dev_id: u8) -> Want {
+        Want { dev_id, index: 1 }
+    }
+
+    #[test]
+    fn a_read_of_one_packet_marks_the_reply_its_last_byte_is_in() {
+        let t0 = Instant::now();
+        let mut p = PacketEnds::default();
+        p.set_payload(Some(62));
+        // Replies 1-3 whole and 2 bytes of reply 4: one packet.
+        p.read(62, t0);
+        for id in 1..=3 {
+            let pending = 62 - 20 * usize::from(id);
+            p.reply(want(id), pending);
+        }
+        assert_eq!(p.take(want(3)), None);
+        // The rest of reply 4 comes in a short read.
+        p.read(18, t0 + Duration::from_millis(5));
+        p.reply(want(4), 0);
+        assert_eq!(
+            p.take(want(4)),
+            Some(PacketMark {
+                byte: 2,
+                read_at: t0
+            })
+        );
+        assert_eq!(p.take(want(4)), None);
+    }
+
+    #[test]
+    fn reads_of_other_sizes_date_nothing() {
+        let t0 = Instant::now();
+        let mut p = PacketEnds::default();
+        p.set_payload(Some(62));
+        p.read(124, t0);
+        p.read(20, t0);
+        for (k, id) in (1..=7).enumerate() {
+            p.reply(want(id), 144 - 20 * (k + 1));
+        }
+        assert!((1..=7).all(|id| p.take(want(id)).is_none()));
+        let mut none = PacketEnds::default();
+        none.read(62, t0);
+        none.reply(want(1), 42);
+        none.reply(want(2), 22);
+        none.reply(want(3), 2);
+        none.read(18, t0);
+        none.reply(want(4), 0);
+        assert_eq!(none.take(want(4)), None, "no payload: no packets");
+    }
+}
