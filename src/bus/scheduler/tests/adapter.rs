@@ -235,6 +235,18 @@ fn an_e_stop_does_not_wait_for_the_polls_in_flight() {
     assert_eq!(b.s.in_flight(), 3, "still matched when they come");
 }
 
+/// [`pipelining_bus`] behind an FTDI chip with a 1 ms timer (which keeps
+/// the `guarded` step), backed off there by a collision's garbage.
+fn guarded_bus() -> (Bus, Instant) {
+    let (mut b, t0) = pipelining_bus_on(AdapterModel::Ftdi { latency_ms: 1 });
+    b.now += Duration::from_millis(100);
+    b.s.usb_watch(0, b.now);
+    b.s.usb_watch(20, b.now);
+    let mode = b.s.pipeline.as_ref().map(|p| p.guard().mode());
+    assert_eq!(mode, Some(crate::bus::usb_guard::PipelineMode::Guarded));
+    (b, t0)
+}
+
 /// The first boundary of [`pipelining_bus`]'s frame clock after `t`.
 fn boundary_after(t0: Instant, t: Instant) -> Instant {
     let phase = Duration::from_micros(20);
@@ -249,12 +261,7 @@ fn boundary_after(t0: Instant, t: Instant) -> Instant {
 /// and 1 poll.
 #[test]
 fn guarded_a_control_only_write_goes_before_each_poll_and_holds_only_its_frame() {
-    let (mut b, t0) = pipelining_bus_on(AdapterModel::Ftdi { latency_ms: 1 });
-    b.now += Duration::from_millis(100);
-    b.s.usb_watch(0, b.now);
-    b.s.usb_watch(20, b.now);
-    let mode = b.s.pipeline.as_ref().map(|p| p.guard().mode());
-    assert_eq!(mode, Some(crate::bus::usb_guard::PipelineMode::Guarded));
+    let (mut b, t0) = guarded_bus();
     assert!(b.s.pipelining(), "guarded writes blind");
     // The first write handed over as the bus aims the others: 0.9 frame
     // before its boundary (b.now is 20 µs before one).
@@ -377,12 +384,7 @@ fn write_now(b: &mut Bus, slot: &Slot) -> (Instant, u32) {
 /// off the wire before the next write can leave.
 #[test]
 fn guarded_a_control_only_write_late_within_the_reach_does_not_push_a_reply_into_the_next_write() {
-    let (mut b, t0) = pipelining_bus_on(AdapterModel::Ftdi { latency_ms: 1 });
-    b.now += Duration::from_millis(100);
-    b.s.usb_watch(0, b.now);
-    b.s.usb_watch(20, b.now);
-    let mode = b.s.pipeline.as_ref().map(|p| p.guard().mode());
-    assert_eq!(mode, Some(crate::bus::usb_guard::PipelineMode::Guarded));
+    let (mut b, t0) = guarded_bus();
 
     // Cycles with new targets each until the next poll is a sentinel.
     let mut k = 0;
