@@ -157,4 +157,20 @@ mod tests {
         none.reply(want(4), 0);
         assert_eq!(none.take(want(4)), None, "no payload: no packets");
     }
+
+    #[test]
+    fn a_reply_no_packet_ends_in_takes_no_mark_of_a_later_reply_of_the_same_block() {
+        let t0 = Instant::now();
+        let mut p = PacketEnds::default();
+        p.set_payload(Some(62));
+        // Two polls of the same block in flight, their replies read
+        // together: the first ends no packet, the second's 2nd byte ends one.
+        p.read(62, t0);
+        p.reply(want(1), 42);
+        p.reply(want(2), 22);
+        p.read(18, t0 + Duration::from_millis(1));
+        p.reply(want(1), 0);
+        // The owner matches the first reply first: it has no mark.
+        assert_eq!(p.take(want(1)), None, "the later reply's mark");
+    }
 }
