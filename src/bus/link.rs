@@ -14,7 +14,7 @@ use crate::transport::Transport;
 
 use super::config::{frame_time, Timing};
 use super::handle::{BusCounters, BusShared, LoggedFrame};
-use super::packets::PacketEnds;
+use super::packets::{PacketEnds, PacketMark};
 use super::wire::Want;
 
 /// Opens the port at a baud: a tty by path for real buses.
@@ -50,9 +50,11 @@ pub(super) struct Link {
     turnaround: Duration,
     pub counters: BusCounters,
     shared: Arc<BusShared>,
-    /// Replies nobody was waiting for (power-up announcements, late replies).
-    pub inbox: Vec<(Reply, Instant)>,
-    /// Which replies ended a full packet of the adapter, and when it was read.
+    /// Replies nobody was waiting for (power-up announcements, late
+    /// replies, polls written blind), each with the full packet of the
+    /// adapter its byte ended, if one did.
+    pub inbox: Vec<(Reply, Instant, Option<PacketMark>)>,
+    /// Which bytes read ended a full packet of the adapter, and when.
     pub packets: PacketEnds,
 }
 
@@ -213,16 +215,12 @@ impl Link {
                 continue;
             };
             self.counters.wire_busy_us += (self.turnaround + self.frame).as_micros() as u64;
-            let its = Want {
-                dev_id: reply.dev_id,
-                index: reply.index,
-            };
-            self.packets.reply(its, self.decoder.pending());
+            let mark = self.packets.reply(self.decoder.pending());
             let wanted = want.is_some_and(|w| w.dev_id == reply.dev_id && w.index == reply.index);
             if wanted && found.is_none() {
                 found = Some((reply, at));
             } else {
-                self.inbox.push((reply, at));
+                self.inbox.push((reply, at, mark));
             }
         }
         let stats = self.decoder.stats();

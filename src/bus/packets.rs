@@ -6,7 +6,9 @@
 //! as soon as the 62nd byte is in, at the next USB frame: a read that is
 //! exactly one packet dates the byte that ended it to the frame before the
 //! read. That byte belongs to a reply; its offset in the stream of bytes
-//! read says which one, once that reply is decoded. The pipeline
+//! read says which one, once that reply is decoded, and the mark goes
+//! with that reply (never looked up by its block: two polls of a block
+//! may be in flight and their replies read together). The pipeline
 //! ([`super::usb_pipeline`]) compares the read with the frame the byte
 //! would have left in had its poll's write made its boundary: a sentinel
 //! that slipped shows a frame later, as on adapters without a timer.
@@ -21,13 +23,9 @@ use std::time::Instant;
 
 use crate::protocol::FRAME_LEN;
 
-use super::wire::Want;
-
 /// Packet ends not yet matched to a reply: more than a few means the
 /// stream went astray (a reply that never decoded), and the oldest go.
 const MAX_ENDS: usize = 8;
-/// Marks not yet taken by the owner (replies it did not wait for).
-const MAX_MARKS: usize = 16;
 
 /// A reply whose byte ended a full packet.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -47,7 +45,6 @@ pub(crate) struct PacketEnds {
     total: u64,
     /// Offsets (exclusive ends) of reads that were exactly one packet.
     ends: VecDeque<(u64, Instant)>,
-    marks: VecDeque<(Want, PacketMark)>,
 }
 
 impl PacketEnds {
@@ -55,14 +52,12 @@ impl PacketEnds {
     pub(crate) fn set_payload(&mut self, payload: Option<usize>) {
         self.payload = payload;
         self.ends.clear();
-        self.marks.clear();
     }
 
     /// The port was (re)opened: offsets start again.
     pub(crate) fn reset(&mut self) {
         self.total = 0;
         self.ends.clear();
-        self.marks.clear();
     }
 
     /// `n` bytes were read at `at`.
@@ -76,30 +71,24 @@ impl PacketEnds {
         }
     }
 
-    /// The reply `want` was decoded, its last byte `pending` bytes before
-    /// the end of what was read: marked if a packet ended inside it.
-    pub(crate) fn reply(&mut self, want: Want, pending: usize) {
+    /// A reply was decoded, its last byte `pending` bytes before the end
+    /// of what was read: its mark, if a packet ended inside it (a packet
+    /// is longer than a frame, so at most one did).
+    pub(crate) fn reply(&mut self, pending: usize) -> Option<PacketMark> {
         let end = self.total.saturating_sub(pending as u64);
         let start = end.saturating_sub(FRAME_LEN as u64);
+        let mut mark = None;
         while let Some(&(at, read_at)) = self.ends.front() {
             if at > end {
                 break;
             }
             self.ends.pop_front();
             if at > start {
-                if self.marks.len() == MAX_MARKS {
-                    self.marks.pop_front();
-                }
                 let byte = u8::try_from(at - start).unwrap_or(u8::MAX);
-                self.marks.push_back((want, PacketMark { byte, read_at }));
+                mark = Some(PacketMark { byte, read_at });
             }
         }
-    }
-
-    /// The mark of `want`'s reply, if a packet ended inside it.
-    pub(crate) fn take(&mut self, want: Want) -> Option<PacketMark> {
-        let pos = self.marks.iter().position(|(w, _)| *w == want)?;
-        self.marks.remove(pos).map(|(_, mark)| mark)
+        mark
     }
 }
 
@@ -108,10 +97,6 @@ mod tests {
     use super::*;
     use std::time::Duration;
 
-    fn want(dev_id: u8) -> Want {
-        Want { dev_id, index: 1 }
-    }
-
     #[test]
     fn a_read_of_one_packet_marks_the_reply_its_last_byte_is_in() {
         let t0 = Instant::now();
@@ -119,22 +104,18 @@ mod tests {
         p.set_payload(Some(62));
         // Replies 1-3 whole and 2 bytes of reply 4: one packet.
         p.read(62, t0);
-        for id in 1..=3 {
-            let pending = 62 - 20 * usize::from(id);
-            p.reply(want(id), pending);
+        for k in 1..=3 {
+            assert_eq!(p.reply(62 - 20 * k), None);
         }
-        assert_eq!(p.take(want(3)), None);
         // The rest of reply 4 comes in a short read.
         p.read(18, t0 + Duration::from_millis(5));
-        p.reply(want(4), 0);
         assert_eq!(
-            p.take(want(4)),
+            p.reply(0),
             Some(PacketMark {
                 byte: 2,
                 read_at: t0
             })
         );
-        assert_eq!(p.take(want(4)), None);
     }
 
     #[test]
@@ -144,17 +125,30 @@ mod tests {
         p.set_payload(Some(62));
         p.read(124, t0);
         p.read(20, t0);
-        for (k, id) in (1..=7).enumerate() {
-            p.reply(want(id), 144 - 20 * (k + 1));
-        }
-        assert!((1..=7).all(|id| p.take(want(id)).is_none()));
+        assert!((1..=7).all(|k| p.reply(144 - 20 * k).is_none()));
         let mut none = PacketEnds::default();
         none.read(62, t0);
-        none.reply(want(1), 42);
-        none.reply(want(2), 22);
-        none.reply(want(3), 2);
+        for pending in [42, 22, 2] {
+            assert_eq!(none.reply(pending), None);
+        }
         none.read(18, t0);
-        none.reply(want(4), 0);
-        assert_eq!(none.take(want(4)), None, "no payload: no packets");
+        assert_eq!(none.reply(0), None, "no payload: no packets");
+    }
+
+    #[test]
+    fn a_reply_no_packet_ends_in_takes_no_mark_of_a_later_reply_of_the_same_block() {
+        let t0 = Instant::now();
+        let mut p = PacketEnds::default();
+        p.set_payload(Some(62));
+        // Two polls of the same block in flight, their replies read
+        // together: the first ends no packet, the second's 2nd byte ends one.
+        p.read(62, t0);
+        let first = p.reply(42);
+        assert_eq!(p.reply(22), None);
+        p.read(18, t0 + Duration::from_millis(1));
+        let second = p.reply(0);
+        // Each keeps its own, whichever the owner matches first.
+        assert_eq!(first, None, "the later reply's mark");
+        assert_eq!(second.map(|m| m.byte), Some(2));
     }
 }

@@ -39,14 +39,13 @@ impl Ctx {
     /// (matched here), power-up announcements, late replies.
     pub(crate) fn absorb_inbox(&mut self) {
         let inbox = std::mem::take(&mut self.link.inbox);
-        for (reply, at) in &inbox {
+        for (reply, at, packet) in &inbox {
             self.sched.arrival(*at);
             let effect = match self.sched.take_inflight(reply) {
                 Some(inflight) => {
                     self.stats
                         .round_trip(at.saturating_duration_since(inflight.handed));
-                    let packet = self.link.packets.take(inflight.want);
-                    self.sched.inflight_reply(reply, *at, &inflight, packet)
+                    self.sched.inflight_reply(reply, *at, &inflight, *packet)
                 }
                 None => {
                     self.link.counters.unsolicited += 1;
