@@ -91,11 +91,16 @@ impl AdapterModel {
         }
     }
 
-    /// Data bytes in the full packet a chip with a latency timer sends as
-    /// soon as they are in (FTDI: a 64-byte packet less two status bytes;
-    /// AN232B-04), for the chips that have one.
+    /// Data bytes in the full packet a full-speed FTDI chip sends as soon
+    /// as they are in (a 64-byte packet less two status bytes; AN232B-04),
+    /// where only such packets can date what the chip received: its latency
+    /// timer longer than the 1 ms frame. (FT232H's 125 µs microframes are
+    /// finer than a host can read, and its packets are larger.)
     pub fn packet_payload(self) -> Option<usize> {
-        self.latency_timer().map(|_| FTDI_PACKET_PAYLOAD)
+        match self {
+            Self::Ftdi { latency_ms } if latency_ms > 1 => Some(FTDI_PACKET_PAYLOAD),
+            _ => None,
+        }
     }
 
     /// The FTDI latency timer, for the chips that have one.

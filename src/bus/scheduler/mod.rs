@@ -771,11 +771,11 @@ impl Scheduler {
         // go (a latency timer no longer than one), or, behind a longer
         // timer, where its bytes end a full packet.
         let sentinels = |p: Duration| p >= Duration::from_micros(500);
-        let packets = |p: Duration| adapter.latency_timer().is_some_and(|t| t > p);
+        let packets = adapter.packet_payload().is_some();
         let replies_next_frame = adapter.latency_timer().is_none();
         match (self.pipeline.as_mut(), period) {
             (Some(pipeline), Some(p)) if pipeline.period() == p => {
-                pipeline.set_sentinels(sentinels(p), packets(p));
+                pipeline.set_sentinels(sentinels(p), packets);
                 pipeline
                     .guard_mut()
                     .set_replies_next_frame(replies_next_frame);
@@ -783,8 +783,7 @@ impl Scheduler {
             _ => {
                 let (recover, now) = (self.usb_recover, Instant::now());
                 self.pipeline = period.map(|p| {
-                    let (sentinels, packets) = (sentinels(p), packets(p));
-                    UsbPipeline::new(p, recover, sentinels, packets, replies_next_frame, now)
+                    UsbPipeline::new(p, recover, sentinels(p), packets, replies_next_frame, now)
                 });
             }
         }

@@ -35,8 +35,8 @@ impl Scheduler {
         packet: Option<PacketMark>,
     ) -> ReplyEffect {
         let change = self.pipeline.as_mut().and_then(|p| match packet {
-            Some(mark) => p.answered_packet(inflight, mark),
-            None => p.answered(inflight, at),
+            Some(mark) if inflight.packet_ref.is_some() => p.answered_packet(inflight, mark),
+            _ => p.answered(inflight, at),
         });
         self.usb_changed(change);
         self.take_reply(reply, at, inflight.window.due)
