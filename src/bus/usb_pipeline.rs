@@ -763,22 +763,32 @@ mod tests {
         assert!(close.ambiguous);
     }
 
+    /// The poll the sentinel tests write.
+    const SENTINEL_POLL: Want = Want {
+        dev_id: 1,
+        index: 2,
+    };
+
+    /// A reply window due `due_us` after `t0`, given up 10 ms later.
+    fn window_at(t0: Instant, due_us: u64) -> ReplyWindow {
+        ReplyWindow {
+            due: t0 + us(due_us),
+            deadline: t0 + us(due_us + 10_000),
+        }
+    }
+
+    /// Sentinels judged, and late, as the bus view counts them.
+    fn sentinel_counts(p: &mut UsbPipeline, t0: Instant) -> (u64, u64) {
+        let v = p.guard_mut().view(Duration::from_millis(1), t0);
+        (v.sentinels, v.sentinels_late)
+    }
+
     #[test]
     fn a_sentinel_reply_a_frame_late_shows_its_write_late() {
         let t0 = Instant::now();
         let mut p = learnt(t0, &[0; PHASE_SAMPLES]);
-        let want = Want {
-            dev_id: 1,
-            index: 2,
-        };
-        let window = ReplyWindow {
-            due: t0 + us(20_000),
-            deadline: t0 + us(30_000),
-        };
-        let view = |p: &mut UsbPipeline| {
-            let v = p.guard_mut().view(Duration::from_millis(1), t0);
-            (v.sentinels, v.sentinels_late)
-        };
+        let (want, window) = (SENTINEL_POLL, window_at(t0, 20_000));
+        let view = |p: &mut UsbPipeline| sentinel_counts(p, t0);
         // Written 100 µs before the 10.3 ms boundary: held for the next.
         let handed = t0 + us(10_200);
         p.arm_sentinel();
@@ -821,18 +831,8 @@ mod tests {
         let t0 = Instant::now();
         let mut p = learnt(t0, &[0; PHASE_SAMPLES]);
         p.set_sentinels(true, true);
-        let want = Want {
-            dev_id: 1,
-            index: 2,
-        };
-        let window = ReplyWindow {
-            due: t0 + us(30_000),
-            deadline: t0 + us(40_000),
-        };
-        let view = |p: &mut UsbPipeline| {
-            let v = p.guard_mut().view(Duration::from_millis(1), t0);
-            (v.sentinels, v.sentinels_late)
-        };
+        let (want, window) = (SENTINEL_POLL, window_at(t0, 30_000));
+        let view = |p: &mut UsbPipeline| sentinel_counts(p, t0);
         // As above: made the 10.3 ms boundary, its reply ends at 12.0 ms on
         // time (13.0 ms as modelled from the later boundary), and a 16 ms
         // timer holds it after that.
