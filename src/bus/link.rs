@@ -199,7 +199,7 @@ impl Link {
     fn pushed(&mut self, n: usize) {
         if n > 0 {
             self.decoder.push(&self.buf[..n]);
-            self.packets.read(n, Instant::now());
+            self.packets.read(n, Instant::now);
         }
     }
 

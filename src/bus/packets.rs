@@ -60,14 +60,15 @@ impl PacketEnds {
         self.ends.clear();
     }
 
-    /// `n` bytes were read at `at`.
-    pub(crate) fn read(&mut self, n: usize, at: Instant) {
+    /// `n` bytes were read just now (`now` is asked only of a read that
+    /// was one packet: the link reads on the bus's hot path).
+    pub(crate) fn read(&mut self, n: usize, now: impl FnOnce() -> Instant) {
         self.total += n as u64;
         if self.payload == Some(n) {
             if self.ends.len() == MAX_ENDS {
                 self.ends.pop_front();
             }
-            self.ends.push_back((self.total, at));
+            self.ends.push_back((self.total, now()));
         }
     }
 
@@ -103,12 +104,12 @@ mod tests {
         let mut p = PacketEnds::default();
         p.set_payload(Some(62));
         // Replies 1-3 whole and 2 bytes of reply 4: one packet.
-        p.read(62, t0);
+        p.read(62, || t0);
         for k in 1..=3 {
             assert_eq!(p.reply(62 - 20 * k), None);
         }
         // The rest of reply 4 comes in a short read.
-        p.read(18, t0 + Duration::from_millis(5));
+        p.read(18, || t0 + Duration::from_millis(5));
         assert_eq!(
             p.reply(0),
             Some(PacketMark {
@@ -123,15 +124,15 @@ mod tests {
         let t0 = Instant::now();
         let mut p = PacketEnds::default();
         p.set_payload(Some(62));
-        p.read(124, t0);
-        p.read(20, t0);
+        p.read(124, || t0);
+        p.read(20, || t0);
         assert!((1..=7).all(|k| p.reply(144 - 20 * k).is_none()));
         let mut none = PacketEnds::default();
-        none.read(62, t0);
+        none.read(62, || t0);
         for pending in [42, 22, 2] {
             assert_eq!(none.reply(pending), None);
         }
-        none.read(18, t0);
+        none.read(18, || t0);
         assert_eq!(none.reply(0), None, "no payload: no packets");
     }
 
@@ -142,10 +143,10 @@ mod tests {
         p.set_payload(Some(62));
         // Two polls of the same block in flight, their replies read
         // together: the first ends no packet, the second's 2nd byte ends one.
-        p.read(62, t0);
+        p.read(62, || t0);
         let first = p.reply(42);
         assert_eq!(p.reply(22), None);
-        p.read(18, t0 + Duration::from_millis(1));
+        p.read(18, || t0 + Duration::from_millis(1));
         let second = p.reply(0);
         // Each keeps its own, whichever the owner matches first.
         assert_eq!(first, None, "the later reply's mark");

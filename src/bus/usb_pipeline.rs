@@ -38,6 +38,7 @@ use super::usb_guard::{
 };
 use super::wire::{ReplyWindow, Want};
 use crate::protocol::FRAME_LEN;
+use crate::transport::adapter::AdapterModel;
 
 /// Arrivals the phase estimate is made of.
 const PHASE_SAMPLES: usize = 32;
@@ -274,33 +275,41 @@ pub(crate) struct UsbPipeline {
 }
 
 impl UsbPipeline {
-    /// `sentinels`, `packets`: see the fields.
-    /// `replies_next_frame`: see [`UsbGuard::new`].
-    pub(crate) fn new(
-        period: Duration,
+    /// The pipeline behind `adapter`; `None` for one without USB frames
+    /// (a native line).
+    pub(crate) fn for_adapter(
+        adapter: AdapterModel,
         recover: Duration,
-        sentinels: bool,
-        packets: bool,
-        replies_next_frame: bool,
         now: Instant,
-    ) -> Self {
-        Self {
-            packets,
+    ) -> Option<Self> {
+        let period = adapter.usb_frame()?;
+        let mut pipeline = Self {
+            packets: false,
             phase: FramePhase::new(period),
             inflight: VecDeque::new(),
-            guard: UsbGuard::new(recover, replies_next_frame, now),
-            sentinels,
+            guard: UsbGuard::new(recover, adapter.replies_next_frame(), now),
+            sentinels: false,
             since_sentinel: 0,
             sentinel_at: None,
             armed: false,
-        }
+        };
+        pipeline.set_adapter(adapter);
+        Some(pipeline)
     }
 
-    /// The adapter was named again with the same frame: whether its
-    /// replies can show a sentinel late may have changed.
-    pub(crate) fn set_sentinels(&mut self, on: bool, packets: bool) {
-        self.sentinels = on;
-        self.packets = packets;
+    /// How `adapter` (with this pipeline's USB frame) lets replies date
+    /// their writes. A sentinel's reply shows its write a frame late only
+    /// where a frame is 0.5 ms or more (a host reads replies 30-90 µs late)
+    /// and the reply reaches the host at the frame after the adapter lets
+    /// it go (a latency timer no longer than one), or, behind a longer
+    /// timer, where its bytes end a full packet. Where a reply reaches the
+    /// host at the next frame, lockstep costs what guarded does
+    /// ([`UsbGuard::new`]).
+    pub(crate) fn set_adapter(&mut self, adapter: AdapterModel) {
+        self.sentinels = self.period() >= Duration::from_micros(500);
+        self.packets = adapter.packet_payload().is_some();
+        self.guard
+            .set_replies_next_frame(adapter.replies_next_frame());
     }
 
     /// True when the next poll transfer should be a sentinel.
@@ -558,11 +567,26 @@ impl UsbPipeline {
         }
     }
 
+    /// The reply of `inflight` was read at `at`, `packet` the full packet a
+    /// byte of it ended, if one did: dated by that packet where its poll
+    /// was tracked for packets, else by its arrival.
+    pub(crate) fn replied(
+        &mut self,
+        inflight: &Inflight,
+        at: Instant,
+        packet: Option<PacketMark>,
+    ) -> Option<Change> {
+        match packet {
+            Some(mark) if inflight.packet_ref.is_some() => self.answered_packet(inflight, mark),
+            _ => self.answered(inflight, at),
+        }
+    }
+
     /// The reply of `inflight` reached the host at `at`: a frame or more
     /// after it would have if its write had made its boundary, the write
     /// reached the adapter late. A backed-off pipeline does not step down
     /// while it sees that; sentinels late often enough back it off.
-    pub(crate) fn answered(&mut self, inflight: &Inflight, at: Instant) -> Option<Change> {
+    fn answered(&mut self, inflight: &Inflight, at: Instant) -> Option<Change> {
         let on_time = inflight.on_time?;
         // Two frames or more late is not a write that slipped (that
         // collides, or shows as garbage): it is the reply of a newer poll
@@ -579,11 +603,7 @@ impl UsbPipeline {
     /// a full packet, which the host read at `mark.read_at`. The packet
     /// leaves the adapter at the frame after that byte came in: read a
     /// frame later than on time, the poll's write slipped a frame.
-    pub(crate) fn answered_packet(
-        &mut self,
-        inflight: &Inflight,
-        mark: PacketMark,
-    ) -> Option<Change> {
+    fn answered_packet(&mut self, inflight: &Inflight, mark: PacketMark) -> Option<Change> {
         let r = inflight.packet_ref?;
         let after_it = FRAME_LEN.saturating_sub(usize::from(mark.byte)) as u32;
         let byte_in = r.reply_end.checked_sub(r.byte * after_it)?;
@@ -661,19 +681,16 @@ mod tests {
 
     /// A frame clock with boundaries at `t0 + 300 µs + k ms`, learnt from
     /// arrivals `lateness` after boundaries.
-    fn pipeline(period: Duration) -> UsbPipeline {
-        UsbPipeline::new(
-            period,
-            Duration::from_secs(10),
-            true,
-            false,
-            false,
-            Instant::now(),
-        )
+    fn pipeline(adapter: AdapterModel) -> UsbPipeline {
+        UsbPipeline::for_adapter(adapter, Duration::from_secs(10), Instant::now())
+            .expect("a USB adapter")
     }
 
+    /// A full-speed FTDI chip with a 1 ms timer: 1 ms frames, sentinels.
+    const FTDI_1: AdapterModel = AdapterModel::Ftdi { latency_ms: 1 };
+
     fn learnt(t0: Instant, lateness: &[u64]) -> UsbPipeline {
-        let mut p = pipeline(Duration::from_millis(1));
+        let mut p = pipeline(FTDI_1);
         for (k, late) in lateness.iter().enumerate() {
             p.arrival(t0 + us(300 + 1000 * (k as u64 + 1) + late));
         }
@@ -830,7 +847,7 @@ mod tests {
     fn behind_a_long_timer_a_sentinel_is_dated_by_the_packet_its_reply_ends() {
         let t0 = Instant::now();
         let mut p = learnt(t0, &[0; PHASE_SAMPLES]);
-        p.set_sentinels(true, true);
+        p.set_adapter(AdapterModel::Ftdi { latency_ms: 16 });
         let (want, window) = (SENTINEL_POLL, window_at(t0, 30_000));
         let view = |p: &mut UsbPipeline| sentinel_counts(p, t0);
         // As above: made the 10.3 ms boundary, its reply ends at 12.0 ms on
@@ -869,16 +886,16 @@ mod tests {
     #[test]
     fn without_a_known_clock_a_write_may_leave_a_period_and_its_reach_later() {
         let t0 = Instant::now();
-        let p = pipeline(Duration::from_millis(1));
+        let p = pipeline(FTDI_1);
         assert_eq!(p.latest_release(t0).at, t0 + us(1_200));
-        let hs = pipeline(us(125));
+        let hs = pipeline(AdapterModel::Ft232h { latency_ms: 1 });
         assert_eq!(hs.latest_release(t0).at, t0 + us(250));
     }
 
     #[test]
     fn replies_are_matched_oldest_first_and_expire_by_deadline() {
         let t0 = Instant::now();
-        let mut p = pipeline(Duration::from_millis(1));
+        let mut p = pipeline(FTDI_1);
         let want = |dev_id| Want { dev_id, index: 1 };
         let window = |ms| ReplyWindow {
             due: t0 + Duration::from_millis(ms),

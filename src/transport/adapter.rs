@@ -103,6 +103,12 @@ impl AdapterModel {
         }
     }
 
+    /// True when the chip hands a reply to the host at the USB frame after
+    /// it came in (no latency timer holds it).
+    pub fn replies_next_frame(self) -> bool {
+        self.latency_timer().is_none()
+    }
+
     /// The FTDI latency timer, for the chips that have one.
     pub fn latency_timer(self) -> Option<Duration> {
         match self {

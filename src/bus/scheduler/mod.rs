@@ -525,15 +525,21 @@ impl Scheduler {
     /// `handed` is when the write was handed to the port.
     pub(crate) fn track(&mut self, want: Want, end: Instant, handed: Instant) {
         let window = self.clock.reply_window(end);
-        // Held in the adapter until its latency timer, if it has one, has
-        // run from the reply's bytes (taken from the last: the latest).
-        let timer = self.clock.adapter().latency_timer().unwrap_or_default();
-        let wire_end = self.clock.reply_end(end);
+        let (wire_end, out) = self.reply_out(end);
         let frame = self.clock.frame_time();
         self.clock.reply_on_wire(end);
         if let Some(pipeline) = self.pipeline.as_mut() {
-            pipeline.track(want, window, handed, wire_end + timer, (wire_end, frame));
+            pipeline.track(want, window, handed, out, (wire_end, frame));
         }
+    }
+
+    /// When the reply to a request ending at `end` leaves the wire, and
+    /// when it leaves the adapter: held until its latency timer, if it has
+    /// one, has run from the reply's bytes (taken from the last: the latest).
+    fn reply_out(&self, end: Instant) -> (Instant, Instant) {
+        let timer = self.clock.adapter().latency_timer().unwrap_or_default();
+        let wire_end = self.clock.reply_end(end);
+        (wire_end, wire_end + timer)
     }
 
     /// Behind a USB adapter, a reply waited for (lockstep, or a one-shot
@@ -541,10 +547,9 @@ impl Scheduler {
     /// `end`, was read at `at`: a write a frame late is seen as a blind
     /// poll's is.
     pub(crate) fn waited_reply(&mut self, end: Instant, handed: Instant, at: Instant) {
-        let timer = self.clock.adapter().latency_timer().unwrap_or_default();
-        let reply_out = self.clock.reply_end(end) + timer;
+        let (_, out) = self.reply_out(end);
         if let Some(pipeline) = self.pipeline.as_mut() {
-            pipeline.waited_reply(handed, reply_out, at);
+            pipeline.waited_reply(handed, out, at);
         }
     }
 
@@ -764,27 +769,12 @@ impl Scheduler {
     /// latent one gets control frames and the next poll in one write.
     pub(crate) fn set_adapter(&mut self, adapter: crate::transport::adapter::AdapterModel) {
         self.clock.set_adapter(adapter);
-        let period = adapter.usb_frame();
-        // A sentinel's reply shows its write a frame late only where a
-        // frame is 0.5 ms or more (a host reads replies 30-90 µs late) and
-        // the reply reaches the host at the frame after the adapter lets it
-        // go (a latency timer no longer than one), or, behind a longer
-        // timer, where its bytes end a full packet.
-        let sentinels = |p: Duration| p >= Duration::from_micros(500);
-        let packets = adapter.packet_payload().is_some();
-        let replies_next_frame = adapter.latency_timer().is_none();
-        match (self.pipeline.as_mut(), period) {
-            (Some(pipeline), Some(p)) if pipeline.period() == p => {
-                pipeline.set_sentinels(sentinels(p), packets);
-                pipeline
-                    .guard_mut()
-                    .set_replies_next_frame(replies_next_frame);
+        match (self.pipeline.as_mut(), adapter.usb_frame()) {
+            (Some(pipeline), Some(period)) if pipeline.period() == period => {
+                pipeline.set_adapter(adapter);
             }
             _ => {
-                let (recover, now) = (self.usb_recover, Instant::now());
-                self.pipeline = period.map(|p| {
-                    UsbPipeline::new(p, recover, sentinels(p), packets, replies_next_frame, now)
-                });
+                self.pipeline = UsbPipeline::for_adapter(adapter, self.usb_recover, Instant::now());
             }
         }
     }

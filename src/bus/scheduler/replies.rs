@@ -34,10 +34,10 @@ impl Scheduler {
         inflight: &Inflight,
         packet: Option<PacketMark>,
     ) -> ReplyEffect {
-        let change = self.pipeline.as_mut().and_then(|p| match packet {
-            Some(mark) if inflight.packet_ref.is_some() => p.answered_packet(inflight, mark),
-            _ => p.answered(inflight, at),
-        });
+        let change = self
+            .pipeline
+            .as_mut()
+            .and_then(|p| p.replied(inflight, at, packet));
         self.usb_changed(change);
         self.take_reply(reply, at, inflight.window.due)
     }

@@ -60,14 +60,31 @@ impl Ctx {
 
     /// Hands host frames to the port; returns when the last one leaves the wire.
     pub(crate) fn send(&mut self, cmds: &[Command]) -> Result<Instant, BusError> {
-        let handed = self.link.send(cmds).map_err(|e| self.lost(e))?;
-        Ok(self.sched.sent(handed, cmds.len() as u32))
+        Ok(self.write(cmds, true)?.1)
     }
 
     /// [`Self::send`] of control frames only: no reply follows them.
     fn send_without_reply(&mut self, cmds: &[Command]) -> Result<Instant, BusError> {
+        Ok(self.write(cmds, false)?.1)
+    }
+
+    /// Hands host frames to the port: when it took them, dated after the
+    /// write (a thread preempted before it must not look like a path that
+    /// delivered them late), and when the last one leaves the wire, the
+    /// wire held as for a write that `asks_reply` or not.
+    fn write(
+        &mut self,
+        cmds: &[Command],
+        asks_reply: bool,
+    ) -> Result<(Instant, Instant), BusError> {
         let handed = self.link.send(cmds).map_err(|e| self.lost(e))?;
-        Ok(self.sched.sent_without_reply(handed, cmds.len() as u32))
+        let n = cmds.len() as u32;
+        let end = if asks_reply {
+            self.sched.sent(handed, n)
+        } else {
+            self.sched.sent_without_reply(handed, n)
+        };
+        Ok((handed, end))
     }
 
     /// Accounts control frames written in front of the last frame of a
@@ -142,16 +159,8 @@ impl Ctx {
     /// the reply is matched when the adapter hands it over (`absorb_inbox`)
     /// or counted missing at its deadline (`expire_inflight`).
     fn poll_blind(&mut self, control: &[Planned], cmd: Config, want: Want) -> Result<(), BusError> {
-        let cmds: Vec<Command> = control
-            .iter()
-            .map(|p| p.command)
-            .chain([Command::Config(cmd)])
-            .collect();
         let clocked = self.sched.usb_clock_known();
-        // Dated after the write (a thread preempted before it must not
-        // look like a path that delivered it late).
-        let handed = self.link.send(&cmds).map_err(|e| self.lost(e))?;
-        let end = self.sched.sent(handed, cmds.len() as u32);
+        let (handed, end) = self.write(&behind(control, cmd), true)?;
         self.link.counters.frames_tx_batched += control.len() as u64;
         self.link.counters.polls_pipelined += 1;
         self.link.counters.usb_writes_unclocked += u64::from(!clocked);
@@ -239,15 +248,7 @@ impl Ctx {
         silence: Silence,
     ) -> Result<Option<Reply>, BusError> {
         let started = Instant::now();
-        let cmds: Vec<Command> = control
-            .iter()
-            .map(|p| p.command)
-            .chain([Command::Config(cmd)])
-            .collect();
-        // Dated after the write, as a blind poll's (a thread preempted
-        // before it must not look like a path that delivered it late).
-        let handed = self.link.send(&cmds).map_err(|e| self.lost(e))?;
-        let end = self.sched.sent(handed, cmds.len() as u32);
+        let (handed, end) = self.write(&behind(control, cmd), true)?;
         self.link.counters.frames_tx_batched += control.len() as u64;
         self.control_frames_sent(control, end);
         let window = self.sched.reply_window(end);
@@ -497,4 +498,13 @@ enum Silence {
     Missed,
     /// Silence is an answer (a firmware probe).
     Answer,
+}
+
+/// `control` frames and then `cmd`, as one write.
+fn behind(control: &[Planned], cmd: Config) -> Vec<Command> {
+    control
+        .iter()
+        .map(|p| p.command)
+        .chain([Command::Config(cmd)])
+        .collect()
 }
