@@ -91,19 +91,21 @@ impl PipelineMode {
         }
     }
 
-    fn up(self) -> Option<Self> {
+    /// The next mode up a ladder that has the `guarded` step or not.
+    fn up(self, guarded: bool) -> Option<Self> {
         match self {
-            Self::Pipelined => Some(Self::Guarded),
-            Self::Guarded => Some(Self::Lockstep),
+            Self::Pipelined if guarded => Some(Self::Guarded),
+            Self::Pipelined | Self::Guarded => Some(Self::Lockstep),
             Self::Lockstep => None,
         }
     }
 
-    fn down(self) -> Option<Self> {
+    /// The next mode down such a ladder.
+    fn down(self, guarded: bool) -> Option<Self> {
         match self {
             Self::Pipelined => None,
-            Self::Guarded => Some(Self::Pipelined),
-            Self::Lockstep => Some(Self::Guarded),
+            Self::Lockstep if guarded => Some(Self::Guarded),
+            Self::Guarded | Self::Lockstep => Some(Self::Pipelined),
         }
     }
 
@@ -429,7 +431,7 @@ impl UsbGuard {
         if seen.saturating_duration_since(self.changed_at) < SETTLE {
             return None;
         }
-        let to = self.step_up()?;
+        let to = self.mode.up(self.guarded_step)?;
         self.backoffs += 1;
         Some(self.change(to, format!("backed off: {evidence}"), now))
     }
@@ -439,7 +441,7 @@ impl UsbGuard {
     /// recovery time) per twice that clean.
     pub(crate) fn tick(&mut self, now: Instant) -> Option<Change> {
         let clean = now.saturating_duration_since(self.clean_from);
-        let Some(to) = self.step_down() else {
+        let Some(to) = self.mode.down(self.guarded_step) else {
             if self.recover_factor > 1 && clean >= self.recover_after() * 2 {
                 self.recover_factor /= 2;
                 self.clean_from = now;
@@ -453,22 +455,6 @@ impl UsbGuard {
         self.stepped_down_at = Some(now);
         let reason = format!("recovered: clean for {} ms", clean.as_millis());
         Some(self.change(to, reason, now))
-    }
-
-    /// The next mode up this bus's ladder.
-    fn step_up(&self) -> Option<PipelineMode> {
-        match self.mode.up()? {
-            PipelineMode::Guarded if !self.guarded_step => PipelineMode::Guarded.up(),
-            to => Some(to),
-        }
-    }
-
-    /// The next mode down this bus's ladder.
-    fn step_down(&self) -> Option<PipelineMode> {
-        match self.mode.down()? {
-            PipelineMode::Guarded if !self.guarded_step => PipelineMode::Guarded.down(),
-            to => Some(to),
-        }
     }
 
     /// Whether the ladder goes through `guarded` (the adapter was named
