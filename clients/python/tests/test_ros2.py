@@ -8,6 +8,7 @@ it publishes `joint_commands` and the simulated joint moves, a bad command
 is dropped whole, `/diagnostics` decodes, and the liveliness tokens parse
 as rmw_zenoh's. Needs a jointd built with `--features ros2` (CI's is)."""
 
+import contextlib
 import json
 import socket
 import struct
@@ -57,19 +58,31 @@ def call(base, method, path, body=None):
         return json.loads(r.read() or b"null")
 
 
-@pytest.fixture()
-def ros2():
+@contextlib.contextmanager
+def on_router(joints, daemon_args):
+    """A Zenoh router, `jointd` started with `daemon_args(endpoint)`, and a
+    Zenoh client of the router: yields (daemon, client) once `joints`
+    simulated joints are online; closes all three after."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = zenoh.open(zenoh_config("router", "listen/endpoints", endpoint))
-    d = Daemon("--sim", "4", "--ros2", "--ros2-connect", endpoint)
-    client = zenoh.open(zenoh_config("client", "connect/endpoints", endpoint))
     try:
-        d.wait("/api/v1/buses/sim0", lambda b: b'"devices_online":4' in b, "4 joints online")
-        yield d, client
+        d = Daemon(*daemon_args(endpoint))
+        client = zenoh.open(zenoh_config("client", "connect/endpoints", endpoint))
+        try:
+            online = f'"devices_online":{joints}'.encode()
+            d.wait("/api/v1/buses/sim0", lambda b: online in b, f"{joints} joints online")
+            yield d, client
+        finally:
+            client.close()
+            d.stop()
     finally:
-        client.close()
-        d.stop()
         router.close()
+
+
+@pytest.fixture()
+def ros2():
+    with on_router(4, lambda endpoint: ["--sim", "4", "--ros2", "--ros2-connect", endpoint]) as pair:
+        yield pair
 
 
 def wait_for(what, ok, timeout=15.0):

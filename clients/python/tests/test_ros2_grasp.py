@@ -14,11 +14,10 @@ import math
 import struct
 
 import pytest
-import zenoh
 from rosbags.typesys import get_types_from_msg
 
 from conftest import Daemon
-from test_ros2 import DIAGNOSTICS, TS, call, dds_name, free_port, key, wait_for, zenoh_config
+from test_ros2 import DIAGNOSTICS, TS, call, dds_name, key, on_router, wait_for
 from test_ros2_services import LOG, SET_BOOL, TRIGGER, call_service
 
 GRIPPER = "control_msgs/msg/GripperCommand"
@@ -45,10 +44,10 @@ def gripper(position, max_effort):
 def hand(tmp_path):
     """`jointd --sim 3`, an object before joint 1 at 15 deg, hand `right`
     of joints 1-3 (thumb, index, middle) with its own namespace."""
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    router = zenoh.open(zenoh_config("router", "listen/endpoints", endpoint))
     config = tmp_path / "jointd.toml"
-    config.write_text(f"""
+
+    def daemon_args(endpoint):
+        config.write_text(f"""
 [[hand]]
 name = "right"
 joints = [{{ bus = "sim0", ids = "1-3", names = ["thumb", "index", "middle"] }}]
@@ -59,15 +58,10 @@ namespace_by = "hand"
 grasp_speed_dps = {SPEED_DPS}
 connect = ["{endpoint}"]
 """)
-    d = Daemon("--sim", "3", "--sim-object", "1=15:0.05", "--config", str(config))
-    client = zenoh.open(zenoh_config("client", "connect/endpoints", endpoint))
-    try:
-        d.wait("/api/v1/buses/sim0", lambda b: b'"devices_online":3' in b, "3 joints online")
-        yield d, client
-    finally:
-        client.close()
-        d.stop()
-        router.close()
+        return ["--sim", "3", "--sim-object", "1=15:0.05", "--config", str(config)]
+
+    with on_router(3, daemon_args) as pair:
+        yield pair
 
 
 class Follow:
