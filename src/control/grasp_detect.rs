@@ -116,8 +116,11 @@ pub(crate) struct Closing {
     over_since: Option<Duration>,
     /// Reports in a row over the threshold.
     over_n: u32,
-    /// Where the rise was last too small to be a press: where contact began.
+    /// Where contact began: where the rise crossed the onset level,
+    /// between the last report under it and the first over it.
     onset_deg: Option<f64>,
+    /// The last report whose rise was under the onset level: (deg, rise).
+    under: Option<(f64, f64)>,
     slow_since: Option<Duration>,
 }
 
@@ -132,6 +135,7 @@ impl Closing {
             over_since: None,
             over_n: 0,
             onset_deg: None,
+            under: None,
             slow_since: None,
         }
     }
@@ -191,8 +195,16 @@ impl Closing {
         let armed = self.baseline.is_some() || (!self.moved && x.t >= START_GRACE);
         let base = self.baseline.unwrap_or(0.0).max(0.0);
         let rise = i - base;
-        if rise < (ONSET_SHARE * self.s.threshold_a).max(ONSET_MIN_A) || self.onset_deg.is_none() {
+        let onset = (ONSET_SHARE * self.s.threshold_a).max(ONSET_MIN_A);
+        if rise < onset || self.onset_deg.is_none() {
             self.onset_deg = Some(x.deg);
+            self.under = (rise < onset).then_some((x.deg, rise));
+        } else if let Some((deg, under)) = self.under.take() {
+            // The first report over it: the rise crossed the level between
+            // the two. Reports far apart (a busy host) would otherwise put
+            // the contact a whole report interval early.
+            let share = (onset - under) / (rise - under);
+            self.onset_deg = Some(deg + (x.deg - deg) * share);
         }
         if !armed || rise < self.s.threshold_a {
             self.over_since = None;
@@ -406,6 +418,30 @@ mod tests {
             let (v, deg) = run_noisy(s, 0.015, None, 1.0, &mut gauss(seed, 0.005));
             assert_eq!(v, Verdict::NoContact, "seed {seed} at {deg}");
         }
+    }
+
+    #[test]
+    fn contact_begins_where_the_rise_crossed_the_onset_between_reports_far_apart() {
+        let mut c = Closing::new(S);
+        let at = |ms: u64, i: f64| Sample {
+            t: Duration::from_millis(ms),
+            deg: f64::from(ms as u32) * 0.03,
+            speed_dps: 30.0,
+            current_a: i,
+        };
+        for ms in (0..100).step_by(4) {
+            c.sample(at(ms, 0.075));
+        }
+        // 40 ms between reports (1.2 deg): under the onset level at 100 ms
+        // (3.0 deg), far over it at 140 ms (4.2 deg). The rise of 0.125 A
+        // crosses the onset level (0.015 A over the free-air 0.075 A) at
+        // 0.12 of the way.
+        assert_eq!(c.sample(at(100, 0.075)), Verdict::Closing);
+        assert_eq!(c.sample(at(140, 0.2)), Verdict::Closing);
+        let Verdict::Contact { deg, .. } = c.sample(at(150, 0.2)) else {
+            panic!("contact");
+        };
+        assert!((deg - (3.0 + 1.2 * 0.12)).abs() < 1e-9, "{deg}");
     }
 
     #[test]
