@@ -200,7 +200,7 @@ async fn a_device_gone_does_not_make_the_pipeline_back_off() {
     assert_eq!(later.devices.values().filter(|d| d.online).count(), 3);
 }
 
-/// Writes late by 0.15 to 0.3 ms make the pipeline's own writes (aimed
+/// Writes late by 0.15 to 0.19 ms make the pipeline's own writes (aimed
 /// 0.8 ms before their frame) no collision, but its sentinels (aimed 0.1 ms
 /// before, the wire held a frame longer for them) show them: the path is
 /// taken as late before its tail can collide.
@@ -233,12 +233,14 @@ async fn late_sentinels_make_the_pipeline_back_off() {
     assert_eq!(backed.mode, PipelineMode::Lockstep);
 }
 
-/// Makes every write reach the adapter 150-300 µs late (never late enough
-/// to collide, always late enough to make a sentinel slip) and waits for
+/// Makes every write reach the adapter 150-190 µs late (within the 200 µs
+/// a pipelined write is held for wherever the host handed it over, so
+/// never late enough to collide even on a host that wakes late; always
+/// late enough to make a sentinel slip) and waits for
 /// the pipeline to back off; it must say it did on late sentinels, more of
 /// them than on the clean path (`clean`).
 async fn backs_off_on_late_sentinels(rig: &Rig, clean: &UsbPipelineView) -> UsbPipelineView {
-    let delay = WriteDelay::parse("150,250,300,300").expect("a delay");
+    let delay = WriteDelay::parse("150,180,190,190").expect("a delay");
     rig.sim.inject(Fault::WriteDelay(Some(delay)));
     let late = rig
         .until("backed off", |s| {
@@ -281,4 +283,75 @@ async fn late_sentinels_behind_a_long_latency_timer_back_the_pipeline_off() {
 
     let backed = backs_off_on_late_sentinels(&rig, &view).await;
     assert_eq!(backed.mode, PipelineMode::Guarded);
+}
+
+/// Behind a latency timer a path whose writes all come 1.95-2.05 ms late
+/// slips `guarded`'s writes two frames (past its 1.5 ms reach): the guard
+/// widens to 2.5 ms and the wire is clean again without going to
+/// `lockstep`, which would wait the timer out for every poll. Once the
+/// path is clean the pipeline retraces the ladder to the bound.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_path_past_guarded_widens_the_guard_before_lockstep_and_comes_back() {
+    let _one = ONE_AT_A_TIME.lock().await;
+    let ids: Vec<u8> = (1..=JOINTS as u8).collect();
+    let rig = adapter_rig(AdapterModel::Ftdi { latency_ms: 1 }, &ids, |c| {
+        c.timing.usb_recover_ms = 1_000;
+    });
+    rig.online(JOINTS).await;
+    rig.enable_all(JOINTS).await;
+    let stream = TargetStream::start(rig.bus.clone(), ids.clone(), Duration::from_millis(1));
+    let start = rig.bus.snapshot();
+    rig.until("100 polls on a clean path", |s| {
+        polls(s) >= polls(&start) + 100
+    })
+    .await;
+
+    let mut events = rig.bus.events();
+    let delay = WriteDelay::parse("1950,2000,2050,2050").expect("a delay");
+    rig.sim.inject(Fault::WriteDelay(Some(delay)));
+    let widened = rig
+        .until("the guard widened", |s| {
+            s.usb_pipeline
+                .as_ref()
+                .is_some_and(|p| p.guard_us == 2_500 || p.mode == PipelineMode::Lockstep)
+        })
+        .await;
+    let view = widened.usb_pipeline.clone().expect("a pipeline view");
+    assert_eq!(view.mode, PipelineMode::Guarded, "{view:?}");
+    assert!(view.reason.contains("guard widened"), "{}", view.reason);
+    let settled = rig
+        .until("20 polls after widening", |s| {
+            polls(s) >= polls(&widened) + 20
+        })
+        .await;
+    let collisions = rig.sim.stats().collisions;
+    let later = rig
+        .until("300 more polls, widened", |s| {
+            polls(s) >= polls(&settled) + 300
+        })
+        .await;
+    assert_eq!(
+        rig.sim.stats().collisions,
+        collisions,
+        "a collision in the widened guard"
+    );
+    let view = later.usb_pipeline.clone().expect("a pipeline view");
+    assert_eq!((view.mode, view.guard_us), (PipelineMode::Guarded, 2_500));
+    assert!(later.devices.values().all(|d| d.online));
+
+    // Clean again: the narrow guard, then the bound.
+    rig.sim.inject(Fault::WriteDelay(None));
+    let mut steps = Vec::new();
+    while steps.last().map(|(m, _): &(String, String)| m.as_str()) != Some("pipelined") {
+        let ev = event(&mut events, "the pipeline steps back", |e| {
+            pipeline_event(e).is_some_and(|(_, r)| r.starts_with("recovered"))
+        })
+        .await;
+        let (mode, reason) = pipeline_event(&ev).expect("a pipeline event");
+        steps.push((mode.to_string(), reason.to_string()));
+    }
+    let modes: Vec<&str> = steps.iter().map(|(m, _)| m.as_str()).collect();
+    assert_eq!(modes, ["guarded", "pipelined"], "{steps:?}");
+    assert!(steps[0].1.contains("guard 1500"), "{steps:?}");
+    assert!(stream.finish() > 0);
 }

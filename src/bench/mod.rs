@@ -417,8 +417,8 @@ struct Run {
     cpu: [Vec<Duration>; 2],
     writes: Vec<client::Write>,
     log: Vec<crate::sim::WireFrame>,
-    /// With a write delay: the referee's collisions in each second of the
-    /// window, and the pipeline's mode at the end of each.
+    /// Behind a USB adapter: the referee's collisions in each second of
+    /// the window, and the pipeline's mode at the end of each.
     collisions_by_second: Vec<u64>,
     modes_by_second: Vec<&'static str>,
 }
@@ -438,13 +438,15 @@ fn measure(
     let (s0, cpu0) = (sim.stats(), cpu_now());
     let mut collisions_by_second = Vec::new();
     let mut modes_by_second = Vec::new();
-    match write_delay_of(args)? {
-        Some(delay) => {
-            sim.inject(Fault::WriteDelay(Some(delay)));
-            (collisions_by_second, modes_by_second) =
-                collisions_each_second(sim, bus, &s0, args.seconds);
-        }
-        None => std::thread::sleep(Duration::from_secs_f64(args.seconds)),
+    let delay = write_delay_of(args)?;
+    if let Some(delay) = delay {
+        sim.inject(Fault::WriteDelay(Some(delay)));
+    }
+    if adapter_of(args)?.is_latent() {
+        (collisions_by_second, modes_by_second) =
+            collisions_each_second(sim, bus, &s0, args.seconds);
+    } else {
+        std::thread::sleep(Duration::from_secs_f64(args.seconds));
     }
     let (s1, cpu1) = (sim.stats(), cpu_now());
     sim.inject(Fault::WriteDelay(None));

@@ -37,7 +37,7 @@ pub struct Report {
     pub collisions: u64,
     /// Host writes late by this distribution from the window's start.
     pub write_delay: Option<crate::sim::WriteDelay>,
-    /// With a write delay: the collisions in each second of the window.
+    /// Behind a USB adapter: the collisions in each second of the window.
     pub collisions_by_second: Vec<u64>,
     /// The pipeline's mode at the end of each of those seconds.
     pub modes_by_second: Vec<&'static str>,
@@ -312,8 +312,6 @@ impl Report {
             ),
         ];
         if let Some(delay) = &self.write_delay {
-            let by_s = &self.collisions_by_second;
-            let last3: u64 = by_s.iter().rev().take(3).sum();
             rows.push((
                 "write delay (from the window's start)",
                 format!(
@@ -321,6 +319,10 @@ impl Report {
                     self.slipped_writes
                 ),
             ));
+        }
+        if !self.collisions_by_second.is_empty() {
+            let by_s = &self.collisions_by_second;
+            let last3: u64 = by_s.iter().rev().take(3).sum();
             rows.push((
                 "collisions each second",
                 format!(

@@ -33,6 +33,7 @@
 //! |---|---|---|---|
 //! | `pipelined` | 0.8 frame before its boundary | 200 µs | none (the bound) |
 //! | `guarded` | 0.9 frame before | 1.5 ms | one frame after each poll's reply: a write late by up to 1.5 ms leaves at most one frame late into a wire held for it; a control-only transfer (no reply to collide with) goes before each poll and is held for its on-time frame when handed over where it is aimed |
+//! | `guarded`, widened | 0.9 frame before | 2.5 ms | two frames after each poll's reply, for a path whose tail passes guarded's reach (a pty behind a loaded host): 0.8 / 0.4 of the bound with one control-only transfer per poll |
 //! | `lockstep` | a poll's transfer after the previous reply, a control-only one before it | any delay | a USB round trip per poll: on an adapter without a latency timer the same 3 frames as `guarded` |
 //!
 //! A write whose delay can reach a whole USB frame cannot be told from one
@@ -49,6 +50,11 @@
 //! On an adapter that hands a reply over at the next USB frame (no
 //! latency timer: CH340, CP2102), `lockstep` costs what `guarded` does
 //! and no delay can make it collide, so its ladder has no `guarded` step.
+//! Behind a latency timer `lockstep` waits the timer out for every poll
+//! (on a 16 ms timer 0.3 / 0.2 of the bound), so an incident in `guarded`
+//! first widens its reach by a frame, and only one in the widened guard
+//! goes to `lockstep`; stepping down, `lockstep` returns to the widened
+//! guard, which narrows before going back to `pipelined`.
 //! One incident steps up one mode at the next write (the evidence shows
 //! within a reply deadline, a few ms). Evidence from transfers written
 //! under the previous mode ([`SETTLE`]) does not step again. A mode held
@@ -130,6 +136,9 @@ const PIPELINED_REACH: Duration = Duration::from_micros(200);
 /// is held for the latest boundary each write can leave at within it,
 /// wherever it was handed over.
 const GUARDED_REACH: Duration = Duration::from_micros(1_500);
+/// In `guarded` after an incident there: a frame more, so a write handed
+/// over where it is aimed leaves at most two frames late.
+const WIDE_GUARDED_REACH: Duration = Duration::from_micros(2_500);
 /// In `lockstep` the next write waits for the reply, so the reach only
 /// times the wire model of the one transfer out.
 const LOCKSTEP_REACH: Duration = Duration::from_micros(1_500);
@@ -197,6 +206,9 @@ impl fmt::Display for Evidence {
 pub(crate) struct Change {
     pub from: PipelineMode,
     pub to: PipelineMode,
+    /// A step away from the bound (from `guarded` to `guarded` when its
+    /// guard widens).
+    pub backed_off: bool,
     pub reason: String,
 }
 
@@ -234,6 +246,8 @@ pub struct UsbPipelineView {
 #[derive(Debug, Clone)]
 pub(crate) struct UsbGuard {
     mode: PipelineMode,
+    /// In `guarded`: held for [`WIDE_GUARDED_REACH`], not [`GUARDED_REACH`].
+    widened: bool,
     changed_at: Instant,
     reason: String,
     /// Since when nothing happened: the last change, incident or forgetting
@@ -277,6 +291,7 @@ impl UsbGuard {
         Self {
             guarded_step: !replies_next_frame,
             mode: PipelineMode::Pipelined,
+            widened: false,
             changed_at: now,
             reason: "start".into(),
             clean_from: now,
@@ -359,6 +374,7 @@ impl UsbGuard {
     pub(crate) fn reach(&self) -> Duration {
         match self.mode {
             PipelineMode::Pipelined => PIPELINED_REACH,
+            PipelineMode::Guarded if self.widened => WIDE_GUARDED_REACH,
             PipelineMode::Guarded => GUARDED_REACH,
             PipelineMode::Lockstep => LOCKSTEP_REACH,
         }
@@ -431,9 +447,42 @@ impl UsbGuard {
         if seen.saturating_duration_since(self.changed_at) < SETTLE {
             return None;
         }
-        let to = self.mode.up(self.guarded_step)?;
+        let (to, widened) = self.step_up()?;
         self.backoffs += 1;
-        Some(self.change(to, format!("backed off: {evidence}"), now))
+        let reason = format!("backed off{}: {evidence}", Self::widening(widened, to));
+        Some(self.change((to, widened), true, reason, now))
+    }
+
+    /// The next step up: `guarded` widens before it gives way to `lockstep`.
+    fn step_up(&self) -> Option<(PipelineMode, bool)> {
+        match self.mode {
+            PipelineMode::Guarded if !self.widened => Some((PipelineMode::Guarded, true)),
+            mode => mode.up(self.guarded_step).map(|to| (to, false)),
+        }
+    }
+
+    /// The next step down: `lockstep` to the widened guard, which narrows
+    /// before `pipelined`.
+    fn step_down(&self) -> Option<(PipelineMode, bool)> {
+        match self.mode {
+            PipelineMode::Guarded if self.widened => Some((PipelineMode::Guarded, false)),
+            mode => mode
+                .down(self.guarded_step)
+                .map(|to| (to, to == PipelineMode::Guarded)),
+        }
+    }
+
+    /// What a change reason adds when it lands in `guarded`.
+    fn widening(widened: bool, to: PipelineMode) -> String {
+        match (to, widened) {
+            (PipelineMode::Guarded, true) => {
+                format!(" (guard widened to {} µs)", WIDE_GUARDED_REACH.as_micros())
+            }
+            (PipelineMode::Guarded, false) => {
+                format!(" (guard {} µs)", GUARDED_REACH.as_micros())
+            }
+            _ => String::new(),
+        }
     }
 
     /// Steps down one mode once the current one has been clean for the
@@ -441,7 +490,7 @@ impl UsbGuard {
     /// recovery time) per twice that clean.
     pub(crate) fn tick(&mut self, now: Instant) -> Option<Change> {
         let clean = now.saturating_duration_since(self.clean_from);
-        let Some(to) = self.mode.down(self.guarded_step) else {
+        let Some((to, widened)) = self.step_down() else {
             if self.recover_factor > 1 && clean >= self.recover_after() * 2 {
                 self.recover_factor /= 2;
                 self.clean_from = now;
@@ -453,8 +502,12 @@ impl UsbGuard {
         }
         self.recoveries += 1;
         self.stepped_down_at = Some(now);
-        let reason = format!("recovered: clean for {} ms", clean.as_millis());
-        Some(self.change(to, reason, now))
+        let reason = format!(
+            "recovered{}: clean for {} ms",
+            Self::widening(widened, to),
+            clean.as_millis()
+        );
+        Some(self.change((to, widened), false, reason, now))
     }
 
     /// Whether the ladder goes through `guarded` (the adapter was named
@@ -463,13 +516,25 @@ impl UsbGuard {
         self.guarded_step = !on;
     }
 
-    fn change(&mut self, to: PipelineMode, reason: String, now: Instant) -> Change {
+    fn change(
+        &mut self,
+        (to, widened): (PipelineMode, bool),
+        backed_off: bool,
+        reason: String,
+        now: Instant,
+    ) -> Change {
         let from = std::mem::replace(&mut self.mode, to);
+        self.widened = widened;
         self.sentinel_window.clear();
         self.changed_at = now;
         self.clean_from = now;
         self.reason.clone_from(&reason);
-        Change { from, to, reason }
+        Change {
+            from,
+            to,
+            backed_off,
+            reason,
+        }
     }
 
     fn prune(&mut self, now: Instant) {
@@ -531,11 +596,52 @@ mod tests {
         // The same collision's aftermath, a moment later: no second step.
         assert_eq!(g.garbled_total(40, t0 + ms(110)), None);
         assert_eq!(g.mode(), PipelineMode::Guarded);
+        // Behind a latency timer a second incident widens the guard...
         let up = g.garbled_total(41, t0 + ms(200)).expect("a second step");
+        assert_eq!(
+            (up.from, up.to),
+            (PipelineMode::Guarded, PipelineMode::Guarded)
+        );
+        assert!(up.backed_off);
+        assert!(up.reason.contains("guard widened to 2500"), "{}", up.reason);
+        assert_eq!(g.reach(), WIDE_GUARDED_REACH);
+        assert!(g.blind());
+        // ... and a third goes to lockstep, the top.
+        let up = g.garbled_total(42, t0 + ms(300)).expect("a third step");
         assert_eq!(up.to, PipelineMode::Lockstep);
         assert!(!g.blind());
-        assert_eq!(g.garbled_total(60, t0 + ms(400)), None);
+        assert_eq!(g.garbled_total(60, t0 + ms(500)), None);
         assert_eq!(g.mode(), PipelineMode::Lockstep);
+    }
+
+    #[test]
+    fn lockstep_steps_down_through_the_widened_guard_then_the_narrow_one() {
+        let t0 = Instant::now();
+        let mut g = UsbGuard::new(ms(1000), false, t0);
+        for (k, total) in [1, 2, 3].into_iter().enumerate() {
+            let at = t0 + ms(100 * (k as u64 + 1));
+            assert!(g.garbled_total(total, at).is_some_and(|c| c.backed_off));
+        }
+        assert_eq!(g.mode(), PipelineMode::Lockstep);
+        let steps: Vec<(PipelineMode, Duration, bool)> = [1400, 2500, 3600]
+            .into_iter()
+            .map(|t| {
+                let c = g.tick(t0 + ms(t)).expect("a step down");
+                (c.to, g.reach(), c.backed_off)
+            })
+            .collect();
+        assert_eq!(
+            steps,
+            [
+                (PipelineMode::Guarded, WIDE_GUARDED_REACH, false),
+                (PipelineMode::Guarded, GUARDED_REACH, false),
+                (PipelineMode::Pipelined, PIPELINED_REACH, false),
+            ]
+        );
+        assert_eq!(
+            g.view(Duration::from_millis(1), t0 + ms(3600)).recoveries,
+            3
+        );
     }
 
     #[test]

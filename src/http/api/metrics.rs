@@ -120,7 +120,7 @@ const BUS_COUNTER_HELP: &[(&str, &str)] = &[
     ),
     (
         "usb_backoffs",
-        "Times the USB pipeline backed off (pipelined to guarded to lockstep; pipelined to lockstep on CH340 and CP2102) on evidence of late writes: garbled bytes, a reply lost from a device that still answers, or late sentinels.",
+        "Times the USB pipeline backed off (pipelined to guarded to guarded with its guard widened to lockstep; pipelined to lockstep on CH340 and CP2102) on evidence of late writes: garbled bytes, a reply lost from a device that still answers, or late sentinels.",
     ),
     (
         "usb_recoveries",

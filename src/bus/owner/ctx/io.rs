@@ -190,7 +190,7 @@ impl Ctx {
     /// One WARN per change of the USB pipeline's mode, never per frame.
     fn usb_changed(&mut self, change: &crate::bus::usb_guard::Change) {
         let c = &mut self.link.counters;
-        if change.to > change.from {
+        if change.backed_off {
             c.usb_backoffs += 1;
             tracing::warn!(
                 bus = %self.cfg.name, from = %change.from, to = %change.to,
