@@ -24,6 +24,7 @@ mod grasp;
 mod grasp_modes;
 mod moves;
 pub mod report;
+mod send_floor;
 pub mod ws;
 
 use std::time::{Duration, Instant};

@@ -5,7 +5,11 @@
 //!    rate (the bus engine's own figure);
 //! 2. **ws**: the same stream from a WebSocket client through `/api/v1/ws`;
 //! 3. **ws + telemetry**: phase 2 with N telemetry clients subscribed to
-//!    every joint at their rate.
+//!    every joint at their rate;
+//!
+//! then, the bus stopped, the same number of sends of the same size alone
+//! ([`super::send_floor`]): what the kernel takes of phase 3 whatever the
+//! daemon does.
 //!
 //! Latency is client send → last byte of the carrying frame on the simulated
 //! wire (the angle encodes the write, as in `jointd bench`). Daemon CPU is the
@@ -24,7 +28,7 @@ use tungstenite::{Message, WebSocket};
 
 use super::analysis::{self, Analysis};
 use super::client::{angle_of, Client, Pacer, Write, CLIENT_THREAD};
-use super::{cpu, BenchArgs, BenchError, SIM_THREAD};
+use super::{cpu, send_floor, BenchArgs, BenchError, SIM_THREAD};
 use crate::bus::{BusHandle, THREAD_PREFIX};
 use crate::http::{app, state_for};
 use crate::sim::{SimHandle, SimStats};
@@ -55,6 +59,8 @@ struct Phase {
     rss_mb: f64,
     /// Telemetry messages/s per client (min, mean) and samples they skipped.
     telemetry: Option<(f64, f64, u64)>,
+    /// Mean size of a telemetry message, bytes.
+    telemetry_len: Option<f64>,
 }
 
 pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
@@ -71,7 +77,18 @@ pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
     runtime.shutdown_timeout(Duration::from_secs(1));
     thread.stop();
     sim.shutdown();
-    let (text, passed) = report(args, baud, &phases);
+    // With the bus stopped: the sends alone, on a quiet process.
+    let floor = match phases[2].telemetry_len {
+        Some(len) if args.telemetry_clients > 0 => Some(send_floor::measure(
+            args.telemetry_clients,
+            args.telemetry_hz,
+            len.round() as usize,
+            Duration::from_secs_f64(args.warmup),
+            Duration::from_secs_f64(args.seconds),
+        )?),
+        _ => None,
+    };
+    let (text, passed) = report(args, baud, &phases, floor);
     println!("{text}");
     Ok(passed)
 }
@@ -108,7 +125,7 @@ fn engine_phase(
 ) -> Result<Phase, BenchError> {
     let client = Client::start(bus.clone(), ids.to_vec(), period, 0)?;
     let (w, ()) = window(args, sim, || (), || client.finish())?;
-    Ok(w.into_phase(ids, None))
+    Ok(w.into_phase(ids, None, None))
 }
 
 fn ws_phase(
@@ -123,8 +140,9 @@ fn ws_phase(
     let teleop = Teleop::start(url, ids.to_vec(), period)?;
     let (w, started) = window(args, sim, || watchers.counts(), || teleop.finish())?;
     let telemetry = watchers.rates(&started, w.elapsed());
+    let telemetry_len = watchers.mean_len();
     watchers.stop();
-    Ok(w.into_phase(ids, telemetry))
+    Ok(w.into_phase(ids, telemetry, telemetry_len))
 }
 
 /// What a window's simulator, CPU and client recorded.
@@ -187,7 +205,12 @@ impl Window {
         used.as_secs_f64() / self.elapsed().as_secs_f64().max(f64::EPSILON)
     }
 
-    fn into_phase(self, ids: &[u8], telemetry: Option<(f64, f64, u64)>) -> Phase {
+    fn into_phase(
+        self,
+        ids: &[u8],
+        telemetry: Option<(f64, f64, u64)>,
+        telemetry_len: Option<f64>,
+    ) -> Phase {
         let (s0, s1) = (&self.stats[0], &self.stats[1]);
         Phase {
             occupancy: SimStats::occupancy(s0, s1),
@@ -197,6 +220,7 @@ impl Window {
             cpu_clients: self.share(&[3, 4, 5]),
             rss_mb: self.rss_mb,
             telemetry,
+            telemetry_len,
         }
     }
 }
@@ -289,6 +313,8 @@ struct Telemetry {
     stop: Arc<AtomicBool>,
     counts: Arc<Vec<AtomicU64>>,
     dropped: Arc<AtomicU64>,
+    /// Bytes of every telemetry message taken.
+    bytes: Arc<AtomicU64>,
     joins: Vec<JoinHandle<()>>,
 }
 
@@ -300,6 +326,7 @@ impl Telemetry {
         let stop = Arc::new(AtomicBool::new(false));
         let counts = Arc::new((0..n).map(|_| AtomicU64::new(0)).collect::<Vec<_>>());
         let dropped = Arc::new(AtomicU64::new(0));
+        let bytes = Arc::new(AtomicU64::new(0));
         let mut joins = Vec::with_capacity(n);
         for i in 0..n {
             let mut ws = connect(url)?;
@@ -309,17 +336,19 @@ impl Telemetry {
             let sub = format!(r#"{{"type":"subscribe","rate_hz":{rate_hz}}}"#);
             ws.send(Message::text(sub))
                 .map_err(|e| BenchError::Setup(format!("subscribe: {e}")))?;
-            let (stop, counts, dropped) = (stop.clone(), counts.clone(), dropped.clone());
+            let (stop, counts) = (stop.clone(), counts.clone());
+            let (dropped, bytes) = (dropped.clone(), bytes.clone());
             joins.push(
                 std::thread::Builder::new()
                     .name(TELEMETRY_THREAD.into())
-                    .spawn(move || watch(ws, &counts[i], &dropped, &stop))?,
+                    .spawn(move || watch(ws, &counts[i], &dropped, &bytes, &stop))?,
             );
         }
         Ok(Telemetry {
             stop,
             counts,
             dropped,
+            bytes,
             joins,
         })
     }
@@ -348,6 +377,12 @@ impl Telemetry {
         Some((min, mean, self.dropped.load(Ordering::Relaxed)))
     }
 
+    /// Mean size of the telemetry messages taken, bytes (none taken: `None`).
+    fn mean_len(&self) -> Option<f64> {
+        let n: u64 = self.counts().iter().sum();
+        (n > 0).then(|| self.bytes.load(Ordering::Relaxed) as f64 / n as f64)
+    }
+
     fn stop(self) {
         self.stop.store(true, Ordering::Release);
         for j in self.joins {
@@ -356,11 +391,18 @@ impl Telemetry {
     }
 }
 
-fn watch(mut ws: Socket, count: &AtomicU64, dropped: &AtomicU64, stop: &AtomicBool) {
+fn watch(
+    mut ws: Socket,
+    count: &AtomicU64,
+    dropped: &AtomicU64,
+    bytes: &AtomicU64,
+    stop: &AtomicBool,
+) {
     while !stop.load(Ordering::Acquire) {
         match ws.read() {
             Ok(Message::Text(t)) if t.as_str().starts_with(r#"{"type":"telemetry""#) => {
                 count.fetch_add(1, Ordering::Relaxed);
+                bytes.fetch_add(t.len() as u64, Ordering::Relaxed);
                 dropped.fetch_add(dropped_field(t.as_str()), Ordering::Relaxed);
             }
             Ok(_) => {}
@@ -387,7 +429,12 @@ fn dropped_field(text: &str) -> u64 {
         .unwrap_or(0)
 }
 
-fn report(args: &BenchArgs, baud: u32, p: &[Phase; 3]) -> (String, bool) {
+fn report(
+    args: &BenchArgs,
+    baud: u32,
+    p: &[Phase; 3],
+    floor: Option<send_floor::SendFloor>,
+) -> (String, bool) {
     let mut out = String::new();
     let _ = writeln!(out, "WebSocket bench: {} joints at {baud} baud, every target at {} Hz; {:.0} s per phase after {:.0} s warm-up; load average {}",
         args.joints, args.rate_hz, args.seconds, args.warmup, super::load_average());
@@ -438,6 +485,21 @@ fn report(args: &BenchArgs, baud: u32, p: &[Phase; 3]) -> (String, bool) {
     row(&mut out, "telemetry samples skipped (all clients)", &|x| {
         x.telemetry.map_or("-".into(), |(_, _, d)| d.to_string())
     });
+    if let (Some(f), Some(len)) = (floor, p[2].telemetry_len) {
+        let _ = writeln!(
+            out,
+            "  sends alone: {} loopback connections at {} Hz, {len:.0} B each ({:.0} sends/s), one thread doing nothing else: {:.1} % core",
+            args.telemetry_clients, args.telemetry_hz, f.sends_per_s, f.sender_cpu * 100.0
+        );
+        let _ = writeln!(
+            out,
+            "  floor of WS + telemetry: the WebSocket phase {:.1} % + the sends {:.1} % = {:.1} % core (measured {:.1} %)",
+            p[1].cpu_daemon * 100.0,
+            f.sender_cpu * 100.0,
+            (p[1].cpu_daemon + f.sender_cpu) * 100.0,
+            p[2].cpu_daemon * 100.0
+        );
+    }
     let (checks, passed) = checks(&p[0], &p[1], &p[2]);
     for (what, ok) in checks {
         let _ = writeln!(out, "  [{}] {what}", if ok { "ok" } else { "MISS" });
