@@ -178,7 +178,7 @@ pub(super) fn admit(
     let who = format!("joint `{}`", joint.name);
     let close_to_deg = soft.check_joint_position(&cal, &field, close_to_joint_deg, &who)?;
     let start_deg = here_joint_deg(state, &joint.bus, joint.id, &cal)?;
-    soft.check_speed("speed_dps", settings.speed_dps, &who)?;
+    soft.check_speed(&"speed_dps", settings.speed_dps, &who)?;
     let slot = Arc::new(Mutex::new(FingerGrasp {
         bus: joint.bus.clone(),
         id: joint.id,

@@ -2,6 +2,8 @@
 //! A target outside them is rejected with 422 naming the limit; nothing is
 //! ever clamped silently.
 
+use std::fmt::Display;
+
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use utoipa::ToSchema;
@@ -132,43 +134,63 @@ impl JointLimits {
     /// Refuses a position target given in the joint's calibrated degrees
     /// outside its calibrated range, the device's range or the soft limits
     /// (the last two told in joint degrees too); the device angle to send.
+    /// `field` and `who` are written out only for an error: a teleop
+    /// stream checks thousands of targets a second.
     pub fn check_joint_position(
         &self,
         cal: &Calibration,
-        field: &str,
+        field: &dyn Display,
         deg: f64,
-        who: &str,
+        who: &dyn Display,
     ) -> Result<f64, ControlError> {
+        let (field, who) = (|| field.to_string(), || who.to_string());
         if !deg.is_finite() {
+            let field = field();
             return Err(ControlError::invalid(
-                field,
+                &field,
                 format!("{field} must be finite"),
             ));
         }
         if let Some((lo, hi)) = cal.range_deg.filter(|(lo, hi)| deg < *lo || deg > *hi) {
-            return Err(ControlError::calibrated_range(field, deg, (lo, hi), who));
+            return Err(ControlError::calibrated_range(
+                &field(),
+                deg,
+                (lo, hi),
+                &who(),
+            ));
         }
         let device = cal.to_device(deg);
         if device.abs() > MAX_ANGLE_DEG {
             let range = cal.range_to_joint((-MAX_ANGLE_DEG, MAX_ANGLE_DEG));
-            return Err(ControlError::out_of_range(field, deg, range, "deg"));
+            return Err(ControlError::out_of_range(&field(), deg, range, "deg"));
         }
         if device < self.min_deg || device > self.max_deg {
             let range = cal.range_to_joint((self.min_deg, self.max_deg));
-            return Err(ControlError::soft_limit(field, deg, range, "deg", who));
+            return Err(ControlError::soft_limit(
+                &field(),
+                deg,
+                range,
+                "deg",
+                &who(),
+            ));
         }
         Ok(device)
     }
 
     /// Refuses an output speed (°/s) whose magnitude exceeds `max_speed_dps`.
-    pub fn check_speed(&self, field: &str, dps: f64, who: &str) -> Result<(), ControlError> {
+    pub fn check_speed(
+        &self,
+        field: &dyn Display,
+        dps: f64,
+        who: &dyn Display,
+    ) -> Result<(), ControlError> {
         match self.max_speed_dps {
             Some(max) if dps.abs() > max => Err(ControlError::soft_limit(
-                field,
+                &field.to_string(),
                 dps,
                 (-max, max),
                 "°/s",
-                who,
+                &who.to_string(),
             )),
             _ => Ok(()),
         }
@@ -205,12 +227,12 @@ mod tests {
         let other = limits.for_joint("right", 3);
         assert_eq!((other.min_deg, other.max_deg), (-100.0, 100.0));
         assert!(j3
-            .check_joint_position(&Calibration::IDENTITY, "position_deg", 25.0, "joint 3")
+            .check_joint_position(&Calibration::IDENTITY, &"position_deg", 25.0, &"joint 3")
             .is_err());
         assert!(j3
-            .check_joint_position(&Calibration::IDENTITY, "position_deg", 20.0, "joint 3")
+            .check_joint_position(&Calibration::IDENTITY, &"position_deg", 20.0, &"joint 3")
             .is_ok());
-        let err = j3.check_speed("speed_dps", -60.0, "joint 3").unwrap_err();
+        let err = j3.check_speed(&"speed_dps", -60.0, &"joint 3").unwrap_err();
         let ControlError::Invalid { allowed, .. } = err else {
             panic!("a refused value, not {err:?}");
         };

@@ -68,26 +68,71 @@ pub(crate) fn setpoint(
             ),
         ));
     }
-    let who = format!("joint {}", dev.dev_id);
+    let names = Names::new(field, dev.dev_id);
     let fw = firmware_of(dev);
-    let (pos_field, spd_field) = (format!("{field}position_deg"), format!("{field}speed_dps"));
     let deg = req.position_deg.ok_or_else(|| {
         ControlError::invalid(
-            &pos_field,
-            format!("{who} is in position mode: position_deg is required"),
+            &names.position().to_string(),
+            format!(
+                "{} is in position mode: position_deg is required",
+                names.who()
+            ),
         )
     })?;
-    let device_deg = limits.check_joint_position(cal, &pos_field, deg, &who)?;
-    let pos_ref =
-        units::angle_to_raw(device_deg).map_err(|e| ControlError::from_unit(&pos_field, e))?;
+    let device_deg = limits.check_joint_position(cal, &names.position(), deg, &names.who())?;
+    let pos_ref = units::angle_to_raw(device_deg)
+        .map_err(|e| ControlError::from_unit(&names.position().to_string(), e))?;
     let default_dps = limits
         .max_speed_dps
         .map_or(DEFAULT_SPEED_LIMIT_DPS, |m| m.min(DEFAULT_SPEED_LIMIT_DPS));
     let dps = req.speed_dps.unwrap_or(default_dps);
-    limits.check_speed(&spd_field, dps, &who)?;
+    limits.check_speed(&names.speed(), dps, &names.who())?;
     let spd_ref = units::speed_limit_dps_to_raw(dps, fw)
-        .map_err(|e| ControlError::from_unit(&spd_field, e))?;
+        .map_err(|e| ControlError::from_unit(&names.speed().to_string(), e))?;
     Ok(Setpoint { pos_ref, spd_ref })
+}
+
+/// The names a target's errors give, written out only when one is raised
+/// (a teleop stream converts thousands of targets a second).
+struct Names<'a> {
+    field: &'a str,
+    id: u8,
+}
+
+impl<'a> Names<'a> {
+    fn new(field: &'a str, id: u8) -> Self {
+        Self { field, id }
+    }
+
+    fn who(&self) -> JointWho {
+        JointWho(self.id)
+    }
+
+    fn position(&self) -> FieldName<'a> {
+        FieldName(self.field, "position_deg")
+    }
+
+    fn speed(&self) -> FieldName<'a> {
+        FieldName(self.field, "speed_dps")
+    }
+}
+
+/// "joint 3".
+struct JointWho(u8);
+
+impl std::fmt::Display for JointWho {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "joint {}", self.0)
+    }
+}
+
+/// A field after its prefix: "targets[2]." and "position_deg".
+struct FieldName<'a>(&'a str, &'static str);
+
+impl std::fmt::Display for FieldName<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}{}", self.0, self.1)
+    }
 }
 
 /// Speed mode: a signed speed only; the position slot keeps the last target
@@ -99,31 +144,33 @@ fn speed_setpoint(
     req: &TargetRequest,
     field: &str,
 ) -> ControlResult<Setpoint> {
-    let who = format!("joint {}", dev.dev_id);
-    let (pos_field, spd_field) = (format!("{field}position_deg"), format!("{field}speed_dps"));
+    let names = Names::new(field, dev.dev_id);
     if req.position_deg.is_some() {
         return Err(ControlError::invalid(
-            &pos_field,
-            format!("{who} is in speed mode: a position has no effect (set mode to position)"),
+            &names.position().to_string(),
+            format!(
+                "{} is in speed mode: a position has no effect (set mode to position)",
+                names.who()
+            ),
         ));
     }
     let dps = req.speed_dps.ok_or_else(|| {
         ControlError::invalid(
-            &spd_field,
-            format!("{who} is in speed mode: speed_dps is required"),
+            &names.speed().to_string(),
+            format!("{} is in speed mode: speed_dps is required", names.who()),
         )
     })?;
-    limits.check_speed(&spd_field, dps, &who)?;
+    limits.check_speed(&names.speed(), dps, &names.who())?;
     // A flipped joint turns the device the other way.
     let spd_ref = units::speed_dps_to_raw(cal.sign() * dps, firmware_of(dev))
-        .map_err(|e| ControlError::from_unit(&spd_field, e))?;
+        .map_err(|e| ControlError::from_unit(&names.speed().to_string(), e))?;
     // Not 0 when unknown: a device that reset unseen runs position mode,
     // and takes this slot as its target.
     let pos_ref = commanded_or_measured_raw(dev).ok_or_else(|| {
         ControlError::conflict(
             "no-position",
             "Position unknown",
-            format!("{who} has not reported its angle yet"),
+            format!("{} has not reported its angle yet", names.who()),
         )
     })?;
     Ok(Setpoint { pos_ref, spd_ref })

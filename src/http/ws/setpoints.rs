@@ -160,7 +160,12 @@ fn joint_of(state: &AppState, t: &TargetItem, field: &str) -> Result<(String, u8
     match (t.id, &t.hand, &t.joint) {
         (Some(id), None, None) => {
             let name = bus_name(state, t).map_err(|e| e.with_field(format!("{field}bus")))?;
-            Ok((name, device_id(&format!("{field}id"), id)?))
+            // The field's name is written out only for a refused id.
+            let id = match device_id("", id) {
+                Ok(id) => id,
+                Err(_) => device_id(&format!("{field}id"), id)?,
+            };
+            Ok((name, id))
         }
         (None, Some(hand), Some(joint)) if t.bus.is_none() => {
             let found = state
