@@ -182,9 +182,18 @@ pub(crate) fn fragment<'a>(
     cache.get_or_build(shape, snap, || {
         let mut list = Vec::new();
         joints(sub, snap, name_of, cal_of, now, &mut list);
-        list.iter()
-            .map(|j| Value::Object(j.clone()).to_string())
-            .collect::<Vec<_>>()
-            .join(",")
+        // Each joint's map written as it is, not copied into a `Value` first.
+        let mut text = String::new();
+        for joint in &list {
+            match serde_json::to_string(joint) {
+                Ok(j) if text.is_empty() => text = j,
+                Ok(j) => {
+                    text.push(',');
+                    text.push_str(&j);
+                }
+                Err(e) => tracing::error!(%e, "could not write a joint's telemetry"),
+            }
+        }
+        text
     })
 }
