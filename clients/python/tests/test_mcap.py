@@ -94,7 +94,10 @@ def test_a_recording_of_a_moving_joint_reads_back(daemon, tmp_path):
     span_s = (states[-1][0] - states[0][0]) / 1e9
     rate = (len(states) - 1) / span_s
     expected = sum(rates) / len(rates)
-    assert abs(rate - expected) / expected < 0.05, f"{rate:.1f} msgs/s against {expected:.1f} Hz"
+    # A sample lost or written twice in every few shows as a rate far off;
+    # the API's rate is read in 1 s windows that the config write and the
+    # move make uneven, by up to 6 % on a loaded host.
+    assert abs(rate - expected) / expected < 0.10, f"{rate:.1f} msgs/s against {expected:.1f} Hz"
     for _, d in states:
         assert d.name == ["sim0_1", "sim0_2", "sim0_3", "sim0_4"], d.name
         assert len(d.position) == len(d.velocity) == len(d.effort) == 4
