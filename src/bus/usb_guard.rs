@@ -453,10 +453,13 @@ impl UsbGuard {
         Some(self.change((to, widened), true, reason, now))
     }
 
-    /// The next step up: `guarded` widens before it gives way to `lockstep`.
+    /// The next step up: behind a latency timer `guarded` widens before it
+    /// gives way to `lockstep` (without one, `lockstep` is the cheaper).
     fn step_up(&self) -> Option<(PipelineMode, bool)> {
         match self.mode {
-            PipelineMode::Guarded if !self.widened => Some((PipelineMode::Guarded, true)),
+            PipelineMode::Guarded if !self.widened && self.guarded_step => {
+                Some((PipelineMode::Guarded, true))
+            }
             mode => mode.up(self.guarded_step).map(|to| (to, false)),
         }
     }
@@ -663,6 +666,27 @@ mod tests {
         g.set_replies_next_frame(false);
         let up = g.garbled_total(40, t0 + ms(1300)).expect("a step up");
         assert_eq!(up.to, PipelineMode::Guarded);
+    }
+
+    #[test]
+    fn guarded_named_again_without_a_latency_timer_goes_to_lockstep_not_widened() {
+        let t0 = Instant::now();
+        let mut g = UsbGuard::new(ms(1000), false, t0);
+        g.garbled_total(1, t0 + ms(100)).expect("up");
+        assert_eq!(g.mode(), PipelineMode::Guarded);
+        // A CH340 now: lockstep costs what guarded does, a widened guard more.
+        g.set_replies_next_frame(true);
+        let up = g.garbled_total(2, t0 + ms(200)).expect("up");
+        assert_eq!(
+            (up.from, up.to, g.reach()),
+            (
+                PipelineMode::Guarded,
+                PipelineMode::Lockstep,
+                LOCKSTEP_REACH
+            ),
+            "{}",
+            up.reason
+        );
     }
 
     #[test]

@@ -171,6 +171,12 @@ pub(crate) struct Scheduler {
     /// Control-only transfers since the last poll (backed off,
     /// [`CONTROL_ONLY_PER_POLL`] go between polls, if setpoints are pending).
     control_only: u32,
+    /// The latest the control-only transfers since the last poll may end
+    /// on the wire within the reach they were written under. Their hold
+    /// leans on the next poll's, which queues behind them in the adapter;
+    /// that poll may be written under a narrower reach once the guard has
+    /// stepped down.
+    queued_until: Option<Instant>,
 }
 
 impl Scheduler {
@@ -206,6 +212,7 @@ impl Scheduler {
             usb_recover: Duration::from_millis(cfg.timing.usb_recover_ms),
             usb_changes: Vec::new(),
             control_only: 0,
+            queued_until: None,
         }
     }
 
@@ -635,11 +642,18 @@ impl Scheduler {
         let Some(pipeline) = &self.pipeline else {
             return self.clock.host_frames(handed, n);
         };
-        let released = if asks_reply {
+        let mut released = if asks_reply {
             pipeline.latest_release(handed)
         } else {
+            let latest = pipeline.latest_release(handed).at + self.clock.frame_time() * n;
+            self.queued_until = Some(self.queued_until.map_or(latest, |q| q.max(latest)));
             pipeline.release_without_reply(handed)
         };
+        if asks_reply {
+            if let Some(queued) = self.queued_until.take() {
+                released.at = released.at.max(queued);
+            }
+        }
         self.ambiguous_writes += u64::from(released.ambiguous);
         self.clock.host_frames(released.at, n)
     }

@@ -166,15 +166,40 @@ struct SetpointsText {
     targets: Vec<TargetItem>,
 }
 
-#[derive(Deserialize)]
-enum SetpointsTag {
-    #[serde(rename = "setpoints")]
-    Setpoints,
+/// The string `"setpoints"` and nothing else: a derived enum would also
+/// take `{"setpoints":null}`, which the generic path refuses.
+struct SetpointsTag;
+
+impl<'de> Deserialize<'de> for SetpointsTag {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Tag;
+        impl serde::de::Visitor<'_> for Tag {
+            type Value = SetpointsTag;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("the string \"setpoints\"")
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<SetpointsTag, E> {
+                if v == "setpoints" {
+                    Ok(SetpointsTag)
+                } else {
+                    Err(E::invalid_value(serde::de::Unexpected::Str(v), &self))
+                }
+            }
+        }
+        d.deserialize_str(Tag)
+    }
 }
 
 /// Parses one text frame.
 pub(crate) fn parse(text: &str) -> Result<ClientMessage, ParseError> {
-    if let Ok(m) = serde_json::from_str::<SetpointsText>(text) {
+    // Only an object: a derived struct would also be read from an array.
+    let object = text
+        .trim_start_matches([' ', '\t', '\n', '\r'])
+        .starts_with('{');
+    if let Some(m) = object
+        .then(|| serde_json::from_str::<SetpointsText>(text).ok())
+        .flatten()
+    {
         return Ok(ClientMessage::Setpoints(SetpointBatch {
             seq: m.seq,
             ack: m.ack,
@@ -462,6 +487,42 @@ mod tests {
             assert_eq!(parse(t), parse_any(t), "{t}");
         }
         assert!(parse(texts[0]).is_ok() && parse(texts[4]).is_err());
+    }
+
+    #[test]
+    fn setpoints_read_straight_take_no_text_the_long_way_refuses() {
+        let texts = [
+            // Not an object: a struct may be read from an array.
+            r#"["setpoints",null,false,false,[{"id":1,"position_deg":10}]]"#,
+            r#" ["setpoints",3,true,true,[]]"#,
+            // `type` not a string: an enum may be read from `{"variant":null}`.
+            r#"{"type":{"setpoints":null},"targets":[{"id":1,"position_deg":10}]}"#,
+            // Agreed already; kept so that they stay so.
+            r#"{"type":"setpoints","type":"setpoints","targets":[]}"#,
+            r#"{"type":"ping","type":"setpoints","targets":[]}"#,
+            r#"{"type":"setpoints","seq":1,"seq":2,"targets":[]}"#,
+            r#"{"type":"setpoints","seq":-0,"targets":[]}"#,
+            r#"{"type":"setpoints","seq":1.0,"targets":[]}"#,
+            r#"{"type":"setpoints","seq":18446744073709551615,"targets":[]}"#,
+            r#"{"type":"setpoints","seq":18446744073709551616,"targets":[]}"#,
+            r#"{"type":"setpoints","targets":[{"id":1,"position_deg":1e400}]}"#,
+            r#"{"type":"setpoints","targets":[{"id":1,"position_deg":-0}]}"#,
+            r#"{"type":"setpoints","targets":[{"id":99999999999999999999}]}"#,
+            r#"{"type":"setpoints","targets":[{"id":1,"id":2}]}"#,
+            r#"{"type":"set\u0070oints","t\u0061rgets":[]}"#,
+            r#"{"type":"Setpoints","targets":[]}"#,
+            r#"{"type":"setpoints","targets":[],"ack":null}"#,
+            r#"{"type":"setpoints","targets":[{"id":1,"hand":{"x":[1,{}]}}]}"#,
+            r#"{"type":"setpoints","targets":[[null,1,null,null,10.0,null]]}"#,
+            r#""setpoints""#,
+            r#"null"#,
+        ];
+        let differ: Vec<_> = texts
+            .iter()
+            .filter(|t| parse(t) != parse_any(t))
+            .map(|t| (t, parse(t)))
+            .collect();
+        assert!(differ.is_empty(), "{differ:#?}");
     }
 
     #[test]

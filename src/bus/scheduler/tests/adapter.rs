@@ -425,3 +425,64 @@ fn guarded_a_control_only_write_late_within_the_reach_does_not_push_a_reply_into
         (control_leaves - on_time).as_millis(),
     );
 }
+
+/// A control-only transfer written in the widened guard is held only for
+/// its on-time frame: a write late within its reach (2.5 ms) leaves two
+/// frames late, and the poll's two held frames cover what queues behind
+/// it. When the guard narrows between the two, the poll written next is
+/// held a frame less, yet the control-only write before it was still
+/// allowed its reach: its reply must still be off the wire before the
+/// next write can leave.
+#[test]
+fn a_guard_narrowing_between_a_control_only_write_and_its_poll_does_not_double_book_the_wire() {
+    use crate::bus::usb_guard::PipelineMode;
+    let (mut b, t0) = guarded_bus();
+    b.now += Duration::from_millis(100);
+    b.s.usb_watch(40, b.now);
+    let reach = |b: &Bus| b.s.pipeline.as_ref().map(|p| p.guard().reach());
+    assert_eq!(reach(&b), Some(Duration::from_micros(2_500)), "widened");
+
+    // Cycles with new targets until the next write is a control-only one.
+    let mut k = 0;
+    let control = loop {
+        b.set(1..=16, 200 + k);
+        k += 1;
+        assert!(k < 50, "no control-only write");
+        let slot = next_write(&mut b);
+        if matches!(slot, Slot::ControlBatch(_)) {
+            break slot;
+        }
+        write_now(&mut b, &slot);
+    };
+    let handed_c = b.now;
+    let (_, n_c) = write_now(&mut b, &control);
+
+    // The path was clean long enough: the guard narrows now.
+    let guard = b.s.pipeline.as_mut().expect("a pipeline").guard_mut();
+    let down = guard
+        .tick(b.now + Duration::from_secs(60))
+        .expect("a step down");
+    assert_eq!(
+        (down.from, down.to),
+        (PipelineMode::Guarded, PipelineMode::Guarded)
+    );
+    assert_eq!(reach(&b), Some(Duration::from_micros(1_500)), "narrowed");
+
+    let poll = next_write(&mut b);
+    assert!(matches!(poll, Slot::Batch { .. }), "{poll:?}");
+    let handed_p = b.now;
+    let (_, n_p) = write_now(&mut b, &poll);
+    next_write(&mut b);
+    let next_leaves = boundary_after(t0, b.now);
+
+    // The control-only write reaches the adapter 2.4 ms late, within the
+    // reach it was written under; the poll queues behind it in the FIFO.
+    let control_leaves = boundary_after(t0, handed_c + Duration::from_micros(2_400));
+    let poll_starts = boundary_after(t0, handed_p).max(control_leaves + FRAME * n_c);
+    let reply_ends = b.s.clock().reply_end(poll_starts + FRAME * n_p);
+    assert!(
+        next_leaves >= reply_ends,
+        "the next write leaves {:?} before the poll's reply is off the wire",
+        reply_ends - next_leaves,
+    );
+}
