@@ -369,6 +369,17 @@ impl UsbGuard {
         self.mode != PipelineMode::Pipelined
     }
 
+    /// How many frames late a write may leave into a wire held for it
+    /// (one; two in the widened guard): a reply that late says its write
+    /// slipped, harmlessly, and the path is still late.
+    pub(crate) fn frames_of_slack(&self) -> u32 {
+        if self.mode == PipelineMode::Guarded && self.widened {
+            2
+        } else {
+            1
+        }
+    }
+
     /// How late a write may reach the adapter and still leave where the
     /// wire is held for it.
     pub(crate) fn reach(&self) -> Duration {

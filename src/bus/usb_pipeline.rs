@@ -547,11 +547,15 @@ impl UsbPipeline {
     }
 
     /// True when a reply read at `at`, due at `on_time`, says its write
-    /// slipped a frame (see [`Self::answered`]).
+    /// slipped a frame, or two where the widened guard holds the wire for
+    /// that (see [`Self::answered`]).
     fn slipped(&self, on_time: Instant, at: Instant) -> bool {
         let after = at.saturating_duration_since(on_time);
         let period = self.period();
-        after >= period.mul_f64(0.9) && after <= period.mul_f64(1.25)
+        (1..=self.guard.frames_of_slack()).any(|frames| {
+            let frames = f64::from(frames);
+            after >= period.mul_f64(frames - 0.1) && after <= period.mul_f64(frames + 0.25)
+        })
     }
 
     /// A reply waited for (lockstep, or a one-shot request) to a write
@@ -588,9 +592,10 @@ impl UsbPipeline {
     /// while it sees that; sentinels late often enough back it off.
     fn answered(&mut self, inflight: &Inflight, at: Instant) -> Option<Change> {
         let on_time = inflight.on_time?;
-        // Two frames or more late is not a write that slipped (that
-        // collides, or shows as garbage): it is the reply of a newer poll
-        // of the same block matched to an older one whose reply was lost.
+        // Later than the frames the wire is held for is not a write that
+        // slipped (that collides, or shows as garbage): it is the reply of
+        // a newer poll of the same block matched to an older one whose
+        // reply was lost.
         // Under three quarters of a frame is the host reading late.
         // A write that slipped a frame makes its reply reach the host at the
         // next boundary, read promptly: a frame after on time, give or take
@@ -881,6 +886,61 @@ mod tests {
         // Read 1.6 ms after on time: the host's lateness, not judged.
         assert_eq!(p.answered_packet(&s, mark(13_900)), None);
         assert_eq!(view(&mut p), (2, 1));
+    }
+
+    #[test]
+    fn a_reply_two_frames_late_is_a_slip_only_where_the_widened_guard_holds_for_it() {
+        let t0 = Instant::now();
+        let mut p = learnt(t0, &[0; PHASE_SAMPLES]);
+        let want = Want {
+            dev_id: 4,
+            index: 1,
+        };
+        let late_writes = |p: &mut UsbPipeline| p.guard_mut().view(us(1_000), t0).late_writes;
+        // A poll, and when its reply reads `frames` frames after on time
+        // (read promptly: 30 µs after that boundary).
+        let poll = |p: &mut UsbPipeline| {
+            let end = t0 + us(13_000);
+            p.track(
+                want,
+                window_at(t0, 20_000),
+                t0 + us(10_200),
+                end,
+                (end, us(400)),
+            );
+            let polled = p.take(want).expect("tracked");
+            let on_time = polled.on_time.expect("judged by its arrival");
+            (polled, move |frames: u64| on_time + us(30 + 1_000 * frames))
+        };
+        p.guard_mut()
+            .garbled_total(1, t0 + us(100_000))
+            .expect("guarded");
+        let (narrow, read) = poll(&mut p);
+        assert_eq!(p.answered(&narrow, read(2)), None);
+        assert_eq!(
+            late_writes(&mut p),
+            0,
+            "a 1.5 ms guard: another poll's reply"
+        );
+        assert_eq!(p.answered(&narrow, read(1)), None);
+        assert_eq!(late_writes(&mut p), 1, "a frame late counts");
+        let wide = p
+            .guard_mut()
+            .garbled_total(2, t0 + us(200_000))
+            .expect("widened");
+        assert_eq!(
+            (wide.to, p.guard().reach()),
+            (PipelineMode::Guarded, us(2_500))
+        );
+        let (held, read) = poll(&mut p);
+        assert_eq!(p.answered(&held, read(2)), None);
+        assert_eq!(late_writes(&mut p), 2, "the widened guard held it");
+        assert_eq!(p.answered(&held, read(3)), None);
+        assert_eq!(
+            late_writes(&mut p),
+            2,
+            "three frames late is no slip there either"
+        );
     }
 
     #[test]
