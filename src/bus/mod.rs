@@ -54,6 +54,7 @@ pub(crate) mod registry;
 pub(crate) mod scheduler;
 pub(crate) mod setpoints;
 pub(crate) mod state;
+mod usb_frame_clock;
 pub mod usb_guard;
 pub(crate) mod usb_pipeline;
 pub(crate) mod verify;
