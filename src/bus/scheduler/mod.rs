@@ -677,6 +677,20 @@ impl Scheduler {
         self.clock.reply_window(end)
     }
 
+    /// Behind a latency timer, from when an e-stop may take the wire from
+    /// a transaction whose request ended at `end`: its reply has left the
+    /// wire (the write late by up to the pipeline's reach) and only waits
+    /// in the adapter, for as long as the timer. `None` elsewhere: there
+    /// the reply reaches the host as it leaves the wire.
+    pub(crate) fn estop_cut_in(&self, end: Instant) -> Option<Instant> {
+        self.clock.adapter().latency_timer()?;
+        let reach = self
+            .pipeline
+            .as_ref()
+            .map_or(Duration::ZERO, |p| p.guard().reach());
+        Some(self.clock.reply_end(end) + reach)
+    }
+
     /// True while an e-stop press above the last one served waits.
     pub(crate) fn estop_pending(&self, generation: u64) -> bool {
         generation > self.estop_seen

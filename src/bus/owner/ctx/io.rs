@@ -252,14 +252,15 @@ impl Ctx {
         self.link.counters.frames_tx_batched += control.len() as u64;
         self.control_frames_sent(control, end);
         let window = self.sched.reply_window(end);
-        let mut got = self.sleep_before_reply(want, window.due);
+        let cut_in = self.sched.estop_cut_in(end);
+        let mut got = self.sleep_before_reply(want, window.due, cut_in);
         if prepare && matches!(got, Ok(None)) {
             // Planned in the moments before the reply, after the one wake-up
             // a transaction costs: its setpoints are as fresh as they can be.
             self.sched.prepare(window.due, &self.shared.setpoints);
         }
         if matches!(got, Ok(None)) {
-            got = self.wait_reply(want, window.due, window.deadline);
+            got = self.wait_reply(want, window.due, window.deadline, cut_in);
         }
         self.absorb_inbox();
         let got = got.map_err(|e| self.lost(e))?;
@@ -272,18 +273,24 @@ impl Ctx {
     }
 
     /// Waits for `want` until `deadline`. Past a frame after the modelled
-    /// reply the wait goes in short slices: a late or missing reply must not
-    /// hold an e-stop back, nor the snapshot.
+    /// reply, or past `cut_in` (the reply off the wire, held by a latency
+    /// timer), the wait goes in short slices: a late, missing or held reply
+    /// must not hold an e-stop back, nor the snapshot.
     fn wait_reply(
         &mut self,
         want: Want,
         due: Instant,
         deadline: Instant,
+        cut_in: Option<Instant>,
     ) -> std::io::Result<Option<(Reply, Instant)>> {
         let grace = due + self.sched.clock().frame_time();
+        let sliced_from = cut_in.map_or(grace, |c| c.min(grace));
+        if self.estop_pending() && Instant::now() >= sliced_from {
+            return Ok(None);
+        }
         let mut got = self.spin_for_reply(want, due);
         if matches!(got, Ok(None)) {
-            got = self.link.wait(Some(want), grace.min(deadline));
+            got = self.link.wait(Some(want), sliced_from.min(deadline));
         }
         while matches!(got, Ok(None)) && !self.estop_pending() {
             let now = Instant::now();
@@ -301,10 +308,13 @@ impl Ctx {
     /// Blocks until shortly before the reply is due: by as much as this
     /// thread is seen to wake late, when it spins for the reply next
     /// ([`Self::spin_for_reply`]); by [`PREPARE_LEAD`] when it does not.
+    /// Past `cut_in` (see [`Self::wait_reply`]) it sleeps in short slices
+    /// and gives way to an e-stop.
     fn sleep_before_reply(
         &mut self,
         want: Want,
         due: Instant,
+        cut_in: Option<Instant>,
     ) -> std::io::Result<Option<(Reply, Instant)>> {
         let spinning = self.cfg.timing.reply_spin_us > 0;
         let until = if spinning {
@@ -313,7 +323,16 @@ impl Ctx {
             due.checked_sub(PREPARE_LEAD).unwrap_or(due)
         };
         let slept = Instant::now() < until;
-        let got = self.link.wait(Some(want), until);
+        let mut got = self
+            .link
+            .wait(Some(want), cut_in.map_or(until, |c| c.min(until)));
+        while cut_in.is_some() && matches!(got, Ok(None)) && !self.estop_pending() {
+            let now = Instant::now();
+            if now >= until {
+                break;
+            }
+            got = self.link.wait(Some(want), until.min(now + LATE_WAIT_SLICE));
+        }
         if spinning && slept && matches!(got, Ok(None)) {
             self.wake.observe(until, Instant::now());
         }
