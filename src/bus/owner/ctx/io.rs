@@ -333,8 +333,11 @@ impl Ctx {
             }
             got = self.link.wait(Some(want), until.min(now + LATE_WAIT_SLICE));
         }
-        if spinning && slept && matches!(got, Ok(None)) {
-            self.wake.observe(until, Instant::now());
+        // A wake-up at `until`, not one an e-stop cut short, says how late
+        // this thread wakes.
+        let woke = Instant::now();
+        if spinning && slept && matches!(got, Ok(None)) && woke >= until {
+            self.wake.observe(until, woke);
         }
         got
     }
