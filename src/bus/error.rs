@@ -58,7 +58,9 @@ pub enum BusError {
     /// Too many requests waiting (retry later).
     #[error("request queue full ({depth} waiting)")]
     Busy { depth: usize },
-    /// An e-stop cancelled this request before it reached the wire.
+    /// An e-stop cancelled this request: before it reached the wire, or
+    /// while it waited for its reply (then whether a write took is unknown;
+    /// the write paths report it unverified).
     #[error("preempted by an emergency stop")]
     Preempted,
     /// The owner did not answer in time (should not happen).

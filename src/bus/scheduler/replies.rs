@@ -121,6 +121,15 @@ impl Scheduler {
         self.reg.on_missed(want.dev_id, &mut self.events);
     }
 
+    /// The reply to `want`, due at `due`, was given up at `now`, before
+    /// its deadline, for an e-stop: nothing against the device nor the USB
+    /// path (it may still come, and is then taken in as a late one); the
+    /// line is free again.
+    pub(crate) fn given_up(&mut self, want: Want, due: Instant, now: Instant) {
+        self.overdue = Some((want, due));
+        self.clock.line_free(now);
+    }
+
     /// A poll written blind got no reply by its deadline: missed like any
     /// other, but the line was never held for it beyond the model.
     pub(crate) fn inflight_timed_out(&mut self, inflight: &Inflight, now: Instant) {

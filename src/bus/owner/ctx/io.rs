@@ -209,7 +209,9 @@ impl Ctx {
 
     /// Writes one config/read frame and waits for the reply it asks for;
     /// with `prepare`, has the next control frame planned meanwhile. `None`
-    /// when the reply did not come in time (counted as a missed poll).
+    /// when the reply did not come in time (counted as a missed poll);
+    /// [`BusError::Preempted`] when an e-stop cut the wait short (the frame
+    /// went out, its effect is unknown).
     fn exchange(
         &mut self,
         cmd: Config,
@@ -264,6 +266,13 @@ impl Ctx {
         }
         self.absorb_inbox();
         let got = got.map_err(|e| self.lost(e))?;
+        let now = Instant::now();
+        if got.is_none() && self.estop_pending() && now < window.deadline {
+            // Given up for the e-stop, not missed: the reply may still
+            // come out of the adapter, and is then taken in as a late one.
+            self.sched.given_up(want, window.due, now);
+            return Err(BusError::Preempted);
+        }
         if let Some((_, read_at)) = &got {
             self.stats
                 .round_trip(read_at.saturating_duration_since(started));
