@@ -1,4 +1,4 @@
-//! Issue 13: a web page the user visits must not move the hand. Each attack
+//! A web page the user visits must not move the hand. Each attack
 //! is sent as the browser would send it against the API in front of the
 //! real bus engine and the simulator; each must be refused and leave the
 //! joint where it was, while the same request from the dashboard's origin

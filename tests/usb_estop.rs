@@ -1,24 +1,29 @@
 //! Behind a USB adapter with a latency timer a transaction's reply leaves
 //! the wire long before the adapter hands it over (16 ms later on an FTDI
 //! chip's default timer). An e-stop pressed meanwhile takes the wire once
-//! the reply is off it, not once the host has read it. Orderings on the
-//! simulator's wire only: the e-stop's first frame against the moment the
-//! adapter releases the reply.
+//! the reply is off it, not once the host has read it; the transaction is
+//! given up for the e-stop, not missed: its reply, when the adapter lets it
+//! go, is taken in as a late one, and neither the device's record nor the
+//! USB pipeline's evidence of lost replies counts it. Orderings and counts
+//! on the simulator's wire only.
 
 mod support;
 
 use std::time::Duration;
 
+use jointd::bus::error::BusError;
 use jointd::bus::AdapterSetting;
-use jointd::protocol::{Command, Config, InfoBlock};
+use jointd::protocol::{Command, Config, InfoBlock, Reply};
 use jointd::sim::WireFrame;
 use jointd::transport::adapter::AdapterModel;
 use support::bus::*;
+use tokio::task::JoinHandle;
 
 const TIMER: Duration = Duration::from_millis(16);
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn an_estop_during_a_transaction_does_not_wait_out_the_latency_timer() {
+/// Four joints online behind a simulated FTDI chip on its 16 ms timer, the
+/// pipeline past the time its evidence is not counted.
+async fn ftdi_rig() -> Rig {
     let ids: Vec<u8> = (1..=4).collect();
     let adapter = AdapterModel::Ftdi { latency_ms: 16 };
     let mut sim_cfg = sim_config(&ids, BAUD);
@@ -29,9 +34,17 @@ async fn an_estop_during_a_transaction_does_not_wait_out_the_latency_timer() {
         c.adapter = AdapterSetting::Fixed(adapter);
     });
     rig.online(4).await;
+    rig.until("the pipeline settled", |s| {
+        s.usb_pipeline.as_ref().is_some_and(|u| u.since_s > 0.2)
+    })
+    .await;
+    rig
+}
 
-    // A one-shot read of a block the polls never ask for, so its frame
-    // is known on the wire.
+/// Starts a read of device 2's INFO_03 (a block the polls never ask for,
+/// so its frame is known on the wire) and waits until that frame is on
+/// the wire: the read task, and the frame's index in the wire log.
+async fn read_on_the_wire(rig: &Rig) -> (JoinHandle<Result<Reply, BusError>>, usize) {
     let request = Command::Config(Config::read(2, InfoBlock::Info03)).encode();
     let before = rig.sim.frame_log().len();
     let bus = rig.bus.clone();
@@ -43,16 +56,22 @@ async fn an_estop_during_a_transaction_does_not_wait_out_the_latency_timer() {
             .map(|i| before + i)
     };
     let deadline = tokio::time::Instant::now() + WAIT;
-    let asked = loop {
+    loop {
         if let Some(i) = on_wire(&rig.sim.frame_log()) {
-            break i;
+            return (read, i);
         }
         assert!(
             tokio::time::Instant::now() < deadline,
             "the read never reached the wire"
         );
         tokio::task::yield_now().await;
-    };
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_estop_during_a_transaction_does_not_wait_out_the_latency_timer() {
+    let rig = ftdi_rig().await;
+    let (read, asked) = read_on_the_wire(&rig).await;
     let report = rig.bus.estop().await.expect("the e-stop");
     assert!(report.frames_sent > 0, "{report:?}");
 
@@ -78,4 +97,40 @@ async fn an_estop_during_a_transaction_does_not_wait_out_the_latency_timer() {
     let _ = tokio::time::timeout(WAIT, read)
         .await
         .expect("the read ended");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_transaction_given_up_for_an_estop_is_not_a_missed_reply() {
+    let rig = ftdi_rig().await;
+    let (read, _) = read_on_the_wire(&rig).await;
+    let at_estop = rig.bus.snapshot();
+    rig.bus.estop().await.expect("the e-stop");
+    let read = tokio::time::timeout(WAIT, read)
+        .await
+        .expect("the read ended")
+        .expect("the read's task");
+    assert!(
+        matches!(read, Err(BusError::Preempted)),
+        "the read the e-stop cut short: {read:?}"
+    );
+    // The reply the e-stop did not wait for comes out of the adapter
+    // later; a few turns after it is taken in, any evidence it made has
+    // been acted on.
+    let taken = rig
+        .until("the abandoned reply taken in", |s| {
+            s.counters.unsolicited > at_estop.counters.unsolicited
+        })
+        .await;
+    let snap = rig
+        .until("a few polls more", |s| {
+            s.counters.polls > taken.counters.polls + 5
+        })
+        .await;
+    let (c, c0) = (&snap.counters, &at_estop.counters);
+    assert_eq!(c.timeouts, c0.timeouts, "counted as a timeout");
+    assert_eq!(c.retries, c0.retries, "counted as a retry");
+    assert_eq!(snap.devices[&2].missed_polls, 0, "counted as a missed poll");
+    let usb = snap.usb_pipeline.as_ref().expect("a USB pipeline");
+    assert_eq!(usb.backoffs, 0, "the pipeline backed off: {}", usb.reason);
+    assert_eq!(usb.incidents_per_s, 0.0, "taken as evidence: {usb:?}");
 }

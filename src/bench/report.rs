@@ -15,7 +15,7 @@ const MIN_CONTROL_HZ: f64 = 400.0;
 const MIN_TELEMETRY_HZ: f64 = 40.0;
 const MAX_P99_US: u64 = 3_000;
 const MAX_DAEMON_CPU: f64 = 0.15;
-/// Issue 15: behind a USB adapter, each rate as a share of the adapter's
+/// Behind a USB adapter, each rate as a share of the adapter's
 /// pipeline bound.
 const MIN_SHARE_OF_BOUND: f64 = 0.9;
 /// With late writes: control as a share of the bound, and how long the

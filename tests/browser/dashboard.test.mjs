@@ -217,7 +217,7 @@ test("e-stop disables every joint", async () => {
   await page.screenshot({ path: `${SHOTS}/estop.png`, fullPage: true });
 });
 
-// Issue 13: a page of another origin the user happens to visit. It sends the
+// A page of another origin the user happens to visit. It sends the
 // requests a browser lets any page send (no-cors POSTs, a WebSocket); the
 // daemon must refuse them all and the joints stay disabled.
 test("a page of another origin cannot move a joint", async () => {

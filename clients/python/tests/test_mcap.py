@@ -1,4 +1,4 @@
-"""Recordings (issue 16) read back by the MCAP reference reader: `jointd
+"""Recordings read back by the MCAP reference reader: `jointd
 record` against a daemon on the simulator while a joint moves; Python's
 `mcap` and `mcap-ros2-support` decode the joint states against the real
 `sensor_msgs/msg/JointState` definition; their count matches the telemetry

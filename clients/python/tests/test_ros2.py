@@ -1,4 +1,4 @@
-"""The ROS 2 bridge (issue 16) against a real Zenoh router and real ROS
+"""The ROS 2 bridge against a real Zenoh router and real ROS
 message definitions, as a ROS 2 node on rmw_zenoh would meet it: a router
 in this process (`eclipse-zenoh`, mode router), `jointd --sim 4 --ros2`
 connected to it, a client session that subscribes to `joint_states` on the

@@ -125,14 +125,7 @@ pub(crate) fn fragment<'a>(
 ) -> Arc<str> {
     cache.get_or_build(shape, snap, || {
         let mut text = Vec::new();
-        for dev in snap.devices.values() {
-            if sub
-                .devices
-                .as_ref()
-                .is_some_and(|ids| !ids.contains(&dev.dev_id))
-            {
-                continue;
-            }
+        for dev in selected(sub, snap) {
             let joint = JointJson {
                 sub,
                 bus: &snap.name,
@@ -152,6 +145,18 @@ pub(crate) fn fragment<'a>(
         }
         // serde_json writes UTF-8 only.
         String::from_utf8(text).unwrap_or_default()
+    })
+}
+
+/// The devices of `snap` the subscription asks for, in id order.
+fn selected<'a>(
+    sub: &'a Subscription,
+    snap: &'a BusSnapshot,
+) -> impl Iterator<Item = &'a DeviceState> + 'a {
+    snap.devices.values().filter(move |dev| {
+        sub.devices
+            .as_ref()
+            .map_or(true, |ids| ids.contains(&dev.dev_id))
     })
 }
 
@@ -234,14 +239,7 @@ mod tests {
         now: Instant,
         out: &mut Vec<Map<String, Value>>,
     ) {
-        for dev in snap.devices.values() {
-            if sub
-                .devices
-                .as_ref()
-                .is_some_and(|ids| !ids.contains(&dev.dev_id))
-            {
-                continue;
-            }
+        for dev in selected(sub, snap) {
             let mut m = joint(sub, &snap.name, dev, &cal_of(dev.dev_id), now);
             if let Some(name) = name_of(dev.dev_id) {
                 m.insert("name".into(), name.into());
