@@ -420,15 +420,19 @@ mod tests {
         }
     }
 
-    #[test]
-    fn contact_begins_where_the_rise_crossed_the_onset_between_reports_far_apart() {
-        let mut c = Closing::new(S);
-        let at = |ms: u64, i: f64| Sample {
+    /// A report at `ms` of a finger closing at 30 °/s from 0°, drawing `i` A.
+    fn at(ms: u64, i: f64) -> Sample {
+        Sample {
             t: Duration::from_millis(ms),
             deg: f64::from(ms as u32) * 0.03,
             speed_dps: 30.0,
             current_a: i,
-        };
+        }
+    }
+
+    #[test]
+    fn contact_begins_where_the_rise_crossed_the_onset_between_reports_far_apart() {
+        let mut c = Closing::new(S);
         for ms in (0..100).step_by(4) {
             c.sample(at(ms, 0.075));
         }
@@ -455,12 +459,6 @@ mod tests {
     #[test]
     fn one_report_over_the_threshold_is_no_contact_two_ten_ms_apart_are() {
         let mut c = Closing::new(S);
-        let at = |ms: u64, i: f64| Sample {
-            t: Duration::from_millis(ms),
-            deg: f64::from(ms as u32) * 0.03,
-            speed_dps: 30.0,
-            current_a: i,
-        };
         for ms in (0..100).step_by(4) {
             assert_eq!(c.sample(at(ms, 0.075)), Verdict::Closing);
         }

@@ -642,18 +642,17 @@ impl Scheduler {
         let Some(pipeline) = &self.pipeline else {
             return self.clock.host_frames(handed, n);
         };
-        let mut released = if asks_reply {
-            pipeline.latest_release(handed)
+        let released = if asks_reply {
+            let mut released = pipeline.latest_release(handed);
+            if let Some(queued) = self.queued_until.take() {
+                released.at = released.at.max(queued);
+            }
+            released
         } else {
             let latest = pipeline.latest_release(handed).at + self.clock.frame_time() * n;
             self.queued_until = Some(self.queued_until.map_or(latest, |q| q.max(latest)));
             pipeline.release_without_reply(handed)
         };
-        if asks_reply {
-            if let Some(queued) = self.queued_until.take() {
-                released.at = released.at.max(queued);
-            }
-        }
         self.ambiguous_writes += u64::from(released.ambiguous);
         self.clock.host_frames(released.at, n)
     }
@@ -688,7 +687,8 @@ impl Scheduler {
             .pipeline
             .as_ref()
             .map_or(Duration::ZERO, |p| p.guard().reach());
-        Some(self.clock.reply_end(end) + reach)
+        let (wire_end, _) = self.reply_out(end);
+        Some(wire_end + reach)
     }
 
     /// True while an e-stop press above the last one served waits.

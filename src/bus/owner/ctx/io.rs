@@ -301,15 +301,28 @@ impl Ctx {
         if matches!(got, Ok(None)) {
             got = self.link.wait(Some(want), sliced_from.min(deadline));
         }
+        self.wait_sliced(want, got, deadline, true)
+    }
+
+    /// Goes on waiting for `want` until `until` while `got` is empty, in
+    /// slices of [`LATE_WAIT_SLICE`] that give way to an e-stop; with
+    /// `housekeeping`, the snapshot and expiries are kept up between them.
+    fn wait_sliced(
+        &mut self,
+        want: Want,
+        mut got: std::io::Result<Option<(Reply, Instant)>>,
+        until: Instant,
+        housekeeping: bool,
+    ) -> std::io::Result<Option<(Reply, Instant)>> {
         while matches!(got, Ok(None)) && !self.estop_pending() {
             let now = Instant::now();
-            if now >= deadline {
+            if now >= until {
                 break;
             }
-            self.housekeeping(now);
-            got = self
-                .link
-                .wait(Some(want), deadline.min(now + LATE_WAIT_SLICE));
+            if housekeeping {
+                self.housekeeping(now);
+            }
+            got = self.link.wait(Some(want), until.min(now + LATE_WAIT_SLICE));
         }
         got
     }
@@ -335,12 +348,8 @@ impl Ctx {
         let mut got = self
             .link
             .wait(Some(want), cut_in.map_or(until, |c| c.min(until)));
-        while cut_in.is_some() && matches!(got, Ok(None)) && !self.estop_pending() {
-            let now = Instant::now();
-            if now >= until {
-                break;
-            }
-            got = self.link.wait(Some(want), until.min(now + LATE_WAIT_SLICE));
+        if cut_in.is_some() {
+            got = self.wait_sliced(want, got, until, false);
         }
         // A wake-up at `until`, not one an e-stop cut short, says how late
         // this thread wakes.
