@@ -155,39 +155,16 @@ pub(crate) struct ParseError {
 /// refuses goes that way, whose errors say what was wrong.
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct SetpointsText {
-    #[serde(rename = "type")]
-    _kind: SetpointsTag,
+struct SetpointsText<'a> {
+    /// Borrowed: only a plain string (an escaped one goes the long way).
+    #[serde(rename = "type", borrow)]
+    kind: &'a str,
     seq: Option<u64>,
     #[serde(default)]
     ack: bool,
     #[serde(default)]
     restart: bool,
     targets: Vec<TargetItem>,
-}
-
-/// The string `"setpoints"` and nothing else: a derived enum would also
-/// take `{"setpoints":null}`, which the generic path refuses.
-struct SetpointsTag;
-
-impl<'de> Deserialize<'de> for SetpointsTag {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct Tag;
-        impl serde::de::Visitor<'_> for Tag {
-            type Value = SetpointsTag;
-            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-                f.write_str("the string \"setpoints\"")
-            }
-            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<SetpointsTag, E> {
-                if v == "setpoints" {
-                    Ok(SetpointsTag)
-                } else {
-                    Err(E::invalid_value(serde::de::Unexpected::Str(v), &self))
-                }
-            }
-        }
-        d.deserialize_str(Tag)
-    }
 }
 
 /// Parses one text frame.
@@ -199,6 +176,7 @@ pub(crate) fn parse(text: &str) -> Result<ClientMessage, ParseError> {
     if let Some(m) = object
         .then(|| serde_json::from_str::<SetpointsText>(text).ok())
         .flatten()
+        .filter(|m| m.kind == "setpoints")
     {
         return Ok(ClientMessage::Setpoints(SetpointBatch {
             seq: m.seq,
