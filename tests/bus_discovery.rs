@@ -86,19 +86,24 @@ async fn a_pty_refusing_rs485_mode_is_a_note_and_the_bus_runs() {
 
 #[tokio::test]
 async fn a_scan_counts_a_device_whose_reply_came_after_its_deadline() {
+    // A probe waits 5.5 ms (0.5 ms modelled reply, 5 ms margin) before the
+    // next one goes out.
+    const MARGIN_US: u64 = 5_000;
     // The bus knows only id 5 (absent): device 1 announced itself before.
     let rig = rig_after_boot(sim_config(&[1], BAUD), |cfg| {
         cfg.ids = vec![5];
-        cfg.timing.reply_margin_us = 1_000;
+        cfg.timing.reply_margin_us = MARGIN_US;
     });
-    // Device 1 now answers 2.5 ms later than the bus expects: its reply to
-    // the probe of 1 ends after that probe's deadline, while the probe of 2
-    // (nobody) waits, without touching it on the wire. Ids 3 to 32 give a
-    // loaded machine time (about 60 ms of probes) to deliver it before the
-    // scan ends; a busy 2-core host can hold the simulator's thread for
-    // more than the dozen milliseconds a shorter scan leaves.
+    // Device 1 now answers 8.4 ms late: past the deadline of the probe of 1
+    // and in the middle of the quiet between the probes of 2 and 3, which
+    // end 5.9 and 11.8 ms after it. The 2.5 ms either side of the reply
+    // absorb the pty's lag on a loaded host (a 1 ms margin would leave
+    // 0.4 ms, and a probe could land on the reply). Ids 4 to 32 give a
+    // loaded machine time to deliver it before the scan ends; a busy
+    // 2-core host can hold the simulator's thread for more than the few
+    // milliseconds a shorter scan leaves.
     rig.sim
-        .inject(Fault::ExtraTurnaround(Duration::from_micros(2_500)));
+        .inject(Fault::ExtraTurnaround(Duration::from_micros(8_400)));
     let found = rig.bus.scan(1, 32).await.expect("scan");
     assert_eq!(found, vec![1]);
 }

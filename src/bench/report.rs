@@ -301,11 +301,12 @@ impl Report {
                 "the daemon's own view (last 1 s)",
                 format!(
                     "utilisation {:.3}  timeouts/s {:.1}  reply timeout {:.1} ms  \
-                     wake lead {} µs  setpoint age p50 {:.2} ms p99 {:.2} ms",
+                     wake lead {} µs  reply lag {} µs  setpoint age p50 {:.2} ms p99 {:.2} ms",
                     d.wire_utilisation,
                     d.timeouts_per_s,
                     ms(d.reply_timeout_us),
                     d.wake_lead_us,
+                    d.reply_lag_us,
                     ms(d.setpoint_age_p50_us),
                     ms(d.setpoint_age_p99_us)
                 ),

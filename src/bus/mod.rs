@@ -24,6 +24,7 @@
 //!
 //! The pure parts the scheduler is made of:
 //! - [`wire`]: the line model: when frames leave, when a reply is due or overdue.
+//! - [`reply_lag`]: how long after the model replies reach the host (a low quantile).
 //! - [`usb_pipeline`]: behind a USB adapter, the frame clock learnt from
 //!   arrivals and the polls written blind (replies in flight).
 //! - [`poll`]: control budget and poll plan.
@@ -51,6 +52,7 @@ mod owner;
 mod packets;
 pub(crate) mod poll;
 pub(crate) mod registry;
+mod reply_lag;
 pub(crate) mod scheduler;
 pub(crate) mod setpoints;
 pub(crate) mod state;

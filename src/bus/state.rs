@@ -237,6 +237,10 @@ pub struct BusRates {
     /// the port, µs: how late its sleeps were seen to end (a high quantile),
     /// so the line does not idle after a reply while the thread wakes.
     pub wake_lead_us: u64,
+    /// How long after the line model replies reach the owner, µs (a low
+    /// quantile): where it starts watching the port for one. A few µs on a
+    /// native UART; a pty or a slow USB path adds to it.
+    pub reply_lag_us: u64,
 }
 
 /// What the owner publishes after every change worth seeing.

@@ -80,6 +80,10 @@ impl Stats {
         self.rates.wake_lead_us = lead.as_micros() as u64;
     }
 
+    pub(crate) fn set_reply_lag(&mut self, lag: Duration) {
+        self.rates.reply_lag_us = lag.as_micros() as u64;
+    }
+
     /// Closes the window if it is over; returns its length when it did.
     pub(crate) fn roll(&mut self, now: Instant, counters: &BusCounters) -> Option<Duration> {
         let window = now.saturating_duration_since(self.window_start);
@@ -120,6 +124,7 @@ fn rates(base: &BusCounters, now: &BusCounters, window: Duration, ages: &mut [u6
         setpoint_age_max_us: ages.last().copied().unwrap_or(0),
         reply_timeout_us: 0,
         wake_lead_us: 0,
+        reply_lag_us: 0,
     }
 }
 

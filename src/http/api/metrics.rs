@@ -358,6 +358,12 @@ fn bus_families(m: &mut Exposition, snap: &BusSnapshot) {
         &l,
         snap.rates.wake_lead_us as f64 / 1e6,
     );
+    m.gauge(
+        "jointd_bus_reply_lag_seconds",
+        "How long after the line model replies reach the bus thread (a low quantile): where it starts watching for one.",
+        &l,
+        snap.rates.reply_lag_us as f64 / 1e6,
+    );
     m.histogram(
         "jointd_bus_setpoint_to_wire_seconds",
         "A setpoint's acceptance to the last byte of its frame on the wire.",

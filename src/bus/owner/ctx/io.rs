@@ -15,7 +15,8 @@ use crate::bus::config::StartPolicy;
 use crate::bus::error::BusError;
 use crate::bus::owner::confirm::describe;
 use crate::bus::registry::ReplyEffect;
-use crate::bus::wire::Want;
+use crate::bus::reply_lag::Seen;
+use crate::bus::wire::{ReplyWindow, Want};
 use crate::protocol::{Command, Config, ConfigParam, InfoBlock, Reply};
 
 use super::Ctx;
@@ -255,14 +256,20 @@ impl Ctx {
         self.control_frames_sent(control, end);
         let window = self.sched.reply_window(end);
         let cut_in = self.sched.estop_cut_in(end);
-        let mut got = self.sleep_before_reply(want, window.due, cut_in);
+        // Where replies have been coming, not where the model puts them.
+        let aim = window.due + self.reply_lag.lag();
+        let mut got = self.sleep_before_reply(want, aim, cut_in);
         if prepare && matches!(got, Ok(None)) {
             // Planned in the moments before the reply, after the one wake-up
             // a transaction costs: its setpoints are as fresh as they can be.
             self.sched.prepare(window.due, &self.shared.setpoints);
         }
+        let mut seen = Seen::Bound;
         if matches!(got, Ok(None)) {
-            got = self.wait_reply(want, window.due, window.deadline, cut_in);
+            (got, seen) = self.wait_reply(want, window, aim, cut_in);
+        }
+        if let Ok(Some((_, read_at))) = &got {
+            self.reply_lag.observe(window.due, *read_at, seen);
         }
         self.absorb_inbox();
         let got = got.map_err(|e| self.lost(e))?;
@@ -281,27 +288,29 @@ impl Ctx {
         Ok(self.settle_exchange(got, want, window.due, silence))
     }
 
-    /// Waits for `want` until `deadline`. Past a frame after the modelled
-    /// reply, or past `cut_in` (the reply off the wire, held by a latency
-    /// timer), the wait goes in short slices: a late, missing or held reply
-    /// must not hold an e-stop back, nor the snapshot.
+    /// Waits for `want` until the window's deadline, watching the port from
+    /// `aim` (the modelled time plus the lag replies have shown). Past a
+    /// frame after the modelled reply, or past `cut_in` (the reply off the
+    /// wire, held by a latency timer), the wait goes in short slices: a
+    /// late, missing or held reply must not hold an e-stop back, nor the
+    /// snapshot. Says whether the reply came while the port was watched.
     fn wait_reply(
         &mut self,
         want: Want,
-        due: Instant,
-        deadline: Instant,
+        window: ReplyWindow,
+        aim: Instant,
         cut_in: Option<Instant>,
-    ) -> std::io::Result<Option<(Reply, Instant)>> {
-        let grace = due + self.sched.clock().frame_time();
+    ) -> (std::io::Result<Option<(Reply, Instant)>>, Seen) {
+        let grace = window.due + self.sched.clock().frame_time();
         let sliced_from = cut_in.map_or(grace, |c| c.min(grace));
         if self.estop_pending() && Instant::now() >= sliced_from {
-            return Ok(None);
+            return (Ok(None), Seen::Bound);
         }
-        let mut got = self.spin_for_reply(want, due);
+        let (mut got, seen) = self.spin_for_reply(want, aim);
         if matches!(got, Ok(None)) {
-            got = self.link.wait(Some(want), sliced_from.min(deadline));
+            got = self.link.wait(Some(want), sliced_from.min(window.deadline));
         }
-        self.wait_sliced(want, got, deadline, true)
+        (self.wait_sliced(want, got, window.deadline, true), seen)
     }
 
     /// Goes on waiting for `want` until `until` while `got` is empty, in
@@ -327,8 +336,8 @@ impl Ctx {
         got
     }
 
-    /// Blocks until shortly before the reply is due: by as much as this
-    /// thread is seen to wake late, when it spins for the reply next
+    /// Blocks until shortly before `due`, where the reply is expected: by
+    /// as much as this thread is seen to wake late, when it spins for the reply next
     /// ([`Self::spin_for_reply`]); by [`PREPARE_LEAD`] when it does not.
     /// Past `cut_in` (see [`Self::wait_reply`]) it sleeps in short slices
     /// and gives way to an e-stop.
@@ -360,25 +369,28 @@ impl Ctx {
         got
     }
 
-    /// Looks at the port without sleeping until `reply_spin_us` past the
-    /// reply's due time: a thread woken from sleep (on a VM, a halted
-    /// virtual CPU woken too) reacts tens of µs later, and every poll's
-    /// reply would be followed by such a gap on the line.
+    /// Looks at the port without sleeping until `reply_spin_us` past `aim`
+    /// (where the reply is expected): a thread woken from sleep (on a VM, a
+    /// halted virtual CPU woken too) reacts tens of µs later, and every
+    /// poll's reply would be followed by such a gap on the line. A reply
+    /// found after an empty look arrived when it was found.
     fn spin_for_reply(
         &mut self,
         want: Want,
-        due: Instant,
-    ) -> std::io::Result<Option<(Reply, Instant)>> {
+        aim: Instant,
+    ) -> (std::io::Result<Option<(Reply, Instant)>>, Seen) {
         let spin = Duration::from_micros(self.cfg.timing.reply_spin_us);
         if spin.is_zero() {
-            return Ok(None);
+            return (Ok(None), Seen::Bound);
         }
         let mut got = self.link.poll_now(Some(want));
-        while matches!(got, Ok(None)) && Instant::now() < due + spin {
+        let mut seen = Seen::Bound;
+        while matches!(got, Ok(None)) && Instant::now() < aim + spin {
             std::hint::spin_loop();
+            seen = Seen::Watching;
             got = self.link.poll_now(Some(want));
         }
-        got
+        (got, seen)
     }
 
     /// Takes in the reply of an exchange, or counts it missing.

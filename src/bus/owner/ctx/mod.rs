@@ -44,6 +44,9 @@ pub(crate) struct Ctx {
     /// How late this thread wakes: it stops sleeping that much before a
     /// reply is due.
     wake: crate::rt::wake::WakeLateness,
+    /// How long after the model replies reach this thread: it aims its
+    /// wake-up and its watch of the port there.
+    reply_lag: crate::bus::reply_lag::ReplyLag,
 }
 
 impl Ctx {
@@ -67,6 +70,7 @@ impl Ctx {
             held: None,
             next_motion_sample: now,
             wake: crate::rt::wake::WakeLateness::default(),
+            reply_lag: crate::bus::reply_lag::ReplyLag::default(),
         }
     }
 

@@ -18,6 +18,7 @@ impl Ctx {
             let timeout = self.sched.clock().reply_timeout(now);
             self.stats.set_reply_timeout(timeout);
             self.stats.set_wake_lead(self.wake.lead());
+            self.stats.set_reply_lag(self.reply_lag.lag());
         }
         if self.stats.due(now) || self.sched.has_events() {
             self.publish(now);
