@@ -290,6 +290,40 @@ async fn every_error_is_reported_and_nothing_partial_is_applied() {
     assert_eq!(c.next_of("pong").await["ref_seq"], 99);
 }
 
+/// The server offers its codec a few KiB per read of the socket; a
+/// message many reads long still arrives whole, and one over the size
+/// limit is refused without taking the daemon down.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_message_longer_than_one_read_arrives_whole() {
+    let bus = sim_bus::start(1, None).await;
+    let mut c = connect(&bus).await;
+    // 100 kB of whitespace inside a ping: valid JSON, a dozen reads long.
+    let padded = format!(r#"{{"type":"ping",{}"seq":41}}"#, " ".repeat(100_000));
+    c.send_text(&padded).await;
+    assert_eq!(c.next_of("pong").await["ref_seq"], 41);
+    c.send(json!({"type":"ping","seq":42})).await;
+    assert_eq!(c.next_of("pong").await["ref_seq"], 42);
+
+    // Over the 256 KiB limit: this connection ends, the daemon serves on.
+    let huge = format!(r#"{{"type":"ping",{}"seq":43}}"#, " ".repeat(300_000));
+    let _ = c.ws.send(Message::text(huge)).await;
+    let ended = tokio::time::timeout(WAIT, async {
+        loop {
+            match c.ws.next().await {
+                Some(Ok(Message::Text(t))) if t.as_str().contains("\"pong\"") => return false,
+                Some(Ok(Message::Close(_))) | Some(Err(_)) | None => return true,
+                Some(Ok(_)) => continue,
+            }
+        }
+    })
+    .await
+    .expect("the oversized message is answered by the end of the connection");
+    assert!(ended, "an oversized message was answered");
+    let mut again = connect(&bus).await;
+    again.send(json!({"type":"ping","seq":44})).await;
+    assert_eq!(again.next_of("pong").await["ref_seq"], 44);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn watchdog_hold_freezes_joints_and_tells_everyone() {
     let bus = sim_bus::start(4, None).await;
