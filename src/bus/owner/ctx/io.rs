@@ -306,8 +306,11 @@ impl Ctx {
         if self.estop_pending() && Instant::now() >= sliced_from {
             return (Ok(None), Seen::Bound);
         }
-        let (mut got, seen) = self.spin_for_reply(want, aim);
+        let (mut got, mut seen) = self.spin_for_reply(want, aim);
         if matches!(got, Ok(None)) {
+            // A reply from here on wakes the thread: it may have come
+            // before it was read.
+            seen = Seen::Bound;
             got = self.link.wait(Some(want), sliced_from.min(window.deadline));
         }
         (self.wait_sliced(want, got, window.deadline, true), seen)
@@ -560,3 +563,6 @@ fn behind(control: &[Planned], cmd: Config) -> Vec<Command> {
         .chain([Command::Config(cmd)])
         .collect()
 }
+
+#[cfg(test)]
+mod tests;
