@@ -1,12 +1,15 @@
 //! The owner's reply wait against an in-memory line: what it learns of
-//! the reply lag.
+//! the reply lag, and how soon it gives way to an e-stop.
 
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use crate::bus::config::BusConfig;
+use crate::bus::error::BusError;
 use crate::bus::handle::{BusShared, BusSnapshot};
 use crate::bus::link::Link;
+use crate::bus::reply_lag::{Seen, MAX_LAG};
 use crate::bus::wire::Want;
 use crate::protocol::{Config, InfoBlock, Reply, ReplyBody};
 use crate::transport::memory::{self, MemoryPort};
@@ -77,5 +80,62 @@ fn a_reply_that_woke_the_owner_does_not_raise_the_lag() {
         ctx.reply_lag.lag(),
         Duration::ZERO,
         "a reply found on waking bounds its arrival from above: it may only lower the lag"
+    );
+}
+
+/// The quickest of `tries` exchanges of a silent device under a pending
+/// e-stop, from the write to the owner giving way, and when each was
+/// modelled to reach the end of its reply frame (`due`) and its grace.
+fn quickest_give_way(ctx: &mut Ctx, tries: u32) -> Duration {
+    ctx.shared.estop_generation.fetch_add(1, Ordering::SeqCst);
+    let (cmd, want) = read_info02(3);
+    (0..tries)
+        .map(|_| {
+            let start = Instant::now();
+            let got = ctx.exchange(cmd, want, false);
+            assert!(
+                matches!(got, Err(BusError::Preempted)),
+                "the e-stop preempts the wait: {got:?}"
+            );
+            start.elapsed()
+        })
+        .min()
+        .unwrap_or_default()
+}
+
+#[test]
+fn a_learnt_lag_does_not_hold_an_estop_past_the_grace() {
+    let (mut ctx, _dev) = ctx(|_| {});
+    // A path whose replies come late by the most the owner aims past.
+    let t0 = Instant::now();
+    for _ in 0..5_000 {
+        ctx.reply_lag
+            .observe(t0, t0 + Duration::from_millis(20), Seen::Watching);
+    }
+    assert_eq!(ctx.reply_lag.lag(), MAX_LAG);
+    let frame = ctx.sched.clock().frame_time();
+    // Request and reply frames, back to back (no turnaround): the reply is
+    // modelled two frames after the write, its grace a frame later.
+    let grace = frame * 3;
+    // Asleep until the aim (less the most it wakes early by), the owner
+    // could not give way before this.
+    let asleep_until = frame * 2 + MAX_LAG - crate::rt::wake::MAX_LEAD;
+    let quickest = quickest_give_way(&mut ctx, 20);
+    assert!(
+        quickest < asleep_until,
+        "gave way {quickest:?} after the write at the quickest; the grace ends at {grace:?}"
+    );
+}
+
+#[test]
+fn a_long_spin_does_not_hold_an_estop_past_the_grace() {
+    let (mut ctx, _dev) = ctx(|cfg| cfg.timing.reply_spin_us = 3_000);
+    let frame = ctx.sched.clock().frame_time();
+    let grace = frame * 3;
+    let spun_until = frame * 2 + Duration::from_micros(3_000);
+    let quickest = quickest_give_way(&mut ctx, 20);
+    assert!(
+        quickest < spun_until,
+        "gave way {quickest:?} after the write at the quickest; the grace ends at {grace:?}"
     );
 }
