@@ -15,7 +15,7 @@ use crate::bus::config::StartPolicy;
 use crate::bus::error::BusError;
 use crate::bus::owner::confirm::describe;
 use crate::bus::registry::ReplyEffect;
-use crate::bus::reply_lag::{Seen, MAX_LAG};
+use crate::bus::reply_lag::Seen;
 use crate::bus::wire::{ReplyWindow, Want};
 use crate::protocol::{Command, Config, ConfigParam, InfoBlock, Reply};
 
@@ -290,10 +290,11 @@ impl Ctx {
 
     /// From when a wait for the reply to a request ending at `end` goes in
     /// short slices that give way to an e-stop: a frame after the modelled
-    /// reply, or from `cut_in` (the reply off the wire, held by a latency
-    /// timer) if that is sooner. A late, missing or held reply must not
-    /// hold an e-stop back, nor the snapshot; nor may the owner's aim at
-    /// where replies have been coming (up to [`MAX_LAG`] past the model).
+    /// reply, or from the e-stop cut-in (the reply off the wire, held by a
+    /// latency timer) if that is sooner. A late, missing or held reply must
+    /// not hold an e-stop back, nor the snapshot; nor may the owner's aim
+    /// at where replies have been coming (up to
+    /// [`crate::bus::reply_lag::MAX_LAG`] past the model).
     fn sliced_from(&self, window: ReplyWindow, end: Instant) -> Instant {
         let grace = window.due + self.sched.clock().frame_time();
         self.sched.estop_cut_in(end).map_or(grace, |c| c.min(grace))
