@@ -255,10 +255,10 @@ impl Ctx {
         self.link.counters.frames_tx_batched += control.len() as u64;
         self.control_frames_sent(control, end);
         let window = self.sched.reply_window(end);
-        let cut_in = self.sched.estop_cut_in(end);
+        let sliced_from = self.sliced_from(window, end);
         // Where replies have been coming, not where the model puts them.
         let aim = window.due + self.reply_lag.lag();
-        let mut got = self.sleep_before_reply(want, aim, cut_in);
+        let mut got = self.sleep_before_reply(want, aim, sliced_from);
         if prepare && matches!(got, Ok(None)) {
             // Planned in the moments before the reply, after the one wake-up
             // a transaction costs: its setpoints are as fresh as they can be.
@@ -266,7 +266,7 @@ impl Ctx {
         }
         let mut seen = Seen::Bound;
         if matches!(got, Ok(None)) {
-            (got, seen) = self.wait_reply(want, window, aim, cut_in);
+            (got, seen) = self.wait_reply(want, window, aim, sliced_from);
         }
         if let Ok(Some((_, read_at))) = &got {
             self.reply_lag.observe(window.due, *read_at, seen);
@@ -288,26 +288,37 @@ impl Ctx {
         Ok(self.settle_exchange(got, want, window.due, silence))
     }
 
+    /// From when a wait for the reply to a request ending at `end` goes in
+    /// short slices that give way to an e-stop: a frame after the modelled
+    /// reply, or from the e-stop cut-in (the reply off the wire, held by a
+    /// latency timer) if that is sooner. A late, missing or held reply must
+    /// not hold an e-stop back, nor the snapshot; nor may the owner's aim
+    /// at where replies have been coming (up to
+    /// [`crate::bus::reply_lag::MAX_LAG`] past the model).
+    fn sliced_from(&self, window: ReplyWindow, end: Instant) -> Instant {
+        let grace = window.due + self.sched.clock().frame_time();
+        self.sched.estop_cut_in(end).map_or(grace, |c| c.min(grace))
+    }
+
     /// Waits for `want` until the window's deadline, watching the port from
-    /// `aim` (the modelled time plus the lag replies have shown). Past a
-    /// frame after the modelled reply, or past `cut_in` (the reply off the
-    /// wire, held by a latency timer), the wait goes in short slices: a
-    /// late, missing or held reply must not hold an e-stop back, nor the
-    /// snapshot. Says whether the reply came while the port was watched.
+    /// `aim` (the modelled time plus the lag replies have shown); in
+    /// slices from `sliced_from` (see [`Self::sliced_from`]). Says whether
+    /// the reply came while the port was watched.
     fn wait_reply(
         &mut self,
         want: Want,
         window: ReplyWindow,
         aim: Instant,
-        cut_in: Option<Instant>,
+        sliced_from: Instant,
     ) -> (std::io::Result<Option<(Reply, Instant)>>, Seen) {
-        let grace = window.due + self.sched.clock().frame_time();
-        let sliced_from = cut_in.map_or(grace, |c| c.min(grace));
         if self.estop_pending() && Instant::now() >= sliced_from {
             return (Ok(None), Seen::Bound);
         }
-        let (mut got, seen) = self.spin_for_reply(want, aim);
+        let (mut got, mut seen) = self.spin_for_reply(want, aim, sliced_from);
         if matches!(got, Ok(None)) {
+            // A reply from here on wakes the thread: it may have come
+            // before it was read.
+            seen = Seen::Bound;
             got = self.link.wait(Some(want), sliced_from.min(window.deadline));
         }
         (self.wait_sliced(want, got, window.deadline, true), seen)
@@ -339,13 +350,13 @@ impl Ctx {
     /// Blocks until shortly before `due`, where the reply is expected: by
     /// as much as this thread is seen to wake late, when it spins for the reply next
     /// ([`Self::spin_for_reply`]); by [`PREPARE_LEAD`] when it does not.
-    /// Past `cut_in` (see [`Self::wait_reply`]) it sleeps in short slices
-    /// and gives way to an e-stop.
+    /// Past `sliced_from` (see [`Self::sliced_from`]) it sleeps in short
+    /// slices and gives way to an e-stop.
     fn sleep_before_reply(
         &mut self,
         want: Want,
         due: Instant,
-        cut_in: Option<Instant>,
+        sliced_from: Instant,
     ) -> std::io::Result<Option<(Reply, Instant)>> {
         let spinning = self.cfg.timing.reply_spin_us > 0;
         let until = if spinning {
@@ -354,12 +365,8 @@ impl Ctx {
             due.checked_sub(PREPARE_LEAD).unwrap_or(due)
         };
         let slept = Instant::now() < until;
-        let mut got = self
-            .link
-            .wait(Some(want), cut_in.map_or(until, |c| c.min(until)));
-        if cut_in.is_some() {
-            got = self.wait_sliced(want, got, until, false);
-        }
+        let got = self.link.wait(Some(want), sliced_from.min(until));
+        let got = self.wait_sliced(want, got, until, false);
         // A wake-up at `until`, not one an e-stop cut short, says how late
         // this thread wakes.
         let woke = Instant::now();
@@ -373,11 +380,13 @@ impl Ctx {
     /// (where the reply is expected): a thread woken from sleep (on a VM, a
     /// halted virtual CPU woken too) reacts tens of µs later, and every
     /// poll's reply would be followed by such a gap on the line. A reply
-    /// found after an empty look arrived when it was found.
+    /// found after an empty look arrived when it was found. Past
+    /// `sliced_from` it gives way to an e-stop.
     fn spin_for_reply(
         &mut self,
         want: Want,
         aim: Instant,
+        sliced_from: Instant,
     ) -> (std::io::Result<Option<(Reply, Instant)>>, Seen) {
         let spin = Duration::from_micros(self.cfg.timing.reply_spin_us);
         if spin.is_zero() {
@@ -385,7 +394,11 @@ impl Ctx {
         }
         let mut got = self.link.poll_now(Some(want));
         let mut seen = Seen::Bound;
-        while matches!(got, Ok(None)) && Instant::now() < aim + spin {
+        while matches!(got, Ok(None)) {
+            let now = Instant::now();
+            if now >= aim + spin || (now >= sliced_from && self.estop_pending()) {
+                break;
+            }
             std::hint::spin_loop();
             seen = Seen::Watching;
             got = self.link.poll_now(Some(want));
@@ -560,3 +573,6 @@ fn behind(control: &[Planned], cmd: Config) -> Vec<Command> {
         .chain([Command::Config(cmd)])
         .collect()
 }
+
+#[cfg(test)]
+mod tests;
