@@ -89,18 +89,30 @@ fn a_reply_that_woke_the_owner_does_not_raise_the_lag() {
 fn quickest_give_way(ctx: &mut Ctx, tries: u32) -> Duration {
     ctx.shared.estop_generation.fetch_add(1, Ordering::SeqCst);
     let (cmd, want) = read_info02(3);
-    (0..tries)
-        .map(|_| {
-            let start = Instant::now();
-            let got = ctx.exchange(cmd, want, false);
-            assert!(
-                matches!(got, Err(BusError::Preempted)),
-                "the e-stop preempts the wait: {got:?}"
-            );
-            start.elapsed()
+    // On a thread of its own set up as the owner's is: precise timers,
+    // and the FIFO class where the host allows it (ignored where refused),
+    // so a loaded test machine does not hold every wake-up past the bound.
+    // Both end with the thread, not with the test harness's.
+    std::thread::scope(|s| {
+        s.spawn(|| {
+            crate::rt::precise_timers();
+            let _ = crate::rt::set_fifo(0, 10);
+            (0..tries)
+                .map(|_| {
+                    let start = Instant::now();
+                    let got = ctx.exchange(cmd, want, false);
+                    assert!(
+                        matches!(got, Err(BusError::Preempted)),
+                        "the e-stop preempts the wait: {got:?}"
+                    );
+                    start.elapsed()
+                })
+                .min()
+                .unwrap_or_default()
         })
-        .min()
-        .unwrap_or_default()
+        .join()
+        .expect("the exchanges ran")
+    })
 }
 
 #[test]
@@ -120,7 +132,7 @@ fn a_learnt_lag_does_not_hold_an_estop_past_the_grace() {
     // Asleep until the aim (less the most it wakes early by), the owner
     // could not give way before this.
     let asleep_until = frame * 2 + MAX_LAG - crate::rt::wake::MAX_LEAD;
-    let quickest = quickest_give_way(&mut ctx, 20);
+    let quickest = quickest_give_way(&mut ctx, 50);
     assert!(
         quickest < asleep_until,
         "gave way {quickest:?} after the write at the quickest; the grace ends at {grace:?}"
@@ -133,7 +145,7 @@ fn a_long_spin_does_not_hold_an_estop_past_the_grace() {
     let frame = ctx.sched.clock().frame_time();
     let grace = frame * 3;
     let spun_until = frame * 2 + Duration::from_micros(3_000);
-    let quickest = quickest_give_way(&mut ctx, 20);
+    let quickest = quickest_give_way(&mut ctx, 50);
     assert!(
         quickest < spun_until,
         "gave way {quickest:?} after the write at the quickest; the grace ends at {grace:?}"
