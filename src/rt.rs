@@ -5,7 +5,9 @@
 //!
 //! - [`wake`]: how late a thread wakes from a timed sleep, learnt from its
 //!   own sleeps (how early to stop sleeping and spin).
+//! - [`skewed`]: the estimate both learn with, faster one way than the other.
 
+pub(crate) mod skewed;
 pub(crate) mod wake;
 
 /// Makes this thread's timed waits precise: Linux otherwise lets a timer fire

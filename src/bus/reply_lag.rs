@@ -18,6 +18,8 @@
 
 use std::time::{Duration, Instant};
 
+use crate::rt::skewed::Skewed;
+
 /// The most lag the owner aims past: beyond it a reply is late, not a
 /// path's steady lag, and the owner waits for it asleep.
 pub(crate) const MAX_LAG: Duration = Duration::from_micros(500);
@@ -38,29 +40,32 @@ pub(crate) enum Seen {
     Bound,
 }
 
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub(crate) struct ReplyLag {
-    estimate_us: f64,
+    estimate: Skewed,
+}
+
+impl Default for ReplyLag {
+    fn default() -> Self {
+        Self {
+            estimate: Skewed::new(Duration::ZERO, RISE, FALL),
+        }
+    }
 }
 
 impl ReplyLag {
     /// How long after its modelled time a reply is expected, at the least.
     pub(crate) fn lag(&self) -> Duration {
-        Duration::from_secs_f64(self.estimate_us / 1e6).min(MAX_LAG)
+        self.estimate.get().min(MAX_LAG)
     }
 
     /// A reply modelled at `due` was seen at `seen_at`.
     pub(crate) fn observe(&mut self, due: Instant, seen_at: Instant, seen: Seen) {
         let lag = seen_at.saturating_duration_since(due).min(MAX_LAG);
-        let sample = lag.as_secs_f64() * 1e6;
-        let weight = if sample < self.estimate_us {
-            FALL
-        } else if seen == Seen::Watching {
-            RISE
-        } else {
-            return;
-        };
-        self.estimate_us += (sample - self.estimate_us) * weight;
+        match seen {
+            Seen::Watching => self.estimate.feed(lag),
+            Seen::Bound => self.estimate.feed_if_lower(lag),
+        }
     }
 }
 

@@ -13,6 +13,8 @@
 
 use std::time::{Duration, Instant};
 
+use super::skewed::Skewed;
+
 /// The least lead: a wake on time still needs a moment to look at the line.
 pub(crate) const MIN_LEAD: Duration = Duration::from_micros(10);
 /// The most lead (and the largest sample taken): a wake later than this was
@@ -29,13 +31,13 @@ const DECAY: f64 = 0.02;
 
 #[derive(Debug, Clone)]
 pub(crate) struct WakeLateness {
-    estimate_us: f64,
+    estimate: Skewed,
 }
 
 impl Default for WakeLateness {
     fn default() -> Self {
         Self {
-            estimate_us: MIN_LEAD.as_secs_f64() * 1e6,
+            estimate: Skewed::new(MIN_LEAD, RISE, DECAY),
         }
     }
 }
@@ -43,7 +45,7 @@ impl Default for WakeLateness {
 impl WakeLateness {
     /// How long before an instant the thread should stop sleeping.
     pub(crate) fn lead(&self) -> Duration {
-        Duration::from_secs_f64(self.estimate_us / 1e6).clamp(MIN_LEAD, MAX_LEAD)
+        self.estimate.get().clamp(MIN_LEAD, MAX_LEAD)
     }
 
     /// When to stop sleeping to be awake by `due`.
@@ -54,13 +56,7 @@ impl WakeLateness {
     /// A sleep that asked to end at `asked` ended at `woke`.
     pub(crate) fn observe(&mut self, asked: Instant, woke: Instant) {
         let late = woke.saturating_duration_since(asked).min(MAX_LEAD);
-        let sample = late.as_secs_f64() * 1e6;
-        let weight = if sample > self.estimate_us {
-            RISE
-        } else {
-            DECAY
-        };
-        self.estimate_us += (sample - self.estimate_us) * weight;
+        self.estimate.feed(late);
     }
 }
 
