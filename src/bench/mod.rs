@@ -23,6 +23,7 @@ pub mod cpu;
 mod grasp;
 mod grasp_modes;
 mod moves;
+pub mod pty_lag;
 pub mod report;
 mod send_floor;
 pub mod ws;
@@ -132,6 +133,12 @@ pub struct BenchArgs {
     /// With --ws: each telemetry client's rate, Hz.
     #[arg(long, default_value_t = 100.0)]
     pub telemetry_hz: f64,
+    /// Beside the run, measure how late a pty of its own passes bytes on
+    /// (a frame's worth every millisecond, written at the owner's priority
+    /// and read at the simulator's): on a pty line that lag reaches an
+    /// adapter model as writes that came late.
+    #[arg(long)]
+    pub pty_lag: bool,
 }
 
 /// Real-time priorities of the bench's threads (the owner's is its config default).
@@ -302,7 +309,16 @@ pub(crate) fn load_average() -> String {
 fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
     let ids: Vec<u8> = (1..=args.joints).collect();
     let (sim, bus, thread) = setup(args, baud, &ids)?;
+    let probe = match args.pty_lag {
+        true if args.no_rt => Some(pty_lag::PtyLagProbe::start((0, 0))?),
+        true => Some(pty_lag::PtyLagProbe::start((
+            CLIENT_PRIORITY,
+            SIM_PRIORITY,
+        ))?),
+        false => None,
+    };
     let run = measure(args, &sim, &bus, &ids)?;
+    let pty_lag = probe.map(pty_lag::PtyLagProbe::finish).transpose()?;
     if args.show_collisions {
         crate::sim::collision_context(&run.log)
             .iter()
@@ -340,6 +356,7 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
         cpu_client: share(2),
         daemon: snapshot.rates.clone(),
         referee_undated: s1.host_reads_undated.saturating_sub(s0.host_reads_undated),
+        pty_lag,
         referee_late_us: [0.5, 0.99]
             .map(|p| analysis::quantile_i64(&referee_late_ns, p) as f64 / 1e3),
         counters: snapshot.counters.clone(),

@@ -58,6 +58,8 @@ pub struct Report {
     /// Host writes the adapter model found waiting after a stall of the
     /// simulator's thread (dated to the earliest they may have been written).
     pub referee_undated: u64,
+    /// With `--pty-lag`: the lag of a pty of the probe's own beside the run.
+    pub pty_lag: Option<super::pty_lag::PtyLag>,
     /// The daemon's counters at the end of the run (warm-up included):
     /// behind a latent adapter, how the USB pipeline wrote.
     pub counters: BusCounters,
@@ -312,6 +314,22 @@ impl Report {
                 ),
             ),
         ];
+        if let Some(lag) = &self.pty_lag {
+            let us = |d: Duration| d.as_micros();
+            rows.push((
+                "pty lag beside the run (probe)",
+                format!(
+                    "p50 {} µs  p99 {} µs  p99.9 {} µs  max {} µs; {} of {} writes over {} ms",
+                    us(lag.quantile(0.5)),
+                    us(lag.quantile(0.99)),
+                    us(lag.quantile(0.999)),
+                    us(lag.max()),
+                    lag.late(),
+                    lag.lags.len(),
+                    super::pty_lag::LATE.as_millis()
+                ),
+            ));
+        }
         if let Some(delay) = &self.write_delay {
             rows.push((
                 "write delay (from the window's start)",
