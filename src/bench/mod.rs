@@ -139,6 +139,12 @@ pub struct BenchArgs {
     /// adapter model as writes that came late.
     #[arg(long)]
     pub pty_lag: bool,
+    /// Behind an adapter model on the in-memory line: do not confirm writes
+    /// (the bus setting `timing.usb_confirm = false`), as on a port that
+    /// cannot say when the adapter took a write: the blind pipeline and
+    /// its guard ladder.
+    #[arg(long)]
+    pub no_confirm: bool,
 }
 
 /// Real-time priorities of the bench's threads (the owner's is its config default).
@@ -409,6 +415,9 @@ pub(crate) fn setup_with(
     cfg.timing.turnaround_us = args.turnaround_us;
     if args.no_rt {
         cfg.timing.rt_priority = 0;
+    }
+    if args.no_confirm {
+        cfg.timing.usb_confirm = false;
     }
     if let Some(spin) = args.reply_spin_us {
         cfg.timing.reply_spin_us = spin;

@@ -359,12 +359,16 @@ impl Report {
             rows.push((
                 "USB pipeline at the end",
                 format!(
-                    "{} (guard {} µs, writes {} µs before their frame); {} backoffs, \
+                    "{}{} (guard {} µs, writes {} µs before their frame); {} writes taken late, \
+                     {} counts given up; {} backoffs, \
                      {} recoveries; {} of {} sentinels late, {} late writes backed off; \
                      last change: {}",
                     p.mode,
+                    if p.confirming { ", confirmed" } else { "" },
                     p.guard_us,
                     p.lead_us,
+                    p.writes_taken_late,
+                    p.counts_given_up,
                     p.backoffs,
                     p.recoveries,
                     p.sentinels_late,

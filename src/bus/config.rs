@@ -218,6 +218,13 @@ pub struct Timing {
     /// collision's aftermath before it steps back towards the adapter's
     /// bound, ms (doubled after a relapse, up to 16 times).
     pub usb_recover_ms: u64,
+    /// Behind a USB adapter whose driver counts the bytes the adapter has
+    /// not taken yet (`TIOCOUTQ` on a USB-serial tty): wait to see each
+    /// blind write taken before the next, so a write that reaches the
+    /// adapter late costs the frames it was late and never collides.
+    /// Off: writes are trusted to arrive within the pipeline's guard, and
+    /// late ones are learnt from what they leave behind.
+    pub usb_confirm: bool,
 }
 
 impl Default for Timing {
@@ -230,6 +237,7 @@ impl Default for Timing {
             reply_spin_us: 150,
             rt_priority: DEFAULT_RT_PRIORITY,
             usb_recover_ms: 10_000,
+            usb_confirm: true,
         }
     }
 }

@@ -112,6 +112,7 @@ impl Link {
                     model: AdapterModel::Native,
                     found_by: "a transport handed in, no tty to look at".into(),
                     tty_without_usb: false,
+                    usb: false,
                 })]
             }
         };
@@ -138,6 +139,12 @@ impl Link {
             (true, Some(port)) => Ok(port),
             _ => Err(not_open()),
         }
+    }
+
+    /// Bytes written that the adapter has not taken yet, where the port
+    /// can tell ([`Transport::unsent`]).
+    pub(super) fn unsent(&mut self) -> Option<usize> {
+        self.port().ok()?.unsent()
     }
 
     /// Hands `cmds` to the port back to back; returns when it handed them.

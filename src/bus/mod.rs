@@ -56,6 +56,7 @@ mod reply_lag;
 pub(crate) mod scheduler;
 pub(crate) mod setpoints;
 pub(crate) mod state;
+mod usb_confirm;
 mod usb_frame_clock;
 pub mod usb_guard;
 pub(crate) mod usb_pipeline;

@@ -200,6 +200,12 @@ pub struct BusCounters {
     /// them whose write reached the adapter a frame late.
     pub usb_sentinels: u64,
     pub usb_sentinels_late: u64,
+    /// Behind a USB adapter whose port counts what the adapter has not
+    /// taken: writes seen taken half a frame or more after the boundary
+    /// they were aimed at (each held the wire that much longer, no
+    /// collision), and counts that stayed up 4 ms (given up on: evidence).
+    pub usb_writes_taken_late: u64,
+    pub usb_counts_given_up: u64,
 }
 
 /// Latency histograms since start (`/metrics`).

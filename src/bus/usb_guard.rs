@@ -180,6 +180,10 @@ pub(crate) enum Evidence {
     ReplyLost { dev_id: u8 },
     /// Sentinels whose write reached the adapter after their margin.
     LateSentinels { late: usize, of: usize },
+    /// A confirmed write the port still counted as not taken this long
+    /// after its boundary: the count cannot be trusted, or the adapter
+    /// stopped taking bytes.
+    Untaken { after: Duration },
 }
 
 impl fmt::Display for Evidence {
@@ -190,6 +194,13 @@ impl fmt::Display for Evidence {
             }
             Self::ReplyLost { dev_id } => {
                 write!(f, "a reply of device {dev_id} lost while it still answers")
+            }
+            Self::Untaken { after } => {
+                write!(
+                    f,
+                    "a write not taken by the adapter {} ms after its USB frame (the port's output count)",
+                    after.as_millis()
+                )
             }
             Self::LateSentinels { late, of } => {
                 write!(
@@ -240,6 +251,15 @@ pub struct UsbPipelineView {
     /// and those of them that reached the adapter a frame late.
     pub sentinels: u64,
     pub sentinels_late: u64,
+    /// Writes are confirmed: the port says when the adapter took each,
+    /// and the wire is held as it says, not for a write's reach.
+    pub confirming: bool,
+    /// Confirmed writes the adapter took a frame or more after the one
+    /// they were aimed at (each cost the frames it was late, no collision).
+    pub writes_taken_late: u64,
+    /// Confirmed writes whose output count stayed up
+    /// for 4 ms after their USB frame (evidence: the count is not trusted).
+    pub counts_given_up: u64,
 }
 
 /// The self-protection state of one latent bus.
@@ -584,6 +604,9 @@ impl UsbGuard {
             late_writes: self.late_writes,
             sentinels: self.sentinels,
             sentinels_late: self.sentinels_late,
+            confirming: false,
+            writes_taken_late: 0,
+            counts_given_up: 0,
         }
     }
 }

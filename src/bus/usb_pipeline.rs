@@ -33,9 +33,10 @@ use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use super::packets::PacketMark;
+use super::usb_confirm::{Confirm, Outcome};
 use super::usb_frame_clock::FramePhase;
 use super::usb_guard::{
-    Change, PipelineMode, UsbGuard, SENTINEL_EVERY, SENTINEL_LEAD, SENTINEL_MIN_MARGIN,
+    Change, Evidence, PipelineMode, UsbGuard, SENTINEL_EVERY, SENTINEL_LEAD, SENTINEL_MIN_MARGIN,
 };
 use super::wire::{ReplyWindow, Want};
 use crate::protocol::FRAME_LEN;
@@ -110,6 +111,11 @@ pub(crate) struct UsbPipeline {
     sentinel_at: Option<Instant>,
     /// The write being made is a sentinel: the wire is held a frame longer.
     armed: bool,
+    /// The port says when the adapter took a write
+    /// ([`crate::transport::Transport::unsent`]).
+    port_confirms: bool,
+    /// The write waiting to be seen taken ([`super::usb_confirm`]).
+    confirm: Confirm,
 }
 
 impl UsbPipeline {
@@ -130,6 +136,8 @@ impl UsbPipeline {
             since_sentinel: 0,
             sentinel_at: None,
             armed: false,
+            port_confirms: false,
+            confirm: Confirm::default(),
         };
         pipeline.set_adapter(adapter);
         Some(pipeline)
@@ -150,9 +158,82 @@ impl UsbPipeline {
             .set_replies_next_frame(adapter.replies_next_frame());
     }
 
-    /// True when the next poll transfer should be a sentinel.
+    /// Whether the port says when the adapter took a write.
+    pub(crate) fn set_port_confirms(&mut self, on: bool) {
+        self.port_confirms = on;
+        if !on {
+            self.confirm.reset();
+        }
+    }
+
+    /// True while writes are confirmed ([`super::usb_confirm`]): the port
+    /// can tell, the frame clock is known and the guard has not backed off
+    /// (a backed-off guard holds the wire for a write's reach as before).
+    pub(crate) fn confirming(&self) -> bool {
+        self.port_confirms && self.active() && self.guard.mode() == PipelineMode::Pipelined
+    }
+
+    /// Writes seen taken late, and counts given up on, since start.
+    pub(crate) fn confirm_counts(&self) -> (u64, u64) {
+        (self.confirm.late, self.confirm.gave_up)
+    }
+
+    /// True while a write waits to be seen taken: read the port's count
+    /// and pass it to [`Self::confirm`] before deciding the next slot.
+    pub(crate) fn awaiting_confirmation(&self) -> bool {
+        self.confirm.waiting()
+    }
+
+    /// The write just made was waited for: its reply or deadline settled it.
+    pub(crate) fn exchange_settled(&mut self) {
+        self.confirm.reset();
+    }
+
+    /// The port's count of bytes not yet taken read `unsent` at `now`.
+    /// Returns how far the wire model moves (the write left later than
+    /// it had), and a change of mode when the count was given up on.
+    pub(crate) fn confirm(
+        &mut self,
+        unsent: Option<usize>,
+        now: Instant,
+    ) -> (Duration, Option<Change>) {
+        let period = self.period();
+        let phase = &self.phase;
+        let outcome = self
+            .confirm
+            .look(unsent, now, period, |t| phase.boundary_after(t));
+        let (by, poll, change) = match outcome {
+            Outcome::Wait => return (Duration::ZERO, None),
+            Outcome::Taken { by, poll } => (by, poll, None),
+            Outcome::Moved { by, poll } => (by, poll, None),
+            Outcome::GaveUp { by, poll } => {
+                let change = self.guard.incident(
+                    Evidence::Untaken {
+                        after: super::usb_confirm::MAX_UNTAKEN,
+                    },
+                    now,
+                );
+                (by, poll, change)
+            }
+        };
+        if poll && !by.is_zero() {
+            if let Some(last) = self.inflight.back_mut() {
+                last.window.due += by;
+                last.window.deadline += by;
+                last.on_time = last.on_time.map(|t| t + by);
+                if let Some(r) = last.packet_ref.as_mut() {
+                    r.reply_end += by;
+                }
+            }
+        }
+        (by, change)
+    }
+
+    /// True when the next poll transfer should be a sentinel (not while
+    /// writes are confirmed: a late one costs nothing there).
     pub(crate) fn sentinel_due(&self) -> bool {
         self.sentinels
+            && !self.confirming()
             && self.active()
             && self.guard.blind()
             && self.since_sentinel + 1 >= SENTINEL_EVERY
@@ -234,7 +315,12 @@ impl UsbPipeline {
     /// Before the frame clock is known: once the wire is free and the
     /// guard has passed (a write leaves at the earliest right after it is
     /// made; [`Self::latest_release`] holds the wire for the latest).
+    /// While a write waits to be seen taken, nothing else is written: the
+    /// next look at the port's count is the time to wake.
     pub(crate) fn write_at(&self, free_at: Instant, now: Instant) -> Instant {
+        if let Some(check) = self.confirm.check_at(self.period()) {
+            return check;
+        }
         if !self.active() {
             return free_at + GUARD;
         }
@@ -259,6 +345,13 @@ impl UsbPipeline {
     /// write is held for a later one by design, not as a late host's.
     pub(crate) fn released(&self, handed: Instant) -> Released {
         let first = self.phase.boundary_after(handed);
+        if self.confirming() {
+            // Held as on time; the port's count says otherwise in time.
+            return Released {
+                at: first,
+                ambiguous: false,
+            };
+        }
         let latest = self.phase.boundary_after(handed + self.reach());
         Released {
             at: latest,
@@ -335,6 +428,7 @@ impl UsbPipeline {
         } else {
             (self.on_time_read(handed, reply_end), None)
         };
+        self.confirm.carried_poll();
         let armed = std::mem::take(&mut self.armed);
         // An attempt counts as one whether or not it can be judged: each
         // holds the wire a frame.
@@ -511,6 +605,16 @@ impl UsbPipeline {
         self.phase.forget();
         self.armed = false;
         self.sentinel_at = None;
+        self.confirm.reset();
+    }
+
+    /// A write was handed over at `handed` (before [`Self::track`] of its
+    /// poll, if it carries one): while writes are confirmed, it is waited
+    /// to be seen taken.
+    pub(crate) fn written(&mut self, handed: Instant) {
+        if self.confirming() {
+            self.confirm.written(self.phase.boundary_after(handed));
+        }
     }
 }
 

@@ -177,6 +177,12 @@ impl WireClock {
         self.late.mul_f64(0.5f64.powf(age / LATE_HALF_LIFE_S))
     }
 
+    /// The last write left `by` later than it was accounted for: the line
+    /// frees that much later.
+    pub(crate) fn hold_longer(&mut self, by: Duration) {
+        self.free_at += by;
+    }
+
     /// A reply arrived (or its time ran out) at `at`: the line is free from then.
     pub(crate) fn line_free(&mut self, at: Instant) {
         self.free_at = self.free_at.max(at);

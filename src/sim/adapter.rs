@@ -175,6 +175,8 @@ impl AdapterLine {
         let period = model.usb_frame().unwrap_or(Duration::from_millis(1));
         // The frame phase: from the seed, reproducible, unknown to the host.
         let phase = Duration::from_nanos(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) % 1_000_000);
+        let mut inner = inner;
+        inner.reports_taken();
         Self {
             inner,
             clock: UsbClock::new(start, period, phase),
@@ -290,6 +292,7 @@ impl Line for AdapterLine {
                     None => self.written_at(called, returned),
                 };
                 let release = self.release_of(at);
+                self.inner.took(release, n);
                 match self.to_wire.back_mut() {
                     // Written before that frame began: it takes them too.
                     Some((r, bytes)) if *r == release => {

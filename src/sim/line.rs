@@ -55,6 +55,14 @@ pub(crate) trait Line: Send {
     fn take_written_at(&mut self) -> Option<std::time::Instant> {
         None
     }
+    /// An adapter model in front will report when it takes the host's
+    /// bytes ([`Self::took`]): a line that can pass that on to the host
+    /// does (an in-memory pipe, as a USB-serial driver's output count; a
+    /// pty cannot).
+    fn reports_taken(&mut self) {}
+    /// The adapter model takes `bytes` of the host's at `at`, the USB frame
+    /// they leave in.
+    fn took(&mut self, _at: std::time::Instant, _bytes: usize) {}
 }
 
 /// The device end of an in-memory pipe.
@@ -82,6 +90,14 @@ impl Line for MemoryLine {
 
     fn take_written_at(&mut self) -> Option<std::time::Instant> {
         self.port.take_written_at()
+    }
+
+    fn reports_taken(&mut self) {
+        self.port.reports_taken();
+    }
+
+    fn took(&mut self, at: std::time::Instant, bytes: usize) {
+        self.port.took(at, bytes);
     }
 
     /// A UART starts sending a host frame when it is written, not when the

@@ -177,6 +177,8 @@ pub struct AdapterInfo {
     /// reaches the line whenever that path passes it on, not within a USB
     /// frame as an adapter takes it.
     pub tty_without_usb: bool,
+    /// A USB device was found behind the tty.
+    pub usb: bool,
 }
 
 /// Finds the adapter behind `tty` (a `/dev` path, links followed) from
@@ -192,6 +194,7 @@ pub fn detect(tty: &Path) -> AdapterInfo {
             model: AdapterModel::Native,
             found_by: "not a device node: taken for native".into(),
             tty_without_usb: false,
+            usb: false,
         },
     }
 }
@@ -204,6 +207,7 @@ pub fn detect_in(class_tty: &Path, name: &str) -> AdapterInfo {
             model: AdapterModel::Native,
             found_by: "no USB device behind the tty (a pty or a UART)".into(),
             tty_without_usb: true,
+            usb: false,
         };
     };
     let id = |f: &str| {
@@ -232,6 +236,7 @@ pub fn detect_in(class_tty: &Path, name: &str) -> AdapterInfo {
         model,
         found_by: format!("usb {vid}:{pid} ({driver})"),
         tty_without_usb: false,
+        usb: true,
     }
 }
 

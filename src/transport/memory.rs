@@ -5,7 +5,7 @@
 
 use std::collections::VecDeque;
 use std::io;
-use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -46,6 +46,24 @@ struct Line {
     to_host: Channel,
     baud: AtomicU32,
     hung_up: AtomicBool,
+    /// Host bytes written so far.
+    host_written: AtomicU64,
+    /// When an adapter model at the device end takes the host's bytes.
+    taken: Mutex<Taken>,
+}
+
+/// The host bytes an adapter model took, and when (at the USB frame each
+/// leaves in, which is when a USB-serial driver's transfer completes).
+#[derive(Default)]
+struct Taken {
+    /// An adapter model reports what it takes: the host can ask.
+    reported: bool,
+    /// Bytes taken so far at the device end, each report added.
+    total: u64,
+    /// Reports not yet due: (when, the total then).
+    due: VecDeque<(Instant, u64)>,
+    /// The total of the last report due.
+    done: u64,
 }
 
 /// One end of an in-memory line.
@@ -63,6 +81,8 @@ pub fn pair(baud: u32) -> (MemoryPort, MemoryPort) {
         to_host: Channel::default(),
         baud: AtomicU32::new(baud),
         hung_up: AtomicBool::new(false),
+        host_written: AtomicU64::new(0),
+        taken: Mutex::new(Taken::default()),
     });
     let host = MemoryPort {
         line: line.clone(),
@@ -111,10 +131,35 @@ impl MemoryPort {
             lock(ch).clear(&ch.queued);
             ch.ready.notify_all();
         }
+        // What the unplug dropped is no longer on its way.
+        let mut taken = self.taken();
+        let written = self.line.host_written.load(Ordering::Acquire);
+        taken.due.clear();
+        taken.done = written;
+        taken.total = written;
     }
 
     pub fn is_hung_up(&self) -> bool {
         self.line.hung_up.load(Ordering::SeqCst)
+    }
+
+    fn taken(&self) -> MutexGuard<'_, Taken> {
+        self.line.taken.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Device end, an adapter model: it reports when it takes the host's
+    /// bytes ([`Self::took`]), so the host end can say what is unsent.
+    pub fn reports_taken(&self) {
+        self.taken().reported = true;
+    }
+
+    /// Device end: the adapter takes `bytes` more of the host's at `at`
+    /// (the USB frame they leave in, perhaps still to come).
+    pub fn took(&self, at: Instant, bytes: usize) {
+        let mut taken = self.taken();
+        taken.total += bytes as u64;
+        let total = taken.total;
+        taken.due.push_back((at, total));
     }
 
     /// When the other end wrote the first byte of the last read: a pipe in
@@ -131,6 +176,11 @@ impl Transport for MemoryPort {
         }
         if bytes.is_empty() {
             return Ok(());
+        }
+        if self.is_host {
+            self.line
+                .host_written
+                .fetch_add(bytes.len() as u64, Ordering::AcqRel);
         }
         let ch = self.outgoing();
         let mut q = lock(ch);
@@ -201,6 +251,25 @@ impl Transport for MemoryPort {
         lock(ch).clear(&ch.queued);
         Ok(())
     }
+
+    /// Host end, with an adapter model at the device end: the host bytes it
+    /// has not taken by now, as a USB-serial driver's output count.
+    fn unsent(&mut self) -> Option<usize> {
+        if !self.is_host {
+            return None;
+        }
+        let written = self.line.host_written.load(Ordering::Acquire);
+        let now = Instant::now();
+        let mut taken = self.taken();
+        if !taken.reported {
+            return None;
+        }
+        while let Some(&(_, total)) = taken.due.front().filter(|(at, _)| *at <= now) {
+            taken.done = total;
+            taken.due.pop_front();
+        }
+        Some(usize::try_from(written.saturating_sub(taken.done)).unwrap_or(usize::MAX))
+    }
 }
 
 impl std::fmt::Debug for MemoryPort {
@@ -235,6 +304,32 @@ mod tests {
         assert_eq!(dev.read_timeout(&mut buf, Duration::ZERO).unwrap(), 0);
         host.write_all(&[4, 5]).unwrap();
         assert_eq!(dev.read_timeout(&mut buf, Duration::ZERO).unwrap(), 2);
+    }
+
+    #[test]
+    fn the_host_sees_its_bytes_unsent_until_the_adapter_takes_them() {
+        let (mut host, mut dev) = pair(500_000);
+        host.write_all(&[1, 2, 3]).unwrap();
+        assert_eq!(host.unsent(), None, "no adapter model reports");
+        dev.reports_taken();
+        assert_eq!(host.unsent(), Some(3));
+        let mut buf = [0u8; 8];
+        assert_eq!(dev.read_timeout(&mut buf, Duration::ZERO).unwrap(), 3);
+        let now = Instant::now();
+        dev.took(now + Duration::from_secs(3600), 3);
+        assert_eq!(host.unsent(), Some(3), "taken at a frame still to come");
+        host.write_all(&[4]).unwrap();
+        dev.took(now, 1);
+        // Reports come in order of the frames; a later one due first is
+        // not seen before the earlier one.
+        assert_eq!(host.unsent(), Some(4));
+        dev.set_hung_up(true);
+        assert_eq!(
+            host.unsent(),
+            Some(0),
+            "an unplug drops what was on its way"
+        );
+        assert_eq!(dev.unsent(), None, "the device end does not ask");
     }
 
     #[test]

@@ -44,6 +44,16 @@ pub trait Transport: Send {
 
     /// Drops bytes received but not yet read (after a baud change or reopen).
     fn discard_input(&mut self) -> io::Result<()>;
+
+    /// Bytes handed over that the adapter has not taken yet, where the
+    /// line can tell: on a USB-serial tty `TIOCOUTQ` counts the driver's
+    /// buffer and the USB transfer in flight, which ends when the adapter
+    /// takes the bytes (at the USB frame they leave in). `None` where the
+    /// line cannot tell (a pty says 0 at once, whenever its reader gets
+    /// the bytes).
+    fn unsent(&mut self) -> Option<usize> {
+        None
+    }
 }
 
 /// True for errors that mean the line is gone rather than a passing fault.

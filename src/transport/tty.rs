@@ -100,6 +100,9 @@ pub struct TtyPort {
     file: File,
     path: PathBuf,
     baud: u32,
+    /// A USB adapter is behind the tty: its driver's output count says
+    /// when the adapter took a write ([`Transport::unsent`]).
+    usb: bool,
 }
 
 pub use super::note::PortNote;
@@ -142,12 +145,15 @@ impl TtyPort {
         }
         // After ASYNC_LOW_LATENCY: the Linux FTDI driver turns it into a 1 ms
         // timer, and what is reported must be what is in effect.
-        notes.push(PortNote::Adapter(super::adapter::detect(path)));
+        let adapter = super::adapter::detect(path);
+        let usb = adapter.usb;
+        notes.push(PortNote::Adapter(adapter));
         Ok((
             TtyPort {
                 file,
                 path: path.to_path_buf(),
                 baud,
+                usb,
             },
             notes,
         ))
@@ -187,7 +193,25 @@ fn set_low_latency(file: &File) -> io::Result<()> {
     Ok(())
 }
 
+/// Bytes in the tty's output queue (`TIOCOUTQ`).
+fn output_queued(fd: BorrowedFd<'_>) -> io::Result<usize> {
+    let mut n: libc::c_int = 0;
+    // SAFETY: TIOCOUTQ writes one int through a valid pointer.
+    let rc = unsafe { libc::ioctl(fd.as_raw_fd(), libc::TIOCOUTQ, &mut n) };
+    if rc < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    Ok(usize::try_from(n).unwrap_or(0))
+}
+
 impl Transport for TtyPort {
+    fn unsent(&mut self) -> Option<usize> {
+        if !self.usb {
+            return None;
+        }
+        output_queued(self.file.as_fd()).ok()
+    }
+
     fn write_all(&mut self, mut bytes: &[u8]) -> io::Result<()> {
         while !bytes.is_empty() {
             match self.file.write(bytes) {

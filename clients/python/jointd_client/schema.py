@@ -1025,6 +1025,10 @@ class UsbPipelineView(TypedDict):
 
     backoffs: int
     """Steps up and down since start."""
+    confirming: bool
+    """Writes are confirmed: the port says when the adapter took each, and the wire is held as it says, not for a write's reach."""
+    counts_given_up: int
+    """Confirmed writes whose output count stayed up for 4 ms after their USB frame (evidence: the count is not trusted)."""
     guard_us: int
     """How late a write may reach the adapter and still leave where the wire is held for it, µs."""
     incidents_per_s: float
@@ -1044,6 +1048,8 @@ class UsbPipelineView(TypedDict):
     sentinels_late: int
     since_s: float
     """Seconds since that change."""
+    writes_taken_late: int
+    """Confirmed writes the adapter took a frame or more after the one they were aimed at (each cost the frames it was late, no collision)."""
 
 
 class WaypointRequest(TypedDict):

@@ -177,6 +177,11 @@ pub(crate) struct Scheduler {
     /// that poll may be written under a narrower reach once the guard has
     /// stepped down.
     queued_until: Option<Instant>,
+    /// The port says when the adapter took a write (kept for a pipeline
+    /// made anew when the adapter changes).
+    port_confirms: bool,
+    /// The pipeline's confirmation counts last handed to the bus counters.
+    confirm_seen: (u64, u64),
 }
 
 impl Scheduler {
@@ -213,7 +218,63 @@ impl Scheduler {
             usb_changes: Vec::new(),
             control_only: 0,
             queued_until: None,
+            port_confirms: false,
+            confirm_seen: (0, 0),
         }
+    }
+
+    /// Whether the port just opened says when the adapter took a write
+    /// ([`crate::transport::Transport::unsent`]): then writes are confirmed
+    /// ([`crate::bus::usb_confirm`]).
+    pub(crate) fn set_port_confirms(&mut self, on: bool) {
+        self.port_confirms = on;
+        if let Some(pipeline) = self.pipeline.as_mut() {
+            pipeline.set_port_confirms(on);
+        }
+    }
+
+    /// True while a write waits to be seen taken by the adapter: the owner
+    /// reads the port's count for [`Self::confirm_writes`] before the next
+    /// slot.
+    pub(crate) fn awaiting_confirmation(&self) -> bool {
+        self.pipeline
+            .as_ref()
+            .is_some_and(UsbPipeline::awaiting_confirmation)
+    }
+
+    /// Confirmed writes seen taken late, and counts given up on, since the
+    /// last call.
+    pub(crate) fn take_confirm_counts(&mut self) -> (u64, u64) {
+        let Some(pipeline) = self.pipeline.as_ref() else {
+            return (0, 0);
+        };
+        let (late, gave_up) = pipeline.confirm_counts();
+        let (seen_late, seen_gave_up) = self.confirm_seen;
+        self.confirm_seen = (late, gave_up);
+        (
+            late.saturating_sub(seen_late),
+            gave_up.saturating_sub(seen_gave_up),
+        )
+    }
+
+    /// A write waited for its reply (or its deadline): nothing waits to
+    /// be seen taken.
+    pub(crate) fn exchange_settled(&mut self) {
+        if let Some(pipeline) = self.pipeline.as_mut() {
+            pipeline.exchange_settled();
+        }
+    }
+
+    /// The port's count of bytes the adapter has not taken read `unsent`
+    /// at `now`: a write that left later than the wire model had moves
+    /// the model (the line is held that much longer).
+    pub(crate) fn confirm_writes(&mut self, unsent: Option<usize>, now: Instant) {
+        let Some(pipeline) = self.pipeline.as_mut() else {
+            return;
+        };
+        let (by, change) = pipeline.confirm(unsent, now);
+        self.clock.hold_longer(by);
+        self.usb_changed(change);
     }
 
     /// The next slot at `now`.
@@ -510,7 +571,13 @@ impl Scheduler {
     ) -> Option<crate::bus::usb_guard::UsbPipelineView> {
         let pipeline = self.pipeline.as_mut()?;
         let period = pipeline.period();
-        Some(pipeline.guard_mut().view(period, now))
+        let confirming = pipeline.confirming();
+        let (late, gave_up) = pipeline.confirm_counts();
+        let mut view = pipeline.guard_mut().view(period, now);
+        view.confirming = confirming;
+        view.writes_taken_late = late;
+        view.counts_given_up = gave_up;
+        Some(view)
     }
 
     /// True once the USB frame clock is known from reply arrivals (writes
@@ -639,7 +706,7 @@ impl Scheduler {
     }
 
     fn sent_held(&mut self, handed: Instant, n: u32, asks_reply: bool) -> Instant {
-        let Some(pipeline) = &self.pipeline else {
+        let Some(pipeline) = self.pipeline.as_mut() else {
             return self.clock.host_frames(handed, n);
         };
         let released = if asks_reply {
@@ -654,6 +721,7 @@ impl Scheduler {
             pipeline.release_without_reply(handed)
         };
         self.ambiguous_writes += u64::from(released.ambiguous);
+        pipeline.written(handed);
         self.clock.host_frames(released.at, n)
     }
 
@@ -803,6 +871,10 @@ impl Scheduler {
             }
             _ => {
                 self.pipeline = UsbPipeline::for_adapter(adapter, self.usb_recover, Instant::now());
+                self.confirm_seen = (0, 0);
+                if let Some(pipeline) = self.pipeline.as_mut() {
+                    pipeline.set_port_confirms(self.port_confirms);
+                }
             }
         }
     }

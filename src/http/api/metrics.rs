@@ -134,6 +134,14 @@ const BUS_COUNTER_HELP: &[(&str, &str)] = &[
         "usb_sentinels_late",
         "Sentinel transfers whose write reached the adapter a frame late.",
     ),
+    (
+        "usb_writes_taken_late",
+        "Confirmed writes the adapter took half a USB frame or more after the boundary they were aimed at: each held the wire that much longer, no collision.",
+    ),
+    (
+        "usb_counts_given_up",
+        "Confirmed writes the port's output count still showed untaken 4 ms after their USB frame: the count is given up on, as evidence for the pipeline's guard.",
+    ),
 ];
 
 /// Builds the exposition: families in order of first use, each with one
@@ -301,6 +309,12 @@ fn bus_families(m: &mut Exposition, snap: &BusSnapshot) {
         "Behind a USB adapter, how late a write may reach it and still leave where the wire is held for it (0 on a native line).",
         &l,
         usb.map_or(0.0, |p| p.guard_us as f64 / 1e6),
+    );
+    m.gauge(
+        "jointd_bus_usb_confirming",
+        "Behind a USB adapter, 1 while each write is seen taken by the adapter (the port's output count) before the next: late writes then cost time, never a collision.",
+        &l,
+        f64::from(u8::from(usb.is_some_and(|p| p.confirming))),
     );
     m.gauge(
         "jointd_bus_usb_incidents_per_second",

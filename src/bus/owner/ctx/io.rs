@@ -183,6 +183,9 @@ impl Ctx {
         let (sentinels, late) = self.sched.take_sentinel_counts();
         self.link.counters.usb_sentinels += sentinels;
         self.link.counters.usb_sentinels_late += late;
+        let (taken_late, given_up) = self.sched.take_confirm_counts();
+        self.link.counters.usb_writes_taken_late += taken_late;
+        self.link.counters.usb_counts_given_up += given_up;
         for change in self.sched.take_usb_changes() {
             self.usb_changed(&change);
         }
@@ -414,6 +417,9 @@ impl Ctx {
         due: Instant,
         silence: Silence,
     ) -> Option<Reply> {
+        // Its reply, or its deadline, settles the write: the wire model
+        // follows the exchange, not the port's count read after it.
+        self.sched.exchange_settled();
         if let Some((_, at)) = &got {
             self.sched.arrival(*at);
         }

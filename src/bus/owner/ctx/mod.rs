@@ -86,6 +86,12 @@ impl Ctx {
             request_queued: self.held.is_some(),
             setpoints: &self.shared.setpoints,
         };
+        if self.sched.awaiting_confirmation() {
+            // Timed after the read: a count seen at 0 says the write was
+            // taken by then, never earlier.
+            let unsent = self.link.unsent();
+            self.sched.confirm_writes(unsent, Instant::now());
+        }
         let slot = self.sched.next(now, &work);
         self.after_decision();
         // Bookkeeping goes where the line leaves slack, not between a reply

@@ -46,6 +46,8 @@ impl Ctx {
         match self.link.open() {
             Ok(notes) => {
                 self.note_port(notes);
+                let confirms = self.cfg.timing.usb_confirm && self.link.unsent().is_some();
+                self.sched.set_port_confirms(confirms);
                 if self.sched.link_up(Instant::now()) {
                     self.link.counters.reconnects += 1;
                 }

@@ -486,3 +486,69 @@ fn a_guard_narrowing_between_a_control_only_write_and_its_poll_does_not_double_b
         reply_ends - next_leaves,
     );
 }
+
+#[test]
+fn confirmed_writes_wait_to_be_seen_taken_and_a_late_one_moves_the_wire() {
+    let (mut b, t0) = pipelining_bus();
+    // The first write goes at once (the clock was just learnt).
+    pipeline_writes(&mut b, 1);
+    b.s.set_port_confirms(true);
+    let first = pipeline_writes(&mut b, 1)[0];
+    // Held as on time: from the boundary after the write.
+    assert_eq!(first.released - first.at, Duration::from_micros(800));
+    assert!(b.s.awaiting_confirmation());
+    // Nothing more is written until the port's count is read, 0.15 of a
+    // frame after that boundary.
+    let Slot::Listen { until } = b.next() else {
+        panic!("a write while the last waits to be seen taken");
+    };
+    assert_eq!(until, first.released + Duration::from_micros(150));
+    // Untaken at the look: it leaves at the next boundary at the earliest,
+    // and the wire is held a frame longer.
+    let free = b.s.clock().free_at();
+    b.now = until;
+    b.s.confirm_writes(Some(60), b.now);
+    assert_eq!(b.s.clock().free_at() - free, Duration::from_millis(1));
+    assert!(b.s.awaiting_confirmation());
+    let Slot::Listen { until } = b.next() else {
+        panic!("a write while the last waits to be seen taken");
+    };
+    assert_eq!(until, first.released + Duration::from_micros(1_150));
+    // Taken by the next look: the wire is held from the look, and the next
+    // write is aimed past the moved reply.
+    b.now = until;
+    b.s.confirm_writes(Some(0), b.now);
+    assert!(!b.s.awaiting_confirmation());
+    let second = pipeline_writes(&mut b, 1)[0];
+    assert_eq!((second.released - t0).as_micros() % 1_000, 20);
+    assert_eq!(second.released - first.released, Duration::from_millis(3));
+    // Seen taken a frame late: counted, no backoff.
+    let view = b.s.usb_view(b.now).expect("a pipeline view");
+    assert!(view.confirming);
+    assert_eq!(view.writes_taken_late, 1);
+    assert_eq!(view.mode, crate::bus::usb_guard::PipelineMode::Pipelined);
+}
+
+#[test]
+fn confirmed_writes_have_no_sentinels() {
+    let (mut b, _) = pipelining_bus();
+    pipeline_writes(&mut b, 1);
+    b.s.set_port_confirms(true);
+    let mut writes = Vec::new();
+    for _ in 0..30 {
+        let w = pipeline_writes(&mut b, 1)[0];
+        b.now = b.now.max(w.released) + Duration::from_micros(150);
+        b.s.confirm_writes(Some(0), b.now);
+        writes.push(w);
+    }
+    // Every write 0.8 ms before its boundary (a sentinel would be 0.1).
+    assert!(
+        writes
+            .iter()
+            .all(|w| w.released - w.at == Duration::from_micros(800)),
+        "{writes:?}"
+    );
+    for w in writes.windows(2) {
+        assert_eq!(w[1].released - w[0].released, Duration::from_millis(2));
+    }
+}

@@ -1,0 +1,298 @@
+//! Confirmed writes: behind a USB adapter whose port says when the adapter
+//! took a write, no write is taken on trust.
+//!
+//! A USB-serial driver counts the bytes it holds until the adapter takes
+//! them (`TIOCOUTQ`: its buffer and the transfer in flight, which completes
+//! at the USB frame the bytes leave in). So the owner writes a poll's
+//! transfer aimed at boundary `b`, with the wire held as if it leaves
+//! there, and writes nothing else until the count says the adapter took
+//! it. It looks shortly after `b` ([`CHECK_AFTER`] of a frame): taken, the
+//! write left by then, and the wire model holds from the moment of the
+//! look (a little later than `b`, never earlier than the truth, whatever
+//! the frame clock's error); not taken, it leaves at a later boundary, and
+//! the owner looks again after the next. A late write then costs the
+//! frames it was late, never a collision, and an on-time one costs the
+//! look's lag, inside the guard the cycle already has: the pipeline keeps
+//! the adapter's bound on a path whose writes come late now and then,
+//! where blind writes must hold a frame after every poll for the one that
+//! might (see [`super::usb_guard`]).
+//!
+//! A count that stays up for [`MAX_UNTAKEN`] (an adapter that stopped
+//! taking bytes, a driver whose count cannot be trusted) is given up on,
+//! as evidence for the pipeline's guard.
+//!
+//! Pure: every instant is passed in.
+
+use std::time::{Duration, Instant};
+
+/// How long after the boundary a write is aimed at the count is read, as a
+/// share of the frame: the adapter's taking of a write shows in the
+/// driver's count within this (the model shows it at once). A look later
+/// than the cycle's guard allows costs a frame, not a collision.
+pub(crate) const CHECK_AFTER: f64 = 0.15;
+/// How long after the boundary it was aimed at a write may stay untaken
+/// before the count is given up on: four full-speed USB frames.
+pub(crate) const MAX_UNTAKEN: Duration = Duration::from_millis(4);
+
+/// The write waiting to be confirmed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Pending {
+    /// The boundary it was aimed at.
+    first: Instant,
+    /// The boundary after which the count is read next.
+    frame: Instant,
+    /// When the wire model has it leave.
+    modeled: Instant,
+    /// It carried a poll (the newest in flight).
+    poll: bool,
+}
+
+/// What a look at the count found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Outcome {
+    /// Nothing to confirm, or too early to tell.
+    Wait,
+    /// Taken by the look: the wire model moves `by` (zero when the model
+    /// already had it leave at or after the look).
+    Taken { by: Duration, poll: bool },
+    /// Not taken by the look: it leaves after the next boundary at the
+    /// earliest, `by` later than the model had.
+    Moved { by: Duration, poll: bool },
+    /// Untaken for [`MAX_UNTAKEN`]: taken to leave at the next
+    /// boundary, `by` later than the model had, and no longer waited for.
+    GaveUp { by: Duration, poll: bool },
+}
+
+/// The one write the owner waits to see taken.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Confirm {
+    pending: Option<Pending>,
+    /// Writes seen taken half a frame or more after the boundary they were
+    /// aimed at (each cost the frames it was late, no collision).
+    pub late: u64,
+    /// Writes whose count stayed up for [`MAX_UNTAKEN`].
+    pub gave_up: u64,
+}
+
+impl Confirm {
+    /// A write was handed over; `boundary` is the first after that, where
+    /// the wire model has it leave.
+    pub(crate) fn written(&mut self, boundary: Instant) {
+        self.pending = Some(Pending {
+            first: boundary,
+            frame: boundary,
+            modeled: boundary,
+            poll: false,
+        });
+    }
+
+    /// The write just made carried a poll.
+    pub(crate) fn carried_poll(&mut self) {
+        if let Some(p) = self.pending.as_mut() {
+            p.poll = true;
+        }
+    }
+
+    pub(crate) fn waiting(&self) -> bool {
+        self.pending.is_some()
+    }
+
+    /// When to read the count next.
+    pub(crate) fn check_at(&self, period: Duration) -> Option<Instant> {
+        let p = self.pending?;
+        Some(p.frame + period.mul_f64(CHECK_AFTER))
+    }
+
+    /// The count read `unsent`, timed `now` after the read (`None`: the
+    /// port cannot tell any more, as after a reopen: nothing to wait for).
+    /// `boundary_after` gives the first USB frame boundary after an instant.
+    pub(crate) fn look(
+        &mut self,
+        unsent: Option<usize>,
+        now: Instant,
+        period: Duration,
+        boundary_after: impl Fn(Instant) -> Instant,
+    ) -> Outcome {
+        let Some(mut p) = self.pending else {
+            return Outcome::Wait;
+        };
+        match unsent {
+            None => {
+                self.pending = None;
+                Outcome::Taken {
+                    by: Duration::ZERO,
+                    poll: p.poll,
+                }
+            }
+            Some(0) => {
+                self.pending = None;
+                // Taken by now: the wire is held from now at the latest.
+                self.late += u64::from(now >= p.first + period / 2);
+                Outcome::Taken {
+                    by: now.saturating_duration_since(p.modeled),
+                    poll: p.poll,
+                }
+            }
+            Some(_) => {
+                if now < p.frame + period.mul_f64(CHECK_AFTER) {
+                    return Outcome::Wait;
+                }
+                let next = boundary_after(now);
+                let by = next.saturating_duration_since(p.modeled);
+                if next.saturating_duration_since(p.first) >= MAX_UNTAKEN {
+                    self.pending = None;
+                    self.gave_up += 1;
+                    return Outcome::GaveUp { by, poll: p.poll };
+                }
+                p.frame = next;
+                p.modeled = p.modeled.max(next);
+                self.pending = Some(p);
+                Outcome::Moved { by, poll: p.poll }
+            }
+        }
+    }
+
+    /// The port was lost or reopened, or the write was waited for: nothing
+    /// waits.
+    pub(crate) fn reset(&mut self) {
+        self.pending = None;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const P: Duration = Duration::from_millis(1);
+
+    fn us(n: u64) -> Duration {
+        Duration::from_micros(n)
+    }
+
+    /// Boundaries every millisecond from `t0`.
+    fn after(t0: Instant) -> impl Fn(Instant) -> Instant {
+        move |t| {
+            let into = t.duration_since(t0).as_nanos() % P.as_nanos();
+            t + Duration::from_nanos((P.as_nanos() - into) as u64)
+        }
+    }
+
+    #[test]
+    fn a_write_taken_by_the_look_holds_the_wire_from_the_look() {
+        let t0 = Instant::now();
+        let mut c = Confirm::default();
+        c.written(t0 + P);
+        c.carried_poll();
+        assert_eq!(c.check_at(P), Some(t0 + us(1_150)));
+        assert_eq!(c.look(Some(40), t0 + us(900), P, after(t0)), Outcome::Wait);
+        assert_eq!(
+            c.look(Some(0), t0 + us(1_160), P, after(t0)),
+            Outcome::Taken {
+                by: us(160),
+                poll: true
+            }
+        );
+        assert!(!c.waiting());
+        assert_eq!(c.late, 0);
+    }
+
+    #[test]
+    fn a_write_taken_before_its_boundary_moves_nothing() {
+        // The frame clock's estimate a little late: the count shows the
+        // write taken before the boundary the model has.
+        let t0 = Instant::now();
+        let mut c = Confirm::default();
+        c.written(t0 + P);
+        assert_eq!(
+            c.look(Some(0), t0 + us(990), P, after(t0)),
+            Outcome::Taken {
+                by: Duration::ZERO,
+                poll: false
+            }
+        );
+    }
+
+    #[test]
+    fn a_write_untaken_at_the_look_moves_past_the_next_boundary() {
+        let t0 = Instant::now();
+        let mut c = Confirm::default();
+        c.written(t0 + P);
+        let moved = c.look(Some(60), t0 + us(1_150), P, after(t0));
+        assert_eq!(moved, Outcome::Moved { by: P, poll: false });
+        assert_eq!(c.check_at(P), Some(t0 + us(2_150)));
+        assert_eq!(
+            c.look(Some(60), t0 + us(2_000), P, after(t0)),
+            Outcome::Wait
+        );
+        assert_eq!(
+            c.look(Some(0), t0 + us(2_200), P, after(t0)),
+            Outcome::Taken {
+                by: us(200),
+                poll: false
+            }
+        );
+        assert_eq!(c.late, 1);
+    }
+
+    #[test]
+    fn a_look_long_after_the_boundary_holds_the_wire_from_the_look() {
+        let t0 = Instant::now();
+        let mut c = Confirm::default();
+        c.written(t0 + P);
+        // The host looked only at 2.3 ms: it left by then, when is unknown.
+        assert_eq!(
+            c.look(Some(0), t0 + us(2_300), P, after(t0)),
+            Outcome::Taken {
+                by: us(1_300),
+                poll: false
+            }
+        );
+        // Untaken at 2.3 ms: it leaves at 3 ms at the earliest.
+        c.written(t0 + P);
+        assert_eq!(
+            c.look(Some(20), t0 + us(2_300), P, after(t0)),
+            Outcome::Moved {
+                by: P * 2,
+                poll: false
+            }
+        );
+    }
+
+    #[test]
+    fn a_count_that_stays_up_is_given_up_on() {
+        let t0 = Instant::now();
+        let mut c = Confirm::default();
+        c.written(t0 + P);
+        let mut outcomes = Vec::new();
+        for k in 1..=6u64 {
+            let at = t0 + us(1_000 * k + 200);
+            outcomes.push(c.look(Some(60), at, P, after(t0)));
+            if !c.waiting() {
+                break;
+            }
+        }
+        assert_eq!(
+            outcomes,
+            [
+                Outcome::Moved { by: P, poll: false },
+                Outcome::Moved { by: P, poll: false },
+                Outcome::Moved { by: P, poll: false },
+                Outcome::GaveUp { by: P, poll: false },
+            ]
+        );
+        assert_eq!(c.gave_up, 1);
+    }
+
+    #[test]
+    fn a_port_that_cannot_tell_ends_the_wait() {
+        let t0 = Instant::now();
+        let mut c = Confirm::default();
+        c.written(t0 + P);
+        assert!(matches!(
+            c.look(None, t0 + us(100), P, after(t0)),
+            Outcome::Taken { .. }
+        ));
+        assert!(!c.waiting());
+        assert_eq!(c.look(Some(0), t0, P, after(t0)), Outcome::Wait);
+    }
+}
