@@ -22,15 +22,30 @@ const JOINTS: usize = 8;
 static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
 fn rig_behind(adapter: AdapterModel, ids: &[u8], confirm: bool) -> Rig {
+    rig_on(Line::Memory, adapter, ids, confirm)
+}
+
+enum Line {
+    Memory,
+    /// Opened by path like hardware; the simulator publishes what the
+    /// driver's count would say (a pty's own says 0 at once).
+    Pty,
+}
+
+fn rig_on(line: Line, adapter: AdapterModel, ids: &[u8], confirm: bool) -> Rig {
     let mut sim_cfg = sim_config(ids, BAUD);
     sim_cfg.adapter = adapter;
     // The adapter's timing is hardware's (see tests/usb_backoff.rs).
     sim_cfg.realtime = true;
-    rig_on_memory(sim_cfg, |c| {
+    let tune = |c: &mut jointd::bus::BusConfig| {
         c.ids = ids.to_vec();
         c.adapter = AdapterSetting::Fixed(adapter);
         c.timing.usb_confirm = confirm;
-    })
+    };
+    match line {
+        Line::Memory => rig_on_memory(sim_cfg, tune),
+        Line::Pty => rig_with(sim_cfg, tune),
+    }
 }
 
 fn view(s: &BusSnapshot) -> UsbPipelineView {
@@ -46,10 +61,10 @@ fn polls(s: &BusSnapshot) -> u64 {
 /// Streams targets through a clean path, then `delay`, then clean again:
 /// no collision anywhere, no backoff, every joint online, and the late
 /// writes seen taken late.
-async fn no_write_collides(adapter: AdapterModel, delay: &str) {
+async fn no_write_collides(line: Line, adapter: AdapterModel, delay: &str) {
     let _one = ONE_AT_A_TIME.lock().await;
     let ids: Vec<u8> = (1..=JOINTS as u8).collect();
-    let rig = rig_behind(adapter, &ids, true);
+    let rig = rig_on(line, adapter, &ids, true);
     rig.online(JOINTS).await;
     rig.enable_all(JOINTS).await;
     let stream = TargetStream::start(rig.bus.clone(), ids.clone(), Duration::from_millis(1));
@@ -105,12 +120,28 @@ async fn no_write_collides(adapter: AdapterModel, delay: &str) {
 async fn late_writes_never_collide_behind_a_ch340() {
     // Late by up to a whole USB frame, one in six past 0.85 ms: blind,
     // this path backs the pipeline off (tests/usb_backoff.rs).
-    no_write_collides(AdapterModel::Ch340, "600,1000,1000,1000").await;
+    no_write_collides(Line::Memory, AdapterModel::Ch340, "600,1000,1000,1000").await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn late_writes_never_collide_over_a_pty_either() {
+    // The pty's own lag comes on top of the injected delay.
+    no_write_collides(
+        Line::Pty,
+        AdapterModel::Ftdi { latency_ms: 1 },
+        "600,1000,1000,1000",
+    )
+    .await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_path_late_by_milliseconds_never_collides_behind_an_ftdi_chip() {
-    no_write_collides(AdapterModel::Ftdi { latency_ms: 16 }, "500,2000,3000").await;
+    no_write_collides(
+        Line::Memory,
+        AdapterModel::Ftdi { latency_ms: 16 },
+        "500,2000,3000",
+    )
+    .await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

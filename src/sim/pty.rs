@@ -12,11 +12,13 @@ use std::io::{self, Read, Write};
 use std::os::fd::{AsFd, AsRawFd, OwnedFd};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::Arc;
 use std::time::Duration;
 
 use nix::fcntl::{fcntl, FcntlArg, OFlag};
 use nix::pty::openpty;
 
+use crate::transport::taken::{self, TakenCount};
 use crate::transport::tty::{make_raw, read_baud, wait_readable};
 
 use super::line::Line;
@@ -37,6 +39,10 @@ pub(crate) struct PtyLine {
     dir: PathBuf,
     link: PathBuf,
     baud: u32,
+    /// Behind an adapter model: what a USB-serial driver's output count
+    /// would say, published under the link for a host in this process
+    /// (a pty's own count says 0 at once).
+    taken: Option<Arc<TakenCount>>,
 }
 
 impl PtyLine {
@@ -51,6 +57,7 @@ impl PtyLine {
             dir,
             link,
             baud,
+            taken: None,
         };
         line.replug()?;
         Ok(line)
@@ -121,6 +128,9 @@ impl Line for PtyLine {
     /// as the device node of an unplugged adapter disappears.
     fn unplug(&mut self) -> io::Result<()> {
         self.pty = None;
+        if let Some(count) = &self.taken {
+            count.settle();
+        }
         match fs::remove_file(&self.link) {
             Err(e) if e.kind() != io::ErrorKind::NotFound => Err(e),
             _ => Ok(()),
@@ -141,6 +151,17 @@ impl Line for PtyLine {
         self.pty.is_none()
     }
 
+    fn reports_taken(&mut self) {
+        let count = self.taken.get_or_insert_with(Default::default);
+        taken::publish(&self.link, count.clone());
+    }
+
+    fn took(&mut self, at: std::time::Instant, bytes: usize) {
+        if let Some(count) = &self.taken {
+            count.took(at, bytes);
+        }
+    }
+
     fn path(&self) -> Option<&Path> {
         Some(&self.link)
     }
@@ -148,6 +169,9 @@ impl Line for PtyLine {
 
 impl Drop for PtyLine {
     fn drop(&mut self) {
+        if self.taken.is_some() {
+            taken::withdraw(&self.link);
+        }
         self.pty = None;
         let _ = fs::remove_file(&self.link);
         let _ = fs::remove_dir(&self.dir);

@@ -5,10 +5,11 @@
 
 use std::collections::VecDeque;
 use std::io;
-use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
+use super::taken::TakenCount;
 use super::Transport;
 
 /// One direction of the pipe.
@@ -46,24 +47,10 @@ struct Line {
     to_host: Channel,
     baud: AtomicU32,
     hung_up: AtomicBool,
-    /// Host bytes written so far.
-    host_written: AtomicU64,
-    /// When an adapter model at the device end takes the host's bytes.
-    taken: Mutex<Taken>,
-}
-
-/// The host bytes an adapter model took, and when (at the USB frame each
-/// leaves in, which is when a USB-serial driver's transfer completes).
-#[derive(Default)]
-struct Taken {
-    /// An adapter model reports what it takes: the host can ask.
-    reported: bool,
-    /// Bytes taken so far at the device end, each report added.
-    total: u64,
-    /// Reports not yet due: (when, the total then).
-    due: VecDeque<(Instant, u64)>,
-    /// The total of the last report due.
-    done: u64,
+    /// What the adapter model at the device end took of the host's bytes,
+    /// once it reports ([`Self`]`::reports_taken`).
+    taken: TakenCount,
+    taken_reported: AtomicBool,
 }
 
 /// One end of an in-memory line.
@@ -81,8 +68,8 @@ pub fn pair(baud: u32) -> (MemoryPort, MemoryPort) {
         to_host: Channel::default(),
         baud: AtomicU32::new(baud),
         hung_up: AtomicBool::new(false),
-        host_written: AtomicU64::new(0),
-        taken: Mutex::new(Taken::default()),
+        taken: TakenCount::default(),
+        taken_reported: AtomicBool::new(false),
     });
     let host = MemoryPort {
         line: line.clone(),
@@ -132,34 +119,23 @@ impl MemoryPort {
             ch.ready.notify_all();
         }
         // What the unplug dropped is no longer on its way.
-        let mut taken = self.taken();
-        let written = self.line.host_written.load(Ordering::Acquire);
-        taken.due.clear();
-        taken.done = written;
-        taken.total = written;
+        self.line.taken.settle();
     }
 
     pub fn is_hung_up(&self) -> bool {
         self.line.hung_up.load(Ordering::SeqCst)
     }
 
-    fn taken(&self) -> MutexGuard<'_, Taken> {
-        self.line.taken.lock().unwrap_or_else(|p| p.into_inner())
-    }
-
     /// Device end, an adapter model: it reports when it takes the host's
     /// bytes ([`Self::took`]), so the host end can say what is unsent.
     pub fn reports_taken(&self) {
-        self.taken().reported = true;
+        self.line.taken_reported.store(true, Ordering::Release);
     }
 
     /// Device end: the adapter takes `bytes` more of the host's at `at`
     /// (the USB frame they leave in, perhaps still to come).
     pub fn took(&self, at: Instant, bytes: usize) {
-        let mut taken = self.taken();
-        taken.total += bytes as u64;
-        let total = taken.total;
-        taken.due.push_back((at, total));
+        self.line.taken.took(at, bytes);
     }
 
     /// When the other end wrote the first byte of the last read: a pipe in
@@ -178,9 +154,7 @@ impl Transport for MemoryPort {
             return Ok(());
         }
         if self.is_host {
-            self.line
-                .host_written
-                .fetch_add(bytes.len() as u64, Ordering::AcqRel);
+            self.line.taken.wrote(bytes.len());
         }
         let ch = self.outgoing();
         let mut q = lock(ch);
@@ -255,20 +229,10 @@ impl Transport for MemoryPort {
     /// Host end, with an adapter model at the device end: the host bytes it
     /// has not taken by now, as a USB-serial driver's output count.
     fn unsent(&mut self) -> Option<usize> {
-        if !self.is_host {
+        if !self.is_host || !self.line.taken_reported.load(Ordering::Acquire) {
             return None;
         }
-        let written = self.line.host_written.load(Ordering::Acquire);
-        let now = Instant::now();
-        let mut taken = self.taken();
-        if !taken.reported {
-            return None;
-        }
-        while let Some(&(_, total)) = taken.due.front().filter(|(at, _)| *at <= now) {
-            taken.done = total;
-            taken.due.pop_front();
-        }
-        Some(usize::try_from(written.saturating_sub(taken.done)).unwrap_or(usize::MAX))
+        Some(self.line.taken.unsent(Instant::now()))
     }
 }
 

@@ -12,11 +12,13 @@
 //! - [`rs485`]: the kernel's RS-485 direction control on a tty, where it exists.
 //! - [`note`]: what opening a port found worth telling ([`note::PortNote`]).
 //! - [`adapter`]: the USB adapter in between: its timing model and its detection from sysfs.
+//! - [`taken`]: a simulated adapter's stand-in for a USB-serial driver's output count.
 
 pub mod adapter;
 pub mod memory;
 pub(crate) mod note;
 pub(crate) mod rs485;
+pub mod taken;
 pub mod tty;
 
 use std::io;

@@ -9,10 +9,12 @@ use std::io::{self, Read, Write};
 use std::os::fd::{AsFd, AsRawFd, BorrowedFd};
 use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Duration;
 
 use nix::sys::termios::{self, BaudRate, ControlFlags, FlushArg, SetArg, SpecialCharacterIndices};
 
+use super::taken::TakenCount;
 use super::Transport;
 
 /// The baud rates of SPEC §1 and their termios constants.
@@ -103,6 +105,9 @@ pub struct TtyPort {
     /// A USB adapter is behind the tty: its driver's output count says
     /// when the adapter took a write ([`Transport::unsent`]).
     usb: bool,
+    /// A simulated adapter behind this pty published its stand-in for
+    /// that count ([`super::taken`]).
+    simulated: Option<Arc<TakenCount>>,
 }
 
 pub use super::note::PortNote;
@@ -154,6 +159,7 @@ impl TtyPort {
                 path: path.to_path_buf(),
                 baud,
                 usb,
+                simulated: super::taken::lookup(path),
             },
             notes,
         ))
@@ -206,13 +212,18 @@ fn output_queued(fd: BorrowedFd<'_>) -> io::Result<usize> {
 
 impl Transport for TtyPort {
     fn unsent(&mut self) -> Option<usize> {
-        if !self.usb {
-            return None;
+        if self.usb {
+            return output_queued(self.file.as_fd()).ok();
         }
-        output_queued(self.file.as_fd()).ok()
+        let count = self.simulated.as_ref()?;
+        Some(count.unsent(std::time::Instant::now()))
     }
 
     fn write_all(&mut self, mut bytes: &[u8]) -> io::Result<()> {
+        if let Some(count) = &self.simulated {
+            // Counted before the simulator can see them taken.
+            count.wrote(bytes.len());
+        }
         while !bytes.is_empty() {
             match self.file.write(bytes) {
                 Ok(0) => {

@@ -1,0 +1,133 @@
+//! What a USB-serial driver's output count would say of a simulated
+//! adapter: the host's bytes written, less those the adapter model took by
+//! now (at the USB frame each leaves in).
+//!
+//! On hardware the count is the driver's (`TIOCOUTQ`). A simulated adapter
+//! has no driver: the in-memory line keeps a [`TakenCount`] between its
+//! ends, and a simulator behind a pseudo-terminal (whose own count says 0
+//! at once) publishes one under the path the host opens ([`publish`]),
+//! where a port opened on that path in the same process finds it
+//! ([`lookup`]). A pty nobody published has none: its writes are blind.
+
+use std::collections::{HashMap, VecDeque};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::time::Instant;
+
+/// The count of one line.
+#[derive(Debug, Default)]
+pub struct TakenCount {
+    inner: Mutex<Counts>,
+}
+
+#[derive(Debug, Default)]
+struct Counts {
+    /// Host bytes written so far.
+    written: u64,
+    /// Bytes the adapter took so far, each report added.
+    total: u64,
+    /// Reports not yet due: (when, the total then).
+    due: VecDeque<(Instant, u64)>,
+    /// The total of the last report due.
+    done: u64,
+}
+
+impl TakenCount {
+    fn lock(&self) -> MutexGuard<'_, Counts> {
+        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The host wrote `bytes` more.
+    pub fn wrote(&self, bytes: usize) {
+        self.lock().written += bytes as u64;
+    }
+
+    /// The adapter takes `bytes` more of the host's at `at` (the USB frame
+    /// they leave in, perhaps still to come). Reports come in the order of
+    /// their frames.
+    pub fn took(&self, at: Instant, bytes: usize) {
+        let mut c = self.lock();
+        c.total += bytes as u64;
+        let total = c.total;
+        c.due.push_back((at, total));
+    }
+
+    /// Everything written is gone (an unplug dropped what was on its way).
+    pub fn settle(&self) {
+        let mut c = self.lock();
+        c.due.clear();
+        c.done = c.written;
+        c.total = c.written;
+    }
+
+    /// The host bytes not taken by `now`.
+    pub fn unsent(&self, now: Instant) -> usize {
+        let mut c = self.lock();
+        while let Some(&(_, total)) = c.due.front().filter(|(at, _)| *at <= now) {
+            c.done = total;
+            c.due.pop_front();
+        }
+        usize::try_from(c.written.saturating_sub(c.done)).unwrap_or(usize::MAX)
+    }
+}
+
+type Registry = Mutex<HashMap<PathBuf, Arc<TakenCount>>>;
+
+fn registry() -> MutexGuard<'static, HashMap<PathBuf, Arc<TakenCount>>> {
+    static REGISTRY: OnceLock<Registry> = OnceLock::new();
+    REGISTRY
+        .get_or_init(Registry::default)
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+}
+
+/// A simulated adapter behind the pty at `path` publishes its count.
+pub fn publish(path: &Path, count: Arc<TakenCount>) {
+    registry().insert(path.to_path_buf(), count);
+}
+
+/// The pty at `path` is gone.
+pub fn withdraw(path: &Path) {
+    registry().remove(path);
+}
+
+/// The count a simulated adapter published for `path`, if any.
+pub fn lookup(path: &Path) -> Option<Arc<TakenCount>> {
+    registry().get(path).cloned()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    #[test]
+    fn bytes_are_unsent_until_their_frame_comes() {
+        let c = TakenCount::default();
+        let now = Instant::now();
+        c.wrote(3);
+        assert_eq!(c.unsent(now), 3);
+        c.took(now + Duration::from_secs(3600), 3);
+        assert_eq!(c.unsent(now), 3, "taken at a frame still to come");
+        c.wrote(1);
+        c.took(now, 1);
+        // Reports are in the order of their frames: the later one due
+        // first is not seen before the earlier.
+        assert_eq!(c.unsent(now), 4);
+        c.settle();
+        assert_eq!(c.unsent(now), 0);
+    }
+
+    #[test]
+    fn a_published_count_is_found_by_its_path_until_withdrawn() {
+        let path = Path::new("/nonexistent/jointd-taken-test/ttySIM0");
+        assert!(lookup(path).is_none());
+        let count = Arc::new(TakenCount::default());
+        publish(path, count.clone());
+        let found = lookup(path).expect("published");
+        count.wrote(2);
+        assert_eq!(found.unsent(Instant::now()), 2);
+        withdraw(path);
+        assert!(lookup(path).is_none());
+    }
+}
