@@ -38,16 +38,22 @@
 //!   instants: the frame the host aimed at if it wrote in time, and the
 //!   earlier of two frames if it wrote too early, which is the mistake a
 //!   collision should show. An in-memory line says when each write was
-//!   made, and that is used instead. Such reads are counted
+//!   made, and that is used instead: there the frame that takes a write is
+//!   decided at the write, so the host's stand-in for a driver's output
+//!   count ([`crate::transport::taken`]) falls at that frame however late
+//!   this thread reads the bytes, as a driver's falls when the transfer
+//!   completes. Such reads are counted
 //!   ([`SimStats::host_reads_undated`](super::stats::SimStats)): a run where
 //!   they coincide with collisions was judged with less precision.
 
 use std::collections::VecDeque;
 use std::io;
 use std::path::Path;
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use crate::transport::adapter::{AdapterModel, FTDI_PACKET_PAYLOAD};
+use crate::transport::taken::TakeRule;
 
 use super::line::Line;
 use super::rng::Rng;
@@ -155,6 +161,20 @@ pub(crate) struct AdapterLine {
     seen_empty: Option<Instant>,
     /// Reads whose bytes had waited unwatched (see the module doc).
     undated: u64,
+    /// Which frame takes a host write (shared with a line that runs it at
+    /// the host's write: [`Line::taken_at`]).
+    taking: Arc<Taking>,
+}
+
+/// The chip's rule for the frame that takes a host write.
+#[derive(Debug)]
+pub(crate) struct Taking {
+    clock: UsbClock,
+    state: Mutex<TakingState>,
+}
+
+#[derive(Debug)]
+struct TakingState {
     /// Host writes held on their way to the chip (a busy host or hub).
     delay: WriteDelayCell,
     dice: Rng,
@@ -162,6 +182,37 @@ pub(crate) struct AdapterLine {
     last_release: Option<Instant>,
     /// Writes the delay made miss the frame they would have made.
     slipped: u64,
+}
+
+impl Taking {
+    fn state(&self) -> MutexGuard<'_, TakingState> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn take_slipped(&self) -> u64 {
+        std::mem::take(&mut self.state().slipped)
+    }
+}
+
+impl TakeRule for Taking {
+    /// The frame that takes host bytes written at `at`: the next one after
+    /// they reach the chip (late by the write delay in force), and never
+    /// one before the last write's.
+    fn release_of(&self, at: Instant) -> Instant {
+        let mut st = self.state();
+        let on_time = self.clock.next_after(at);
+        let reach = match st.delay.get() {
+            Some(delay) => at + delay.quantile(st.dice.unit()),
+            None => at,
+        };
+        let release = self
+            .clock
+            .next_after(reach)
+            .max(st.last_release.unwrap_or(on_time));
+        st.slipped += u64::from(release > on_time);
+        st.last_release = Some(release);
+        release
+    }
 }
 
 impl AdapterLine {
@@ -175,11 +226,21 @@ impl AdapterLine {
         let period = model.usb_frame().unwrap_or(Duration::from_millis(1));
         // The frame phase: from the seed, reproducible, unknown to the host.
         let phase = Duration::from_nanos(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) % 1_000_000);
+        let clock = UsbClock::new(start, period, phase);
+        let taking = Arc::new(Taking {
+            clock,
+            state: Mutex::new(TakingState {
+                delay,
+                dice: Rng::new(seed ^ 0xD17E_DE1A),
+                last_release: None,
+                slipped: 0,
+            }),
+        });
         let mut inner = inner;
-        inner.reports_taken();
+        inner.reports_taken(taking.clone());
         Self {
             inner,
-            clock: UsbClock::new(start, period, phase),
+            clock,
             rx: RxRule::of(model),
             to_wire: VecDeque::new(),
             to_host: Held::default(),
@@ -187,29 +248,8 @@ impl AdapterLine {
             read_at: None,
             seen_empty: None,
             undated: 0,
-            delay,
-            dice: Rng::new(seed ^ 0xD17E_DE1A),
-            last_release: None,
-            slipped: 0,
+            taking,
         }
-    }
-
-    /// The frame that takes host bytes written at `at`: the next one after
-    /// they reach the chip (late by the write delay in force), and never
-    /// one before the last write's.
-    fn release_of(&mut self, at: Instant) -> Instant {
-        let on_time = self.clock.next_after(at);
-        let reach = match self.delay.get() {
-            Some(delay) => at + delay.quantile(self.dice.unit()),
-            None => at,
-        };
-        let release = self
-            .clock
-            .next_after(reach)
-            .max(self.last_release.unwrap_or(on_time));
-        self.slipped += u64::from(release > on_time);
-        self.last_release = Some(release);
-        release
     }
 
     /// When host bytes read by a call made at `called` that returned at
@@ -287,12 +327,18 @@ impl Line for AdapterLine {
                 .read_timeout(&mut self.scratch, wake.saturating_duration_since(now))?;
             let returned = Instant::now();
             if n > 0 {
-                let at = match self.inner.take_written_at() {
-                    Some(written) => written,
-                    None => self.written_at(called, returned),
+                let written = self.inner.take_written_at();
+                // Decided at the host's write where the line can (as the
+                // count the host reads was), else now.
+                let release = match self.inner.taken_at(n) {
+                    Some(release) => release,
+                    None => {
+                        let at = written.unwrap_or_else(|| self.written_at(called, returned));
+                        let release = self.taking.release_of(at);
+                        self.inner.took(release, n);
+                        release
+                    }
                 };
-                let release = self.release_of(at);
-                self.inner.took(release, n);
                 match self.to_wire.back_mut() {
                     // Written before that frame began: it takes them too.
                     Some((r, bytes)) if *r == release => {
@@ -361,7 +407,7 @@ impl Line for AdapterLine {
     }
 
     fn take_slipped_writes(&mut self) -> u64 {
-        std::mem::take(&mut self.slipped)
+        self.taking.take_slipped()
     }
 
     fn next_release(&self) -> Option<Instant> {
@@ -376,6 +422,42 @@ impl Line for AdapterLine {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sim::line::MemoryLine;
+    use crate::transport::Transport;
+
+    #[test]
+    fn the_hosts_count_falls_at_the_frame_however_late_the_model_reads() {
+        let (mut host, dev) = crate::transport::memory::pair(500_000);
+        let mut line = AdapterLine::new(
+            Box::new(MemoryLine::new(dev)),
+            AdapterModel::Ch340,
+            Instant::now(),
+            7,
+            WriteDelayCell::default(),
+        );
+        let before = Instant::now();
+        host.write_all(&[1, 2, 3]).unwrap();
+        // The model's thread does not read the line (held off its CPU):
+        // a driver's count falls when the adapter takes the transfer all
+        // the same.
+        let deadline = before + Duration::from_secs(2);
+        let fell = loop {
+            if host.unsent() == Some(0) {
+                break Instant::now();
+            }
+            assert!(
+                Instant::now() < deadline,
+                "the count stayed up while the model did not read"
+            );
+            std::thread::sleep(Duration::from_micros(100));
+        };
+        // Read late, the bytes reach the wire at the frame the count named.
+        let mut buf = [0u8; 8];
+        assert_eq!(line.read_timeout(&mut buf, Duration::ZERO).unwrap(), 3);
+        let on_wire = line.take_read_at().expect("dated on the wire");
+        assert!(on_wire > before && on_wire <= fell, "{on_wire:?} {fell:?}");
+        assert_eq!(host.unsent(), Some(0));
+    }
 
     fn ms(n: u64) -> Duration {
         Duration::from_millis(n)

@@ -7,6 +7,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use crate::transport::memory::MemoryPort;
+use crate::transport::taken::TakeRule;
 use crate::transport::{is_hangup, Transport};
 
 /// What the runner needs from the device end of a line.
@@ -58,11 +59,18 @@ pub(crate) trait Line: Send {
     /// An adapter model in front will report when it takes the host's
     /// bytes ([`Self::took`]): a line that can pass that on to the host
     /// does (an in-memory pipe, as a USB-serial driver's output count; a
-    /// pty cannot).
-    fn reports_taken(&mut self) {}
+    /// pty cannot). A line that knows each host write's instant runs the
+    /// model's `rule` at the write instead ([`Self::taken_at`]).
+    fn reports_taken(&mut self, _rule: std::sync::Arc<dyn TakeRule>) {}
     /// The adapter model takes `bytes` of the host's at `at`, the USB frame
     /// they leave in.
     fn took(&mut self, _at: std::time::Instant, _bytes: usize) {}
+    /// The frame the model's rule named, at the host's write, for the
+    /// first of the `bytes` just read (`None`: the model decides now, and
+    /// reports it with [`Self::took`]).
+    fn taken_at(&mut self, _bytes: usize) -> Option<std::time::Instant> {
+        None
+    }
 }
 
 /// The device end of an in-memory pipe.
@@ -92,8 +100,15 @@ impl Line for MemoryLine {
         self.port.take_written_at()
     }
 
-    fn reports_taken(&mut self) {
-        self.port.reports_taken();
+    /// The pipe knows when each write was made: the count follows the
+    /// model from there, as a driver's does, however late the simulator's
+    /// thread reads the bytes.
+    fn reports_taken(&mut self, rule: std::sync::Arc<dyn TakeRule>) {
+        self.port.take_by(rule);
+    }
+
+    fn taken_at(&mut self, bytes: usize) -> Option<std::time::Instant> {
+        self.port.decided(bytes)
     }
 
     fn took(&mut self, at: std::time::Instant, bytes: usize) {

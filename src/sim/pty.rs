@@ -151,7 +151,10 @@ impl Line for PtyLine {
         self.pty.is_none()
     }
 
-    fn reports_taken(&mut self) {
+    /// A pty passes writes on whenever its reader gets them: that lag
+    /// stands for the host's path to the adapter, so the count follows the
+    /// model's reading ([`Line::took`]), not `_rule`.
+    fn reports_taken(&mut self, _rule: Arc<dyn taken::TakeRule>) {
         let count = self.taken.get_or_insert_with(Default::default);
         taken::publish(&self.link, count.clone());
     }

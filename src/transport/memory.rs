@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use super::taken::TakenCount;
+use super::taken::{TakeRule, TakenCount};
 use super::Transport;
 
 /// One direction of the pipe.
@@ -136,6 +136,20 @@ impl MemoryPort {
     /// (the USB frame they leave in, perhaps still to come).
     pub fn took(&self, at: Instant, bytes: usize) {
         self.line.taken.took(at, bytes);
+    }
+
+    /// Device end, an adapter model that can say at each host write which
+    /// frame takes it: the count follows the model from the write on, not
+    /// from when the model's thread reads the bytes.
+    pub fn take_by(&self, rule: Arc<dyn TakeRule>) {
+        self.line.taken.follow(rule);
+        self.reports_taken();
+    }
+
+    /// Device end, under [`Self::take_by`]: the frame decided for the
+    /// first of the next `bytes` read.
+    pub fn decided(&self, bytes: usize) -> Option<Instant> {
+        self.line.taken.decided(bytes)
     }
 
     /// When the other end wrote the first byte of the last read: a pipe in

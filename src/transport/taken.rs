@@ -8,11 +8,25 @@
 //! at once) publishes one under the path the host opens ([`publish`]),
 //! where a port opened on that path in the same process finds it
 //! ([`lookup`]). A pty nobody published has none: its writes are blind.
+//!
+//! A driver's count falls when the USB transfer completes, whoever reads
+//! the bytes on the far side and whenever. Where the adapter model can say
+//! at the host's write which frame takes it (the in-memory line, which
+//! knows each write's instant: [`TakeRule`]), the count decides it there,
+//! not when the simulator's thread gets round to reading the bytes: a
+//! thread held off its CPU for milliseconds must not look like an adapter
+//! that stopped taking bytes.
 
 use std::collections::{HashMap, VecDeque};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::Instant;
+
+/// A simulated adapter's rule for the frame that takes host bytes
+/// written at an instant (each call is one write, in the order made).
+pub trait TakeRule: Send + Sync + std::fmt::Debug {
+    fn release_of(&self, written: Instant) -> Instant;
+}
 
 /// The count of one line.
 #[derive(Debug, Default)]
@@ -30,6 +44,11 @@ struct Counts {
     due: VecDeque<(Instant, u64)>,
     /// The total of the last report due.
     done: u64,
+    /// The adapter model's rule, run at each host write ([`TakeRule`]).
+    rule: Option<Arc<dyn TakeRule>>,
+    /// Writes decided by the rule that the model has not read yet: (the
+    /// frame that takes them, bytes).
+    decided: VecDeque<(Instant, usize)>,
 }
 
 impl TakenCount {
@@ -37,9 +56,25 @@ impl TakenCount {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// The host wrote `bytes` more.
+    /// The adapter model decides at each host write which frame takes it.
+    pub fn follow(&self, rule: Arc<dyn TakeRule>) {
+        self.lock().rule = Some(rule);
+    }
+
+    /// The host wrote `bytes` more (now): with a rule, taken at the frame
+    /// it names.
     pub fn wrote(&self, bytes: usize) {
-        self.lock().written += bytes as u64;
+        let mut c = self.lock();
+        if let Some(rule) = c.rule.clone() {
+            let at = rule.release_of(Instant::now());
+            c.written += bytes as u64;
+            c.total += bytes as u64;
+            let total = c.total;
+            c.due.push_back((at, total));
+            c.decided.push_back((at, bytes));
+            return;
+        }
+        c.written += bytes as u64;
     }
 
     /// The adapter takes `bytes` more of the host's at `at` (the USB frame
@@ -52,10 +87,31 @@ impl TakenCount {
         c.due.push_back((at, total));
     }
 
+    /// The model reads `bytes` more of the host's: the frame the rule
+    /// decided takes the first of them (`None` without a rule).
+    pub fn decided(&self, bytes: usize) -> Option<Instant> {
+        let mut c = self.lock();
+        let (at, _) = *c.decided.front()?;
+        let mut left = bytes;
+        while left > 0 {
+            let Some(front) = c.decided.front_mut() else {
+                break;
+            };
+            let n = left.min(front.1);
+            front.1 -= n;
+            left -= n;
+            if front.1 == 0 {
+                c.decided.pop_front();
+            }
+        }
+        Some(at)
+    }
+
     /// Everything written is gone (an unplug dropped what was on its way).
     pub fn settle(&self) {
         let mut c = self.lock();
         c.due.clear();
+        c.decided.clear();
         c.done = c.written;
         c.total = c.written;
     }

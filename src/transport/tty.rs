@@ -151,7 +151,9 @@ impl TtyPort {
         // After ASYNC_LOW_LATENCY: the Linux FTDI driver turns it into a 1 ms
         // timer, and what is reported must be what is in effect.
         let adapter = super::adapter::detect(path);
-        let usb = adapter.usb;
+        // A driver whose count cannot be read at all has none to confirm
+        // writes with.
+        let usb = adapter.usb && output_queued(file.as_fd()).is_ok();
         notes.push(PortNote::Adapter(adapter));
         Ok((
             TtyPort {
@@ -199,31 +201,36 @@ fn set_low_latency(file: &File) -> io::Result<()> {
     Ok(())
 }
 
-/// Bytes in the tty's output queue (`TIOCOUTQ`).
-fn output_queued(fd: BorrowedFd<'_>) -> io::Result<usize> {
+/// The tty's output queue (`TIOCOUTQ`) as the driver reports it.
+fn output_queued(fd: BorrowedFd<'_>) -> io::Result<libc::c_int> {
     let mut n: libc::c_int = 0;
     // SAFETY: TIOCOUTQ writes one int through a valid pointer.
     let rc = unsafe { libc::ioctl(fd.as_raw_fd(), libc::TIOCOUTQ, &mut n) };
     if rc < 0 {
         return Err(io::Error::last_os_error());
     }
-    Ok(usize::try_from(n).unwrap_or(0))
+    Ok(n)
+}
+
+/// The bytes not taken yet, from the driver's count `queued`. A count that
+/// cannot be read, or is negative, says nothing was taken, never that all
+/// was: the wait for it is bounded, and given up on it is evidence
+/// against the pipeline ([`crate::bus::usb_confirm`]), where reading it as
+/// 0 would hold the wire as if the write had left on time.
+fn untaken(queued: io::Result<libc::c_int>) -> usize {
+    queued.map_or(usize::MAX, |n| usize::try_from(n).unwrap_or(usize::MAX))
 }
 
 impl Transport for TtyPort {
     fn unsent(&mut self) -> Option<usize> {
         if self.usb {
-            return output_queued(self.file.as_fd()).ok();
+            return Some(untaken(output_queued(self.file.as_fd())));
         }
         let count = self.simulated.as_ref()?;
         Some(count.unsent(std::time::Instant::now()))
     }
 
     fn write_all(&mut self, mut bytes: &[u8]) -> io::Result<()> {
-        if let Some(count) = &self.simulated {
-            // Counted before the simulator can see them taken.
-            count.wrote(bytes.len());
-        }
         while !bytes.is_empty() {
             match self.file.write(bytes) {
                 Ok(0) => {
@@ -232,7 +239,17 @@ impl Transport for TtyPort {
                         "tty accepted no bytes",
                     ))
                 }
-                Ok(n) => bytes = &bytes[n..],
+                Ok(n) => {
+                    // Only what the tty took is on its way: bytes a failed
+                    // write (an unplugged simulator) never passed on would
+                    // keep the count up for good. The simulator may report
+                    // them taken first; the count reads 0 either way, and
+                    // only this thread reads it.
+                    if let Some(count) = &self.simulated {
+                        count.wrote(n);
+                    }
+                    bytes = &bytes[n..];
+                }
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => wait_writable(&self.file)?,
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
                 Err(e) => return Err(e),
@@ -298,6 +315,31 @@ mod tests {
 
     fn slave_path(slave: &std::os::fd::OwnedFd) -> PathBuf {
         std::fs::read_link(format!("/proc/self/fd/{}", slave.as_raw_fd())).expect("pty slave path")
+    }
+
+    #[test]
+    fn a_count_that_cannot_be_read_or_is_negative_says_nothing_was_taken() {
+        assert_eq!(untaken(Ok(12)), 12);
+        assert_eq!(untaken(Ok(0)), 0);
+        assert_eq!(untaken(Ok(-1)), usize::MAX);
+        assert_eq!(
+            untaken(Err(io::Error::from_raw_os_error(libc::EIO))),
+            usize::MAX
+        );
+    }
+
+    #[test]
+    fn bytes_a_failed_write_never_passed_on_are_not_counted_unsent() {
+        let pty = openpty(None, None).expect("openpty");
+        let path = slave_path(&pty.slave);
+        let count = std::sync::Arc::new(TakenCount::default());
+        super::super::taken::publish(&path, count.clone());
+        let (mut port, _) = TtyPort::open(&path, 500_000).expect("open pty slave");
+        super::super::taken::withdraw(&path);
+        // The simulator's end goes away: the write fails.
+        drop(pty.master);
+        assert!(port.write_all(&[1, 2, 3]).is_err());
+        assert_eq!(port.unsent(), Some(0), "a write that never left");
     }
 
     #[test]

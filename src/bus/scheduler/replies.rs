@@ -124,10 +124,14 @@ impl Scheduler {
     /// The reply to `want`, due at `due`, was given up at `now`, before
     /// its deadline, for an e-stop: nothing against the device nor the USB
     /// path (it may still come, and is then taken in as a late one); the
-    /// line is free again.
+    /// line is free again. The cut-in settles the write as its deadline
+    /// would: a look at the port's count after it would hold the line
+    /// from that look for the whole time the transaction waited, and the
+    /// e-stop with it.
     pub(crate) fn given_up(&mut self, want: Want, due: Instant, now: Instant) {
         self.overdue = Some((want, due));
         self.clock.line_free(now);
+        self.exchange_settled();
     }
 
     /// A poll written blind got no reply by its deadline: missed like any

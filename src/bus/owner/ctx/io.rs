@@ -539,6 +539,7 @@ impl Ctx {
     /// e-stop.
     fn before_job_frame(&mut self) -> Result<(), BusError> {
         loop {
+            self.wait_confirmed()?;
             self.wait_until(self.sched.write_at(Instant::now()))?;
             let generation = self.estop_generation();
             let now = Instant::now();
@@ -559,6 +560,20 @@ impl Ctx {
             return Err(self.down_error());
         }
         Ok(())
+    }
+
+    /// Until the write before is seen taken (or its count given up on,
+    /// within [`crate::bus::usb_confirm::MAX_UNTAKEN`]): a request's frames,
+    /// and the setpoints let out between them, go one after another without
+    /// the owner's turn, whose look at the port's count this stands in for.
+    fn wait_confirmed(&mut self) -> Result<(), BusError> {
+        loop {
+            self.look_at_count();
+            if !self.sched.awaiting_confirmation() {
+                return Ok(());
+            }
+            self.wait_until(self.sched.write_at(Instant::now()))?;
+        }
     }
 }
 

@@ -81,17 +81,12 @@ impl Ctx {
         if self.held.is_none() && self.sched.link_is_up() {
             self.held = self.next_request();
         }
+        self.look_at_count();
         let work = Work {
             estop_generation: self.estop_generation(),
             request_queued: self.held.is_some(),
             setpoints: &self.shared.setpoints,
         };
-        if self.sched.awaiting_confirmation() {
-            // Timed after the read: a count seen at 0 says the write was
-            // taken by then, never earlier.
-            let unsent = self.link.unsent();
-            self.sched.confirm_writes(unsent, Instant::now());
-        }
         let slot = self.sched.next(now, &work);
         self.after_decision();
         // Bookkeeping goes where the line leaves slack, not between a reply
@@ -100,6 +95,17 @@ impl Ctx {
             self.housekeeping(now);
         }
         slot
+    }
+
+    /// While a write waits to be seen taken, reads the port's count for it
+    /// ([`crate::bus::usb_confirm`]).
+    pub(crate) fn look_at_count(&mut self) {
+        if self.sched.awaiting_confirmation() {
+            // Timed after the read: a count seen at 0 says the write was
+            // taken by then, never earlier.
+            let unsent = self.link.unsent();
+            self.sched.confirm_writes(unsent, Instant::now());
+        }
     }
 
     /// Joints following a move get their position at the instant the next

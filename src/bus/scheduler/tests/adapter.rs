@@ -552,3 +552,40 @@ fn confirmed_writes_have_no_sentinels() {
         assert_eq!(w[1].released - w[0].released, Duration::from_millis(2));
     }
 }
+
+#[test]
+fn a_count_that_never_falls_holds_an_estop_no_longer_than_the_give_up_and_a_frame() {
+    // A driver whose count stays up (or reads as garbage: the tty reads it
+    // as nothing taken): the wait is given up on and counted, and an
+    // e-stop pressed right after the write goes once the write would be
+    // off the wire had it left at the boundary after the give-up (with
+    // the 16 setpoints it carries and its reply, 1.7 ms of wire).
+    let (mut b, _) = pipelining_bus();
+    pipeline_writes(&mut b, 1);
+    b.s.set_port_confirms(true);
+    let first = pipeline_writes(&mut b, 1)[0];
+    let held = b.s.clock().free_at() - first.released;
+    b.estop = 1;
+    let slot = loop {
+        if b.s.awaiting_confirmation() {
+            b.s.confirm_writes(Some(usize::MAX), b.now);
+        }
+        match b.next() {
+            Slot::Listen { until } => {
+                assert!(until > b.now, "a listen that does not move on");
+                b.now = until;
+            }
+            slot => break slot,
+        }
+    };
+    assert_eq!(slot, Slot::EStop { generation: 1 });
+    let waited = b.now - first.released;
+    assert!(
+        waited <= crate::bus::usb_confirm::MAX_UNTAKEN + held,
+        "the e-stop waited {waited:?} past the write's boundary ({held:?} held)"
+    );
+    let view = b.s.usb_view(b.now).expect("a pipeline view");
+    assert_eq!(view.counts_given_up, 1, "{view:?}");
+    assert_eq!(b.s.take_confirm_counts(), (0, 1));
+    assert!(!b.s.awaiting_confirmation());
+}

@@ -151,3 +151,45 @@ fn a_long_spin_does_not_hold_an_estop_past_the_grace() {
         "gave way {quickest:?} after the write at the quickest; the grace ends at {grace:?}"
     );
 }
+
+#[test]
+fn a_request_frame_is_not_written_while_the_write_before_waits_to_be_seen_taken() {
+    use crate::protocol::{Command, Control};
+    use crate::transport::adapter::AdapterModel;
+
+    let (mut ctx, mut dev) = ctx(|_| {});
+    // The device end stands for an adapter whose count never falls.
+    dev.reports_taken();
+    ctx.sched.set_adapter(AdapterModel::Ch340);
+    let t0 = Instant::now() - Duration::from_millis(100);
+    for k in 0..40u64 {
+        ctx.sched
+            .arrival(t0 + Duration::from_micros(1_000 * k + 20));
+    }
+    assert!(ctx.sched.usb_clock_known());
+    ctx.sched.set_port_confirms(true);
+    // A setpoint frame (no reply: the kind a request lets out between its
+    // frames, or an e-stop's disable before its read-back).
+    ctx.send_without_reply(&[Command::Control(Control::disable(1))])
+        .expect("written");
+    assert!(ctx.sched.awaiting_confirmation());
+    ctx.job_send(&[Command::Control(Control::disable(2))])
+        .expect("written");
+    let mut buf = [0u8; 64];
+    let mut written = Vec::new();
+    while written.len() < 2 {
+        let n = dev
+            .read_timeout(&mut buf, Duration::from_millis(100))
+            .expect("the device end reads");
+        assert!(n > 0, "both writes on the line");
+        written.push(dev.take_written_at().expect("a dated write"));
+    }
+    // Untaken, the first was looked at each frame and given up on 4 ms
+    // after its frame; only then did the request's frame go.
+    let gap = written[1] - written[0];
+    assert!(
+        gap >= Duration::from_millis(3),
+        "the request's frame went {gap:?} after a write still untaken"
+    );
+    assert_eq!(ctx.sched.take_confirm_counts(), (0, 1));
+}
