@@ -254,8 +254,9 @@ pub struct UsbPipelineView {
     /// Writes are confirmed: the port says when the adapter took each,
     /// and the wire is held as it says, not for a write's reach.
     pub confirming: bool,
-    /// Confirmed writes the adapter took a frame or more after the one
-    /// they were aimed at (each cost the frames it was late, no collision).
+    /// Confirmed writes seen taken half a frame or more after the boundary
+    /// they were aimed at (each held the wire that much longer, no
+    /// collision): late writes, and looks the owner made late.
     pub writes_taken_late: u64,
     /// Confirmed writes whose output count stayed up
     /// for 4 ms after their USB frame (evidence: the count is not trusted).

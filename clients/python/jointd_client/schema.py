@@ -1049,7 +1049,7 @@ class UsbPipelineView(TypedDict):
     since_s: float
     """Seconds since that change."""
     writes_taken_late: int
-    """Confirmed writes the adapter took a frame or more after the one they were aimed at (each cost the frames it was late, no collision)."""
+    """Confirmed writes seen taken half a frame or more after the boundary they were aimed at (each held the wire that much longer, no collision): late writes, and looks the owner made late."""
 
 
 class WaypointRequest(TypedDict):

@@ -136,7 +136,7 @@ const BUS_COUNTER_HELP: &[(&str, &str)] = &[
     ),
     (
         "usb_writes_taken_late",
-        "Confirmed writes the adapter took half a USB frame or more after the boundary they were aimed at: each held the wire that much longer, no collision.",
+        "Confirmed writes seen taken half a USB frame or more after the boundary they were aimed at (late writes, and late looks at the count): each held the wire that much longer, no collision.",
     ),
     (
         "usb_counts_given_up",
