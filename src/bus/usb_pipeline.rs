@@ -27,6 +27,11 @@
 //! next transfer is placed after the latest the wire can be busy, so the
 //! one thing the host cannot observe never makes a collision.
 //!
+//! Where the port says when the adapter took a write (a USB-serial
+//! driver's output count), the host does observe it: each write is then
+//! held as on time and seen taken before the next ([`super::usb_confirm`]),
+//! and the guard's reach and sentinels are not needed.
+//!
 //! Pure: every instant is passed in.
 
 use std::collections::VecDeque;
