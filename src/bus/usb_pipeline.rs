@@ -173,7 +173,7 @@ impl UsbPipeline {
 
     /// True while writes are confirmed ([`super::usb_confirm`]): the port
     /// can tell, the frame clock is known and the guard has not backed off
-    /// (a backed-off guard holds the wire for a write's reach as before).
+    /// (a backed-off guard holds the wire for each write's reach, blind).
     pub(crate) fn confirming(&self) -> bool {
         self.port_confirms && self.active() && self.guard.mode() == PipelineMode::Pipelined
     }
