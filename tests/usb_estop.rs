@@ -134,3 +134,56 @@ async fn a_transaction_given_up_for_an_estop_is_not_a_missed_reply() {
     assert_eq!(usb.backoffs, 0, "the pipeline backed off: {}", usb.reason);
     assert_eq!(usb.incidents_per_s, 0.0, "taken as evidence: {usb:?}");
 }
+
+/// Writes are confirmed here (the simulated chip says when it took each):
+/// an e-stop that cuts a transaction short is not held for the time the
+/// transaction had already waited. Pressed 8 ms after the reply left the
+/// wire, half the chip's timer, it still takes the wire before the chip
+/// hands the reply over.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_estop_is_not_held_for_the_age_of_the_transaction_it_cuts_short() {
+    let rig = ftdi_rig().await;
+    rig.until("writes confirmed", |s| {
+        s.usb_pipeline.as_ref().is_some_and(|u| u.confirming)
+    })
+    .await;
+    let (read, asked) = read_on_the_wire(&rig).await;
+    let deadline = std::time::Instant::now() + WAIT;
+    let reply_end = loop {
+        let log = rig.sim.frame_log();
+        if let Some(reply) = log[asked + 1..]
+            .iter()
+            .find(|f| !f.from_host && f.dev_id == Some(2))
+        {
+            break reply.end;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the read was never answered"
+        );
+        tokio::task::yield_now().await;
+    };
+    let press_at = reply_end + TIMER / 2;
+    while std::time::Instant::now() < press_at {
+        tokio::task::yield_now().await;
+    }
+    rig.bus.estop().await.expect("the e-stop");
+    let read = tokio::time::timeout(WAIT, read)
+        .await
+        .expect("the read ended")
+        .expect("the read's task");
+    assert!(
+        matches!(read, Err(BusError::Preempted)),
+        "the e-stop cut the read short: {read:?}"
+    );
+    let log = rig.sim.frame_log();
+    let estop = log
+        .iter()
+        .find(|f| f.from_host && f.start >= press_at)
+        .expect("the e-stop's frames");
+    assert!(
+        estop.start < reply_end + TIMER,
+        "the e-stop went {:?} after the press, past the chip's hold of the reply",
+        estop.start - press_at
+    );
+}
