@@ -68,6 +68,18 @@ async fn read_on_the_wire(rig: &Rig) -> (JoinHandle<Result<Reply, BusError>>, us
     }
 }
 
+/// The read ends, cut short by the e-stop.
+async fn preempted(read: JoinHandle<Result<Reply, BusError>>) {
+    let read = tokio::time::timeout(WAIT, read)
+        .await
+        .expect("the read ended")
+        .expect("the read's task");
+    assert!(
+        matches!(read, Err(BusError::Preempted)),
+        "the read the e-stop cut short: {read:?}"
+    );
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_estop_during_a_transaction_does_not_wait_out_the_latency_timer() {
     let rig = ftdi_rig().await;
@@ -105,14 +117,7 @@ async fn a_transaction_given_up_for_an_estop_is_not_a_missed_reply() {
     let (read, _) = read_on_the_wire(&rig).await;
     let at_estop = rig.bus.snapshot();
     rig.bus.estop().await.expect("the e-stop");
-    let read = tokio::time::timeout(WAIT, read)
-        .await
-        .expect("the read ended")
-        .expect("the read's task");
-    assert!(
-        matches!(read, Err(BusError::Preempted)),
-        "the read the e-stop cut short: {read:?}"
-    );
+    preempted(read).await;
     // The reply the e-stop did not wait for comes out of the adapter
     // later; a few turns after it is taken in, any evidence it made has
     // been acted on.
@@ -168,14 +173,7 @@ async fn an_estop_is_not_held_for_the_age_of_the_transaction_it_cuts_short() {
         tokio::task::yield_now().await;
     }
     rig.bus.estop().await.expect("the e-stop");
-    let read = tokio::time::timeout(WAIT, read)
-        .await
-        .expect("the read ended")
-        .expect("the read's task");
-    assert!(
-        matches!(read, Err(BusError::Preempted)),
-        "the e-stop cut the read short: {read:?}"
-    );
+    preempted(read).await;
     let log = rig.sim.frame_log();
     let estop = log
         .iter()

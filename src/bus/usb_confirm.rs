@@ -72,6 +72,8 @@ pub(crate) struct Confirm {
     pub late: u64,
     /// Writes whose count stayed up for [`MAX_UNTAKEN`].
     pub gave_up: u64,
+    /// Of those, not yet handed to the bus counters: (late, given up).
+    untaken: (u64, u64),
 }
 
 impl Confirm {
@@ -127,7 +129,9 @@ impl Confirm {
             Some(0) => {
                 self.pending = None;
                 // Taken by now: the wire is held from now at the latest.
-                self.late += u64::from(now >= p.first + period / 2);
+                let late = u64::from(now >= p.first + period / 2);
+                self.late += late;
+                self.untaken.0 += late;
                 Outcome::Taken {
                     by: now.saturating_duration_since(p.modeled),
                     poll: p.poll,
@@ -142,6 +146,7 @@ impl Confirm {
                 if next.saturating_duration_since(p.first) >= MAX_UNTAKEN {
                     self.pending = None;
                     self.gave_up += 1;
+                    self.untaken.1 += 1;
                     return Outcome::GaveUp { by, poll: p.poll };
                 }
                 p.frame = next;
@@ -150,6 +155,11 @@ impl Confirm {
                 Outcome::Moved { by, poll: p.poll }
             }
         }
+    }
+
+    /// Writes seen taken late, and counts given up on, since the last call.
+    pub(crate) fn take_counts(&mut self) -> (u64, u64) {
+        std::mem::take(&mut self.untaken)
     }
 
     /// The port was lost or reopened, or the write was waited for: nothing

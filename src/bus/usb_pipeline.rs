@@ -183,6 +183,11 @@ impl UsbPipeline {
         (self.confirm.late, self.confirm.gave_up)
     }
 
+    /// The same, since the last call.
+    pub(crate) fn take_confirm_counts(&mut self) -> (u64, u64) {
+        self.confirm.take_counts()
+    }
+
     /// True while a write waits to be seen taken: read the port's count
     /// and pass it to [`Self::confirm`] before deciding the next slot.
     pub(crate) fn awaiting_confirmation(&self) -> bool {

@@ -51,6 +51,13 @@ struct Counts {
     decided: VecDeque<(Instant, usize)>,
 }
 
+impl Counts {
+    fn take(&mut self, at: Instant, bytes: usize) {
+        self.total += bytes as u64;
+        self.due.push_back((at, self.total));
+    }
+}
+
 impl TakenCount {
     fn lock(&self) -> MutexGuard<'_, Counts> {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
@@ -65,26 +72,19 @@ impl TakenCount {
     /// it names.
     pub fn wrote(&self, bytes: usize) {
         let mut c = self.lock();
+        c.written += bytes as u64;
         if let Some(rule) = c.rule.clone() {
             let at = rule.release_of(Instant::now());
-            c.written += bytes as u64;
-            c.total += bytes as u64;
-            let total = c.total;
-            c.due.push_back((at, total));
+            c.take(at, bytes);
             c.decided.push_back((at, bytes));
-            return;
         }
-        c.written += bytes as u64;
     }
 
     /// The adapter takes `bytes` more of the host's at `at` (the USB frame
     /// they leave in, perhaps still to come). Reports come in the order of
     /// their frames.
     pub fn took(&self, at: Instant, bytes: usize) {
-        let mut c = self.lock();
-        c.total += bytes as u64;
-        let total = c.total;
-        c.due.push_back((at, total));
+        self.lock().take(at, bytes);
     }
 
     /// The model reads `bytes` more of the host's: the frame the rule

@@ -180,8 +180,6 @@ pub(crate) struct Scheduler {
     /// The port says when the adapter took a write (kept for a pipeline
     /// made anew when the adapter changes).
     port_confirms: bool,
-    /// The pipeline's confirmation counts last handed to the bus counters.
-    confirm_seen: (u64, u64),
 }
 
 impl Scheduler {
@@ -219,7 +217,6 @@ impl Scheduler {
             control_only: 0,
             queued_until: None,
             port_confirms: false,
-            confirm_seen: (0, 0),
         }
     }
 
@@ -245,16 +242,9 @@ impl Scheduler {
     /// Confirmed writes seen taken late, and counts given up on, since the
     /// last call.
     pub(crate) fn take_confirm_counts(&mut self) -> (u64, u64) {
-        let Some(pipeline) = self.pipeline.as_ref() else {
-            return (0, 0);
-        };
-        let (late, gave_up) = pipeline.confirm_counts();
-        let (seen_late, seen_gave_up) = self.confirm_seen;
-        self.confirm_seen = (late, gave_up);
-        (
-            late.saturating_sub(seen_late),
-            gave_up.saturating_sub(seen_gave_up),
-        )
+        self.pipeline
+            .as_mut()
+            .map_or((0, 0), UsbPipeline::take_confirm_counts)
     }
 
     /// A write waited for its reply (or its deadline): nothing waits to
@@ -871,7 +861,6 @@ impl Scheduler {
             }
             _ => {
                 self.pipeline = UsbPipeline::for_adapter(adapter, self.usb_recover, Instant::now());
-                self.confirm_seen = (0, 0);
                 if let Some(pipeline) = self.pipeline.as_mut() {
                     pipeline.set_port_confirms(self.port_confirms);
                 }
