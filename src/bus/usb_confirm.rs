@@ -18,8 +18,20 @@
 //! might (see [`super::usb_guard`]).
 //!
 //! A count that stays up for [`MAX_UNTAKEN`] (an adapter that stopped
-//! taking bytes, a driver whose count cannot be trusted) is given up on,
-//! as evidence for the pipeline's guard.
+//! taking bytes, a host too loaded to let it, a driver whose count cannot
+//! be trusted) is given up on, as evidence for the pipeline's guard, which
+//! backs off. The write is still waited for: anything written behind it
+//! would queue in the adapter and follow it onto the wire into its reply.
+//! Only an e-stop goes behind an overdue write (it can only queue there,
+//! and must not wait). A count still up [`MAX_WAITED`] after the boundary
+//! is taken for a count that lies, and no longer waited for.
+//!
+//! What it tolerates: any lateness of the owner. A look made late holds
+//! the wire from the look; a write made late is seen untaken and moved;
+//! without a frame clock (a host too busy to learn it) the owner looks a
+//! few times a frame and holds the wire from the look that saw the take.
+//! Past that, a write untaken for [`MAX_UNTAKEN`] backs the pipeline off,
+//! and nothing but an e-stop is written until it is taken.
 //!
 //! Pure: every instant is passed in.
 
@@ -33,6 +45,9 @@ pub(crate) const CHECK_AFTER: f64 = 0.15;
 /// How long after the boundary it was aimed at a write may stay untaken
 /// before the count is given up on: four full-speed USB frames.
 pub(crate) const MAX_UNTAKEN: Duration = Duration::from_millis(4);
+/// How long after its boundary an untaken write is waited for at all: a
+/// count up this long says nothing of the adapter any more.
+pub(crate) const MAX_WAITED: Duration = Duration::from_millis(50);
 
 /// The write waiting to be confirmed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -45,6 +60,8 @@ struct Pending {
     modeled: Instant,
     /// It carried a poll (the newest in flight).
     poll: bool,
+    /// Untaken past [`MAX_UNTAKEN`]: given up on as evidence, still waited for.
+    overdue: bool,
 }
 
 /// What a look at the count found.
@@ -58,9 +75,13 @@ pub(crate) enum Outcome {
     /// Not taken by the look: it leaves after the next boundary at the
     /// earliest, `by` later than the model had.
     Moved { by: Duration, poll: bool },
-    /// Untaken for [`MAX_UNTAKEN`]: taken to leave at the next
-    /// boundary, `by` later than the model had, and no longer waited for.
+    /// Untaken for [`MAX_UNTAKEN`]: evidence for the guard, reported
+    /// once; it leaves after the next boundary at the earliest, `by` later
+    /// than the model had, and is still waited for.
     GaveUp { by: Duration, poll: bool },
+    /// Untaken for [`MAX_WAITED`]: the count is not believed; taken to
+    /// leave at the next boundary and no longer waited for.
+    Abandoned { by: Duration, poll: bool },
 }
 
 /// The one write the owner waits to see taken.
@@ -85,6 +106,7 @@ impl Confirm {
             frame: boundary,
             modeled: boundary,
             poll: false,
+            overdue: false,
         });
     }
 
@@ -97,6 +119,12 @@ impl Confirm {
 
     pub(crate) fn waiting(&self) -> bool {
         self.pending.is_some()
+    }
+
+    /// True while the write waited for is untaken past [`MAX_UNTAKEN`]:
+    /// an e-stop may go behind it.
+    pub(crate) fn overdue(&self) -> bool {
+        self.pending.is_some_and(|p| p.overdue)
     }
 
     /// When to read the count next.
@@ -143,15 +171,21 @@ impl Confirm {
                 }
                 let next = boundary_after(now);
                 let by = next.saturating_duration_since(p.modeled);
-                if next.saturating_duration_since(p.first) >= MAX_UNTAKEN {
+                let untaken = next.saturating_duration_since(p.first);
+                if untaken >= MAX_WAITED {
                     self.pending = None;
+                    return Outcome::Abandoned { by, poll: p.poll };
+                }
+                p.frame = next;
+                p.modeled = p.modeled.max(next);
+                let gave_up = untaken >= MAX_UNTAKEN && !p.overdue;
+                p.overdue |= gave_up;
+                self.pending = Some(p);
+                if gave_up {
                     self.gave_up += 1;
                     self.untaken.1 += 1;
                     return Outcome::GaveUp { by, poll: p.poll };
                 }
-                p.frame = next;
-                p.modeled = p.modeled.max(next);
-                self.pending = Some(p);
                 Outcome::Moved { by, poll: p.poll }
             }
         }
@@ -277,9 +311,6 @@ mod tests {
         for k in 1..=6u64 {
             let at = t0 + us(1_000 * k + 200);
             outcomes.push(c.look(Some(60), at, P, after(t0)));
-            if !c.waiting() {
-                break;
-            }
         }
         assert_eq!(
             outcomes,
@@ -288,9 +319,37 @@ mod tests {
                 Outcome::Moved { by: P, poll: false },
                 Outcome::Moved { by: P, poll: false },
                 Outcome::GaveUp { by: P, poll: false },
+                Outcome::Moved { by: P, poll: false },
+                Outcome::Moved { by: P, poll: false },
             ]
         );
         assert_eq!(c.gave_up, 1);
+        // Still waited for: whatever is written behind it follows it out.
+        assert!(c.waiting() && c.overdue());
+        assert_eq!(
+            c.look(Some(0), t0 + us(7_300), P, after(t0)),
+            Outcome::Taken {
+                by: us(300),
+                poll: false
+            }
+        );
+        assert!(!c.waiting() && !c.overdue());
+    }
+
+    #[test]
+    fn a_count_up_past_the_longest_wait_is_not_believed() {
+        let t0 = Instant::now();
+        let mut c = Confirm::default();
+        c.written(t0 + P);
+        let mut last = Outcome::Wait;
+        for k in 1..=60u64 {
+            last = c.look(Some(60), t0 + us(1_000 * k + 200), P, after(t0));
+            if !c.waiting() {
+                break;
+            }
+        }
+        assert_eq!(last, Outcome::Abandoned { by: P, poll: false });
+        assert_eq!(c.gave_up, 1, "counted once, when it became overdue");
     }
 
     #[test]

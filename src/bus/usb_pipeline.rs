@@ -56,6 +56,10 @@ const WRITE_LAST_CHANCE: Duration = Duration::from_micros(10);
 /// Spacing between the wire's modelled end of one transfer and the next
 /// release, for the device's turnaround jitter.
 const GUARD: Duration = Duration::from_micros(50);
+/// Without a frame clock, a write not yet taken is looked at again this
+/// many times a frame: each look later than the take holds the wire up to
+/// that much longer than it was busy.
+const UNCLOCKED_LOOKS_PER_FRAME: u32 = 4;
 
 /// A poll written blind: its reply is matched when the adapter hands it over.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -172,10 +176,13 @@ impl UsbPipeline {
     }
 
     /// True while writes are confirmed ([`super::usb_confirm`]): the port
-    /// can tell, the frame clock is known and the guard has not backed off
-    /// (a backed-off guard holds the wire for each write's reach, blind).
+    /// can tell and the guard has not backed off (a backed-off guard holds
+    /// the wire for each write's reach, blind). The frame clock is not
+    /// needed: a host too busy to learn it (replies read late, scattered)
+    /// is the host most likely to write late, and the count still says
+    /// when each write was taken.
     pub(crate) fn confirming(&self) -> bool {
-        self.port_confirms && self.active() && self.guard.mode() == PipelineMode::Pipelined
+        self.port_confirms && self.guard.mode() == PipelineMode::Pipelined
     }
 
     /// Writes seen taken late, and counts given up on, since start.
@@ -194,6 +201,12 @@ impl UsbPipeline {
         self.confirm.waiting()
     }
 
+    /// True while the write waited for is overdue ([`super::usb_confirm`]):
+    /// an e-stop may be written behind it.
+    pub(crate) fn confirmation_overdue(&self) -> bool {
+        self.confirm.overdue()
+    }
+
     /// The write just made was waited for: its reply or deadline settled it.
     pub(crate) fn exchange_settled(&mut self) {
         self.confirm.reset();
@@ -209,13 +222,20 @@ impl UsbPipeline {
     ) -> (Duration, Option<Change>) {
         let period = self.period();
         let phase = &self.phase;
-        let outcome = self
-            .confirm
-            .look(unsent, now, period, |t| phase.boundary_after(t));
+        let outcome = self.confirm.look(unsent, now, period, |t| {
+            if phase.known() {
+                phase.boundary_after(t)
+            } else {
+                // No clock to say where the next frame starts: look again
+                // a quarter frame on; the wire is held from that look.
+                t + period / UNCLOCKED_LOOKS_PER_FRAME
+            }
+        });
         let (by, poll, change) = match outcome {
             Outcome::Wait => return (Duration::ZERO, None),
-            Outcome::Taken { by, poll } => (by, poll, None),
-            Outcome::Moved { by, poll } => (by, poll, None),
+            Outcome::Taken { by, poll }
+            | Outcome::Moved { by, poll }
+            | Outcome::Abandoned { by, poll } => (by, poll, None),
             Outcome::GaveUp { by, poll } => {
                 let change = self.guard.incident(
                     Evidence::Untaken {
@@ -622,8 +642,14 @@ impl UsbPipeline {
     /// poll, if it carries one): while writes are confirmed, it is waited
     /// to be seen taken.
     pub(crate) fn written(&mut self, handed: Instant) {
-        if self.confirming() {
+        if !self.confirming() {
+            return;
+        }
+        if self.active() {
             self.confirm.written(self.phase.boundary_after(handed));
+        } else {
+            // Held as late as an unclocked write may leave; looked at then.
+            self.confirm.written(self.latest_release(handed).at);
         }
     }
 }

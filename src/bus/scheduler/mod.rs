@@ -239,6 +239,12 @@ impl Scheduler {
             .is_some_and(UsbPipeline::awaiting_confirmation)
     }
 
+    fn confirmation_overdue(&self) -> bool {
+        self.pipeline
+            .as_ref()
+            .is_some_and(UsbPipeline::confirmation_overdue)
+    }
+
     /// Confirmed writes seen taken late, and counts given up on, since the
     /// last call.
     pub(crate) fn take_confirm_counts(&mut self) -> (u64, u64) {
@@ -278,6 +284,13 @@ impl Scheduler {
             return Slot::Reopen {
                 at: self.reopen.next_open(),
             };
+        }
+        // An e-stop does not wait for a write the adapter is overdue to
+        // take: it can only queue behind it, and must not wait more.
+        if self.confirmation_overdue() {
+            if let Some(slot) = self.estop_slot(work) {
+                return slot;
+            }
         }
         let ready = self.write_at(now).max(self.reopen.quiet_until());
         if now < ready {

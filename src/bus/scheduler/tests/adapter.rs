@@ -193,6 +193,56 @@ fn before_the_usb_frame_clock_is_known_polls_still_go_out_before_their_replies()
 }
 
 #[test]
+fn without_a_frame_clock_confirmed_writes_hold_the_wire_from_the_look_that_saw_the_take() {
+    // A host too busy to learn the frame clock writes late as often as
+    // not: its writes are confirmed all the same.
+    let ids: Vec<u8> = (1..=16).collect();
+    let mut b = Bus::new(&ids, &ids);
+    b.s.set_adapter(AdapterModel::Ftdi { latency_ms: 16 });
+    b.s.set_port_confirms(true);
+    assert!(!b.s.usb_clock_known());
+    let first = pipeline_writes(&mut b, 1)[0];
+    assert!(b.s.awaiting_confirmation());
+    // The write reaches the adapter 2.6 ms late: until then every look
+    // finds it untaken, and nothing else is written.
+    let taken = first.at + Duration::from_micros(2_600);
+    let mut looks = 0;
+    loop {
+        match b.next() {
+            Slot::Listen { until } => b.now = until,
+            slot => panic!("{slot:?} written while a write waits to be taken"),
+        }
+        looks += 1;
+        let unsent = if b.now >= taken { 0 } else { 60 };
+        b.s.confirm_writes(Some(unsent), b.now);
+        if !b.s.awaiting_confirmation() {
+            break;
+        }
+    }
+    assert!(looks >= 3, "{looks} looks");
+    let seen = b.now;
+    // The wire is held as if the transfer left at the look that saw it
+    // taken: the next one leaves after its frames and the reply.
+    let second = pipeline_writes(&mut b, 1)[0];
+    let request_end = seen + FRAME * (first.broadcasts as u32 + 1);
+    let reply_end = b.s.clock().reply_end(request_end);
+    assert!(
+        second.released >= reply_end,
+        "the next transfer leaves {:?} into the last one's reply",
+        reply_end - second.released
+    );
+    // Looks a quarter frame apart: at most that much is lost.
+    assert!(
+        seen - taken <= Duration::from_micros(400),
+        "{:?}",
+        seen - taken
+    );
+    let view = b.s.usb_view(b.now).expect("a pipeline view");
+    assert!(view.confirming, "{view:?}");
+    assert_eq!(view.counts_given_up, 0);
+}
+
+#[test]
 fn a_request_waits_for_the_polls_in_flight_and_a_missing_reply_counts_at_its_deadline() {
     let (mut b, _) = pipelining_bus();
     let writes = pipeline_writes(&mut b, 3);
@@ -587,5 +637,39 @@ fn a_count_that_never_falls_holds_an_estop_no_longer_than_the_give_up_and_a_fram
     let view = b.s.usb_view(b.now).expect("a pipeline view");
     assert_eq!(view.counts_given_up, 1, "{view:?}");
     assert_eq!(b.s.take_confirm_counts(), (0, 1));
+    // The overdue write is still waited for: nothing but the e-stop goes
+    // behind it, which would follow it out of the adapter into its reply.
+    assert!(b.s.awaiting_confirmation());
+    let until = first.released + crate::bus::usb_confirm::MAX_WAITED / 2;
+    while b.now < until {
+        b.s.confirm_writes(Some(usize::MAX), b.now);
+        match b.next() {
+            Slot::Listen { until } => b.now = until.max(b.now + Duration::from_micros(100)),
+            slot => panic!("{slot:?} written behind an untaken write"),
+        }
+    }
+    // Taken at last: the wire is held from the look that saw it.
+    b.s.confirm_writes(Some(0), b.now);
+    assert!(!b.s.awaiting_confirmation());
+    assert!(b.s.clock().free_at() >= b.now);
+}
+
+#[test]
+fn a_count_that_never_falls_is_not_waited_for_past_the_longest_wait() {
+    let (mut b, _) = pipelining_bus();
+    pipeline_writes(&mut b, 1);
+    b.s.set_port_confirms(true);
+    let first = pipeline_writes(&mut b, 1)[0];
+    let slot = loop {
+        if b.s.awaiting_confirmation() {
+            b.s.confirm_writes(Some(usize::MAX), b.now);
+        }
+        match b.next() {
+            Slot::Listen { until } => b.now = until.max(b.now + Duration::from_micros(100)),
+            slot => break slot,
+        }
+    };
+    assert!(!matches!(slot, Slot::EStop { .. }));
+    assert!(b.now - first.released >= crate::bus::usb_confirm::MAX_WAITED);
     assert!(!b.s.awaiting_confirmation());
 }
