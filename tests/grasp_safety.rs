@@ -126,3 +126,48 @@ async fn a_disable_ends_its_finger_and_the_others_hold_on() {
     assert_eq!(state_of(&view, "b"), "aborted", "{view}");
     limits_restored(&b, &view).await;
 }
+
+/// A move that takes a finger out of a holding grasp starts where the
+/// finger stands against its object, not from the grasp's closing limit:
+/// it never presses further in, though the grasp hands its full current
+/// limit back as the move takes over.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_move_out_of_a_holding_grasp_never_presses_further_in() {
+    let b = hand(&[(1, 20.0, 0.01)]).await;
+    let id = grasp(
+        &b,
+        json!({"speed_dps": 30.0, "hold_current_a": 0.2, "joints": [
+            {"joint": "a", "close_to_deg": 80.0}]}),
+    )
+    .await;
+    wait_grasp(&b, id, "a holding", |v| state_of(v, "a") == "holding").await;
+    let stood = b.sim.device(1).expect("d").angle_deg;
+    let r = b
+        .server
+        .post(
+            "/api/v1/moves",
+            json!({"joints": [{"bus": "sim0", "id": 1, "position_deg": 0}], "duration_ms": 1000}),
+        )
+        .await;
+    assert_eq!(r.status.as_u16(), 201, "{}", r.body);
+    let mut deepest = stood;
+    let deadline = tokio::time::Instant::now() + support::sim_bus::WAIT;
+    loop {
+        let a = b.sim.device(1).expect("d").angle_deg;
+        deepest = deepest.max(a);
+        if a < 1.0 {
+            break;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "never opened (at {a}°)"
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(1)).await;
+    }
+    assert!(
+        deepest <= stood + 2.0,
+        "the finger pressed on to {deepest:.1}° from {stood:.1}° before opening"
+    );
+    let view = wait_grasp(&b, id, "done", |v| v["state"] == "done").await;
+    assert_eq!(finger(&view, "a")["current_limit_restored"], true, "{view}");
+}

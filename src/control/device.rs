@@ -30,7 +30,8 @@ pub fn revision_of(dev: &DeviceState) -> Option<Revision> {
 }
 
 /// Where a joint is headed: the last target sent, else where it was
-/// measured (a move or a pose starts from here).
+/// measured (what a pose saved from a hand records; paths start from the
+/// measured angle instead, [`measured_angle_raw`]).
 pub fn commanded_or_measured_raw(dev: &DeviceState) -> Option<i16> {
     dev.target_sent
         .map(|t| t.pos_ref)

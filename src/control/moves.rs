@@ -12,7 +12,7 @@ use utoipa::ToSchema;
 use crate::bus::handle::DeviceState;
 use crate::bus::motion::Follower;
 use crate::bus::BusHandle;
-use crate::control::device::{commanded_or_measured_raw, firmware_of};
+use crate::control::device::{firmware_of, measured_angle_raw};
 use crate::control::error::{ControlError, ControlResult};
 use crate::control::joints::{known_device, resolve_joint};
 use crate::control::move_book::Booked;
@@ -274,7 +274,11 @@ fn plan<'a>(state: &'a Control, req: &MoveRequest) -> ControlResult<Plan<'a>> {
                 ),
             ));
         }
-        let from = commanded_or_measured_raw(dev).ok_or_else(|| {
+        // From where the joint is, never from a target it has not
+        // reached: a path from the target would first turn it towards a
+        // goal it was just taken away from (or, out of a grasp, further
+        // into the object).
+        let from = measured_angle_raw(dev).ok_or_else(|| {
             ControlError::conflict(
                 "no-position",
                 "Position unknown",

@@ -8,7 +8,7 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::device::{commanded_or_measured_raw, firmware_of, revision_of};
+use super::device::{firmware_of, measured_angle_raw, revision_of};
 use super::error::{ControlError, ControlResult};
 use super::limits::JointLimits;
 use crate::bus::authority::Epoch;
@@ -165,8 +165,8 @@ fn speed_setpoint(
     let spd_ref = units::speed_dps_to_raw(cal.sign() * dps, firmware_of(dev))
         .map_err(|e| ControlError::from_unit(&names.speed().to_string(), e))?;
     // Not 0 when unknown: a device that reset unseen runs position mode,
-    // and takes this slot as its target.
-    let pos_ref = commanded_or_measured_raw(dev).ok_or_else(|| {
+    // and takes this slot as its target: where it stands holds it there.
+    let pos_ref = measured_angle_raw(dev).ok_or_else(|| {
         ControlError::conflict(
             "no-position",
             "Position unknown",
