@@ -17,21 +17,23 @@
 //! where blind writes must hold a frame after every poll for the one that
 //! might (see [`super::usb_guard`]).
 //!
-//! A count that stays up for [`MAX_UNTAKEN`] (an adapter that stopped
-//! taking bytes, a host too loaded to let it, a driver whose count cannot
-//! be trusted) is given up on, as evidence for the pipeline's guard, which
-//! backs off. The write is still waited for: anything written behind it
-//! would queue in the adapter and follow it onto the wire into its reply.
-//! Only an e-stop goes behind an overdue write (it can only queue there,
-//! and must not wait). A count still up [`MAX_WAITED`] after the boundary
-//! is taken for a count that lies, and no longer waited for.
+//! A count that stays up for [`MAX_UNTAKEN`] (an adapter slow to take
+//! bytes, a host too loaded to let it) is counted as given up on, and the
+//! write is still waited for: anything written behind it would queue in
+//! the adapter and follow it onto the wire into its reply, and blind
+//! writes would do worse on such a path. Only an e-stop goes behind an
+//! overdue write (it can only queue there, and must not wait). A count
+//! still up [`MAX_WAITED`] after the boundary is taken for a count that
+//! lies (a driver whose count does not fall): it is no longer waited for,
+//! and the pipeline's guard backs off to blind writes.
 //!
 //! What it tolerates: any lateness of the owner. A look made late holds
 //! the wire from the look; a write made late is seen untaken and moved;
 //! without a frame clock (a host too busy to learn it) the owner looks a
 //! few times a frame and holds the wire from the look that saw the take.
-//! Past that, a write untaken for [`MAX_UNTAKEN`] backs the pipeline off,
-//! and nothing but an e-stop is written until it is taken.
+//! A write untaken for [`MAX_UNTAKEN`] is counted, and nothing but an
+//! e-stop is written until it is taken; only past [`MAX_WAITED`] does the
+//! pipeline back off.
 //!
 //! Pure: every instant is passed in.
 
@@ -45,6 +47,11 @@ pub(crate) const CHECK_AFTER: f64 = 0.15;
 /// How long after the boundary it was aimed at a write may stay untaken
 /// before the count is given up on: four full-speed USB frames.
 pub(crate) const MAX_UNTAKEN: Duration = Duration::from_millis(4);
+/// How long before the boundary a write is aimed at the count is read
+/// once, where the write leaves time for it, as a share of the frame:
+/// still untaken there, the frame clock's estimate held for this write;
+/// taken already, the estimate is off (see [`Outcome::TakenEarly`]).
+pub(crate) const EARLY_LOOK: f64 = 0.1;
 /// How long after its boundary an untaken write is waited for at all: a
 /// count up this long says nothing of the adapter any more.
 pub(crate) const MAX_WAITED: Duration = Duration::from_millis(50);
@@ -62,6 +69,11 @@ struct Pending {
     poll: bool,
     /// Untaken past [`MAX_UNTAKEN`]: given up on as evidence, still waited for.
     overdue: bool,
+    /// Aimed by the frame clock (not held as late as an unclocked write
+    /// may leave): a take before `first` says the clock is off.
+    clocked: bool,
+    /// When to read the count once before `first` (see [`EARLY_LOOK`]).
+    early: Option<Instant>,
 }
 
 /// What a look at the count found.
@@ -69,6 +81,14 @@ struct Pending {
 pub(crate) enum Outcome {
     /// Nothing to confirm, or too early to tell.
     Wait,
+    /// Untaken shortly before the boundary it was aimed at, as the frame
+    /// clock says it should be.
+    OnClock,
+    /// Taken before the boundary the frame clock had it leave at: the
+    /// clock's estimate is off (a host that reads replies late learns it
+    /// late), and a write made early in a frame may leave a frame early.
+    /// The wire model keeps it at the later boundary (later than the truth).
+    TakenEarly { poll: bool },
     /// Taken by the look: the wire model moves `by` (zero when the model
     /// already had it leave at or after the look).
     Taken { by: Duration, poll: bool },
@@ -93,21 +113,35 @@ pub(crate) struct Confirm {
     pub late: u64,
     /// Writes whose count stayed up for [`MAX_UNTAKEN`].
     pub gave_up: u64,
+    /// Writes seen taken before the boundary the frame clock aimed them at.
+    pub early_takes: u64,
     /// Of those, not yet handed to the bus counters: (late, given up).
     untaken: (u64, u64),
 }
 
 impl Confirm {
-    /// A write was handed over; `boundary` is the first after that, where
-    /// the wire model has it leave.
-    pub(crate) fn written(&mut self, boundary: Instant) {
+    /// A write was handed over; `boundary` is the first after that by the
+    /// frame clock, where the wire model has it leave; `early`, when to
+    /// check the clock on it before then.
+    pub(crate) fn written(&mut self, boundary: Instant, early: Option<Instant>) {
         self.pending = Some(Pending {
             first: boundary,
             frame: boundary,
             modeled: boundary,
             poll: false,
             overdue: false,
+            clocked: true,
+            early,
         });
+    }
+
+    /// A write was handed over with no frame clock: the wire model has it
+    /// leave at `latest`, the latest it may.
+    pub(crate) fn written_unclocked(&mut self, latest: Instant) {
+        self.written(latest, None);
+        if let Some(p) = self.pending.as_mut() {
+            p.clocked = false;
+        }
     }
 
     /// The write just made carried a poll.
@@ -130,7 +164,7 @@ impl Confirm {
     /// When to read the count next.
     pub(crate) fn check_at(&self, period: Duration) -> Option<Instant> {
         let p = self.pending?;
-        Some(p.frame + period.mul_f64(CHECK_AFTER))
+        Some(p.early.unwrap_or(p.frame + period.mul_f64(CHECK_AFTER)))
     }
 
     /// The count read `unsent`, timed `now` after the read (`None`: the
@@ -154,6 +188,11 @@ impl Confirm {
                     poll: p.poll,
                 }
             }
+            Some(0) if p.clocked && now < p.first => {
+                self.pending = None;
+                self.early_takes += 1;
+                Outcome::TakenEarly { poll: p.poll }
+            }
             Some(0) => {
                 self.pending = None;
                 // Taken by now: the wire is held from now at the latest.
@@ -166,6 +205,13 @@ impl Confirm {
                 }
             }
             Some(_) => {
+                if p.early.is_some_and(|early| now >= early) {
+                    p.early = None;
+                    self.pending = Some(p);
+                    if now < p.first {
+                        return Outcome::OnClock;
+                    }
+                }
                 if now < p.frame + period.mul_f64(CHECK_AFTER) {
                     return Outcome::Wait;
                 }
@@ -225,7 +271,7 @@ mod tests {
     fn a_write_taken_by_the_look_holds_the_wire_from_the_look() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P);
+        c.written(t0 + P, None);
         c.carried_poll();
         assert_eq!(c.check_at(P), Some(t0 + us(1_150)));
         assert_eq!(c.look(Some(40), t0 + us(900), P, after(t0)), Outcome::Wait);
@@ -241,26 +287,64 @@ mod tests {
     }
 
     #[test]
-    fn a_write_taken_before_its_boundary_moves_nothing() {
-        // The frame clock's estimate a little late: the count shows the
-        // write taken before the boundary the model has.
+    fn a_write_taken_before_its_boundary_says_the_clock_is_off() {
+        // The frame clock's estimate late: the count shows the write taken
+        // before the boundary the model has, which stays (later than the
+        // truth: nothing moves).
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P);
+        c.written(t0 + P, Some(t0 + us(900)));
+        assert_eq!(c.check_at(P), Some(t0 + us(900)));
         assert_eq!(
-            c.look(Some(0), t0 + us(990), P, after(t0)),
+            c.look(Some(0), t0 + us(900), P, after(t0)),
+            Outcome::TakenEarly { poll: false }
+        );
+        assert!(!c.waiting());
+        assert_eq!(c.early_takes, 1);
+    }
+
+    #[test]
+    fn a_write_untaken_just_before_its_boundary_is_on_the_clock() {
+        let t0 = Instant::now();
+        let mut c = Confirm::default();
+        c.written(t0 + P, Some(t0 + us(900)));
+        // A look before the early one says nothing yet.
+        assert_eq!(c.look(Some(40), t0 + us(500), P, after(t0)), Outcome::Wait);
+        assert_eq!(
+            c.look(Some(40), t0 + us(905), P, after(t0)),
+            Outcome::OnClock
+        );
+        // Then the regular look.
+        assert_eq!(c.check_at(P), Some(t0 + us(1_150)));
+        assert_eq!(
+            c.look(Some(0), t0 + us(1_150), P, after(t0)),
             Outcome::Taken {
-                by: Duration::ZERO,
+                by: us(150),
                 poll: false
             }
         );
     }
 
     #[test]
+    fn an_unclocked_write_taken_before_its_latest_is_no_clock_error() {
+        let t0 = Instant::now();
+        let mut c = Confirm::default();
+        c.written_unclocked(t0 + us(1_200));
+        assert_eq!(
+            c.look(Some(0), t0 + us(1_000), P, after(t0)),
+            Outcome::Taken {
+                by: Duration::ZERO,
+                poll: false
+            }
+        );
+        assert_eq!(c.early_takes, 0);
+    }
+
+    #[test]
     fn a_write_untaken_at_the_look_moves_past_the_next_boundary() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P);
+        c.written(t0 + P, None);
         let moved = c.look(Some(60), t0 + us(1_150), P, after(t0));
         assert_eq!(moved, Outcome::Moved { by: P, poll: false });
         assert_eq!(c.check_at(P), Some(t0 + us(2_150)));
@@ -282,7 +366,7 @@ mod tests {
     fn a_look_long_after_the_boundary_holds_the_wire_from_the_look() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P);
+        c.written(t0 + P, None);
         // The host looked only at 2.3 ms: it left by then, when is unknown.
         assert_eq!(
             c.look(Some(0), t0 + us(2_300), P, after(t0)),
@@ -292,7 +376,7 @@ mod tests {
             }
         );
         // Untaken at 2.3 ms: it leaves at 3 ms at the earliest.
-        c.written(t0 + P);
+        c.written(t0 + P, None);
         assert_eq!(
             c.look(Some(20), t0 + us(2_300), P, after(t0)),
             Outcome::Moved {
@@ -306,7 +390,7 @@ mod tests {
     fn a_count_that_stays_up_is_given_up_on() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P);
+        c.written(t0 + P, None);
         let mut outcomes = Vec::new();
         for k in 1..=6u64 {
             let at = t0 + us(1_000 * k + 200);
@@ -340,7 +424,7 @@ mod tests {
     fn a_count_up_past_the_longest_wait_is_not_believed() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P);
+        c.written(t0 + P, None);
         let mut last = Outcome::Wait;
         for k in 1..=60u64 {
             last = c.look(Some(60), t0 + us(1_000 * k + 200), P, after(t0));
@@ -356,7 +440,7 @@ mod tests {
     fn a_port_that_cannot_tell_ends_the_wait() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P);
+        c.written(t0 + P, None);
         assert!(matches!(
             c.look(None, t0 + us(100), P, after(t0)),
             Outcome::Taken { .. }

@@ -60,6 +60,9 @@ const GUARD: Duration = Duration::from_micros(50);
 /// many times a frame: each look later than the take holds the wire up to
 /// that much longer than it was busy.
 const UNCLOCKED_LOOKS_PER_FRAME: u32 = 4;
+/// Confirmed writes are made early in the frame before their boundary
+/// only once this many in a row were seen untaken just before it.
+const CLOCK_CHECKS_TRUSTED: u32 = 8;
 
 /// A poll written blind: its reply is matched when the adapter hands it over.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -125,6 +128,9 @@ pub(crate) struct UsbPipeline {
     port_confirms: bool,
     /// The write waiting to be seen taken ([`super::usb_confirm`]).
     confirm: Confirm,
+    /// Writes in a row seen untaken just before the boundary the frame
+    /// clock aimed them at (none seen taken before it).
+    clock_checks: u32,
 }
 
 impl UsbPipeline {
@@ -147,6 +153,7 @@ impl UsbPipeline {
             armed: false,
             port_confirms: false,
             confirm: Confirm::default(),
+            clock_checks: 0,
         };
         pipeline.set_adapter(adapter);
         Some(pipeline)
@@ -233,13 +240,26 @@ impl UsbPipeline {
         });
         let (by, poll, change) = match outcome {
             Outcome::Wait => return (Duration::ZERO, None),
+            Outcome::OnClock => {
+                self.clock_checks = self.clock_checks.saturating_add(1);
+                return (Duration::ZERO, None);
+            }
+            Outcome::TakenEarly { .. } => {
+                // Off by most of a frame: writes wait for the wire to be
+                // free until the clock holds again for a run of writes.
+                self.clock_checks = 0;
+                return (Duration::ZERO, None);
+            }
+            // A write the adapter is slow to take is still waited for:
+            // blind writes would do worse on such a path, so the guard
+            // stays; only a count that does not fall at all backs it off.
             Outcome::Taken { by, poll }
             | Outcome::Moved { by, poll }
-            | Outcome::Abandoned { by, poll } => (by, poll, None),
-            Outcome::GaveUp { by, poll } => {
+            | Outcome::GaveUp { by, poll } => (by, poll, None),
+            Outcome::Abandoned { by, poll } => {
                 let change = self.guard.incident(
                     Evidence::Untaken {
-                        after: super::usb_confirm::MAX_UNTAKEN,
+                        after: super::usb_confirm::MAX_WAITED,
                     },
                     now,
                 );
@@ -359,7 +379,18 @@ impl UsbPipeline {
             .period()
             .mul_f64(self.guard.lead())
             .max(self.period() / 2);
-        release.checked_sub(lead).unwrap_or(release)
+        let at = release.checked_sub(lead).unwrap_or(release);
+        if self.confirming() && self.clock_checks < CLOCK_CHECKS_TRUSTED {
+            // Not before the wire is free while the count has not shown
+            // the frame clock right: its estimate can be off by most of a
+            // frame on a host that reads replies late, and a write made
+            // early in the frame before the boundary it aims at is then
+            // taken at the boundary before, into the reply still on the
+            // wire. Made once the wire is free, no boundary can take it
+            // too early, and the count says when one took it late.
+            return at.max(free_at + GUARD);
+        }
+        at
     }
 
     /// The first boundary the wire allows that the host can still make.
@@ -633,6 +664,7 @@ impl UsbPipeline {
     pub(crate) fn reset(&mut self) {
         self.inflight.clear();
         self.phase.forget();
+        self.clock_checks = 0;
         self.armed = false;
         self.sentinel_at = None;
         self.confirm.reset();
@@ -646,10 +678,15 @@ impl UsbPipeline {
             return;
         }
         if self.active() {
-            self.confirm.written(self.phase.boundary_after(handed));
+            let boundary = self.phase.boundary_after(handed);
+            let early = boundary
+                .checked_sub(self.period().mul_f64(super::usb_confirm::EARLY_LOOK))
+                .filter(|&at| at > handed);
+            self.confirm.written(boundary, early);
         } else {
             // Held as late as an unclocked write may leave; looked at then.
-            self.confirm.written(self.latest_release(handed).at);
+            self.confirm
+                .written_unclocked(self.latest_release(handed).at);
         }
     }
 }

@@ -544,11 +544,19 @@ fn confirmed_writes_wait_to_be_seen_taken_and_a_late_one_moves_the_wire() {
     pipeline_writes(&mut b, 1);
     b.s.set_port_confirms(true);
     let first = pipeline_writes(&mut b, 1)[0];
-    // Held as on time: from the boundary after the write.
-    assert_eq!(first.released - first.at, Duration::from_micros(800));
+    // Held as on time: from the boundary after the write (made once the
+    // wire is free: the count has not shown the clock right yet).
+    assert!(first.released > first.at);
     assert!(b.s.awaiting_confirmation());
-    // Nothing more is written until the port's count is read, 0.15 of a
-    // frame after that boundary.
+    // Nothing more is written until the port's count is read: a tenth of
+    // a frame before that boundary (still untaken: the clock holds), then
+    // 0.15 of a frame after it.
+    let Slot::Listen { until } = b.next() else {
+        panic!("a write while the last waits to be seen taken");
+    };
+    assert_eq!(until, first.released - Duration::from_micros(100));
+    b.now = until;
+    b.s.confirm_writes(Some(60), b.now);
     let Slot::Listen { until } = b.next() else {
         panic!("a write while the last waits to be seen taken");
     };
@@ -579,6 +587,51 @@ fn confirmed_writes_wait_to_be_seen_taken_and_a_late_one_moves_the_wire() {
     assert_eq!(view.mode, crate::bus::usb_guard::PipelineMode::Pipelined);
 }
 
+/// One confirmed write, looked at as the owner does: untaken a tenth of
+/// a frame before its boundary (`early_unsent`), taken after it.
+fn confirmed_write(b: &mut Bus, early_unsent: usize) -> (Written, Instant) {
+    let free_before = b.s.clock().free_at();
+    let w = pipeline_writes(b, 1)[0];
+    while b.s.awaiting_confirmation() {
+        let Slot::Listen { until } = b.next() else {
+            panic!("a write while the last waits to be seen taken");
+        };
+        b.now = until;
+        let unsent = if b.now < w.released { early_unsent } else { 0 };
+        b.s.confirm_writes(Some(unsent), b.now);
+    }
+    (w, free_before)
+}
+
+#[test]
+fn confirmed_writes_lead_their_boundary_only_once_the_count_shows_the_clock_right() {
+    let (mut b, _) = pipelining_bus();
+    pipeline_writes(&mut b, 1);
+    b.s.set_port_confirms(true);
+    let mut leads = Vec::new();
+    for _ in 0..12 {
+        let (w, free_before) = confirmed_write(&mut b, 60);
+        // Until trusted, never before the wire is free of the last one.
+        if leads.len() < 8 {
+            assert!(w.at >= free_before, "{w:?} before {free_before:?}");
+        }
+        leads.push(w.released - w.at);
+    }
+    assert!(
+        leads[..8].iter().all(|l| *l < Duration::from_micros(800)),
+        "{leads:?}"
+    );
+    assert!(
+        leads[9..].iter().all(|l| *l == Duration::from_micros(800)),
+        "{leads:?}"
+    );
+    // A write taken before its boundary: the clock is off; back to waiting
+    // for the wire to be free.
+    let _ = confirmed_write(&mut b, 0);
+    let (w, free_before) = confirmed_write(&mut b, 60);
+    assert!(w.at >= free_before, "{w:?} before {free_before:?}");
+}
+
 #[test]
 fn confirmed_writes_have_no_sentinels() {
     let (mut b, _) = pipelining_bus();
@@ -591,9 +644,10 @@ fn confirmed_writes_have_no_sentinels() {
         b.s.confirm_writes(Some(0), b.now);
         writes.push(w);
     }
-    // Every write 0.8 ms before its boundary (a sentinel would be 0.1).
+    // Once the count has shown the clock right for a run of writes, every
+    // write 0.8 ms before its boundary (a sentinel would be 0.1).
     assert!(
-        writes
+        writes[10..]
             .iter()
             .all(|w| w.released - w.at == Duration::from_micros(800)),
         "{writes:?}"
@@ -672,4 +726,12 @@ fn a_count_that_never_falls_is_not_waited_for_past_the_longest_wait() {
     assert!(!matches!(slot, Slot::EStop { .. }));
     assert!(b.now - first.released >= crate::bus::usb_confirm::MAX_WAITED);
     assert!(!b.s.awaiting_confirmation());
+    // A count that does not fall is not believed: blind writes from here.
+    let view = b.s.usb_view(b.now).expect("a pipeline view");
+    assert_ne!(
+        view.mode,
+        crate::bus::usb_guard::PipelineMode::Pipelined,
+        "{view:?}"
+    );
+    assert!(!view.confirming, "{view:?}");
 }
