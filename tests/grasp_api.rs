@@ -165,6 +165,24 @@ async fn bad_grasps_are_4xx_problems_that_say_what_is_wrong() {
     let field = |r: &support::http::Resp, status: u16| r.problem(status)["field"].clone();
     let r = bad(json!({"speed_dps": 0, "hold_current_a": 0.2})).await;
     assert_eq!(field(&r, 422), "speed_dps");
+    // Too slow for the wire to carry: sent as 0, the finger would close
+    // for ever.
+    let r = bad(json!({"speed_dps": 1e-300, "hold_current_a": 0.2})).await;
+    assert_eq!(field(&r, 422), "speed_dps", "{}", r.body);
+    // Below the current's noise: any reading would be contact.
+    let r =
+        bad(json!({"speed_dps": 30, "hold_current_a": 0.2, "contact_threshold_a": 1e-300})).await;
+    assert_eq!(field(&r, 422), "contact_threshold_a", "{}", r.body);
+    // Every finger stands at 0°: closing to -10° would open.
+    let r = bad(json!({"speed_dps": 30, "hold_current_a": 0.2,
+        "joints": [{"joint": "a", "close_to_deg": -10}]}))
+    .await;
+    let p = r.problem(422);
+    assert_eq!(p["type"], "urn:jointd:problem:would-open", "{p}");
+    assert!(
+        p["detail"].as_str().unwrap_or("").contains("joint `a`"),
+        "{p}"
+    );
     let r = bad(json!({"speed_dps": 30, "hold_current_a": -1})).await;
     assert_eq!(field(&r, 422), "hold_current_a");
     let r = bad(json!({"speed_dps": 30, "hold_current_a": 0.2, "contact_threshold_a": 0.3})).await;

@@ -75,3 +75,46 @@ async fn a_release_that_would_close_is_refused_and_a_stop_ends_an_opening() {
     );
     limits_restored(&b, &view).await;
 }
+
+/// A release's speed is checked as every motion speed is: over a finger's
+/// soft speed limit it is refused before anything moves.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_release_faster_than_a_fingers_soft_limit_is_refused() {
+    // Joint b (id 2) may turn at 60 °/s at most.
+    let b = hand(&[(2, 10.0, 0.1)]).await;
+    let s = &b.server;
+    let id = grasp(
+        &b,
+        json!({"speed_dps": 30, "hold_current_a": 0.2,
+               "joints": [{"joint": "b", "close_to_deg": 30}]}),
+    )
+    .await;
+    wait_grasp(&b, id, "b holding", |v| state_of(v, "b") == "holding").await;
+    let r = s
+        .post(
+            &format!("/api/v1/grasps/{id}/release"),
+            json!({"open_deg": 5, "speed_dps": 180}),
+        )
+        .await;
+    let p = r.problem(422);
+    assert_eq!(p["type"], "urn:jointd:problem:soft-limit", "{p}");
+    let view = s.get(&format!("/api/v1/grasps/{id}")).await.ok().clone();
+    assert_eq!(state_of(&view, "b"), "holding", "nothing moved: {view}");
+    let r = s
+        .post(
+            &format!("/api/v1/grasps/{id}/release"),
+            json!({"open_deg": 5, "speed_dps": 1e-300}),
+        )
+        .await;
+    assert_eq!(r.problem(422)["field"], "speed_dps", "{}", r.body);
+    let view = s
+        .post(
+            &format!("/api/v1/grasps/{id}/release"),
+            json!({"open_deg": 5, "speed_dps": 40}),
+        )
+        .await
+        .ok()
+        .clone();
+    assert_eq!(state_of(&view, "b"), "released", "{view}");
+    limits_restored(&b, &view).await;
+}

@@ -28,6 +28,8 @@ pub enum InvalidKind {
     SoftLimit,
     /// Outside the usable range the joint's calibration gives it.
     CalibratedRange,
+    /// A grasp's closing limit on the opening side of where a finger is.
+    WouldOpen,
 }
 
 impl InvalidKind {
@@ -39,6 +41,7 @@ impl InvalidKind {
             Self::OutOfRange => "out-of-range",
             Self::SoftLimit => "soft-limit",
             Self::CalibratedRange => "calibrated-range",
+            Self::WouldOpen => "would-open",
         }
     }
 
@@ -49,6 +52,7 @@ impl InvalidKind {
             Self::OutOfRange => "Value out of range",
             Self::SoftLimit => "Target outside the joint's soft limits",
             Self::CalibratedRange => "Target outside the joint's calibrated range",
+            Self::WouldOpen => "A grasp that would open a finger",
         }
     }
 }
@@ -97,7 +101,7 @@ pub enum ControlError {
 pub type ControlResult<T> = Result<T, ControlError>;
 
 impl ControlError {
-    fn invalid_as(kind: InvalidKind, field: &str, detail: String) -> Self {
+    pub(crate) fn invalid_as(kind: InvalidKind, field: &str, detail: String) -> Self {
         Self::Invalid {
             kind,
             field: field.to_owned(),

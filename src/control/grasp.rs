@@ -166,7 +166,7 @@ pub(crate) async fn release(
         Some(s) => speed("speed_dps", s)?,
         None => job.settings.speed_dps,
     };
-    let goals = open_goals(state, &job, req)?;
+    let goals = open_goals(state, &job, req, speed_dps)?;
     job.command
         .send_replace(Command::Release { goals, speed_dps });
     wait_done(state, id, &job).await

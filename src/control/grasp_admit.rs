@@ -6,14 +6,14 @@
 
 use std::sync::{Arc, Mutex};
 
-use super::error::{ControlError, ControlResult};
+use super::error::{ControlError, ControlResult, InvalidKind};
 use super::grasp_book::{Busy, FingerGrasp, FingerState, GraspSettings};
 use super::grasp_plan::Finger;
 use super::grasp_request::{busy, GraspRequest, CLOSED_POSE};
 use super::joints::known_device;
 use super::targets::admit_positions;
 use super::Control;
-use crate::control::device::measured_angle_raw;
+use crate::control::device::{firmware_of, measured_angle_raw};
 use crate::hands::{Calibration, Hand, HandJoint};
 use crate::protocol::units;
 
@@ -21,8 +21,12 @@ use crate::protocol::units;
 const MAX_SPEED_DPS: f64 = 180.0;
 /// The contact threshold by default: this share of the hold current ...
 const THRESHOLD_SHARE: f64 = 0.3;
-/// ... but at least this (above the current's noise), A.
+/// ... but at least this (above the current's noise), A; a threshold
+/// asked for below it would take the noise for contact.
 const MIN_THRESHOLD_A: f64 = 0.02;
+/// A finger may stand this far past its closing limit (degrees) and still
+/// be closed to it: the reading's noise, not an opening.
+const PAST_LIMIT_DEG: f64 = 0.5;
 
 pub(super) fn here_joint_deg(
     state: &Control,
@@ -58,14 +62,18 @@ pub(super) fn settings(req: &GraspRequest) -> ControlResult<GraspSettings> {
     let threshold = req
         .contact_threshold_a
         .unwrap_or((THRESHOLD_SHARE * hold).max(MIN_THRESHOLD_A));
-    if !(threshold.is_finite() && threshold > 0.0 && threshold < hold) {
-        return Err(
-            ControlError::out_of_range("contact_threshold_a", threshold, (0.0, hold), "A")
-                .with_detail(format!(
-            "contact_threshold_a = {threshold} A must lie above 0 and below hold_current_a \
-             ({hold} A): the current a finger holds with never rises over a higher one"
-        )),
-        );
+    if !(threshold.is_finite() && threshold >= MIN_THRESHOLD_A && threshold < hold) {
+        return Err(ControlError::out_of_range(
+            "contact_threshold_a",
+            threshold,
+            (MIN_THRESHOLD_A, hold),
+            "A",
+        )
+        .with_detail(format!(
+            "contact_threshold_a = {threshold} A must lie from {MIN_THRESHOLD_A} A (below it the \
+             current's noise reads as contact) up to below hold_current_a ({hold} A): the current \
+             a finger holds with never rises over a higher one"
+        )));
     }
     Ok(GraspSettings {
         speed_dps,
@@ -178,7 +186,8 @@ pub(super) fn admit(
     let who = format!("joint `{}`", joint.name);
     let close_to_deg = soft.check_joint_position(&cal, &field, close_to_joint_deg, &who)?;
     let start_deg = here_joint_deg(state, &joint.bus, joint.id, &cal)?;
-    soft.check_speed(&"speed_dps", settings.speed_dps, &who)?;
+    would_open(&field, &joint.name, close_to_joint_deg, start_deg)?;
+    soft.check_motion_speed(&"speed_dps", settings.speed_dps, firmware_of(dev), &who)?;
     let slot = Arc::new(Mutex::new(FingerGrasp {
         bus: joint.bus.clone(),
         id: joint.id,
@@ -203,6 +212,24 @@ pub(super) fn admit(
         close_to_deg,
         slot,
     })
+}
+
+/// Fingers close towards higher angles of their calibrated frame (a
+/// calibration flips a joint whose device turns the other way): a closing
+/// limit below where a finger stands would open it, and is refused.
+pub(super) fn would_open(field: &str, joint: &str, close_to: f64, here: f64) -> ControlResult<()> {
+    if close_to + PAST_LIMIT_DEG >= here {
+        return Ok(());
+    }
+    Err(ControlError::invalid_as(
+        InvalidKind::WouldOpen,
+        field,
+        format!(
+            "joint `{joint}`: closing to {close_to:.1}° is below where it stands ({here:.1}°); \
+             fingers close towards higher angles, so it would open: give a limit above where \
+             the finger stands, or none for its default"
+        ),
+    ))
 }
 
 /// A joint still aligning (or, under rev 2.0.8, starting) is enabled but

@@ -20,6 +20,7 @@ pub(super) fn open_goals(
     state: &Control,
     job: &Job,
     req: &ReleaseRequest,
+    speed_dps: f64,
 ) -> ControlResult<Vec<Option<f64>>> {
     if req.pose.is_some() && req.open_deg.is_some() {
         return Err(ControlError::invalid(
@@ -58,9 +59,26 @@ pub(super) fn open_goals(
             if !f.state.live() {
                 return Ok(None);
             }
+            open_speed(state, &f, speed_dps)?;
             open_goal(state, &f, pose.as_ref(), req.open_deg).map(Some)
         })
         .collect()
+}
+
+/// The opening speed, checked for one finger as every motion speed is.
+fn open_speed(state: &Control, f: &FingerGrasp, speed_dps: f64) -> ControlResult<()> {
+    let snap = state.bus(&f.bus)?.snapshot();
+    let fw = snap
+        .devices
+        .get(&f.id)
+        .map(crate::control::device::firmware_of)
+        .unwrap_or_default();
+    state.limits(&f.bus, f.id).check_motion_speed(
+        &"speed_dps",
+        speed_dps,
+        fw,
+        &format!("joint `{}`", f.joint),
+    )
 }
 
 /// Where one finger opens to (device degrees), checked against its limits.

@@ -19,6 +19,8 @@ pub(crate) struct GraspJoint {
     pub joint: String,
     /// Where it closes to at most, degrees (calibrated frame); default:
     /// the hand's pose `closed`, else the top of the joint's allowed range.
+    /// Fingers close towards higher angles: a limit below where the finger
+    /// stands is refused (`would-open`).
     #[schema(example = 90.0)]
     pub close_to_deg: Option<f64>,
 }
@@ -28,7 +30,8 @@ pub(crate) struct GraspJoint {
 #[serde(deny_unknown_fields)]
 #[schema(example = json!({"speed_dps": 30.0, "hold_current_a": 0.2}))]
 pub(crate) struct GraspRequest {
-    /// Closing speed at the output, °/s (0 < s ≤ 180).
+    /// Closing speed at the output, °/s (0 < s ≤ 180, within each
+    /// finger's soft speed limit, and no slower than the wire carries).
     #[schema(example = 30.0, exclusive_minimum = 0.0, maximum = 180.0)]
     pub speed_dps: f64,
     /// The force each finger holds with, as a q current, A (0 < I ≤ 5.625,
@@ -36,9 +39,10 @@ pub(crate) struct GraspRequest {
     #[schema(example = 0.2, exclusive_minimum = 0.0, maximum = 5.625)]
     pub hold_current_a: f64,
     /// The rise of q current over what the finger draws moving freely that
-    /// counts as contact, A (0 < t < hold_current_a; default 30 % of
-    /// hold_current_a, at least 0.02).
-    #[schema(example = 0.06, exclusive_minimum = 0.0)]
+    /// counts as contact, A (0.02 ≤ t < hold_current_a: below 0.02 the
+    /// current's noise reads as contact; default 30 % of hold_current_a,
+    /// at least 0.02).
+    #[schema(example = 0.06, minimum = 0.02)]
     pub contact_threshold_a: Option<f64>,
     /// The fingers (1..=64, each once); default: every joint of the hand.
     pub joints: Option<Vec<GraspJoint>>,
@@ -55,7 +59,8 @@ pub(crate) struct ReleaseRequest {
     /// Open each finger by this much from where it is, degrees (0 < d ≤ 180).
     #[schema(example = 20.0, exclusive_minimum = 0.0, maximum = 180.0)]
     pub open_deg: Option<f64>,
-    /// Opening speed, °/s (default: the closing speed).
+    /// Opening speed, °/s (default: the closing speed), checked as the
+    /// closing speed is.
     #[schema(example = 30.0, exclusive_minimum = 0.0, maximum = 180.0)]
     pub speed_dps: Option<f64>,
 }

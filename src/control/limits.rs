@@ -10,7 +10,7 @@ use utoipa::ToSchema;
 
 use super::error::ControlError;
 use crate::hands::Calibration;
-use crate::protocol::units::{output_deg_per_s, MAX_ANGLE_DEG};
+use crate::protocol::units::{self, output_deg_per_s, FirmwareVersion, MAX_ANGLE_DEG};
 
 /// One rule of the `[[limit]]` table. Later rules override earlier ones
 /// field by field, so a bus-wide default can be narrowed for single joints.
@@ -175,6 +175,33 @@ impl JointLimits {
             ));
         }
         Ok(device)
+    }
+
+    /// A speed a motion is to reach its goal at, °/s (a position target's
+    /// speed limit, a grasp's closing or opening speed): at least the
+    /// smallest the wire carries for firmware `fw` (below it the device is
+    /// sent 0 and never arrives), and within the soft limit.
+    pub fn check_motion_speed(
+        &self,
+        field: &dyn Display,
+        dps: f64,
+        fw: FirmwareVersion,
+        who: &dyn Display,
+    ) -> Result<(), ControlError> {
+        let floor = output_deg_per_s(units::speed_rpm(1, fw));
+        if !(dps.is_finite() && dps >= floor) {
+            let top = self
+                .max_speed_dps
+                .unwrap_or_else(|| output_deg_per_s(fw.speed_base_rpm()));
+            return Err(
+                ControlError::out_of_range(&field.to_string(), dps, (floor, top), "°/s")
+                    .with_detail(format!(
+                "{field} = {dps} °/s for {who}: a motion needs at least {floor:.4} °/s, the \
+                 smallest speed the wire carries, or it never arrives"
+            )),
+            );
+        }
+        self.check_speed(field, dps, who)
     }
 
     /// Refuses an output speed (°/s) whose magnitude exceeds `max_speed_dps`.

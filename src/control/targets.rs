@@ -86,7 +86,7 @@ pub(crate) fn setpoint(
         .max_speed_dps
         .map_or(DEFAULT_SPEED_LIMIT_DPS, |m| m.min(DEFAULT_SPEED_LIMIT_DPS));
     let dps = req.speed_dps.unwrap_or(default_dps);
-    limits.check_speed(&names.speed(), dps, &names.who())?;
+    limits.check_motion_speed(&names.speed(), dps, fw, &names.who())?;
     let spd_ref = units::speed_limit_dps_to_raw(dps, fw)
         .map_err(|e| ControlError::from_unit(&names.speed().to_string(), e))?;
     Ok(Setpoint { pos_ref, spd_ref })

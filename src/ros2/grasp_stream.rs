@@ -20,10 +20,8 @@ use super::gripper::{self, FingerNow};
 use super::keys;
 use super::msgs::GripperCommand;
 use super::Ros2Stats;
-use crate::control::device::measured_angle_raw;
 use crate::control::grasp;
 use crate::control::Control;
-use crate::protocol::units;
 use crate::record::cdr::diagnostic_array_cdr;
 use crate::record::joint_states::system_ns;
 
@@ -88,27 +86,15 @@ async fn start(
     Ok(grasp::start(state, hand, &req).await?.id)
 }
 
-/// The hand's fingers and where each stands (calibrated degrees).
+/// The hand's fingers.
 fn fingers_now(state: &Control, hand: &str) -> Vec<FingerNow> {
     let Some(h) = state.hands().and_then(|s| s.hand(hand)).cloned() else {
         return Vec::new();
     };
     h.joints
         .iter()
-        .map(|j| {
-            let here_deg = state.bus(&j.bus).ok().and_then(|b| {
-                let snap = b.snapshot();
-                let raw = snap.devices.get(&j.id).and_then(measured_angle_raw)?;
-                Some(
-                    state
-                        .calibration(&j.bus, j.id)
-                        .to_joint(units::angle_deg(raw)),
-                )
-            });
-            FingerNow {
-                name: j.name.clone(),
-                here_deg,
-            }
+        .map(|j| FingerNow {
+            name: j.name.clone(),
         })
         .collect()
 }

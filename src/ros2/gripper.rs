@@ -9,9 +9,10 @@
 //! (the hand's pose `closed`, else the top of its allowed range, as REST
 //! without `close_to_deg`); `max_effort` is the hold current in A (the
 //! unit of `joint_states`' effort). Fingers close towards higher angles:
-//! a limit below where a finger stands would open it, so such a command
-//! is refused whole, naming the finger. The closing speed is `[ros2]
-//! grasp_speed_dps` (the message has none).
+//! a limit below where a finger stands would open it, which the control
+//! core refuses (`would-open`, naming the finger) as it does for REST and
+//! the WebSocket. The closing speed is `[ros2] grasp_speed_dps` (the
+//! message has none).
 
 use super::commands::Refused;
 use super::msgs::GripperCommand;
@@ -19,16 +20,10 @@ use crate::control::grasp::{GraspJoint, GraspRequest};
 use crate::control::grasp_book::{FingerState, GraspView};
 use crate::record::cdr::DiagnosticStatus;
 
-/// A finger may stand this far past a closing limit (degrees) and still
-/// be closed to it: the reading's noise, not an opening.
-const PAST_LIMIT_DEG: f64 = 0.5;
-
-/// One finger of the hand: its joint name and where it stands now
-/// (calibrated degrees; `None` before its first reading).
+/// One finger of the hand: its joint name.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct FingerNow {
     pub name: String,
-    pub here_deg: Option<f64>,
 }
 
 /// The grasp request `cmd` asks of a hand with `fingers`, closing at
@@ -62,21 +57,6 @@ pub(crate) fn grasp_request(
         ));
     } else {
         let close_to = cmd.position.to_degrees();
-        if let Some(f) = fingers
-            .iter()
-            .find(|f| f.here_deg.is_some_and(|h| h > close_to + PAST_LIMIT_DEG))
-        {
-            let here = f.here_deg.unwrap_or_default().to_radians();
-            return Err(Refused::new(
-                "would-open",
-                format!(
-                    "position = {:.4} rad is below joint `{}` (at {here:.4} rad): fingers close \
-                     towards higher angles, so it would open; give a limit above every finger, \
-                     or NaN for each finger's default",
-                    cmd.position, f.name
-                ),
-            ));
-        }
         Some(
             fingers
                 .iter()
@@ -235,11 +215,9 @@ mod tests {
     use crate::control::grasp_book::{FingerGrasp, GraspSettings};
 
     fn fingers(here: &[Option<f64>]) -> Vec<FingerNow> {
-        here.iter()
-            .enumerate()
-            .map(|(i, h)| FingerNow {
+        (0..here.len())
+            .map(|i| FingerNow {
                 name: format!("f{i}"),
-                here_deg: *h,
             })
             .collect()
     }
@@ -268,14 +246,8 @@ mod tests {
     }
 
     #[test]
-    fn a_limit_behind_a_finger_or_a_number_that_is_none_is_refused() {
-        // 0.5 rad = 28.65 deg: a finger at 30 deg would open.
-        let err =
-            grasp_request(&cmd(0.5, 0.2), &fingers(&[Some(0.0), Some(30.0)]), 30.0).unwrap_err();
-        assert_eq!(err.cause, "would-open");
-        assert!(err.why.contains("joint `f1`"), "{}", err.why);
-        // Within the reading's noise of the limit: closes to it.
-        assert!(grasp_request(&cmd(0.5, 0.2), &fingers(&[Some(28.9)]), 30.0).is_ok());
+    fn a_number_that_is_none_is_refused() {
+        // (A limit behind a finger is the core's to refuse: would-open.)
         for bad in [
             cmd(0.5, f64::NAN),
             cmd(f64::INFINITY, 0.2),

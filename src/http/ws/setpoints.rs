@@ -50,9 +50,10 @@ impl From<ControlError> for WsError {
             ControlError::Invalid { kind, .. } => match kind {
                 InvalidKind::SoftLimit => ErrorCode::OutOfLimit,
                 InvalidKind::Duplicate => ErrorCode::BadMessage,
-                InvalidKind::Value | InvalidKind::OutOfRange | InvalidKind::CalibratedRange => {
-                    ErrorCode::OutOfRange
-                }
+                InvalidKind::Value
+                | InvalidKind::OutOfRange
+                | InvalidKind::CalibratedRange
+                | InvalidKind::WouldOpen => ErrorCode::OutOfRange,
             },
             ControlError::NotFound { kind, .. } if kind == "unknown-bus" => ErrorCode::UnknownBus,
             ControlError::NotFound { .. } => ErrorCode::UnknownDevice,
