@@ -261,10 +261,11 @@ async fn the_current_limit_counts_as_restored_only_when_it_reads_back_as_it_was(
         .await
         .ok();
     // The first read gives the previous limit (raw 4368, 0.75 A); every
-    // read after the write-back shows another one.
+    // read after the write-back shows another one, for a good while.
+    bus.script().info04_max_current.push_back(4368);
     bus.script()
         .info04_max_current
-        .extend([4368, 1000, 1000, 1000, 1000]);
+        .extend(std::iter::repeat_n(1000, 10_000));
     // The fake joint never moves: the search times out at once.
     let body = json!({"joints": [{"bus": "fake", "id": 1}], "timeout_ms": 50.0});
     let r = server.post("/api/v1/homing", body.clone()).await;
@@ -279,8 +280,33 @@ async fn the_current_limit_counts_as_restored_only_when_it_reads_back_as_it_was(
         .filter(|k| **k == "read_info")
         .count();
     assert!(reads >= 3, "the limit was read back: {reads} reads");
-    // When the read-back shows the previous limit, it says so.
+    // Owed: the joint's view says so, and no new motion is admitted.
+    let dev = server.get("/api/v1/buses/fake/devices/1").await;
+    assert_eq!(
+        dev.ok()["current_limit_owed_a"],
+        json!(0.7498397778252511),
+        "{}",
+        dev.body
+    );
+    let r = server.post("/api/v1/homing", body.clone()).await;
+    assert_eq!(
+        r.problem(409)["type"],
+        "urn:jointd:problem:current-limit-owed"
+    );
+    // When a read-back shows the previous limit, the job says so, and the
+    // joint may move again.
     bus.script().info04_max_current.clear();
+    let path = format!("/api/v1/homing/{}", done["id"]);
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    while server.get(&path).await.ok()["joints"][0]["current_limit_restored"] != true {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the owed limit never went back"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let dev = server.get("/api/v1/buses/fake/devices/1").await;
+    assert!(dev.ok()["current_limit_owed_a"].is_null(), "{}", dev.body);
     let r = server.post("/api/v1/homing", body).await;
     assert_eq!(r.status.as_u16(), 202, "{}", r.body);
     let done = homing_done(&server, &r.body["id"]).await;

@@ -193,6 +193,8 @@ pub struct BusShared {
     /// Every frame as it is logged, for recordings (sent only while one
     /// listens: nothing is copied otherwise).
     pub frame_tap: broadcast::Sender<LoggedFrame>,
+    /// Current limits a routine could not give back yet.
+    pub owed_limits: super::owed::OwedLimits,
 }
 
 /// How many frames a recording may fall behind before it loses some
@@ -219,6 +221,7 @@ impl BusShared {
             queued: AtomicUsize::new(0),
             motion: Default::default(),
             frame_tap: broadcast::channel(FRAME_TAP_LEN).0,
+            owed_limits: Default::default(),
         })
     }
 
@@ -349,6 +352,11 @@ impl BusHandle {
     }
 
     /// Who may move which joint on this bus.
+    /// Current limits owed to this bus's joints ([`super::owed`]).
+    pub fn owed_limits(&self) -> &super::owed::OwedLimits {
+        &self.shared.owed_limits
+    }
+
     pub fn authority(&self) -> &super::authority::MotionAuthority {
         self.shared.setpoints.authority()
     }

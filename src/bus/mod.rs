@@ -21,6 +21,7 @@
 //! - [`state`]: what the owner publishes: snapshot, events, frame log, wire acks.
 //! - [`handle`]: the cloneable handle and the requests it sends (the API's contract).
 //! - [`motion`]: the joints following a move, sampled by the owner every control cycle.
+//! - [`owed`]: current limits a routine could not give back yet; nothing new moves those joints.
 //!
 //! The pure parts the scheduler is made of:
 //! - [`wire`]: the line model: when frames leave, when a reply is due or overdue.
@@ -48,6 +49,7 @@ pub mod firmware;
 pub mod handle;
 mod link;
 pub mod motion;
+pub mod owed;
 mod owner;
 mod packets;
 pub(crate) mod poll;

@@ -165,6 +165,11 @@ impl BusMotion {
         self.active.load(Ordering::Acquire)
     }
 
+    /// True while joint `id` follows a move.
+    pub fn follows(&self, id: u8) -> bool {
+        self.is_active() && self.lock().iter().any(|f| f.dev_id == id)
+    }
+
     /// The owner's step: every follower's position at `wire_at` (when the
     /// next control frame reaches the wire) written to `store` under the
     /// epoch its move was admitted with; joints that arrived or stalled

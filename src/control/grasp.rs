@@ -115,7 +115,8 @@ async fn run(job: Arc<Job>, fingers: Vec<Finger>, plan: Plan) {
             let p = match p {
                 Ok(p) | Err((p, _)) => *p,
             };
-            async move { (f, grasp_limit::restore(&f.bus, f.id, p).await) }
+            let settled = grasp_limit::settled_in(&f.slot);
+            async move { (f, grasp_limit::restore(&f.bus, f.id, p, settled).await) }
         });
         for (f, restored) in futures_util::future::join_all(restores).await {
             grasp_plan::set(&f.slot, |s| {

@@ -25,7 +25,7 @@ use crate::control::grasp_book::{Command, FingerState};
 use crate::control::grasp_detect::{
     Closing, Holding, Sample, Settings, Verdict, CONTACT_SPEED_SHARE,
 };
-use crate::control::grasp_limit::{restore, Prepared, RestoreOnDrop};
+use crate::control::grasp_limit::{restore, settled_in, Prepared, RestoreOnDrop};
 use crate::control::grasp_plan::{set, Finger, Plan};
 use crate::control::grasp_watch::{fresh_sample, taken_over, unfit, Watch};
 use crate::protocol::units;
@@ -61,7 +61,7 @@ pub(crate) async fn run(f: Finger, plan: Plan, prepared: Prepared, cmd: watch::R
         // already took the joint).
         hold_measured(&f);
     }
-    let restored = restore(&f.bus, f.id, prepared).await;
+    let restored = restore(&f.bus, f.id, prepared, settled_in(&f.slot)).await;
     guard.armed = false;
     set(&f.slot, |s| {
         s.current_limit_restored = restored;
@@ -117,6 +117,8 @@ async fn drive(f: &Finger, plan: &Plan, mut cmd: watch::Receiver<Command>) -> En
         hold_a: plan.hold_a,
     };
     let mut phase = Phase::Closing(Closing::new(settings));
+    // A move took the joint since (see [`may_send`]).
+    let mut moved_away = false;
     loop {
         if let Err(why) = unfit(f, &mut w) {
             return End::Aborted(why);
@@ -138,6 +140,10 @@ async fn drive(f: &Finger, plan: &Plan, mut cmd: watch::Receiver<Command>) -> En
         let dev = snap.devices.get(&f.id);
         if let Some(taken) = taken_over(dev, &mut w) {
             return End::Stopped(taken);
+        }
+        moved_away |= !may_send(f);
+        if moved_away && dev.and_then(|d| d.target_sent) != Some(w.last_sent()) {
+            return End::Stopped("a move took the joint".into());
         }
         if let Some(x) = fresh_sample(dev, &mut w, started) {
             let q = w.current;
@@ -230,9 +236,21 @@ fn send(
     Ok(sp)
 }
 
+/// False once a move took the joint since the grasp did: the finger sends
+/// nothing more (a re-send would take the joint back out of the move, and
+/// press on), and ends when the move's first sample is on the wire
+/// ([`taken_over`]), where the joint no longer presses (the path starts
+/// where it stands).
+fn may_send(f: &Finger) -> bool {
+    !f.bus.shared().motion.follows(f.id)
+}
+
 /// Sends the finger's target again at another speed limit (the brake
 /// after contact, and its end).
 fn set_speed(f: &Finger, w: &mut Watch, dps: f64) {
+    if !may_send(f) {
+        return;
+    }
     let snap = f.bus.snapshot();
     let fw = snap.devices.get(&f.id).map(firmware_of).unwrap_or_default();
     if let Ok(spd_ref) = units::speed_limit_dps_to_raw(dps, fw) {
@@ -248,6 +266,9 @@ fn set_speed(f: &Finger, w: &mut Watch, dps: f64) {
 
 /// Holds the finger at `deg` (device), at its current speed limit.
 fn hold_at(f: &Finger, deg: f64) -> Option<Setpoint> {
+    if !may_send(f) {
+        return None;
+    }
     let pos_ref = units::angle_to_raw(deg).ok()?;
     let spd_ref = f
         .bus
@@ -290,6 +311,9 @@ async fn open(
     fw: units::FirmwareVersion,
     cmd: &mut watch::Receiver<Command>,
 ) -> End {
+    if !may_send(f) {
+        return End::Stopped("a move took the joint".into());
+    }
     set(&f.slot, |s| s.state = FingerState::Releasing);
     match send(f, speed_dps, goal, fw) {
         Ok(sp) => w.sent(sp),

@@ -83,15 +83,29 @@ async fn check_protection(f: &Finger, hold_a: f64) -> Result<(), String> {
 }
 
 /// Writes the previous limit back and reads it back: true only when the
-/// read-back shows it. Nothing written before: nothing to restore.
-pub(crate) async fn restore(bus: &BusHandle, id: u8, p: Prepared) -> bool {
+/// read-back shows it. Nothing written before: nothing to restore. Not
+/// back: owed ([`current_limit::restore`]), and `settled` says when it is.
+pub(crate) async fn restore(
+    bus: &BusHandle,
+    id: u8,
+    p: Prepared,
+    settled: impl FnOnce() + Send + 'static,
+) -> bool {
     let Some(previous) = p.previous else {
         return !p.written;
     };
     if !p.written {
         return true;
     }
-    current_limit::restore(bus, id, previous, "grasp").await
+    current_limit::restore(bus, id, previous, "grasp", settled).await
+}
+
+/// What says a finger's limit is back once an owed one is.
+pub(crate) fn settled_in(
+    slot: &crate::control::grasp_book::Slot,
+) -> impl FnOnce() + Send + 'static {
+    let slot = slot.clone();
+    move || set(&slot, |s| s.current_limit_restored = true)
 }
 
 /// Writes the previous limit back from a task of its own if the finger's
@@ -116,7 +130,7 @@ impl Drop for RestoreOnDrop {
         );
         let (bus, id, p) = (self.bus.clone(), self.id, self.prepared);
         if let Ok(rt) = tokio::runtime::Handle::try_current() {
-            rt.spawn(async move { restore(&bus, id, p).await });
+            rt.spawn(async move { restore(&bus, id, p, || {}).await });
         }
     }
 }

@@ -535,7 +535,9 @@ async fn home(
         Err(ended) => Err(ended),
     };
     set(&slot, |s| s.phase = "restoring");
-    let restored = restore(&bus, id, previous).await;
+    let owed_slot = slot.clone();
+    let settled = move || set(&owed_slot, |s| s.current_limit_restored = true);
+    let restored = restore(&bus, id, previous, settled).await;
     set(&slot, |s| s.current_limit_restored = restored);
     finish(&slot, job, outcome);
 }
@@ -909,7 +911,13 @@ async fn back_off(
     let _ = tokio::time::timeout(BACKOFF_WAIT, reached).await;
 }
 
-/// Writes the previous current limit back and reads it back.
-async fn restore(bus: &BusHandle, id: u8, previous: u16) -> bool {
-    current_limit::restore(bus, id, previous, "homing").await
+/// Writes the previous current limit back and reads it back (owed when it
+/// cannot be: `settled` says when it is back).
+async fn restore(
+    bus: &BusHandle,
+    id: u8,
+    previous: u16,
+    settled: impl FnOnce() + Send + 'static,
+) -> bool {
+    current_limit::restore(bus, id, previous, "homing", settled).await
 }

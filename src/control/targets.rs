@@ -178,9 +178,22 @@ fn speed_setpoint(
 
 /// 409 unless the daemon enabled the joint and nothing revoked that since
 /// (the bus's motion authority, not a telemetry snapshot that may lag an
-/// e-stop); the joint's motion epoch, under which what follows is admitted.
+/// e-stop), and no current limit is owed to it; the joint's motion epoch,
+/// under which what follows is admitted.
 pub(crate) fn admit(bus: &BusHandle, dev: &DeviceState, what: &str) -> ControlResult<Epoch> {
     let id = dev.dev_id;
+    if let Some(owed) = bus.owed_limits().get(id) {
+        return Err(ControlError::conflict(
+            "current-limit-owed",
+            "Current limit not restored yet",
+            format!(
+                "{what} waits until device {id} has its current limit back ({:.3} A): a grasp or \
+                 homing lowered it and could not write it back; jointd writes it and reads it \
+                 back as soon as the joint answers again",
+                units::current_limit_a(owed)
+            ),
+        ));
+    }
     let grant = bus.grant(id);
     if !grant.mode_settled() {
         return Err(ControlError::conflict(

@@ -146,6 +146,12 @@ pub(crate) struct DeviceDetail {
     /// Soft limits that apply to targets of this joint, in its calibrated
     /// frame (the config gives them in device degrees).
     pub limits: JointLimits,
+    /// The current limit a grasp or homing lowered and could not write back
+    /// yet, A: jointd writes it and reads it back as soon as the joint
+    /// answers, and refuses every new motion of the joint (409
+    /// `current-limit-owed`) until then. `null`: nothing owed.
+    #[schema(example = json!(null))]
+    pub current_limit_owed_a: Option<f64>,
     /// Its calibration, when it has one: every angle, speed and q current
     /// here is in the joint's frame; the `raw` fields stay the device's.
     pub calibration: Option<CalibrationView>,
@@ -291,6 +297,10 @@ async fn get_device(
         resets: dev.resets,
         last_reset: reset_view(&dev, now),
         limits: limits_in_joint_frame(state.limits(&snap.name, id), &cal),
+        current_limit_owed_a: bus
+            .owed_limits()
+            .get(id)
+            .map(crate::protocol::units::current_limit_a),
         calibration: (!cal.is_identity()).then(|| CalibrationView::new(&snap.name, id, &cal)),
         missed_polls: dev.missed_polls,
         control_hz: dev.control_hz,

@@ -249,6 +249,13 @@ pub(crate) fn render(state: &AppState) -> String {
     for bus in state.buses() {
         let snap = bus.snapshot();
         bus_families(&mut m, &snap);
+        m.gauge(
+            "jointd_bus_current_limits_owed",
+            "Joints whose current limit a grasp or homing lowered and could not write back yet \
+             (nothing new moves them until it is).",
+            &format!("bus=\"{}\"", label(&snap.name)),
+            bus.owed_limits().len() as f64,
+        );
         device_families(&mut m, &snap, now);
     }
     ws_families(&mut m, state.ws());
