@@ -10,6 +10,15 @@
 //! > a joint moves only toward what the last command admitted since its last
 //! > enable asked.
 //!
+//! And a second, on each joint's measured angle:
+//!
+//! > a joint under a move, pose, grasp or release stays between where it
+//! > stood when the command was admitted and the command's goal (±2°).
+//!
+//! Steps for it besides: a slow target and then a move the other way, a
+//! grasp taken over by a move, and a bus unplugged while a grasp holds
+//! (the limits must be written back once it is plugged in again).
+//!
 //! Per joint the test keeps what was admitted since its last enable (where
 //! it stood when enabled, each accepted target, the span of each accepted
 //! move or pose, the speeds of accepted speed targets). An enabled device's
@@ -20,7 +29,8 @@
 //!
 //! Seeds: `JOINTD_SAFETY_SEEDS` (count, default 5) and `JOINTD_SAFETY_STEPS`
 //! (per seed, default 60), or one `JOINTD_SAFETY_SEED` to replay; a failure
-//! prints its seed and the steps that led to it.
+//! prints its seed and the steps that led to it (`JOINTD_SAFETY_LOG` prints
+//! them for a run that passes too).
 
 mod support;
 
@@ -37,6 +47,26 @@ use tokio_tungstenite::tungstenite::Message;
 const JOINTS: [u8; 3] = [1, 2, 3];
 /// Slack on an angle: measurement and the device's own rounding (Q7).
 const SLACK_DEG: f64 = 1.0;
+/// Slack on the measured angle under a generated path: the sample the
+/// daemon started from may be a telemetry period old.
+const PATH_SLACK_DEG: f64 = 2.0;
+
+/// A generated path a joint is under: the span from where it stood when
+/// the command was admitted to the command's goal.
+#[derive(Debug, Clone)]
+struct Under {
+    lo: f64,
+    hi: f64,
+    what: String,
+}
+
+impl Under {
+    fn new(points: &[f64], what: String) -> Self {
+        let lo = points.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = points.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        Self { lo, hi, what }
+    }
+}
 
 /// A small deterministic generator (xorshift64*): a seed replays a run.
 struct Rng(u64);
@@ -97,6 +127,8 @@ struct World {
     seed: u64,
     log: Vec<String>,
     admitted: [Admitted; 4],
+    /// The generated path each joint is under, if any.
+    under: [Option<Under>; 4],
 }
 
 impl World {
@@ -161,7 +193,38 @@ impl World {
                     d.target_deg, a.spans, self.both_views(id)
                 ));
             }
+            if let Some(u) = &self.under[usize::from(id)] {
+                if d.angle_deg < u.lo - PATH_SLACK_DEG || d.angle_deg > u.hi + PATH_SLACK_DEG {
+                    self.fail(format!(
+                        "joint {id} is at {:.2}°, outside {:.2}..{:.2}° (where it stood when {} was admitted, and its goal); {}",
+                        d.angle_deg, u.lo, u.hi, u.what, self.both_views(id)
+                    ));
+                }
+            }
         }
+    }
+
+    /// Joint `id` in position mode and enabled, as a user readies it.
+    async fn ready(&mut self, id: u8) {
+        let d = self.device(id);
+        if d.mode == CtrlMode::Speed {
+            self.mode(id, false).await;
+        }
+        if !self.device(id).enabled || !self.b.handle.grant(id).enabled {
+            self.enable(id).await;
+        }
+    }
+
+    /// Joint `id` is under no generated path any more (another command
+    /// took it, or it stopped).
+    fn not_under(&mut self, id: u8) {
+        self.under[usize::from(id)] = None;
+    }
+
+    /// Joint `id` is under a path from `stood` (where it was when the
+    /// command was asked, and when it was answered) to `goal`.
+    fn under_path(&mut self, id: u8, stood: (f64, f64), goal: f64, what: String) {
+        self.under[usize::from(id)] = Some(Under::new(&[stood.0, stood.1, goal], what));
     }
 
     async fn enable(&mut self, id: u8) {
@@ -175,6 +238,7 @@ impl World {
             )
             .await;
         self.log.push(format!("enable {id}: {}", r.status));
+        self.not_under(id);
         if r.status.is_success() {
             self.b.wait_fsm(id, fsm::RUN).await;
         }
@@ -201,11 +265,13 @@ impl World {
             )
             .await;
         self.log.push(format!("disable {id}: {}", r.status));
+        self.not_under(id);
     }
 
     async fn estop(&mut self) {
         let r = self.b.server.post_empty("/api/v1/estop").await;
         self.log.push(format!("estop: {}", r.status));
+        self.under = Default::default();
     }
 
     async fn mode(&mut self, id: u8, speed: bool) {
@@ -220,6 +286,7 @@ impl World {
             )
             .await;
         self.log.push(format!("mode {id} {mode}: {}", r.status));
+        self.not_under(id);
         if r.status.is_success() {
             let after = self.device(id);
             let a = &mut self.admitted[usize::from(id)];
@@ -246,6 +313,7 @@ impl World {
             .await;
         self.log.push(format!("target {id} {body}: {}", r.status));
         if r.status.is_success() {
+            self.not_under(id);
             let a = &mut self.admitted[usize::from(id)];
             match (body["speed_dps"].as_f64(), body["position_deg"].as_f64()) {
                 (Some(dps), _) => a.speeds.push(jointd::protocol::units::rotor_rpm(dps)),
@@ -286,6 +354,8 @@ impl World {
                 let a = &mut self.admitted[usize::from(*id)];
                 a.span(target.min(angle), *deg);
                 a.span(target.max(angle), *deg);
+                let now = self.device(*id).angle_deg;
+                self.under_path(*id, (angle, now), *deg, format!("move to {deg:.1}°"));
             }
         }
     }
@@ -324,6 +394,9 @@ impl World {
                 let a = &mut self.admitted[usize::from(id)];
                 a.span(target.min(angle), positions[k]);
                 a.span(target.max(angle), positions[k]);
+                let now = self.device(id).angle_deg;
+                let goal = positions[k];
+                self.under_path(id, (angle, now), goal, format!("pose go to {goal:.1}°"));
             }
         }
     }
@@ -356,6 +429,7 @@ impl World {
             fired_since_ack |= fired;
             match reply.as_deref() {
                 Some("ack") => {
+                    self.under[usize::from(id)] = None;
                     accepted += 1;
                     fired_since_ack = false;
                     hull.push(deg);
@@ -406,6 +480,7 @@ impl World {
             .await;
         self.log.push(format!("homing {id}: {}", r.status));
         if r.status.is_success() {
+            self.not_under(id);
             let rpm = speed_dps / jointd::protocol::units::output_deg_per_s(1.0);
             let a = &mut self.admitted[usize::from(id)];
             a.speeds.extend([rpm, -rpm]);
@@ -421,6 +496,39 @@ impl World {
     /// sometimes on an object placed on joint 1's way; then released (back
     /// to where the fingers started), stopped, or left to whatever follows.
     async fn grasp(&mut self) {
+        if let Some(id) = self.start_grasp().await {
+            match self.rng.below(3) {
+                0 => {
+                    self.b
+                        .server
+                        .post(&format!("/api/v1/grasps/{id}/release"), json!({}))
+                        .await;
+                    self.log.push(format!("grasp {id} released"));
+                }
+                1 => {
+                    self.b
+                        .server
+                        .post_empty(&format!("/api/v1/grasps/{id}/stop"))
+                        .await;
+                    self.log.push(format!("grasp {id} stopped"));
+                }
+                _ => {}
+            }
+        }
+        self.b.sim.inject(Fault::RemoveObject { dev_id: 1 });
+    }
+
+    /// Starts a grasp of hand `h` (joints 1 and 2) over REST or the
+    /// WebSocket, each finger closing (towards higher angles) to a random
+    /// limit, sometimes on an object placed on joint 1's way; its id.
+    async fn start_grasp(&mut self) -> Option<u64> {
+        // Mostly on a hand ready for it (as a user would make it), so the
+        // steps after it have a grasp to act on.
+        if self.rng.below(4) != 0 {
+            for joint in [1u8, 2] {
+                self.ready(joint).await;
+            }
+        }
         let from: Vec<(f64, f64)> = [1u8, 2]
             .iter()
             .map(|&id| {
@@ -428,7 +536,11 @@ impl World {
                 (d.target_deg, d.angle_deg)
             })
             .collect();
-        let close_to: Vec<f64> = (0..2).map(|_| self.rng.angle()).collect();
+        // Joint 2's soft limits are ±45°.
+        let close_to: Vec<f64> = from
+            .iter()
+            .map(|(_, angle)| (angle + 5.0 + self.rng.below(35) as f64).min(44.0))
+            .collect();
         if self.rng.below(2) == 0 {
             let at = (from[0].1 + close_to[0]) / 2.0;
             self.b.sim.inject(Fault::Object {
@@ -447,30 +559,154 @@ impl World {
             self.log.push(format!("grasp {close_to:?}: {}", r.status));
             (r.status.as_u16() == 202).then(|| r.body["id"].as_u64().expect("a grasp id"))
         };
-        if let Some(id) = started {
-            for (k, id) in [1u8, 2].into_iter().enumerate() {
-                let (target, angle) = from[k];
-                let a = &mut self.admitted[usize::from(id)];
-                a.span(target.min(angle), close_to[k]);
-                a.span(target.max(angle), close_to[k]);
+        let id = started?;
+        for (k, joint) in [1u8, 2].into_iter().enumerate() {
+            let (target, angle) = from[k];
+            let a = &mut self.admitted[usize::from(joint)];
+            a.span(target.min(angle), close_to[k]);
+            a.span(target.max(angle), close_to[k]);
+            let now = self.device(joint).angle_deg;
+            let what = format!("grasp {id} (closing to {:.1}°, or released)", close_to[k]);
+            self.under_path(joint, (angle, now), close_to[k], what);
+        }
+        Some(id)
+    }
+
+    /// Until finger `joint` of grasp `id` is closing or holding (or the
+    /// grasp ended), as its view says.
+    async fn grasp_under_way(&self, id: u64, joint: &str) {
+        let path = format!("/api/v1/grasps/{id}");
+        let deadline = tokio::time::Instant::now() + WAIT;
+        loop {
+            let v = self.b.server.get(&path).await.body;
+            let state = v["fingers"]
+                .as_array()
+                .and_then(|f| f.iter().find(|f| f["joint"] == joint))
+                .map_or("?".to_string(), |f| {
+                    f["state"].as_str().unwrap_or("?").to_string()
+                });
+            if v["state"] == "done" || state == "closing" || state == "holding" {
+                return;
             }
-            match self.rng.below(3) {
-                0 => {
-                    self.b
-                        .server
-                        .post(&format!("/api/v1/grasps/{id}/release"), json!({}))
-                        .await;
-                    self.log.push(format!("grasp {id} released"));
-                }
-                1 => {
-                    self.b
-                        .server
-                        .post_empty(&format!("/api/v1/grasps/{id}/stop"))
-                        .await;
-                    self.log.push(format!("grasp {id} stopped"));
-                }
-                _ => {}
+            if tokio::time::Instant::now() >= deadline {
+                self.fail(format!("grasp {id} never under way: {v}"));
             }
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+    }
+
+    /// A grasp, then a move that takes one finger out of it while it
+    /// closes or holds: the finger goes from where it stands, never on
+    /// into the object.
+    async fn grasp_taken_over_by_a_move(&mut self) {
+        if let Some(id) = self.start_grasp().await {
+            self.grasp_under_way(id, "a").await;
+            let ms = 300 + self.rng.below(1200);
+            self.move_joints(&[1], ms).await;
+        }
+        self.b.sim.inject(Fault::RemoveObject { dev_id: 1 });
+    }
+
+    /// A slow target, and while the joint is on its way a move the other
+    /// way: the move starts where the joint is, not from the target.
+    async fn slow_target_then_move(&mut self, id: u8) {
+        self.ready(id).await;
+        if self.device(id).mode == CtrlMode::Speed {
+            return self.target(id).await;
+        }
+        let here = self.device(id).angle_deg;
+        let far = if here < 0.0 { 40.0 } else { -40.0 };
+        let body = json!({"position_deg": far, "speed_dps": 10});
+        let r = self
+            .b
+            .server
+            .put(
+                &format!("/api/v1/buses/sim0/devices/{id}/target"),
+                body.clone(),
+            )
+            .await;
+        self.log
+            .push(format!("slow target {id} {body}: {}", r.status));
+        if !r.status.is_success() {
+            return;
+        }
+        self.not_under(id);
+        self.admitted[usize::from(id)].span(far, far);
+        // On its way (a degree or so), or stopped by something else.
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(1);
+        while (self.device(id).angle_deg - here).abs() < 1.0
+            && self.device(id).enabled
+            && tokio::time::Instant::now() < deadline
+        {
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        let back = -far / 4.0;
+        let stood = self.device(id).angle_deg;
+        let joints = json!([{"bus": "sim0", "id": id, "position_deg": back}]);
+        let r = self
+            .b
+            .server
+            .post(
+                "/api/v1/moves",
+                json!({"joints": joints, "duration_ms": 800}),
+            )
+            .await;
+        self.log.push(format!(
+            "move {id} back to {back} from {stood:.1}: {}",
+            r.status
+        ));
+        if r.status.as_u16() == 201 {
+            self.admitted[usize::from(id)].span(stood, back);
+            let now = self.device(id).angle_deg;
+            self.under_path(id, (stood, now), back, format!("move back to {back:.1}°"));
+        }
+    }
+
+    /// The bus unplugged for a moment while a grasp closes or holds: every
+    /// finger ends, and once the bus is back each lowered limit is written
+    /// and read back (owed until then), before anything else moves them.
+    async fn grasp_unplugged(&mut self) {
+        let Some(id) = self.start_grasp().await else {
+            return;
+        };
+        self.grasp_under_way(id, "a").await;
+        self.b.sim.inject(Fault::Unplug);
+        self.b
+            .wait_snapshot("the bus down", |s| {
+                matches!(s.link, jointd::bus::handle::LinkState::Down { .. })
+            })
+            .await;
+        self.b.sim.inject(Fault::Replug);
+        self.b
+            .wait_snapshot("the bus up", |s| {
+                s.link == jointd::bus::handle::LinkState::Up
+            })
+            .await;
+        self.log.push(format!("grasp {id}: bus unplugged and back"));
+        let deadline = tokio::time::Instant::now() + WAIT * 2;
+        loop {
+            let v = self
+                .b
+                .server
+                .get(&format!("/api/v1/grasps/{id}"))
+                .await
+                .body;
+            let back = v["state"] == "done"
+                && v["fingers"]
+                    .as_array()
+                    .is_some_and(|f| f.iter().all(|f| f["current_limit_restored"] == true))
+                && [1u8, 2]
+                    .iter()
+                    .all(|j| self.b.handle.owed_limits().get(*j).is_none());
+            if back {
+                break;
+            }
+            if tokio::time::Instant::now() >= deadline {
+                self.fail(format!(
+                    "grasp {id}: a limit never came back after the unplug: {v}"
+                ));
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
         }
         self.b.sim.inject(Fault::RemoveObject { dev_id: 1 });
     }
@@ -515,6 +751,7 @@ impl World {
     async fn power_cycle(&mut self, id: u8) {
         self.b.sim.inject(Fault::PowerCycle { dev_id: id });
         self.log.push(format!("power cycle {id}"));
+        self.not_under(id);
     }
 
     /// An e-stop with a move or a target in flight beside it.
@@ -529,31 +766,35 @@ impl World {
         }
         let _ = estop.await;
         self.log.push("estop (raced)".into());
+        self.under = Default::default();
     }
 
     async fn step(&mut self) {
         let id = self.rng.joint();
         match self.rng.below(100) {
-            0..=19 => self.enable(id).await,
-            20..=25 => self.disable(id).await,
-            26..=29 => self.estop().await,
-            30..=37 => {
+            0..=17 => self.enable(id).await,
+            18..=22 => self.disable(id).await,
+            23..=26 => self.estop().await,
+            27..=33 => {
                 let speed = self.rng.below(3) == 0;
                 self.mode(id, speed).await
             }
-            38..=52 => self.target(id).await,
-            53..=55 => self.grasp().await,
+            34..=45 => self.target(id).await,
+            46..=48 => self.grasp().await,
+            49..=51 => self.grasp_taken_over_by_a_move().await,
+            52..=54 => self.slow_target_then_move(id).await,
+            55..=56 => self.grasp_unplugged().await,
             // Moves outlast several steps: what happens to them meanwhile
             // (an e-stop, a disable, a mode change) is the point.
-            56..=67 => {
+            57..=66 => {
                 let ms = 300 + self.rng.below(2700);
                 self.move_joints(&[id], ms).await
             }
-            68..=73 => self.move_joints(&[1, 2], 1500).await,
-            74..=79 => self.pose_go().await,
-            80..=87 => self.stream(id).await,
-            88..=90 => self.power_cycle(id).await,
-            91..=94 => self.homing(id).await,
+            67..=72 => self.move_joints(&[1, 2], 1500).await,
+            73..=78 => self.pose_go().await,
+            79..=86 => self.stream(id).await,
+            87..=89 => self.power_cycle(id).await,
+            90..=94 => self.homing(id).await,
             _ => self.estop_race(id).await,
         }
         self.fence().await;
@@ -622,6 +863,7 @@ async fn run_seed(seed: u64, steps: u64) {
         seed,
         log: Vec::new(),
         admitted: Default::default(),
+        under: Default::default(),
     };
     for _ in 0..steps {
         w.step().await;
@@ -637,6 +879,9 @@ async fn run_seed(seed: u64, steps: u64) {
         );
     }
     eprintln!("seed {seed}: (steps, accepted) by kind {kinds:?}");
+    if std::env::var_os("JOINTD_SAFETY_LOG").is_some() {
+        eprintln!("{}", w.log.join("\n"));
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
