@@ -67,6 +67,12 @@ fn pipeline_event(ev: &BusEvent) -> Option<(&'static str, &str)> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn late_writes_make_the_pipeline_back_off_to_a_clean_wire_and_return_when_they_stop() {
+    // Blind writes are dated by their replies: the simulator must keep time.
+    if !realtime_or_skip(
+        "late_writes_make_the_pipeline_back_off_to_a_clean_wire_and_return_when_they_stop",
+    ) {
+        return;
+    }
     let _one = ONE_AT_A_TIME.lock().await;
     let ids: Vec<u8> = (1..=JOINTS as u8).collect();
     let rig = ch340_rig(&ids, |c| c.timing.usb_recover_ms = 1_000);
@@ -209,6 +215,10 @@ async fn a_device_gone_does_not_make_the_pipeline_back_off() {
 /// taken as late before its tail can collide.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn late_sentinels_make_the_pipeline_back_off() {
+    // Blind writes are dated by their replies: the simulator must keep time.
+    if !realtime_or_skip("late_sentinels_make_the_pipeline_back_off") {
+        return;
+    }
     let _one = ONE_AT_A_TIME.lock().await;
     let ids: Vec<u8> = (1..=4).collect();
     let rig = ch340_rig(&ids, |_| {});
@@ -270,6 +280,10 @@ async fn backs_off_on_late_sentinels(rig: &Rig, clean: &UsbPipelineView) -> UsbP
 /// guarded, which this chip keeps) before the delay's tail can collide.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn late_sentinels_behind_a_long_latency_timer_back_the_pipeline_off() {
+    // Blind writes are dated by their replies: the simulator must keep time.
+    if !realtime_or_skip("late_sentinels_behind_a_long_latency_timer_back_the_pipeline_off") {
+        return;
+    }
     let _one = ONE_AT_A_TIME.lock().await;
     let ids: Vec<u8> = (1..=4).collect();
     let rig = adapter_rig(AdapterModel::Ftdi { latency_ms: 16 }, &ids, |_| {});
@@ -295,6 +309,10 @@ async fn late_sentinels_behind_a_long_latency_timer_back_the_pipeline_off() {
 /// path is clean the pipeline retraces the ladder to the bound.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_path_past_guarded_widens_the_guard_before_lockstep_and_comes_back() {
+    // Blind writes are dated by their replies: the simulator must keep time.
+    if !realtime_or_skip("a_path_past_guarded_widens_the_guard_before_lockstep_and_comes_back") {
+        return;
+    }
     let _one = ONE_AT_A_TIME.lock().await;
     let ids: Vec<u8> = (1..=JOINTS as u8).collect();
     let rig = adapter_rig(AdapterModel::Ftdi { latency_ms: 1 }, &ids, |c| {

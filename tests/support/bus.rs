@@ -24,6 +24,33 @@ pub struct Rig {
 }
 
 /// A simulator with short align and boot times.
+/// True when this host gives a thread the real-time FIFO class (root with
+/// a real-time budget, CAP_SYS_NICE, or an RTPRIO limit). A simulated
+/// adapter whose timing a test judges the daemon by is wire-accurate only
+/// then where its thread reads a pty, or where the daemon dates writes by
+/// its replies (blind writes): on a busy host without it the simulator's
+/// own stalls look like the path's. Asked from a thread of its own, which
+/// ends with the answer.
+pub fn realtime_available() -> bool {
+    std::thread::spawn(|| jointd::rt::set_fifo(0, 1).is_ok())
+        .join()
+        .unwrap_or(false)
+}
+
+/// [`realtime_available`], saying so on stderr when not: the test that
+/// asks returns without judging (the confirmed-write tests on the
+/// in-memory line judge the daemon on any host).
+pub fn realtime_or_skip(test: &str) -> bool {
+    let ok = realtime_available();
+    if !ok {
+        eprintln!(
+            "{test}: skipped: this host refuses the real-time class (no CAP_SYS_NICE or RTPRIO \
+             limit), which a simulated adapter needs to keep its timing here"
+        );
+    }
+    ok
+}
+
 pub fn sim_config(ids: &[u8], baud: u32) -> SimConfig {
     let mut cfg = SimConfig::new(ids.to_vec(), baud);
     cfg.align_time = Duration::from_millis(50);
