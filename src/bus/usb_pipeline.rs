@@ -685,6 +685,8 @@ impl UsbPipeline {
             self.confirm.written(boundary, early);
         } else {
             // Held as late as an unclocked write may leave; looked at then.
+            // A clock learnt again is checked again before writes lead it.
+            self.clock_checks = 0;
             self.confirm
                 .written_unclocked(self.latest_release(handed).at);
         }
