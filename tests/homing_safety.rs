@@ -217,6 +217,30 @@ async fn a_second_homing_of_a_joint_being_homed_is_refused_naming_the_job() {
     homing_done(&b.server, &again.body["id"]).await;
 }
 
+/// A homing speed is checked as every motion speed is: no slower than
+/// the wire carries, within the joint's soft speed limit.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_homing_speed_the_wire_cannot_carry_or_over_the_soft_limit_is_refused() {
+    let b = rig(2, Vec::new()).await;
+    let home = |id: u8, dps: f64| {
+        b.server.post(
+            "/api/v1/homing",
+            json!({"joints": [{"bus": "sim0", "id": id}], "speed_dps": dps, "stop_at_deg": 0.0}),
+        )
+    };
+    let r = home(1, 1e-300).await;
+    assert_eq!(r.problem(422)["field"], "speed_dps", "{}", r.body);
+    // Joint 2 may turn at 60 °/s at most.
+    let r = home(2, 80.0).await;
+    assert_eq!(
+        r.problem(422)["type"],
+        "urn:jointd:problem:soft-limit",
+        "{}",
+        r.body
+    );
+    assert_eq!(b.server.get("/api/v1/homing/1").await.status.as_u16(), 404);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_stop_reading_at_the_end_of_the_range_is_refused_with_the_allowed_range() {
     let b = rig(2, Vec::new()).await;

@@ -187,6 +187,12 @@ pub(crate) async fn start(state: &Arc<Control>, req: &HomingRequest) -> ControlR
         let dev = known_device(&snap, r.id)?;
         let soft = state.limits(&r.bus, r.id);
         check_stop_at(&plan, &soft, r)?;
+        soft.check_motion_speed(
+            &"speed_dps",
+            plan.speed_dps,
+            firmware_of(dev),
+            &format!("joint {} of bus `{}`", r.id, r.bus),
+        )?;
         ensure_running(bus, dev).await?;
         // The job drives the joint under the epoch it is admitted with:
         // anything that advances it from here on ends the job.
