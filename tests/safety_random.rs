@@ -13,7 +13,9 @@
 //! And a second, on each joint's measured angle:
 //!
 //! > a joint under a move, pose, grasp or release stays between where it
-//! > stood when the command was admitted and the command's goal (±2°).
+//! > stood when the command was admitted and the command's goal (±2°;
+//! > a joint moving then also as far as it carries on in 50 ms, since a
+//! > path starts at rest).
 //!
 //! Steps for it besides: a slow target and then a move the other way, a
 //! grasp taken over by a move, and a bus unplugged while a grasp holds
@@ -50,6 +52,9 @@ const SLACK_DEG: f64 = 1.0;
 /// Slack on the measured angle under a generated path: the sample the
 /// daemon started from may be a telemetry period old.
 const PATH_SLACK_DEG: f64 = 2.0;
+/// How long a joint moving when a path starts carries on its way (see
+/// [`World::under_path`]): the sample's age and the braking, seconds.
+const BRAKE_S: f64 = 0.05;
 
 /// A generated path a joint is under: the span from where it stood when
 /// the command was admitted to the command's goal.
@@ -223,8 +228,14 @@ impl World {
 
     /// Joint `id` is under a path from `stood` (where it was when the
     /// command was asked, and when it was answered) to `goal`.
+    /// A joint moving when the command came carries on its way a little
+    /// while it brakes: a path starts at rest where the joint was measured
+    /// (a telemetry sample up to a period old), so the span takes in what
+    /// the joint covers in [`BRAKE_S`] at the speed it had then.
     fn under_path(&mut self, id: u8, stood: (f64, f64), goal: f64, what: String) {
-        self.under[usize::from(id)] = Some(Under::new(&[stood.0, stood.1, goal], what));
+        let v = self.device(id).velocity_deg_s;
+        let carried = stood.1 + v * BRAKE_S;
+        self.under[usize::from(id)] = Some(Under::new(&[stood.0, stood.1, carried, goal], what));
     }
 
     async fn enable(&mut self, id: u8) {
