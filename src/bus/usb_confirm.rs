@@ -74,6 +74,8 @@ struct Pending {
     clocked: bool,
     /// When to read the count once before `first` (see [`EARLY_LOOK`]).
     early: Option<Instant>,
+    /// How long before `first` the write was made.
+    lead: Duration,
 }
 
 /// What a look at the count found.
@@ -82,8 +84,9 @@ pub(crate) enum Outcome {
     /// Nothing to confirm, or too early to tell.
     Wait,
     /// Untaken shortly before the boundary it was aimed at, as the frame
-    /// clock says it should be.
-    OnClock,
+    /// clock says it should be, for a write made `lead` before that
+    /// boundary: no boundary lay between the two.
+    OnClock { lead: Duration },
     /// Taken before the boundary the frame clock had it leave at: the
     /// clock's estimate is off (a host that reads replies late learns it
     /// late), and a write made early in a frame may leave a frame early.
@@ -120,10 +123,10 @@ pub(crate) struct Confirm {
 }
 
 impl Confirm {
-    /// A write was handed over; `boundary` is the first after that by the
-    /// frame clock, where the wire model has it leave; `early`, when to
-    /// check the clock on it before then.
-    pub(crate) fn written(&mut self, boundary: Instant, early: Option<Instant>) {
+    /// A write was handed over `lead` before `boundary`, the first after it
+    /// by the frame clock, where the wire model has it leave; `early`, when
+    /// to check the clock on it before then.
+    pub(crate) fn written(&mut self, boundary: Instant, lead: Duration, early: Option<Instant>) {
         self.pending = Some(Pending {
             first: boundary,
             frame: boundary,
@@ -132,13 +135,14 @@ impl Confirm {
             overdue: false,
             clocked: true,
             early,
+            lead,
         });
     }
 
     /// A write was handed over with no frame clock: the wire model has it
     /// leave at `latest`, the latest it may.
     pub(crate) fn written_unclocked(&mut self, latest: Instant) {
-        self.written(latest, None);
+        self.written(latest, Duration::ZERO, None);
         if let Some(p) = self.pending.as_mut() {
             p.clocked = false;
         }
@@ -209,7 +213,7 @@ impl Confirm {
                     p.early = None;
                     self.pending = Some(p);
                     if now < p.first {
-                        return Outcome::OnClock;
+                        return Outcome::OnClock { lead: p.lead };
                     }
                 }
                 if now < p.frame + period.mul_f64(CHECK_AFTER) {
@@ -271,7 +275,7 @@ mod tests {
     fn a_write_taken_by_the_look_holds_the_wire_from_the_look() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P, None);
+        c.written(t0 + P, us(300), None);
         c.carried_poll();
         assert_eq!(c.check_at(P), Some(t0 + us(1_150)));
         assert_eq!(c.look(Some(40), t0 + us(900), P, after(t0)), Outcome::Wait);
@@ -293,7 +297,7 @@ mod tests {
         // truth: nothing moves).
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P, Some(t0 + us(900)));
+        c.written(t0 + P, us(300), Some(t0 + us(900)));
         assert_eq!(c.check_at(P), Some(t0 + us(900)));
         assert_eq!(
             c.look(Some(0), t0 + us(900), P, after(t0)),
@@ -307,12 +311,12 @@ mod tests {
     fn a_write_untaken_just_before_its_boundary_is_on_the_clock() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P, Some(t0 + us(900)));
+        c.written(t0 + P, us(300), Some(t0 + us(900)));
         // A look before the early one says nothing yet.
         assert_eq!(c.look(Some(40), t0 + us(500), P, after(t0)), Outcome::Wait);
         assert_eq!(
             c.look(Some(40), t0 + us(905), P, after(t0)),
-            Outcome::OnClock
+            Outcome::OnClock { lead: us(300) }
         );
         // Then the regular look.
         assert_eq!(c.check_at(P), Some(t0 + us(1_150)));
@@ -344,7 +348,7 @@ mod tests {
     fn a_write_untaken_at_the_look_moves_past_the_next_boundary() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P, None);
+        c.written(t0 + P, us(300), None);
         let moved = c.look(Some(60), t0 + us(1_150), P, after(t0));
         assert_eq!(moved, Outcome::Moved { by: P, poll: false });
         assert_eq!(c.check_at(P), Some(t0 + us(2_150)));
@@ -366,7 +370,7 @@ mod tests {
     fn a_look_long_after_the_boundary_holds_the_wire_from_the_look() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P, None);
+        c.written(t0 + P, us(300), None);
         // The host looked only at 2.3 ms: it left by then, when is unknown.
         assert_eq!(
             c.look(Some(0), t0 + us(2_300), P, after(t0)),
@@ -376,7 +380,7 @@ mod tests {
             }
         );
         // Untaken at 2.3 ms: it leaves at 3 ms at the earliest.
-        c.written(t0 + P, None);
+        c.written(t0 + P, us(300), None);
         assert_eq!(
             c.look(Some(20), t0 + us(2_300), P, after(t0)),
             Outcome::Moved {
@@ -390,7 +394,7 @@ mod tests {
     fn a_count_that_stays_up_is_given_up_on() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P, None);
+        c.written(t0 + P, us(300), None);
         let mut outcomes = Vec::new();
         for k in 1..=6u64 {
             let at = t0 + us(1_000 * k + 200);
@@ -424,7 +428,7 @@ mod tests {
     fn a_count_up_past_the_longest_wait_is_not_believed() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P, None);
+        c.written(t0 + P, us(300), None);
         let mut last = Outcome::Wait;
         for k in 1..=60u64 {
             last = c.look(Some(60), t0 + us(1_000 * k + 200), P, after(t0));
@@ -440,7 +444,7 @@ mod tests {
     fn a_port_that_cannot_tell_ends_the_wait() {
         let t0 = Instant::now();
         let mut c = Confirm::default();
-        c.written(t0 + P, None);
+        c.written(t0 + P, us(300), None);
         assert!(matches!(
             c.look(None, t0 + us(100), P, after(t0)),
             Outcome::Taken { .. }

@@ -240,8 +240,13 @@ impl UsbPipeline {
         });
         let (by, poll, change) = match outcome {
             Outcome::Wait => return (Duration::ZERO, None),
-            Outcome::OnClock => {
-                self.clock_checks = self.clock_checks.saturating_add(1);
+            Outcome::OnClock { lead } => {
+                // Only a write made as early as writes lead their boundary
+                // shows no boundary lies where a leading write would be
+                // taken early.
+                if lead >= self.lead() {
+                    self.clock_checks = self.clock_checks.saturating_add(1);
+                }
                 return (Duration::ZERO, None);
             }
             Outcome::TakenEarly { .. } => {
@@ -375,11 +380,7 @@ impl UsbPipeline {
             return free_at + GUARD;
         }
         let release = self.aimed_boundary(free_at, now);
-        let lead = self
-            .period()
-            .mul_f64(self.guard.lead())
-            .max(self.period() / 2);
-        let at = release.checked_sub(lead).unwrap_or(release);
+        let at = release.checked_sub(self.lead()).unwrap_or(release);
         if self.confirming() && self.clock_checks < CLOCK_CHECKS_TRUSTED {
             // Not before the wire is free while the count has not shown
             // the frame clock right: its estimate can be off by most of a
@@ -391,6 +392,14 @@ impl UsbPipeline {
             return at.max(free_at + GUARD);
         }
         at
+    }
+
+    /// How long before the boundary it aims at a write is made: in the
+    /// frame before, early in it.
+    fn lead(&self) -> Duration {
+        self.period()
+            .mul_f64(self.guard.lead())
+            .max(self.period() / 2)
     }
 
     /// The first boundary the wire allows that the host can still make.
@@ -682,7 +691,8 @@ impl UsbPipeline {
             let early = boundary
                 .checked_sub(self.period().mul_f64(super::usb_confirm::EARLY_LOOK))
                 .filter(|&at| at > handed);
-            self.confirm.written(boundary, early);
+            self.confirm
+                .written(boundary, boundary.saturating_duration_since(handed), early);
         } else {
             // Held as late as an unclocked write may leave; looked at then.
             // A clock learnt again is checked again before writes lead it.
