@@ -1,4 +1,6 @@
-//! Every frame of `../shared/protocol/vectors.json` is a test case: replies
+//! Every frame of `tests/data/vectors.json` (a byte-identical copy of the
+//! protocol's published test vectors, kept here so a clone tests alone) is
+//! a test case: replies
 //! decode to exactly their `meaning`, host frames are produced byte-for-byte
 //! from it, and the printed `0xB155` example is not taken for a command.
 //! The file is read at run time, so a vector added there is tested too.
@@ -15,7 +17,7 @@ fn vectors_path() -> PathBuf {
     std::env::var_os("JOINTD_VECTORS")
         .map(PathBuf::from)
         .unwrap_or_else(|| {
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/protocol/vectors.json")
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/vectors.json")
         })
 }
 

@@ -3,7 +3,7 @@
 //! This module is the one place that knows frame offsets, CRC rules and unit
 //! scaling (`../shared/protocol/SPEC.md`). It does no I/O and depends on no
 //! runtime, so the daemon and the simulator share it, and the tests prove it
-//! against `../shared/protocol/vectors.json`.
+//! against the protocol's test vectors (`tests/data/vectors.json`).
 //!
 //! # Layout
 //! - [`checksum`]: the CRC-16/IBM-3740 used by both frame kinds.
