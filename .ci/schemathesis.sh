@@ -14,9 +14,14 @@ WAIT_S=60
 TOKEN="ci-$RANDOM$RANDOM"
 WORK="$(mktemp -d)"
 
-if ! schemathesis --version 2>/dev/null | grep -q "$SCHEMATHESIS_VERSION"; then
-  python3 -m pip install --quiet "schemathesis==$SCHEMATHESIS_VERSION"
+# A venv of its own under target/: Debian's Python refuses installs
+# outside one (externally managed).
+VENV="target/schemathesis-venv"
+[ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
+if ! "$VENV/bin/schemathesis" --version 2>/dev/null | grep -q "$SCHEMATHESIS_VERSION"; then
+  "$VENV/bin/pip" install --quiet "schemathesis==$SCHEMATHESIS_VERSION"
 fi
+PATH="$PWD/$VENV/bin:$PATH"
 
 cargo build --quiet --features bench,ros2 --bin jointd
 JOINTD_TOKEN="$TOKEN" target/debug/jointd --sim 16 --listen 127.0.0.1:0 \
