@@ -571,6 +571,11 @@ fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusToStart), DaemonError>
 pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     let plan = plan(&args)?;
     raise_open_files_limit();
+    // Bound before any bus opens: a second daemon on a taken address stops
+    // there, without touching a port (nor sending a shutdown's disable).
+    let listener = TcpListener::bind(plan.listen)
+        .await
+        .map_err(|e| listen_error(plan.listen, e))?;
     let mut configs: Vec<BusToStart> = plan.buses.into_iter().map(|cfg| (cfg, None)).collect();
     let sim = match plan.sim {
         Some(sim_cfg) => {
@@ -585,9 +590,6 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
         .map(|(cfg, _)| (cfg.name.clone(), cfg.ids.clone()))
         .collect();
     let (handles, threads) = start_buses(configs)?;
-    let listener = TcpListener::bind(plan.listen)
-        .await
-        .map_err(|e| listen_error(plan.listen, e))?;
     let addr = listener.local_addr().map_err(|e| DaemonError::Io {
         what: "listener address".into(),
         source: e,

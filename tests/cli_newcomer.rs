@@ -33,6 +33,14 @@ fn a_taken_port_names_the_address_and_listen() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains(&addr) && err.contains("--listen"), "{err}");
+    // It stopped before opening any bus: nothing to disable, nothing said
+    // of one.
+    for never in ["bus up", "disable", "WARN"] {
+        assert!(
+            !err.contains(never),
+            "`{never}` from a daemon that never started: {err}"
+        );
+    }
 }
 
 #[test]

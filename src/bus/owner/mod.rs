@@ -165,7 +165,10 @@ impl Owner {
         // after a stop, the log is where a user looks for what was released.
         let ids = ctx.sched().registry().ids();
         let driving = driving_ids(ctx);
-        if disable {
+        if !ctx.ever_up() {
+            // A start that never opened the port has nothing to disable.
+            tracing::debug!(bus = %ctx.name(), "shutdown: the port was never open");
+        } else if disable {
             match estop::disable_everything(ctx, DisabledReason::Shutdown) {
                 Ok(_) => {
                     // Let the disable frames leave the wire before the port closes.

@@ -34,6 +34,8 @@ pub(crate) struct Ctx {
     sched: Scheduler,
     stats: Stats,
     link_state: LinkState,
+    /// The port was open at least once: something on it may be enabled.
+    ever_up: bool,
     port_notes: Vec<String>,
     /// What starting the thread found worth telling (no real-time priority).
     thread_notes: Vec<String>,
@@ -65,6 +67,7 @@ impl Ctx {
             requests,
             link,
             link_state: LinkState::Opening,
+            ever_up: false,
             port_notes: Vec::new(),
             thread_notes: Vec::new(),
             held: None,
@@ -95,6 +98,11 @@ impl Ctx {
             self.housekeeping(now);
         }
         slot
+    }
+
+    /// The port was open at least once since the owner started.
+    pub(crate) fn ever_up(&self) -> bool {
+        self.ever_up
     }
 
     /// While a write waits to be seen taken, reads the port's count for it

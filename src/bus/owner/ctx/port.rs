@@ -52,6 +52,7 @@ impl Ctx {
                     self.link.counters.reconnects += 1;
                 }
                 self.link_state = LinkState::Up;
+                self.ever_up = true;
                 tracing::info!(bus = %self.cfg.name, path = %self.cfg.path.display(), "bus up");
                 self.sched.push_event(BusEvent::BusUp {
                     bus: self.cfg.name.clone(),
