@@ -195,10 +195,7 @@ impl World {
                         d.spd_ref, a.speeds, self.both_views(id)
                     ));
                 }
-            } else if !a.allows_position(d.target_deg)
-                && !(self.after_outage[usize::from(id)]
-                    && (d.target_deg - d.angle_deg).abs() <= SLACK_DEG)
-            {
+            } else if !a.allows_position(d.target_deg) && !self.holds_after_outage(id, &d) {
                 self.fail(format!(
                     "joint {id} holds a target of {:.2}° that nothing admitted since its enable asked; admitted: {:?}; {}",
                     d.target_deg, a.spans, self.both_views(id)
@@ -224,6 +221,11 @@ impl World {
         if !self.device(id).enabled || !self.b.handle.grant(id).enabled {
             self.enable(id).await;
         }
+    }
+
+    /// Held where it stands by a bus that came back (see [`World::after_outage`]).
+    fn holds_after_outage(&self, id: u8, d: &jointd::sim::DeviceView) -> bool {
+        self.after_outage[usize::from(id)] && (d.target_deg - d.angle_deg).abs() <= SLACK_DEG
     }
 
     /// Joint `id` is under no generated path any more (another command
