@@ -118,24 +118,30 @@ fn pipeline_writes(b: &mut Bus, cycles: usize) -> Vec<Written> {
         else {
             panic!("cycle {k}: {slot:?}");
         };
-        let n = control.len() as u32 + 1;
-        let end = b.s.sent(b.now, n);
-        for (i, c) in control.iter().enumerate() {
-            b.s.control_sent(c, end - FRAME * (n - i as u32));
-        }
-        let want = Want {
-            dev_id,
-            index: block.index(),
-        };
-        b.s.track(want, end, b.now);
-        writes.push(Written {
-            at: b.now,
-            released: end - FRAME * n,
-            broadcasts: control.len(),
-            want,
-        });
+        writes.push(account_batch(b, &control, dev_id, block));
     }
     writes
+}
+
+/// A batch slot's transfer (`control` frames and a poll) handed to the
+/// port now, as the owner accounts it.
+fn account_batch(b: &mut Bus, control: &[Planned], dev_id: u8, block: InfoBlock) -> Written {
+    let n = control.len() as u32 + 1;
+    let end = b.s.sent(b.now, n);
+    for (i, c) in control.iter().enumerate() {
+        b.s.control_sent(c, end - FRAME * (n - i as u32));
+    }
+    let want = Want {
+        dev_id,
+        index: block.index(),
+    };
+    b.s.track(want, end, b.now);
+    Written {
+        at: b.now,
+        released: end - FRAME * n,
+        broadcasts: control.len(),
+        want,
+    }
 }
 
 #[test]
@@ -808,24 +814,9 @@ fn slowed_owner_run(seed: u64, clock_error_us: u64) -> (u32, u32) {
             wire_free - take
         );
         late_takes += u32::from(take > truth(b.now));
-        if std::env::var_os("DBG_SLOW").is_some() {
-            eprintln!(
-                "k {k} margin {:?} early {}",
-                take.saturating_duration_since(wire_free),
-                b.s.usb_view(b.now).map_or(0, |v| v.writes_taken_late)
-            );
-        }
         wire_free = b.s.clock().reply_end(take + FRAME * n);
         taken_at = Some(take);
-        let end = b.s.sent(b.now, n);
-        for (i, c) in control.iter().enumerate() {
-            b.s.control_sent(c, end - FRAME * (n - i as u32));
-        }
-        let want = Want {
-            dev_id,
-            index: block.index(),
-        };
-        b.s.track(want, end, b.now);
+        account_batch(&mut b, &control, dev_id, block);
         writes += 1;
     }
     (writes, late_takes)
