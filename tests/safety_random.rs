@@ -516,7 +516,7 @@ impl World {
     /// sometimes on an object placed on joint 1's way; then released (back
     /// to where the fingers started), stopped, or left to whatever follows.
     async fn grasp(&mut self) {
-        if let Some(id) = self.start_grasp().await {
+        if let Some((id, _)) = self.start_grasp().await {
             match self.rng.below(3) {
                 0 => {
                     self.b
@@ -541,7 +541,7 @@ impl World {
     /// Starts a grasp of hand `h` (joints 1 and 2) over REST or the
     /// WebSocket, each finger closing (towards higher angles) to a random
     /// limit, sometimes on an object placed on joint 1's way; its id.
-    async fn start_grasp(&mut self) -> Option<u64> {
+    async fn start_grasp(&mut self) -> Option<(u64, f64)> {
         // Mostly on a hand ready for it (as a user would make it), so the
         // steps after it have a grasp to act on.
         if self.rng.below(4) != 0 {
@@ -589,7 +589,7 @@ impl World {
             let what = format!("grasp {id} (closing to {:.1}°, or released)", close_to[k]);
             self.under_path(joint, (angle, now), close_to[k], what);
         }
-        Some(id)
+        Some((id, close_to[0]))
     }
 
     /// A finger that ended before it closed (its limit could not be set:
@@ -604,26 +604,30 @@ impl World {
         }
     }
 
-    /// Until finger `joint` of grasp `id` is closing or holding (or the
-    /// grasp ended), as its view says.
-    async fn grasp_under_way(&self, id: u64, joint: &str) {
+    /// Until joint 1 (finger `a` of grasp `id`) has the grasp's target
+    /// `close_to` on the device, or the grasp's view says the finger is
+    /// past closing (holding, or ended).
+    async fn grasp_under_way(&self, id: u64, close_to: f64) {
         let path = format!("/api/v1/grasps/{id}");
         let deadline = tokio::time::Instant::now() + WAIT;
         loop {
+            if (self.device(1).target_deg - close_to).abs() < 0.5 {
+                return;
+            }
             let v = self.b.server.get(&path).await.body;
             let state = v["fingers"]
                 .as_array()
-                .and_then(|f| f.iter().find(|f| f["joint"] == joint))
+                .and_then(|f| f.iter().find(|f| f["joint"] == "a"))
                 .map_or("?".to_string(), |f| {
                     f["state"].as_str().unwrap_or("?").to_string()
                 });
-            if v["state"] == "done" || state == "closing" || state == "holding" {
+            if v["state"] == "done" || !(state == "starting" || state == "closing") {
                 return;
             }
             if tokio::time::Instant::now() >= deadline {
                 self.fail(format!("grasp {id} never under way: {v}"));
             }
-            tokio::time::sleep(Duration::from_millis(5)).await;
+            tokio::time::sleep(Duration::from_millis(2)).await;
         }
     }
 
@@ -631,8 +635,8 @@ impl World {
     /// closes or holds: the finger goes from where it stands, never on
     /// into the object.
     async fn grasp_taken_over_by_a_move(&mut self) {
-        if let Some(id) = self.start_grasp().await {
-            self.grasp_under_way(id, "a").await;
+        if let Some((id, close_to)) = self.start_grasp().await {
+            self.grasp_under_way(id, close_to).await;
             let ms = 300 + self.rng.below(1200);
             self.move_joints(&[1], ms).await;
         }
@@ -698,10 +702,10 @@ impl World {
     /// finger ends, and once the bus is back each lowered limit is written
     /// and read back (owed until then), before anything else moves them.
     async fn grasp_unplugged(&mut self) {
-        let Some(id) = self.start_grasp().await else {
+        let Some((id, close_to)) = self.start_grasp().await else {
             return;
         };
-        self.grasp_under_way(id, "a").await;
+        self.grasp_under_way(id, close_to).await;
         let before: Vec<f64> = JOINTS.iter().map(|&j| self.device(j).angle_deg).collect();
         self.b.sim.inject(Fault::Unplug);
         self.b

@@ -97,6 +97,11 @@ pub(crate) async fn start(
         fingers = fingers.len(),
         "grasp started"
     );
+    // The grasp takes its joints from any move now: a move admitted after
+    // this one takes them back, and the fingers then send nothing.
+    for f in &fingers {
+        f.bus.take_over(&[f.id]);
+    }
     tokio::spawn(run(job, fingers, plan));
     get(state, id)
 }

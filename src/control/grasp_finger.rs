@@ -99,6 +99,9 @@ async fn drive(f: &Finger, plan: &Plan, mut cmd: watch::Receiver<Command>) -> En
         return End::Aborted("the joint's angle is not known".into());
     };
     let fw = dev.as_ref().map(firmware_of).unwrap_or_default();
+    if !may_send(f) {
+        return End::Stopped("a move took the joint".into());
+    }
     match send(f, plan.speed_dps, f.close_to_deg, fw) {
         Ok(sp) => w.sent(sp),
         Err(why) => return End::Aborted(why),
@@ -230,13 +233,12 @@ fn send(
     let pos_ref = units::angle_to_raw(deg).map_err(|e| format!("target {deg}°: {e}"))?;
     let spd_ref = units::speed_limit_to_raw(rpm, fw).map_err(|e| format!("speed: {e}"))?;
     let sp = Setpoint { pos_ref, spd_ref };
-    f.bus.take_over(&[f.id]);
     f.bus
         .set_targets_under(&[(f.id, sp, f.epoch)], Source::Grasp);
     Ok(sp)
 }
 
-/// False once a move took the joint since the grasp did: the finger sends
+/// False once a move took the joint since the grasp did (at its start): the finger sends
 /// nothing more (a re-send would take the joint back out of the move, and
 /// press on), and ends when the move's first sample is on the wire
 /// ([`taken_over`]), where the joint no longer presses (the path starts
