@@ -271,3 +271,36 @@ async fn no_new_motion_of_a_joint_owed_its_limit_is_admitted() {
     let r = b.server.post("/api/v1/moves", mv).await;
     assert_eq!(r.status.as_u16(), 201, "{}", r.body);
 }
+
+/// A finger whose replies stop mid-hold: the grasp ends, its limit cannot
+/// be read back and stays owed; once the joint answers again the limit is
+/// written and read back, and the finger says so.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_finger_silent_mid_hold_gets_its_limit_back_once_it_answers() {
+    let b = hand(&[(1, 10.0, 0.05)]).await;
+    let id = grasp(
+        &b,
+        json!({"speed_dps": 30.0, "hold_current_a": 0.2, "joints": [
+            {"joint": "a", "close_to_deg": 40.0}]}),
+    )
+    .await;
+    wait_grasp(&b, id, "a holding", |v| state_of(v, "a") == "holding").await;
+    b.sim.inject(jointd::sim::Fault::DropReplies {
+        dev_id: Some(1),
+        rate: 1.0,
+    });
+    let view = wait_grasp(&b, id, "a ended", |v| v["state"] == "done").await;
+    assert_eq!(
+        finger(&view, "a")["current_limit_restored"],
+        false,
+        "{view}"
+    );
+    assert!(b.handle.owed_limits().get(1).is_some());
+    b.sim.inject(jointd::sim::Fault::ClearAll);
+    let view = wait_grasp(&b, id, "a's limit back", |v| {
+        finger(v, "a")["current_limit_restored"] == true
+    })
+    .await;
+    limits_restored(&b, &view).await;
+    assert!(b.handle.owed_limits().get(1).is_none());
+}
