@@ -7,7 +7,7 @@ use jointd::protocol::params::index;
 use jointd::protocol::status::fsm;
 use jointd::sim::Fault;
 use serde_json::json;
-use support::sim_bus::{start, BUS};
+use support::sim_bus::{start, start_sim_with, BUS};
 
 const DEV: &str = "/api/v1/buses/sim0/devices";
 /// Rotor speed (raw Q15) below which a joint counts as settled (~15 rpm).
@@ -61,6 +61,57 @@ async fn move_a_joint_end_to_end() {
     s.post_empty(&format!("{DEV}/1/disable")).await.ok();
     b.wait_fsm(1, fsm::READY).await;
     assert!(!b.sim.device(1).unwrap().enabled);
+}
+
+/// A joint aligning after its first enable stands still: a target then is
+/// refused (409, saying to wait for `run`), on its own or in a group; once
+/// it runs, the same target is taken and reached.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_target_while_the_joint_aligns_is_409_until_it_runs() {
+    // Long enough that the requests come while it lasts on a loaded machine.
+    let b = start_sim_with(
+        2,
+        None,
+        "2.0.1",
+        |sim| sim.align_time = std::time::Duration::from_secs(2),
+        |_| {},
+    )
+    .await;
+    let s = &b.server;
+    s.post_empty(&format!("{DEV}/1/enable")).await.ok();
+    b.wait_fsm(1, fsm::ALIGN).await;
+    let target = json!({"position_deg": 20, "speed_dps": 200});
+    let r = s.put(&format!("{DEV}/1/target"), target.clone()).await;
+    let p = r.problem(409);
+    assert_eq!(p["type"], "urn:jointd:problem:not-aligned", "{p}");
+    let detail = p["detail"].as_str().unwrap();
+    assert!(
+        detail.contains("aligning") && detail.contains("once its state is `run`"),
+        "{p}"
+    );
+    let r = s
+        .put(
+            "/api/v1/buses/sim0/control/targets",
+            json!({"targets": [{"id": 1, "position_deg": 20}]}),
+        )
+        .await;
+    let p = r.problem(409);
+    assert_eq!(p["type"], "urn:jointd:problem:not-aligned", "{p}");
+    assert_eq!(p["field"], "targets[0]", "{p}");
+    let d = s.get(&format!("{DEV}/1")).await;
+    assert_eq!(d.ok()["status"]["state"], "align", "still aligning: {d:?}");
+    // Nothing was stored: the joint runs without heading for 20°.
+    b.wait_fsm(1, fsm::RUN).await;
+    let held = b.sim.device(1).unwrap().target_deg;
+    assert!((held - 20.0).abs() > 1.0, "target {held}° after the 409s");
+    s.put(&format!("{DEV}/1/target"), target).await.ok();
+    b.wait_snapshot("joint 1 near 20°", |snap| {
+        snap.devices[&1]
+            .info02
+            .as_ref()
+            .is_some_and(|(i, _)| (i.angle_deg() - 20.0).abs() < 0.5)
+    })
+    .await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

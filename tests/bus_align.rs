@@ -1,5 +1,6 @@
-//! A target sent while a joint aligns after its first enable must still be
-//! reached once it runs (the README's walkthrough enables and moves at once).
+//! A target the bus is given while a joint aligns after its first enable
+//! must still be reached once it runs. The front-ends refuse targets then
+//! (409 `not-aligned`, `control::targets`); the bus keeps what it is given.
 
 mod support;
 

@@ -1,7 +1,7 @@
 //! Targets in physical units → raw setpoints: soft limits first, then the
 //! wire range via [`crate::protocol::units`], with the speed base of the
-//! device's own firmware. Also the "is it enabled?" check that jogs and
-//! targets need.
+//! device's own firmware; a joint still aligning takes no target. Also the
+//! "is it enabled?" check that jogs and targets need.
 
 use std::time::Duration;
 
@@ -15,7 +15,7 @@ use crate::bus::authority::Epoch;
 use crate::bus::handle::DeviceState;
 use crate::bus::{BusHandle, Setpoint};
 use crate::hands::Calibration;
-use crate::protocol::status::fsm_name_in;
+use crate::protocol::status::{fsm, fsm_name_in};
 use crate::protocol::units;
 use crate::protocol::CtrlMode;
 
@@ -45,7 +45,21 @@ pub(crate) struct TargetRequest {
 
 /// Converts one joint's target, given in its calibrated frame (`cal`);
 /// `field` prefixes error field names (`targets[2].` in a group request).
+/// A valid target for a joint that aligns is refused (409 `not-aligned`).
 pub(crate) fn setpoint(
+    dev: &DeviceState,
+    limits: &JointLimits,
+    cal: &Calibration,
+    req: &TargetRequest,
+    field: &str,
+) -> ControlResult<Setpoint> {
+    let sp = checked_setpoint(dev, limits, cal, req, field)?;
+    not_aligning(dev, field)?;
+    Ok(sp)
+}
+
+/// [`setpoint`]'s value checks and conversion, whatever the joint's state.
+fn checked_setpoint(
     dev: &DeviceState,
     limits: &JointLimits,
     cal: &Calibration,
@@ -90,6 +104,36 @@ pub(crate) fn setpoint(
     let spd_ref = units::speed_limit_dps_to_raw(dps, fw)
         .map_err(|e| ControlError::from_unit(&names.speed().to_string(), e))?;
     Ok(Setpoint { pos_ref, spd_ref })
+}
+
+/// 409 while the joint aligns its encoder after its first enable (fsm
+/// `align`, about a second): it stands still until it runs, and a target
+/// accepted now would read as taken while nothing moves. Every front-end's
+/// targets come through [`setpoint`], so each refuses it alike. The enable
+/// confirms the state it reached, so the snapshot says `align` right after.
+fn not_aligning(dev: &DeviceState, field: &str) -> ControlResult<()> {
+    if !dev
+        .info01
+        .as_ref()
+        .is_some_and(|(i, _)| i.fsm == fsm::ALIGN)
+    {
+        return Ok(());
+    }
+    let err = ControlError::conflict(
+        "not-aligned",
+        "Joint still aligning",
+        format!(
+            "joint {} is aligning its encoder after its enable and stands still until it \
+             runs: send the target once its state is `run`",
+            dev.dev_id
+        ),
+    );
+    let field = field.trim_end_matches('.');
+    Err(if field.is_empty() {
+        err
+    } else {
+        err.with_field(field)
+    })
 }
 
 /// The names a target's errors give, written out only when one is raised
@@ -334,6 +378,52 @@ mod tests {
         )
         .unwrap_err();
         assert_eq!(err.field(), Some("t.position_deg"));
+    }
+
+    #[test]
+    fn a_joint_aligning_takes_no_target_and_a_bad_value_is_said_first() {
+        let limits = JointLimits::default();
+        let mut aligning = dev(CtrlMode::Position, Some(128));
+        if let Some((info, _)) = aligning.info01.as_mut() {
+            info.fsm = fsm::ALIGN;
+        }
+        let err = setpoint(
+            &aligning,
+            &limits,
+            &Calibration::IDENTITY,
+            &req(Some(10.0), None),
+            "targets[1].",
+        )
+        .unwrap_err();
+        match &err {
+            ControlError::Conflict { kind, field, .. } => {
+                assert_eq!(kind, "not-aligned");
+                assert_eq!(field.as_deref(), Some("targets[1]"));
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(err.to_string().contains("once its state is `run`"), "{err}");
+        let err = setpoint(
+            &aligning,
+            &limits,
+            &Calibration::IDENTITY,
+            &req(Some(1000.0), None),
+            "",
+        )
+        .unwrap_err();
+        assert!(matches!(err, ControlError::Invalid { .. }), "{err:?}");
+        let mut running = aligning.clone();
+        if let Some((info, _)) = running.info01.as_mut() {
+            info.fsm = fsm::RUN;
+        }
+        assert!(setpoint(
+            &running,
+            &limits,
+            &Calibration::IDENTITY,
+            &req(Some(10.0), None),
+            ""
+        )
+        .is_ok());
     }
 
     #[test]

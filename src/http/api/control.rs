@@ -279,8 +279,9 @@ async fn disable_one(
 ///
 /// Position mode: `position_deg` with an optional `speed_dps` limit (output-shaft °/s; 30 when left
 /// out). Speed mode: `speed_dps` only. Values outside the configured soft limits are refused with
-/// 422 and never clamped. 200 when the reference went out on the wire, 202 when it is stored for
-/// the next control frame.
+/// 422 and never clamped. 409 while the joint is not enabled, or while it aligns its encoder after
+/// its first enable (state `align`, about a second): send the target once its state is `run`. 200
+/// when the reference went out on the wire, 202 when it is stored for the next control frame.
 #[utoipa::path(put, path = "/api/v1/buses/{bus}/devices/{id}/target", tag = TAG_CONTROL, params(DevicePath),
     request_body(content = TargetRequest, example = json!({"position_deg": 45.0, "speed_dps": 30.0})),
     responses((status = 200, description = "Target written to the wire", body = TargetAck),
@@ -398,8 +399,8 @@ async fn disable_group(
 /// target rejects the whole request), then stored in one write.
 ///
 /// Every target is checked against the soft limits and the devices' states before anything is
-/// stored: one bad target refuses the whole request (422 or 409). The accepted targets go out
-/// together in the next control cycle.
+/// stored: one bad target refuses the whole request (422 or 409; 409 also while a joint aligns
+/// after its first enable). The accepted targets go out together in the next control cycle.
 #[utoipa::path(put, path = "/api/v1/buses/{bus}/control/targets", tag = TAG_CONTROL, params(BusPath),
     request_body(content = GroupTargetRequest, example = json!({"targets": [
         {"id": 1, "position_deg": 30.0, "speed_dps": 30.0},
