@@ -239,6 +239,8 @@ class DeviceDetail(_DeviceDetailRequired, total=False):
     """One device's full state."""
 
     calibration: Optional["CalibrationView"]
+    current_limit_owed_a: Optional[float]
+    """The current limit a grasp or homing lowered and could not write back yet, A: jointd writes it and reads it back as soon as the joint answers, and refuses every new motion of the joint (409 `current-limit-owed`) until then. `null`: nothing owed."""
     disabled_reason: Optional[str]
     """Why the joint is disabled, when the daemon knows: `reset` (the device lost power or rebooted), `fault`, `estop`, `request` (a disable: REST, WebSocket, the teleop watchdog), `on_start` (found enabled at start, disabled by the bus's `on_start`), `shutdown`. `null` while enabled, or if nothing disabled it since the daemon started."""
     firmware: Optional[str]
@@ -385,21 +387,21 @@ class GraspJoint(_GraspJointRequired, total=False):
     """One finger of the hand, by its joint name, and where it closes to."""
 
     close_to_deg: Optional[float]
-    """Where it closes to at most, degrees (calibrated frame); default: the hand's pose `closed`, else the top of the joint's allowed range."""
+    """Where it closes to at most, degrees (calibrated frame); default: the hand's pose `closed`, else the top of the joint's allowed range. Fingers close towards higher angles: a limit below where the finger stands is refused (`would-open`)."""
 
 
 class _GraspRequestRequired(TypedDict):
     hold_current_a: float
     """The force each finger holds with, as a q current, A (0 < I ≤ 5.625, below the joint's own current limit and its protection level)."""
     speed_dps: float
-    """Closing speed at the output, °/s (0 < s ≤ 180)."""
+    """Closing speed at the output, °/s (0 < s ≤ 180, within each finger's soft speed limit, and no slower than the wire carries)."""
 
 
 class GraspRequest(_GraspRequestRequired, total=False):
     """How to grasp."""
 
     contact_threshold_a: Optional[float]
-    """The rise of q current over what the finger draws moving freely that counts as contact, A (0 < t < hold_current_a; default 30 % of hold_current_a, at least 0.02)."""
+    """The rise of q current over what the finger draws moving freely that counts as contact, A (0.02 ≤ t < hold_current_a: below 0.02 the current's noise reads as contact; default 30 % of hold_current_a, at least 0.02)."""
     joints: Optional[List["GraspJoint"]]
     """The fingers (1..=64, each once); default: every joint of the hand."""
 
@@ -859,7 +861,7 @@ class ReleaseRequest(TypedDict, total=False):
     pose: Optional[str]
     """Open to this pose of the hand (its angle for each finger)."""
     speed_dps: Optional[float]
-    """Opening speed, °/s (default: the closing speed)."""
+    """Opening speed, °/s (default: the closing speed), checked as the closing speed is."""
 
 
 class ResetView(TypedDict):
