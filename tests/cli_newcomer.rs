@@ -1,7 +1,8 @@
 //! What a newcomer meets on the command line: the assumed baud
 //! said aloud, a taken port that names `--listen`, a refused config value
 //! with its line, a bus that is down answering "bus down" for every device
-//! call, and a shutdown that names the joints it disabled.
+//! call (and nothing to disable at shutdown if it never opened), and a
+//! shutdown that names the joints it disabled.
 
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -127,6 +128,39 @@ fn every_device_call_on_a_bus_that_is_down_answers_bus_down() {
             );
         }
     });
+}
+
+#[test]
+fn a_bus_that_never_opened_has_nothing_to_disable_at_shutdown() {
+    let path = missing_device_path();
+    let spec = format!("gone={path}@500000");
+    let mut d = Daemon::spawn(&["--bus", &spec, "--listen", "127.0.0.1:0"]);
+    // The API answering says the daemon is up to its signal handling.
+    let base = format!("{}/api/v1/buses/gone", d.base);
+    tokio::runtime::Runtime::new()
+        .expect("runtime")
+        .block_on(async {
+            let deadline = Instant::now() + WAIT;
+            loop {
+                let bus: serde_json::Value =
+                    reqwest::get(&base).await.unwrap().json().await.unwrap();
+                if bus["link"] == "down" {
+                    break;
+                }
+                assert!(Instant::now() < deadline, "the bus never went down: {bus}");
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+        });
+    assert!(d.stop().success());
+    let log = d.log_to_end();
+    let (_, after) = log
+        .split_once("shutting down")
+        .unwrap_or_else(|| panic!("no shutdown in:\n{log}"));
+    // No disable tried on a port that never opened, so no warning that it
+    // could not be sent.
+    for never in ["disable", "WARN"] {
+        assert!(!after.contains(never), "`{never}` at shutdown:\n{log}");
+    }
 }
 
 #[test]
