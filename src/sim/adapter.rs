@@ -199,15 +199,6 @@ impl TakeRule for Taking {
     /// they reach the chip (late by the write delay in force), and never
     /// one before the last write's.
     fn release_of(&self, at: Instant) -> Instant {
-        self.release_seen(at, None)
-    }
-}
-
-impl Taking {
-    /// [`TakeRule::release_of`], no earlier than the frame after `seen`
-    /// where a count the host reads is published only then: a count
-    /// cannot fall before it is told.
-    fn release_seen(&self, at: Instant, seen: Option<Instant>) -> Instant {
         let mut st = self.state();
         let on_time = self.clock.next_after(at);
         let reach = match st.delay.get() {
@@ -217,8 +208,7 @@ impl Taking {
         let release = self
             .clock
             .next_after(reach)
-            .max(st.last_release.unwrap_or(on_time))
-            .max(seen.map_or(on_time, |t| self.clock.next_after(t)));
+            .max(st.last_release.unwrap_or(on_time));
         st.slipped += u64::from(release > on_time);
         st.last_release = Some(release);
         release
@@ -344,12 +334,7 @@ impl Line for AdapterLine {
                     Some(release) => release,
                     None => {
                         let at = written.unwrap_or_else(|| self.written_at(called, returned));
-                        // Dated as early as the write may have been, but
-                        // where the host confirms writes by the count this
-                        // publishes, taken no earlier than now: the host
-                        // saw it untaken until now, and wrote nothing else.
-                        let seen = self.inner.publishes_count().then_some(returned);
-                        let release = self.taking.release_seen(at, seen);
+                        let release = self.taking.release_of(at);
                         self.inner.took(release, n);
                         release
                     }

@@ -65,12 +65,6 @@ pub(crate) trait Line: Send {
     /// The adapter model takes `bytes` of the host's at `at`, the USB frame
     /// they leave in.
     fn took(&mut self, _at: std::time::Instant, _bytes: usize) {}
-    /// True when [`Self::took`] reaches a host that reads it as its
-    /// driver's output count, as the model reads the bytes (a pty's
-    /// published count).
-    fn publishes_count(&self) -> bool {
-        false
-    }
     /// The frame the model's rule named, at the host's write, for the
     /// first of the `bytes` just read (`None`: the model decides now, and
     /// reports it with [`Self::took`]).

@@ -165,10 +165,6 @@ impl Line for PtyLine {
         }
     }
 
-    fn publishes_count(&self) -> bool {
-        self.taken.is_some()
-    }
-
     fn path(&self) -> Option<&Path> {
         Some(&self.link)
     }
