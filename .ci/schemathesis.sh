@@ -15,9 +15,10 @@ TOKEN="ci-$RANDOM$RANDOM"
 WORK="$(mktemp -d)"
 
 # A venv of its own under target/: Debian's Python refuses installs
-# outside one (externally managed).
+# outside one (externally managed). Made again if an earlier attempt left
+# it without pip (python3-venv missing then).
 VENV="target/schemathesis-venv"
-[ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
+[ -x "$VENV/bin/pip" ] || python3 -m venv --clear "$VENV"
 if ! "$VENV/bin/schemathesis" --version 2>/dev/null | grep -q "$SCHEMATHESIS_VERSION"; then
   "$VENV/bin/pip" install --quiet "schemathesis==$SCHEMATHESIS_VERSION"
 fi
