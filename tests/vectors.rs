@@ -1,9 +1,10 @@
 //! Every frame of `tests/data/vectors.json` (a byte-identical copy of the
 //! protocol's published test vectors, kept here so a clone tests alone) is
-//! a test case: replies
-//! decode to exactly their `meaning`, host frames are produced byte-for-byte
-//! from it, and the printed `0xB155` example is not taken for a command.
-//! The file is read at run time, so a vector added there is tested too.
+//! a test case: replies decode to exactly their `meaning`, host frames are
+//! produced byte-for-byte from it, and the printed `0xB155` example is not
+//! taken for a command. The file is read at run time, so a vector added
+//! there is tested too; `JOINTD_VECTORS=path` tests another copy (the
+//! protocol's own, to see whether this one is still the same).
 
 use std::path::PathBuf;
 

@@ -1,9 +1,10 @@
 //! The joint-module wire protocol, as pure functions of bytes.
 //!
 //! This module is the one place that knows frame offsets, CRC rules and unit
-//! scaling (`../shared/protocol/SPEC.md`). It does no I/O and depends on no
-//! runtime, so the daemon and the simulator share it, and the tests prove it
-//! against the protocol's test vectors (`tests/data/vectors.json`).
+//! scaling (the protocol's SPEC.md, cited by section). It does no I/O and
+//! depends on no runtime, so the daemon and the simulator share it, and the
+//! tests prove it against the protocol's test vectors (a copy in
+//! `tests/data/vectors.json`).
 //!
 //! # Layout
 //! - [`checksum`]: the CRC-16/IBM-3740 used by both frame kinds.
