@@ -40,6 +40,12 @@ for _ in $(seq $((WAIT_S * 10))); do
   sleep 0.1
 done
 curl -sf -X POST "$API/devices/1/enable" >/dev/null
+# The first enable aligns the encoder (about a second); a target before
+# the joint runs is refused with 409.
+for _ in $(seq $((WAIT_S * 10))); do
+  curl -sf "$API/devices/1" | grep -q '"state":"run"' && break
+  sleep 0.1
+done
 curl -sf -X PUT "$API/devices/1/target" -H "$J" -d '{"position_deg": 20, "speed_dps": 30}' >/dev/null
 curl -sf "$API/devices/2/config" >/dev/null
 sleep 1
