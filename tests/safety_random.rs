@@ -212,6 +212,17 @@ impl World {
         }
     }
 
+    /// `PUT` joint `id`'s target.
+    async fn put_target(&self, id: u8, body: &Value) -> support::http::Resp {
+        self.b
+            .server
+            .put(
+                &format!("/api/v1/buses/sim0/devices/{id}/target"),
+                body.clone(),
+            )
+            .await
+    }
+
     /// Joint `id` in position mode and enabled, as a user readies it.
     async fn ready(&mut self, id: u8) {
         let d = self.device(id);
@@ -323,14 +334,7 @@ impl World {
         } else {
             json!({"position_deg": self.rng.angle()})
         };
-        let r = self
-            .b
-            .server
-            .put(
-                &format!("/api/v1/buses/sim0/devices/{id}/target"),
-                body.clone(),
-            )
-            .await;
+        let r = self.put_target(id, &body).await;
         self.log.push(format!("target {id} {body}: {}", r.status));
         if r.status.is_success() {
             self.not_under(id);
@@ -653,14 +657,7 @@ impl World {
         let here = self.device(id).angle_deg;
         let far = if here < 0.0 { 40.0 } else { -40.0 };
         let body = json!({"position_deg": far, "speed_dps": 10});
-        let r = self
-            .b
-            .server
-            .put(
-                &format!("/api/v1/buses/sim0/devices/{id}/target"),
-                body.clone(),
-            )
-            .await;
+        let r = self.put_target(id, &body).await;
         self.log
             .push(format!("slow target {id} {body}: {}", r.status));
         if !r.status.is_success() {
