@@ -152,36 +152,60 @@ async fn an_estop_is_not_held_for_the_age_of_the_transaction_it_cuts_short() {
         s.usb_pipeline.as_ref().is_some_and(|u| u.confirming)
     })
     .await;
-    let (read, asked) = read_on_the_wire(&rig).await;
+    // The press is this test's thread's, not the daemon's: on a busy host
+    // that thread may wake past the chip's hold, when there is nothing
+    // left to cut short. Such a try is not this test's case; it is made
+    // again, and each try that pressed in time is judged.
+    for _ in 0..PRESS_TRIES {
+        let (read, asked) = read_on_the_wire(&rig).await;
+        let reply_end = answered(&rig, asked).await;
+        let press_at = reply_end + TIMER / 2;
+        while std::time::Instant::now() < press_at {
+            tokio::task::yield_now().await;
+        }
+        if std::time::Instant::now() > press_at + PRESS_LATE {
+            let _ = tokio::time::timeout(WAIT, read).await;
+            continue;
+        }
+        rig.bus.estop().await.expect("the e-stop");
+        preempted(read).await;
+        let log = rig.sim.frame_log();
+        let estop = log
+            .iter()
+            .find(|f| f.from_host && f.start >= press_at)
+            .expect("the e-stop's frames");
+        assert!(
+            estop.start < reply_end + TIMER,
+            "the e-stop went {:?} after the press, past the chip's hold of the reply",
+            estop.start - press_at
+        );
+        return;
+    }
+    panic!(
+        "this test's thread never pressed within {PRESS_LATE:?} of its aim in {PRESS_TRIES} tries"
+    );
+}
+
+/// Tries of a press aimed at half the chip's hold, and how late one may
+/// come (a quarter of the hold) and still be the case under test.
+const PRESS_TRIES: usize = 10;
+const PRESS_LATE: Duration = Duration::from_millis(4);
+
+/// When the reply to the request at `asked` in the wire log left the wire.
+async fn answered(rig: &Rig, asked: usize) -> std::time::Instant {
     let deadline = std::time::Instant::now() + WAIT;
-    let reply_end = loop {
+    loop {
         let log = rig.sim.frame_log();
         if let Some(reply) = log[asked + 1..]
             .iter()
             .find(|f| !f.from_host && f.dev_id == Some(2))
         {
-            break reply.end;
+            return reply.end;
         }
         assert!(
             std::time::Instant::now() < deadline,
             "the read was never answered"
         );
         tokio::task::yield_now().await;
-    };
-    let press_at = reply_end + TIMER / 2;
-    while std::time::Instant::now() < press_at {
-        tokio::task::yield_now().await;
     }
-    rig.bus.estop().await.expect("the e-stop");
-    preempted(read).await;
-    let log = rig.sim.frame_log();
-    let estop = log
-        .iter()
-        .find(|f| f.from_host && f.start >= press_at)
-        .expect("the e-stop's frames");
-    assert!(
-        estop.start < reply_end + TIMER,
-        "the e-stop went {:?} after the press, past the chip's hold of the reply",
-        estop.start - press_at
-    );
 }
