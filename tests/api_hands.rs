@@ -317,3 +317,118 @@ fn a_kill_during_pose_writes_leaves_a_whole_state_file() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A program streaming setpoints to a hand's joints is shown on the hand
+/// (`streamed_by`, with the name it gave) and on each joint, while it
+/// streams; an e-stop ends its streams and takes it off; a new connection
+/// that only reads is never shown; a name that cannot be shown is a 400.
+#[test]
+fn a_streaming_client_is_shown_on_its_hand_until_its_streams_end() {
+    use futures_util::{SinkExt, StreamExt};
+    use tokio_tungstenite::tungstenite::Message;
+
+    let dir = std::env::temp_dir().join(format!("jointd-hands-stream-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let config = dir.join("jointd.toml");
+    std::fs::write(
+        &config,
+        r#"[[hand]]
+name = "left"
+joints = [{ bus = "sim0", ids = "1-2", names = ["thumb", "index"] }]
+"#,
+    )
+    .unwrap();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let d = start(&config);
+    rt.block_on(async {
+        let base = &d.base;
+        wait_online(base).await;
+        let ws_base = base.replace("http://", "ws://");
+        let refused = tokio_tungstenite::connect_async(format!("{ws_base}/api/v1/ws?client=")).await;
+        assert!(
+            matches!(&refused, Err(tokio_tungstenite::tungstenite::Error::Http(r)) if r.status() == 400),
+            "an empty name: {refused:?}"
+        );
+        let (s, _) = call(
+            reqwest::Method::POST,
+            format!("{base}/api/v1/buses/sim0/control/enable"),
+            Some(json!({"ids": [1, 2]})),
+        )
+        .await;
+        assert_eq!(s, 200);
+        let hands = || async {
+            call(reqwest::Method::GET, format!("{base}/api/v1/hands"), None)
+                .await
+                .1
+        };
+        let (mut ws, _) =
+            tokio_tungstenite::connect_async(format!("{ws_base}/api/v1/ws?client=lerobot%20follower"))
+                .await
+                .expect("connect");
+        let welcome: Value = match ws.next().await {
+            Some(Ok(Message::Text(t))) => serde_json::from_str(t.as_str()).unwrap(),
+            other => panic!("no welcome: {other:?}"),
+        };
+        assert_eq!(welcome["name"], "lerobot follower");
+        assert!(hands().await["hands"][0]["streamed_by"]
+            .as_array()
+            .is_some_and(|a| a.is_empty()));
+        // Targets go in once the joints run (a target while they align is refused).
+        let deadline = Instant::now() + WAIT;
+        loop {
+            ws.send(Message::text(
+                json!({"type": "setpoints", "seq": 1, "ack": true, "targets": [
+                    {"hand": "left", "joint": "index", "position_deg": 5.0}]})
+                .to_string(),
+            ))
+            .await
+            .expect("send");
+            let reply: Value = loop {
+                if let Some(Ok(Message::Text(t))) = ws.next().await {
+                    let v: Value = serde_json::from_str(t.as_str()).unwrap();
+                    if v["type"] == "ack" || v["type"] == "error" {
+                        break v;
+                    }
+                }
+            };
+            if reply["type"] == "ack" {
+                break;
+            }
+            assert!(Instant::now() < deadline, "never accepted: {reply}");
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        let shown = hands().await["hands"][0]["streamed_by"].clone();
+        assert_eq!(shown.as_array().map(Vec::len), Some(1), "{shown}");
+        assert_eq!(shown[0]["via"], "websocket");
+        assert_eq!(shown[0]["name"], "lerobot follower");
+        assert_eq!(shown[0]["client"], welcome["client"]);
+        assert_eq!(shown[0]["joints"], json!(["index"]));
+        let (_, index) = call(
+            reqwest::Method::GET,
+            format!("{base}/api/v1/buses/sim0/devices/2"),
+            None,
+        )
+        .await;
+        assert_eq!(index["streamed_by"]["name"], "lerobot follower");
+        let (_, thumb) = call(
+            reqwest::Method::GET,
+            format!("{base}/api/v1/buses/sim0/devices/1"),
+            None,
+        )
+        .await;
+        assert_eq!(thumb["streamed_by"], Value::Null);
+
+        let (s, _) = call(reqwest::Method::POST, format!("{base}/api/v1/estop"), None).await;
+        assert_eq!(s, 200);
+        let deadline = Instant::now() + WAIT;
+        while !hands().await["hands"][0]["streamed_by"]
+            .as_array()
+            .is_some_and(|a| a.is_empty())
+        {
+            assert!(Instant::now() < deadline, "still shown after the e-stop");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        drop(ws);
+    });
+}

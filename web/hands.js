@@ -9,9 +9,39 @@ import { MoveTracker } from "./moves.js";
 import { graspRow } from "./grasp.js";
 
 const trackers = new Map();     // hand name -> MoveTracker of its pose moves
+const streamLines = new Map();  // hand name -> the line saying who streams to it
+/** How often the page asks who streams to each hand, ms. */
+const STREAMS_EVERY_MS = 1000;
 
 export function initHands() {
   refreshHands();
+  watchStreams();
+}
+
+/** Says on each hand's card which program streams setpoints to it (the
+ *  LeRobot plugin, a teleop client, ROS 2 joint commands): a person about
+ *  to touch the hand sees that a program drives it. */
+async function watchStreams() {
+  for (;;) {
+    try {
+      const list = await api("GET", "hands");
+      for (const h of list.hands || []) showStreams(h);
+    } catch (_) { /* the daemon restarting: the next read says */ }
+    await new Promise((r) => setTimeout(r, STREAMS_EVERY_MS));
+  }
+}
+
+function showStreams(h) {
+  const line = streamLines.get(h.name);
+  if (!line) return;
+  const streams = h.streamed_by || [];
+  line.hidden = streams.length === 0;
+  line.textContent = streams.map((s) => {
+    const who = s.name || (s.via === "ros2" ? "ROS 2" : "a WebSocket client");
+    const via = s.via === "ros2" ? "ROS 2" : `WebSocket client ${s.client}`;
+    const idle = Date.now() - s.last_ms > 1000 ? `, idle ${Math.round((Date.now() - s.last_ms) / 1000)} s` : "";
+    return `Driven by ${who} (${via}${idle}): ${s.joints.join(", ")}`;
+  }).join("; ");
 }
 
 const handPath = (hand, name) => `hands/${encodeURIComponent(hand)}/poses/${encodeURIComponent(name)}`;
@@ -30,6 +60,10 @@ function handView(h) {
   const joints = h.joints.map((j) => `${j.name} (${j.bus}/${j.id})`).join(", ");
   const card = el("div", { className: "hand", testid: `hand-${h.name}` },
     el("div", { className: "row" }, el("strong", { textContent: h.name }), el("span", { className: "hint", textContent: joints })));
+  const streams = el("div", { className: "streamed", testid: `hand-streams-${h.name}`, hidden: true });
+  streamLines.set(h.name, streams);
+  showStreams(h);
+  card.append(streams);
   const poses = el("div", { className: "row" });
   if (!h.poses.length) poses.append(el("span", { className: "hint", textContent: "no saved poses" }));
   for (const name of h.poses) poses.append(poseChip(h.name, name));

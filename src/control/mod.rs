@@ -20,6 +20,7 @@
 //! - `calibration`: saving a joint's calibration (REST and homing).
 //! - [`teleop`]: the watchdog policy, its default, and what firing it does.
 //! - [`watchdog`]: the one teleop watchdog (WebSocket connections and the ROS 2 bridge).
+//! - [`stream_book`]: who streams setpoints to which joints now (the dashboard shows it).
 //! - [`streams`]: teleop streams, each under the epoch it began with; ended streams stay ended.
 //! - `move_book`, [`moves`]: moves checked whole, started, stopped; the book of them.
 //! - `poses`: going to a hand's saved pose (a move of its joints).
@@ -57,6 +58,7 @@ pub(crate) mod poses;
 pub(crate) mod recording_book;
 pub(crate) mod recordings;
 pub mod ros2_stats;
+pub mod stream_book;
 pub mod streams;
 pub mod targets;
 pub mod teleop;
@@ -103,6 +105,7 @@ pub struct Control {
     homings: homing_book::HomingBook,
     grasps: grasp_book::GraspBook,
     recordings: recording_book::RecordingBook,
+    streams: std::sync::Arc<stream_book::StreamBook>,
 }
 
 impl Control {
@@ -118,7 +121,13 @@ impl Control {
             homings: Default::default(),
             grasps: Default::default(),
             recordings: Default::default(),
+            streams: Default::default(),
         }
+    }
+
+    /// Every live teleop stream, by client.
+    pub fn stream_book(&self) -> &std::sync::Arc<stream_book::StreamBook> {
+        &self.streams
     }
 
     pub fn buses(&self) -> impl Iterator<Item = &BusHandle> {

@@ -10,6 +10,7 @@
 use std::collections::BTreeMap;
 
 use super::error::{ControlError, ControlResult};
+use super::stream_book::Registration;
 use super::{Control, JointRef};
 use crate::bus::authority::{Epoch, Revoked};
 
@@ -23,9 +24,30 @@ enum Stream {
 #[derive(Debug, Default)]
 pub struct Streams {
     joints: BTreeMap<JointRef, Stream>,
+    /// Where the dashboard reads who streams to what (none in unit tests).
+    shown: Option<Registration>,
 }
 
 impl Streams {
+    /// A client's streams, listed in the daemon's stream book while live.
+    pub fn shown_as(registration: Registration) -> Self {
+        Self {
+            joints: BTreeMap::new(),
+            shown: Some(registration),
+        }
+    }
+
+    fn show(&self) {
+        if let Some(r) = &self.shown {
+            r.set_live(
+                self.joints
+                    .iter()
+                    .filter(|(_, s)| matches!(s, Stream::Live(_)))
+                    .map(|(j, _)| j.clone()),
+            );
+        }
+    }
+
     /// The epoch each of `joints` streams under, in order: a joint's first
     /// setpoints (or any with `restart`) begin its stream under its current
     /// epoch. All or nothing: one ended stream refuses the batch.
@@ -52,12 +74,21 @@ impl Streams {
                 Stream::Live(e) => epochs.push(e),
                 Stream::Ended(why) => {
                     self.joints.insert(j.clone(), stream);
+                    self.show();
                     return Err(ended(j, why));
                 }
             }
         }
+        let began = joints
+            .iter()
+            .any(|j| !matches!(self.joints.get(j), Some(Stream::Live(_))));
         for (j, e) in joints.iter().zip(&epochs) {
             self.joints.insert(j.clone(), Stream::Live(*e));
+        }
+        if began {
+            self.show();
+        } else if let Some(r) = &self.shown {
+            r.sent();
         }
         Ok(epochs)
     }
@@ -79,6 +110,9 @@ impl Streams {
                 *stream = Stream::Ended(why);
                 out.push((j.clone(), why));
             }
+        }
+        if !out.is_empty() {
+            self.show();
         }
         out
     }

@@ -18,6 +18,7 @@ use super::Ros2Stats;
 use crate::bus::authority::Epoch;
 use crate::bus::BusHandle;
 use crate::bus::Setpoint;
+use crate::control::stream_book::{Driver, Via};
 use crate::control::streams::Streams;
 use crate::control::watchdog::{fire_policy, Watchdog};
 use crate::control::Control;
@@ -131,13 +132,18 @@ impl CommandStream {
         let hold = Duration::from_millis(default.hold_timeout_ms);
         let mut watchdog = Watchdog::default();
         watchdog.arm(hold, default.policy, tokio::time::Instant::now());
+        let shown = state.stream_book().register(Driver {
+            via: Via::Ros2,
+            client: 0,
+            name: Some(format!("ROS 2 {}", dropped.topic)),
+        });
         Self {
             state: state.clone(),
             scope,
             stats,
             watchdog,
             hold: (!hold.is_zero()).then_some(hold),
-            streams: Streams::default(),
+            streams: Streams::shown_as(shown),
             last_command: None,
             dropped,
         }

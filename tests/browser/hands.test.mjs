@@ -77,3 +77,22 @@ test("a pose that cannot be saved says why", async () => {
   const hands = await rest(daemon.base, "GET", "/api/v1/hands");
   assert.deepEqual(hands.hands[0].poses, []);
 });
+
+test("a program streaming to the hand is shown on its card until its stream ends", async () => {
+  const line = page.locator('[data-testid="hand-streams-left"]');
+  assert.equal(await line.isHidden(), true);
+  // A teleop client (here opened from the page's own origin) streams to
+  // the index joint under the name it gave; the joints run from the test above.
+  await page.evaluate(async () => {
+    const ws = new WebSocket(`${location.origin.replace("http", "ws")}/api/v1/ws?client=lerobot-test`);
+    window.__teleop = ws;
+    await new Promise((r) => ws.addEventListener("open", r));
+    ws.send(JSON.stringify({ type: "setpoints", targets: [{ hand: "left", joint: "index", position_deg: 3 }] }));
+  });
+  await page.waitForFunction(() => /Driven by lerobot-test \(WebSocket client \d+\): index$/.test(
+    document.querySelector('[data-testid="hand-streams-left"]')?.textContent || ""), null, { timeout: WAIT });
+  assert.equal(await line.isVisible(), true);
+  await page.evaluate(() => window.__teleop.close());
+  await line.waitFor({ state: "hidden", timeout: WAIT });
+  assert.deepEqual(errors, []);
+});

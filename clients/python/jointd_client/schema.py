@@ -252,6 +252,7 @@ class DeviceDetail(_DeviceDetailRequired, total=False):
     """The joint's name from the config file (`[[joint]]`), if any."""
     protocol: Optional["RevisionView"]
     status: Optional["StatusView"]
+    streamed_by: Optional["Driver"]
     target: Optional["TargetView"]
 
 
@@ -295,6 +296,19 @@ class DeviceSummary(_DeviceSummaryRequired, total=False):
     """Age of the freshest telemetry block, milliseconds."""
     temp_c: Optional[float]
     vbus_v: Optional[float]
+
+
+class _DriverRequired(TypedDict):
+    client: int
+    """The WebSocket connection's number (as in `/metrics`' `client` label); 0 for the ROS 2 bridge."""
+    via: "Via"
+
+
+class Driver(_DriverRequired, total=False):
+    """A client that streams setpoints, as the dashboard names it."""
+
+    name: Optional[str]
+    """The name the client gave (`?client=` on the WebSocket URL), if any."""
 
 
 class DroppedCalibrationView(TypedDict):
@@ -483,6 +497,8 @@ class HandView(TypedDict):
     name: str
     poses: List[str]
     """The names of its saved poses."""
+    streamed_by: List["HandStreamView"]
+    """Programs streaming setpoints to its joints now (a WebSocket client such as the LeRobot plugin, or ROS 2 joint commands), oldest first: each with the names of the joints it streams to."""
 
 
 class Health(TypedDict):
@@ -1076,6 +1092,7 @@ class Written(TypedDict):
 DevicePatch = Dict[str, Any]
 Direction = Literal["negative", "positive"]
 FingerState = Literal["starting", "closing", "holding", "no_contact", "lost", "releasing", "released", "stopped", "aborted", "failed"]
+HandStreamView = Dict[str, Any]
 HomingState = Literal["running", "homed", "failed", "aborted"]
 JogDirection = Literal["cw", "ccw"]
 JointTarget = Dict[str, Any]
@@ -1084,6 +1101,7 @@ Method = Literal["linear", "min_jerk", "trapezoid"]
 ModeName = Literal["position", "speed", "current"]
 MoveState = Literal["running", "done", "stopped", "aborted", "stalled"]
 PipelineMode = Literal["pipelined", "guarded", "lockstep"]
+Via = Literal["websocket", "ros2"]
 __all__ = [
     "ActionDone",
     "AllowedRange",
@@ -1102,6 +1120,7 @@ __all__ = [
     "DevicePatch",
     "DeviceSummary",
     "Direction",
+    "Driver",
     "DroppedCalibrationView",
     "EstopResult",
     "FaultView",
@@ -1121,6 +1140,7 @@ __all__ = [
     "HandCalibration",
     "HandJointView",
     "HandList",
+    "HandStreamView",
     "HandView",
     "Health",
     "HomingJoint",
@@ -1176,6 +1196,7 @@ __all__ = [
     "TargetView",
     "Unverified",
     "UsbPipelineView",
+    "Via",
     "WaypointRequest",
     "Written",
 ]

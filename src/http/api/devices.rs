@@ -14,6 +14,7 @@ use crate::bus::handle::DeviceState;
 use crate::bus::BusError;
 use crate::control::calibration::CalibrationView;
 use crate::control::limits::JointLimits;
+use crate::control::stream_book::Driver;
 use crate::hands::Calibration;
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiPath, ApiQuery};
@@ -152,6 +153,9 @@ pub(crate) struct DeviceDetail {
     /// `current-limit-owed`) until then. `null`: nothing owed.
     #[schema(example = json!(null))]
     pub current_limit_owed_a: Option<f64>,
+    /// The program streaming setpoints to this joint now (a WebSocket
+    /// client, ROS 2 joint commands), if one is. `null`: none.
+    pub streamed_by: Option<Driver>,
     /// Its calibration, when it has one: every angle, speed and q current
     /// here is in the joint's frame; the `raw` fields stay the device's.
     pub calibration: Option<CalibrationView>,
@@ -301,6 +305,10 @@ async fn get_device(
             .owed_limits()
             .get(id)
             .map(crate::protocol::units::current_limit_a),
+        streamed_by: state.stream_book().driver_of(&crate::control::JointRef {
+            bus: snap.name.clone(),
+            id,
+        }),
         calibration: (!cal.is_identity()).then(|| CalibrationView::new(&snap.name, id, &cal)),
         missed_polls: dev.missed_polls,
         control_hz: dev.control_hz,

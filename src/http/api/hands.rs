@@ -15,6 +15,7 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::openapi::{ErrorResponses, TAG_CONTROL};
 use crate::control::moves::MoveView;
 use crate::control::poses::{self, PoseTiming};
+use crate::control::stream_book::{Driver, Driving};
 use crate::hands::{pose, Hand, HandJoint, LoadNotes, Pose, StateStore};
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
@@ -88,6 +89,45 @@ pub(crate) struct HandView {
     /// The names of its saved poses.
     #[schema(example = json!(["fist", "open"]))]
     pub poses: Vec<String>,
+    /// Programs streaming setpoints to its joints now (a WebSocket client
+    /// such as the LeRobot plugin, or ROS 2 joint commands), oldest first:
+    /// each with the names of the joints it streams to.
+    pub streamed_by: Vec<HandStreamView>,
+}
+
+/// A program streaming setpoints to some of a hand's joints.
+#[derive(Debug, Serialize, ToSchema)]
+pub(crate) struct HandStreamView {
+    #[serde(flatten)]
+    pub driver: Driver,
+    /// Unix ms of its first setpoints to this hand's joints' streams.
+    pub since_ms: u64,
+    /// Unix ms of its latest setpoints (to any joint).
+    pub last_ms: u64,
+    /// The hand's joints it streams to, by name, in the hand's order.
+    #[schema(example = json!(["index_mcp", "index_pip"]))]
+    pub joints: Vec<String>,
+}
+
+/// Who streams to which of `hand`'s joints, from every live stream.
+fn hand_streams(hand: &Hand, driving: &[Driving]) -> Vec<HandStreamView> {
+    driving
+        .iter()
+        .filter_map(|d| {
+            let joints: Vec<String> = hand
+                .joints
+                .iter()
+                .filter(|j| d.joints.iter().any(|r| r.bus == j.bus && r.id == j.id))
+                .map(|j| j.name.clone())
+                .collect();
+            (!joints.is_empty()).then(|| HandStreamView {
+                driver: d.driver.clone(),
+                since_ms: d.since_ms,
+                last_ms: d.last_ms,
+                joints,
+            })
+        })
+        .collect()
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -156,6 +196,7 @@ pub(crate) struct GoRequest {
 #[utoipa::path(get, path = "/api/v1/hands", tag = TAG_CONTROL,
     responses((status = 200, description = "The hands", body = HandList), ErrorResponses))]
 async fn list_hands(State(state): State<AppState>) -> ApiResult<Json<HandList>> {
+    let driving = state.stream_book().driving();
     let hands = state
         .hands()
         .map(|store| {
@@ -166,6 +207,7 @@ async fn list_hands(State(state): State<AppState>) -> ApiResult<Json<HandList>> 
                     name: h.name.clone(),
                     joints: h.joints.iter().map(joint_view).collect(),
                     poses: store.poses(&h.name).into_keys().collect(),
+                    streamed_by: hand_streams(h, &driving),
                 })
                 .collect()
         })

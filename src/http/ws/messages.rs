@@ -289,6 +289,11 @@ pub(crate) enum ErrorCode {
 pub(crate) enum ServerMessage {
     Welcome {
         protocol: &'static str,
+        /// This connection's number (the `client` of `/metrics` and of
+        /// the stream book).
+        client: u64,
+        /// The name it gave (`?client=`).
+        name: Option<String>,
         buses: Vec<BusInfo>,
         limits: Limits,
     },

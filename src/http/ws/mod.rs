@@ -19,7 +19,7 @@ pub(crate) mod telemetry;
 pub(crate) mod writer;
 
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
-use axum::extract::{State, WebSocketUpgrade};
+use axum::extract::{Query, State, WebSocketUpgrade};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use axum::Router;
@@ -41,18 +41,50 @@ pub fn router() -> Router<AppState> {
     Router::new().route(WS_PATH, get(upgrade))
 }
 
+/// Longest client name (`?client=`), characters.
+const MAX_CLIENT_NAME: usize = 64;
+
+/// The upgrade's query: `token` is read by the auth layer; `client` names
+/// the program (the dashboard shows it beside the joints it streams to).
+#[derive(Debug, serde::Deserialize)]
+struct UpgradeQuery {
+    client: Option<String>,
+}
+
+/// A client's name as given, or why it is refused.
+fn client_name(query: UpgradeQuery) -> Result<Option<String>, ApiError> {
+    let Some(name) = query.client else {
+        return Ok(None);
+    };
+    let chars = name.chars().count();
+    if chars == 0 || chars > MAX_CLIENT_NAME || name.chars().any(char::is_control) {
+        return Err(ApiError::bad_request(format!(
+            "`client` must be 1 to {MAX_CLIENT_NAME} printable characters (it names the program in the dashboard)"
+        )));
+    }
+    Ok(Some(name))
+}
+
 async fn upgrade(
     ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
+    query: Result<Query<UpgradeQuery>, axum::extract::rejection::QueryRejection>,
     State(state): State<AppState>,
 ) -> Response {
     let ws = match ws {
         Ok(ws) => ws,
         Err(rej) => return ApiError::from(rej).into_response(),
     };
+    let name = match query
+        .map_err(|e| ApiError::bad_request(format!("the WebSocket URL's query: {e}")))
+        .and_then(|Query(q)| client_name(q))
+    {
+        Ok(name) => name,
+        Err(e) => return e.into_response(),
+    };
     ws.max_message_size(MAX_MESSAGE_BYTES)
         .read_buffer_size(READ_CHUNK_BYTES)
         .on_upgrade(move |socket| async move {
             let (sink, stream) = socket.split();
-            session::run(state, sink, stream).await;
+            session::run_named(state, name, sink, stream).await;
         })
 }

@@ -19,6 +19,7 @@ use super::messages::{
 use super::setpoints::{self, WsError, MAX_BATCH};
 use super::telemetry::Subscription;
 use super::writer::{PendingAck, Writer};
+use crate::control::stream_book::{Driver, Via};
 use crate::control::streams::Streams;
 use crate::control::teleop::{WatchdogEvent, MAX_HOLD, MIN_HOLD};
 use crate::control::watchdog::{fire_policy, Watchdog};
@@ -51,14 +52,30 @@ fn refusal_reason(e: &impl std::fmt::Display) -> String {
     reason
 }
 
-/// Serves one connection until the client goes away.
-pub async fn run<Si, St, E>(state: AppState, sink: Si, mut stream: St)
+/// Serves one connection of a client that gave no name until it goes away.
+pub async fn run<Si, St, E>(state: AppState, sink: Si, stream: St)
+where
+    Si: Sink<Message> + Unpin + Send + 'static,
+    St: Stream<Item = Result<Message, E>> + Unpin,
+    E: std::fmt::Display,
+{
+    run_named(state, None, sink, stream).await;
+}
+
+/// Serves one connection until the client goes away; `name` is what the
+/// client called itself (`?client=`), shown beside the joints it streams to.
+pub async fn run_named<Si, St, E>(state: AppState, name: Option<String>, sink: Si, mut stream: St)
 where
     Si: Sink<Message> + Unpin + Send + 'static,
     St: Stream<Item = Result<Message, E>> + Unpin,
     E: std::fmt::Display,
 {
     let client = state.ws().next_client_id();
+    let shown = state.stream_book().register(Driver {
+        via: Via::Websocket,
+        client,
+        name: name.clone(),
+    });
     state.ws().join();
     let (out_tx, out_rx) = mpsc::channel(OUT_QUEUE);
     let (sub_tx, sub_rx) = watch::channel(None);
@@ -75,10 +92,10 @@ where
         sub: sub_tx,
         acks: ack_tx,
         watchdog: Watchdog::default(),
-        streams: Streams::default(),
+        streams: Streams::shown_as(shown),
         grasps: GraspTasks::default(),
     };
-    conn.reply(welcome(&state));
+    conn.reply(welcome(&state, client, name));
     loop {
         let deadline = conn.watchdog.deadline();
         tokio::select! {
@@ -115,7 +132,7 @@ async fn sleep_until(deadline: Option<Instant>) {
     }
 }
 
-fn welcome(state: &AppState) -> ServerMessage {
+fn welcome(state: &AppState, client: u64, name: Option<String>) -> ServerMessage {
     let buses = state
         .buses()
         .map(|b| {
@@ -129,6 +146,8 @@ fn welcome(state: &AppState) -> ServerMessage {
         .collect();
     ServerMessage::Welcome {
         protocol: messages::PROTOCOL,
+        client,
+        name,
         buses,
         limits: Limits {
             max_rate_hz: MAX_RATE_HZ,
