@@ -1,0 +1,212 @@
+"""`jointd`: a follower hand on a jointd daemon as a LeRobot robot.
+
+Observations come from a WebSocket telemetry subscription kept up to date
+in the background; actions are streamed as setpoints on the same socket,
+under the daemon's teleoperation watchdog. Angles are degrees in each
+joint's calibrated frame, keyed `<joint name>.pos` as the hand names them.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from functools import cached_property
+from typing import Any, Dict, List, Optional
+
+from lerobot.cameras.utils import make_cameras_from_configs
+from lerobot.processor import RobotAction, RobotObservation
+from lerobot.robots.robot import Robot
+from lerobot.robots.utils import ensure_safe_goal_position
+from lerobot.utils.errors import DeviceAlreadyConnectedError, DeviceNotConnectedError
+
+from jointd_client.errors import JointdError
+
+from .config_jointd import JointdConfig
+from .hand import Hand
+from .link import HandLink, HandStopped, LinkError
+
+logger = logging.getLogger(__name__)
+
+# The name this plugin gives itself on the daemon's WebSocket (the
+# dashboard shows it beside the joints it drives).
+CLIENT_NAME = "lerobot-jointd"
+# An observation older than this (the daemon stopped answering) is an error.
+STALE_S = 1.0
+
+
+class Jointd(Robot):
+    """A hand of a jointd daemon (`--robot.type=jointd --robot.hand=NAME`)."""
+
+    config_class = JointdConfig
+    name = "jointd"
+
+    def __init__(self, config: JointdConfig):
+        super().__init__(config)
+        self.config = config
+        self.hand = Hand(config.url, config.token, config.hand, config.joints)
+        self.cameras = make_cameras_from_configs(config.cameras)
+        self._link: Optional[HandLink] = None
+        self._streaming = False
+        self.sent_actions = 0
+
+    # ------------------------------------------------------------ features
+
+    @property
+    def joint_names(self) -> List[str]:
+        return [n for n, _, _ in self.hand.joints]
+
+    @cached_property
+    def _joints_ft(self) -> Dict[str, type]:
+        ft: Dict[str, type] = {}
+        for n in self.joint_names:
+            ft[f"{n}.pos"] = float
+            if self.config.observe_velocity:
+                ft[f"{n}.vel"] = float
+            if self.config.observe_current:
+                ft[f"{n}.current"] = float
+        return ft
+
+    @cached_property
+    def observation_features(self) -> Dict[str, Any]:
+        cams = {name: (c.height, c.width, 3) for name, c in self.config.cameras.items()}
+        return {**self._joints_ft, **cams}
+
+    @cached_property
+    def action_features(self) -> Dict[str, type]:
+        return {f"{n}.pos": float for n in self.joint_names}
+
+    # ---------------------------------------------------------- connection
+
+    @property
+    def is_connected(self) -> bool:
+        return (self._link is not None and self._link.is_open
+                and all(c.is_connected for c in self.cameras.values()))
+
+    def connect(self, calibrate: bool = True) -> None:
+        """Enables the hand's joints, waits until they run, and opens the
+        stream. The only place this plugin enables anything."""
+        if self._link is not None:
+            raise DeviceAlreadyConnectedError(f"{self} is already connected")
+        joints = self.hand.joints  # a clear error when the daemon or the hand is not there
+        if not self.is_calibrated and calibrate:
+            self.calibrate()
+        try:
+            self.hand.enable(self.config.enable_timeout_s)
+        except JointdError as e:
+            raise DeviceNotConnectedError(f"could not enable hand `{self.config.hand}`: {e}") from None
+        link = HandLink(self.hand.client.ws_url(), self.config.token,
+                        [(bus, i) for _, bus, i in joints], self.config.telemetry_hz, CLIENT_NAME)
+        try:
+            link.open()
+            link.arm_watchdog(self.config.hold_timeout_ms, self.config.watchdog_policy)
+            link.wait_for_samples(timeout=5.0)
+        except LinkError as e:
+            link.close()
+            raise DeviceNotConnectedError(str(e)) from None
+        self._link = link
+        self._streaming = False
+        for cam in self.cameras.values():
+            cam.connect()
+        logger.info("%s connected: hand %s, joints %s", self, self.config.hand, self.joint_names)
+
+    def disconnect(self) -> None:
+        if self._link is None:
+            raise DeviceNotConnectedError(f"{self} is not connected")
+        self._link.close()
+        self._link = None
+        for cam in self.cameras.values():
+            cam.disconnect()
+        if self.config.disable_on_disconnect:
+            self.hand.disable()
+        logger.info("%s disconnected", self)
+
+    # --------------------------------------------------------- calibration
+
+    @property
+    def is_calibrated(self) -> bool:
+        """LeRobot's calibration file says what the daemon's calibration is."""
+        return bool(self.calibration) and self.calibration == self.hand.calibration()
+
+    def calibrate(self) -> None:
+        """The daemon holds each joint's calibration (offset, flip, range:
+        homing or PUT …/calibration set it); this writes it to LeRobot's
+        calibration file so both say the same."""
+        self.calibration = self.hand.calibration()
+        self._save_calibration()
+        loose = self.hand.uncalibrated_ranges()
+        if loose:
+            logger.warning("hand %s: no range for %s (home them, or set soft limits); "
+                           "their targets are limited only by the protocol's ±255°",
+                           self.config.hand, loose)
+        logger.info("calibration of %s written to %s", self.config.hand, self.calibration_fpath)
+
+    def configure(self) -> None:
+        """Nothing to write: the daemon's config is the joints' configuration."""
+
+    # ----------------------------------------------------------- the loop
+
+    def _require_link(self) -> HandLink:
+        if self._link is None:
+            raise DeviceNotConnectedError(f"{self} is not connected; run `.connect()` first")
+        return self._link
+
+    def _present(self) -> Dict[str, Dict[str, Any]]:
+        link = self._require_link()
+        try:
+            latest = link.latest()
+        except LinkError as e:
+            raise DeviceNotConnectedError(str(e)) from None
+        now = time.monotonic()
+        out: Dict[str, Dict[str, Any]] = {}
+        for name, bus, i in self.hand.joints:
+            sample = latest.get((bus, i))
+            if sample is None or now - sample.taken_at > STALE_S:
+                raise DeviceNotConnectedError(
+                    f"no telemetry of joint {name} ({bus}/{i}) for {STALE_S} s")
+            out[name] = sample.fields
+        return out
+
+    def get_observation(self) -> RobotObservation:
+        obs: Dict[str, Any] = {}
+        for name, f in self._present().items():
+            obs[f"{name}.pos"] = float(f["angle_deg"]) if f.get("angle_deg") is not None else float("nan")
+            if self.config.observe_velocity:
+                obs[f"{name}.vel"] = float(f.get("speed_dps") or 0.0)
+            if self.config.observe_current:
+                obs[f"{name}.current"] = float(f.get("q_current_a") or 0.0)
+        for key, cam in self.cameras.items():
+            obs[key] = cam.async_read()
+        return obs
+
+    def send_action(self, action: RobotAction) -> RobotAction:
+        """Streams `<joint>.pos` targets; returns what was sent (clipped by
+        `max_relative_target` from where each joint is). After an e-stop,
+        a disable, a reset or a fault raises `HandStopped` and sends nothing."""
+        link = self._require_link()
+        goal = {k.removesuffix(".pos"): float(v) for k, v in action.items() if k.endswith(".pos")}
+        unknown = [n for n in goal if n not in self.joint_names]
+        if unknown:
+            raise ValueError(f"hand `{self.config.hand}` has no joint {unknown}")
+        if self.config.max_relative_target is not None:
+            present = self._present()
+            goal = ensure_safe_goal_position(
+                {n: (g, float(present[n]["angle_deg"])) for n, g in goal.items()},
+                self._max_relative(goal))
+        where = {n: (bus, i) for n, bus, i in self.hand.joints}
+        targets = [{"bus": where[n][0], "id": where[n][1], "position_deg": g,
+                    "speed_dps": self.config.speed_dps} for n, g in goal.items()]
+        try:
+            link.send(targets, restart=not self._streaming)
+        except HandStopped:
+            raise
+        except LinkError as e:
+            raise DeviceNotConnectedError(str(e)) from None
+        self._streaming = True
+        self.sent_actions += 1
+        return {f"{n}.pos": g for n, g in goal.items()}
+
+    def _max_relative(self, goal: Dict[str, float]) -> float | Dict[str, float]:
+        cap = self.config.max_relative_target
+        if isinstance(cap, dict):
+            return {n: float(cap[n]) for n in goal}
+        return float(cap)  # type: ignore[arg-type]
