@@ -56,6 +56,9 @@ class JointdConfig(RobotConfig):
     # How long connect() waits for the joints to align after enabling, s.
     enable_timeout_s: float = 10.0
     cameras: dict[str, CameraConfig] = field(default_factory=dict)
+    # Ask the daemon to say when each action is on the wire (an ack per
+    # action, read in the background; the robot's `latencies()` gives them).
+    measure_latency: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()

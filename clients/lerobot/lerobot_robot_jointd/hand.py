@@ -100,3 +100,12 @@ class Hand:
         wanted = {n for n, _, _ in self.joints}
         return [j["joint"] for j in view["joints"]
                 if j["joint"] in wanted and not j["calibration"].get("range_deg")]
+
+    def limits(self) -> Dict[str, Tuple[float, float]]:
+        """Each joint's soft limits in its calibrated frame, degrees (the
+        daemon refuses a target beyond them)."""
+        out: Dict[str, Tuple[float, float]] = {}
+        for name, bus, i in self.joints:
+            lim = self.client.device(bus, i)["limits"]
+            out[name] = (float(lim["min_deg"]), float(lim["max_deg"]))
+        return out

@@ -12,13 +12,14 @@ makes a new link (the robot's `connect()`, which enables on purpose).
 
 from __future__ import annotations
 
+import collections
 import itertools
 import json
 import threading
 import time
 import urllib.parse
 from dataclasses import dataclass
-from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Any, Deque, Dict, Iterable, List, Optional, Sequence, Tuple
 
 from websockets.exceptions import ConnectionClosed, InvalidHandshake
 from websockets.sync.client import ClientConnection, connect
@@ -79,14 +80,21 @@ class HandLink:
         self._reader: Optional[threading.Thread] = None
         self.welcome: Dict[str, Any] = {}
         self.messages = 0
+        # Batches sent with `measure=True`: when each was sent, and for each
+        # acked one, (sent -> ack received, ms; the daemon's accepted -> on
+        # the wire, ms). The ack's trip back makes the first an upper bound.
+        self._measured: Dict[int, float] = {}
+        self.latencies: Deque[Tuple[float, float]] = collections.deque(maxlen=100_000)
 
     # ------------------------------------------------------------ lifecycle
 
     def open(self, timeout: float = 5.0) -> None:
         headers = {"Authorization": f"Bearer {self._token}"} if self._token else None
         try:
+            # Entered as a context manager (newer websockets warn otherwise)
+            # and left in close().
             self._ws = connect(self._url, additional_headers=headers, open_timeout=timeout,
-                               max_size=2**22, compression=None)
+                               max_size=2**22, compression=None).__enter__()
         except (OSError, InvalidHandshake, TimeoutError) as e:
             raise LinkError(f"the WebSocket {self._url} could not be opened: {e}") from None
         self.welcome = json.loads(self._ws.recv(timeout=timeout))
@@ -151,6 +159,10 @@ class HandLink:
                             self._replied.notify_all()
                         else:
                             self._refused = ws_error(msg)
+                elif kind == "ack" and msg.get("ref_seq") in self._measured:
+                    sent = self._measured.pop(msg["ref_seq"])
+                    self.latencies.append(((time.perf_counter() - sent) * 1e3,
+                                           float(msg.get("latency_us", 0.0)) / 1e3))
                 elif msg.get("ref_seq") is not None:
                     with self._lock:
                         if msg["ref_seq"] in self._pending_calls:
@@ -238,13 +250,21 @@ class HandLink:
             raise LinkError(f"the daemon refused the last setpoints: {refused}")
 
     def send(self, targets: Iterable[Dict[str, Any]], restart: bool = False,
-             ack: bool = False) -> Optional[int]:
+             ack: bool = False, measure: bool = False) -> Optional[int]:
         """One batch of targets (`{"bus", "id", "position_deg"}`), without
-        waiting; with `ack`, its `seq` (the ack comes to `wait_ack`)."""
+        waiting; with `ack`, its `seq` (the ack comes to `wait_ack`); with
+        `measure`, its ack's latencies go to `latencies`."""
         self.check()
         msg: Dict[str, Any] = {"type": "setpoints", "targets": list(targets)}
         if restart:
             msg["restart"] = True
+        if measure and not ack:
+            seq = next(self._seq)
+            msg["seq"] = seq
+            msg["ack"] = True
+            self._measured[seq] = time.perf_counter()
+            self._send(msg)
+            return None
         if ack:
             seq = next(self._seq)
             msg["seq"] = seq

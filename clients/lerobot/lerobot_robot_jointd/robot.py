@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import time
 from functools import cached_property
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 from lerobot.cameras.utils import make_cameras_from_configs
 from lerobot.processor import RobotAction, RobotObservation
@@ -47,6 +47,8 @@ class Jointd(Robot):
         self.cameras = make_cameras_from_configs(config.cameras)
         self._link: Optional[HandLink] = None
         self._streaming = False
+        self._limits: Dict[str, Tuple[float, float]] = {}
+        self._clipped: set[str] = set()
         self.sent_actions = 0
 
     # ------------------------------------------------------------ features
@@ -105,6 +107,8 @@ class Jointd(Robot):
             raise DeviceNotConnectedError(str(e)) from None
         self._link = link
         self._streaming = False
+        self._limits = self.hand.limits()
+        self._clipped: set[str] = set()
         for cam in self.cameras.values():
             cam.connect()
         logger.info("%s connected: hand %s, joints %s", self, self.config.hand, self.joint_names)
@@ -192,11 +196,12 @@ class Jointd(Robot):
             goal = ensure_safe_goal_position(
                 {n: (g, float(present[n]["angle_deg"])) for n, g in goal.items()},
                 self._max_relative(goal))
+        goal = {n: self._within_limits(n, g) for n, g in goal.items()}
         where = {n: (bus, i) for n, bus, i in self.hand.joints}
         targets = [{"bus": where[n][0], "id": where[n][1], "position_deg": g,
                     "speed_dps": self.config.speed_dps} for n, g in goal.items()]
         try:
-            link.send(targets, restart=not self._streaming)
+            link.send(targets, restart=not self._streaming, measure=self.config.measure_latency)
         except HandStopped:
             raise
         except LinkError as e:
@@ -205,8 +210,32 @@ class Jointd(Robot):
         self.sent_actions += 1
         return {f"{n}.pos": g for n, g in goal.items()}
 
+    def _within_limits(self, name: str, goal: float) -> float:
+        """`goal` within the joint's soft limits (the daemon would refuse
+        the whole batch), said once per joint and connection."""
+        low, high = self._limits[name]
+        clipped = min(max(goal, low), high)
+        if clipped != goal and name not in self._clipped:
+            self._clipped.add(name)
+            logger.warning("%s: target %.1f° of %s is beyond its soft limits [%g, %g]: sent %.1f° "
+                           "(said once per joint; the returned action says what was sent)",
+                           self, goal, name, low, high, clipped)
+        return clipped
+
     def _max_relative(self, goal: Dict[str, float]) -> float | Dict[str, float]:
         cap = self.config.max_relative_target
         if isinstance(cap, dict):
             return {n: float(cap[n]) for n in goal}
         return float(cap)  # type: ignore[arg-type]
+
+    def latencies(self) -> List[Tuple[float, float]]:
+        """With `measure_latency`: per acked action, (send_action -> ack
+        received, ms; the daemon's accepted -> on the wire, ms)."""
+        return list(self._link.latencies) if self._link is not None else []
+
+    def observation_age_ms(self) -> float:
+        """The oldest joint sample's age now, ms: the daemon's age of it when
+        sent plus the time since this process took it."""
+        link = self._require_link()
+        now = time.monotonic()
+        return max(s.age_ms + (now - s.taken_at) * 1e3 for s in link.latest().values())
