@@ -657,16 +657,7 @@ async fn serve(listener: TcpListener, state: &AppState) -> Result<(), DaemonErro
         ws_state.ws().shut_down();
         let _ = signalled_tx.send(true);
     };
-    // Replies are small and many (acks, pongs, telemetry): without
-    // TCP_NODELAY, Nagle's algorithm holds one behind the previous one's
-    // delayed ACK, up to 40 ms on Linux (seen as WebSocket round trips of
-    // 44 ms at p99 where p50 was 0.12 ms).
-    let listener = axum::serve::ListenerExt::tap_io(listener, |tcp| {
-        if let Err(e) = tcp.set_nodelay(true) {
-            tracing::warn!("TCP_NODELAY not set on a connection: {e}");
-        }
-    });
-    let serving = axum::serve(listener, app(state.clone()))
+    let serving = axum::serve(crate::http::without_nagle(listener), app(state.clone()))
         .with_graceful_shutdown(stopping)
         .into_future();
     let drained = async {

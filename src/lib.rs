@@ -62,7 +62,7 @@
 //! | the dashboard | `web/` (files), served by `http::web` |
 //! | moves generated in the daemon; named hands, poses, calibration, homing | `motion`, `bus::motion`, `control::moves`; `hands`; `control::calibration`, `control::homing` |
 //! | the teleop watchdog and streams (WebSocket, ROS 2) | `control::watchdog`, `control::streams` |
-//! | MCAP recordings (what `jointd record` and `POST /api/v1/recordings` write) | `record`, `http::recordings` |
+//! | MCAP recordings (what `jointd record` and `POST /api/v1/recordings` write) | `record`, `control::recordings`, `http::api::recordings` |
 //! | what a simulated device does with a frame | `sim::device`, `sim::physics`, `sim::faults` |
 //! | collisions and timing on the simulated wire | `sim::wire`, `sim::engine` |
 //! | opening a serial port, RS-485 mode, FTDI latency | `transport::tty`, `transport::rs485` |

@@ -39,7 +39,7 @@ function showStreams(h) {
   line.textContent = streams.map((s) => {
     const who = s.name || (s.via === "ros2" ? "ROS 2" : "a WebSocket client");
     const via = s.via === "ros2" ? "ROS 2" : `WebSocket client ${s.client}`;
-    const idle = Date.now() - s.last_ms > 1000 ? `, idle ${Math.round((Date.now() - s.last_ms) / 1000)} s` : "";
+    const idle = s.idle_ms > 1000 ? `, idle ${Math.round(s.idle_ms / 1000)} s` : "";
     return `Driven by ${who} (${via}${idle}): ${s.joints.join(", ")}`;
   }).join("; ");
 }

@@ -110,6 +110,8 @@ fn serve(bus: BusHandle) -> Result<(tokio::runtime::Runtime, String), BenchError
     rt.spawn(async move {
         match tokio::net::TcpListener::from_std(listener) {
             Ok(l) => {
+                // As the daemon serves: without Nagle.
+                let l = crate::http::without_nagle(l);
                 if let Err(e) = axum::serve(l, app(state_for(vec![bus]))).await {
                     eprintln!("bench server: {e}");
                 }

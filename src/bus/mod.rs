@@ -26,8 +26,12 @@
 //! The pure parts the scheduler is made of:
 //! - [`wire`]: the line model: when frames leave, when a reply is due or overdue.
 //! - [`reply_lag`]: how long after the model replies reach the host (a low quantile).
-//! - [`usb_pipeline`]: behind a USB adapter, the frame clock learnt from
-//!   arrivals and the polls written blind (replies in flight).
+//! - [`usb_frame_clock`]: the adapter's USB frame boundaries, inferred from reply arrivals.
+//! - [`packets`]: which reply ended a full USB packet, and when the host read it.
+//! - [`usb_guard`]: how far the pipeline trusts its writes, learnt from collisions' aftermath.
+//! - [`usb_confirm`]: confirmed writes: the port's output count says when the adapter took each.
+//! - [`usb_pipeline`]: behind a USB adapter, the polls written ahead (replies in flight),
+//!   built on the four above.
 //! - [`poll`]: control budget and poll plan.
 //! - [`coalesce`]: pending setpoints → cheapest correct frames.
 //! - [`registry`]: per-device state, online/offline, rates.

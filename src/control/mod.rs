@@ -24,10 +24,11 @@
 //! - [`streams`]: teleop streams, each under the epoch it began with; ended streams stay ended.
 //! - `move_book`, [`moves`]: moves checked whole, started, stopped; the book of them.
 //! - `poses`: going to a hand's saved pose (a move of its joints).
+//! - `current_limit`: a current limit lowered by a routine, written back, or owed until it is.
 //! - `homing_book`, `homing`: homing jobs, one per joint, bounded.
-//! - `grasp_detect`, `grasp_book`, `grasp_admit`, `grasp_limit`,
-//!   `grasp_watch`, `grasp_finger`, `grasp_open`, `grasp`: closing a hand's
-//!   fingers on an object and holding it with a set current.
+//! - `grasp_request`, `grasp_plan`, `grasp_detect`, `grasp_book`, `grasp_admit`,
+//!   `grasp_limit`, `grasp_watch`, `grasp_finger`, `grasp_open`, `grasp`: closing
+//!   a hand's fingers on an object and holding it with a set current.
 //! - `recording_book`, `recordings`: recordings' jobs: started, listed, stopped, their files.
 //! - `ros2_stats`: the ROS 2 bridge's counters (read by `/metrics` and `/api/v1/ros2`).
 //! - this file: [`Control`], the state the core works on.

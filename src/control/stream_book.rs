@@ -7,7 +7,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::SystemTime;
+use std::time::{Instant, SystemTime};
 
 use serde::Serialize;
 use utoipa::ToSchema;
@@ -38,11 +38,12 @@ pub struct Driver {
 pub struct Driving {
     #[serde(flatten)]
     pub driver: Driver,
-    /// Unix ms of the first setpoints of its oldest live stream.
+    /// Unix ms when its streams began (it has had one live since).
     pub since_ms: u64,
-    /// Unix ms of its latest setpoints: a client that stopped sending (its
-    /// watchdog may have fired) still holds its streams until it closes.
-    pub last_ms: u64,
+    /// How long ago it last sent setpoints, ms (by the daemon's clock): a
+    /// client that stopped sending (its watchdog may have fired) still
+    /// holds its streams until it closes or they end.
+    pub idle_ms: u64,
     pub joints: Vec<JointRef>,
 }
 
@@ -52,7 +53,7 @@ struct Entry {
     /// Book-wide order of beginnings: the later of two streams to a joint wins.
     began: u64,
     since: SystemTime,
-    last: SystemTime,
+    last: Instant,
     joints: BTreeSet<JointRef>,
 }
 
@@ -87,7 +88,7 @@ impl StreamBook {
             .map(|e| Driving {
                 driver: e.driver.clone(),
                 since_ms: unix_ms(e.since),
-                last_ms: unix_ms(e.last),
+                idle_ms: u64::try_from(e.last.elapsed().as_millis()).unwrap_or(u64::MAX),
                 joints: e.joints.iter().cloned().collect(),
             })
             .collect()
@@ -118,8 +119,9 @@ pub struct Registration {
 }
 
 impl Registration {
-    /// The joints this client streams to now (its live streams).
-    pub fn set_live(&self, joints: impl Iterator<Item = JointRef>) {
+    /// The joints this client streams to now (its live streams); `sent`:
+    /// because it just sent setpoints (not because some ended).
+    pub fn set_live(&self, joints: impl Iterator<Item = JointRef>, sent: bool) {
         let joints: BTreeSet<JointRef> = joints.collect();
         let mut entries = self.book.lock();
         if joints.is_empty() {
@@ -127,22 +129,23 @@ impl Registration {
             return;
         }
         let began = &self.book.next;
-        let now = SystemTime::now();
         let entry = entries.entry(self.key).or_insert_with(|| Entry {
             driver: self.driver.clone(),
             began: began.fetch_add(1, Ordering::Relaxed),
-            since: now,
-            last: now,
+            since: SystemTime::now(),
+            last: Instant::now(),
             joints: BTreeSet::new(),
         });
         entry.joints = joints;
-        entry.last = now;
+        if sent {
+            entry.last = Instant::now();
+        }
     }
 
     /// The client sent setpoints just now.
     pub fn sent(&self) {
         if let Some(e) = self.book.lock().get_mut(&self.key) {
-            e.last = SystemTime::now();
+            e.last = Instant::now();
         }
     }
 }
@@ -177,13 +180,13 @@ mod tests {
         let book = Arc::new(StreamBook::default());
         let a = book.register(driver(1, "lerobot"));
         assert!(book.driving().is_empty(), "registered, not streaming yet");
-        a.set_live([joint(1), joint(2)].into_iter());
+        a.set_live([joint(1), joint(2)].into_iter(), true);
         let listed = book.driving();
         assert_eq!(listed.len(), 1);
         assert_eq!(listed[0].joints, vec![joint(1), joint(2)]);
         assert_eq!(book.driver_of(&joint(2)), Some(driver(1, "lerobot")));
         assert_eq!(book.driver_of(&joint(3)), None);
-        a.set_live([joint(2)].into_iter());
+        a.set_live([joint(2)].into_iter(), false);
         assert_eq!(book.driver_of(&joint(1)), None, "its stream to 1 ended");
         drop(a);
         assert!(book.driving().is_empty());
@@ -194,9 +197,9 @@ mod tests {
     fn two_clients_on_one_joint_name_the_later() {
         let book = Arc::new(StreamBook::default());
         let a = book.register(driver(1, "a"));
-        a.set_live([joint(1)].into_iter());
+        a.set_live([joint(1)].into_iter(), true);
         let b = book.register(driver(2, "b"));
-        b.set_live([joint(1)].into_iter());
+        b.set_live([joint(1)].into_iter(), true);
         assert_eq!(book.driver_of(&joint(1)), Some(driver(2, "b")));
         drop(b);
         assert_eq!(book.driver_of(&joint(1)), Some(driver(1, "a")));

@@ -37,13 +37,14 @@ impl Streams {
         }
     }
 
-    fn show(&self) {
+    fn show(&self, sent: bool) {
         if let Some(r) = &self.shown {
             r.set_live(
                 self.joints
                     .iter()
                     .filter(|(_, s)| matches!(s, Stream::Live(_)))
                     .map(|(j, _)| j.clone()),
+                sent,
             );
         }
     }
@@ -74,7 +75,10 @@ impl Streams {
                 Stream::Live(e) => epochs.push(e),
                 Stream::Ended(why) => {
                     self.joints.insert(j.clone(), stream);
-                    self.show();
+                    // Every other stream an epoch ended too, so none is
+                    // still shown as live.
+                    self.end_revoked(control);
+                    self.show(false);
                     return Err(ended(j, why));
                 }
             }
@@ -86,7 +90,7 @@ impl Streams {
             self.joints.insert(j.clone(), Stream::Live(*e));
         }
         if began {
-            self.show();
+            self.show(true);
         } else if let Some(r) = &self.shown {
             r.sent();
         }
@@ -112,7 +116,7 @@ impl Streams {
             }
         }
         if !out.is_empty() {
-            self.show();
+            self.show(false);
         }
         out
     }

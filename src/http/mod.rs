@@ -53,6 +53,20 @@ use crate::bus::BusHandle;
 /// The whole HTTP application. Tests call it with `oneshot` or serve it on
 /// `127.0.0.1:0`; the daemon serves it on `--listen`. Set the state's
 /// options first: the body limit is read here.
+/// `listener` with TCP_NODELAY on every connection it accepts. Replies are
+/// small and many (acks, pongs, telemetry): with Nagle's algorithm one
+/// waits behind the previous one's delayed ACK, up to 40 ms on Linux (seen
+/// as WebSocket round trips of 44 ms at p99 where p50 was 0.12 ms).
+pub fn without_nagle(
+    listener: tokio::net::TcpListener,
+) -> impl axum::serve::Listener<Io = tokio::net::TcpStream, Addr = std::net::SocketAddr> {
+    axum::serve::ListenerExt::tap_io(listener, |tcp| {
+        if let Err(e) = tcp.set_nodelay(true) {
+            tracing::warn!("TCP_NODELAY not set on a connection: {e}");
+        }
+    })
+}
+
 pub fn app(state: AppState) -> Router {
     let (router, doc) = api::router().split_for_parts();
     let router = router

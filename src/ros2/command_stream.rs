@@ -65,18 +65,25 @@ pub(super) async fn run(
     loop {
         match stream.next(&subscriber, &mut closing).await {
             Next::Sample(sample) => stream.take(&sample.payload().to_bytes()).await,
-            Next::Fired => {}
+            Next::Fired | Next::Looked => {}
             Next::Closed => break,
         }
     }
     stream.fire("the ROS 2 session closed").await;
 }
 
+/// How often the stream looks whether one of its joints' streams was
+/// ended, while it has live ones: an atomic read per joint.
+const STREAM_CHECK: Duration = Duration::from_millis(10);
+
 /// What waiting for a command came to.
 enum Next {
     Sample(zenoh::sample::Sample),
     /// Commands stopped for longer than the hold timeout: the watchdog fired.
     Fired,
+    /// Looked whether a stream was ended (an e-stop, a disable...), so the
+    /// stream book stops showing it at once, not at the next command.
+    Looked,
     /// The session is closing, or the subscription ended.
     Closed,
 }
@@ -168,6 +175,10 @@ impl CommandStream {
             () = due => {
                 self.fire("joint commands stopped").await;
                 Next::Fired
+            }
+            () = tokio::time::sleep(STREAM_CHECK), if self.streams.any_live() => {
+                self.streams.end_revoked(&self.state);
+                Next::Looked
             }
         }
     }

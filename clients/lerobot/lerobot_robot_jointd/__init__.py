@@ -5,6 +5,6 @@ distribution name (`lerobot_robot_*`), which registers both."""
 from .config_jointd import JointdConfig, JointdLeaderConfig
 from .leader import JointdLeader
 from .robot import Jointd
-from .link import HandStopped
+from .link import HandStopped, Refused
 
-__all__ = ["Jointd", "JointdConfig", "JointdLeader", "JointdLeaderConfig", "HandStopped"]
+__all__ = ["Jointd", "JointdConfig", "JointdLeader", "JointdLeaderConfig", "HandStopped", "Refused"]

@@ -98,11 +98,12 @@ class JointdLeader(Teleoperator):
         action: Dict[str, Any] = {}
         for name, bus, i in self.hand.joints:
             sample = latest.get((bus, i))
-            if sample is None or now - sample.taken_at > STALE_S:
-                raise DeviceNotConnectedError(f"no telemetry of leader joint {name} for {STALE_S} s")
-            angle = sample.fields.get("angle_deg")
-            if angle is None:
-                raise DeviceNotConnectedError(f"leader joint {name} ({bus}/{i}) has no angle (offline?)")
+            angle = sample.fields.get("angle_deg") if sample is not None else None
+            if sample is None or not sample.fresh(now, STALE_S) or angle is None:
+                why = ("never seen" if sample is None else "offline" if not sample.fields.get("online")
+                       else "no angle" if angle is None
+                       else f"its newest sample is {sample.age_now_ms(now):.0f} ms old")
+                raise DeviceNotConnectedError(f"leader joint {name} ({bus}/{i}): {why}")
             action[f"{self._follower_name(name)}.pos"] = float(angle)
         return action
 

@@ -9,6 +9,7 @@ joint's calibrated frame, keyed `<joint name>.pos` as the hand names them.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from functools import cached_property
 from typing import Any, Dict, List, Optional, Tuple
@@ -23,7 +24,7 @@ from jointd_client.errors import JointdError
 
 from .config_jointd import JointdConfig
 from .hand import Hand
-from .link import HandLink, HandStopped, LinkError
+from .link import HandLink, HandStopped, LinkError, Refused
 
 logger = logging.getLogger(__name__)
 
@@ -46,7 +47,6 @@ class Jointd(Robot):
         self.hand = Hand(config.url, config.token, config.hand, config.joints)
         self.cameras = make_cameras_from_configs(config.cameras)
         self._link: Optional[HandLink] = None
-        self._streaming = False
         self._limits: Dict[str, Tuple[float, float]] = {}
         self._clipped: set[str] = set()
         self.sent_actions = 0
@@ -85,33 +85,81 @@ class Jointd(Robot):
                 and all(c.is_connected for c in self.cameras.values()))
 
     def connect(self, calibrate: bool = True) -> None:
-        """Enables the hand's joints, waits until they run, and opens the
-        stream. The only place this plugin enables anything."""
+        """Enables the hand's joints, waits until they run, and begins the
+        stream to each. The only place this plugin enables anything."""
         if self._link is not None:
             raise DeviceAlreadyConnectedError(f"{self} is already connected")
         joints = self.hand.joints  # a clear error when the daemon or the hand is not there
+        self._check_max_relative()
         if not self.is_calibrated and calibrate:
             self.calibrate()
         try:
-            self.hand.enable(self.config.enable_timeout_s)
+            self._limits = self.hand.limits()
         except JointdError as e:
-            raise DeviceNotConnectedError(f"could not enable hand `{self.config.hand}`: {e}") from None
+            raise DeviceNotConnectedError(f"could not read hand `{self.config.hand}`: {e}") from None
+        self._clipped = set()
+        # The link is open (and hears e-stops) before anything is enabled.
         link = HandLink(self.hand.client.ws_url(), self.config.token,
                         [(bus, i) for _, bus, i in joints], self.config.telemetry_hz, CLIENT_NAME)
         try:
             link.open()
             link.arm_watchdog(self.config.hold_timeout_ms, self.config.watchdog_policy)
-            link.wait_for_samples(timeout=5.0)
         except LinkError as e:
             link.close()
             raise DeviceNotConnectedError(str(e)) from None
+        enabled = False
+        try:
+            self.hand.enable(self.config.enable_timeout_s)
+            enabled = True
+            link.wait_for_samples(timeout=5.0, ok=lambda f: f.get("state") == "run")
+            self._begin_streams(link)
+            if link.stopping_events:
+                raise LinkError(f"the hand was stopped while connecting: {link.stopping_events[0]}")
+            for cam in self.cameras.values():
+                cam.connect()
+        except Exception as e:
+            # Enabled here and not streamed to: left enabled, nobody would
+            # hold it under a watchdog.
+            link.close()
+            if enabled:
+                try:
+                    self.hand.disable()
+                except JointdError as d:
+                    logger.error("could not disable hand %s after a failed connect: %s", self.config.hand, d)
+            if isinstance(e, (LinkError, JointdError)):
+                raise DeviceNotConnectedError(f"could not connect hand `{self.config.hand}`: {e}") from None
+            raise
         self._link = link
-        self._streaming = False
-        self._limits = self.hand.limits()
-        self._clipped: set[str] = set()
-        for cam in self.cameras.values():
-            cam.connect()
         logger.info("%s connected: hand %s, joints %s", self, self.config.hand, self.joint_names)
+
+    def _check_max_relative(self) -> None:
+        cap = self.config.max_relative_target
+        if isinstance(cap, dict):
+            missing = [n for n in self.joint_names if n not in cap]
+            unknown = [n for n in cap if n not in self.joint_names]
+            if missing or unknown:
+                raise ValueError(f"max_relative_target names joints {sorted(cap)}: "
+                                 f"missing {missing}, not of hand `{self.config.hand}` {unknown}")
+
+    def _begin_streams(self, link: HandLink) -> None:
+        """Begins the stream to every joint now, under the enable just
+        made, with the joints' own measured angles as targets (they stay
+        where they stand). Any e-stop, disable, reset or fault after this
+        ends the stream, and `send_action` raises from then on, even
+        before the first action: a hand stopped and enabled again by
+        someone else in between is never driven by this connection. (An
+        e-stop between the enable and this is heard as an event, and fails
+        the connect.)"""
+        latest = link.latest()
+        holds = []
+        for name, bus, i in self.hand.joints:
+            angle = latest[(bus, i)].fields.get("angle_deg")
+            if angle is None:
+                raise LinkError(f"joint {name} ({bus}/{i}) reports no angle (offline?)")
+            holds.append({"bus": bus, "id": i, "position_deg": angle, "speed_dps": self.config.speed_dps})
+        seq = link.send(holds, ack=True)
+        assert seq is not None
+        link.wait_ack(seq, timeout=5.0)
 
     def disconnect(self) -> None:
         if self._link is None:
@@ -155,6 +203,8 @@ class Jointd(Robot):
         return self._link
 
     def _present(self) -> Dict[str, Dict[str, Any]]:
+        """Each joint's newest telemetry, fresh and with an angle, else
+        `DeviceNotConnectedError` saying which joint and why."""
         link = self._require_link()
         try:
             latest = link.latest()
@@ -164,16 +214,18 @@ class Jointd(Robot):
         out: Dict[str, Dict[str, Any]] = {}
         for name, bus, i in self.hand.joints:
             sample = latest.get((bus, i))
-            if sample is None or now - sample.taken_at > STALE_S:
-                raise DeviceNotConnectedError(
-                    f"no telemetry of joint {name} ({bus}/{i}) for {STALE_S} s")
+            if sample is None or not sample.fresh(now, STALE_S) or sample.fields.get("angle_deg") is None:
+                why = ("never seen" if sample is None else "offline" if not sample.fields.get("online")
+                       else "no angle" if sample.fields.get("angle_deg") is None
+                       else f"its newest sample is {sample.age_now_ms(now):.0f} ms old")
+                raise DeviceNotConnectedError(f"joint {name} ({bus}/{i}) of hand {self.config.hand}: {why}")
             out[name] = sample.fields
         return out
 
     def get_observation(self) -> RobotObservation:
         obs: Dict[str, Any] = {}
         for name, f in self._present().items():
-            obs[f"{name}.pos"] = float(f["angle_deg"]) if f.get("angle_deg") is not None else float("nan")
+            obs[f"{name}.pos"] = float(f["angle_deg"])
             if self.config.observe_velocity:
                 obs[f"{name}.vel"] = float(f.get("speed_dps") or 0.0)
             if self.config.observe_current:
@@ -184,15 +236,23 @@ class Jointd(Robot):
 
     def send_action(self, action: RobotAction) -> RobotAction:
         """Streams `<joint>.pos` targets; returns what was sent (clipped by
-        `max_relative_target` from where each joint is). After an e-stop,
-        a disable, a reset or a fault raises `HandStopped` and sends nothing."""
+        `max_relative_target` from where each joint is, and to its soft
+        limits). Once the daemon said the hand was stopped (e-stop,
+        disable, reset, fault) raises `HandStopped` and sends nothing; a
+        joint offline or telemetry gone stale raises
+        `DeviceNotConnectedError`; an earlier batch the daemon refused
+        raises `Refused` once."""
         link = self._require_link()
         goal = {k.removesuffix(".pos"): float(v) for k, v in action.items() if k.endswith(".pos")}
         unknown = [n for n in goal if n not in self.joint_names]
         if unknown:
             raise ValueError(f"hand `{self.config.hand}` has no joint {unknown}")
+        bad = [n for n, g in goal.items() if not math.isfinite(g)]
+        if bad:
+            raise ValueError(f"targets of {bad} are not finite numbers: {action}")
+        link.check()
+        present = self._present()
         if self.config.max_relative_target is not None:
-            present = self._present()
             goal = ensure_safe_goal_position(
                 {n: (g, float(present[n]["angle_deg"])) for n, g in goal.items()},
                 self._max_relative(goal))
@@ -201,12 +261,17 @@ class Jointd(Robot):
         targets = [{"bus": where[n][0], "id": where[n][1], "position_deg": g,
                     "speed_dps": self.config.speed_dps} for n, g in goal.items()]
         try:
-            link.send(targets, restart=not self._streaming, measure=self.config.measure_latency)
+            link.send(targets, measure=self.config.measure_latency)
+        except Refused as r:
+            if r.code == "out_of_limit":
+                # A soft limit changed since connect(): clip to the new ones from now on.
+                self._limits = self.hand.limits()
+                self._clipped = set()
+            raise
         except HandStopped:
             raise
         except LinkError as e:
             raise DeviceNotConnectedError(str(e)) from None
-        self._streaming = True
         self.sent_actions += 1
         return {f"{n}.pos": g for n, g in goal.items()}
 

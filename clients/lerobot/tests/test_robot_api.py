@@ -99,6 +99,24 @@ def test_after_a_disable_the_robot_refuses_until_connect_enables_again(hands, tm
     r.disconnect()
 
 
+def test_a_hand_stopped_and_enabled_again_before_the_first_action_is_not_driven(hands, tmp_path):
+    _, follower = hands
+    r = robot(follower, tmp_path)
+    r.connect()
+    follower.call("POST", "/api/v1/estop")
+    follower.until(lambda: all(d["state"] != "run" for d in follower.devices().values()), "e-stopped")
+    # Someone at the dashboard enables the hand again before the policy's first action.
+    follower.enable_all()
+    before = follower.angles()["index"]
+    with pytest.raises(HandStopped, match="estop|e-stop"):
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            r.send_action({"index.pos": before + 20.0})
+            time.sleep(0.01)
+    assert abs(follower.angles()["index"] - before) < 0.5, "this connection drove the joint"
+    r.disconnect()
+
+
 def test_a_killed_policy_process_leaves_the_hand_held(hands, tmp_path):
     _, follower = hands
     script = textwrap.dedent(f"""

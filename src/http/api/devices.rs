@@ -155,6 +155,7 @@ pub(crate) struct DeviceDetail {
     pub current_limit_owed_a: Option<f64>,
     /// The program streaming setpoints to this joint now (a WebSocket
     /// client, ROS 2 joint commands), if one is. `null`: none.
+    #[schema(example = json!(null))]
     pub streamed_by: Option<Driver>,
     /// Its calibration, when it has one: every angle, speed and q current
     /// here is in the joint's frame; the `raw` fields stay the device's.

@@ -92,6 +92,8 @@ pub(crate) struct HandView {
     /// Programs streaming setpoints to its joints now (a WebSocket client
     /// such as the LeRobot plugin, or ROS 2 joint commands), oldest first:
     /// each with the names of the joints it streams to.
+    #[schema(example = json!([{"via": "websocket", "client": 3, "name": "lerobot-jointd",
+        "since_ms": 1764072000000u64, "idle_ms": 4, "joints": ["index_mcp", "index_pip"]}]))]
     pub streamed_by: Vec<HandStreamView>,
 }
 
@@ -100,10 +102,10 @@ pub(crate) struct HandView {
 pub(crate) struct HandStreamView {
     #[serde(flatten)]
     pub driver: Driver,
-    /// Unix ms of its first setpoints to this hand's joints' streams.
+    /// Unix ms when its streams began (it has had one live since).
     pub since_ms: u64,
-    /// Unix ms of its latest setpoints (to any joint).
-    pub last_ms: u64,
+    /// How long ago it last sent setpoints (to any joint), ms.
+    pub idle_ms: u64,
     /// The hand's joints it streams to, by name, in the hand's order.
     #[schema(example = json!(["index_mcp", "index_pip"]))]
     pub joints: Vec<String>,
@@ -123,7 +125,7 @@ fn hand_streams(hand: &Hand, driving: &[Driving]) -> Vec<HandStreamView> {
             (!joints.is_empty()).then(|| HandStreamView {
                 driver: d.driver.clone(),
                 since_ms: d.since_ms,
-                last_ms: d.last_ms,
+                idle_ms: d.idle_ms,
                 joints,
             })
         })

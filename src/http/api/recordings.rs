@@ -1,5 +1,6 @@
 //! REST of recordings: start, list, read, stop, download (the recorder is
-//! [`crate::record`]; the book [`crate::http::recordings`]).
+//! [`crate::record`]; the jobs and their book, `control::recordings` and
+//! `control::recording_book`).
 
 use axum::extract::State;
 use axum::http::{header, StatusCode};

@@ -56,10 +56,15 @@ fn client_name(query: UpgradeQuery) -> Result<Option<String>, ApiError> {
     let Some(name) = query.client else {
         return Ok(None);
     };
+    // Printable ASCII only: a name shown to a person beside the joints it
+    // drives must not hide characters (zero-width, bidi overrides).
     let chars = name.chars().count();
-    if chars == 0 || chars > MAX_CLIENT_NAME || name.chars().any(char::is_control) {
+    if chars == 0
+        || chars > MAX_CLIENT_NAME
+        || !name.chars().all(|c| c == ' ' || c.is_ascii_graphic())
+    {
         return Err(ApiError::bad_request(format!(
-            "`client` must be 1 to {MAX_CLIENT_NAME} printable characters (it names the program in the dashboard)"
+            "`client` must be 1 to {MAX_CLIENT_NAME} printable ASCII characters (it names the program in the dashboard)"
         )));
     }
     Ok(Some(name))
