@@ -55,6 +55,10 @@ class JointdConfig(RobotConfig):
     speed_dps: float = 360.0
     # How long connect() waits for the joints to align after enabling, s.
     enable_timeout_s: float = 10.0
+    # A joint sample older than this (the daemon's age of it plus the time
+    # since this process took it) is no observation: get_observation and
+    # send_action raise instead of passing an old angle off as new.
+    stale_after_ms: float = 1000.0
     cameras: dict[str, CameraConfig] = field(default_factory=dict)
     # Ask the daemon to say when each action is on the wire (an ack per
     # action, read in the background; the robot's `latencies()` gives them).
@@ -81,6 +85,8 @@ class JointdLeaderConfig(TeleoperatorConfig):
     # Only these leader joints (by name); all of them by default.
     joints: list[str] | None = None
     telemetry_hz: float = 200.0
+    # As the robot's: an older leader sample is no action.
+    stale_after_ms: float = 1000.0
 
     def __post_init__(self) -> None:
         if not self.hand:

@@ -16,12 +16,11 @@ from lerobot.utils.errors import DeviceAlreadyConnectedError, DeviceNotConnected
 
 from .config_jointd import JointdLeaderConfig
 from .hand import Hand
-from .link import HandLink, LinkError
+from .link import HandLink, LinkError, present
 
 logger = logging.getLogger(__name__)
 
 CLIENT_NAME = "lerobot-jointd-leader"
-STALE_S = 1.0
 
 
 class JointdLeader(Teleoperator):
@@ -91,20 +90,12 @@ class JointdLeader(Teleoperator):
         if self._link is None:
             raise DeviceNotConnectedError(f"{self} is not connected; run `.connect()` first")
         try:
-            latest = self._link.latest()
+            joints = present(self._link.latest(), self.hand.joints, time.monotonic(),
+                          self.config.stale_after_ms / 1e3, f"leader hand {self.config.hand}")
         except LinkError as e:
             raise DeviceNotConnectedError(str(e)) from None
-        now = time.monotonic()
-        action: Dict[str, Any] = {}
-        for name, bus, i in self.hand.joints:
-            sample = latest.get((bus, i))
-            angle = sample.fields.get("angle_deg") if sample is not None else None
-            if sample is None or not sample.fresh(now, STALE_S) or angle is None:
-                why = ("never seen" if sample is None else "offline" if not sample.fields.get("online")
-                       else "no angle" if angle is None
-                       else f"its newest sample is {sample.age_now_ms(now):.0f} ms old")
-                raise DeviceNotConnectedError(f"leader joint {name} ({bus}/{i}): {why}")
-            action[f"{self._follower_name(name)}.pos"] = float(angle)
+        action: Dict[str, Any] = {f"{self._follower_name(name)}.pos": float(f["angle_deg"])
+                                  for name, f in joints.items()}
         return action
 
     def send_feedback(self, feedback: Dict[str, Any]) -> None:

@@ -342,3 +342,25 @@ class HandLink:
         if reply.get("type") == "error":
             raise ws_error(reply)
         return reply
+
+
+
+class Stale(LinkError):
+    """A joint's telemetry is missing, offline or too old to use."""
+
+
+def present(latest: Dict[JointKey, Sample], joints: Sequence[Tuple[str, str, int]],
+            now: float, stale_s: float, whose: str) -> Dict[str, Dict[str, Any]]:
+    """Each joint's newest telemetry by name, no older than `stale_s` and
+    with an angle; otherwise `Stale` naming the joint (of `whose`) and why."""
+    out: Dict[str, Dict[str, Any]] = {}
+    for name, bus, i in joints:
+        sample = latest.get((bus, i))
+        angle = sample.fields.get("angle_deg") if sample is not None else None
+        if sample is None or not sample.fresh(now, stale_s) or angle is None:
+            why = ("never seen" if sample is None else "offline" if not sample.fields.get("online")
+                   else "no angle" if angle is None
+                   else f"its newest sample is {sample.age_now_ms(now):.0f} ms old")
+            raise Stale(f"joint {name} ({bus}/{i}) of {whose}: {why}")
+        out[name] = sample.fields
+    return out

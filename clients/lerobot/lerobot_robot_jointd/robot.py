@@ -24,15 +24,13 @@ from jointd_client.errors import JointdError
 
 from .config_jointd import JointdConfig
 from .hand import Hand
-from .link import HandLink, HandStopped, LinkError, Refused
+from .link import HandLink, HandStopped, LinkError, Refused, present
 
 logger = logging.getLogger(__name__)
 
 # The name this plugin gives itself on the daemon's WebSocket (the
 # dashboard shows it beside the joints it drives).
 CLIENT_NAME = "lerobot-jointd"
-# An observation older than this (the daemon stopped answering) is an error.
-STALE_S = 1.0
 
 
 class Jointd(Robot):
@@ -207,20 +205,10 @@ class Jointd(Robot):
         `DeviceNotConnectedError` saying which joint and why."""
         link = self._require_link()
         try:
-            latest = link.latest()
+            return present(link.latest(), self.hand.joints, time.monotonic(),
+                           self.config.stale_after_ms / 1e3, f"hand {self.config.hand}")
         except LinkError as e:
             raise DeviceNotConnectedError(str(e)) from None
-        now = time.monotonic()
-        out: Dict[str, Dict[str, Any]] = {}
-        for name, bus, i in self.hand.joints:
-            sample = latest.get((bus, i))
-            if sample is None or not sample.fresh(now, STALE_S) or sample.fields.get("angle_deg") is None:
-                why = ("never seen" if sample is None else "offline" if not sample.fields.get("online")
-                       else "no angle" if sample.fields.get("angle_deg") is None
-                       else f"its newest sample is {sample.age_now_ms(now):.0f} ms old")
-                raise DeviceNotConnectedError(f"joint {name} ({bus}/{i}) of hand {self.config.hand}: {why}")
-            out[name] = sample.fields
-        return out
 
     def get_observation(self) -> RobotObservation:
         obs: Dict[str, Any] = {}
@@ -251,10 +239,10 @@ class Jointd(Robot):
         if bad:
             raise ValueError(f"targets of {bad} are not finite numbers: {action}")
         link.check()
-        present = self._present()
+        measured = self._present()
         if self.config.max_relative_target is not None:
             goal = ensure_safe_goal_position(
-                {n: (g, float(present[n]["angle_deg"])) for n, g in goal.items()},
+                {n: (g, float(measured[n]["angle_deg"])) for n, g in goal.items()},
                 self._max_relative(goal))
         goal = {n: self._within_limits(n, g) for n, g in goal.items()}
         where = {n: (bus, i) for n, bus, i in self.hand.joints}

@@ -5,14 +5,12 @@ installs it: found by LeRobot with no import by hand."""
 from __future__ import annotations
 
 import math
-import pathlib
 import threading
 import time
 from typing import Dict, List, Tuple
 
-import pytest
 
-from conftest import HAND, JOINTS, WAIT, Daemon, lerobot
+from conftest import JOINTS, WAIT, Daemon, lerobot
 
 FPS = 30
 EPISODE_S = 3

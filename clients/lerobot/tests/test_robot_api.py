@@ -16,12 +16,13 @@ import pytest
 from lerobot.utils.errors import DeviceNotConnectedError
 from websockets.sync.client import connect
 
-from conftest import HAND, JOINTS, Daemon
+from conftest import HAND, JOINTS, STALE_AFTER_MS, Daemon
 from lerobot_robot_jointd import HandStopped, Jointd, JointdConfig, JointdLeader, JointdLeaderConfig
 
 
 def robot(follower: Daemon, tmp_path, **kw) -> Jointd:
-    return Jointd(JointdConfig(url=follower.url, hand=HAND, id="follower", calibration_dir=tmp_path / "cal", **kw))
+    return Jointd(JointdConfig(url=follower.url, hand=HAND, id="follower", calibration_dir=tmp_path / "cal",
+                               stale_after_ms=STALE_AFTER_MS, **kw))
 
 
 def test_a_daemon_down_or_a_hand_unknown_is_a_clear_error(hands, tmp_path):

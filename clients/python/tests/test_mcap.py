@@ -250,8 +250,17 @@ joints = [{ bus = "sim0", ids = "2-3", names = ["index", "middle"] }]
         api = d.url + "/api/v1"
         call(api, "PUT", "/buses/sim0/devices/3/calibration",
              {"offset_deg": -10.0, "flip": True, "range_deg": [-20.0, 60.0]})
-        devices = {dev["id"]: call(api, "GET", f"/buses/sim0/devices/{dev['id']}")
-                   for dev in call(api, "GET", "/buses/sim0/devices")["devices"]}
+        # Each joint's protocol revision is learnt after it comes online (a
+        # busy host may take a while): read the devices once all are known,
+        # so the recording and this read see the same.
+        deadline = time.monotonic() + 20
+        while True:
+            devices = {dev["id"]: call(api, "GET", f"/buses/sim0/devices/{dev['id']}")
+                       for dev in call(api, "GET", "/buses/sim0/devices")["devices"]}
+            if all(v["protocol"] and v["protocol"].get("revision") for v in devices.values()):
+                break
+            assert time.monotonic() < deadline, f"protocol revisions never all known: {devices}"
+            time.sleep(0.05)
         version = call(d.url, "GET", "/healthz")["version"]
         started = call(api, "POST", "/recordings", {"duration_s": 0.5})
         d.wait(f"/api/v1/recordings/{started['id']}", lambda b: b'"finished"' in b, "finished")
