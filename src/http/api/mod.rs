@@ -8,7 +8,7 @@
 //!   request values → writes; [`config_schema`]: the schemas from the parameter
 //!   table; [`config_outcome`]: what a PATCH did per parameter),
 //!   [`estop`], [`health`], [`moves`] (paths generated in the daemon),
-//!   [`hands`] (named hands and their poses), [`calibration`] (joint
+//!   [`hands`] (named hands), [`poses`] (their poses), [`calibration`] (joint
 //!   offsets, directions, ranges), [`homing`] (finding hard stops),
 //!   [`grasp`] (closing a hand on an object),
 //!   [`recordings`] (MCAP files), [`ros2`] (the bridge's counters): one
@@ -32,6 +32,7 @@ pub(crate) mod homing;
 pub(crate) mod metrics;
 pub(crate) mod moves;
 pub(crate) mod openapi;
+pub(crate) mod poses;
 pub(crate) mod recordings;
 pub(crate) mod ros2;
 
@@ -51,6 +52,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .merge(estop::router())
         .merge(moves::router())
         .merge(hands::router())
+        .merge(poses::router())
         .merge(calibration::router())
         .merge(homing::router())
         .merge(grasp::router())
