@@ -13,8 +13,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use crate::bus::BusHandle;
+use crate::control::grasp::book::{FingerState, GraspView};
 use crate::control::grasp::{self, GraspJoint, GraspRequest, ReleaseRequest};
-use crate::control::grasp_book::{FingerState, GraspView};
 use crate::control::limits::SoftLimits;
 use crate::control::{Control, Options};
 use crate::protocol::units;

@@ -10,6 +10,7 @@
 //! # Layout
 //! One-way layers: each file imports only from files above it.
 //! - [`error`]: [`ControlError`], typed refusals with the field and range at fault.
+//! - `lock`: a job's slot under a std `Mutex`, taken even when poisoned.
 //! - [`estop`]: the e-stop's fan-out over buses and its report.
 //! - [`device`]: what a device's published state says (firmware, angle, enabled).
 //! - [`limits`]: per-joint soft limits from the config.
@@ -25,10 +26,9 @@
 //! - `move_book`, [`moves`]: moves checked whole, started, stopped; the book of them.
 //! - `poses`: going to a hand's saved pose (a move of its joints).
 //! - `current_limit`: a current limit lowered by a routine, written back, or owed until it is.
-//! - `homing_book`, `homing`: homing jobs, one per joint, bounded.
-//! - `grasp_request`, `grasp_plan`, `grasp_detect`, `grasp_book`, `grasp_admit`,
-//!   `grasp_limit`, `grasp_watch`, `grasp_finger`, `grasp_open`, `grasp`: closing
-//!   a hand's fingers on an object and holding it with a set current.
+//! - `homing/`: homing jobs, one per joint, bounded (its own layout in `homing/mod.rs`).
+//! - `grasp/`: closing a hand's fingers on an object and holding it with a
+//!   set current (its own layout in `grasp/mod.rs`).
 //! - `recording_book`, `recordings`: recordings' jobs: started, listed, stopped, their files.
 //! - `ros2_stats`: the ROS 2 bridge's counters (read by `/metrics` and `/api/v1/ros2`).
 //! - this file: [`Control`], the state the core works on.
@@ -40,19 +40,10 @@ pub mod device;
 pub mod error;
 pub mod estop;
 pub(crate) mod grasp;
-pub(crate) mod grasp_admit;
-pub(crate) mod grasp_book;
-pub(crate) mod grasp_detect;
-pub(crate) mod grasp_finger;
-pub(crate) mod grasp_limit;
-pub(crate) mod grasp_open;
-pub(crate) mod grasp_plan;
-pub(crate) mod grasp_request;
-pub(crate) mod grasp_watch;
 pub(crate) mod homing;
-pub(crate) mod homing_book;
 pub mod joints;
 pub mod limits;
+pub(crate) mod lock;
 pub(crate) mod move_book;
 pub mod moves;
 pub(crate) mod poses;
@@ -103,8 +94,8 @@ pub struct Control {
     limits: SoftLimits,
     options: std::sync::OnceLock<Options>,
     moves: move_book::MoveBook,
-    homings: homing_book::HomingBook,
-    grasps: grasp_book::GraspBook,
+    homings: homing::book::HomingBook,
+    grasps: grasp::book::GraspBook,
     recordings: recording_book::RecordingBook,
     streams: std::sync::Arc<stream_book::StreamBook>,
 }
@@ -165,12 +156,12 @@ impl Control {
     }
 
     /// The homing jobs started through any front-end.
-    pub(crate) fn homings(&self) -> &homing_book::HomingBook {
+    pub(crate) fn homings(&self) -> &homing::book::HomingBook {
         &self.homings
     }
 
     /// The grasp jobs started through any front-end.
-    pub(crate) fn grasps(&self) -> &grasp_book::GraspBook {
+    pub(crate) fn grasps(&self) -> &grasp::book::GraspBook {
         &self.grasps
     }
 

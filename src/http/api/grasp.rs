@@ -9,8 +9,8 @@ use utoipa::IntoParams;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
+use crate::control::grasp::book::GraspView;
 use crate::control::grasp::{self, GraspRequest, ReleaseRequest};
-use crate::control::grasp_book::GraspView;
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::state::AppState;

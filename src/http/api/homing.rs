@@ -9,8 +9,8 @@ use utoipa::IntoParams;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
+use crate::control::homing::book::HomingView;
 use crate::control::homing::{self, HomingRequest};
-use crate::control::homing_book::HomingView;
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::state::AppState;

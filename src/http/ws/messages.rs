@@ -5,8 +5,8 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
 use crate::bus::handle::BusEvent;
+use crate::control::grasp::book::GraspView;
 use crate::control::grasp::{GraspRequest, ReleaseRequest};
-use crate::control::grasp_book::GraspView;
 use crate::control::moves::{MoveRequest, MoveView};
 use crate::control::teleop::{WatchdogEvent, WatchdogPolicy};
 

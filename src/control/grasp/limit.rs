@@ -5,9 +5,9 @@
 //! ends ([`restore`]), even from a finger task unwinding from a panic
 //! ([`RestoreOnDrop`]).
 
+use super::plan::{set, Finger, Plan};
 use crate::bus::BusHandle;
 use crate::control::current_limit;
-use crate::control::grasp_plan::{set, Finger, Plan};
 use crate::protocol::units;
 use crate::protocol::{ConfigParam, InfoBlock, ReplyBody};
 
@@ -101,9 +101,7 @@ pub(crate) async fn restore(
 }
 
 /// What says a finger's limit is back once an owed one is.
-pub(crate) fn settled_in(
-    slot: &crate::control::grasp_book::Slot,
-) -> impl FnOnce() + Send + 'static {
+pub(crate) fn settled_in(slot: &super::book::Slot) -> impl FnOnce() + Send + 'static {
     let slot = slot.clone();
     move || set(&slot, |s| s.current_limit_restored = true)
 }

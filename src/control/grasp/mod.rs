@@ -11,30 +11,52 @@
 //! towards their closing limit under it: pressing on the object, the
 //! position loop draws what the limit lets it and no more. The previous
 //! limit is written back (and read back) however the grasp ends. Per
-//! finger, see [`super::grasp_finger`] (its limit: [`super::grasp_limit`]);
-//! how samples are read, see [`super::grasp_detect`]; what is checked
-//! before anything starts, [`super::grasp_admit`]; where a release opens
-//! to, [`super::grasp_open`]. `docs/grasping.md` maps the current to torque
+//! finger, see [`finger`] (its limit: [`limit`]);
+//! how samples are read, see [`detect`]; what is checked
+//! before anything starts, [`admit`]; where a release opens
+//! to, [`open`]. `docs/grasping.md` maps the current to torque
 //! and fingertip force.
 //!
 //! Where a finger closes to: the request's `close_to_deg`, else the hand's
 //! pose `closed` (its angle for that joint), else the top of the joint's
 //! allowed range in its calibrated frame (fingers close towards higher
 //! joint angles; a flipped calibration makes it so).
+//!
+//! # Layout
+//! One-way: each file imports only from files above it.
+//! - `book`: the grasp jobs, one per joint, and what each finger reports.
+//! - `request`: what a grasp or a release asks for; a joint already in a grasp refused.
+//! - `plan`: one grasp's fingers, speed and goals, shared by their tasks.
+//! - `detect`: what a finger's samples mean (contact, no contact, a lost object), without I/O.
+//! - `watch`: what a finger's task watches (fresh samples, a joint taken over, an end).
+//! - `limit`: each finger's current limit lowered, written back however it ends.
+//! - `admit`: what is checked before anything starts.
+//! - `finger`: one finger closing, holding, releasing.
+//! - `open`: where a release opens to.
+//! - this file: starting, releasing and stopping a grasp.
+
+pub(crate) mod admit;
+pub(crate) mod book;
+pub(crate) mod detect;
+pub(crate) mod finger;
+pub(crate) mod limit;
+pub(crate) mod open;
+pub(crate) mod plan;
+pub(crate) mod request;
+pub(crate) mod watch;
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use super::error::{ControlError, ControlResult};
-use super::grasp_admit::{admit, fingers, hand_named, settings, speed};
-use super::grasp_book::{Command, FingerState, GraspView, Job, Slot};
-use super::grasp_finger;
-use super::grasp_limit::{self, Prepared};
-use super::grasp_open::open_goals;
-use super::grasp_plan::{self, Finger, Plan};
-use super::grasp_request::busy;
-pub(crate) use super::grasp_request::{GraspJoint, GraspRequest, ReleaseRequest};
 use super::Control;
+use admit::{admit, fingers, hand_named, settings, speed};
+use book::{Command, FingerState, GraspView, Job, Slot};
+use limit::Prepared;
+use open::open_goals;
+use plan::{Finger, Plan};
+use request::busy;
+pub(crate) use request::{GraspJoint, GraspRequest, ReleaseRequest};
 
 /// How long `release` and `stop` wait for the fingers to end.
 const END_WAIT: Duration = Duration::from_secs(20);
@@ -63,7 +85,7 @@ pub(crate) async fn start(
         // Read out first: no lock of a finger is held while the homing
         // book takes its own.
         let (bus, joint) = {
-            let s = super::homing_book::lock(&f.slot);
+            let s = crate::control::lock::lock(&f.slot);
             (s.bus.clone(), s.id)
         };
         let homing = state.homings().running_job(&bus, joint)?;
@@ -71,7 +93,7 @@ pub(crate) async fn start(
     }) {
         let why = format!("joint {joint} of bus `{bus}` is being homed by homing job {homing}");
         for slot in &job.slots {
-            let mut f = super::homing_book::lock(slot);
+            let mut f = crate::control::lock::lock(slot);
             f.state = FingerState::Aborted;
             f.reason = Some(format!("{why}, started at the same time"));
         }
@@ -110,8 +132,7 @@ pub(crate) async fn start(
 /// moves and every limit goes back), then each finger in its own task.
 async fn run(job: Arc<Job>, fingers: Vec<Finger>, plan: Plan) {
     let prepared: Vec<Result<Prepared, (Prepared, String)>> =
-        futures_util::future::join_all(fingers.iter().map(|f| grasp_limit::prepare(f, &plan)))
-            .await;
+        futures_util::future::join_all(fingers.iter().map(|f| limit::prepare(f, &plan))).await;
     if let Some(why) = prepared
         .iter()
         .find_map(|p| p.as_ref().err().map(|e| e.1.clone()))
@@ -120,11 +141,11 @@ async fn run(job: Arc<Job>, fingers: Vec<Finger>, plan: Plan) {
             let p = match p {
                 Ok(p) | Err((p, _)) => *p,
             };
-            let settled = grasp_limit::settled_in(&f.slot);
-            async move { (f, grasp_limit::restore(&f.bus, f.id, p, settled).await) }
+            let settled = limit::settled_in(&f.slot);
+            async move { (f, limit::restore(&f.bus, f.id, p, settled).await) }
         });
         for (f, restored) in futures_util::future::join_all(restores).await {
-            grasp_plan::set(&f.slot, |s| {
+            plan::set(&f.slot, |s| {
                 s.state = FingerState::Failed;
                 s.current_limit_restored = restored;
                 s.reason = Some(why.clone());
@@ -140,7 +161,7 @@ async fn run(job: Arc<Job>, fingers: Vec<Finger>, plan: Plan) {
     let tasks: Vec<_> = fingers
         .into_iter()
         .zip(prepared.into_iter().flatten())
-        .map(|(f, p)| tokio::spawn(grasp_finger::run(f, plan, p, job.command.subscribe())))
+        .map(|(f, p)| tokio::spawn(finger::run(f, plan, p, job.command.subscribe())))
         .collect();
     for t in tasks {
         if let Err(e) = t.await {

@@ -1,11 +1,11 @@
 //! One finger of a grasp, as its own task: its current limit reduced to
 //! the hold current (written and verified before any finger of the job
-//! moves: [`super::grasp_limit`]), then ([`run`]) position mode towards its closing
+//! moves: [`super::limit`]), then ([`run`]) position mode towards its closing
 //! limit at the closing speed until the samples say contact or no contact
-//! ([`super::grasp_detect`]), holding with the reduced limit, watching for
+//! ([`super::detect`]), holding with the reduced limit, watching for
 //! a lost object, until the job says release or stop, or something ends
 //! it (e-stop, disable, reset, mode change, fault, offline, another
-//! command taking the joint; what it watches: [`super::grasp_watch`]).
+//! command taking the joint; what it watches: [`super::watch`]).
 //! However it ends, the previous limit is written back and read back; a
 //! task unwinding from a panic still writes it (from a spawned task) as it
 //! goes.
@@ -18,16 +18,14 @@ use std::time::{Duration, Instant};
 
 use tokio::sync::watch;
 
+use super::book::{Command, FingerState};
+use super::detect::{Closing, Holding, Sample, Settings, Verdict, CONTACT_SPEED_SHARE};
+use super::limit::{restore, settled_in, Prepared, RestoreOnDrop};
+use super::plan::{set, Finger, Plan};
+use super::watch::{fresh_sample, taken_over, unfit, Watch};
 use crate::bus::handle::BusEvent;
 use crate::bus::{Setpoint, Source};
 use crate::control::device::{firmware_of, measured_angle_raw};
-use crate::control::grasp_book::{Command, FingerState};
-use crate::control::grasp_detect::{
-    Closing, Holding, Sample, Settings, Verdict, CONTACT_SPEED_SHARE,
-};
-use crate::control::grasp_limit::{restore, settled_in, Prepared, RestoreOnDrop};
-use crate::control::grasp_plan::{set, Finger, Plan};
-use crate::control::grasp_watch::{fresh_sample, taken_over, unfit, Watch};
 use crate::protocol::units;
 
 /// The longest a finger waits between looks when telemetry is quiet.

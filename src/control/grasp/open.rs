@@ -3,11 +3,11 @@
 //! started; every goal checked against the finger's limits before any
 //! finger moves.
 
-use super::error::{ControlError, ControlResult};
-use super::grasp_admit::here_joint_deg;
-use super::grasp_book::{FingerGrasp, Job};
-use super::grasp_request::ReleaseRequest;
-use super::Control;
+use super::admit::here_joint_deg;
+use super::book::{FingerGrasp, Job};
+use super::request::ReleaseRequest;
+use crate::control::error::{ControlError, ControlResult};
+use crate::control::Control;
 
 /// A release goal may lie this far on the closing side of where the
 /// finger stands (it settles a little past its goal): further is no
@@ -55,7 +55,7 @@ pub(super) fn open_goals(
     job.slots
         .iter()
         .map(|slot| {
-            let f = super::homing_book::lock(slot).clone();
+            let f = crate::control::lock::lock(slot).clone();
             if !f.state.live() {
                 return Ok(None);
             }

@@ -6,14 +6,14 @@
 
 use std::sync::{Arc, Mutex};
 
-use super::error::{ControlError, ControlResult, InvalidKind};
-use super::grasp_book::{Busy, FingerGrasp, FingerState, GraspSettings};
-use super::grasp_plan::Finger;
-use super::grasp_request::{busy, GraspRequest, CLOSED_POSE};
-use super::joints::known_device;
-use super::targets::admit_positions;
-use super::Control;
+use super::book::{Busy, FingerGrasp, FingerState, GraspSettings};
+use super::plan::Finger;
+use super::request::{busy, GraspRequest, CLOSED_POSE};
 use crate::control::device::{firmware_of, measured_angle_raw};
+use crate::control::error::{ControlError, ControlResult, InvalidKind};
+use crate::control::joints::known_device;
+use crate::control::targets::admit_positions;
+use crate::control::Control;
 use crate::hands::{Calibration, Hand, HandJoint};
 use crate::protocol::units;
 
@@ -258,7 +258,7 @@ fn default_close_to(
     hand: &str,
     joint: &HandJoint,
     cal: &Calibration,
-    soft: &super::limits::JointLimits,
+    soft: &crate::control::limits::JointLimits,
 ) -> f64 {
     let closed = state
         .hands()

@@ -9,7 +9,9 @@
 //! each would write back the limit the other had reduced).
 
 use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
+
+use crate::control::lock::lock;
 
 use serde::Serialize;
 use utoipa::ToSchema;
@@ -76,10 +78,6 @@ pub(crate) type Slot = Arc<Mutex<JointHoming>>;
 #[derive(Default)]
 pub(crate) struct HomingBook {
     inner: Mutex<(u64, BTreeMap<u64, Vec<Slot>>)>,
-}
-
-pub(crate) fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 /// A joint that is in a running homing job.

@@ -5,8 +5,8 @@
 use serde::Deserialize;
 use utoipa::ToSchema;
 
-use super::error::ControlError;
-use super::grasp_book::Busy;
+use super::book::Busy;
+use crate::control::error::ControlError;
 
 /// The pose a finger closes to by default.
 pub(crate) const CLOSED_POSE: &str = "closed";

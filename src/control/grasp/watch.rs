@@ -7,12 +7,12 @@ use std::time::Instant;
 
 use tokio::sync::{broadcast, watch};
 
+use super::detect::Sample;
+use super::plan::Finger;
 use crate::bus::authority::Revoked;
 use crate::bus::handle::{BusEvent, DeviceState};
 use crate::bus::{BusSnapshot, Setpoint};
 use crate::control::device::{firmware_of, is_enabled};
-use crate::control::grasp_detect::Sample;
-use crate::control::grasp_plan::Finger;
 use crate::protocol::status::{active_fault, fault_name, fsm};
 use crate::protocol::units;
 

@@ -4,10 +4,10 @@
 
 use std::time::Instant;
 
+use super::book::{FingerGrasp, Slot};
 use crate::bus::authority::Epoch;
 use crate::bus::BusHandle;
-use crate::control::grasp_book::{FingerGrasp, Slot};
-use crate::control::homing_book::lock;
+use crate::control::lock::lock;
 use crate::hands::Calibration;
 
 /// One finger as the job started it (device degrees).
