@@ -44,7 +44,7 @@ pub struct Report {
     /// Writes the delay made miss their USB frame (the referee's count).
     pub slipped_writes: u64,
     /// The bus's USB pipeline at the end of the run.
-    pub pipeline: Option<crate::bus::usb_guard::UsbPipelineView>,
+    pub pipeline: Option<crate::bus::usb::guard::UsbPipelineView>,
     pub analysis: Analysis,
     /// Share of one core over the window: bus owner, simulator, client.
     pub cpu_owner: f64,

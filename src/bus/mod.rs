@@ -26,12 +26,9 @@
 //! The pure parts the scheduler is made of:
 //! - [`wire`]: the line model: when frames leave, when a reply is due or overdue.
 //! - [`reply_lag`]: how long after the model replies reach the host (a low quantile).
-//! - [`usb_frame_clock`]: the adapter's USB frame boundaries, inferred from reply arrivals.
 //! - [`packets`]: which reply ended a full USB packet, and when the host read it.
-//! - [`usb_guard`]: how far the pipeline trusts its writes, learnt from collisions' aftermath.
-//! - [`usb_confirm`]: confirmed writes: the port's output count says when the adapter took each.
-//! - [`usb_pipeline`]: behind a USB adapter, the polls written ahead (replies in flight),
-//!   built on the four above.
+//! - [`usb`]: behind a USB adapter, the polls written ahead (replies in flight), each
+//!   write confirmed by the port's output count or bounded by a learnt guard.
 //! - [`poll`]: control budget and poll plan.
 //! - [`coalesce`]: pending setpoints → cheapest correct frames.
 //! - [`registry`]: per-device state, online/offline, rates.
@@ -62,10 +59,7 @@ mod reply_lag;
 pub(crate) mod scheduler;
 pub(crate) mod setpoints;
 pub(crate) mod state;
-mod usb_confirm;
-mod usb_frame_clock;
-pub mod usb_guard;
-pub(crate) mod usb_pipeline;
+pub mod usb;
 pub(crate) mod verify;
 pub(crate) mod wire;
 

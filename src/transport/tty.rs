@@ -215,7 +215,7 @@ fn output_queued(fd: BorrowedFd<'_>) -> io::Result<libc::c_int> {
 /// The bytes not taken yet, from the driver's count `queued`. A count that
 /// cannot be read, or is negative, says nothing was taken, never that all
 /// was: the wait for it is bounded, and given up on it is evidence
-/// against the pipeline ([`crate::bus::usb_confirm`]), where reading it as
+/// against the pipeline ([`crate::bus::usb::confirm`]), where reading it as
 /// 0 would hold the wire as if the write had left on time.
 fn untaken(queued: io::Result<libc::c_int>) -> usize {
     queued.map_or(usize::MAX, |n| usize::try_from(n).unwrap_or(usize::MAX))

@@ -81,7 +81,7 @@ pub(crate) struct BusView {
     /// mode (`pipelined`, `guarded`, `lockstep`), its guard and the
     /// reason of its last change. It backs off when collisions leave
     /// garbled bytes or lost replies, and steps back after a clean while.
-    pub usb_pipeline: Option<crate::bus::usb_guard::UsbPipelineView>,
+    pub usb_pipeline: Option<crate::bus::usb::guard::UsbPipelineView>,
 }
 
 impl BusView {

@@ -303,7 +303,7 @@ fn bus_families(m: &mut Exposition, snap: &BusSnapshot) {
     );
     // Behind a native line every line is 0: the families are always there.
     let usb = snap.usb_pipeline.as_ref();
-    for mode in crate::bus::usb_guard::PipelineMode::all() {
+    for mode in crate::bus::usb::guard::PipelineMode::all() {
         m.gauge(
             "jointd_bus_usb_pipeline_mode",
             "Behind a USB adapter, the pipeline's mode as a state set: 1 on the current mode's line (all 0 on a native line).",

@@ -29,7 +29,7 @@
 //!
 //! Where the port says when the adapter took a write (a USB-serial
 //! driver's output count), the host does observe it: each write is then
-//! held as on time and seen taken before the next ([`super::usb_confirm`]),
+//! held as on time and seen taken before the next ([`super::confirm`]),
 //! and the guard's reach and sentinels are not needed.
 //!
 //! Pure: every instant is passed in.
@@ -37,13 +37,13 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use super::packets::PacketMark;
-use super::usb_confirm::{Confirm, Outcome};
-use super::usb_frame_clock::FramePhase;
-use super::usb_guard::{
+use super::confirm::{Confirm, Outcome};
+use super::frame_clock::FramePhase;
+use super::guard::{
     Change, Evidence, PipelineMode, UsbGuard, SENTINEL_EVERY, SENTINEL_LEAD, SENTINEL_MIN_MARGIN,
 };
-use super::wire::{ReplyWindow, Want};
+use crate::bus::packets::PacketMark;
+use crate::bus::wire::{ReplyWindow, Want};
 use crate::protocol::FRAME_LEN;
 use crate::transport::adapter::AdapterModel;
 
@@ -75,7 +75,7 @@ pub(crate) struct Inflight {
     /// boundary after it (the frame clock known): a reply a frame later
     /// shows a write that reached the adapter late.
     pub on_time: Option<Instant>,
-    /// A sentinel ([`super::usb_guard`]) handed over early enough for its
+    /// A sentinel ([`super::guard`]) handed over early enough for its
     /// lateness to say something of the path.
     pub sentinel: bool,
     /// Behind a latency timer longer than a frame: when its reply's last
@@ -113,7 +113,7 @@ pub(crate) struct UsbPipeline {
     /// latency timer longer than it) or [`Self::packets`].
     sentinels: bool,
     /// Behind a latency timer longer than a frame, replies are dated by
-    /// the full packets their bytes end ([`super::packets`]), not by their
+    /// the full packets their bytes end ([`crate::bus::packets`]), not by their
     /// arrival.
     packets: bool,
     /// Poll transfers since the last sentinel.
@@ -126,7 +126,7 @@ pub(crate) struct UsbPipeline {
     /// The port says when the adapter took a write
     /// ([`crate::transport::Transport::unsent`]).
     port_confirms: bool,
-    /// The write waiting to be seen taken ([`super::usb_confirm`]).
+    /// The write waiting to be seen taken ([`super::confirm`]).
     confirm: Confirm,
     /// Writes in a row seen untaken just before the boundary the frame
     /// clock aimed them at (none seen taken before it).
@@ -182,7 +182,7 @@ impl UsbPipeline {
         }
     }
 
-    /// True while writes are confirmed ([`super::usb_confirm`]): the port
+    /// True while writes are confirmed ([`super::confirm`]): the port
     /// can tell and the guard has not backed off (a backed-off guard holds
     /// the wire for each write's reach, blind). The frame clock is not
     /// needed: a host too busy to learn it (replies read late, scattered)
@@ -208,7 +208,7 @@ impl UsbPipeline {
         self.confirm.waiting()
     }
 
-    /// True while the write waited for is overdue ([`super::usb_confirm`]):
+    /// True while the write waited for is overdue ([`super::confirm`]):
     /// an e-stop may be written behind it.
     pub(crate) fn confirmation_overdue(&self) -> bool {
         self.confirm.overdue()
@@ -264,7 +264,7 @@ impl UsbPipeline {
             Outcome::Abandoned { by, poll } => {
                 let change = self.guard.incident(
                     Evidence::Untaken {
-                        after: super::usb_confirm::MAX_WAITED,
+                        after: super::confirm::MAX_WAITED,
                     },
                     now,
                 );
@@ -689,7 +689,7 @@ impl UsbPipeline {
         if self.active() {
             let boundary = self.phase.boundary_after(handed);
             let early = boundary
-                .checked_sub(self.period().mul_f64(super::usb_confirm::EARLY_LOOK))
+                .checked_sub(self.period().mul_f64(super::confirm::EARLY_LOOK))
                 .filter(|&at| at > handed);
             self.confirm
                 .written(boundary, boundary.saturating_duration_since(handed), early);
@@ -706,7 +706,7 @@ impl UsbPipeline {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bus::usb_frame_clock::PHASE_SAMPLES;
+    use crate::bus::usb::frame_clock::PHASE_SAMPLES;
 
     fn us(n: u64) -> Duration {
         Duration::from_micros(n)

@@ -15,7 +15,7 @@
 //! look's lag, inside the guard the cycle already has: the pipeline keeps
 //! the adapter's bound on a path whose writes come late now and then,
 //! where blind writes must hold a frame after every poll for the one that
-//! might (see [`super::usb_guard`]).
+//! might (see [`super::guard`]).
 //!
 //! A count that stays up for [`MAX_UNTAKEN`] (an adapter slow to take
 //! bytes, a host too loaded to let it) is counted as given up on, and the

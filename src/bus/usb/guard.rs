@@ -3,8 +3,8 @@
 //!
 //! Where the port cannot say when the adapter took a write (a pty, a
 //! driver without an output count, `timing.usb_confirm = false`; otherwise
-//! writes are confirmed, [`super::usb_confirm`], and only a count given up
-//! on comes here), the pipeline ([`super::usb_pipeline`]) writes each
+//! writes are confirmed, [`super::confirm`], and only a count given up
+//! on comes here), the pipeline ([`super::pipeline`]) writes each
 //! transfer blind, aimed at a USB frame boundary, and holds the wire for the latest boundary the
 //! write may leave at if it reaches the adapter within the *reach*. On a
 //! path whose writes come later than that now and then (a busy host, a hub
