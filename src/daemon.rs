@@ -17,7 +17,9 @@ use tokio::net::TcpListener;
 use crate::config_locate::{key_in_table_array, table_array_line};
 use tokio::signal::unix::{signal, SignalKind};
 
-use crate::bus::{spawn_bus, spawn_bus_on, AdapterSetting, BusConfig, BusError, BusHandle};
+use crate::bus::{
+    spawn_bus, spawn_bus_on, spawn_bus_with, AdapterSetting, BusConfig, BusError, BusHandle,
+};
 use crate::control::limits::{LimitError, LimitRule, SoftLimits};
 use crate::control::teleop::{WatchdogDefault, MAX_HOLD, MIN_HOLD};
 use crate::http::policy::{RequestPolicy, DEFAULT_MAX_BODY_BYTES};
@@ -25,7 +27,7 @@ use crate::http::state::StateOptions;
 use crate::http::{app, AppState};
 use crate::protocol::is_device_id;
 use crate::sim::{AdapterModel, Firmware, SimConfig, SimError, SimHandle, Simulator};
-use crate::transport::Transport;
+use crate::transport::{Opener, Transport};
 
 /// Default HTTP address: loopback only.
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8080";
@@ -531,9 +533,17 @@ fn sim_config(joints: u8, args: &RunArgs) -> Result<SimConfig, DaemonError> {
     Ok(cfg)
 }
 
-/// A bus to start: its config, and the transport when it is not opened by
-/// path (the simulator's in-memory line).
-type BusToStart = (BusConfig, Option<Box<dyn Transport>>);
+/// A bus to start, and how it reaches its port.
+type BusToStart = (BusConfig, Port);
+
+/// How a bus reaches its port: a tty at its configured path, the
+/// simulator's pty through the opener it gives, or the simulator's
+/// in-memory line, handed in (there is no path to open).
+enum Port {
+    Path,
+    Opened(Opener),
+    HandedIn(Box<dyn Transport>),
+}
 
 /// Starts the simulator of `--sim` and the config of the bus that reaches
 /// it: over a pty, opened by path like hardware; behind a USB adapter
@@ -543,18 +553,20 @@ fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusToStart), DaemonError>
     let (ids, baud, joints) = (sim_cfg.ids.clone(), sim_cfg.baud, sim_cfg.ids.len());
     let firmware = sim_cfg.firmware.to_string();
     let adapter = sim_cfg.adapter;
-    let (sim, port) = Simulator::spawn_for(sim_cfg)?;
-    let path = match (&port, sim.device_path()) {
-        (Some(_), _) => PathBuf::from(crate::sim::MEMORY_LINE_PATH),
-        (None, Some(path)) => path,
-        (None, None) => {
+    let (sim, memory) = Simulator::spawn_for(sim_cfg)?;
+    let (path, port) = match (memory, sim.device_path(), sim.pty_opener()) {
+        (Some(host), _, _) => (
+            PathBuf::from(crate::sim::MEMORY_LINE_PATH),
+            Port::HandedIn(Box::new(host)),
+        ),
+        (None, Some(path), Some(opener)) => (path, Port::Opened(opener)),
+        _ => {
             return Err(DaemonError::Io {
                 what: "simulator".into(),
                 source: std::io::Error::other("the simulator has no device path"),
             })
         }
     };
-    let port = port.map(|p| Box::new(p) as Box<dyn Transport>);
     tracing::info!(path = %path.display(), joints, baud, %firmware, %adapter, "simulated bus started");
     let mut cfg = BusConfig::new(SIM_BUS_NAME, path, baud);
     cfg.ids = ids;
@@ -576,7 +588,11 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     let listener = TcpListener::bind(plan.listen)
         .await
         .map_err(|e| listen_error(plan.listen, e))?;
-    let mut configs: Vec<BusToStart> = plan.buses.into_iter().map(|cfg| (cfg, None)).collect();
+    let mut configs: Vec<BusToStart> = plan
+        .buses
+        .into_iter()
+        .map(|cfg| (cfg, Port::Path))
+        .collect();
     let sim = match plan.sim {
         Some(sim_cfg) => {
             let (sim, bus) = start_sim(sim_cfg)?;
@@ -724,8 +740,9 @@ fn start_buses(
     for (cfg, port) in configs {
         tracing::info!(bus = %cfg.name, path = %cfg.path.display(), baud = cfg.baud, "starting bus");
         let (handle, thread) = match port {
-            Some(port) => spawn_bus_on(cfg, port)?,
-            None => spawn_bus(cfg)?,
+            Port::Path => spawn_bus(cfg)?,
+            Port::Opened(opener) => spawn_bus_with(cfg, opener)?,
+            Port::HandedIn(port) => spawn_bus_on(cfg, port)?,
         };
         handles.push(handle);
         threads.push(thread);

@@ -34,8 +34,8 @@ use clap::Args;
 use thiserror::Error;
 
 use crate::bus::{
-    spawn_bus, spawn_bus_on, AdapterSetting, BusConfig, BusError, BusHandle, BusThread, Targets,
-    THREAD_PREFIX,
+    spawn_bus_on, spawn_bus_with, AdapterSetting, BusConfig, BusError, BusHandle, BusThread,
+    Targets, THREAD_PREFIX,
 };
 use crate::protocol::status::fsm;
 use crate::sim::{
@@ -425,9 +425,10 @@ pub(crate) fn setup_with(
     if let Some(share) = args.control_share {
         cfg.poll.control_share = share;
     }
-    let (bus, thread) = match memory {
-        Some(host) => spawn_bus_on(cfg, Box::new(host))?,
-        None => spawn_bus(cfg)?,
+    let (bus, thread) = match (memory, sim.pty_opener()) {
+        (Some(host), _) => spawn_bus_on(cfg, Box::new(host))?,
+        (None, Some(opener)) => spawn_bus_with(cfg, opener)?,
+        (None, None) => return Err(BenchError::Setup("the simulator has no pty".into())),
     };
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()

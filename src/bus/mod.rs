@@ -71,8 +71,10 @@ pub use config::{AdapterSetting, BusConfig, PollPlan, ShutdownState, StartPolicy
 pub use error::BusError;
 pub use handle::{BusHandle, BusShared, BusSnapshot, Setpoint, Source, Targets};
 
+use crate::transport::tty::tty_opener;
+use crate::transport::Opener;
 use crate::transport::Transport;
-use link::{tty_opener, Link, Opener};
+use link::Link;
 use owner::Owner;
 
 /// Prefix of every owner thread's name (`/proc/*/task/*/comm`), so tools
@@ -119,6 +121,13 @@ impl Drop for BusThread {
 /// yet is not an error: the bus starts down and keeps retrying.
 pub fn spawn_bus(cfg: BusConfig) -> Result<(BusHandle, BusThread), BusError> {
     let opener = tty_opener(cfg.path.clone(), cfg.rs485);
+    spawn(cfg, None, Some(opener))
+}
+
+/// Starts the owner of a bus whose port `opener` opens (and reopens after
+/// it was lost): a simulator's pty with its adapter model's count
+/// (`SimHandle::pty_opener`). `cfg.path` only names the port then.
+pub fn spawn_bus_with(cfg: BusConfig, opener: Opener) -> Result<(BusHandle, BusThread), BusError> {
     spawn(cfg, None, Some(opener))
 }
 

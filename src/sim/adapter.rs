@@ -398,6 +398,10 @@ impl Line for AdapterLine {
         self.inner.path()
     }
 
+    fn taken_count(&self) -> Option<Arc<crate::transport::taken::TakenCount>> {
+        self.inner.taken_count()
+    }
+
     fn take_read_at(&mut self) -> Option<Instant> {
         self.read_at.take()
     }

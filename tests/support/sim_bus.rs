@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use jointd::bus::{spawn_bus, BusConfig, BusHandle, BusSnapshot, BusThread};
+use jointd::bus::{spawn_bus_with, BusConfig, BusHandle, BusSnapshot, BusThread};
 use jointd::control::limits::{LimitRule, SoftLimits};
 use jointd::http::AppState;
 use jointd::sim::{SimConfig, SimHandle, Simulator};
@@ -72,7 +72,8 @@ pub async fn start_sim_with(
     // A loaded 2-core machine delays pty bytes by milliseconds: give replies
     // that much slack so a late reply is not mistaken for a silent device.
     bus_cfg.timing.reply_margin_us = REPLY_MARGIN_US;
-    let (handle, thread) = spawn_bus(bus_cfg).expect("bus");
+    let opener = sim.pty_opener().expect("a pty simulator");
+    let (handle, thread) = spawn_bus_with(bus_cfg, opener).expect("bus");
     let limits = SoftLimits::new(vec![LimitRule {
         ids: vec![2],
         min_deg: Some(-45.0),
