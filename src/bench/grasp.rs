@@ -13,7 +13,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use crate::bus::BusHandle;
-use crate::control::grasp::book::{FingerState, GraspView};
+use crate::control::books::grasps::{FingerState, GraspView};
 use crate::control::grasp::{self, GraspJoint, GraspRequest, ReleaseRequest};
 use crate::control::limits::SoftLimits;
 use crate::control::{Control, Options};

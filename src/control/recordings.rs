@@ -12,9 +12,9 @@ use serde::Deserialize;
 use utoipa::ToSchema;
 
 use crate::bus::BusHandle;
+use crate::control::books::recordings::{view, Book, Entry, RecordingView};
 use crate::control::error::{ControlError, ControlResult};
-use crate::control::recording_book::{view, Book, Entry, RecordingView};
-use crate::control::Control;
+use crate::control::state::Control;
 use crate::record::joint_states::Labeler;
 use crate::record::mcap_file::{McapFileError, SideEncoding};
 use crate::record::metadata::JointInfo;

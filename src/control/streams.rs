@@ -10,9 +10,9 @@
 use std::collections::BTreeMap;
 
 use super::error::{ControlError, ControlResult};
-use super::stream_book::Registration;
 use super::{Control, JointRef};
 use crate::bus::authority::{Epoch, Revoked};
+use crate::control::books::streams::Registration;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Stream {

@@ -18,7 +18,7 @@ use super::Ros2Stats;
 use crate::bus::authority::Epoch;
 use crate::bus::BusHandle;
 use crate::bus::Setpoint;
-use crate::control::stream_book::{Driver, Via};
+use crate::control::books::streams::{Driver, Via};
 use crate::control::streams::Streams;
 use crate::control::watchdog::{fire_policy, Watchdog};
 use crate::control::Control;

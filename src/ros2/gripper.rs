@@ -16,7 +16,7 @@
 
 use super::commands::Refused;
 use super::msgs::GripperCommand;
-use crate::control::grasp::book::{FingerState, GraspView};
+use crate::control::books::grasps::{FingerState, GraspView};
 use crate::control::grasp::{GraspJoint, GraspRequest};
 use crate::record::cdr::DiagnosticStatus;
 
@@ -212,7 +212,7 @@ pub(crate) fn ended(view: &GraspView, verb: &str) -> (bool, String) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::grasp::book::{FingerGrasp, GraspSettings};
+    use crate::control::books::grasps::{FingerGrasp, GraspSettings};
 
     fn fingers(here: &[Option<f64>]) -> Vec<FingerNow> {
         (0..here.len())

@@ -6,14 +6,14 @@
 
 use std::sync::{Arc, Mutex};
 
-use super::book::{Busy, FingerGrasp, FingerState, GraspSettings};
 use super::plan::Finger;
 use super::request::{busy, GraspRequest, CLOSED_POSE};
+use crate::control::books::grasps::{Busy, FingerGrasp, FingerState, GraspSettings};
 use crate::control::device::{firmware_of, measured_angle_raw};
 use crate::control::error::{ControlError, ControlResult, InvalidKind};
 use crate::control::joints::known_device;
+use crate::control::state::Control;
 use crate::control::targets::admit_positions;
-use crate::control::Control;
 use crate::hands::{Calibration, Hand, HandJoint};
 use crate::protocol::units;
 
@@ -96,11 +96,7 @@ pub(super) fn speed(field: &str, s: f64) -> ControlResult<f64> {
 }
 
 pub(super) fn hand_named(state: &Control, hand: &str) -> ControlResult<Hand> {
-    state
-        .hands()
-        .and_then(|s| s.hand(hand))
-        .cloned()
-        .ok_or_else(|| ControlError::not_found("unknown-hand", format!("no hand named `{hand}`")))
+    state.hand(hand).cloned()
 }
 
 /// The fingers asked (or every joint of the hand), each once, with the

@@ -18,13 +18,13 @@ use std::time::{Duration, Instant};
 
 use tokio::sync::watch;
 
-use super::book::{Command, FingerState};
 use super::detect::{Closing, Holding, Sample, Settings, Verdict, CONTACT_SPEED_SHARE};
 use super::limit::{restore, settled_in, Prepared, RestoreOnDrop};
 use super::plan::{set, Finger, Plan};
 use super::watch::{fresh_sample, taken_over, unfit, Watch};
 use crate::bus::handle::BusEvent;
 use crate::bus::{Setpoint, Source};
+use crate::control::books::grasps::{Command, FingerState};
 use crate::control::device::{firmware_of, measured_angle_raw};
 use crate::protocol::units;
 

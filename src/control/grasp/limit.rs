@@ -101,7 +101,9 @@ pub(crate) async fn restore(
 }
 
 /// What says a finger's limit is back once an owed one is.
-pub(crate) fn settled_in(slot: &super::book::Slot) -> impl FnOnce() + Send + 'static {
+pub(crate) fn settled_in(
+    slot: &crate::control::books::grasps::Slot,
+) -> impl FnOnce() + Send + 'static {
     let slot = slot.clone();
     move || set(&slot, |s| s.current_limit_restored = true)
 }

@@ -36,7 +36,6 @@
 //! - this file: starting, releasing and stopping a grasp.
 
 pub(crate) mod admit;
-pub(crate) mod book;
 pub(crate) mod detect;
 pub(crate) mod finger;
 pub(crate) mod limit;
@@ -49,9 +48,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use super::error::{ControlError, ControlResult};
-use super::Control;
+use crate::control::books::grasps::{Command, FingerState, GraspView, Job, Slot};
+use crate::control::state::Control;
 use admit::{admit, fingers, hand_named, settings, speed};
-use book::{Command, FingerState, GraspView, Job, Slot};
 use limit::Prepared;
 use open::open_goals;
 use plan::{Finger, Plan};
@@ -85,7 +84,7 @@ pub(crate) async fn start(
         // Read out first: no lock of a finger is held while the homing
         // book takes its own.
         let (bus, joint) = {
-            let s = crate::control::lock::lock(&f.slot);
+            let s = crate::control::books::lock::lock(&f.slot);
             (s.bus.clone(), s.id)
         };
         let homing = state.homings().running_job(&bus, joint)?;
@@ -93,7 +92,7 @@ pub(crate) async fn start(
     }) {
         let why = format!("joint {joint} of bus `{bus}` is being homed by homing job {homing}");
         for slot in &job.slots {
-            let mut f = crate::control::lock::lock(slot);
+            let mut f = crate::control::books::lock::lock(slot);
             f.state = FingerState::Aborted;
             f.reason = Some(format!("{why}, started at the same time"));
         }

@@ -4,10 +4,10 @@
 //! finger moves.
 
 use super::admit::here_joint_deg;
-use super::book::{FingerGrasp, Job};
 use super::request::ReleaseRequest;
+use crate::control::books::grasps::{FingerGrasp, Job};
 use crate::control::error::{ControlError, ControlResult};
-use crate::control::Control;
+use crate::control::state::Control;
 
 /// A release goal may lie this far on the closing side of where the
 /// finger stands (it settles a little past its goal): further is no
@@ -55,7 +55,7 @@ pub(super) fn open_goals(
     job.slots
         .iter()
         .map(|slot| {
-            let f = crate::control::lock::lock(slot).clone();
+            let f = crate::control::books::lock::lock(slot).clone();
             if !f.state.live() {
                 return Ok(None);
             }

@@ -4,10 +4,10 @@
 
 use std::time::Instant;
 
-use super::book::{FingerGrasp, Slot};
 use crate::bus::authority::Epoch;
 use crate::bus::BusHandle;
-use crate::control::lock::lock;
+use crate::control::books::grasps::{FingerGrasp, Slot};
+use crate::control::books::lock::lock;
 use crate::hands::Calibration;
 
 /// One finger as the job started it (device degrees).

@@ -5,7 +5,7 @@
 use serde::Deserialize;
 use utoipa::ToSchema;
 
-use super::book::Busy;
+use crate::control::books::grasps::Busy;
 use crate::control::error::ControlError;
 
 /// The pose a finger closes to by default.

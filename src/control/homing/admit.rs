@@ -7,14 +7,15 @@ use crate::bus::handle::DeviceState;
 use crate::bus::BusHandle;
 use crate::control::device::firmware_of;
 use crate::control::error::{ControlError, ControlResult};
-use crate::control::joints::{known_device, resolve_joint, JointRef};
+use crate::control::joints::{known_device, JointRef};
+use crate::control::lookup::resolve_joint;
 use crate::control::limits::JointLimits;
 use crate::control::targets::admit;
-use crate::control::Control;
+use crate::control::state::Control;
 use crate::protocol::status::{fsm, fsm_name};
 use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
 
-use super::book::Busy;
+use crate::control::books::homing::Busy;
 use super::request::{check_stop_at, HomingRequest, Plan};
 
 /// The joints named, or every joint of the hand; each once.
@@ -35,11 +36,7 @@ pub(super) fn joints(state: &Control, req: &HomingRequest) -> ControlResult<Vec<
             })
             .collect::<ControlResult<_>>()?,
         (None, Some(hand)) => state
-            .hands()
-            .and_then(|store| store.hand(hand))
-            .ok_or_else(|| {
-                ControlError::not_found("unknown-hand", format!("no hand named `{hand}`"))
-            })?
+            .hand(hand)?
             .joints
             .iter()
             .map(|j| JointRef {

@@ -41,7 +41,6 @@
 //! - this file: starting a job, each joint's task, the offset saved, the limit restored.
 
 mod backoff;
-pub(crate) mod book;
 mod hold;
 mod request;
 mod search;
@@ -51,15 +50,16 @@ use std::sync::{Arc, Mutex};
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use crate::bus::BusHandle;
+use crate::control::books::homing::{HomingState, HomingView, JointHoming, Slot};
+use crate::control::books::lock::lock;
 use crate::control::error::{ControlError, ControlResult};
 use crate::control::limits::JointLimits;
-use crate::control::lock::lock;
-use crate::control::{calibration, current_limit, Control};
+use crate::control::state::Control;
+use crate::control::{calibration, current_limit};
 use crate::protocol::units;
 use crate::protocol::ConfigParam;
 use admit::{admit_joint, busy, joints};
 use backoff::back_off;
-use book::{HomingState, HomingView, JointHoming, Slot};
 use hold::{hold_here, SpeedZero};
 pub(crate) use request::HomingRequest;
 use request::{plan, Plan};

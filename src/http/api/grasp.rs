@@ -9,7 +9,7 @@ use utoipa::IntoParams;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
-use crate::control::grasp::book::GraspView;
+use crate::control::books::grasps::GraspView;
 use crate::control::grasp::{self, GraspRequest, ReleaseRequest};
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiJson, ApiPath};

@@ -9,7 +9,7 @@ use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
-use crate::control::stream_book::{Driver, Driving};
+use crate::control::books::streams::{Driver, Driving};
 use crate::hands::{Hand, HandJoint, LoadNotes};
 use crate::http::error::ApiResult;
 use crate::http::state::AppState;

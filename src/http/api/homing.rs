@@ -9,7 +9,7 @@ use utoipa::IntoParams;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
-use crate::control::homing::book::HomingView;
+use crate::control::books::homing::HomingView;
 use crate::control::homing::{self, HomingRequest};
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiJson, ApiPath};

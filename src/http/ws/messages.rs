@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
 use crate::bus::handle::BusEvent;
-use crate::control::grasp::book::GraspView;
+use crate::control::books::grasps::GraspView;
 use crate::control::grasp::{GraspRequest, ReleaseRequest};
 use crate::control::moves::{MoveRequest, MoveView};
 use crate::control::teleop::{WatchdogEvent, WatchdogPolicy};

@@ -19,7 +19,7 @@ use super::messages::{
 use super::setpoints::{self, WsError, MAX_BATCH};
 use super::telemetry::Subscription;
 use super::writer::{PendingAck, Writer};
-use crate::control::stream_book::{Driver, Via};
+use crate::control::books::streams::{Driver, Via};
 use crate::control::streams::Streams;
 use crate::control::teleop::{WatchdogEvent, MAX_HOLD, MIN_HOLD};
 use crate::control::watchdog::{fire_policy, Watchdog};

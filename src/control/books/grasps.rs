@@ -15,7 +15,7 @@ use serde::Serialize;
 use tokio::sync::watch;
 use utoipa::ToSchema;
 
-use crate::control::lock::lock;
+use crate::control::books::lock::lock;
 
 /// Jobs kept for `GET` after they ended.
 const KEPT: usize = 64;

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 
-use super::JointRef;
+use crate::control::joints::JointRef;
 use crate::motion::RunningMove;
 
 /// Moves kept for `GET` after they ended.

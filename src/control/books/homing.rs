@@ -11,7 +11,7 @@
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 
-use crate::control::lock::lock;
+use crate::control::books::lock::lock;
 
 use serde::Serialize;
 use utoipa::ToSchema;

@@ -1,7 +1,7 @@
 //! Who is streaming setpoints to which joints right now: every live teleop
 //! stream (a WebSocket client, the ROS 2 bridge, the LeRobot plugin over
 //! WebSocket), so a person at the dashboard sees that a program drives a
-//! hand before touching it. Each client's [`super::streams::Streams`]
+//! hand before touching it. Each client's `control::streams::Streams`
 //! keeps its entry up to date and removes it when it goes away.
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -12,7 +12,7 @@ use std::time::{Instant, SystemTime};
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use super::JointRef;
+use crate::control::joints::JointRef;
 
 /// How a streaming client reaches the daemon.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, ToSchema)]
