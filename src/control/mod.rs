@@ -15,6 +15,7 @@
 //! - [`ros2_stats`]: the ROS 2 bridge's counters (read by `/metrics` and `/api/v1/ros2`).
 //! - [`estop`]: the e-stop's fan-out over buses and its report.
 //! - [`joints`]: [`JointRef`], device ids, a device known on its bus.
+//! - [`revision`]: features a firmware revision must have (422, or 409 while unknown).
 //! - [`limits`]: per-joint soft limits from the config.
 //! - [`teleop`]: the watchdog policy, its default, and what firing it does.
 //! - [`targets`]: physical targets → raw setpoints, checked; admission under the authority.
@@ -23,6 +24,8 @@
 //! - [`velocity`]: a velocity command as a position target toward the soft limit at that speed.
 //! - `state`: [`Control`], the state the core works on: buses, limits, options, books.
 //! - `lookup`: a hand by name, a joint by bus and id or by hand and joint name.
+//! - `actions`: enable, disable, mode, jog, re-zero, targets and e-stop, as every
+//!   front-end offers them, checked here.
 //! - `calibration`: saving a joint's calibration (REST and homing).
 //! - `recordings`: recordings started, listed, stopped; their files.
 //! - `grasp/`: closing a hand's fingers on an object and holding it with a
@@ -35,6 +38,7 @@
 //! - `poses`: going to a hand's saved pose (a move of its joints).
 //! - this file: the layout and what the rest of the daemon uses by a short name.
 
+pub(crate) mod actions;
 pub(crate) mod batch;
 pub mod books;
 pub(crate) mod calibration;
@@ -50,6 +54,7 @@ pub(crate) mod lookup;
 pub mod moves;
 pub(crate) mod poses;
 pub(crate) mod recordings;
+pub mod revision;
 pub mod ros2_stats;
 mod state;
 pub mod streams;
