@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 use std::future::IntoFuture;
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 
 use serde::Deserialize;
@@ -22,8 +23,9 @@ use crate::bus::{
 };
 use crate::control::limits::{LimitError, LimitRule, SoftLimits};
 use crate::control::teleop::{WatchdogDefault, MAX_HOLD, MIN_HOLD};
+use crate::control::Control;
 use crate::http::policy::{RequestPolicy, DEFAULT_MAX_BODY_BYTES};
-use crate::http::state::StateOptions;
+use crate::http::state::HttpOptions;
 use crate::http::{app, AppState};
 use crate::protocol::is_device_id;
 use crate::sim::{AdapterModel, Firmware, SimConfig, SimError, SimHandle, Simulator};
@@ -224,7 +226,10 @@ pub struct Plan {
     pub limits: SoftLimits,
     /// The simulated bus of `--sim`, checked.
     pub sim: Option<SimConfig>,
-    pub options: StateOptions,
+    /// The core's options (`managed` is filled in when the buses start).
+    pub control: crate::control::Options,
+    /// What HTTP alone reads of the config.
+    pub http: HttpOptions,
     /// The ROS 2 bridge, when enabled.
     pub ros2: Option<crate::ros2::Ros2Config>,
 }
@@ -314,18 +319,20 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     }
     let hand_names: Vec<String> = poses.hands().iter().map(|h| h.name.clone()).collect();
     let ros2 = ros2_config(file.ros2, args, &bus_names, &hand_names)?;
-    let options = StateOptions {
+    let control = crate::control::Options {
         ros2: ros2
             .as_ref()
             .map(|_| std::sync::Arc::new(crate::control::ros2_stats::Ros2Stats::default())),
         hands: Some(std::sync::Arc::new(poses)),
-        web_dir: args.web_dir.clone().or(file.web_dir),
         joint_names: joint_names(&file.joints, args)?,
         watchdog: checked_watchdog(file.watchdog, args)?,
-        policy,
         recordings_dir: state_dir.as_ref().map(|d| d.join("recordings")),
         // Filled in when the buses start (the simulator's bus is added then).
         managed: Default::default(),
+    };
+    let http = HttpOptions {
+        web_dir: args.web_dir.clone().or(file.web_dir),
+        policy,
     };
     Ok(Plan {
         listen,
@@ -333,7 +340,8 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
         buses,
         limits: SoftLimits::new(file.limits)?,
         sim,
-        options,
+        control,
+        http,
         ros2,
     })
 }
@@ -613,18 +621,23 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     // First line on stdout: scripts and tests read the port from it.
     println!("listening on http://{addr}");
     tracing::info!(%addr, auth = plan.token.is_some(), "serving the API");
-    let state = AppState::new(handles, plan.limits, plan.token);
-    let mut options = plan.options;
-    options.policy.listen = Some(addr);
-    options.managed = managed;
-    let ros2_stats = options.ros2.clone();
-    // A fresh state has no options yet: this cannot be refused.
-    let _ = state.set_options(options);
+    // One core, handed to HTTP and ROS 2 alike.
+    let control = Arc::new(Control::new(handles, plan.limits));
+    let mut control_options = plan.control;
+    control_options.managed = managed;
+    let ros2_stats = control_options.ros2.clone();
+    // A fresh core and a fresh state have no options yet: neither call
+    // can be refused.
+    let _ = control.set_options(control_options);
+    let state = AppState::new(control.clone(), plan.token);
+    let mut http_options = plan.http;
+    http_options.policy.listen = Some(addr);
+    let _ = state.set_options(http_options);
     // The bridge lives until the daemon stops (dropped below: the ROS
     // graph sees its tokens go).
     let bridge = match (plan.ros2, ros2_stats) {
         (Some(cfg), Some(stats)) => Some(
-            crate::ros2::start(state.control().clone(), cfg, stats)
+            crate::ros2::start(control.clone(), cfg, stats)
                 .map_err(|e| DaemonError::Policy(e.to_string()))?,
         ),
         _ => None,

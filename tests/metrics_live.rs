@@ -13,7 +13,7 @@ use support::http::{serve, Server};
 
 async fn setup() -> (FakeBus, Server) {
     let bus = FakeBus::new("fake", &[1, 2]);
-    let state = AppState::new(vec![bus.handle.clone()], SoftLimits::default(), None);
+    let state = AppState::standalone(vec![bus.handle.clone()], SoftLimits::default(), None);
     (bus, serve(state).await)
 }
 

@@ -202,8 +202,8 @@ fn panic_to_problem(_: Box<dyn std::any::Any + Send + 'static>) -> axum::respons
     axum::response::IntoResponse::into_response(ApiError::internal())
 }
 
-/// Convenience for the daemon and tests: state from handles with no limits
-/// and no token.
+/// For tests and the bench's server: a core of its own over `buses`, with
+/// no limits and no token.
 pub fn state_for(buses: Vec<BusHandle>) -> AppState {
-    AppState::new(buses, crate::control::limits::SoftLimits::default(), None)
+    AppState::standalone(buses, crate::control::limits::SoftLimits::default(), None)
 }

@@ -82,7 +82,7 @@ pub async fn start_sim_with(
         ..Default::default()
     }])
     .expect("limits");
-    let state = AppState::new(vec![handle.clone()], limits, token.map(str::to_owned));
+    let state = AppState::standalone(vec![handle.clone()], limits, token.map(str::to_owned));
     let mut server = serve(state.clone()).await;
     if let Some(t) = token {
         server = server.with_token(t);
@@ -143,12 +143,12 @@ impl SimBus {
     /// joints 1..=n enabled and running (homing and calibration need both).
     pub async fn calibrated_and_enabled(self, n: u8) -> SimBus {
         let store = jointd::hands::StateStore::open(Vec::new(), None).expect("store");
-        let options = jointd::http::state::StateOptions {
+        let options = jointd::control::Options {
             hands: Some(std::sync::Arc::new(store)),
             ..Default::default()
         };
         assert!(
-            self.server_state.set_options(options).is_ok(),
+            self.server_state.control().set_options(options).is_ok(),
             "options set twice"
         );
         let ids: Vec<u8> = (1..=n).collect();

@@ -182,7 +182,11 @@ pub(crate) struct FrameLog {
 #[utoipa::path(get, path = "/api/v1/buses", tag = TAG_BUSES,
     responses((status = 200, description = "Every configured bus", body = BusList), ErrorResponses))]
 async fn list_buses(State(state): State<AppState>) -> Json<BusList> {
-    let buses = state.buses().map(|b| BusView::new(&b.snapshot())).collect();
+    let buses = state
+        .control()
+        .buses()
+        .map(|b| BusView::new(&b.snapshot()))
+        .collect();
     Json(BusList { buses })
 }
 
@@ -196,7 +200,7 @@ async fn get_bus(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<BusPath>,
 ) -> ApiResult<Json<BusView>> {
-    Ok(Json(BusView::new(&state.bus(&p.bus)?.snapshot())))
+    Ok(Json(BusView::new(&state.control().bus(&p.bus)?.snapshot())))
 }
 
 /// Scan an id range: poll INFO_01 of each id; devices that answer join the bus.
@@ -211,7 +215,7 @@ async fn scan(
     ApiPath(p): ApiPath<BusPath>,
     ApiJson(req): ApiJson<ScanRequest>,
 ) -> ApiResult<Json<ScanResult>> {
-    let bus = state.bus(&p.bus)?;
+    let bus = state.control().bus(&p.bus)?;
     let first = device_id("first", req.first)?;
     let last = device_id("last", req.last)?;
     if first > last {
@@ -247,7 +251,7 @@ async fn set_baud(
     ApiPath(p): ApiPath<BusPath>,
     ApiJson(req): ApiJson<BaudRequest>,
 ) -> ApiResult<Json<BaudRequest>> {
-    let bus = state.bus(&p.bus)?;
+    let bus = state.control().bus(&p.bus)?;
     let level = u32::try_from(req.baud)
         .ok()
         .and_then(BaudLevel::from_baud)
@@ -283,7 +287,7 @@ async fn frames(
     ApiPath(p): ApiPath<BusPath>,
     ApiQuery(q): ApiQuery<FramesQuery>,
 ) -> ApiResult<Json<FrameLog>> {
-    let bus = state.bus(&p.bus)?;
+    let bus = state.control().bus(&p.bus)?;
     let limit = q.limit.unwrap_or(DEFAULT_FRAME_LIMIT);
     if !(1..=FRAME_LOG_LEN as i64).contains(&limit) {
         return Err(ApiError::out_of_range(

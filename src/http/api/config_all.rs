@@ -102,7 +102,7 @@ async fn patch_bus_config(
     ApiQuery(q): ApiQuery<BusPatchQuery>,
     ApiJson(patch): ApiJson<ConfigPatch>,
 ) -> ApiResult<Json<BusPatchResult>> {
-    let bus = state.bus(&p.bus)?;
+    let bus = state.control().bus(&p.bus)?;
     let snap = bus.snapshot();
     if let crate::bus::handle::LinkState::Down { reason, .. } = &snap.link {
         return Err(BusError::Down {
@@ -114,7 +114,7 @@ async fn patch_bus_config(
     let mut skipped = Vec::new();
     let mut targets = Vec::new();
     for dev in snap.devices.values() {
-        let managed = state.managed(&snap.name, dev.dev_id);
+        let managed = state.control().managed(&snap.name, dev.dev_id);
         match (dev.online, managed || q.include_unmanaged) {
             (false, _) => skipped.push(SkippedDevice {
                 id: dev.dev_id,

@@ -241,7 +241,7 @@ async fn list_devices(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<BusPath>,
 ) -> ApiResult<Json<DeviceList>> {
-    let snap = state.bus(&p.bus)?.snapshot();
+    let snap = state.control().bus(&p.bus)?.snapshot();
     let now = Instant::now();
     Ok(Json(DeviceList {
         bus: snap.name.clone(),
@@ -249,8 +249,13 @@ async fn list_devices(
             .devices
             .values()
             .map(|d| {
-                let cal = state.calibration(&snap.name, d.dev_id);
-                summary(d, state.joint_name(&snap.name, d.dev_id), &cal, now)
+                let cal = state.control().calibration(&snap.name, d.dev_id);
+                summary(
+                    d,
+                    state.control().joint_name(&snap.name, d.dev_id),
+                    &cal,
+                    now,
+                )
             })
             .collect(),
     }))
@@ -277,11 +282,14 @@ async fn get_device(
     }
     let now = Instant::now();
     let fw = firmware_of(&dev);
-    let cal = state.calibration(&snap.name, id);
+    let cal = state.control().calibration(&snap.name, id);
     Ok(Json(DeviceDetail {
         bus: snap.name.clone(),
         id,
-        name: state.joint_name(&snap.name, id).map(str::to_owned),
+        name: state
+            .control()
+            .joint_name(&snap.name, id)
+            .map(str::to_owned),
         online: dev.online,
         firmware: dev.info01.as_ref().map(|(i, _)| i.firmware().dotted()),
         mode: dev.mode.map(CtrlMode::name),
@@ -301,15 +309,18 @@ async fn get_device(
         disabled_reason: disabled_reason(&dev),
         resets: dev.resets,
         last_reset: reset_view(&dev, now),
-        limits: limits_in_joint_frame(state.limits(&snap.name, id), &cal),
+        limits: limits_in_joint_frame(state.control().limits(&snap.name, id), &cal),
         current_limit_owed_a: bus
             .owed_limits()
             .get(id)
             .map(crate::protocol::units::current_limit_a),
-        streamed_by: state.stream_book().driver_of(&crate::control::JointRef {
-            bus: snap.name.clone(),
-            id,
-        }),
+        streamed_by: state
+            .control()
+            .stream_book()
+            .driver_of(&crate::control::JointRef {
+                bus: snap.name.clone(),
+                id,
+            }),
         calibration: (!cal.is_identity()).then(|| CalibrationView::new(&snap.name, id, &cal)),
         missed_polls: dev.missed_polls,
         control_hz: dev.control_hz,

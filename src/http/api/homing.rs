@@ -74,5 +74,5 @@ async fn get_homing(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<HomingPath>,
 ) -> ApiResult<Json<HomingView>> {
-    Ok(Json(homing::get(&state, p.id)?))
+    Ok(Json(homing::get(state.control(), p.id)?))
 }

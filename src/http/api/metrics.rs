@@ -246,7 +246,7 @@ pub(crate) fn render(state: &AppState) -> String {
         state.uptime_s(),
     );
     let now = Instant::now();
-    for bus in state.buses() {
+    for bus in state.control().buses() {
         let snap = bus.snapshot();
         bus_families(&mut m, &snap);
         m.gauge(
@@ -492,7 +492,7 @@ fn device_families(m: &mut Exposition, snap: &BusSnapshot, now: Instant) {
 /// The ROS 2 bridge's counters (zero when it does not run) and the
 /// recordings running.
 fn bridge_families(m: &mut Exposition, state: &AppState) {
-    let stats = state.ros2();
+    let stats = state.control().ros2();
     m.gauge(
         "jointd_ros2_enabled",
         "1 when the ROS 2 bridge runs.",

@@ -71,7 +71,7 @@ where
     E: std::fmt::Display,
 {
     let client = state.ws().next_client_id();
-    let shown = state.stream_book().register(Driver {
+    let shown = state.control().stream_book().register(Driver {
         via: Via::Websocket,
         client,
         name: name.clone(),
@@ -206,7 +206,7 @@ impl Connection {
             ClientMessage::Watchdog(w) => self.arm_watchdog(w),
             ClientMessage::Ping { seq } => self.reply(ServerMessage::Pong { ref_seq: seq }),
             ClientMessage::Move { seq, request } => {
-                match crate::control::moves::start(&self.state, &request).await {
+                match crate::control::moves::start(self.state.control(), &request).await {
                     Ok(started) => self.reply(ServerMessage::MoveStarted {
                         ref_seq: seq,
                         started,
@@ -309,7 +309,7 @@ impl Connection {
 
     /// The config's `[watchdog]` arms for a streaming client that declared none.
     fn arm_default_watchdog(&mut self) {
-        let d = self.state.watchdog_default();
+        let d = self.state.control().watchdog_default();
         if d.hold_timeout_ms > 0 && !self.watchdog.declared() {
             self.watchdog.arm(
                 Duration::from_millis(d.hold_timeout_ms),
@@ -346,7 +346,7 @@ fn subscription(state: &AppState, s: &Subscribe) -> Result<Subscription, WsError
     let buses = match &s.buses {
         Some(names) => {
             for (i, n) in names.iter().enumerate() {
-                state.bus(n)?;
+                state.control().bus(n)?;
                 if names[..i].contains(n) {
                     return Err(ControlError::duplicate(
                         &format!("buses[{i}]"),
@@ -357,7 +357,11 @@ fn subscription(state: &AppState, s: &Subscribe) -> Result<Subscription, WsError
             }
             names.clone()
         }
-        None => state.buses().map(|b| b.name().to_owned()).collect(),
+        None => state
+            .control()
+            .buses()
+            .map(|b| b.name().to_owned())
+            .collect(),
     };
     let devices = match &s.devices {
         Some(ids) => {

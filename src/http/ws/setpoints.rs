@@ -118,7 +118,7 @@ pub(crate) fn apply(
     let accepted = Instant::now();
     let mut writes = Vec::new();
     for (name, targets) in per_bus {
-        let bus = state.bus(&name)?;
+        let bus = state.control().bus(&name)?;
         let under: Vec<_> = targets
             .iter()
             .zip(epochs.by_ref())
@@ -197,10 +197,10 @@ fn joint_of(state: &AppState, t: &TargetItem, field: &str) -> Result<(String, u8
 /// The target's bus, or the only bus when it names none.
 fn bus_name(state: &AppState, t: &TargetItem) -> Result<String, WsError> {
     if let Some(name) = &t.bus {
-        state.bus(name)?;
+        state.control().bus(name)?;
         return Ok(name.clone());
     }
-    let mut names = state.buses().map(|b| b.name().to_owned());
+    let mut names = state.control().buses().map(|b| b.name().to_owned());
     match (names.next(), names.next()) {
         (Some(only), None) => Ok(only),
         _ => Err(WsError::new(

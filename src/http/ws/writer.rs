@@ -204,7 +204,7 @@ where
 
     fn event_streams(&self) -> Events {
         let mut all: Events = select_all(Vec::new());
-        for bus in self.state.buses() {
+        for bus in self.state.control().buses() {
             let s =
                 BroadcastStream::new(bus.events()).map(|r| r.map(EventBody::Bus).map_err(lagged));
             all.push(Box::pin(s));
@@ -217,7 +217,7 @@ where
 
     fn ack_streams(&self) -> Acks {
         let mut all: Acks = select_all(Vec::new());
-        for bus in self.state.buses() {
+        for bus in self.state.control().buses() {
             let name = bus.name().to_owned();
             all.push(Box::pin(
                 WatchStream::new(bus.wire_acks()).map(move |a| (name.clone(), a)),
@@ -262,9 +262,9 @@ where
         self.count_skipped_ticks(&sub, now);
         let mut parts: Vec<Arc<str>> = Vec::with_capacity(sub.buses.len());
         for (name, shape) in sub.buses_and_shapes() {
-            if let Ok(bus) = self.state.bus(name) {
-                let names = |id| self.state.joint_name(name, id);
-                let cals = |id| self.state.calibration(name, id);
+            if let Ok(bus) = self.state.control().bus(name) {
+                let names = |id| self.state.control().joint_name(name, id);
+                let cals = |id| self.state.control().calibration(name, id);
                 let cache = &self.state.ws().fragments;
                 let snap = bus.snapshot();
                 let part = super::telemetry::fragment(cache, &sub, shape, &snap, names, cals, now);
