@@ -11,8 +11,9 @@
 //! - [`api`]: the REST areas (buses, devices, control, config, e-stop, health) and the OpenAPI document.
 //! - [`ws`]: the WebSocket endpoint: telemetry streams, setpoint batches, teleop watchdog.
 //! - [`web`]: the embedded dashboard (or `--web-dir` while developing).
-//! - [`state`]: [`AppState`]: the control core ([`crate::control::Control`], by `Deref`)
-//!   and what only HTTP needs: token, WebSocket hub, host/origin policy; path guards.
+//! - [`state`]: [`AppState`]: the control core the daemon shares with ROS 2
+//!   ([`crate::control::Control`]) and what only HTTP needs: token, WebSocket hub,
+//!   host/origin policy; path parameters.
 //! - [`error`]: [`ApiError`], RFC 9457 problem details; the one place that picks HTTP statuses.
 //! - [`extract`]: JSON/path/query extractors whose rejections are problems.
 //! - [`guard`]: the request guards before auth: Host (DNS rebinding), body size, browser origin.
