@@ -9,8 +9,7 @@
 //! [`Refused`] says why, and under which cause (what `/rosout` is
 //! throttled by).
 
-use crate::bus::{BusHandle, Setpoint};
-use crate::control::batch::{self, BatchItem};
+use crate::control::batch::BatchItem;
 use crate::control::error::ControlError;
 use crate::control::joints::known_device;
 use crate::control::targets::TargetRequest;
@@ -19,9 +18,6 @@ use crate::control::Control;
 use crate::control::JointRef;
 use crate::record::cdr::JointState;
 use crate::record::joint_states::Scope;
-
-/// Targets for joints of one bus.
-pub(crate) type BusTargets = (BusHandle, Vec<(u8, Setpoint)>);
 
 /// Why a command (or trajectory) was refused whole: its cause, a short
 /// name (the control core's problem name where it refused), and the words.
@@ -95,13 +91,14 @@ pub(crate) fn joints_named(
         .collect()
 }
 
-/// The setpoints `cmd` asks of the joints of `scope` (a bus, or a hand on
-/// one or more buses), grouped by bus; or why it is refused.
-pub(crate) fn setpoints(
+/// The targets `cmd` asks of the joints of `scope` (a bus, or a hand on
+/// one or more buses), each with its joint, for the core's teleop step
+/// (which checks them whole); or why it is refused.
+pub(crate) fn targets(
     state: &std::sync::Arc<Control>,
     scope: &Scope,
     cmd: &JointState,
-) -> Result<Vec<BusTargets>, Refused> {
+) -> Result<Vec<BatchItem>, Refused> {
     check_shape(cmd).map_err(|why| Refused::new("malformed", why))?;
     let joints = joints_named(state, scope, &cmd.name)?;
     let mut items = Vec::with_capacity(cmd.name.len());
@@ -118,11 +115,7 @@ pub(crate) fn setpoints(
             field,
         });
     }
-    let per_bus = batch::resolve(state, &items)?;
-    per_bus
-        .into_iter()
-        .map(|(name, targets)| Ok((state.bus(&name)?.clone(), targets)))
-        .collect()
+    Ok(items)
 }
 
 /// Whether a command asks for velocities only.

@@ -120,6 +120,7 @@ async fn hand_calibration(
     ApiPath(p): ApiPath<HandPath>,
 ) -> ApiResult<Json<HandCalibration>> {
     let hand = state
+        .control()
         .hands()
         .and_then(|store| store.hand(&p.hand))
         .ok_or_else(|| {

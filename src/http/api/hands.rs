@@ -137,6 +137,7 @@ pub(crate) struct HandJointView {
 async fn list_hands(State(state): State<AppState>) -> ApiResult<Json<HandList>> {
     let driving = state.control().stream_book().driving();
     let hands = state
+        .control()
         .hands()
         .map(|store| {
             store

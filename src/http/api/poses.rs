@@ -171,6 +171,7 @@ async fn go_to_pose(
 
 fn hand<'a>(state: &'a AppState, name: &str) -> ApiResult<(&'a StateStore, &'a Hand)> {
     state
+        .control()
         .hands()
         .and_then(|store| store.hand(name).map(|h| (store, h)))
         .ok_or_else(|| ApiError::not_found("unknown-hand", format!("no hand named `{name}`")))
