@@ -12,6 +12,7 @@
 //! - [`mem`]: giving freed heap memory back to the system (glibc `malloc_trim`).
 //! - [`histogram`]: a latency histogram in Prometheus' shape, cheap enough for the bus
 //!   owner's hot path (no allocation, no lock).
+//! - [`rosmsg`]: ROS 2 messages in CDR, encoded and decoded (recordings and the bridge). Pure.
 //! - [`motion`]: moves generated in the daemon: synchronised multi-joint paths
 //!   (linear, minimum-jerk, trapezoid; waypoints; limits) and a move's status. Pure.
 //! - [`hands`]: named hands (`[[hand]]`), their poses and the joints' calibrations, kept in
@@ -90,6 +91,7 @@ pub mod motion;
 pub mod protocol;
 pub mod record;
 pub mod ros2;
+pub mod rosmsg;
 pub mod rt;
 pub mod sim;
 pub mod transport;

@@ -7,6 +7,13 @@
 //! authority ([`crate::bus::authority`]): the core admits a command under a
 //! joint's epoch, the owner drops it once that epoch has passed.
 //!
+//! Request types (a target, a move, a homing job, a grasp) carry their
+//! OpenAPI schema (`utoipa::ToSchema`) beside their serde shape, here: the
+//! type that parses a request is the one the document describes, so the
+//! two cannot drift, and REST, WebSocket and ROS 2 keep one vocabulary. A
+//! REST-side copy of each would be a second definition to keep in step.
+//! The derive is metadata only: nothing in the core calls into utoipa.
+//!
 //! # Layout
 //! One-way layers: each file imports only from files above it in this list.
 //! - [`error`]: [`ControlError`], typed refusals with the field and range at fault.

@@ -34,9 +34,9 @@ use mcap::records::MessageHeader;
 use mcap::{WriteOptions, Writer};
 use thiserror::Error;
 
-use super::cdr::{string_cdr, JOINT_STATE_MSG, STRING_MSG};
 use super::schemas;
 use super::sink::{Failure, Sink};
+use crate::rosmsg::{string_cdr, JOINT_STATE_MSG, STRING_MSG};
 
 /// How long a chunk may collect messages before it is written out.
 pub const CHUNK_PERIOD: Duration = Duration::from_secs(1);

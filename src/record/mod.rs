@@ -1,7 +1,6 @@
 //! Recordings: what the joints did, in an MCAP file that
 //! Foxglove and `ros2 bag play` (storage plugin mcap) open as is.
 //!
-//! - [`cdr`]: `sensor_msgs/msg/JointState` in CDR (shared with the ROS 2 bridge);
 //! - [`joint_states`]: a `JointState` per poll round from a bus's snapshots;
 //! - [`mcap_file`]: the file: schemas, channels, chunks, summary;
 //! - [`metadata`]: its Metadata record `jointd` (version, joints);
@@ -11,7 +10,6 @@
 //! - [`recorder`]: the thread that taps the buses and writes;
 //! - [`client`]: `jointd record`, which asks a running daemon for one.
 
-pub mod cdr;
 pub mod client;
 pub mod joint_states;
 pub mod mcap_file;

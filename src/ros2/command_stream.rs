@@ -20,8 +20,8 @@ use crate::control::books::streams::{Driver, Via};
 use crate::control::streams::Streams;
 use crate::control::watchdog::{fire_policy, Watchdog};
 use crate::control::Control;
-use crate::record::cdr::JointState;
 use crate::record::joint_states::Scope;
+use crate::rosmsg::JointState;
 
 pub(super) type Subscriber =
     zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;

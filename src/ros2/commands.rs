@@ -16,8 +16,8 @@ use crate::control::targets::TargetRequest;
 use crate::control::velocity;
 use crate::control::Control;
 use crate::control::JointRef;
-use crate::record::cdr::JointState;
 use crate::record::joint_states::Scope;
+use crate::rosmsg::JointState;
 
 /// Why a command (or trajectory) was refused whole: its cause, a short
 /// name (the control core's problem name where it refused), and the words.

@@ -13,8 +13,8 @@ use crate::bus::handle::LinkState;
 use crate::bus::BusSnapshot;
 use crate::control::Control;
 use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
-use crate::record::cdr::{diagnostic_array_cdr, DiagnosticStatus};
 use crate::record::joint_states::system_ns;
+use crate::rosmsg::{diagnostic_array_cdr, DiagnosticStatus};
 
 pub(super) async fn publish(
     state: Arc<Control>,

@@ -15,10 +15,10 @@
 //! message has none).
 
 use super::commands::Refused;
-use super::msgs::GripperCommand;
 use crate::control::books::grasps::{FingerState, GraspView};
 use crate::control::grasp::{GraspJoint, GraspRequest};
-use crate::record::cdr::DiagnosticStatus;
+use crate::rosmsg::bridge::GripperCommand;
+use crate::rosmsg::DiagnosticStatus;
 
 /// One finger of the hand: its joint name.
 #[derive(Debug, Clone, PartialEq)]

@@ -22,10 +22,10 @@ use zenoh::query::{Query, Queryable};
 
 use super::gripper;
 use super::keys;
-use super::msgs;
 use crate::control::grasp::{self, ReleaseRequest};
 use crate::control::Control;
 use crate::record::joint_states::Scope;
+use crate::rosmsg::bridge as msgs;
 
 pub(super) type ServiceQueryable = Queryable<FifoChannelHandler<Query>>;
 

@@ -1,12 +1,12 @@
 //! The ROS 2 messages the bridge takes and gives besides `JointState` and
-//! `DiagnosticArray` (those are [`crate::record::cdr`]'s, shared with
+//! `DiagnosticArray` (those are [`super::topics`], shared with
 //! recordings), in CDR as rmw_zenoh carries them: the requests and
 //! responses of `std_srvs/srv/SetBool` and `std_srvs/srv/Trigger`,
 //! `trajectory_msgs/msg/JointTrajectory`, `rcl_interfaces/msg/Log`,
 //! `control_msgs/msg/GripperCommand`.
 //! Pure: bytes in, bytes out.
 
-use crate::record::cdr::{Cdr, CdrError, CdrReader};
+use super::cdr::{Cdr, CdrError, CdrReader};
 
 /// `rcl_interfaces/msg/Log`'s level WARN.
 pub(crate) const LOG_WARN: u8 = 30;
