@@ -1,5 +1,5 @@
 //! One error shape for every failure: RFC 9457 problem details
-//! (`application/problem+json`), and the one file that picks HTTP
+//! (`application/problem+json`), and the one module that picks HTTP
 //! statuses. Handlers return [`ApiResult`] and use `?` on bus errors; the
 //! same device answer is then the same status on every route. The OpenAPI
 //! document describes each status from [`DOCUMENTED_STATUSES`] below.
@@ -22,9 +22,15 @@
 //! | bus down, request queue full, bus owner stopped, not ready, e-stop unconfirmed, too many requests at once (load shed), a recording's file not writable | 503 |
 //! | device did not answer; a write sent whose RES or read-back was lost (`write-unverified`) | 504 |
 //! | a recording's file cannot be written: the disk (or quota, or file size limit) is full | 507 |
+//!
+//! # Layout
+//! - `documented`: the statuses every route documents; the guards' problems.
+//! - `from`: each failure (core, bus, axum's rejections) mapped to its problem.
+//! - this file: the problem shape, its constructors, the response.
 
-use axum::extract::rejection::{JsonRejection, PathRejection, QueryRejection};
-use axum::extract::ws::rejection::WebSocketUpgradeRejection;
+mod documented;
+mod from;
+
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
@@ -331,242 +337,6 @@ impl ApiError {
     }
 }
 
-/// A write sent whose confirmation was lost (the device may have taken it):
-/// a gateway timeout, as the missing answer is the upstream's, with its own
-/// problem type so a client never reads it as "not written".
-const UNVERIFIED: (StatusCode, &str, &str) = (
-    StatusCode::GATEWAY_TIMEOUT,
-    "write-unverified",
-    "Write sent, confirmation lost",
-);
-
-/// Status, problem type and title of each bus failure: the one table that
-/// turns what the bus reports into HTTP.
-fn bus_problem(err: &BusError) -> (StatusCode, &'static str, &'static str) {
-    match err {
-        BusError::Timeout { .. } => (
-            StatusCode::GATEWAY_TIMEOUT,
-            "device-timeout",
-            "Device did not answer",
-        ),
-        // The write went out; only its confirmation did not come back.
-        BusError::Unverified { .. } => UNVERIFIED,
-        BusError::Down { .. } => (StatusCode::SERVICE_UNAVAILABLE, "bus-down", "Bus is down"),
-        BusError::Refused { .. } => (StatusCode::CONFLICT, "device-refused", "Device refused"),
-        // The device answered, but wrongly: the upstream failed, not the request.
-        BusError::VerifyMismatch { .. } => (
-            StatusCode::BAD_GATEWAY,
-            "verify-mismatch",
-            "Read-back differs from the value written",
-        ),
-        BusError::UnexpectedReply(_) => (
-            StatusCode::BAD_GATEWAY,
-            "unexpected-reply",
-            "Unexpected reply",
-        ),
-        BusError::UnknownDevice { .. } => (StatusCode::NOT_FOUND, "unknown-device", "Not found"),
-        BusError::WrongState(_) => (StatusCode::CONFLICT, "wrong-state", "Wrong device state"),
-        BusError::Invalid(_) => (
-            StatusCode::UNPROCESSABLE_ENTITY,
-            "invalid-value",
-            "Invalid value",
-        ),
-        BusError::Busy { .. } => (
-            StatusCode::SERVICE_UNAVAILABLE,
-            "bus-busy",
-            "Bus request queue full",
-        ),
-        BusError::Preempted => (
-            StatusCode::CONFLICT,
-            "preempted",
-            "Preempted by an emergency stop",
-        ),
-        BusError::OwnerTimeout | BusError::Stopped => (
-            StatusCode::SERVICE_UNAVAILABLE,
-            "bus-unavailable",
-            "Bus owner unavailable",
-        ),
-    }
-}
-
-/// The control core's refusals: each kind its status, once.
-impl From<ControlError> for ApiError {
-    fn from(err: ControlError) -> Self {
-        match err {
-            ControlError::Invalid {
-                kind,
-                field,
-                detail,
-                allowed,
-            } => {
-                let e = Self::new(
-                    StatusCode::UNPROCESSABLE_ENTITY,
-                    kind.name(),
-                    kind.title(),
-                    detail,
-                )
-                .with_field(field);
-                match allowed {
-                    Some(a) => e.with_range(a.min, a.max, &a.unit),
-                    None => e,
-                }
-            }
-            ControlError::NotFound { kind, detail } => Self::not_found(&kind, detail),
-            ControlError::Conflict {
-                kind,
-                title,
-                detail,
-                field,
-            } => {
-                let e = Self::conflict(&kind, &title, detail);
-                match field {
-                    Some(f) => e.with_field(f),
-                    None => e,
-                }
-            }
-            ControlError::StateUnwritable(detail) => Self::state_unwritable(detail),
-            ControlError::Storage { full: true, detail } => Self::new(
-                StatusCode::INSUFFICIENT_STORAGE,
-                "storage-full",
-                "No room for the recording",
-                detail,
-            ),
-            ControlError::Storage {
-                full: false,
-                detail,
-            } => Self::new(
-                StatusCode::SERVICE_UNAVAILABLE,
-                "recording-unwritable",
-                "Recording file not written",
-                detail,
-            ),
-            ControlError::Unreadable(detail) => Self::new(
-                StatusCode::SERVICE_UNAVAILABLE,
-                "recording-unreadable",
-                "Recording file not readable",
-                detail,
-            ),
-            ControlError::Internal(detail) => {
-                tracing::error!("internal error: {detail}");
-                Self::internal()
-            }
-            ControlError::Bus(e) => e.into(),
-        }
-    }
-}
-
-impl From<BusError> for ApiError {
-    fn from(err: BusError) -> Self {
-        let (status, kind, title) = bus_problem(&err);
-        Self::new(status, kind, title, err.to_string())
-    }
-}
-
-impl From<JsonRejection> for ApiError {
-    fn from(rej: JsonRejection) -> Self {
-        // A body over DefaultBodyLimit fails while buffering; axum marks it 413.
-        if rej.status() == StatusCode::PAYLOAD_TOO_LARGE {
-            return ApiError::payload_too_large(None);
-        }
-        match rej {
-            // Well-formed JSON of the wrong shape: a missing field, a string
-            // where a number belongs, an unknown field.
-            JsonRejection::JsonDataError(e) => ApiError::new(
-                StatusCode::UNPROCESSABLE_ENTITY,
-                "invalid-body",
-                "Request body does not match the schema",
-                e.body_text(),
-            ),
-            JsonRejection::MissingJsonContentType(_) => ApiError::new(
-                StatusCode::UNSUPPORTED_MEDIA_TYPE,
-                "unsupported-media-type",
-                "Body must be application/json",
-                "send the body with `Content-Type: application/json`",
-            ),
-            other => ApiError::bad_request(other.body_text()),
-        }
-    }
-}
-
-/// A plain GET to the WebSocket endpoint (no `Connection: upgrade` /
-/// `Upgrade: websocket`) is told to upgrade (426); a broken handshake is
-/// malformed (400).
-impl From<WebSocketUpgradeRejection> for ApiError {
-    fn from(rej: WebSocketUpgradeRejection) -> Self {
-        match rej {
-            WebSocketUpgradeRejection::InvalidConnectionHeader(_)
-            | WebSocketUpgradeRejection::InvalidUpgradeHeader(_)
-            | WebSocketUpgradeRejection::ConnectionNotUpgradable(_) => ApiError::upgrade_required(
-                "this is the WebSocket endpoint (protocol jointd.ws.v1, docs/websocket.md): \
-                 connect with a WebSocket client",
-            ),
-            other => ApiError::bad_request(format!("WebSocket handshake: {}", other.body_text())),
-        }
-    }
-}
-
-impl From<PathRejection> for ApiError {
-    fn from(rej: PathRejection) -> Self {
-        ApiError::bad_request(rej.body_text())
-    }
-}
-
-impl From<QueryRejection> for ApiError {
-    fn from(rej: QueryRejection) -> Self {
-        ApiError::bad_request(rej.body_text())
-    }
-}
-
-/// Every failure status an operation may answer with, and what it means:
-/// the OpenAPI document's shared responses (every operation).
-pub(crate) const DOCUMENTED_STATUSES: [(&str, &str); 10] = [
-    (
-        "400",
-        "Malformed request (JSON syntax, unparsable path or query)",
-    ),
-    ("401", "Missing or wrong bearer token"),
-    ("404", "Unknown bus, device or route"),
-    (
-        "409",
-        "Wrong device state, device refused, or preempted by an e-stop",
-    ),
-    ("415", "Body is not application/json"),
-    (
-        "422",
-        "Value out of range or outside a soft limit; names the field and the range",
-    ),
-    (
-        "502",
-        "The device answered something other than what was asked (unexpected-reply), \
-         or a write reads back another value (verify-mismatch)",
-    ),
-    (
-        "503",
-        "Bus down, request queue full, bus owner stopped, or too many requests at once \
-         (overloaded: retry after Retry-After; e-stops are never refused for this)",
-    ),
-    (
-        "504",
-        "Device did not answer (device-timeout), or a write went out and its confirmation \
-         was lost (write-unverified: it may or may not have taken effect; a config PATCH's \
-         `partial` lists `written`, `unverified` and `not_written` per parameter)",
-    ),
-    ("500", "Internal error (a bug; never expected)"),
-];
-
-/// Statuses of the request guards, each documented only where it applies:
-/// 403 on operations that change something, 413 on those with a body, 421
-/// on all but `/healthz`.
-pub(crate) const FORBIDDEN_ORIGIN: (&str, &str) = (
-    "403",
-    "A browser page of a foreign origin tried to change something (Origin / Sec-Fetch-Site)",
-);
-pub(crate) const BODY_TOO_LARGE: (&str, &str) = ("413", "Request body over max_body_bytes");
-pub(crate) const UNKNOWN_HOST: (&str, &str) = (
-    "421",
-    "The Host header names no host of this daemon (DNS rebinding guard; see allowed_hosts)",
-);
-
 /// The problem type of an answer, left in the response's extensions.
 #[derive(Debug, Clone)]
 pub(crate) struct ProblemType(pub(crate) String);
@@ -600,8 +370,11 @@ impl IntoResponse for ApiError {
 
 pub(crate) type ApiResult<T> = Result<T, ApiError>;
 
+pub(crate) use documented::{BODY_TOO_LARGE, DOCUMENTED_STATUSES, FORBIDDEN_ORIGIN, UNKNOWN_HOST};
+
 #[cfg(test)]
 mod tests {
+    use super::from::bus_problem;
     use super::*;
 
     #[test]
