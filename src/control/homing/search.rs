@@ -57,6 +57,48 @@ pub(super) async fn search(
     let rpm = plan.direction.sign() * plan.speed_dps / units::output_deg_per_s(1.0);
     let spd_ref = units::speed_to_raw(rpm, firmware_of(dev))
         .map_err(|e| Ended::Failed(format!("speed_dps: {e}")))?;
+    let epoch = speed_mode(bus, joint, here, spd_ref).await?;
+    let started = Instant::now();
+    let deadline = started + plan.timeout;
+    let mut watch = bus.watch();
+    let mut last_sample: Option<Instant> = None;
+    let mut stall = StallWatch::new(started, plan.speed_dps, plan.current_limit_a);
+    loop {
+        aborted_by_event(bus, events)?;
+        revoked(bus, id, epoch)?;
+        let snap = watch.borrow_and_update().clone();
+        let dev = snap.devices.get(&id);
+        unfit(dev)?;
+        if let Some(deg) = dev.and_then(measured_angle_raw).map(units::angle_deg) {
+            if bound.reached(plan.direction, deg, plan.speed_dps) {
+                return Err(Ended::Failed(bound.failure(deg)));
+            }
+        }
+        if let Some(stop_deg) = stalled_at(dev, started, &mut last_sample, &mut stall) {
+            return Ok(stop_deg);
+        }
+        let now = Instant::now();
+        if now >= deadline {
+            return Err(Ended::Failed(format!(
+                "no stop found within {} ms (moved: {})",
+                plan.timeout.as_millis(),
+                stall.moved()
+            )));
+        }
+        let wait = (deadline - now).min(Duration::from_millis(20));
+        let _ = tokio::time::timeout(wait, watch.changed()).await;
+    }
+}
+
+/// Speed 0 on the wire, speed mode, then the search's speed from `here`,
+/// under the epoch the joint's own mode change led to; that epoch.
+async fn speed_mode(
+    bus: &BusHandle,
+    joint: Admitted,
+    here: i16,
+    spd_ref: i16,
+) -> Result<Epoch, Ended> {
+    let id = joint.id;
     // The speed the joint last had stays with it into speed mode (in
     // position mode it is the speed limit): make it 0 first.
     if !speed_zero_on_wire(bus, id).await {
@@ -86,47 +128,30 @@ pub(super) async fn search(
         )],
         Source::Homing,
     );
-    let started = Instant::now();
-    let deadline = started + plan.timeout;
-    let mut watch = bus.watch();
-    let mut last_sample: Option<Instant> = None;
-    let mut stall = StallWatch::new(started, plan.speed_dps, plan.current_limit_a);
-    loop {
-        aborted_by_event(bus, events)?;
-        revoked(bus, id, epoch)?;
-        let snap = watch.borrow_and_update().clone();
-        let dev = snap.devices.get(&id);
-        unfit(dev)?;
-        if let Some(deg) = dev.and_then(measured_angle_raw).map(units::angle_deg) {
-            if bound.reached(plan.direction, deg, plan.speed_dps) {
-                return Err(Ended::Failed(bound.failure(deg)));
-            }
-        }
-        if let Some((info, at)) = dev.and_then(|d| d.info02.as_ref().map(|(i, at)| (*i, *at))) {
-            if last_sample.map_or(true, |last| at > last) && at >= started {
-                last_sample = Some(at);
-                let fw = dev.map(firmware_of).unwrap_or_default();
-                let sample = Sample {
-                    at,
-                    speed_dps: units::output_deg_per_s(info.speed_rpm(fw)),
-                    current_a: units::current_a(info.q_cur),
-                };
-                if stall.stalled(sample) {
-                    return Ok(units::angle_deg(info.angle));
-                }
-            }
-        }
-        let now = Instant::now();
-        if now >= deadline {
-            return Err(Ended::Failed(format!(
-                "no stop found within {} ms (moved: {})",
-                plan.timeout.as_millis(),
-                stall.moved()
-            )));
-        }
-        let wait = (deadline - now).min(Duration::from_millis(20));
-        let _ = tokio::time::timeout(wait, watch.changed()).await;
+    Ok(epoch)
+}
+
+/// The joint's newest telemetry sample since the search began, read for a
+/// stall; the angle it stalled at once the watch says so.
+fn stalled_at(
+    dev: Option<&DeviceState>,
+    started: Instant,
+    last_sample: &mut Option<Instant>,
+    stall: &mut StallWatch,
+) -> Option<f64> {
+    let dev = dev?;
+    let (info, at) = dev.info02.as_ref().map(|(i, at)| (*i, *at))?;
+    if last_sample.is_some_and(|last| at <= last) || at < started {
+        return None;
     }
+    *last_sample = Some(at);
+    let fw = firmware_of(dev);
+    let sample = Sample {
+        at,
+        speed_dps: units::output_deg_per_s(info.speed_rpm(fw)),
+        current_a: units::current_a(info.q_cur),
+    };
+    stall.stalled(sample).then(|| units::angle_deg(info.angle))
 }
 
 /// An e-stop on the joint's bus ends the search (checked between samples,
