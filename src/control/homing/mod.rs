@@ -143,6 +143,19 @@ fn set(slot: &Slot, edit: impl FnOnce(&mut JointHoming)) {
 /// Homes one joint; whatever happens, its previous current limit is
 /// written back (and read back) before the job says it ended.
 
+/// The search's current limit, raw: below the joint's own (`previous`),
+/// or why homing cannot reduce it.
+fn reduced_limit(plan: &Plan, previous: u16) -> Result<u16, String> {
+    match units::current_limit_to_raw(plan.current_limit_a) {
+        Ok(raw) if raw < previous => Ok(raw),
+        _ => Err(format!(
+            "current_limit_a = {} A is not below the joint's own limit ({:.3} A): homing needs a reduced limit",
+            plan.current_limit_a,
+            units::current_limit_a(previous)
+        )),
+    }
+}
+
 async fn home(
     state: Arc<Control>,
     bus: BusHandle,
@@ -161,40 +174,16 @@ async fn home(
     set(&slot, |s| {
         s.previous_current_limit_a = Some(units::current_limit_a(previous));
     });
-    let limit = match units::current_limit_to_raw(plan.current_limit_a) {
-        Ok(raw) if raw < previous => raw,
-        _ => {
-            let why = format!(
-                "current_limit_a = {} A is not below the joint's own limit ({:.3} A): homing needs a reduced limit",
-                plan.current_limit_a,
-                units::current_limit_a(previous)
-            );
+    let limit = match reduced_limit(&plan, previous) {
+        Ok(raw) => raw,
+        Err(why) => {
             // Nothing was written: the limit just read is the previous one.
             set(&slot, |s| s.current_limit_restored = true);
             return finish(&slot, job, Err(Ended::Failed(why)));
         }
     };
     bus.take_over(&[id]);
-    let mut guard = SpeedZero {
-        bus: bus.clone(),
-        id,
-        armed: false,
-    };
-    let outcome = match bus.write_config(id, ConfigParam::MaxCur(limit)).await {
-        Ok(_) => {
-            set(&slot, |s| s.phase = "searching");
-            guard.armed = true;
-            search(&bus, joint, &plan, &soft, &mut events).await
-        }
-        Err(e) => Err(Ended::Failed(format!(
-            "could not reduce the current limit: {e}"
-        ))),
-    };
-    if guard.armed {
-        // Stop pushing and leave speed mode, however the search ended.
-        hold_here(&bus, id).await;
-        guard.armed = false;
-    }
+    let outcome = limited_search(&bus, joint, &plan, &soft, limit, &slot, &mut events).await;
     let outcome = match outcome {
         Ok(stop_deg) => {
             set(&slot, |s| {
@@ -213,6 +202,42 @@ async fn home(
     let restored = restore(&bus, id, previous, settled).await;
     set(&slot, |s| s.current_limit_restored = restored);
     finish(&slot, job, outcome);
+}
+
+/// The search under the reduced current limit `limit`; then, however it
+/// ended, the joint stops pushing and leaves speed mode (a task unwinding
+/// writes speed 0 on its way out).
+async fn limited_search(
+    bus: &BusHandle,
+    joint: Admitted,
+    plan: &Plan,
+    soft: &JointLimits,
+    limit: u16,
+    slot: &Slot,
+    events: &mut tokio::sync::broadcast::Receiver<crate::bus::handle::BusEvent>,
+) -> Result<f64, Ended> {
+    let id = joint.id;
+    let mut guard = SpeedZero {
+        bus: bus.clone(),
+        id,
+        armed: false,
+    };
+    let outcome = match bus.write_config(id, ConfigParam::MaxCur(limit)).await {
+        Ok(_) => {
+            set(slot, |s| s.phase = "searching");
+            guard.armed = true;
+            search(bus, joint, plan, soft, events).await
+        }
+        Err(e) => Err(Ended::Failed(format!(
+            "could not reduce the current limit: {e}"
+        ))),
+    };
+    if guard.armed {
+        // Stop pushing and leave speed mode, however the search ended.
+        hold_here(bus, id).await;
+        guard.armed = false;
+    }
+    outcome
 }
 
 fn finish(slot: &Slot, job: u64, outcome: Result<f64, Ended>) {
