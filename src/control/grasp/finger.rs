@@ -106,17 +106,7 @@ async fn drive(f: &Finger, plan: &Plan, mut cmd: watch::Receiver<Command>) -> En
     }
     set(&f.slot, |s| s.state = FingerState::Closing);
     let started = Instant::now();
-    let settings = Settings {
-        dir: if f.close_to_deg >= start_deg {
-            1.0
-        } else {
-            -1.0
-        },
-        limit_deg: f.close_to_deg,
-        speed_dps: plan.speed_dps,
-        threshold_a: plan.threshold_a,
-        hold_a: plan.hold_a,
-    };
+    let settings = settings_of(f, plan, start_deg);
     let mut phase = Phase::Closing(Closing::new(settings));
     // A move took the joint since (see [`may_send`]).
     let mut moved_away = false;
@@ -124,18 +114,8 @@ async fn drive(f: &Finger, plan: &Plan, mut cmd: watch::Receiver<Command>) -> En
         if let Err(why) = unfit(f, &mut w) {
             return End::Aborted(why);
         }
-        // Every command but Hold ends the finger's grasp: the latest one
-        // is the one that applies, however many wake-ups it took to see.
-        let now = cmd.borrow().clone();
-        match now {
-            Command::Hold => {}
-            Command::Stop => return hold_here(f, "stopped by request"),
-            Command::Release { goals, speed_dps } => {
-                return match goals.get(f.index).copied().flatten() {
-                    Some(goal) => open(f, &mut w, goal, speed_dps, fw, &mut cmd).await,
-                    None => hold_here(f, "nothing to open to"),
-                };
-            }
+        if let Some(end) = follow_command(f, &mut w, fw, &mut cmd).await {
+            return end;
         }
         let snap = w.snaps.borrow_and_update().clone();
         let dev = snap.devices.get(&f.id);
@@ -155,6 +135,45 @@ async fn drive(f: &Finger, plan: &Plan, mut cmd: watch::Receiver<Command>) -> En
             _ = w.snaps.changed() => {}
             _ = cmd.changed() => {}
             _ = tokio::time::sleep(LOOK) => {}
+        }
+    }
+}
+
+/// What the detector needs of this finger's grasp: which way it closes
+/// (from where it starts), its limit, the speed and the currents.
+fn settings_of(f: &Finger, plan: &Plan, start_deg: f64) -> Settings {
+    Settings {
+        dir: if f.close_to_deg >= start_deg {
+            1.0
+        } else {
+            -1.0
+        },
+        limit_deg: f.close_to_deg,
+        speed_dps: plan.speed_dps,
+        threshold_a: plan.threshold_a,
+        hold_a: plan.hold_a,
+    }
+}
+
+/// What the job's latest command asks: `None` while it says hold; the
+/// finger's end otherwise (a release opens it first). Every command but
+/// Hold ends the finger's grasp: the latest one is the one that applies,
+/// however many wake-ups it took to see.
+async fn follow_command(
+    f: &Finger,
+    w: &mut Watch,
+    fw: units::FirmwareVersion,
+    cmd: &mut watch::Receiver<Command>,
+) -> Option<End> {
+    let now = cmd.borrow().clone();
+    match now {
+        Command::Hold => None,
+        Command::Stop => Some(hold_here(f, "stopped by request")),
+        Command::Release { goals, speed_dps } => {
+            Some(match goals.get(f.index).copied().flatten() {
+                Some(goal) => open(f, w, goal, speed_dps, fw, cmd).await,
+                None => hold_here(f, "nothing to open to"),
+            })
         }
     }
 }
