@@ -77,9 +77,36 @@ pub(crate) async fn start(
     let slots: Vec<Slot> = admitted.iter().map(|f| f.slot.clone()).collect();
     let job = Job::new(hand.to_owned(), settings, slots);
     let id = state.grasps().add(job.clone()).map_err(|b| busy(&b))?;
-    // A homing admitted meanwhile on one of these joints passed its check
-    // of this book before the job was in it: whichever of the two sees
-    // the other now stands down, so they never both drive a joint.
+    stand_down_for_homing(state, &admitted, &job)?;
+    let plan = Plan {
+        grasp_id: id,
+        speed_dps: settings.speed_dps,
+        hold_a: settings.hold_current_a,
+        threshold_a: settings.contact_threshold_a,
+        called: Instant::now(),
+    };
+    let fingers = admitted;
+    tracing::info!(
+        grasp_id = id,
+        hand,
+        ?settings,
+        fingers = fingers.len(),
+        "grasp started"
+    );
+    // The grasp takes its joints from any move now: a move admitted after
+    // this one takes them back, and the fingers then send nothing.
+    for f in &fingers {
+        f.bus.take_over(&[f.id]);
+    }
+    tokio::spawn(run(job, fingers, plan));
+    get(state, id)
+}
+
+/// A homing admitted meanwhile on one of these joints passed its check of
+/// the grasp book before the job was in it: whichever of the two sees the
+/// other stands down, so they never both drive a joint. Here the grasp
+/// does, its fingers aborted, with 409 naming the homing job.
+fn stand_down_for_homing(state: &Control, admitted: &[Finger], job: &Job) -> ControlResult<()> {
     if let Some((bus, joint, homing)) = admitted.iter().find_map(|f| {
         // Read out first: no lock of a finger is held while the homing
         // book takes its own.
@@ -103,28 +130,7 @@ pub(crate) async fn start(
             format!("{why}: grasp once it is done"),
         ));
     }
-    let plan = Plan {
-        grasp_id: id,
-        speed_dps: settings.speed_dps,
-        hold_a: settings.hold_current_a,
-        threshold_a: settings.contact_threshold_a,
-        called: Instant::now(),
-    };
-    let fingers = admitted;
-    tracing::info!(
-        grasp_id = id,
-        hand,
-        ?settings,
-        fingers = fingers.len(),
-        "grasp started"
-    );
-    // The grasp takes its joints from any move now: a move admitted after
-    // this one takes them back, and the fingers then send nothing.
-    for f in &fingers {
-        f.bus.take_over(&[f.id]);
-    }
-    tokio::spawn(run(job, fingers, plan));
-    get(state, id)
+    Ok(())
 }
 
 /// The job: every limit reduced and verified (or none of the fingers
