@@ -120,63 +120,7 @@ pub(super) async fn declare(
     let (rosout, publish_logs) = Rosout::new(&cfg.node_name, publisher, gid);
     on.spawn(publish_logs);
     for (name, scope) in scopes(state, cfg) {
-        let ns = cfg.namespace(&name);
-        let (publisher, gid) = on
-            .publisher(&keys::qualified(&ns, "joint_states"), JOINT_STATE)
-            .await?;
-        let min_gap = cfg
-            .joint_states_max_hz
-            .map(|hz| Duration::from_secs_f64(1.0 / hz));
-        on.spawn(publish_joint_states(
-            state.clone(),
-            scope.clone(),
-            min_gap,
-            publisher,
-            gid,
-            stats.clone(),
-        ));
-        let topic = keys::qualified(&ns, "joint_commands");
-        let subscriber = on.subscriber(&topic, JOINT_STATE).await?;
-        let dropped = Dropped::new(rosout.clone(), topic);
-        on.spawn(command_stream::run(
-            state.clone(),
-            scope.clone(),
-            subscriber,
-            stats.clone(),
-            dropped,
-            closed.clone(),
-        ));
-        let topic = keys::qualified(&ns, "joint_trajectory");
-        let subscriber = on.subscriber(&topic, JOINT_TRAJECTORY).await?;
-        let dropped = Dropped::new(rosout.clone(), topic);
-        on.spawn(trajectory_stream::run(
-            state.clone(),
-            scope.clone(),
-            subscriber,
-            stats.clone(),
-            dropped,
-            closed.clone(),
-        ));
-        let mut services = vec![Service::Enable, Service::Estop];
-        if let Scope::Hand { name: hand, joints } = &scope {
-            declare_grasp(
-                &mut on, state, cfg, stats, &rosout, &ns, hand, joints, &closed,
-            )
-            .await?;
-            services.extend([Service::GraspRelease, Service::GraspStop]);
-        }
-        for service in services {
-            let (queryable, key) = on.service(&ns, service).await?;
-            on.spawn(services::serve(
-                state.clone(),
-                scope.clone(),
-                service,
-                queryable,
-                key,
-                closed.clone(),
-            ));
-        }
-        tracing::debug!(%name, %ns, "ROS 2: topics and services declared");
+        declare_scope(&mut on, state, cfg, stats, &rosout, &closed, &name, scope).await?;
     }
     let (publisher, gid) = on.publisher("/diagnostics", DIAGNOSTIC_ARRAY).await?;
     let period = Duration::from_secs_f64(1.0 / cfg.diagnostics_hz);
@@ -188,6 +132,77 @@ pub(super) async fn declare(
         stats.clone(),
     ));
     Ok(on.declared)
+}
+
+/// One namespace (a bus, or a hand): `joint_states` published,
+/// `joint_commands` and `joint_trajectory` taken, its services served (a
+/// hand's grasp too).
+#[allow(clippy::too_many_arguments)]
+async fn declare_scope(
+    on: &mut On<'_>,
+    state: &Arc<Control>,
+    cfg: &Ros2Config,
+    stats: &Arc<Ros2Stats>,
+    rosout: &Rosout,
+    closed: &watch::Receiver<bool>,
+    name: &str,
+    scope: Scope,
+) -> zenoh::Result<()> {
+    let ns = cfg.namespace(name);
+    let (publisher, gid) = on
+        .publisher(&keys::qualified(&ns, "joint_states"), JOINT_STATE)
+        .await?;
+    let min_gap = cfg
+        .joint_states_max_hz
+        .map(|hz| Duration::from_secs_f64(1.0 / hz));
+    on.spawn(publish_joint_states(
+        state.clone(),
+        scope.clone(),
+        min_gap,
+        publisher,
+        gid,
+        stats.clone(),
+    ));
+    let topic = keys::qualified(&ns, "joint_commands");
+    let subscriber = on.subscriber(&topic, JOINT_STATE).await?;
+    let dropped = Dropped::new(rosout.clone(), topic);
+    on.spawn(command_stream::run(
+        state.clone(),
+        scope.clone(),
+        subscriber,
+        stats.clone(),
+        dropped,
+        closed.clone(),
+    ));
+    let topic = keys::qualified(&ns, "joint_trajectory");
+    let subscriber = on.subscriber(&topic, JOINT_TRAJECTORY).await?;
+    let dropped = Dropped::new(rosout.clone(), topic);
+    on.spawn(trajectory_stream::run(
+        state.clone(),
+        scope.clone(),
+        subscriber,
+        stats.clone(),
+        dropped,
+        closed.clone(),
+    ));
+    let mut services = vec![Service::Enable, Service::Estop];
+    if let Scope::Hand { name: hand, joints } = &scope {
+        declare_grasp(on, state, cfg, stats, rosout, &ns, hand, joints, closed).await?;
+        services.extend([Service::GraspRelease, Service::GraspStop]);
+    }
+    for service in services {
+        let (queryable, key) = on.service(&ns, service).await?;
+        on.spawn(services::serve(
+            state.clone(),
+            scope.clone(),
+            service,
+            queryable,
+            key,
+            closed.clone(),
+        ));
+    }
+    tracing::debug!(%name, %ns, "ROS 2: topics and services declared");
+    Ok(())
 }
 
 /// A hand's grasp: `gripper_command` taken, `grasp_state` published
