@@ -27,7 +27,7 @@ use crate::control::Control;
 use crate::http::AppState;
 use error::listen_error;
 use shutdown::{serve, stop_buses, stop_recordings, wait_for_ws_close};
-use start::{raise_open_files_limit, start_buses, start_sim, BusToStart, Port};
+use start::{raise_open_files_limit, start_all, Started};
 
 pub use args::{FileConfig, JointName, RunArgs, DEFAULT_LISTEN, SIM_BUS_NAME};
 pub use error::DaemonError;
@@ -42,24 +42,12 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     let listener = TcpListener::bind(plan.listen)
         .await
         .map_err(|e| listen_error(plan.listen, e))?;
-    let mut configs: Vec<BusToStart> = plan
-        .buses
-        .into_iter()
-        .map(|cfg| (cfg, Port::Path))
-        .collect();
-    let sim = match plan.sim {
-        Some(sim_cfg) => {
-            let (sim, bus) = start_sim(sim_cfg)?;
-            configs.push(bus);
-            Some(sim)
-        }
-        None => None,
-    };
-    let managed = configs
-        .iter()
-        .map(|(cfg, _)| (cfg.name.clone(), cfg.ids.clone()))
-        .collect();
-    let (handles, threads) = start_buses(configs)?;
+    let Started {
+        sim,
+        handles,
+        threads,
+        managed,
+    } = start_all(plan.buses, plan.sim)?;
     let addr = listener.local_addr().map_err(|e| DaemonError::Io {
         what: "listener address".into(),
         source: e,

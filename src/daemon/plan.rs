@@ -93,17 +93,7 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     let hands = crate::hands::resolve(&file.hands, &bus_names)
         .map_err(|e| DaemonError::Policy(format!("[[hand]]: {e}")))?;
     let state_dir = args.state_dir.clone().or(file.state_dir);
-    let poses = crate::hands::StateStore::open(hands, state_dir.as_deref())
-        .map_err(|e| DaemonError::Policy(e.to_string()))?;
-    match poses.state_path() {
-        Some(path) => {
-            tracing::info!(state_file = %path.display(), "poses are kept in the state file")
-        }
-        None if !poses.hands().is_empty() => tracing::warn!(
-            "no state_dir: saved poses last until the daemon stops (set state_dir or --state-dir)"
-        ),
-        None => {}
-    }
+    let poses = open_poses(hands, state_dir.as_deref())?;
     let hand_names: Vec<String> = poses.hands().iter().map(|h| h.name.clone()).collect();
     let ros2 = ros2_config(file.ros2, args, &bus_names, &hand_names)?;
     let control = crate::control::Options {
@@ -131,6 +121,26 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
         http,
         ros2,
     })
+}
+
+/// The hands' poses and calibrations, in the state file under `state_dir`
+/// (or in memory, said in the log when there are hands to lose).
+fn open_poses(
+    hands: Vec<crate::hands::Hand>,
+    state_dir: Option<&std::path::Path>,
+) -> Result<crate::hands::StateStore, DaemonError> {
+    let poses = crate::hands::StateStore::open(hands, state_dir)
+        .map_err(|e| DaemonError::Policy(e.to_string()))?;
+    match poses.state_path() {
+        Some(path) => {
+            tracing::info!(state_file = %path.display(), "poses are kept in the state file")
+        }
+        None if !poses.hands().is_empty() => tracing::warn!(
+            "no state_dir: saved poses last until the daemon stops (set state_dir or --state-dir)"
+        ),
+        None => {}
+    }
+    Ok(poses)
 }
 
 /// `[ros2]` with the flags over it; `None` when the bridge is off.

@@ -2,6 +2,7 @@
 //! that reaches it, then one owner per bus; and the open-files limit the
 //! connections need.
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use super::args::SIM_BUS_NAME;
@@ -14,12 +15,12 @@ use crate::transport::{Opener, Transport};
 const SIM_REPLY_MARGIN_US: u64 = 20_000;
 
 /// A bus to start, and how it reaches its port.
-pub(super) type BusToStart = (BusConfig, Port);
+type BusToStart = (BusConfig, Port);
 
 /// How a bus reaches its port: a tty at its configured path, the
 /// simulator's pty through the opener it gives, or the simulator's
 /// in-memory line, handed in (there is no path to open).
-pub(super) enum Port {
+enum Port {
     Path,
     Opened(Opener),
     HandedIn(Box<dyn Transport>),
@@ -29,7 +30,7 @@ pub(super) enum Port {
 /// it: over a pty, opened by path like hardware; behind a USB adapter
 /// model, over the in-memory line instead, with the line itself
 /// ([`Simulator::spawn_for`] says why).
-pub(super) fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusToStart), DaemonError> {
+fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusToStart), DaemonError> {
     let (ids, baud, joints) = (sim_cfg.ids.clone(), sim_cfg.baud, sim_cfg.ids.len());
     let firmware = sim_cfg.firmware.to_string();
     let adapter = sim_cfg.adapter;
@@ -80,7 +81,7 @@ pub(super) fn raise_open_files_limit() {
 }
 
 /// Starts one owner per bus; a port that is not there yet is retried by its owner.
-pub(super) fn start_buses(
+fn start_buses(
     configs: Vec<BusToStart>,
 ) -> Result<(Vec<BusHandle>, Vec<crate::bus::BusThread>), DaemonError> {
     let mut handles = Vec::with_capacity(configs.len());
@@ -96,4 +97,41 @@ pub(super) fn start_buses(
         threads.push(thread);
     }
     Ok((handles, threads))
+}
+
+/// The buses as started: the simulator (kept alive until shutdown), one
+/// handle and one owner thread per bus, the devices each was configured
+/// with (the ones the daemon manages).
+pub(super) struct Started {
+    pub(super) sim: Option<SimHandle>,
+    pub(super) handles: Vec<BusHandle>,
+    pub(super) threads: Vec<crate::bus::BusThread>,
+    pub(super) managed: BTreeMap<String, Vec<u8>>,
+}
+
+/// The configured buses and the simulator's, each with its owner.
+pub(super) fn start_all(
+    buses: Vec<BusConfig>,
+    sim: Option<SimConfig>,
+) -> Result<Started, DaemonError> {
+    let mut configs: Vec<BusToStart> = buses.into_iter().map(|cfg| (cfg, Port::Path)).collect();
+    let sim = match sim {
+        Some(sim_cfg) => {
+            let (sim, bus) = start_sim(sim_cfg)?;
+            configs.push(bus);
+            Some(sim)
+        }
+        None => None,
+    };
+    let managed = configs
+        .iter()
+        .map(|(cfg, _)| (cfg.name.clone(), cfg.ids.clone()))
+        .collect();
+    let (handles, threads) = start_buses(configs)?;
+    Ok(Started {
+        sim,
+        handles,
+        threads,
+        managed,
+    })
 }
