@@ -190,8 +190,22 @@ async fn declare_scope(
         declare_grasp(on, state, cfg, stats, rosout, &ns, hand, joints, closed).await?;
         services.extend([Service::GraspRelease, Service::GraspStop]);
     }
-    for service in services {
-        let (queryable, key) = on.service(&ns, service).await?;
+    serve_services(on, state, &scope, &ns, &services, closed).await?;
+    tracing::debug!(%name, %ns, "ROS 2: topics and services declared");
+    Ok(())
+}
+
+/// Each of `services` under the namespace `ns`, in a task of its own.
+async fn serve_services(
+    on: &mut On<'_>,
+    state: &Arc<Control>,
+    scope: &Scope,
+    ns: &str,
+    services: &[Service],
+    closed: &watch::Receiver<bool>,
+) -> zenoh::Result<()> {
+    for &service in services {
+        let (queryable, key) = on.service(ns, service).await?;
         on.spawn(services::serve(
             state.clone(),
             scope.clone(),
@@ -201,7 +215,6 @@ async fn declare_scope(
             closed.clone(),
         ));
     }
-    tracing::debug!(%name, %ns, "ROS 2: topics and services declared");
     Ok(())
 }
 
