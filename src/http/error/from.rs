@@ -103,21 +103,7 @@ impl From<ControlError> for ApiError {
                 }
             }
             ControlError::StateUnwritable(detail) => Self::state_unwritable(detail),
-            ControlError::Storage { full: true, detail } => Self::new(
-                StatusCode::INSUFFICIENT_STORAGE,
-                "storage-full",
-                "No room for the recording",
-                detail,
-            ),
-            ControlError::Storage {
-                full: false,
-                detail,
-            } => Self::new(
-                StatusCode::SERVICE_UNAVAILABLE,
-                "recording-unwritable",
-                "Recording file not written",
-                detail,
-            ),
+            ControlError::Storage { full, detail } => storage_problem(full, detail),
             ControlError::Unreadable(detail) => Self::new(
                 StatusCode::SERVICE_UNAVAILABLE,
                 "recording-unreadable",
@@ -130,6 +116,25 @@ impl From<ControlError> for ApiError {
             }
             ControlError::Bus(e) => e.into(),
         }
+    }
+}
+
+/// A recording's file not written: 507 when the disk is full, else 503.
+fn storage_problem(full: bool, detail: String) -> ApiError {
+    if full {
+        ApiError::new(
+            StatusCode::INSUFFICIENT_STORAGE,
+            "storage-full",
+            "No room for the recording",
+            detail,
+        )
+    } else {
+        ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "recording-unwritable",
+            "Recording file not written",
+            detail,
+        )
     }
 }
 
