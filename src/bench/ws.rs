@@ -441,9 +441,7 @@ fn report(
     p: &[Phase; 3],
     floor: Option<send_floor::SendFloor>,
 ) -> (String, bool) {
-    let mut out = String::new();
-    let _ = writeln!(out, "WebSocket bench: {} joints at {baud} baud, every target at {} Hz; {:.0} s per phase after {:.0} s warm-up; load average {}",
-        args.joints, args.rate_hz, args.seconds, args.warmup, super::load_average());
+    let mut out = header(args, baud);
     let row = |out: &mut String, what: &str, f: &dyn Fn(&Phase) -> String| {
         let _ = writeln!(
             out,
@@ -453,11 +451,6 @@ fn report(
             f(&p[2])
         );
     };
-    let _ = writeln!(
-        out,
-        "  {:<44} {:>16} {:>16} {:>22}",
-        "", "engine alone", "WebSocket", "WS + telemetry"
-    );
     row(&mut out, "wire occupancy (referee)", &|x| {
         format!("{:.3}", x.occupancy)
     });
@@ -492,25 +485,50 @@ fn report(
         x.telemetry.map_or("-".into(), |(_, _, d)| d.to_string())
     });
     if let (Some(f), Some(len)) = (floor, p[2].telemetry_len) {
-        let _ = writeln!(
-            out,
-            "  sends alone: {} loopback connections at {} Hz, {len:.0} B each ({:.0} sends/s), one thread doing nothing else: {:.1} % core",
-            args.telemetry_clients, args.telemetry_hz, f.sends_per_s, f.sender_cpu * 100.0
-        );
-        let _ = writeln!(
-            out,
-            "  floor of WS + telemetry: the WebSocket phase {:.1} % + the sends {:.1} % = {:.1} % core (measured {:.1} %)",
-            p[1].cpu_daemon * 100.0,
-            f.sender_cpu * 100.0,
-            (p[1].cpu_daemon + f.sender_cpu) * 100.0,
-            p[2].cpu_daemon * 100.0
-        );
+        floor_lines(&mut out, args, p, &f, len);
     }
     let (checks, passed) = checks(&p[0], &p[1], &p[2]);
     for (what, ok) in checks {
         let _ = writeln!(out, "  [{}] {what}", if ok { "ok" } else { "MISS" });
     }
     (out, passed)
+}
+
+/// The report's first lines: the run, then the phases' column heads.
+fn header(args: &BenchArgs, baud: u32) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "WebSocket bench: {} joints at {baud} baud, every target at {} Hz; {:.0} s per phase after {:.0} s warm-up; load average {}",
+        args.joints, args.rate_hz, args.seconds, args.warmup, super::load_average());
+    let _ = writeln!(
+        out,
+        "  {:<44} {:>16} {:>16} {:>22}",
+        "", "engine alone", "WebSocket", "WS + telemetry"
+    );
+    out
+}
+
+/// What the telemetry sends cost alone, and the floor they put under the
+/// WS + telemetry phase.
+fn floor_lines(
+    out: &mut String,
+    args: &BenchArgs,
+    p: &[Phase; 3],
+    f: &send_floor::SendFloor,
+    len: f64,
+) {
+    let _ = writeln!(
+        out,
+        "  sends alone: {} loopback connections at {} Hz, {len:.0} B each ({:.0} sends/s), one thread doing nothing else: {:.1} % core",
+        args.telemetry_clients, args.telemetry_hz, f.sends_per_s, f.sender_cpu * 100.0
+    );
+    let _ = writeln!(
+        out,
+        "  floor of WS + telemetry: the WebSocket phase {:.1} % + the sends {:.1} % = {:.1} % core (measured {:.1} %)",
+        p[1].cpu_daemon * 100.0,
+        f.sender_cpu * 100.0,
+        (p[1].cpu_daemon + f.sender_cpu) * 100.0,
+        p[2].cpu_daemon * 100.0
+    );
 }
 
 fn change(a: f64, b: f64) -> f64 {
