@@ -117,6 +117,17 @@ where
             _ = tokio::time::sleep(STREAM_CHECK), if conn.streams.any_live() => conn.end_revoked_streams(),
         }
     }
+    end(&state, client, conn, writer).await;
+}
+
+/// The session's end: the watchdog fires if it is armed ("closed"), the
+/// writer finishes, the hub forgets the client.
+async fn end(
+    state: &AppState,
+    client: u64,
+    mut conn: Connection,
+    writer: tokio::task::JoinHandle<()>,
+) {
     if conn.watchdog.is_armed() {
         conn.fire_watchdog("closed").await;
     }

@@ -143,7 +143,11 @@ where
                 break;
             }
         }
-        // Replies the client will never see: counted, not silently lost.
+        self.count_unsent(&mut out);
+    }
+
+    /// Replies the client will never see: counted, not silently lost.
+    fn count_unsent(&self, out: &mut mpsc::Receiver<ServerMessage>) {
         out.close();
         while out.try_recv().is_ok() {
             crate::http::hub::WsHub::count(&self.state.ws().unsent_replies, 1);
