@@ -21,7 +21,7 @@
 //!   `supervisor` (the one background task: the session, opened and opened
 //!   again), `bridge` (publishers, subscriptions and tokens on a session),
 //!   `command_stream` (one `joint_commands` subscription as a teleop stream),
-//!   `trajectory_stream` (`joint_trajectory` as moves), `grasp_stream`
+//!   `joint_states` (published per namespace), `trajectory_stream` (`joint_trajectory` as moves), `grasp_stream`
 //!   (`gripper_command` as grasps, `grasp_state`), `services`
 //!   (`enable`, `estop`, `grasp_release`, `grasp_stop`), `rosout`, `diagnostics` (per bus and per joint).
 //!
@@ -54,6 +54,8 @@ mod command_stream;
 mod diagnostics;
 #[cfg(feature = "ros2")]
 mod grasp_stream;
+#[cfg(feature = "ros2")]
+mod joint_states;
 #[cfg(feature = "ros2")]
 mod rosout;
 #[cfg(feature = "ros2")]
