@@ -9,7 +9,7 @@
 //! opening it again, is [`super::supervisor`]'s.
 
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use tokio::sync::watch;
 use zenoh::liveliness::LivelinessToken;
