@@ -104,7 +104,7 @@ pub fn app(state: AppState) -> Router {
         .layer(TraceLayer::new_for_http().on_failure(()))
         // Outermost: shed, refused and unauthorised answers count too.
         .layer(axum::middleware::from_fn_with_state(
-            state.clone(),
+            state.requests().clone(),
             request_stats::count,
         ))
         .with_state(state)

@@ -36,7 +36,7 @@ struct Inner {
     token: Option<String>,
     started: Instant,
     ws: WsHub,
-    requests: RequestStats,
+    requests: Arc<RequestStats>,
     refusals: RefusalLog,
     options: std::sync::OnceLock<HttpOptions>,
 }
@@ -50,7 +50,7 @@ impl AppState {
                 token: token.filter(|t| !t.is_empty()),
                 started: Instant::now(),
                 ws: WsHub::default(),
-                requests: RequestStats::default(),
+                requests: Arc::default(),
                 refusals: RefusalLog::default(),
                 options: std::sync::OnceLock::new(),
             }),
@@ -107,7 +107,7 @@ impl AppState {
     }
 
     /// Answered requests by route and status, for `/metrics`.
-    pub(crate) fn requests(&self) -> &RequestStats {
+    pub(crate) fn requests(&self) -> &Arc<RequestStats> {
         &self.inner.requests
     }
 

@@ -20,7 +20,8 @@ use super::joint_states::{publish_joint_states, scopes};
 use super::keys::{self, Kind, NodeIdentity};
 use super::rosout::Rosout;
 use super::services::{self, Service, ServiceQueryable};
-use super::{diagnostics, grasp_stream, trajectory_stream, Ros2Stats};
+use super::{diagnostics, grasp_stream, trajectory_stream};
+use crate::control::ros2_stats::Ros2Stats;
 use crate::control::Control;
 use crate::record::joint_states::Scope;
 

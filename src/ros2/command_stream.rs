@@ -14,9 +14,9 @@ use tokio::sync::watch;
 
 use super::commands::{self, Refused};
 use super::rosout::Rosout;
-use super::Ros2Stats;
 use crate::bus::Source;
 use crate::control::books::streams::{Driver, Via};
+use crate::control::ros2_stats::Ros2Stats;
 use crate::control::streams::Streams;
 use crate::control::watchdog::{fire_policy, Watchdog};
 use crate::control::Control;

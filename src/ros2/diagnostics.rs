@@ -8,9 +8,9 @@ use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
 use super::keys;
-use super::Ros2Stats;
 use crate::bus::handle::LinkState;
 use crate::bus::BusSnapshot;
+use crate::control::ros2_stats::Ros2Stats;
 use crate::control::Control;
 use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
 use crate::record::joint_states::system_ns;

@@ -12,9 +12,9 @@ use tokio_stream::wrappers::BroadcastStream;
 
 use super::config::{NamespaceBy, Ros2Config};
 use super::keys;
-use super::Ros2Stats;
 use crate::bus::BusHandle;
 use crate::bus::BusSnapshot;
+use crate::control::ros2_stats::Ros2Stats;
 use crate::control::Control;
 use crate::record::joint_states::{system_ns, JointStates, Scope};
 
