@@ -21,7 +21,8 @@ use crate::protocol::units;
 use crate::sim::physics::HOLD_CURRENT_A;
 use crate::sim::{Fault, SimHandle};
 
-use super::{setup_with, BenchArgs, BenchError};
+use super::args::{BenchArgs, BenchError};
+use super::rig::setup_with;
 
 const HAND: &str = "bench";
 const FINGERS: [(u8, &str, f64); 3] = [(1, "f1", 10.0), (2, "f2", 15.0), (3, "f3", 20.0)];

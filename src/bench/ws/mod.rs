@@ -31,8 +31,10 @@ use std::time::{Duration, Instant};
 use tungstenite::{Message, WebSocket};
 
 use crate::bench::analysis;
+use crate::bench::args::{BenchArgs, BenchError, SIM_THREAD};
 use crate::bench::client::{angle_of, Client, Pacer, Write, CLIENT_THREAD};
-use crate::bench::{cpu, send_floor, BenchArgs, BenchError, SIM_THREAD};
+use crate::bench::rig::setup;
+use crate::bench::{cpu, send_floor};
 use crate::bus::{BusHandle, THREAD_PREFIX};
 use crate::http::{app, state_for};
 use crate::sim::{SimHandle, SimStats};
@@ -47,7 +49,7 @@ pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
     let baud = args.bauds.first().copied().unwrap_or(500_000);
     let ids: Vec<u8> = (1..=args.joints).collect();
     let period = Duration::from_secs_f64(1.0 / f64::from(args.rate_hz));
-    let (sim, bus, thread) = super::setup(args, baud, &ids)?;
+    let (sim, bus, thread) = setup(args, baud, &ids)?;
     let (runtime, url) = serve(bus.clone())?;
     let phases = [
         engine_phase(args, &sim, &bus, &ids, period)?,

@@ -5,7 +5,9 @@ use std::fmt::Write as _;
 
 use super::phase::Phase;
 use crate::bench::analysis::Analysis;
-use crate::bench::{send_floor, BenchArgs};
+use crate::bench::args::BenchArgs;
+use crate::bench::rig::load_average;
+use crate::bench::send_floor;
 
 /// The bounds the WebSocket path is held to: its cost and load tolerance.
 const MAX_WS_COST_US: f64 = 500.0;
@@ -75,7 +77,7 @@ pub(super) fn report(
 fn header(args: &BenchArgs, baud: u32) -> String {
     let mut out = String::new();
     let _ = writeln!(out, "WebSocket bench: {} joints at {baud} baud, every target at {} Hz; {:.0} s per phase after {:.0} s warm-up; load average {}",
-        args.joints, args.rate_hz, args.seconds, args.warmup, super::load_average());
+        args.joints, args.rate_hz, args.seconds, args.warmup, load_average());
     let _ = writeln!(
         out,
         "  {:<44} {:>16} {:>16} {:>22}",

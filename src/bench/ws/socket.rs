@@ -4,7 +4,7 @@
 use tungstenite::stream::MaybeTlsStream;
 use tungstenite::WebSocket;
 
-use crate::bench::BenchError;
+use crate::bench::args::BenchError;
 
 /// Names of the threads the CPU report tells apart.
 pub(super) const HTTP_THREAD: &str = "jointd-http";

@@ -10,7 +10,7 @@ use std::time::Duration;
 use tungstenite::Message;
 
 use super::socket::{connect, Socket, TELEMETRY_THREAD};
-use crate::bench::BenchError;
+use crate::bench::args::BenchError;
 
 /// Telemetry clients: one thread each, counting telemetry messages and the
 /// samples the daemon reports they skipped.
