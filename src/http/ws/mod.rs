@@ -16,6 +16,7 @@ pub(crate) mod messages;
 pub mod session;
 pub(crate) mod setpoints;
 pub(crate) mod telemetry;
+mod ticker;
 pub(crate) mod writer;
 
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
