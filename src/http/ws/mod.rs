@@ -15,6 +15,7 @@ pub(crate) mod grasp;
 pub(crate) mod messages;
 pub mod session;
 pub(crate) mod setpoints;
+mod subscribe;
 pub(crate) mod telemetry;
 mod ticker;
 pub(crate) mod writer;

@@ -13,29 +13,20 @@ use tokio::time::Instant;
 
 use super::grasp::GraspTasks;
 use super::messages::{
-    self, BusInfo, ClientMessage, ErrorCode, Field, Limits, ServerMessage, Subscribe,
-    WatchdogRequest,
+    self, BusInfo, ClientMessage, ErrorCode, Limits, ServerMessage, Subscribe, WatchdogRequest,
 };
 use super::setpoints::{self, WsError, MAX_BATCH};
+use super::subscribe::{subscription, MAX_RATE_HZ};
 use super::telemetry::Subscription;
 use super::writer::{PendingAck, Writer};
 use crate::control::books::streams::{Driver, Via};
 use crate::control::streams::Streams;
 use crate::control::teleop::{WatchdogEvent, MAX_HOLD, MIN_HOLD};
 use crate::control::watchdog::{fire_policy, Watchdog};
-use crate::control::ControlError;
 use crate::http::hub::WsHub;
-use crate::http::state::device_id;
 use crate::http::state::AppState;
-
-/// Replies (acks, errors) a connection may have queued; beyond, they are dropped and counted.
-const OUT_QUEUE: usize = 64;
 /// Acks waiting for the wire, per connection.
 const MAX_PENDING_ACKS: usize = 256;
-/// Telemetry rate bounds and default, messages per second.
-pub const MAX_RATE_HZ: f64 = 1000.0;
-const MIN_RATE_HZ: f64 = 1.0;
-const DEFAULT_RATE_HZ: f64 = 50.0;
 
 /// How often a connection looks whether one of its streams was ended
 /// (while it has live streams): an atomic read per joint.
@@ -352,55 +343,4 @@ impl Connection {
             joints,
         });
     }
-}
-
-fn subscription(state: &AppState, s: &Subscribe) -> Result<Subscription, WsError> {
-    let buses = match &s.buses {
-        Some(names) => {
-            for (i, n) in names.iter().enumerate() {
-                state.control().bus(n)?;
-                if names[..i].contains(n) {
-                    return Err(ControlError::duplicate(
-                        &format!("buses[{i}]"),
-                        format!("bus `{n}` appears twice"),
-                    )
-                    .into());
-                }
-            }
-            names.clone()
-        }
-        None => state
-            .control()
-            .buses()
-            .map(|b| b.name().to_owned())
-            .collect(),
-    };
-    let devices = match &s.devices {
-        Some(ids) => {
-            let ids = ids
-                .iter()
-                .map(|&id| device_id("devices", id))
-                .collect::<Result<Vec<u8>, _>>()?;
-            if let Some(i) = (1..ids.len()).find(|&i| ids[..i].contains(&ids[i])) {
-                return Err(ControlError::duplicate(
-                    &format!("devices[{i}]"),
-                    format!("device {} appears twice", ids[i]),
-                )
-                .into());
-            }
-            Some(ids)
-        }
-        None => None,
-    };
-    let rate_hz = s.rate_hz.unwrap_or(DEFAULT_RATE_HZ);
-    if !(MIN_RATE_HZ..=MAX_RATE_HZ).contains(&rate_hz) {
-        let mut e = WsError::new(
-            ErrorCode::OutOfRange,
-            format!("rate_hz = {rate_hz} is out of range; allowed {MIN_RATE_HZ}..={MAX_RATE_HZ}"),
-        );
-        e.field = Some("rate_hz".into());
-        return Err(e);
-    }
-    let fields = s.fields.clone().unwrap_or_else(|| Field::ALL.to_vec());
-    Ok(Subscription::new(buses, devices, fields, rate_hz))
 }
