@@ -42,6 +42,10 @@ use phase::Phase;
 use report::report;
 use socket::{connect, Socket, HTTP_THREAD, TELEMETRY_THREAD, TELEOP_THREAD};
 use telemetry::Telemetry;
+
+/// Speed limit the WebSocket client sends, output °/s (about the vendor's
+/// recommended 20000 rotor rpm).
+const SPEED_DPS: f64 = 200.0;
 /// Worker threads of the HTTP/WebSocket runtime (the daemon's default on 2 cores).
 const HTTP_WORKERS: usize = 2;
 

@@ -25,6 +25,9 @@ use crate::control::teleop::{WatchdogEvent, MAX_HOLD, MIN_HOLD};
 use crate::control::watchdog::{fire_policy, Watchdog};
 use crate::http::hub::WsHub;
 use crate::http::state::AppState;
+
+/// Replies (acks, errors) a connection may have queued; beyond, they are dropped and counted.
+const OUT_QUEUE: usize = 64;
 /// Acks waiting for the wire, per connection.
 const MAX_PENDING_ACKS: usize = 256;
 

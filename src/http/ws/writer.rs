@@ -24,6 +24,18 @@ use super::telemetry::Subscription;
 use super::ticker::Ticker;
 use crate::bus::handle::WireAck;
 use crate::http::state::AppState;
+
+/// An ack the writer sends once every bus write of a batch is on the wire.
+#[derive(Debug, Clone)]
+pub(crate) struct PendingAck {
+    pub ref_seq: Option<u64>,
+    pub joints: usize,
+    pub accepted: Instant,
+    pub writes: Vec<(String, u64)>,
+}
+
+/// Longest wait for a batch to reach the wire before the client hears so.
+const ACK_TIMEOUT: Duration = Duration::from_secs(1);
 /// Longest a client may leave one message untaken before it is closed
 /// (1008 "too slow"): longer than any pause a live client takes, short
 /// enough that a dead one does not hold its writer for minutes.
