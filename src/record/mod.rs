@@ -2,7 +2,8 @@
 //! Foxglove and `ros2 bag play` (storage plugin mcap) open as is.
 //!
 //! - [`joint_states`]: a `JointState` per poll round from a bus's snapshots;
-//! - [`mcap_file`]: the file: schemas, channels, chunks, summary;
+//! - [`channels`]: a recording's channels per bus, their schemas and QoS;
+//! - [`mcap_file`]: the file: chunks, summary;
 //! - [`metadata`]: its Metadata record `jointd` (version, joints);
 //! - [`schemas`]: the JSON channels' schemas, every field typed;
 //! - [`sink`]: the stream under the MCAP writer, which keeps I/O errors
@@ -10,6 +11,7 @@
 //! - [`recorder`]: the thread that taps the buses and writes;
 //! - [`client`]: `jointd record`, which asks a running daemon for one.
 
+pub mod channels;
 pub mod client;
 pub mod joint_states;
 pub mod mcap_file;
