@@ -12,6 +12,7 @@
 //! - [`analysis`]: per-joint rates and setpoint-to-wire latency from the frame log.
 //! - [`cpu`]: per-thread CPU time by thread name.
 //! - [`report`]: the result, the engine's targets, the printout.
+//! - `report_rows`: the printout's rows (results, the adapter's bound, where the wire time went).
 //! - `moves`: `--moves`: back-to-back moves generated in the daemon.
 //! - `grasp`: `--grasp`: grasps on the simulator's objects and in free air.
 //! - `grasp_modes`: `--grasp-modes` (and after `--grasp`): position mode
@@ -26,6 +27,7 @@ mod grasp_modes;
 mod moves;
 pub mod pty_lag;
 pub mod report;
+mod report_rows;
 mod rig;
 mod send_floor;
 pub mod ws;
