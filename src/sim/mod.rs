@@ -92,6 +92,7 @@ pub(crate) mod pty;
 pub(crate) mod rng;
 pub(crate) mod runner;
 pub(crate) mod stats;
+pub(crate) mod usb_clock;
 pub(crate) mod view;
 pub(crate) mod wire;
 pub(crate) mod write_delay;
