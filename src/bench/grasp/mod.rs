@@ -8,78 +8,35 @@
 //! steady-state error while holding (mean measured |q current| against the
 //! setting, mean push against the set force); then fingers closing in free
 //! air, counting false contacts.
+//!
+//! # Layout
+//! - `setup`: the hand, its objects, speeds, timing and goals.
+//! - `case`: one case's measurements and its printout.
+//! - `calls`: a grasp's view and release through the core.
+//! - this file: the cases run, one grasp, free air.
+
+mod calls;
+mod case;
+mod setup;
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crate::bus::BusHandle;
-use crate::control::books::grasps::{FingerState, GraspView};
-use crate::control::grasp::{self, GraspJoint, GraspRequest, ReleaseRequest};
-use crate::control::limits::SoftLimits;
-use crate::control::{Control, Options};
-use crate::protocol::units;
-use crate::sim::physics::HOLD_CURRENT_A;
-use crate::sim::{Fault, SimHandle};
+use calls::{release, view_of};
+use case::{print_case, sample, set_force_a, Case, Trace};
+use setup::{
+    CLOSE_TO_DEG, FAST_DPS, FINGERS, FREE_AIR_CLOSE_DEG, FREE_AIR_RUNS, HAND, HOLD_A,
+    RUNS_PER_CASE, RUN_WAIT, SAMPLE, SETTLE, SPEED_DPS, STIFFNESS, WINDOW,
+};
 
 use super::args::{BenchArgs, BenchError};
 use super::rig::setup_with;
-
-const HAND: &str = "bench";
-const FINGERS: [(u8, &str, f64); 3] = [(1, "f1", 10.0), (2, "f2", 15.0), (3, "f3", 20.0)];
-const CLOSE_TO_DEG: f64 = 45.0;
-const SPEED_DPS: f64 = 30.0;
-/// A faster closing on the stiff object, reported but not judged.
-const FAST_DPS: f64 = 60.0;
-const HOLD_A: f64 = 0.2;
-/// Soft and stiff objects, N·m per degree.
-const STIFFNESS: [f64; 2] = [0.01, 0.1];
-const RUNS_PER_CASE: usize = 8;
-const FREE_AIR_RUNS: usize = 100;
-const FREE_AIR_CLOSE_DEG: f64 = 12.0;
-/// The hold is judged from this long after the last contact, over `WINDOW`.
-const SETTLE: Duration = Duration::from_millis(300);
-const WINDOW: Duration = Duration::from_millis(1000);
-const SAMPLE: Duration = Duration::from_millis(1);
-const RUN_WAIT: Duration = Duration::from_secs(15);
-/// At rest after a release: this slow and this close to the target.
-const REST_DEG_S: f64 = 0.5;
-const REST_DEG: f64 = 0.05;
-/// Goals: overshoot and steady-state error, % of the hold setting.
-const MAX_OVERSHOOT_PCT: f64 = 20.0;
-const MAX_HOLD_ERROR_PCT: f64 = 10.0;
-
-/// What one case (firmware, stiffness) measured, over its runs and fingers.
-#[derive(Debug, Default)]
-struct Case {
-    /// Call to contact, ms, per finger.
-    contact_ms: [Vec<f64>; 3],
-    /// Peak measured |q current| over the hold setting, %.
-    measured_over_pct: Vec<f64>,
-    /// Peak object push over the set force, %.
-    force_over_pct: Vec<f64>,
-    /// Mean measured |q current| against the setting, %.
-    hold_error_pct: Vec<f64>,
-    /// Mean object push against the set force, %.
-    force_error_pct: Vec<f64>,
-    missed: usize,
-}
-
-/// The force the hold setting makes at rest, as the q current that
-/// balances the object's push: the resting current makes none.
-fn set_force_a() -> f64 {
-    HOLD_A - HOLD_CURRENT_A
-}
-
-/// Peaks and window sums of one grasp, per finger.
-#[derive(Debug, Default, Clone, Copy)]
-struct Trace {
-    peak_measured: f64,
-    peak_push: f64,
-    measured: (f64, u32),
-    push: (f64, u32),
-    /// The last INFO_02 seen (each report counts once).
-    last_report: Option<Instant>,
-}
+use crate::bus::BusHandle;
+use crate::control::books::grasps::FingerState;
+use crate::control::grasp::{self, GraspJoint, GraspRequest};
+use crate::control::limits::SoftLimits;
+use crate::control::{Control, Options};
+use crate::sim::{Fault, SimHandle};
 
 pub(crate) fn run(args: &BenchArgs) -> Result<bool, BenchError> {
     let mut all = true;
@@ -301,123 +258,4 @@ async fn free_air(control: &Arc<Control>, sim: &SimHandle) -> Result<usize, Benc
         release(control, sim, view.id).await?;
     }
     Ok(false_contacts)
-}
-
-/// Releases grasp `id` and waits until every finger is back at rest where
-/// it started (the release answers once a finger is within a degree of
-/// it: the next grasp would start short of it, and each a little shorter).
-async fn release(control: &Arc<Control>, sim: &SimHandle, id: u64) -> Result<(), BenchError> {
-    released(control, id).await?;
-    let deadline = Instant::now() + RUN_WAIT;
-    loop {
-        let at_rest = FINGERS.iter().all(|(fid, _, _)| {
-            sim.device(*fid).is_some_and(|d| {
-                d.velocity_deg_s.abs() < REST_DEG_S && (d.angle_deg - d.target_deg).abs() < REST_DEG
-            })
-        });
-        if at_rest {
-            return Ok(());
-        }
-        if Instant::now() > deadline {
-            return Err(BenchError::Setup(format!(
-                "grasp {id}: the fingers never came to rest after the release"
-            )));
-        }
-        tokio::time::sleep(SAMPLE).await;
-    }
-}
-
-async fn released(control: &Arc<Control>, id: u64) -> Result<(), BenchError> {
-    let v = match grasp::release(control, id, &ReleaseRequest::default()).await {
-        Ok(v) => v,
-        Err(e) => {
-            let view = view_of(control, id)?;
-            return Err(BenchError::Setup(format!(
-                "release: {e}; the grasp: {view:?}"
-            )));
-        }
-    };
-    if v.fingers.iter().any(|f| !f.current_limit_restored) {
-        return Err(BenchError::Setup(format!(
-            "a limit was not restored: {v:?}"
-        )));
-    }
-    Ok(())
-}
-
-fn view_of(control: &Control, id: u64) -> Result<GraspView, BenchError> {
-    grasp::get(control, id).map_err(|e| BenchError::Setup(e.to_string()))
-}
-
-/// One look at every finger: the daemon's latest INFO_02 (each report
-/// once) and the simulator's object push; summed too when `in_window`.
-fn sample(sim: &SimHandle, bus: &BusHandle, traces: &mut [Trace; 3], in_window: bool) {
-    let snap = bus.snapshot();
-    for (k, (id, _, _)) in FINGERS.iter().enumerate() {
-        let t = &mut traces[k];
-        let report = snap.devices.get(id).and_then(|d| d.info02.as_ref());
-        if let Some((info, at)) = report.filter(|(_, at)| t.last_report != Some(*at)) {
-            t.last_report = Some(*at);
-            let q = units::current_a(info.q_cur).abs();
-            t.peak_measured = t.peak_measured.max(q);
-            if in_window {
-                t.measured.0 += q;
-                t.measured.1 += 1;
-            }
-        }
-        if let Some(d) = sim.device(*id) {
-            t.peak_push = t.peak_push.max(d.object_push_a);
-            if in_window {
-                t.push.0 += d.object_push_a;
-                t.push.1 += 1;
-            }
-        }
-    }
-}
-
-/// Prints one case; true when it met the goals (the overshoot goal on
-/// both measures).
-fn print_case(firmware: &str, k: f64, speed_dps: f64, c: &Case, judged: bool) -> bool {
-    let stat = |v: &[f64]| {
-        let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
-        let max = v.iter().copied().fold(f64::NAN, f64::max);
-        (mean, max)
-    };
-    let contact: Vec<String> = FINGERS
-        .iter()
-        .zip(&c.contact_ms)
-        .map(|((_, name, at), ms)| {
-            let (mean, max) = stat(ms);
-            format!("{name} (object at {at} deg) {mean:.0} ms (max {max:.0})")
-        })
-        .collect();
-    let (mo_mean, mo_max) = stat(&c.measured_over_pct);
-    let (fo_mean, fo_max) = stat(&c.force_over_pct);
-    let (he_mean, he_max) = stat(&c.hold_error_pct);
-    let (fe_mean, fe_max) = stat(&c.force_error_pct);
-    let passed = c.missed == 0
-        && mo_max <= MAX_OVERSHOOT_PCT
-        && fo_max <= MAX_OVERSHOOT_PCT
-        && he_max <= MAX_HOLD_ERROR_PCT;
-    println!(
-        "grasp firmware {firmware} position mode, objects {k} N*m/deg at 10/15/20 deg, {speed_dps} deg/s, \
-         hold {HOLD_A} A, {} finger-grasps{}\n  \
-         call->contact: {}\n  \
-         overshoot, peak measured q current over the setting: mean {mo_mean:.1} % (max {mo_max:.1}); \
-         peak object push over the set force ({:.2} A): mean {fo_mean:.1} % (max {fo_max:.1}) (goal <= \
-         {MAX_OVERSHOOT_PCT})\n  \
-         hold error, mean measured q current: mean {he_mean:.1} % (max {he_max:.1}, goal <= \
-         {MAX_HOLD_ERROR_PCT}); mean push against the set force: mean {fe_mean:.1} % (max {fe_max:.1})\n  \
-         missed contacts {}",
-        c.measured_over_pct.len(),
-        match (judged, passed) {
-            (false, _) => "  (not judged)",
-            (true, true) => "",
-            (true, false) => "  FAILED",
-        },
-        contact.join(", "),
-        set_force_a(),
-        c.missed,
-    );
-    passed
 }
