@@ -298,9 +298,11 @@ async fn fake_with(
     use jointd::http::policy::RequestPolicy;
     use jointd::http::state::HttpOptions;
     let bus = support::fake_bus::FakeBus::new("fake", &[1, 2]);
-    let state = jointd::http::AppState::standalone(
-        vec![bus.handle.clone()],
-        Default::default(),
+    let state = jointd::http::AppState::new(
+        std::sync::Arc::new(jointd::control::Control::new(
+            vec![bus.handle.clone()],
+            Default::default(),
+        )),
         token.map(str::to_owned),
     );
     let own = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();

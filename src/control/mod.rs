@@ -31,6 +31,8 @@
 //! - [`velocity`]: a velocity command as a position target toward the soft limit at that speed.
 //! - `state`: [`Control`], the state the core works on: buses, limits, options, books.
 //! - `lookup`: a hand by name, a joint by bus and id or by hand and joint name.
+//! - [`bus_reader`]: a bus as a front-end sees it, read only.
+//! - `bus_ops`: scan, baud, blocks read now, parameters written, flash, a new id.
 //! - `actions`: enable, disable, mode, jog, re-zero, targets and e-stop, as every
 //!   front-end offers them, checked here.
 //! - `calibration`: saving a joint's calibration (REST and homing).
@@ -48,6 +50,8 @@
 pub(crate) mod actions;
 pub(crate) mod batch;
 pub mod books;
+pub(crate) mod bus_ops;
+pub mod bus_reader;
 pub(crate) mod calibration;
 pub(crate) mod current_limit;
 pub mod device;

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use super::books::{grasps, homing, moves, recordings, streams};
+use super::bus_reader::BusReader;
 use super::error::{ControlError, ControlResult};
 use super::limits::{JointLimits, SoftLimits};
 use super::ros2_stats;
@@ -64,14 +65,26 @@ impl Control {
         &self.streams
     }
 
-    pub fn buses(&self) -> impl Iterator<Item = &BusHandle> {
+    /// Every bus's handle: the core's own (front-ends read through [`Self::readers`]).
+    pub(in crate::control) fn buses(&self) -> impl Iterator<Item = &BusHandle> {
         self.buses.values()
     }
 
-    pub fn bus(&self, name: &str) -> ControlResult<&BusHandle> {
+    /// A bus's handle: the core's own (front-ends read through [`Self::reader`]).
+    pub(in crate::control) fn bus(&self, name: &str) -> ControlResult<&BusHandle> {
         self.buses
             .get(name)
             .ok_or_else(|| ControlError::unknown_bus(name))
+    }
+
+    /// Every bus, read only, in name order.
+    pub fn readers(&self) -> impl Iterator<Item = BusReader> + '_ {
+        self.buses.values().map(BusReader::new)
+    }
+
+    /// Bus `name`, read only; 404 when the daemon has none by that name.
+    pub fn reader(&self, name: &str) -> ControlResult<BusReader> {
+        self.bus(name).map(BusReader::new)
     }
 
     /// The options (set once, at start; a second call is refused and gets

@@ -1,7 +1,8 @@
-//! The HTTP layer: one axum application over the bus handles, built in one
-//! place ([`app`]). Handlers never touch a port; they validate, convert
-//! physical units to raw with [`crate::protocol::units`], and call a
-//! [`BusHandle`].
+//! The HTTP layer: one axum application over the control core, built in
+//! one place ([`app`]). Handlers never touch a bus: they parse, call the
+//! core ([`crate::control::Control`]), which checks and acts, and shape its
+//! answer; what they read of a bus they read through a read-only
+//! [`crate::control::bus_reader::BusReader`].
 //!
 //! The three areas below ([`api`], [`ws`], [`web`]) never import each
 //! other: what two of them need lives here, beside them, so every import
@@ -48,8 +49,6 @@ use tower_http::trace::TraceLayer;
 
 pub use error::{ApiError, Problem};
 pub use state::AppState;
-
-use crate::bus::BusHandle;
 
 /// The whole HTTP application. Tests call it with `oneshot` or serve it on
 /// `127.0.0.1:0`; the daemon serves it on `--listen`. Set the state's
@@ -201,10 +200,4 @@ async fn method_not_allowed(method: axum::http::Method) -> ApiError {
 fn panic_to_problem(_: Box<dyn std::any::Any + Send + 'static>) -> axum::response::Response {
     tracing::error!("request handler panicked");
     axum::response::IntoResponse::into_response(ApiError::internal())
-}
-
-/// For tests and the bench's server: a core of its own over `buses`, with
-/// no limits and no token.
-pub fn state_for(buses: Vec<BusHandle>) -> AppState {
-    AppState::standalone(buses, crate::control::limits::SoftLimits::default(), None)
 }

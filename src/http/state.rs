@@ -8,8 +8,7 @@ use super::error::ApiResult;
 use super::hub::WsHub;
 use super::policy::{RefusalLog, RequestPolicy};
 use super::request_stats::RequestStats;
-use crate::bus::BusHandle;
-use crate::control::limits::SoftLimits;
+use crate::control::bus_reader::BusReader;
 use crate::control::Control;
 
 pub use crate::control::joints::{device_id, known_device};
@@ -55,12 +54,6 @@ impl AppState {
                 options: std::sync::OnceLock::new(),
             }),
         }
-    }
-
-    /// A core of its own over `buses` (tests, the bench's server): the
-    /// daemon builds one core and hands it to HTTP and ROS 2 alike.
-    pub fn standalone(buses: Vec<BusHandle>, limits: SoftLimits, token: Option<String>) -> Self {
-        Self::new(Arc::new(Control::new(buses, limits)), token)
     }
 
     /// The control core every handler acts through.
@@ -156,9 +149,10 @@ fn plain_decimal<'de, D: serde::Deserializer<'de>>(d: D) -> Result<i64, D::Error
 }
 
 impl DevicePath {
-    /// The bus handle and the checked device id.
-    pub fn resolve<'a>(&self, state: &'a AppState) -> ApiResult<(&'a BusHandle, u8)> {
-        let bus = state.control().bus(&self.bus)?;
+    /// The bus (read only) and the checked device id: 404 for the bus
+    /// first, then 422 for the id.
+    pub fn resolve(&self, state: &AppState) -> ApiResult<(BusReader, u8)> {
+        let bus = state.control().reader(&self.bus)?;
         Ok((bus, device_id("id", self.id)?))
     }
 }
@@ -166,7 +160,11 @@ impl DevicePath {
 /// Names the buses; the token must never reach a log line.
 impl std::fmt::Debug for AppState {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let buses: Vec<&str> = self.control().buses().map(BusHandle::name).collect();
+        let buses: Vec<String> = self
+            .control()
+            .readers()
+            .map(|b| b.name().to_owned())
+            .collect();
         f.debug_struct("AppState")
             .field("buses", &buses)
             .finish_non_exhaustive()

@@ -52,7 +52,7 @@ impl From<ControlError> for Refused {
 fn candidates(state: &Control, scope: &Scope) -> Vec<(String, u8)> {
     match scope {
         Scope::Bus(bus) => state
-            .bus(bus)
+            .reader(bus)
             .map(|b| {
                 b.snapshot()
                     .devices
@@ -170,7 +170,7 @@ fn velocity_request(
     rad_s: f64,
     field: &str,
 ) -> Result<TargetRequest, Refused> {
-    let snap = state.bus(bus)?.snapshot();
+    let snap = state.reader(bus)?.snapshot();
     let dev = known_device(&snap, id)?;
     let limits = state.limits(bus, id);
     let cal = state.calibration(bus, id);

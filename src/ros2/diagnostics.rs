@@ -29,7 +29,7 @@ pub(super) async fn publish(
     loop {
         tick.tick().await;
         let mut status = Vec::new();
-        for bus in state.buses() {
+        for bus in state.readers() {
             let snap = bus.snapshot();
             status.push(bus_status(&snap));
             for dev in snap.devices.values() {

@@ -12,8 +12,8 @@ use tokio_stream::wrappers::BroadcastStream;
 
 use super::config::{NamespaceBy, Ros2Config};
 use super::keys;
-use crate::bus::BusHandle;
 use crate::bus::BusSnapshot;
+use crate::control::bus_reader::BusReader;
 use crate::control::ros2_stats::Ros2Stats;
 use crate::control::Control;
 use crate::record::joint_states::{system_ns, JointStates, Scope};
@@ -26,7 +26,7 @@ fn now_ns() -> i64 {
 pub(super) fn scopes(state: &Arc<Control>, cfg: &Ros2Config) -> Vec<(String, Scope)> {
     match cfg.namespace_by {
         NamespaceBy::Bus => state
-            .buses()
+            .readers()
             .map(|b| (b.name().to_owned(), Scope::Bus(b.name().to_owned())))
             .collect(),
         NamespaceBy::Hand => state
@@ -50,7 +50,7 @@ pub(super) fn scopes(state: &Arc<Control>, cfg: &Ros2Config) -> Vec<(String, Sco
 }
 
 /// The buses a scope's joints are on.
-fn buses_of(state: &Arc<Control>, scope: &Scope) -> Vec<BusHandle> {
+fn buses_of(state: &Arc<Control>, scope: &Scope) -> Vec<BusReader> {
     let mut names: Vec<&str> = match scope {
         Scope::Bus(b) => vec![b.as_str()],
         Scope::Hand { joints, .. } => joints.iter().map(|(b, _)| b.as_str()).collect(),
@@ -58,7 +58,7 @@ fn buses_of(state: &Arc<Control>, scope: &Scope) -> Vec<BusHandle> {
     names.dedup();
     names
         .into_iter()
-        .filter_map(|n| state.bus(n).ok().cloned())
+        .filter_map(|n| state.reader(n).ok())
         .collect()
 }
 
@@ -74,7 +74,7 @@ pub(super) async fn publish_joint_states(
     // Every bus's frames in one stream, each with its bus's name.
     let mut frames = futures_util::stream::select_all(buses.iter().map(|b| {
         let name = b.name().to_owned();
-        BroadcastStream::new(b.shared().frame_tap.subscribe())
+        BroadcastStream::new(b.frame_tap())
             .map(move |f| (name.clone(), f))
             .boxed()
     }));
@@ -90,7 +90,7 @@ pub(super) async fn publish_joint_states(
             }
         };
         states.on_frame(&bus, &frame);
-        let snaps: Vec<Arc<BusSnapshot>> = buses.iter().map(BusHandle::snapshot).collect();
+        let snaps: Vec<Arc<BusSnapshot>> = buses.iter().map(BusReader::snapshot).collect();
         let views: Vec<&BusSnapshot> = snaps.iter().map(Arc::as_ref).collect();
         let Some(msg) = states.next(&views) else {
             continue;

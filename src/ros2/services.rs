@@ -121,7 +121,7 @@ async fn reply(query: &Query, key: &str, success: bool, message: &str) {
 fn groups(state: &Control, scope: &Scope) -> Vec<(String, Option<Vec<u8>>)> {
     match scope {
         Scope::Bus(name) => state
-            .bus(name)
+            .reader(name)
             .map(|_| vec![(name.clone(), None)])
             .unwrap_or_default(),
         Scope::Hand { joints, .. } => {
@@ -129,7 +129,7 @@ fn groups(state: &Control, scope: &Scope) -> Vec<(String, Option<Vec<u8>>)> {
             for (bus, id) in joints {
                 match out.iter_mut().find(|(b, _)| b == bus) {
                     Some((_, ids)) => ids.push(*id),
-                    None if state.bus(bus).is_ok() => out.push((bus.clone(), vec![*id])),
+                    None if state.reader(bus).is_ok() => out.push((bus.clone(), vec![*id])),
                     None => {}
                 }
             }

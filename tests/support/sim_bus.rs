@@ -82,7 +82,10 @@ pub async fn start_sim_with(
         ..Default::default()
     }])
     .expect("limits");
-    let state = AppState::standalone(vec![handle.clone()], limits, token.map(str::to_owned));
+    let state = AppState::new(
+        std::sync::Arc::new(jointd::control::Control::new(vec![handle.clone()], limits)),
+        token.map(str::to_owned),
+    );
     let mut server = serve(state.clone()).await;
     if let Some(t) = token {
         server = server.with_token(t);

@@ -36,7 +36,8 @@ use crate::bench::client::{angle_of, Client, Pacer, Write, CLIENT_THREAD};
 use crate::bench::rig::setup;
 use crate::bench::{cpu, send_floor};
 use crate::bus::{BusHandle, THREAD_PREFIX};
-use crate::http::{app, state_for};
+use crate::control::Control;
+use crate::http::{app, AppState};
 use crate::sim::{SimHandle, SimStats};
 use phase::Phase;
 use report::report;
@@ -98,7 +99,15 @@ fn serve(bus: BusHandle) -> Result<(tokio::runtime::Runtime, String), BenchError
             Ok(l) => {
                 // As the daemon serves: without Nagle.
                 let l = crate::http::without_nagle(l);
-                if let Err(e) = axum::serve(l, app(state_for(vec![bus]))).await {
+                if let Err(e) = axum::serve(
+                    l,
+                    app(AppState::new(
+                        Arc::new(Control::new(vec![bus], Default::default())),
+                        None,
+                    )),
+                )
+                .await
+                {
                     eprintln!("bench server: {e}");
                 }
             }

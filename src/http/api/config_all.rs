@@ -16,7 +16,8 @@ use super::config_params::Param;
 use super::config_params::{check_offered, to_config, ConfigPatch};
 use super::openapi::{ErrorResponses, TAG_CONFIG};
 use crate::bus::handle::{DeviceState, WriteOutcome};
-use crate::bus::{BusError, BusHandle, BusSnapshot};
+use crate::bus::{BusError, BusSnapshot};
+use crate::control::Control;
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath, ApiQuery};
 use crate::http::state::{AppState, BusPath};
@@ -105,7 +106,7 @@ async fn patch_bus_config(
     ApiQuery(q): ApiQuery<BusPatchQuery>,
     ApiJson(patch): ApiJson<ConfigPatch>,
 ) -> ApiResult<Json<BusPatchResult>> {
-    let bus = state.control().bus(&p.bus)?;
+    let bus = state.control().reader(&p.bus)?;
     let snap = bus.snapshot();
     if let crate::bus::handle::LinkState::Down { reason, .. } = &snap.link {
         return Err(BusError::Down {
@@ -126,7 +127,7 @@ async fn patch_bus_config(
         writes.push((param, value, to_config(param, value)?));
     }
     let ids: Vec<u8> = targets.iter().map(|d| d.dev_id).collect();
-    let (devices, methods, failed) = write_each(bus, &ids, writes).await;
+    let (devices, methods, failed) = write_each(state.control(), &snap.name, &ids, writes).await;
     let result = BusPatchResult {
         bus: snap.name.clone(),
         method: match (methods.is_empty(), methods.iter().all(|m| *m)) {
@@ -194,7 +195,8 @@ fn nothing_online(bus: &str, skipped: &[SkippedDevice]) -> ApiError {
 /// Each device's outcomes, whether each parameter went in one frame, the
 /// failure that stopped it.
 async fn write_each(
-    bus: &BusHandle,
+    control: &Control,
+    bus: &str,
     ids: &[u8],
     writes: Vec<(Param, f64, ConfigParam)>,
 ) -> (Vec<DevicePatch>, Vec<bool>, Option<ApiError>) {
@@ -214,7 +216,7 @@ async fn write_each(
             not_written(&mut devices, param, value, raw, &why);
             continue;
         }
-        match bus.write_all(ids.to_vec(), config).await {
+        match control.write_all(bus, ids.to_vec(), config).await {
             Ok(outcome) => {
                 methods.push(outcome.one_frame);
                 let stopped = record(&mut devices, param, value, raw, outcome.per_device);

@@ -15,6 +15,7 @@ use crate::bus::BusError;
 use crate::control::books::streams::Driver;
 use crate::control::calibration::CalibrationView;
 use crate::control::limits::JointLimits;
+use crate::control::Control;
 use crate::hands::Calibration;
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiPath, ApiQuery};
@@ -241,7 +242,7 @@ async fn list_devices(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<BusPath>,
 ) -> ApiResult<Json<DeviceList>> {
-    let snap = state.control().bus(&p.bus)?.snapshot();
+    let snap = state.control().reader(&p.bus)?.snapshot();
     let now = Instant::now();
     Ok(Json(DeviceList {
         bus: snap.name.clone(),
@@ -278,7 +279,7 @@ async fn get_device(
     let snap = bus.snapshot();
     let mut dev = known_device(&snap, id)?.clone();
     if q.fresh {
-        refresh(bus, &mut dev).await?;
+        refresh(state.control(), bus.name(), &mut dev).await?;
     }
     let now = Instant::now();
     let fw = firmware_of(&dev);
@@ -329,10 +330,10 @@ async fn get_device(
 }
 
 /// Reads INFO_01 then INFO_02 from the device into `dev`.
-async fn refresh(bus: &crate::bus::BusHandle, dev: &mut DeviceState) -> ApiResult<()> {
+async fn refresh(control: &Control, bus: &str, dev: &mut DeviceState) -> ApiResult<()> {
     let id = dev.dev_id;
-    let r1 = bus.read_info(id, InfoBlock::Info01).await?;
-    let r2 = bus.read_info(id, InfoBlock::Info02).await?;
+    let r1 = control.read_info(bus, id, InfoBlock::Info01).await?;
+    let r2 = control.read_info(bus, id, InfoBlock::Info02).await?;
     let now = Instant::now();
     match (r1.body(), r2.body()) {
         (ReplyBody::Info01(a), ReplyBody::Info02(b)) => {

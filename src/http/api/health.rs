@@ -70,7 +70,7 @@ async fn healthz(State(state): State<AppState>) -> Json<Health> {
 async fn readyz(State(state): State<AppState>) -> ApiResult<Json<Readiness>> {
     let buses: Vec<BusReadiness> = state
         .control()
-        .buses()
+        .readers()
         .map(|b| BusReadiness {
             bus: b.name().to_owned(),
             link: b.snapshot().link.name(),

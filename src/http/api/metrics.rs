@@ -52,7 +52,7 @@ pub(crate) fn render(state: &AppState) -> String {
         state.uptime_s(),
     );
     let now = Instant::now();
-    for bus in state.control().buses() {
+    for bus in state.control().readers() {
         let snap = bus.snapshot();
         bus_families(&mut m, &snap);
         m.gauge(

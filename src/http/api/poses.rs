@@ -244,7 +244,7 @@ fn checked(state: &AppState, hand: &Hand, positions: BTreeMap<String, f64>) -> A
 fn current(state: &AppState, hand: &Hand) -> ApiResult<Pose> {
     let mut pose = Pose::new();
     for j in &hand.joints {
-        let bus = state.control().bus(&j.bus)?;
+        let bus = state.control().reader(&j.bus)?;
         let snap = bus.snapshot();
         let raw = snap
             .devices

@@ -140,7 +140,7 @@ async fn sleep_until(deadline: Option<Instant>) {
 fn welcome(state: &AppState, client: u64, name: Option<String>) -> ServerMessage {
     let buses = state
         .control()
-        .buses()
+        .readers()
         .map(|b| {
             let snap = b.snapshot();
             BusInfo {

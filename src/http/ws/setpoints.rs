@@ -154,10 +154,10 @@ fn joint_of(state: &AppState, t: &TargetItem, field: &str) -> Result<(String, u8
 /// The target's bus, or the only bus when it names none.
 fn bus_name(state: &AppState, t: &TargetItem) -> Result<String, WsError> {
     if let Some(name) = &t.bus {
-        state.control().bus(name)?;
+        state.control().reader(name)?;
         return Ok(name.clone());
     }
-    let mut names = state.control().buses().map(|b| b.name().to_owned());
+    let mut names = state.control().readers().map(|b| b.name().to_owned());
     match (names.next(), names.next()) {
         (Some(only), None) => Ok(only),
         _ => Err(WsError::new(

@@ -17,7 +17,7 @@ pub(super) fn subscription(state: &AppState, s: &Subscribe) -> Result<Subscripti
     let buses = match &s.buses {
         Some(names) => {
             for (i, n) in names.iter().enumerate() {
-                state.control().bus(n)?;
+                state.control().reader(n)?;
                 if names[..i].contains(n) {
                     return Err(ControlError::duplicate(
                         &format!("buses[{i}]"),
@@ -30,7 +30,7 @@ pub(super) fn subscription(state: &AppState, s: &Subscribe) -> Result<Subscripti
         }
         None => state
             .control()
-            .buses()
+            .readers()
             .map(|b| b.name().to_owned())
             .collect(),
     };

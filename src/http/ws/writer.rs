@@ -209,7 +209,7 @@ where
 
     fn event_streams(&self) -> Events {
         let mut all: Events = select_all(Vec::new());
-        for bus in self.state.control().buses() {
+        for bus in self.state.control().readers() {
             let s =
                 BroadcastStream::new(bus.events()).map(|r| r.map(EventBody::Bus).map_err(lagged));
             all.push(Box::pin(s));
@@ -222,7 +222,7 @@ where
 
     fn ack_streams(&self) -> Acks {
         let mut all: Acks = select_all(Vec::new());
-        for bus in self.state.control().buses() {
+        for bus in self.state.control().readers() {
             let name = bus.name().to_owned();
             all.push(Box::pin(
                 WatchStream::new(bus.wire_acks()).map(move |a| (name.clone(), a)),
@@ -267,7 +267,7 @@ where
         self.count_skipped_ticks(&sub, now);
         let mut parts: Vec<Arc<str>> = Vec::with_capacity(sub.buses.len());
         for (name, shape) in sub.buses_and_shapes() {
-            if let Ok(bus) = self.state.control().bus(name) {
+            if let Ok(bus) = self.state.control().reader(name) {
                 let names = |id| self.state.control().joint_name(name, id);
                 let cals = |id| self.state.control().calibration(name, id);
                 let cache = &self.state.ws().fragments;
