@@ -14,8 +14,8 @@ pub(crate) use super::replies::{BusInfo, ErrorCode, EventBody, Field, Limits, Se
 pub(crate) const PROTOCOL: &str = "jointd.ws.v1";
 
 /// The client message types, as errors list them.
-const TYPES: &str =
-    "subscribe, unsubscribe, setpoints, watchdog, ping, move, grasp, grasp_release, grasp_stop";
+const TYPES: &str = "subscribe, unsubscribe, setpoints, watchdog, ping, move, grasp, \
+     grasp_release, grasp_stop, enable, disable, estop";
 
 /// A message from the client.
 #[derive(Debug, Clone, PartialEq)]
@@ -51,6 +51,30 @@ pub(crate) enum ClientMessage {
         seq: Option<u64>,
         id: u64,
     },
+    /// Enable joints of a bus (the body of `POST /api/v1/buses/{bus}/control/enable`).
+    Enable(JointsOfBus),
+    /// Disable joints of a bus.
+    Disable(JointsOfBus),
+    /// The e-stop of one bus, or of every bus (`POST /api/v1/estop`).
+    Estop(EstopRequest),
+}
+
+/// The joints of a bus an `enable` or `disable` addresses; `ids` left
+/// out: every joint of the bus.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct JointsOfBus {
+    pub seq: Option<u64>,
+    pub bus: String,
+    pub ids: Option<Vec<i64>>,
+}
+
+/// The bus an `estop` stops; `bus` left out: every bus.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct EstopRequest {
+    pub seq: Option<u64>,
+    pub bus: Option<String>,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
@@ -215,6 +239,9 @@ fn parse_any(text: &str) -> Result<ClientMessage, ParseError> {
             serde_json::from_value(rest).map(|request| ClientMessage::Move { seq, request })
         }
         "grasp" | "grasp_release" | "grasp_stop" => return parse_grasp(&kind, rest, seq),
+        "enable" => serde_json::from_value(rest).map(ClientMessage::Enable),
+        "disable" => serde_json::from_value(rest).map(ClientMessage::Disable),
+        "estop" => serde_json::from_value(rest).map(ClientMessage::Estop),
         other => return Err(bad(format!("unknown type `{other}` ({TYPES})"))),
     }
     .map_err(field_err)

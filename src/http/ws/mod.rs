@@ -12,8 +12,10 @@
 //! - [`writer`]: one connection's writer: telemetry, events, acks; bounded.
 //! - [`setpoints`]: validate a batch whole, then store it.
 //! - [`grasp`]: start, release and stop grasps; tell the starter when one ended.
+//! - `actions`: enable, disable and the e-stop, each in a task of its own.
 //! - [`telemetry`]: snapshot → joint fields in physical units.
 
+mod actions;
 pub(crate) mod grasp;
 pub(crate) mod messages;
 mod replies;

@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::bus::handle::BusEvent;
 use crate::control::books::grasps::GraspView;
+use crate::control::estop::EstopResult;
 use crate::control::moves::MoveView;
 use crate::control::teleop::{WatchdogEvent, WatchdogPolicy};
 
@@ -110,6 +111,20 @@ pub(crate) enum ServerMessage {
         reason: &'static str,
     },
     /// A `move` was accepted: the move as `GET /api/v1/moves/{id}` shows it.
+    /// An `enable` or `disable` done, as REST's answer says it: the
+    /// joints addressed (`ids` absent: every joint of the bus).
+    Done {
+        ref_seq: Option<u64>,
+        action: &'static str,
+        bus: String,
+        ids: Option<Vec<u8>>,
+    },
+    /// An `estop` done: what each bus did, as `POST /api/v1/estop` answers
+    /// (`stopped` false: not every device was confirmed stopped).
+    Estopped {
+        ref_seq: Option<u64>,
+        result: EstopResult,
+    },
     MoveStarted {
         ref_seq: Option<u64>,
         #[serde(rename = "move")]

@@ -11,6 +11,7 @@ use futures_util::{Sink, Stream, StreamExt};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
+use super::actions::{spawn_estop, spawn_switch, Switch};
 use super::grasp::GraspTasks;
 use super::messages::{
     self, BusInfo, ClientMessage, ErrorCode, Limits, ServerMessage, Subscribe, WatchdogRequest,
@@ -239,6 +240,11 @@ impl Connection {
                     self.reject(seq, e);
                 }
             }
+            ClientMessage::Enable(req) => spawn_switch(&self.state, &self.out, Switch::Enable, req),
+            ClientMessage::Disable(req) => {
+                spawn_switch(&self.state, &self.out, Switch::Disable, req)
+            }
+            ClientMessage::Estop(req) => spawn_estop(&self.state, &self.out, req),
         }
     }
 
