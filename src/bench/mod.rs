@@ -43,8 +43,7 @@ use rig::{
 };
 
 use crate::bus::BusHandle;
-use crate::sim::{Fault, SimHandle, SimStats, Simulator, WriteDelay};
-pub(crate) use args::SIM_THREAD;
+use crate::sim::{Fault, SimHandle, SimStats};
 pub use args::{BenchArgs, BenchError};
 
 /// Runs every workload and prints its report; true when all met their targets.

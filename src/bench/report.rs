@@ -105,7 +105,7 @@ impl Report {
 
     /// Control and telemetry per joint (the slowest joint) as shares of the
     /// adapter's bound: `T = P·⌈((B + 2)·tf + ta)/P⌉` with B = 2.
-    fn shares_of_bound(&self) -> (f64, f64) {
+    pub(super) fn shares_of_bound(&self) -> (f64, f64) {
         let frame = Duration::from_secs_f64(200.0 / f64::from(self.baud));
         let cycle = self.adapter.cycle_bound(frame, self.turnaround, 2);
         let per_s = 1.0 / cycle.as_secs_f64().max(f64::EPSILON);

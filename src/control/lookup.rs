@@ -23,7 +23,7 @@ impl Control {
 
 /// A joint named by `bus` and `id`, or by `hand` and `joint` (its name in
 /// a `[[hand]]`); `field` names it in errors (`joints[2]`).
-pub fn resolve_joint(
+pub(crate) fn resolve_joint(
     state: &Control,
     field: &str,
     bus: Option<&str>,

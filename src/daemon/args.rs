@@ -8,7 +8,6 @@ use serde::Deserialize;
 use crate::bus::BusConfig;
 use crate::control::limits::LimitRule;
 use crate::control::teleop::WatchdogDefault;
-use crate::sim::Firmware;
 
 /// Default HTTP address: loopback only.
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8080";

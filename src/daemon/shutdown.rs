@@ -2,6 +2,7 @@
 //! under way (bounded), the WebSocket sessions, every joint disabled and
 //! every port closed, the recordings' summaries written.
 
+use std::future::IntoFuture;
 use std::time::Duration;
 
 use tokio::net::TcpListener;

@@ -1,6 +1,8 @@
 //! The bench's hand and the numbers it is judged by: the fingers and
 //! where their objects stand, speeds, the hold current, timing, the goals.
 
+use std::time::Duration;
+
 pub(super) const HAND: &str = "bench";
 pub(super) const FINGERS: [(u8, &str, f64); 3] =
     [(1, "f1", 10.0), (2, "f2", 15.0), (3, "f3", 20.0)];

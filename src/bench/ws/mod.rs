@@ -28,7 +28,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use tungstenite::{Message, WebSocket};
+use tungstenite::Message;
 
 use crate::bench::analysis;
 use crate::bench::args::{BenchArgs, BenchError, SIM_THREAD};

@@ -7,6 +7,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use tungstenite::stream::MaybeTlsStream;
 use tungstenite::Message;
 
 use super::socket::{connect, Socket, TELEMETRY_THREAD};

@@ -8,15 +8,15 @@ use crate::bus::BusHandle;
 use crate::control::device::firmware_of;
 use crate::control::error::{ControlError, ControlResult};
 use crate::control::joints::{known_device, JointRef};
-use crate::control::lookup::resolve_joint;
 use crate::control::limits::JointLimits;
-use crate::control::targets::admit;
+use crate::control::lookup::resolve_joint;
 use crate::control::state::Control;
+use crate::control::targets::admit;
 use crate::protocol::status::{fsm, fsm_name};
 use crate::protocol::{CtrlMode, InfoBlock, ReplyBody};
 
-use crate::control::books::homing::Busy;
 use super::request::{check_stop_at, HomingRequest, Plan};
+use crate::control::books::homing::Busy;
 
 /// The joints named, or every joint of the hand; each once.
 pub(super) fn joints(state: &Control, req: &HomingRequest) -> ControlResult<Vec<JointRef>> {

@@ -40,6 +40,7 @@
 //! - `backoff`: off the stop once found.
 //! - this file: starting a job, each joint's task, the offset saved, the limit restored.
 
+mod admit;
 mod backoff;
 mod hold;
 mod request;
@@ -140,9 +141,6 @@ fn set(slot: &Slot, edit: impl FnOnce(&mut JointHoming)) {
     edit(&mut lock(slot));
 }
 
-/// Homes one joint; whatever happens, its previous current limit is
-/// written back (and read back) before the job says it ended.
-
 /// The search's current limit, raw: below the joint's own (`previous`),
 /// or why homing cannot reduce it.
 fn reduced_limit(plan: &Plan, previous: u16) -> Result<u16, String> {
@@ -156,6 +154,8 @@ fn reduced_limit(plan: &Plan, previous: u16) -> Result<u16, String> {
     }
 }
 
+/// Homes one joint; whatever happens, its previous current limit is
+/// written back (and read back) before the job says it ended.
 async fn home(
     state: Arc<Control>,
     bus: BusHandle,

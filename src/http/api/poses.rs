@@ -234,6 +234,7 @@ fn checked(state: &AppState, hand: &Hand, positions: BTreeMap<String, f64>) -> A
         let who = format!("joint `{name}` ({} on bus `{}`)", joint.id, joint.bus);
         let cal = state.control().calibration(&joint.bus, joint.id);
         state
+            .control()
             .limits(&joint.bus, joint.id)
             .check_joint_position(&cal, &field, *deg, &who)?;
     }

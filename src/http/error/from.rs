@@ -12,7 +12,7 @@ use crate::control::ControlError;
 /// A write sent whose confirmation was lost (the device may have taken it):
 /// a gateway timeout, as the missing answer is the upstream's, with its own
 /// problem type so a client never reads it as "not written".
-const UNVERIFIED: (StatusCode, &str, &str) = (
+pub(super) const UNVERIFIED: (StatusCode, &str, &str) = (
     StatusCode::GATEWAY_TIMEOUT,
     "write-unverified",
     "Write sent, confirmation lost",

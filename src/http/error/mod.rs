@@ -36,7 +36,6 @@ use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use crate::bus::BusError;
 use crate::control::ControlError;
 use crate::protocol::units::UnitError;
 
@@ -297,7 +296,7 @@ impl ApiError {
     /// (504, like a single unverified write; `partial` lists per parameter
     /// `written`, `unverified` and `not_written`).
     pub fn writes_unverified(detail: impl Into<String>) -> Self {
-        let (status, kind, title) = UNVERIFIED;
+        let (status, kind, title) = from::UNVERIFIED;
         Self::new(status, kind, title, detail)
     }
 
@@ -374,8 +373,8 @@ pub(crate) use documented::{BODY_TOO_LARGE, DOCUMENTED_STATUSES, FORBIDDEN_ORIGI
 
 #[cfg(test)]
 mod tests {
-    use super::from::bus_problem;
     use super::*;
+    use crate::bus::BusError;
 
     #[test]
     fn bus_errors_map_to_documented_statuses() {

@@ -267,7 +267,7 @@ impl Connection {
     /// Says at once which of this connection's streams an e-stop, a
     /// disable, a reset, a fault or a mode change ended.
     fn end_revoked_streams(&mut self) {
-        for (j, why) in self.streams.end_revoked(&self.state) {
+        for (j, why) in self.streams.end_revoked(self.state.control()) {
             self.reply(ServerMessage::StreamEnded {
                 bus: j.bus,
                 id: j.id,
@@ -343,7 +343,7 @@ impl Connection {
             joints = joints.len(),
             "teleop watchdog fired"
         );
-        fire_policy(&self.state, policy, &joints).await;
+        fire_policy(self.state.control(), policy, &joints).await;
         self.state.ws().publish(WatchdogEvent {
             event: "watchdog",
             client: self.client,

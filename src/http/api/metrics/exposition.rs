@@ -4,7 +4,6 @@
 use std::fmt::Write as _;
 
 use crate::histogram::Histogram;
-use crate::histogram::Histogram;
 
 /// Builds the exposition: families in order of first use, each with one
 /// `HELP` and one `TYPE` line and its samples together.
@@ -21,7 +20,12 @@ struct Family {
 }
 
 impl Exposition {
-    fn family(&mut self, name: &str, kind: &'static str, help: &str) -> &mut Vec<String> {
+    pub(super) fn family(
+        &mut self,
+        name: &str,
+        kind: &'static str,
+        help: &str,
+    ) -> &mut Vec<String> {
         let i = match self.families.iter().position(|f| f.name == name) {
             Some(i) => i,
             None => {
