@@ -104,7 +104,7 @@ pub(crate) fn setup_with(
     if let Some(share) = args.control_share {
         cfg.poll.control_share = share;
     }
-    let (bus, thread) = match (memory, sim.pty_opener()) {
+    let (bus, thread) = match (memory, sim.pty_opener(cfg.rs485)) {
         (Some(host), _) => spawn_bus_on(cfg, Box::new(host))?,
         (None, Some(opener)) => spawn_bus_with(cfg, opener)?,
         (None, None) => return Err(BenchError::Setup("the simulator has no pty".into())),

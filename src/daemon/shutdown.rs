@@ -14,6 +14,10 @@ use crate::http::{app, AppState};
 /// How long shutdown waits for each bus to disable its joints and close.
 const BUS_STOP_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// Serves the API until SIGINT or SIGTERM, then for at most
+/// [`HTTP_DRAIN_TIMEOUT`] while the requests under way finish: a flood of
+/// requests (or one that waits on a slow bus) cannot hold the shutdown,
+/// and with it the joints' disable.
 pub(super) async fn serve(listener: TcpListener, state: &AppState) -> Result<(), DaemonError> {
     let (signalled_tx, mut signalled) = tokio::sync::watch::channel(false);
     let ws_state = state.clone();

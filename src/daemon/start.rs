@@ -35,7 +35,9 @@ fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusToStart), DaemonError>
     let firmware = sim_cfg.firmware.to_string();
     let adapter = sim_cfg.adapter;
     let (sim, memory) = Simulator::spawn_for(sim_cfg)?;
-    let (path, port) = match (memory, sim.device_path(), sim.pty_opener()) {
+    // The path is the simulator's, set below; the rest as any bus's.
+    let mut cfg = BusConfig::new(SIM_BUS_NAME, PathBuf::new(), baud);
+    let (path, port) = match (memory, sim.device_path(), sim.pty_opener(cfg.rs485)) {
         (Some(host), _, _) => (
             PathBuf::from(crate::sim::MEMORY_LINE_PATH),
             Port::HandedIn(Box::new(host)),
@@ -49,7 +51,7 @@ fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusToStart), DaemonError>
         }
     };
     tracing::info!(path = %path.display(), joints, baud, %firmware, %adapter, "simulated bus started");
-    let mut cfg = BusConfig::new(SIM_BUS_NAME, path, baud);
+    cfg.path = path;
     cfg.ids = ids;
     // Neither a pty nor the in-memory line shows USB in sysfs: the bus is
     // told what the simulator models.
@@ -60,10 +62,6 @@ fn start_sim(sim_cfg: SimConfig) -> Result<(SimHandle, BusToStart), DaemonError>
     Ok((sim, (cfg, port)))
 }
 
-/// Serves the API until SIGINT or SIGTERM, then for at most
-/// [`HTTP_DRAIN_TIMEOUT`] while the requests under way finish: a flood of
-/// requests (or one that waits on a slow bus) cannot hold the shutdown,
-/// and with it the joints' disable.
 /// Every connection holds a file descriptor: at the common soft limit of
 /// 1024 about a thousand idle connections leave no descriptor to accept the
 /// e-stop's. The soft limit goes up to the hard one (what the service

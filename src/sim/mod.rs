@@ -114,7 +114,7 @@ pub use write_delay::WriteDelay;
 
 use crate::transport::memory::{self, MemoryPort};
 use crate::transport::taken::TakenCount;
-use crate::transport::tty::TtyPort;
+use crate::transport::tty::{PortSetup, TtyPort};
 use crate::transport::{Opener, Transport};
 use engine::Engine;
 use line::{Line, MemoryLine};
@@ -231,13 +231,15 @@ impl SimHandle {
 
     /// How a bus in this process opens the simulator's pty: by its path,
     /// like hardware, with the adapter model's count of the bytes it took
-    /// standing in for a USB-serial driver's output count. `None` on the
-    /// in-memory line (its host end is the port).
-    pub fn pty_opener(&self) -> Option<Opener> {
+    /// standing in for a USB-serial driver's output count; `rs485`: ask
+    /// for the kernel's RS-485 mode, as a bus configured so would (a pty
+    /// refuses it, which is a note). `None` on the in-memory line (its
+    /// host end is the port).
+    pub fn pty_opener(&self, rs485: bool) -> Option<Opener> {
         let path = self.inner.device_path.clone()?;
         let taken = self.inner.taken.clone();
         Some(Box::new(move |baud| {
-            let (port, notes) = TtyPort::open(&path, baud)?;
+            let (port, notes) = TtyPort::open_with(&path, baud, PortSetup { rs485 })?;
             let port = match &taken {
                 Some(count) => port.counted_by(count.clone()),
                 None => port,

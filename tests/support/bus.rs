@@ -113,7 +113,7 @@ fn bus_on(sim: SimHandle, baud: u32, tune: impl FnOnce(&mut BusConfig)) -> Rig {
     cfg.timing.reply_margin_us = TEST_REPLY_MARGIN_US;
     firmware_as_configured(&mut cfg, &sim);
     tune(&mut cfg);
-    let opener = sim.pty_opener().expect("a pty simulator");
+    let opener = sim.pty_opener(cfg.rs485).expect("a pty simulator");
     let (bus, thread) = spawn_bus_with(cfg, opener).expect("spawn bus");
     Rig {
         sim,
@@ -185,7 +185,7 @@ impl Rig {
         cfg.timing.reply_margin_us = TEST_REPLY_MARGIN_US;
         firmware_as_configured(&mut cfg, &self.sim);
         tune(&mut cfg);
-        let opener = self.sim.pty_opener().expect("a pty simulator");
+        let opener = self.sim.pty_opener(cfg.rs485).expect("a pty simulator");
         let (bus, thread) = spawn_bus_with(cfg, opener).expect("spawn bus");
         self.bus = bus;
         self.thread = Some(thread);

@@ -72,7 +72,7 @@ pub async fn start_sim_with(
     // A loaded 2-core machine delays pty bytes by milliseconds: give replies
     // that much slack so a late reply is not mistaken for a silent device.
     bus_cfg.timing.reply_margin_us = REPLY_MARGIN_US;
-    let opener = sim.pty_opener().expect("a pty simulator");
+    let opener = sim.pty_opener(bus_cfg.rs485).expect("a pty simulator");
     let (handle, thread) = spawn_bus_with(bus_cfg, opener).expect("bus");
     let limits = SoftLimits::new(vec![LimitRule {
         ids: vec![2],
