@@ -310,6 +310,10 @@ fn checked_watchdog(w: WatchdogDefault, args: &RunArgs) -> Result<WatchdogDefaul
 /// firmware of `--sim-firmware` (refused here, before anything starts).
 fn sim_config(joints: u8, args: &RunArgs) -> Result<SimConfig, DaemonError> {
     let mut cfg = SimConfig::new((1..=joints).collect(), args.sim_baud);
+    // Devices answer within their turnaround whatever else the host runs:
+    // a simulator thread held off its CPU would look like devices falling
+    // silent. Real-time where the system allows it (refused: logged).
+    cfg.realtime = true;
     if let Some(spec) = &args.sim_firmware {
         cfg.firmware = Firmware::parse(spec)?;
     }
