@@ -111,7 +111,7 @@ pub fn decode_mcap(path: &std::path::Path) -> Result<Vec<String>, FrameCliError>
         };
         // JSON, or the same text in a std_msgs/String (a bag-compatible recording).
         let text = if message.channel.message_encoding == "cdr" {
-            crate::record::cdr::string_from_cdr(&message.data)
+            crate::rosmsg::string_from_cdr(&message.data)
                 .map_err(|e| FrameCliError::Mcap(format!("{topic}: not a String: {e}")))?
                 .into_bytes()
         } else {

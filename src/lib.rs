@@ -12,6 +12,7 @@
 //! - [`mem`]: giving freed heap memory back to the system (glibc `malloc_trim`).
 //! - [`histogram`]: a latency histogram in Prometheus' shape, cheap enough for the bus
 //!   owner's hot path (no allocation, no lock).
+//! - [`rosmsg`]: ROS 2 messages in CDR, encoded and decoded (recordings and the bridge). Pure.
 //! - [`motion`]: moves generated in the daemon: synchronised multi-joint paths
 //!   (linear, minimum-jerk, trapezoid; waypoints; limits) and a move's status. Pure.
 //! - [`hands`]: named hands (`[[hand]]`), their poses and the joints' calibrations, kept in
@@ -21,12 +22,14 @@
 //! - [`transport`]: the byte lines a bus runs over (tty/pty with RS-485 setup, in-memory pipe).
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory), behaviour from the SPEC.
 //! - [`bus`]: one owner thread per bus: the pure scheduler decides, the owner does the I/O;
-//!   the [`bus::BusHandle`] is everything the rest of the daemon sees.
+//!   the [`bus::BusHandle`] is what the control core acts through.
 //! - [`record`]: MCAP recordings of the buses (joint states in CDR, frames, events,
 //!   setpoints) and the `jointd record` client.
-//! - [`control`]: the control core REST, WebSocket and ROS 2 call as equals: targets,
-//!   soft limits, moves, homing, calibration, the teleop watchdog and streams; its own
-//!   error ([`control::ControlError`]), which each front-end maps once.
+//! - [`control`]: the control core, the one way in: REST, WebSocket and ROS 2 only
+//!   translate; every operation (enable, targets, moves, homing, grasps, configuration
+//!   writes, the teleop step, e-stop) is a call on it, and a front-end reads a bus
+//!   through a read-only [`control::bus_reader::BusReader`]; its own error
+//!   ([`control::ControlError`]), which each front-end maps once.
 //! - [`http`]: one axum application: state, auth, errors (the one place that picks HTTP
 //!   statuses), and below it the REST areas, the WebSocket and the dashboard, which never
 //!   import each other.
@@ -55,13 +58,15 @@
 //! | enable, verified writes, id/baud change, scan, e-stop on the wire | `bus::owner` (its `jobs`, `write`, `baud`, `scan`, `estop`) |
 //! | what a bus error is; which HTTP status it gets | `bus::error`; `http::error` |
 //! | who may call at all: token, Host (DNS rebinding), browser origin, body size | `http::auth`, `http::guard` (checks), `http::policy` (the decisions, pure) |
-//! | a REST route | `http::api` (one file per area), its OpenAPI in the same handler |
+//! | a REST route | `http::api` (one file per area), its OpenAPI in the same handler; what it does, a call on `control` |
+//! | enable, disable, mode, jog, re-zero, targets, e-stop; scan, baud, parameter writes, id | `control::actions`; `control::bus_ops` |
 //! | a WebSocket message | `http::ws::messages`, applied in `http::ws::session` |
 //! | soft limits, target checks, admission under the motion authority | `control::limits`, `control::targets`, `control::batch` |
 //! | whether a frame may still go out (motion epoch per joint) | `bus::authority`, checked in `bus::scheduler` (control) and `bus::motion` |
 //! | the dashboard | `web/` (files), served by `http::web` |
 //! | moves generated in the daemon; named hands, poses, calibration, homing | `motion`, `bus::motion`, `control::moves`; `hands`; `control::calibration`, `control::homing` |
-//! | the teleop watchdog and streams (WebSocket, ROS 2) | `control::watchdog`, `control::streams` |
+//! | the teleop watchdog and streams (WebSocket, ROS 2), the one teleop step | `control::watchdog`, `control::streams` (`Streams::apply`) |
+//! | a ROS 2 message's CDR | `rosmsg` |
 //! | MCAP recordings (what `jointd record` and `POST /api/v1/recordings` write) | `record`, `control::recordings`, `http::api::recordings` |
 //! | what a simulated device does with a frame | `sim::device`, `sim::physics`, `sim::faults` |
 //! | collisions and timing on the simulated wire | `sim::wire`, `sim::engine` |
@@ -90,6 +95,7 @@ pub mod motion;
 pub mod protocol;
 pub mod record;
 pub mod ros2;
+pub mod rosmsg;
 pub mod rt;
 pub mod sim;
 pub mod transport;

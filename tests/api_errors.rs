@@ -28,7 +28,13 @@ fn limits() -> SoftLimits {
 
 async fn setup(token: Option<&str>) -> (FakeBus, Server) {
     let bus = FakeBus::new("fake", &[1, 2, 3]);
-    let state = AppState::new(vec![bus.handle.clone()], limits(), token.map(str::to_owned));
+    let state = AppState::new(
+        std::sync::Arc::new(jointd::control::Control::new(
+            vec![bus.handle.clone()],
+            limits(),
+        )),
+        token.map(str::to_owned),
+    );
     let server = serve(state).await;
     (bus, server)
 }
@@ -537,8 +543,14 @@ async fn a_body_over_the_limit_is_413() {
 #[tokio::test]
 async fn the_body_limit_is_configurable() {
     let bus = FakeBus::new("fake", &[1, 2, 3]);
-    let state = AppState::new(vec![bus.handle.clone()], limits(), None);
-    let mut options = jointd::http::state::StateOptions::default();
+    let state = AppState::new(
+        std::sync::Arc::new(jointd::control::Control::new(
+            vec![bus.handle.clone()],
+            limits(),
+        )),
+        None,
+    );
+    let mut options = jointd::http::state::HttpOptions::default();
     options.policy.max_body_bytes = 64;
     assert!(state.set_options(options).is_ok());
     let s = serve(state).await;

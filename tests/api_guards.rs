@@ -296,16 +296,18 @@ async fn fake_with(
     origins: &[&str],
 ) -> (support::fake_bus::FakeBus, support::http::Server) {
     use jointd::http::policy::RequestPolicy;
-    use jointd::http::state::StateOptions;
+    use jointd::http::state::HttpOptions;
     let bus = support::fake_bus::FakeBus::new("fake", &[1, 2]);
     let state = jointd::http::AppState::new(
-        vec![bus.handle.clone()],
-        Default::default(),
+        std::sync::Arc::new(jointd::control::Control::new(
+            vec![bus.handle.clone()],
+            Default::default(),
+        )),
         token.map(str::to_owned),
     );
     let own = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
     let policy = RequestPolicy::new(None, &own(hosts), &own(origins), 1024 * 1024).unwrap();
-    let options = StateOptions {
+    let options = HttpOptions {
         policy,
         ..Default::default()
     };

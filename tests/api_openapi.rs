@@ -4,7 +4,6 @@
 mod support;
 
 use jointd::http::api;
-use jointd::http::state_for;
 use serde_json::Value;
 use support::http::serve;
 
@@ -21,7 +20,14 @@ fn checked_in() -> Value {
 
 #[tokio::test]
 async fn checked_in_document_equals_the_served_one() {
-    let server = serve(state_for(Vec::new())).await;
+    let server = serve(jointd::http::AppState::new(
+        std::sync::Arc::new(jointd::control::Control::new(
+            Vec::new(),
+            Default::default(),
+        )),
+        None,
+    ))
+    .await;
     let served = server.get("/openapi.json").await;
     assert!(served.status.is_success());
     assert_eq!(
@@ -37,7 +43,14 @@ async fn checked_in_document_equals_the_served_one() {
 
 #[tokio::test]
 async fn docs_page_is_served() {
-    let server = serve(state_for(Vec::new())).await;
+    let server = serve(jointd::http::AppState::new(
+        std::sync::Arc::new(jointd::control::Control::new(
+            Vec::new(),
+            Default::default(),
+        )),
+        None,
+    ))
+    .await;
     let page = server.get("/docs/").await;
     assert!(page.status.is_success(), "{}", page.status);
     assert!(page

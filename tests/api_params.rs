@@ -3,13 +3,19 @@
 
 mod support;
 
-use jointd::http::state_for;
 use jointd::protocol::params::PARAMS;
 use support::http::serve;
 
 #[tokio::test]
 async fn the_table_is_served_row_by_row() {
-    let server = serve(state_for(Vec::new())).await;
+    let server = serve(jointd::http::AppState::new(
+        std::sync::Arc::new(jointd::control::Control::new(
+            Vec::new(),
+            Default::default(),
+        )),
+        None,
+    ))
+    .await;
     let r = server.get("/api/v1/params").await;
     assert!(r.status.is_success(), "{}", r.status);
     let rows = r.body["params"].as_array().expect("params array");

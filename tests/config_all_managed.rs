@@ -8,7 +8,7 @@ mod support;
 
 use std::collections::BTreeMap;
 
-use jointd::http::state::StateOptions;
+use jointd::control::Options;
 use jointd::protocol::command::index;
 use jointd::protocol::{Command, Config, Frame, ALL_DEVICES};
 use jointd::sim::Fault;
@@ -58,11 +58,11 @@ async fn write_to_all_skips_offline_and_unmanaged_devices_and_says_so() {
         s.devices.values().filter(|d| d.firmware.is_some()).count() == 3
     })
     .await;
-    let options = StateOptions {
+    let options = Options {
         managed: BTreeMap::from([("sim0".to_string(), vec![1, 2])]),
         ..Default::default()
     };
-    assert!(bus.server_state.set_options(options).is_ok());
+    assert!(bus.server_state.control().set_options(options).is_ok());
     bus.sim.inject(Fault::DropReplies {
         dev_id: Some(2),
         rate: 1.0,

@@ -69,13 +69,13 @@ fn the_annotated_example_plans() {
     assert_eq!(p.buses[0].ids.len(), 16);
     assert_eq!(p.listen.to_string(), "127.0.0.1:8080");
     assert_eq!(
-        p.options
+        p.control
             .joint_names
             .get(&(Some("right_hand".into()), 1))
             .map(String::as_str),
         Some("index_mcp")
     );
-    assert_eq!(p.options.watchdog.hold_timeout_ms, 300);
+    assert_eq!(p.control.watchdog.hold_timeout_ms, 300);
     assert_eq!(p.buses[0].firmware.name(), "auto");
     assert_eq!(p.buses[0].adapter, jointd::bus::AdapterSetting::Auto);
 }
@@ -262,7 +262,7 @@ fn allow_lists_and_body_limit_from_file_and_flags() {
         sim: Some(1),
         ..args
     };
-    let p = plan(&args).unwrap().options.policy;
+    let p = plan(&args).unwrap().http.policy;
     assert_eq!(p.allowed_hosts, ["robot-pc", "192.168.1.5"]);
     assert_eq!(p.allowed_origins, ["http://robot-pc:3000"]);
     assert_eq!(p.max_body_bytes, 4096);
@@ -272,11 +272,11 @@ fn allow_lists_and_body_limit_from_file_and_flags() {
         max_body_bytes: Some(100),
         ..args
     };
-    let p = plan(&flags).unwrap().options.policy;
+    let p = plan(&flags).unwrap().http.policy;
     assert_eq!(p.allowed_hosts, ["arm.lan"]);
     assert_eq!(p.allowed_origins, ["https://ops.example"]);
     assert_eq!(p.max_body_bytes, 100);
-    let p = plan(&sim_args()).unwrap().options.policy;
+    let p = plan(&sim_args()).unwrap().http.policy;
     assert_eq!(p.max_body_bytes, 1024 * 1024);
     assert!(p.allowed_hosts.is_empty() && p.allowed_origins.is_empty());
     let err = error_of("allowed_origins = [\"robot-pc:3000\"]\n[[bus]]\nname = \"a\"\npath = \"/dev/null\"\nbaud = 500000\n");

@@ -278,7 +278,13 @@ async fn a_stop_reading_at_the_end_of_the_range_is_refused_with_the_allowed_rang
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_current_limit_counts_as_restored_only_when_it_reads_back_as_it_was() {
     let bus = support::fake_bus::FakeBus::new("fake", &[1]);
-    let state = jointd::http::AppState::new(vec![bus.handle.clone()], Default::default(), None);
+    let state = jointd::http::AppState::new(
+        std::sync::Arc::new(jointd::control::Control::new(
+            vec![bus.handle.clone()],
+            Default::default(),
+        )),
+        None,
+    );
     let server = support::http::serve(state).await;
     server
         .post("/api/v1/buses/fake/control/enable", json!({"ids": [1]}))

@@ -13,7 +13,13 @@ use support::http::{serve, Server};
 
 async fn setup() -> (FakeBus, Server) {
     let bus = FakeBus::new("fake", &[1, 2]);
-    let state = AppState::new(vec![bus.handle.clone()], SoftLimits::default(), None);
+    let state = AppState::new(
+        std::sync::Arc::new(jointd::control::Control::new(
+            vec![bus.handle.clone()],
+            SoftLimits::default(),
+        )),
+        None,
+    );
     (bus, serve(state).await)
 }
 

@@ -906,11 +906,11 @@ async fn run_seed(seed: u64, steps: u64) {
     )
     .expect("a hand");
     let store = jointd::hands::StateStore::open(hands, None).expect("store");
-    let options = jointd::http::state::StateOptions {
+    let options = jointd::control::Options {
         hands: Some(std::sync::Arc::new(store)),
         ..Default::default()
     };
-    assert!(b.server_state.set_options(options).is_ok());
+    assert!(b.server_state.control().set_options(options).is_ok());
     let mut w = World {
         b,
         rng: Rng(seed.max(1)),

@@ -9,7 +9,7 @@ mod support;
 
 use std::time::Duration;
 
-use jointd::bus::usb_guard::{PipelineMode, UsbPipelineView};
+use jointd::bus::usb::guard::{PipelineMode, UsbPipelineView};
 use jointd::bus::{AdapterSetting, BusSnapshot};
 use jointd::sim::{Fault, WriteDelay};
 use jointd::transport::adapter::AdapterModel;

@@ -19,7 +19,13 @@ use support::fake_bus::FakeBus;
 #[tokio::test]
 async fn a_batch_already_on_the_wire_is_acked_without_another_write() {
     let bus = FakeBus::new("fake", &[1]);
-    let state = jointd::http::AppState::new(vec![bus.handle.clone()], Default::default(), None);
+    let state = jointd::http::AppState::new(
+        std::sync::Arc::new(jointd::control::Control::new(
+            vec![bus.handle.clone()],
+            Default::default(),
+        )),
+        None,
+    );
     let server = support::http::serve(state.clone()).await;
     server
         .post_empty("/api/v1/buses/fake/devices/1/enable")

@@ -451,9 +451,9 @@ async fn auth_applies_to_the_websocket() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn config_default_watchdog_and_joint_names() {
     use jointd::control::teleop::{WatchdogDefault, WatchdogPolicy};
-    use jointd::http::state::StateOptions;
+    use jointd::control::Options;
     let bus = sim_bus::start(2, None).await;
-    let mut options = StateOptions::default();
+    let mut options = Options::default();
     options
         .joint_names
         .insert((Some("sim0".into()), 1), "index_mcp".into());
@@ -461,7 +461,7 @@ async fn config_default_watchdog_and_joint_names() {
         hold_timeout_ms: 100,
         policy: WatchdogPolicy::Disable,
     };
-    assert!(bus.server_state.set_options(options).is_ok());
+    assert!(bus.server_state.control().set_options(options).is_ok());
     enable(&bus, &[1]).await;
     let mut observer = connect(&bus).await;
     observer
@@ -704,11 +704,11 @@ async fn setpoints_may_name_joints_by_hand_and_joint_name() {
     )
     .expect("a hand");
     let store = StateStore::open(hands, None).expect("poses in memory");
-    let options = jointd::http::state::StateOptions {
+    let options = jointd::control::Options {
         hands: Some(std::sync::Arc::new(store)),
         ..Default::default()
     };
-    assert!(bus.server_state.set_options(options).is_ok());
+    assert!(bus.server_state.control().set_options(options).is_ok());
     enable(&bus, &[1, 2]).await;
     let mut c = connect(&bus).await;
     c.send(json!({"type": "setpoints", "seq": 1, "ack": true,

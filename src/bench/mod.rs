@@ -12,12 +12,14 @@
 //! - [`analysis`]: per-joint rates and setpoint-to-wire latency from the frame log.
 //! - [`cpu`]: per-thread CPU time by thread name.
 //! - [`report`]: the result, the engine's targets, the printout.
+//! - `report_rows`: the printout's rows (results, the adapter's bound, where the wire time went).
 //! - `moves`: `--moves`: back-to-back moves generated in the daemon.
 //! - `grasp`: `--grasp`: grasps on the simulator's objects and in free air.
 //! - `grasp_modes`: `--grasp-modes` (and after `--grasp`): position mode
 //!   against current mode on the joint physics.
 
 pub mod analysis;
+mod args;
 pub mod client;
 pub mod cpu;
 mod grasp;
@@ -25,150 +27,24 @@ mod grasp_modes;
 mod moves;
 pub mod pty_lag;
 pub mod report;
+mod report_rows;
+mod rig;
 mod send_floor;
 pub mod ws;
 
 use std::time::{Duration, Instant};
 
-use clap::Args;
-use thiserror::Error;
-
-use crate::bus::{
-    spawn_bus, spawn_bus_on, AdapterSetting, BusConfig, BusError, BusHandle, BusThread, Targets,
-    THREAD_PREFIX,
-};
-use crate::protocol::status::fsm;
-use crate::sim::{
-    AdapterModel, Fault, SimConfig, SimError, SimHandle, SimStats, Simulator, WriteDelay,
-};
-
 use analysis::Analysis;
-use client::{Client, CLIENT_THREAD};
+use client::Client;
 use report::Report;
+use rig::{
+    adapter_of, cpu_now, cpu_share, load_average, setup, write_delay_of, CLIENT_PRIORITY,
+    SIM_PRIORITY,
+};
 
-/// Arguments of `jointd bench`.
-#[derive(Args, Debug, Clone)]
-pub struct BenchArgs {
-    /// Baud rate of a workload; repeat for several (default: 500000 and 230400).
-    #[arg(long = "baud", default_values_t = [500_000u32, 230_400])]
-    pub bauds: Vec<u32>,
-    /// Joints on the bus (ids 1..=N).
-    #[arg(long, default_value_t = 16)]
-    pub joints: u8,
-    /// How often the client writes every joint's target, Hz.
-    #[arg(long, default_value_t = 1000)]
-    pub rate_hz: u32,
-    /// Measured time per workload, seconds.
-    #[arg(long, default_value_t = 10.0)]
-    pub seconds: f64,
-    /// Streaming time before measuring, seconds.
-    #[arg(long, default_value_t = 2.0)]
-    pub warmup: f64,
-    /// Overrides the poll plan's control share of the wire (default: the bus default).
-    #[arg(long)]
-    pub control_share: Option<f64>,
-    /// The simulated devices' turnaround, µs.
-    #[arg(long, default_value_t = 100)]
-    pub turnaround_us: u64,
-    /// Overrides how long the owner looks at the port without sleeping once
-    /// a reply is due, µs (default: the bus default; 0 = always sleep).
-    #[arg(long)]
-    pub reply_spin_us: Option<u64>,
-    /// Run every thread at normal priority. By default the simulator (the
-    /// referee) runs at real-time priority 30, the bus owner at its default
-    /// 10 and the client at 10, so other work on the machine does not decide
-    /// the result.
-    #[arg(long)]
-    pub no_rt: bool,
-    /// Print the frames around every collision the simulator saw.
-    #[arg(long)]
-    pub show_collisions: bool,
-    /// The USB adapter the simulated bus sits behind (`native`, `ftdi[:MS]`,
-    /// `ch340`, `cp2102`, `ft232h[:MS]`); the bus is told the same. The
-    /// report gives each rate as a share of what that adapter allows.
-    #[arg(long, default_value = "native")]
-    pub adapter: String,
-    /// Behind an adapter: from the start of the measured window, host
-    /// writes reach it late by a random delay with these quantiles, µs
-    /// (`P50,P99,MAX` or `P50,P99,P99.9,MAX`, e.g. `38,150,750,1000`); the
-    /// report adds the collisions of each second.
-    #[arg(long, value_name = "P50,P99[,P99.9],MAX")]
-    pub write_delay_us: Option<String>,
-    /// Run this many buses at once, each with `--joints` joints on its own
-    /// simulator and owner, after one bus carrying all of them: what a
-    /// second adapter buys (per-joint rates, the ratio, the CPU).
-    #[arg(long, default_value_t = 1)]
-    pub buses: u8,
-    /// How the bus reaches the simulator: `pty` (opened by path, like
-    /// hardware) or `memory` (an in-process pipe that dates each write when
-    /// it is made: under load a pty's kernel worker passes bytes on up to
-    /// milliseconds late, a delay USB-serial drivers do not add, which the
-    /// adapter models then take for a write that missed its USB frame).
-    /// Default: `pty` on a native line, `memory` behind a USB adapter model.
-    #[arg(long, value_parser = ["pty", "memory"])]
-    pub line: Option<String>,
-    /// Measure moves generated in the daemon instead: every joint
-    /// doing back-to-back minimum-jerk moves of 300 ms; the rate of move
-    /// setpoints on the wire per joint, the tracking error, occupancy, CPU.
-    #[arg(long)]
-    pub moves: bool,
-    /// Measure grasping instead: three fingers closing on the simulator's
-    /// objects at two stiffnesses, on V2.0.1 and rev 2.0.8 firmware (time
-    /// to contact, force overshoot, hold error), then 100 grasps in free
-    /// air counting false contacts; then the position/current mode
-    /// comparison of `--grasp-modes`.
-    #[arg(long)]
-    pub grasp: bool,
-    /// Only compare position mode with current mode for grasping, on the
-    /// simulated joint physics directly (no bus, no daemon).
-    #[arg(long)]
-    pub grasp_modes: bool,
-    /// Measure the WebSocket path instead: the engine alone, the
-    /// same stream through /api/v1/ws, then with telemetry clients added.
-    #[arg(long)]
-    pub ws: bool,
-    /// With --ws: telemetry clients subscribed to every joint.
-    #[arg(long, default_value_t = 100)]
-    pub telemetry_clients: usize,
-    /// With --ws: each telemetry client's rate, Hz.
-    #[arg(long, default_value_t = 100.0)]
-    pub telemetry_hz: f64,
-    /// Beside the run, measure how late a pty of its own passes bytes on
-    /// (a frame's worth every millisecond, written at the owner's priority
-    /// and read at the simulator's): on a pty line that lag reaches an
-    /// adapter model as writes that came late.
-    #[arg(long)]
-    pub pty_lag: bool,
-    /// Behind an adapter model on the in-memory line: do not confirm writes
-    /// (the bus setting `timing.usb_confirm = false`), as on a port that
-    /// cannot say when the adapter took a write: the blind pipeline and
-    /// its guard ladder.
-    #[arg(long)]
-    pub no_confirm: bool,
-}
-
-/// Real-time priorities of the bench's threads (the owner's is its config default).
-const SIM_PRIORITY: u8 = 30;
-const CLIENT_PRIORITY: u8 = 10;
-
-#[derive(Debug, Error)]
-pub enum BenchError {
-    #[error("simulator: {0}")]
-    Sim(#[from] SimError),
-    #[error("bus: {0}")]
-    Bus(#[from] BusError),
-    #[error("{0}")]
-    Setup(String),
-    #[error("i/o: {0}")]
-    Io(#[from] std::io::Error),
-}
-
-/// Align time of the simulated joints: short, the bench is about the bus.
-const ALIGN: Duration = Duration::from_millis(100);
-/// Bound on each setup step (discovery, enable); the steps end on the event.
-const SETUP_WAIT: Duration = Duration::from_secs(10);
-/// Thread name prefix of the simulator's runner.
-pub(crate) const SIM_THREAD: &str = "jointd-sim";
+use crate::bus::BusHandle;
+use crate::sim::{Fault, SimHandle, SimStats};
+pub use args::{BenchArgs, BenchError};
 
 /// Runs every workload and prints its report; true when all met their targets.
 pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
@@ -286,31 +162,8 @@ fn several_buses(args: &BenchArgs) -> Result<bool, BenchError> {
     Ok(all)
 }
 
-fn adapter_of(args: &BenchArgs) -> Result<AdapterModel, BenchError> {
-    AdapterModel::parse(&args.adapter).map_err(BenchError::Setup)
-}
-
-/// `--write-delay-us`, checked: it needs an adapter model.
-fn write_delay_of(args: &BenchArgs) -> Result<Option<WriteDelay>, BenchError> {
-    let Some(spec) = args.write_delay_us.as_deref() else {
-        return Ok(None);
-    };
-    if !adapter_of(args)?.is_latent() {
-        return Err(BenchError::Setup(
-            "--write-delay-us needs a USB adapter model (--adapter ch340, ...)".into(),
-        ));
-    }
-    WriteDelay::parse(spec).map(Some).map_err(BenchError::Setup)
-}
-
 /// What splitting the joints over two adapters must at least buy per joint.
 const MIN_SPLIT_GAIN: f64 = 1.95;
-
-pub(crate) fn load_average() -> String {
-    std::fs::read_to_string("/proc/loadavg")
-        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
-        .unwrap_or_else(|_| "unknown".into())
-}
 
 fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
     let ids: Vec<u8> = (1..=args.joints).collect();
@@ -367,74 +220,6 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
             .map(|p| analysis::quantile_i64(&referee_late_ns, p) as f64 / 1e3),
         counters: snapshot.counters.clone(),
     })
-}
-
-/// The simulator on a pty, the bus owner on its path (like hardware),
-/// every joint online, enabled and aligned.
-pub(crate) fn setup(
-    args: &BenchArgs,
-    baud: u32,
-    ids: &[u8],
-) -> Result<(SimHandle, BusHandle, BusThread), BenchError> {
-    setup_with(args, baud, ids, |_| {})
-}
-
-/// [`setup`] with a last word on the simulator's config.
-pub(crate) fn setup_with(
-    args: &BenchArgs,
-    baud: u32,
-    ids: &[u8],
-    tweak: impl FnOnce(&mut SimConfig),
-) -> Result<(SimHandle, BusHandle, BusThread), BenchError> {
-    let mut sim_cfg = SimConfig::new(ids.to_vec(), baud);
-    tweak(&mut sim_cfg);
-    sim_cfg.align_time = ALIGN;
-    sim_cfg.turnaround = Duration::from_micros(args.turnaround_us);
-    let adapter = adapter_of(args)?;
-    sim_cfg.adapter = adapter;
-    let (sim, memory) = match args.line.as_deref() {
-        Some("memory") => {
-            let (sim, host) = Simulator::spawn_memory(sim_cfg)?;
-            (sim, Some(host))
-        }
-        Some(_) => (Simulator::spawn_pty(sim_cfg)?, None),
-        None => Simulator::spawn_for(sim_cfg)?,
-    };
-    if !args.no_rt {
-        referee_realtime()?;
-    }
-    let path = match &memory {
-        Some(_) => std::path::PathBuf::from(crate::sim::MEMORY_LINE_PATH),
-        None => sim
-            .device_path()
-            .ok_or_else(|| BenchError::Setup("the simulator has no pty path".into()))?,
-    };
-    let mut cfg = BusConfig::new("bench", path, baud);
-    cfg.ids = ids.to_vec();
-    cfg.adapter = AdapterSetting::Fixed(adapter);
-    cfg.timing.turnaround_us = args.turnaround_us;
-    if args.no_rt {
-        cfg.timing.rt_priority = 0;
-    }
-    if args.no_confirm {
-        cfg.timing.usb_confirm = false;
-    }
-    if let Some(spin) = args.reply_spin_us {
-        cfg.timing.reply_spin_us = spin;
-    }
-    if let Some(share) = args.control_share {
-        cfg.poll.control_share = share;
-    }
-    let (bus, thread) = match memory {
-        Some(host) => spawn_bus_on(cfg, Box::new(host))?,
-        None => spawn_bus(cfg)?,
-    };
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()?;
-    rt.block_on(bring_up(&bus, ids.len()))?;
-    wait_running(&sim, ids)?;
-    Ok((sim, bus, thread))
 }
 
 /// What one measured window left behind.
@@ -514,67 +299,4 @@ fn collisions_each_second(
         modes.push(mode.unwrap_or("none"));
     }
     (collisions, modes)
-}
-
-/// The simulator's runner thread at real-time priority: a referee the OS
-/// holds back mis-times replies and collisions.
-fn referee_realtime() -> Result<(), BenchError> {
-    // A new thread names itself once it runs: look again for a moment.
-    let deadline = Instant::now() + SETUP_WAIT;
-    let mut tids = cpu::tids(SIM_THREAD);
-    while tids.is_empty() {
-        if Instant::now() > deadline {
-            return Err(BenchError::Setup("no simulator thread found".into()));
-        }
-        std::thread::sleep(Duration::from_millis(1));
-        tids = cpu::tids(SIM_THREAD);
-    }
-    for tid in tids {
-        crate::rt::set_fifo(tid, SIM_PRIORITY).map_err(|e| {
-            BenchError::Setup(format!(
-                "real-time priority for the simulator refused ({e}); run with --no-rt"
-            ))
-        })?;
-    }
-    Ok(())
-}
-
-/// Waits for every joint online, then enables them all.
-async fn bring_up(bus: &BusHandle, n: usize) -> Result<(), BenchError> {
-    let mut rx = bus.watch();
-    let online = rx.wait_for(|s| s.devices.values().filter(|d| d.online).count() >= n);
-    match tokio::time::timeout(SETUP_WAIT, online).await {
-        Ok(Ok(_)) => {}
-        _ => return Err(BenchError::Setup(format!("not all {n} joints came online"))),
-    }
-    bus.enable(Targets::All).await?;
-    Ok(())
-}
-
-/// Waits until the simulated joints finished aligning (bounded; the
-/// simulator offers no event for it).
-fn wait_running(sim: &SimHandle, ids: &[u8]) -> Result<(), BenchError> {
-    let deadline = Instant::now() + SETUP_WAIT;
-    while !ids
-        .iter()
-        .all(|id| sim.device(*id).is_some_and(|d| d.fsm == fsm::RUN))
-    {
-        if Instant::now() > deadline {
-            return Err(BenchError::Setup("joints did not reach run".into()));
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    Ok(())
-}
-
-const CPU_THREADS: [&str; 3] = [THREAD_PREFIX, SIM_THREAD, CLIENT_THREAD];
-
-fn cpu_now() -> Vec<Duration> {
-    cpu::snapshot(&CPU_THREADS)
-}
-
-fn cpu_share(a: &[Duration], b: &[Duration], s0: &SimStats, s1: &SimStats, i: usize) -> f64 {
-    let wall = s1.at.saturating_duration_since(s0.at).as_secs_f64();
-    let used = b[i].saturating_sub(a[i]).as_secs_f64();
-    used / wall.max(f64::EPSILON)
 }

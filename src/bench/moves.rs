@@ -13,7 +13,8 @@ use crate::motion::{Method, Path, RunningMove};
 use crate::protocol::units;
 use crate::sim::{SimHandle, SimStats};
 
-use super::{cpu_now, cpu_share, setup, BenchArgs, BenchError};
+use super::args::{BenchArgs, BenchError};
+use super::rig::{cpu_now, cpu_share, setup};
 
 /// Each move's duration and amplitude (the joints swing between ±AMPLITUDE).
 const MOVE: Duration = Duration::from_millis(300);

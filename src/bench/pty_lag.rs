@@ -61,51 +61,13 @@ impl PtyLagProbe {
             let stop = stop.clone();
             std::thread::Builder::new()
                 .name("pty-lag-write".into())
-                .spawn(move || {
-                    at_priority(priorities.0);
-                    let mut sent = Vec::new();
-                    let frame = [0x55u8; FRAME_LEN];
-                    let mut next = Instant::now();
-                    while !stop.load(Ordering::Relaxed) {
-                        next += PERIOD;
-                        std::thread::sleep(next.saturating_duration_since(Instant::now()));
-                        match slave.write_all(&frame) {
-                            Ok(()) => sent.push(Instant::now()),
-                            // The reader may end first and close the master.
-                            Err(_) if stop.load(Ordering::Relaxed) => break,
-                            Err(e) => return Err(e),
-                        }
-                    }
-                    Ok(sent)
-                })?
+                .spawn(move || write_frames(&mut slave, &stop, priorities.0))?
         };
         let reader = {
             let (stop, read) = (stop.clone(), read.clone());
             std::thread::Builder::new()
                 .name("pty-lag-read".into())
-                .spawn(move || {
-                    at_priority(priorities.1);
-                    let mut seen = Vec::new();
-                    let (mut total, mut buf) = (0usize, [0u8; 256]);
-                    while !stop.load(Ordering::Relaxed) {
-                        if !wait_readable(master.as_fd(), PERIOD * 10)? {
-                            continue;
-                        }
-                        match master.read(&mut buf) {
-                            Ok(n) => {
-                                total += n;
-                                seen.push((total, Instant::now()));
-                                read.store(total, Ordering::Relaxed);
-                            }
-                            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
-                            // The writer ends first and its close hangs the
-                            // master up.
-                            Err(_) if stop.load(Ordering::Relaxed) => break,
-                            Err(e) => return Err(e),
-                        }
-                    }
-                    Ok(seen)
-                })?
+                .spawn(move || read_frames(&mut master, &stop, &read, priorities.1))?
         };
         Ok(Self {
             stop,
@@ -178,6 +140,54 @@ fn at_priority(priority: u8) {
         // Refused, the probe still measures, at normal priority.
         let _ = crate::rt::set_fifo(0, priority);
     }
+}
+
+/// Writes a frame every [`PERIOD`] until `stop`; when each write returned.
+fn write_frames(slave: &mut File, stop: &AtomicBool, priority: u8) -> io::Result<Vec<Instant>> {
+    at_priority(priority);
+    let mut sent = Vec::new();
+    let frame = [0x55u8; FRAME_LEN];
+    let mut next = Instant::now();
+    while !stop.load(Ordering::Relaxed) {
+        next += PERIOD;
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+        match slave.write_all(&frame) {
+            Ok(()) => sent.push(Instant::now()),
+            // The reader may end first and close the master.
+            Err(_) if stop.load(Ordering::Relaxed) => break,
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(sent)
+}
+
+/// Reads until `stop`; the running byte total and when each read returned.
+fn read_frames(
+    master: &mut File,
+    stop: &AtomicBool,
+    read: &AtomicUsize,
+    priority: u8,
+) -> io::Result<Vec<(usize, Instant)>> {
+    at_priority(priority);
+    let mut seen = Vec::new();
+    let (mut total, mut buf) = (0usize, [0u8; 256]);
+    while !stop.load(Ordering::Relaxed) {
+        if !wait_readable(master.as_fd(), PERIOD * 10)? {
+            continue;
+        }
+        match master.read(&mut buf) {
+            Ok(n) => {
+                total += n;
+                seen.push((total, Instant::now()));
+                read.store(total, Ordering::Relaxed);
+            }
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
+            // The writer ends first and its close hangs the master up.
+            Err(_) if stop.load(Ordering::Relaxed) => break,
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(seen)
 }
 
 #[cfg(test)]

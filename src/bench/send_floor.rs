@@ -14,8 +14,9 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use super::args::BenchError;
 use super::client::Pacer;
-use super::{cpu, BenchError};
+use super::cpu;
 
 const SENDER_THREAD: &str = "bench-floor";
 const READER_THREAD: &str = "bench-sink";

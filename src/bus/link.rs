@@ -9,27 +9,12 @@ use std::time::{Duration, Instant, SystemTime};
 
 use crate::protocol::{Command, FrameBytes, Message, Reply, StreamDecoder, FRAME_LEN};
 use crate::transport::adapter::{AdapterInfo, AdapterModel};
-use crate::transport::tty::{PortNote, PortSetup, TtyPort};
-use crate::transport::Transport;
+use crate::transport::{Opener, PortNote, Transport};
 
 use super::config::{frame_time, Timing};
 use super::handle::{BusCounters, BusShared, LoggedFrame};
 use super::packets::{PacketEnds, PacketMark};
 use super::wire::Want;
-
-/// Opens the port at a baud: a tty by path for real buses.
-pub(super) type Opener =
-    Box<dyn FnMut(u32) -> io::Result<(Box<dyn Transport>, Vec<PortNote>)> + Send + 'static>;
-
-/// An opener for a tty path (USB adapter, pty, `/dev/serial/by-id` link);
-/// `rs485`: ask for the kernel's RS-485 direction control.
-pub(super) fn tty_opener(path: std::path::PathBuf, rs485: bool) -> Opener {
-    Box::new(move |baud| {
-        let setup = PortSetup { rs485 };
-        let (port, notes) = TtyPort::open_with(&path, baud, setup)?;
-        Ok((Box::new(port) as Box<dyn Transport>, notes))
-    })
-}
 
 /// Bytes read per system call; a few frames.
 const READ_BUF: usize = 256;

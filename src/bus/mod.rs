@@ -26,12 +26,9 @@
 //! The pure parts the scheduler is made of:
 //! - [`wire`]: the line model: when frames leave, when a reply is due or overdue.
 //! - [`reply_lag`]: how long after the model replies reach the host (a low quantile).
-//! - [`usb_frame_clock`]: the adapter's USB frame boundaries, inferred from reply arrivals.
 //! - [`packets`]: which reply ended a full USB packet, and when the host read it.
-//! - [`usb_guard`]: how far the pipeline trusts its writes, learnt from collisions' aftermath.
-//! - [`usb_confirm`]: confirmed writes: the port's output count says when the adapter took each.
-//! - [`usb_pipeline`]: behind a USB adapter, the polls written ahead (replies in flight),
-//!   built on the four above.
+//! - [`usb`]: behind a USB adapter, the polls written ahead (replies in flight), each
+//!   write confirmed by the port's output count or bounded by a learnt guard.
 //! - [`poll`]: control budget and poll plan.
 //! - [`coalesce`]: pending setpoints → cheapest correct frames.
 //! - [`registry`]: per-device state, online/offline, rates.
@@ -62,10 +59,7 @@ mod reply_lag;
 pub(crate) mod scheduler;
 pub(crate) mod setpoints;
 pub(crate) mod state;
-mod usb_confirm;
-mod usb_frame_clock;
-pub mod usb_guard;
-pub(crate) mod usb_pipeline;
+pub mod usb;
 pub(crate) mod verify;
 pub(crate) mod wire;
 
@@ -77,8 +71,10 @@ pub use config::{AdapterSetting, BusConfig, PollPlan, ShutdownState, StartPolicy
 pub use error::BusError;
 pub use handle::{BusHandle, BusShared, BusSnapshot, Setpoint, Source, Targets};
 
+use crate::transport::tty::tty_opener;
+use crate::transport::Opener;
 use crate::transport::Transport;
-use link::{tty_opener, Link, Opener};
+use link::Link;
 use owner::Owner;
 
 /// Prefix of every owner thread's name (`/proc/*/task/*/comm`), so tools
@@ -125,6 +121,13 @@ impl Drop for BusThread {
 /// yet is not an error: the bus starts down and keeps retrying.
 pub fn spawn_bus(cfg: BusConfig) -> Result<(BusHandle, BusThread), BusError> {
     let opener = tty_opener(cfg.path.clone(), cfg.rs485);
+    spawn(cfg, None, Some(opener))
+}
+
+/// Starts the owner of a bus whose port `opener` opens (and reopens after
+/// it was lost): a simulator's pty with its adapter model's count
+/// (`SimHandle::pty_opener`). `cfg.path` only names the port then.
+pub fn spawn_bus_with(cfg: BusConfig, opener: Opener) -> Result<(BusHandle, BusThread), BusError> {
     spawn(cfg, None, Some(opener))
 }
 

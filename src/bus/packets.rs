@@ -9,7 +9,7 @@
 //! read says which one, once that reply is decoded, and the mark goes
 //! with that reply (never looked up by its block: two polls of a block
 //! may be in flight and their replies read together). The pipeline
-//! ([`super::usb_pipeline`]) compares the read with the frame the byte
+//! ([`super::usb::pipeline`]) compares the read with the frame the byte
 //! would have left in had its poll's write made its boundary: a sentinel
 //! that slipped shows a frame later, as on adapters without a timer.
 //!

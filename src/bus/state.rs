@@ -276,7 +276,7 @@ pub struct BusSnapshot {
     /// One poll's round trip as the host lives it on that adapter, µs.
     pub transaction_us: u64,
     /// Behind a USB adapter: the pipeline's mode, guard and why it last changed.
-    pub usb_pipeline: Option<crate::bus::usb_guard::UsbPipelineView>,
+    pub usb_pipeline: Option<crate::bus::usb::guard::UsbPipelineView>,
 }
 
 impl BusSnapshot {

@@ -8,8 +8,9 @@ use std::collections::BTreeMap;
 
 use super::error::{ControlError, ControlResult};
 use super::joints::known_device;
+use super::joints::JointRef;
+use super::state::Control;
 use super::targets::{setpoint, TargetRequest};
-use super::{Control, JointRef};
 use crate::bus::Setpoint;
 
 /// One target of a batch, its joint already named.

@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use crate::control::error::{ControlError, ControlResult};
-use crate::control::Control;
+use crate::control::state::Control;
 use crate::hands::Calibration;
 
 /// A joint's calibration: `joint = sign · (device − offset_deg)`, sign −1

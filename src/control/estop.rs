@@ -47,7 +47,7 @@ pub struct BusStop {
     pub error: Option<String>,
 }
 
-#[derive(Debug, Serialize, ToSchema)]
+#[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct EstopResult {
     #[schema(example = true)]
     pub stopped: bool,

@@ -1,12 +1,11 @@
 //! One reference to a joint (bus and id) for every front-end, how a device
-//! id is checked, and how a joint named by bus and id or by hand and joint
-//! name is resolved.
+//! id is checked, and a device known on its bus; no lookup of names here
+//! (that is [`super::lookup`], above the core's state).
 
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::error::{ControlError, ControlResult};
-use super::Control;
 use crate::bus::handle::{DeviceState, LinkState};
 use crate::bus::{BusError, BusSnapshot};
 use crate::protocol::{is_device_id, MAX_DEVICE_ID, MIN_DEVICE_ID};
@@ -55,47 +54,4 @@ pub fn known_device(snap: &BusSnapshot, id: u8) -> ControlResult<&DeviceState> {
             ),
         )
     })
-}
-
-/// A joint named by `bus` and `id`, or by `hand` and `joint` (its name in
-/// a `[[hand]]`); `field` names it in errors (`joints[2]`).
-pub fn resolve_joint(
-    state: &Control,
-    field: &str,
-    bus: Option<&str>,
-    id: Option<i64>,
-    hand: Option<&str>,
-    joint: Option<&str>,
-) -> ControlResult<JointRef> {
-    match (bus, id, hand, joint) {
-        (Some(bus), Some(id), None, None) => {
-            state.bus(bus)?;
-            Ok(JointRef {
-                bus: bus.to_owned(),
-                id: device_id(&format!("{field}.id"), id)?,
-            })
-        }
-        (None, None, Some(hand), Some(name)) => {
-            let hand_of = state
-                .hands()
-                .and_then(|store| store.hand(hand))
-                .ok_or_else(|| {
-                    ControlError::not_found("unknown-hand", format!("no hand named `{hand}`"))
-                })?;
-            let joint = hand_of.joint(name).ok_or_else(|| {
-                ControlError::invalid(
-                    &format!("{field}.joint"),
-                    format!("hand `{hand}` has no joint `{name}`"),
-                )
-            })?;
-            Ok(JointRef {
-                bus: joint.bus.clone(),
-                id: joint.id,
-            })
-        }
-        _ => Err(ControlError::invalid(
-            field,
-            "name a joint by `bus` and `id`, or by `hand` and `joint`",
-        )),
-    }
 }

@@ -4,7 +4,8 @@
 
 use super::error::{ControlError, ControlResult};
 use super::moves::{self, MoveJoint, MoveRequest, MoveView};
-use super::Control;
+use crate::control::lookup::unknown_hand;
+use crate::control::state::Control;
 use crate::motion::Method;
 
 /// How a pose is reached: a move's timing and shape.
@@ -23,8 +24,8 @@ pub(crate) async fn go(
     name: &str,
     timing: PoseTiming,
 ) -> ControlResult<MoveView> {
+    let hand_of = control.hand(hand)?;
     let store = control.hands().ok_or_else(|| unknown_hand(hand))?;
-    let hand_of = store.hand(hand).ok_or_else(|| unknown_hand(hand))?;
     let pose = store.pose(hand, name).ok_or_else(|| {
         ControlError::not_found(
             "unknown-pose",
@@ -52,8 +53,4 @@ pub(crate) async fn go(
         waypoints: None,
     };
     moves::start(control, &request).await
-}
-
-fn unknown_hand(name: &str) -> ControlError {
-    ControlError::not_found("unknown-hand", format!("no hand named `{name}`"))
 }

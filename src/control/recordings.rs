@@ -12,9 +12,9 @@ use serde::Deserialize;
 use utoipa::ToSchema;
 
 use crate::bus::BusHandle;
+use crate::control::books::recordings::{view, Book, Entry, RecordingView};
 use crate::control::error::{ControlError, ControlResult};
-use crate::control::recording_book::{view, Book, Entry, RecordingView};
-use crate::control::Control;
+use crate::control::state::Control;
 use crate::record::joint_states::Labeler;
 use crate::record::mcap_file::{McapFileError, SideEncoding};
 use crate::record::metadata::JointInfo;
@@ -125,16 +125,7 @@ pub(crate) async fn start(
     state: &Arc<Control>,
     req: &RecordingRequest,
 ) -> ControlResult<RecordingView> {
-    if let Some(d) = req.duration_s {
-        if !(d.is_finite() && d > 0.0 && d <= MAX_DURATION_S) {
-            return Err(ControlError::out_of_range(
-                "duration_s",
-                d,
-                (0.0, MAX_DURATION_S),
-                "s",
-            ));
-        }
-    }
+    check_duration(req.duration_s)?;
     let buses = requested_buses(state, req)?;
     let place = Place::take(state)?;
     let id = place.id;
@@ -182,6 +173,16 @@ pub(crate) async fn start(
     tracing::info!(recording = id, file = %v.file, buses = ?v.buses, duration_s = ?v.duration_s, "recording started");
     book.entries.insert(id, entry);
     Ok(v)
+}
+
+/// `duration_s`, when given: more than 0, at most [`MAX_DURATION_S`].
+fn check_duration(duration_s: Option<f64>) -> ControlResult<()> {
+    match duration_s {
+        Some(d) if !(d.is_finite() && d > 0.0 && d <= MAX_DURATION_S) => Err(
+            ControlError::out_of_range("duration_s", d, (0.0, MAX_DURATION_S), "s"),
+        ),
+        _ => Ok(()),
+    }
 }
 
 /// A place among the recordings allowed at once while one starts, given

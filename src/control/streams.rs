@@ -8,16 +8,31 @@
 //! dashboard, say) therefore cannot drive the joint again unasked.
 
 use std::collections::BTreeMap;
+use std::time::Instant;
 
+use super::batch::{self, BatchItem};
 use super::error::{ControlError, ControlResult};
-use super::stream_book::Registration;
-use super::{Control, JointRef};
+use super::joints::JointRef;
+use super::state::Control;
 use crate::bus::authority::{Epoch, Revoked};
+use crate::bus::Source;
+use crate::control::books::streams::Registration;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Stream {
     Live(Epoch),
     Ended(Revoked),
+}
+
+/// What a teleop batch did once stored.
+#[derive(Debug, Clone)]
+pub(crate) struct Applied {
+    /// When it was stored.
+    pub accepted: Instant,
+    /// (bus name, store sequence number) per bus it touched.
+    pub writes: Vec<(String, u64)>,
+    /// Its joints, bus by bus in the batch's order.
+    pub joints: Vec<JointRef>,
 }
 
 /// One client's streams, by joint.
@@ -47,6 +62,48 @@ impl Streams {
                 sent,
             );
         }
+    }
+
+    /// The last teleop step, the same for every front-end (WebSocket
+    /// setpoints, ROS 2 joint commands, the LeRobot plugin over the
+    /// WebSocket): the batch checked whole ([`batch::resolve`]), each joint
+    /// admitted under its stream's epoch ([`Self::admit`]), then each bus's
+    /// targets stored under those epochs as written by `source`. Nothing
+    /// of a refused batch is stored.
+    pub(crate) fn apply(
+        &mut self,
+        control: &Control,
+        items: &[BatchItem],
+        restart: bool,
+        source: Source,
+    ) -> ControlResult<Applied> {
+        let per_bus = batch::resolve(control, items)?;
+        let joints: Vec<JointRef> = per_bus
+            .iter()
+            .flat_map(|(name, targets)| {
+                targets.iter().map(|(id, _)| JointRef {
+                    bus: name.clone(),
+                    id: *id,
+                })
+            })
+            .collect();
+        let mut epochs = self.admit(control, &joints, restart)?.into_iter();
+        let accepted = Instant::now();
+        let mut writes = Vec::with_capacity(per_bus.len());
+        for (name, targets) in per_bus {
+            let bus = control.bus(&name)?;
+            let under: Vec<_> = targets
+                .iter()
+                .zip(epochs.by_ref())
+                .map(|(&(id, sp), epoch)| (id, sp, epoch))
+                .collect();
+            writes.push((name, bus.set_targets_under(&under, source)));
+        }
+        Ok(Applied {
+            accepted,
+            writes,
+            joints,
+        })
     }
 
     /// The epoch each of `joints` streams under, in order: a joint's first

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
-use super::JointRef;
+use crate::control::joints::JointRef;
 
 /// Shortest and longest hold timeouts a client (or the config) may declare.
 pub const MIN_HOLD: Duration = Duration::from_millis(20);

@@ -10,8 +10,9 @@ use std::time::Duration;
 
 use tokio::time::Instant;
 
+use super::joints::JointRef;
+use super::state::Control;
 use super::teleop::{apply_policy, WatchdogPolicy};
-use super::{Control, JointRef};
 
 #[derive(Debug, Default)]
 pub struct Watchdog {

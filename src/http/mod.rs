@@ -1,7 +1,8 @@
-//! The HTTP layer: one axum application over the bus handles, built in one
-//! place ([`app`]). Handlers never touch a port; they validate, convert
-//! physical units to raw with [`crate::protocol::units`], and call a
-//! [`BusHandle`].
+//! The HTTP layer: one axum application over the control core, built in
+//! one place ([`app`]). Handlers never touch a bus: they parse, call the
+//! core ([`crate::control::Control`]), which checks and acts, and shape its
+//! answer; what they read of a bus they read through a read-only
+//! [`crate::control::bus_reader::BusReader`].
 //!
 //! The three areas below ([`api`], [`ws`], [`web`]) never import each
 //! other: what two of them need lives here, beside them, so every import
@@ -11,8 +12,9 @@
 //! - [`api`]: the REST areas (buses, devices, control, config, e-stop, health) and the OpenAPI document.
 //! - [`ws`]: the WebSocket endpoint: telemetry streams, setpoint batches, teleop watchdog.
 //! - [`web`]: the embedded dashboard (or `--web-dir` while developing).
-//! - [`state`]: [`AppState`]: the control core ([`crate::control::Control`], by `Deref`)
-//!   and what only HTTP needs: token, WebSocket hub, host/origin policy; path guards.
+//! - [`state`]: [`AppState`]: the control core the daemon shares with ROS 2
+//!   ([`crate::control::Control`]) and what only HTTP needs: token, WebSocket hub,
+//!   host/origin policy; path parameters.
 //! - [`error`]: [`ApiError`], RFC 9457 problem details; the one place that picks HTTP statuses.
 //! - [`extract`]: JSON/path/query extractors whose rejections are problems.
 //! - [`guard`]: the request guards before auth: Host (DNS rebinding), body size, browser origin.
@@ -47,8 +49,6 @@ use tower_http::trace::TraceLayer;
 
 pub use error::{ApiError, Problem};
 pub use state::AppState;
-
-use crate::bus::BusHandle;
 
 /// The whole HTTP application. Tests call it with `oneshot` or serve it on
 /// `127.0.0.1:0`; the daemon serves it on `--listen`. Set the state's
@@ -103,7 +103,7 @@ pub fn app(state: AppState) -> Router {
         .layer(TraceLayer::new_for_http().on_failure(()))
         // Outermost: shed, refused and unauthorised answers count too.
         .layer(axum::middleware::from_fn_with_state(
-            state.clone(),
+            state.requests().clone(),
             request_stats::count,
         ))
         .with_state(state)
@@ -200,10 +200,4 @@ async fn method_not_allowed(method: axum::http::Method) -> ApiError {
 fn panic_to_problem(_: Box<dyn std::any::Any + Send + 'static>) -> axum::response::Response {
     tracing::error!("request handler panicked");
     axum::response::IntoResponse::into_response(ApiError::internal())
-}
-
-/// Convenience for the daemon and tests: state from handles with no limits
-/// and no token.
-pub fn state_for(buses: Vec<BusHandle>) -> AppState {
-    AppState::new(buses, crate::control::limits::SoftLimits::default(), None)
 }

@@ -8,7 +8,7 @@
 //! a method outside HTTP's usual ones as `other`.
 
 use std::collections::BTreeMap;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use axum::extract::{MatchedPath, Request, State};
@@ -16,7 +16,6 @@ use axum::http::Method;
 use axum::middleware::Next;
 use axum::response::Response;
 
-use super::AppState;
 use crate::histogram::Histogram;
 
 /// The route label of a request no route matched.
@@ -60,7 +59,11 @@ impl RequestStats {
 
 /// Middleware: counts each answer once, when its head is ready (a
 /// WebSocket upgrade once, as its 101; a streamed body goes on after).
-pub(crate) async fn count(State(state): State<AppState>, req: Request, next: Next) -> Response {
+pub(crate) async fn count(
+    State(stats): State<Arc<RequestStats>>,
+    req: Request,
+    next: Next,
+) -> Response {
     let started = Instant::now();
     let method = method_label(req.method());
     let route = req
@@ -69,9 +72,7 @@ pub(crate) async fn count(State(state): State<AppState>, req: Request, next: Nex
         .map_or_else(|| UNMATCHED.to_owned(), |p| p.as_str().to_owned());
     let resp = next.run(req).await;
     let status = status_class(resp.status().as_u16());
-    state
-        .requests()
-        .record(method, route, status, started.elapsed());
+    stats.record(method, route, status, started.elapsed());
     resp
 }
 

@@ -15,7 +15,7 @@ use crate::bus::BusSnapshot;
 use crate::hands::Calibration;
 use crate::protocol::{units, Frame, Message, ReplyBody};
 
-use super::cdr::JointState;
+use crate::rosmsg::JointState;
 
 /// A joint's name and calibration, as the daemon's config and state give them.
 pub type Labeler = Arc<dyn Fn(&str, u8) -> (String, Calibration) + Send + Sync>;

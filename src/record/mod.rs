@@ -1,9 +1,9 @@
 //! Recordings: what the joints did, in an MCAP file that
 //! Foxglove and `ros2 bag play` (storage plugin mcap) open as is.
 //!
-//! - [`cdr`]: `sensor_msgs/msg/JointState` in CDR (shared with the ROS 2 bridge);
 //! - [`joint_states`]: a `JointState` per poll round from a bus's snapshots;
-//! - [`mcap_file`]: the file: schemas, channels, chunks, summary;
+//! - [`channels`]: a recording's channels per bus, their schemas and QoS;
+//! - [`mcap_file`]: the file: chunks, summary;
 //! - [`metadata`]: its Metadata record `jointd` (version, joints);
 //! - [`schemas`]: the JSON channels' schemas, every field typed;
 //! - [`sink`]: the stream under the MCAP writer, which keeps I/O errors
@@ -11,7 +11,7 @@
 //! - [`recorder`]: the thread that taps the buses and writes;
 //! - [`client`]: `jointd record`, which asks a running daemon for one.
 
-pub mod cdr;
+pub mod channels;
 pub mod client;
 pub mod joint_states;
 pub mod mcap_file;

@@ -8,26 +8,22 @@
 //! commands go to [`super::command_stream`]. Opening the session, and
 //! opening it again, is [`super::supervisor`]'s.
 
-use std::sync::atomic::Ordering;
 use std::sync::Arc;
-use std::time::{Duration, Instant, SystemTime};
+use std::time::Duration;
 
-use futures_util::StreamExt;
 use tokio::sync::watch;
-use tokio_stream::wrappers::errors::BroadcastStreamRecvError;
-use tokio_stream::wrappers::BroadcastStream;
 use zenoh::liveliness::LivelinessToken;
 
 use super::command_stream::{self, Dropped};
-use super::config::{Distro, NamespaceBy, Ros2Config, Ros2Mode};
+use super::config::{Distro, Ros2Config, Ros2Mode};
+use super::joint_states::{publish_joint_states, scopes};
 use super::keys::{self, Kind, NodeIdentity};
 use super::rosout::Rosout;
 use super::services::{self, Service, ServiceQueryable};
-use super::{diagnostics, grasp_stream, trajectory_stream, Ros2Stats};
-use crate::bus::BusHandle;
-use crate::bus::BusSnapshot;
+use super::{diagnostics, grasp_stream, trajectory_stream};
+use crate::control::ros2_stats::Ros2Stats;
 use crate::control::Control;
-use crate::record::joint_states::{system_ns, JointStates, Scope};
+use crate::record::joint_states::Scope;
 
 /// How long the tasks of a closing session get to finish (the command
 /// stream applies its watchdog's policy) before they are aborted.
@@ -120,63 +116,7 @@ pub(super) async fn declare(
     let (rosout, publish_logs) = Rosout::new(&cfg.node_name, publisher, gid);
     on.spawn(publish_logs);
     for (name, scope) in scopes(state, cfg) {
-        let ns = cfg.namespace(&name);
-        let (publisher, gid) = on
-            .publisher(&keys::qualified(&ns, "joint_states"), JOINT_STATE)
-            .await?;
-        let min_gap = cfg
-            .joint_states_max_hz
-            .map(|hz| Duration::from_secs_f64(1.0 / hz));
-        on.spawn(publish_joint_states(
-            state.clone(),
-            scope.clone(),
-            min_gap,
-            publisher,
-            gid,
-            stats.clone(),
-        ));
-        let topic = keys::qualified(&ns, "joint_commands");
-        let subscriber = on.subscriber(&topic, JOINT_STATE).await?;
-        let dropped = Dropped::new(rosout.clone(), topic);
-        on.spawn(command_stream::run(
-            state.clone(),
-            scope.clone(),
-            subscriber,
-            stats.clone(),
-            dropped,
-            closed.clone(),
-        ));
-        let topic = keys::qualified(&ns, "joint_trajectory");
-        let subscriber = on.subscriber(&topic, JOINT_TRAJECTORY).await?;
-        let dropped = Dropped::new(rosout.clone(), topic);
-        on.spawn(trajectory_stream::run(
-            state.clone(),
-            scope.clone(),
-            subscriber,
-            stats.clone(),
-            dropped,
-            closed.clone(),
-        ));
-        let mut services = vec![Service::Enable, Service::Estop];
-        if let Scope::Hand { name: hand, joints } = &scope {
-            declare_grasp(
-                &mut on, state, cfg, stats, &rosout, &ns, hand, joints, &closed,
-            )
-            .await?;
-            services.extend([Service::GraspRelease, Service::GraspStop]);
-        }
-        for service in services {
-            let (queryable, key) = on.service(&ns, service).await?;
-            on.spawn(services::serve(
-                state.clone(),
-                scope.clone(),
-                service,
-                queryable,
-                key,
-                closed.clone(),
-            ));
-        }
-        tracing::debug!(%name, %ns, "ROS 2: topics and services declared");
+        declare_scope(&mut on, state, cfg, stats, &rosout, &closed, &name, scope).await?;
     }
     let (publisher, gid) = on.publisher("/diagnostics", DIAGNOSTIC_ARRAY).await?;
     let period = Duration::from_secs_f64(1.0 / cfg.diagnostics_hz);
@@ -188,6 +128,90 @@ pub(super) async fn declare(
         stats.clone(),
     ));
     Ok(on.declared)
+}
+
+/// One namespace (a bus, or a hand): `joint_states` published,
+/// `joint_commands` and `joint_trajectory` taken, its services served (a
+/// hand's grasp too).
+#[allow(clippy::too_many_arguments)]
+async fn declare_scope(
+    on: &mut On<'_>,
+    state: &Arc<Control>,
+    cfg: &Ros2Config,
+    stats: &Arc<Ros2Stats>,
+    rosout: &Rosout,
+    closed: &watch::Receiver<bool>,
+    name: &str,
+    scope: Scope,
+) -> zenoh::Result<()> {
+    let ns = cfg.namespace(name);
+    let (publisher, gid) = on
+        .publisher(&keys::qualified(&ns, "joint_states"), JOINT_STATE)
+        .await?;
+    let min_gap = cfg
+        .joint_states_max_hz
+        .map(|hz| Duration::from_secs_f64(1.0 / hz));
+    on.spawn(publish_joint_states(
+        state.clone(),
+        scope.clone(),
+        min_gap,
+        publisher,
+        gid,
+        stats.clone(),
+    ));
+    let topic = keys::qualified(&ns, "joint_commands");
+    let subscriber = on.subscriber(&topic, JOINT_STATE).await?;
+    let dropped = Dropped::new(rosout.clone(), topic);
+    on.spawn(command_stream::run(
+        state.clone(),
+        scope.clone(),
+        subscriber,
+        stats.clone(),
+        dropped,
+        closed.clone(),
+    ));
+    let topic = keys::qualified(&ns, "joint_trajectory");
+    let subscriber = on.subscriber(&topic, JOINT_TRAJECTORY).await?;
+    let dropped = Dropped::new(rosout.clone(), topic);
+    on.spawn(trajectory_stream::run(
+        state.clone(),
+        scope.clone(),
+        subscriber,
+        stats.clone(),
+        dropped,
+        closed.clone(),
+    ));
+    let mut services = vec![Service::Enable, Service::Estop];
+    if let Scope::Hand { name: hand, joints } = &scope {
+        declare_grasp(on, state, cfg, stats, rosout, &ns, hand, joints, closed).await?;
+        services.extend([Service::GraspRelease, Service::GraspStop]);
+    }
+    serve_services(on, state, &scope, &ns, &services, closed).await?;
+    tracing::debug!(%name, %ns, "ROS 2: topics and services declared");
+    Ok(())
+}
+
+/// Each of `services` under the namespace `ns`, in a task of its own.
+async fn serve_services(
+    on: &mut On<'_>,
+    state: &Arc<Control>,
+    scope: &Scope,
+    ns: &str,
+    services: &[Service],
+    closed: &watch::Receiver<bool>,
+) -> zenoh::Result<()> {
+    for &service in services {
+        let (queryable, key) = on.service(ns, service).await?;
+        on.spawn(services::serve(
+            state.clone(),
+            scope.clone(),
+            service,
+            queryable,
+            key,
+            closed.clone(),
+        ));
+    }
+    Ok(())
 }
 
 /// A hand's grasp: `gripper_command` taken, `grasp_state` published
@@ -318,101 +342,3 @@ impl On<'_> {
 
 type Subscriber =
     zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
-
-fn now_ns() -> i64 {
-    i64::try_from(system_ns(SystemTime::now())).unwrap_or(i64::MAX)
-}
-
-/// What gets topics of its own: every bus, or every named hand.
-fn scopes(state: &Arc<Control>, cfg: &Ros2Config) -> Vec<(String, Scope)> {
-    match cfg.namespace_by {
-        NamespaceBy::Bus => state
-            .buses()
-            .map(|b| (b.name().to_owned(), Scope::Bus(b.name().to_owned())))
-            .collect(),
-        NamespaceBy::Hand => state
-            .hands()
-            .map(|store| {
-                store
-                    .hands()
-                    .iter()
-                    .map(|h| {
-                        let joints = h.joints.iter().map(|j| (j.bus.clone(), j.id)).collect();
-                        let scope = Scope::Hand {
-                            name: h.name.clone(),
-                            joints,
-                        };
-                        (h.name.clone(), scope)
-                    })
-                    .collect()
-            })
-            .unwrap_or_default(),
-    }
-}
-
-/// The buses a scope's joints are on.
-fn buses_of(state: &Arc<Control>, scope: &Scope) -> Vec<BusHandle> {
-    let mut names: Vec<&str> = match scope {
-        Scope::Bus(b) => vec![b.as_str()],
-        Scope::Hand { joints, .. } => joints.iter().map(|(b, _)| b.as_str()).collect(),
-    };
-    names.dedup();
-    names
-        .into_iter()
-        .filter_map(|n| state.bus(n).ok().cloned())
-        .collect()
-}
-
-async fn publish_joint_states(
-    state: Arc<Control>,
-    scope: Scope,
-    min_gap: Option<Duration>,
-    publisher: zenoh::pubsub::Publisher<'static>,
-    gid: [u8; 16],
-    stats: Arc<Ros2Stats>,
-) {
-    let buses = buses_of(&state, &scope);
-    // Every bus's frames in one stream, each with its bus's name.
-    let mut frames = futures_util::stream::select_all(buses.iter().map(|b| {
-        let name = b.name().to_owned();
-        BroadcastStream::new(b.shared().frame_tap.subscribe())
-            .map(move |f| (name.clone(), f))
-            .boxed()
-    }));
-    let mut states = JointStates::of(scope, state.joint_labeler());
-    let mut sequence = 0i64;
-    let mut last_put: Option<Instant> = None;
-    while let Some((bus, frame)) = frames.next().await {
-        let frame = match frame {
-            Ok(f) => f,
-            Err(BroadcastStreamRecvError::Lagged(n)) => {
-                stats.frames_lost.fetch_add(n, Ordering::Relaxed);
-                continue;
-            }
-        };
-        states.on_frame(&bus, &frame);
-        let snaps: Vec<Arc<BusSnapshot>> = buses.iter().map(BusHandle::snapshot).collect();
-        let views: Vec<&BusSnapshot> = snaps.iter().map(Arc::as_ref).collect();
-        let Some(msg) = states.next(&views) else {
-            continue;
-        };
-        // Over the cap: this round is skipped (the next carries newer data).
-        let now = Instant::now();
-        if min_gap.is_some_and(|gap| last_put.is_some_and(|t| now < t + gap)) {
-            continue;
-        }
-        last_put = Some(now);
-        sequence += 1;
-        let attachment = keys::attachment(sequence, now_ns(), &gid);
-        match publisher.put(msg.to_cdr()).attachment(attachment).await {
-            Ok(()) => {
-                stats.joint_states.fetch_add(1, Ordering::Relaxed);
-            }
-            Err(e) => {
-                if stats.publish_errors.fetch_add(1, Ordering::Relaxed) == 0 {
-                    tracing::warn!(%bus, error = %e, "ROS 2: a joint state could not be published (said once)");
-                }
-            }
-        }
-    }
-}

@@ -14,17 +14,14 @@ use tokio::sync::watch;
 
 use super::commands::{self, Refused};
 use super::rosout::Rosout;
-use super::Ros2Stats;
-use crate::bus::authority::Epoch;
-use crate::bus::BusHandle;
-use crate::bus::Setpoint;
-use crate::control::stream_book::{Driver, Via};
+use crate::bus::Source;
+use crate::control::books::streams::{Driver, Via};
+use crate::control::ros2_stats::Ros2Stats;
 use crate::control::streams::Streams;
 use crate::control::watchdog::{fire_policy, Watchdog};
 use crate::control::Control;
-use crate::control::JointRef;
-use crate::record::cdr::JointState;
 use crate::record::joint_states::Scope;
+use crate::rosmsg::JointState;
 
 pub(super) type Subscriber =
     zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
@@ -210,22 +207,17 @@ impl CommandStream {
                 return self.dropped(Refused::new("not-cdr", why));
             }
         };
-        let outcome = commands::setpoints(&self.state, &self.scope, &cmd)
-            .and_then(|per_bus| streamed(&self.state, &mut self.streams, per_bus, restart));
+        let outcome = commands::targets(&self.state, &self.scope, &cmd).and_then(|items| {
+            self.streams
+                .apply(&self.state, &items, restart, Source::Ros2)
+                .map_err(Refused::from)
+        });
         match outcome {
-            Ok(per_bus) => {
+            Ok(applied) => {
                 if commands::by_velocity(&cmd) {
                     self.watch_velocities(now);
                 }
-                let mut fed = Vec::new();
-                for (bus, targets) in per_bus {
-                    fed.extend(targets.iter().map(|(id, _, _)| JointRef {
-                        bus: bus.name().to_owned(),
-                        id: *id,
-                    }));
-                    bus.set_targets_under(&targets, crate::bus::Source::Ros2);
-                }
-                self.watchdog.feed(&fed, now);
+                self.watchdog.feed(&applied.joints, now);
                 self.stats.commands_applied.fetch_add(1, Ordering::Relaxed);
             }
             Err(why) => self.dropped(why),
@@ -245,39 +237,4 @@ impl CommandStream {
     fn dropped(&mut self, refused: Refused) {
         self.dropped.say(&self.stats, "a joint command", refused);
     }
-}
-
-/// One bus's targets, each under the epoch of its joint's stream.
-type StreamedTargets = (BusHandle, Vec<(u8, Setpoint, Epoch)>);
-
-/// Each bus's targets under the epochs of their joints' streams, or why
-/// the command is refused whole (a stream an e-stop, a disable, a reset, a
-/// fault or a mode change ended).
-fn streamed(
-    state: &Control,
-    streams: &mut Streams,
-    per_bus: Vec<commands::BusTargets>,
-    restart: bool,
-) -> Result<Vec<StreamedTargets>, Refused> {
-    let joints: Vec<JointRef> = per_bus
-        .iter()
-        .flat_map(|(bus, targets)| {
-            targets.iter().map(|(id, _)| JointRef {
-                bus: bus.name().to_owned(),
-                id: *id,
-            })
-        })
-        .collect();
-    let mut epochs = streams.admit(state, &joints, restart)?.into_iter();
-    Ok(per_bus
-        .into_iter()
-        .map(|(bus, targets)| {
-            let under = targets
-                .into_iter()
-                .zip(epochs.by_ref())
-                .map(|((id, sp), epoch)| (id, sp, epoch))
-                .collect();
-            (bus, under)
-        })
-        .collect())
 }

@@ -9,19 +9,15 @@
 //! [`Refused`] says why, and under which cause (what `/rosout` is
 //! throttled by).
 
-use crate::bus::{BusHandle, Setpoint};
-use crate::control::batch::{self, BatchItem};
+use crate::control::batch::BatchItem;
 use crate::control::error::ControlError;
 use crate::control::joints::known_device;
 use crate::control::targets::TargetRequest;
 use crate::control::velocity;
 use crate::control::Control;
 use crate::control::JointRef;
-use crate::record::cdr::JointState;
 use crate::record::joint_states::Scope;
-
-/// Targets for joints of one bus.
-pub(crate) type BusTargets = (BusHandle, Vec<(u8, Setpoint)>);
+use crate::rosmsg::JointState;
 
 /// Why a command (or trajectory) was refused whole: its cause, a short
 /// name (the control core's problem name where it refused), and the words.
@@ -56,7 +52,7 @@ impl From<ControlError> for Refused {
 fn candidates(state: &Control, scope: &Scope) -> Vec<(String, u8)> {
     match scope {
         Scope::Bus(bus) => state
-            .bus(bus)
+            .reader(bus)
             .map(|b| {
                 b.snapshot()
                     .devices
@@ -95,13 +91,14 @@ pub(crate) fn joints_named(
         .collect()
 }
 
-/// The setpoints `cmd` asks of the joints of `scope` (a bus, or a hand on
-/// one or more buses), grouped by bus; or why it is refused.
-pub(crate) fn setpoints(
+/// The targets `cmd` asks of the joints of `scope` (a bus, or a hand on
+/// one or more buses), each with its joint, for the core's teleop step
+/// (which checks them whole); or why it is refused.
+pub(crate) fn targets(
     state: &std::sync::Arc<Control>,
     scope: &Scope,
     cmd: &JointState,
-) -> Result<Vec<BusTargets>, Refused> {
+) -> Result<Vec<BatchItem>, Refused> {
     check_shape(cmd).map_err(|why| Refused::new("malformed", why))?;
     let joints = joints_named(state, scope, &cmd.name)?;
     let mut items = Vec::with_capacity(cmd.name.len());
@@ -118,11 +115,7 @@ pub(crate) fn setpoints(
             field,
         });
     }
-    let per_bus = batch::resolve(state, &items)?;
-    per_bus
-        .into_iter()
-        .map(|(name, targets)| Ok((state.bus(&name)?.clone(), targets)))
-        .collect()
+    Ok(items)
 }
 
 /// Whether a command asks for velocities only.
@@ -177,7 +170,7 @@ fn velocity_request(
     rad_s: f64,
     field: &str,
 ) -> Result<TargetRequest, Refused> {
-    let snap = state.bus(bus)?.snapshot();
+    let snap = state.reader(bus)?.snapshot();
     let dev = known_device(&snap, id)?;
     let limits = state.limits(bus, id);
     let cal = state.calibration(bus, id);

@@ -8,13 +8,13 @@ use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
 use super::keys;
-use super::Ros2Stats;
 use crate::bus::handle::LinkState;
 use crate::bus::BusSnapshot;
+use crate::control::ros2_stats::Ros2Stats;
 use crate::control::Control;
 use crate::protocol::status::{active_fault, fault_name, fsm_name_in};
-use crate::record::cdr::{diagnostic_array_cdr, DiagnosticStatus};
 use crate::record::joint_states::system_ns;
+use crate::rosmsg::{diagnostic_array_cdr, DiagnosticStatus};
 
 pub(super) async fn publish(
     state: Arc<Control>,
@@ -29,7 +29,7 @@ pub(super) async fn publish(
     loop {
         tick.tick().await;
         let mut status = Vec::new();
-        for bus in state.buses() {
+        for bus in state.readers() {
             let snap = bus.snapshot();
             status.push(bus_status(&snap));
             for dev in snap.devices.values() {

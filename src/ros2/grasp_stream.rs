@@ -18,12 +18,12 @@ use super::command_stream::{next_payload, Dropped, Subscriber};
 use super::commands::Refused;
 use super::gripper::{self, FingerNow};
 use super::keys;
-use super::msgs::GripperCommand;
-use super::Ros2Stats;
 use crate::control::grasp;
+use crate::control::ros2_stats::Ros2Stats;
 use crate::control::Control;
-use crate::record::cdr::diagnostic_array_cdr;
 use crate::record::joint_states::system_ns;
+use crate::rosmsg::bridge::GripperCommand;
+use crate::rosmsg::diagnostic_array_cdr;
 
 /// How often the hand's grasp is looked at for a change.
 const LOOK: Duration = Duration::from_millis(50);

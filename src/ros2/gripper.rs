@@ -15,10 +15,10 @@
 //! message has none).
 
 use super::commands::Refused;
-use super::msgs::GripperCommand;
+use crate::control::books::grasps::{FingerState, GraspView};
 use crate::control::grasp::{GraspJoint, GraspRequest};
-use crate::control::grasp_book::{FingerState, GraspView};
-use crate::record::cdr::DiagnosticStatus;
+use crate::rosmsg::bridge::GripperCommand;
+use crate::rosmsg::DiagnosticStatus;
 
 /// One finger of the hand: its joint name.
 #[derive(Debug, Clone, PartialEq)]
@@ -212,7 +212,7 @@ pub(crate) fn ended(view: &GraspView, verb: &str) -> (bool, String) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::grasp_book::{FingerGrasp, GraspSettings};
+    use crate::control::books::grasps::{FingerGrasp, GraspSettings};
 
     fn fingers(here: &[Option<f64>]) -> Vec<FingerNow> {
         (0..here.len())

@@ -15,22 +15,21 @@
 //! - [`trajectory`]: a `JointTrajectory` as a move request;
 //! - [`gripper`]: a `GripperCommand` as a grasp request, a grasp as
 //!   `DiagnosticStatus`es;
-//! - [`msgs`]: the CDR of the services' requests and responses,
-//!   `JointTrajectory` and `Log`;
 //! - [`throttle`]: each cause on `/rosout` at most once per 5 s;
 //! - [`link`]: when to try the router again and what to log about it;
 //! - with the cargo feature `ros2` (Zenoh adds minutes to a cold build):
 //!   `supervisor` (the one background task: the session, opened and opened
 //!   again), `bridge` (publishers, subscriptions and tokens on a session),
 //!   `command_stream` (one `joint_commands` subscription as a teleop stream),
-//!   `trajectory_stream` (`joint_trajectory` as moves), `grasp_stream`
+//!   `joint_states` (published per namespace), `trajectory_stream` (`joint_trajectory` as moves), `grasp_stream`
 //!   (`gripper_command` as grasps, `grasp_state`), `services`
 //!   (`enable`, `estop`, `grasp_release`, `grasp_stop`), `rosout`, `diagnostics` (per bus and per joint).
 //!
 //! The bridge never holds the daemon: without a router the buses and the
 //! API serve as ever, and `GET /api/v1/ros2` says `connected: false`.
 //!
-//! Messages are CDR ([`crate::record::cdr`], shared with MCAP recordings).
+//! Messages are CDR, encoded and decoded by [`crate::rosmsg`] (shared with
+//! MCAP recordings).
 //! Positions are rad, velocities rad/s at the output shaft, and **effort is
 //! the q-axis current in A**, in each joint's calibrated frame.
 
@@ -42,8 +41,6 @@ pub mod config;
 pub(crate) mod gripper;
 pub mod keys;
 pub mod link;
-#[cfg_attr(not(feature = "ros2"), allow(dead_code))]
-pub(crate) mod msgs;
 #[cfg_attr(not(feature = "ros2"), allow(dead_code))]
 pub(crate) mod throttle;
 #[cfg_attr(not(feature = "ros2"), allow(dead_code))]
@@ -57,6 +54,8 @@ mod command_stream;
 mod diagnostics;
 #[cfg(feature = "ros2")]
 mod grasp_stream;
+#[cfg(feature = "ros2")]
+mod joint_states;
 #[cfg(feature = "ros2")]
 mod rosout;
 #[cfg(feature = "ros2")]

@@ -11,9 +11,9 @@ use std::time::{Instant, SystemTime};
 use tokio::sync::mpsc;
 
 use super::keys;
-use super::msgs::{Log, LOG_WARN};
 use super::throttle::Throttle;
 use crate::record::joint_states::system_ns;
+use crate::rosmsg::bridge::{Log, LOG_WARN};
 
 /// Warnings waiting for the publisher; more are dropped (they are counted).
 const QUEUE: usize = 16;

@@ -3,8 +3,8 @@
 //! `<ns>/enable` (`std_srvs/srv/SetBool`: `true` enables every joint of the
 //! bus or hand, `false` disables them) and `<ns>/estop`
 //! (`std_srvs/srv/Trigger`: the e-stop of the bus, or of every bus a
-//! hand's joints are on). Both through the calls REST makes
-//! (`BusHandle::enable` / `disable`, [`crate::control::estop::stop`]).
+//! hand's joints are on). Both through the core's calls REST makes
+//! (`Control::enable` / `disable` / `estop_buses`).
 //! A hand's namespace (`namespace_by = "hand"`) has two more, both
 //! `std_srvs/srv/Trigger`: `<hand>/grasp_release` releases the hand's
 //! running grasp (each finger back to where it started, as REST's
@@ -22,11 +22,10 @@ use zenoh::query::{Query, Queryable};
 
 use super::gripper;
 use super::keys;
-use super::msgs;
-use crate::bus::{BusHandle, Targets};
 use crate::control::grasp::{self, ReleaseRequest};
 use crate::control::Control;
 use crate::record::joint_states::Scope;
+use crate::rosmsg::bridge as msgs;
 
 pub(super) type ServiceQueryable = Queryable<FifoChannelHandler<Query>>;
 
@@ -117,47 +116,43 @@ async fn reply(query: &Query, key: &str, success: bool, message: &str) {
     }
 }
 
-/// Each bus of the scope with the joints of it the scope has.
-fn groups(state: &Control, scope: &Scope) -> Vec<(BusHandle, Targets)> {
+/// Each bus of the scope with the joints of it the scope has (`None`:
+/// every joint of the bus); buses the daemon does not have are left out.
+fn groups(state: &Control, scope: &Scope) -> Vec<(String, Option<Vec<u8>>)> {
     match scope {
         Scope::Bus(name) => state
-            .bus(name)
-            .map(|b| vec![(b.clone(), Targets::All)])
+            .reader(name)
+            .map(|_| vec![(name.clone(), None)])
             .unwrap_or_default(),
         Scope::Hand { joints, .. } => {
-            let mut out: Vec<(BusHandle, Vec<u8>)> = Vec::new();
+            let mut out: Vec<(String, Vec<u8>)> = Vec::new();
             for (bus, id) in joints {
-                match out.iter_mut().find(|(b, _)| b.name() == bus) {
+                match out.iter_mut().find(|(b, _)| b == bus) {
                     Some((_, ids)) => ids.push(*id),
-                    None => {
-                        if let Ok(b) = state.bus(bus) {
-                            out.push((b.clone(), vec![*id]));
-                        }
-                    }
+                    None if state.reader(bus).is_ok() => out.push((bus.clone(), vec![*id])),
+                    None => {}
                 }
             }
-            out.into_iter()
-                .map(|(b, ids)| (b, Targets::Ids(ids)))
-                .collect()
+            out.into_iter().map(|(b, ids)| (b, Some(ids))).collect()
         }
     }
 }
 
-/// Enables (or disables) every joint of the scope, bus by bus; success
-/// when every bus confirmed it.
+/// Enables (or disables) every joint of the scope, bus by bus, through
+/// the core's calls REST makes; success when every bus confirmed it.
 async fn set_enabled(state: &Control, scope: &Scope, on: bool) -> (bool, String) {
     let verb = if on { "enabled" } else { "disabled" };
     let mut done = Vec::new();
     let mut failed = Vec::new();
-    for (bus, targets) in groups(state, scope) {
-        let what = match &targets {
-            Targets::All => format!("every joint of bus `{}`", bus.name()),
-            Targets::Ids(ids) => format!("joints {ids:?} of bus `{}`", bus.name()),
+    for (bus, ids) in groups(state, scope) {
+        let what = match &ids {
+            None => format!("every joint of bus `{bus}`"),
+            Some(ids) => format!("joints {ids:?} of bus `{bus}`"),
         };
         let result = if on {
-            bus.enable(targets).await
+            state.enable(&bus, ids).await
         } else {
-            bus.disable(targets).await
+            state.disable(&bus, ids).await
         };
         match result {
             Ok(()) => done.push(what),
@@ -179,8 +174,12 @@ async fn set_enabled(state: &Control, scope: &Scope, on: bool) -> (bool, String)
 
 /// The e-stop of the scope's buses, as REST's `POST /buses/{bus}/estop`.
 async fn estop(state: &Control, scope: &Scope) -> (bool, String) {
-    let buses: Vec<BusHandle> = groups(state, scope).into_iter().map(|(b, _)| b).collect();
-    let result = crate::control::estop::stop(buses).await;
+    let groups = groups(state, scope);
+    let names: Vec<&str> = groups.iter().map(|(b, _)| b.as_str()).collect();
+    let result = match state.estop_buses(&names).await {
+        Ok(result) => result,
+        Err(e) => return (false, format!("e-stop: {e}")),
+    };
     let each: Vec<String> = result
         .buses
         .iter()

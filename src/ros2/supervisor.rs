@@ -11,7 +11,7 @@ use std::time::Duration;
 use super::bridge::{self, Declared};
 use super::config::{Ros2Config, Ros2Mode};
 use super::link::{Link, Say};
-use super::Ros2Stats;
+use crate::control::ros2_stats::Ros2Stats;
 use crate::control::Control;
 
 /// How often an open session is checked for its router.

@@ -4,10 +4,10 @@
 //! the points' velocities and accelerations are not used). Pure.
 
 use super::commands::Refused;
-use super::msgs::JointTrajectory;
 use crate::control::moves::{MoveJoint, MoveRequest, WaypointRequest};
 use crate::control::JointRef;
 use crate::motion::Method;
+use crate::rosmsg::bridge::JointTrajectory;
 
 /// The move that runs through the trajectory's points (rad → degrees, in
 /// each joint's calibrated frame). A first point at `time_from_start` 0
@@ -65,7 +65,7 @@ pub(crate) fn move_request(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ros2::msgs::TrajectoryPoint;
+    use crate::rosmsg::bridge::TrajectoryPoint;
 
     fn point(positions: Vec<f64>, ms: i64) -> TrajectoryPoint {
         TrajectoryPoint {

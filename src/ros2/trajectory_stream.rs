@@ -14,12 +14,12 @@ use tokio::sync::watch;
 
 use super::command_stream::{next_payload, Dropped, Subscriber};
 use super::commands::{joints_named, Refused};
-use super::msgs::JointTrajectory;
 use super::trajectory::move_request;
-use super::Ros2Stats;
 use crate::control::moves;
+use crate::control::ros2_stats::Ros2Stats;
 use crate::control::Control;
 use crate::record::joint_states::Scope;
+use crate::rosmsg::bridge::JointTrajectory;
 
 /// Takes trajectories until the session closes.
 pub(super) async fn run(

@@ -52,11 +52,12 @@ use std::path::Path;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use crate::transport::adapter::{AdapterModel, FTDI_PACKET_PAYLOAD};
+use crate::transport::adapter::AdapterModel;
 use crate::transport::taken::TakeRule;
 
 use super::line::Line;
 use super::rng::Rng;
+use super::usb_clock::{RxRule, UsbClock};
 use super::write_delay::WriteDelayCell;
 
 /// A read that returns sooner than this after it was called did not wait:
@@ -65,75 +66,6 @@ const READ_BLOCKED: Duration = Duration::from_micros(20);
 /// Bytes found waiting after the line went unwatched this long are
 /// counted as undated (their stamp may be off by that much).
 const UNDATED_AFTER: Duration = Duration::from_micros(100);
-
-/// The USB (micro)frame clock: boundaries at `origin + k·period`.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct UsbClock {
-    origin: Instant,
-    period: Duration,
-}
-
-impl UsbClock {
-    /// A clock whose boundaries sit at `phase` (taken modulo the period)
-    /// after `start`.
-    pub(crate) fn new(start: Instant, period: Duration, phase: Duration) -> Self {
-        let phase_ns = phase.as_nanos() % period.as_nanos().max(1);
-        Self {
-            origin: start + Duration::from_nanos(u64::try_from(phase_ns).unwrap_or(0)),
-            period,
-        }
-    }
-
-    /// The first boundary strictly after `t`.
-    pub(crate) fn next_after(&self, t: Instant) -> Instant {
-        let p = self.period.as_nanos().max(1);
-        if t < self.origin {
-            return self.origin;
-        }
-        let since = t.duration_since(self.origin).as_nanos();
-        let k = since / p + 1;
-        self.origin + Duration::from_nanos(u64::try_from(k * p).unwrap_or(u64::MAX))
-    }
-}
-
-/// When the chip hands received bytes to the host.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct RxRule {
-    timer: Option<Duration>,
-}
-
-impl RxRule {
-    pub(crate) fn of(model: AdapterModel) -> Self {
-        Self {
-            timer: model.latency_timer(),
-        }
-    }
-
-    /// The moment the chip sends the host the next packet of the bytes it
-    /// holds, received at `times` (one instant a byte, in order): a full
-    /// packet at the frame after its last byte came in, a shorter one when
-    /// the timer has run from its first. `None` with nothing held.
-    pub(crate) fn release(&self, clock: &UsbClock, times: &[Instant]) -> Option<Instant> {
-        let first = *times.first()?;
-        Some(match self.timer {
-            Some(_) if times.len() >= FTDI_PACKET_PAYLOAD => {
-                clock.next_after(times[FTDI_PACKET_PAYLOAD - 1])
-            }
-            Some(timer) => clock.next_after(first + timer),
-            None => clock.next_after(*times.last()?),
-        })
-    }
-
-    /// How many of `held` bytes one packet takes: an FTDI chip sends at
-    /// most 62 (a 64-byte packet less its two status bytes) and keeps the
-    /// rest; the others are taken as sending all.
-    fn packet(&self, held: usize) -> usize {
-        match self.timer {
-            Some(_) => held.min(FTDI_PACKET_PAYLOAD),
-            None => held,
-        }
-    }
-}
 
 /// Device bytes held in the chip, each with the instant it came in.
 #[derive(Debug, Default)]
@@ -396,6 +328,10 @@ impl Line for AdapterLine {
 
     fn path(&self) -> Option<&Path> {
         self.inner.path()
+    }
+
+    fn taken_count(&self) -> Option<Arc<crate::transport::taken::TakenCount>> {
+        self.inner.taken_count()
     }
 
     fn take_read_at(&mut self) -> Option<Instant> {

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use crate::transport::memory::MemoryPort;
-use crate::transport::taken::TakeRule;
+use crate::transport::taken::{TakeRule, TakenCount};
 use crate::transport::{is_hangup, Transport};
 
 /// What the runner needs from the device end of a line.
@@ -62,6 +62,12 @@ pub(crate) trait Line: Send {
     /// pty cannot). A line that knows each host write's instant runs the
     /// model's `rule` at the write instead ([`Self::taken_at`]).
     fn reports_taken(&mut self, _rule: std::sync::Arc<dyn TakeRule>) {}
+    /// What a host opening this line by path reads in place of a
+    /// USB-serial driver's output count, once an adapter model reports
+    /// ([`Self::reports_taken`]; a pty's own count says 0 at once).
+    fn taken_count(&self) -> Option<std::sync::Arc<TakenCount>> {
+        None
+    }
     /// The adapter model takes `bytes` of the host's at `at`, the USB frame
     /// they leave in.
     fn took(&mut self, _at: std::time::Instant, _bytes: usize) {}

@@ -92,6 +92,7 @@ pub(crate) mod pty;
 pub(crate) mod rng;
 pub(crate) mod runner;
 pub(crate) mod stats;
+pub(crate) mod usb_clock;
 pub(crate) mod view;
 pub(crate) mod wire;
 pub(crate) mod write_delay;
@@ -112,6 +113,9 @@ pub use view::DeviceView;
 pub use write_delay::WriteDelay;
 
 use crate::transport::memory::{self, MemoryPort};
+use crate::transport::taken::TakenCount;
+use crate::transport::tty::{PortSetup, TtyPort};
+use crate::transport::{Opener, Transport};
 use engine::Engine;
 use line::{Line, MemoryLine};
 use pty::PtyLine;
@@ -172,6 +176,9 @@ struct Inner {
     ctl: Arc<Control>,
     thread: Mutex<Option<JoinHandle<()>>>,
     device_path: Option<PathBuf>,
+    /// Behind an adapter model on a pty: its count of the host bytes it
+    /// took, for the port a bus opens ([`SimHandle::pty_opener`]).
+    taken: Option<Arc<TakenCount>>,
     write_delay: write_delay::WriteDelayCell,
 }
 
@@ -193,6 +200,7 @@ impl SimHandle {
                 write_delay.clone(),
             )),
         };
+        let taken = line.taken_count();
         let engine = Arc::new(Mutex::new(Engine::new(cfg, start)?));
         let ctl = Arc::new(Control::default());
         let (e, c, rt) = (engine.clone(), ctl.clone(), cfg.realtime);
@@ -206,6 +214,7 @@ impl SimHandle {
                 ctl,
                 thread: Mutex::new(Some(thread)),
                 device_path,
+                taken,
                 write_delay,
             }),
         })
@@ -218,6 +227,25 @@ impl SimHandle {
     /// The tty a host opens (a stable link; `None` for the memory pipe).
     pub fn device_path(&self) -> Option<PathBuf> {
         self.inner.device_path.clone()
+    }
+
+    /// How a bus in this process opens the simulator's pty: by its path,
+    /// like hardware, with the adapter model's count of the bytes it took
+    /// standing in for a USB-serial driver's output count; `rs485`: ask
+    /// for the kernel's RS-485 mode, as a bus configured so would (a pty
+    /// refuses it, which is a note). `None` on the in-memory line (its
+    /// host end is the port).
+    pub fn pty_opener(&self, rs485: bool) -> Option<Opener> {
+        let path = self.inner.device_path.clone()?;
+        let taken = self.inner.taken.clone();
+        Some(Box::new(move |baud| {
+            let (port, notes) = TtyPort::open_with(&path, baud, PortSetup { rs485 })?;
+            let port = match &taken {
+                Some(count) => port.counted_by(count.clone()),
+                None => port,
+            };
+            Ok((Box::new(port) as Box<dyn Transport>, notes))
+        }))
     }
 
     /// Counters and busy time as of now.

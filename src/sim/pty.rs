@@ -40,7 +40,7 @@ pub(crate) struct PtyLine {
     link: PathBuf,
     baud: u32,
     /// Behind an adapter model: what a USB-serial driver's output count
-    /// would say, published under the link for a host in this process
+    /// would say, handed to a host in this process that opens the link
     /// (a pty's own count says 0 at once).
     taken: Option<Arc<TakenCount>>,
 }
@@ -155,8 +155,11 @@ impl Line for PtyLine {
     /// stands for the host's path to the adapter, so the count follows the
     /// model's reading ([`Line::took`]), not `_rule`.
     fn reports_taken(&mut self, _rule: Arc<dyn taken::TakeRule>) {
-        let count = self.taken.get_or_insert_with(Default::default);
-        taken::publish(&self.link, count.clone());
+        self.taken.get_or_insert_with(Default::default);
+    }
+
+    fn taken_count(&self) -> Option<Arc<TakenCount>> {
+        self.taken.clone()
     }
 
     fn took(&mut self, at: std::time::Instant, bytes: usize) {
@@ -172,9 +175,6 @@ impl Line for PtyLine {
 
 impl Drop for PtyLine {
     fn drop(&mut self) {
-        if self.taken.is_some() {
-            taken::withdraw(&self.link);
-        }
         self.pty = None;
         let _ = fs::remove_file(&self.link);
         let _ = fs::remove_dir(&self.dir);

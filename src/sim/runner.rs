@@ -91,7 +91,9 @@ const REALTIME_PRIORITY: u8 = 10;
 /// Moves this thread to SCHED_FIFO; a refusal (no privilege) is only logged.
 fn set_realtime() {
     if let Err(e) = crate::rt::set_fifo(0, REALTIME_PRIORITY) {
-        tracing::warn!("simulator: no real-time scheduling: {e}");
+        tracing::info!(
+            "simulator: real-time priority refused ({e}): its devices answer late when the host is busy"
+        );
     }
 }
 

@@ -13,6 +13,7 @@
 //! - [`note`]: what opening a port found worth telling ([`note::PortNote`]).
 //! - [`adapter`]: the USB adapter in between: its timing model and its detection from sysfs.
 //! - [`taken`]: a simulated adapter's stand-in for a USB-serial driver's output count.
+//! - [`Opener`]: how a bus opens its port, and again after it was lost.
 
 pub mod adapter;
 pub mod memory;
@@ -23,6 +24,14 @@ pub mod tty;
 
 use std::io;
 use std::time::Duration;
+
+pub use note::PortNote;
+
+/// Opens a port at a baud, and again after it was lost: a tty by path for
+/// a real bus ([`tty::tty_opener`]), a simulator's pty with its adapter's
+/// count (`SimHandle::pty_opener`).
+pub type Opener =
+    Box<dyn FnMut(u32) -> io::Result<(Box<dyn Transport>, Vec<PortNote>)> + Send + 'static>;
 
 /// A half-duplex serial line as the host sees it.
 ///

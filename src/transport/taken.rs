@@ -5,9 +5,9 @@
 //! On hardware the count is the driver's (`TIOCOUTQ`). A simulated adapter
 //! has no driver: the in-memory line keeps a [`TakenCount`] between its
 //! ends, and a simulator behind a pseudo-terminal (whose own count says 0
-//! at once) publishes one under the path the host opens ([`publish`]),
-//! where a port opened on that path in the same process finds it
-//! ([`lookup`]). A pty nobody published has none: its writes are blind.
+//! at once) hands one to the port it opens for the bus
+//! (`SimHandle::pty_opener`, [`super::tty::TtyPort::counted_by`]). A pty
+//! opened without one has none: its writes are blind.
 //!
 //! A driver's count falls when the USB transfer completes, whoever reads
 //! the bytes on the far side and whenever. Where the adapter model can say
@@ -17,9 +17,8 @@
 //! thread held off its CPU for milliseconds must not look like an adapter
 //! that stopped taking bytes.
 
-use std::collections::{HashMap, VecDeque};
-use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
 /// A simulated adapter's rule for the frame that takes host bytes
@@ -127,31 +126,6 @@ impl TakenCount {
     }
 }
 
-type Registry = Mutex<HashMap<PathBuf, Arc<TakenCount>>>;
-
-fn registry() -> MutexGuard<'static, HashMap<PathBuf, Arc<TakenCount>>> {
-    static REGISTRY: OnceLock<Registry> = OnceLock::new();
-    REGISTRY
-        .get_or_init(Registry::default)
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-}
-
-/// A simulated adapter behind the pty at `path` publishes its count.
-pub fn publish(path: &Path, count: Arc<TakenCount>) {
-    registry().insert(path.to_path_buf(), count);
-}
-
-/// The pty at `path` is gone.
-pub fn withdraw(path: &Path) {
-    registry().remove(path);
-}
-
-/// The count a simulated adapter published for `path`, if any.
-pub fn lookup(path: &Path) -> Option<Arc<TakenCount>> {
-    registry().get(path).cloned()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -172,18 +146,5 @@ mod tests {
         assert_eq!(c.unsent(now), 4);
         c.settle();
         assert_eq!(c.unsent(now), 0);
-    }
-
-    #[test]
-    fn a_published_count_is_found_by_its_path_until_withdrawn() {
-        let path = Path::new("/nonexistent/jointd-taken-test/ttySIM0");
-        assert!(lookup(path).is_none());
-        let count = Arc::new(TakenCount::default());
-        publish(path, count.clone());
-        let found = lookup(path).expect("published");
-        count.wrote(2);
-        assert_eq!(found.unsent(Instant::now()), 2);
-        withdraw(path);
-        assert!(lookup(path).is_none());
     }
 }

@@ -15,7 +15,7 @@ use std::time::Duration;
 use nix::sys::termios::{self, BaudRate, ControlFlags, FlushArg, SetArg, SpecialCharacterIndices};
 
 use super::taken::TakenCount;
-use super::Transport;
+use super::{Opener, Transport};
 
 /// The baud rates of SPEC §1 and their termios constants.
 const BAUDS: [(u32, BaudRate); 5] = [
@@ -105,8 +105,8 @@ pub struct TtyPort {
     /// A USB adapter is behind the tty: its driver's output count says
     /// when the adapter took a write ([`Transport::unsent`]).
     usb: bool,
-    /// A simulated adapter behind this pty published its stand-in for
-    /// that count ([`super::taken`]).
+    /// A simulated adapter behind this pty counts what it took, standing
+    /// in for that count ([`super::taken`]).
     simulated: Option<Arc<TakenCount>>,
 }
 
@@ -161,7 +161,7 @@ impl TtyPort {
                 path: path.to_path_buf(),
                 baud,
                 usb,
-                simulated: super::taken::lookup(path),
+                simulated: None,
             },
             notes,
         ))
@@ -170,6 +170,24 @@ impl TtyPort {
     pub fn path(&self) -> &Path {
         &self.path
     }
+
+    /// Behind a simulated adapter on a pty: its count of the bytes it took
+    /// is read in place of a USB-serial driver's output count (a pty's own
+    /// says 0 at once).
+    pub fn counted_by(mut self, count: Arc<TakenCount>) -> Self {
+        self.simulated = Some(count);
+        self
+    }
+}
+
+/// An opener for a tty path (USB adapter, pty, `/dev/serial/by-id` link);
+/// `rs485`: ask for the kernel's RS-485 direction control.
+pub fn tty_opener(path: PathBuf, rs485: bool) -> Opener {
+    Box::new(move |baud| {
+        let setup = PortSetup { rs485 };
+        let (port, notes) = TtyPort::open_with(&path, baud, setup)?;
+        Ok((Box::new(port) as Box<dyn Transport>, notes))
+    })
 }
 
 /// Linux `struct serial_struct` prefix up to `flags`, for TIOCGSERIAL/TIOCSSERIAL.
@@ -215,7 +233,7 @@ fn output_queued(fd: BorrowedFd<'_>) -> io::Result<libc::c_int> {
 /// The bytes not taken yet, from the driver's count `queued`. A count that
 /// cannot be read, or is negative, says nothing was taken, never that all
 /// was: the wait for it is bounded, and given up on it is evidence
-/// against the pipeline ([`crate::bus::usb_confirm`]), where reading it as
+/// against the pipeline ([`crate::bus::usb::confirm`]), where reading it as
 /// 0 would hold the wire as if the write had left on time.
 fn untaken(queued: io::Result<libc::c_int>) -> usize {
     queued.map_or(usize::MAX, |n| usize::try_from(n).unwrap_or(usize::MAX))
@@ -333,9 +351,8 @@ mod tests {
         let pty = openpty(None, None).expect("openpty");
         let path = slave_path(&pty.slave);
         let count = std::sync::Arc::new(TakenCount::default());
-        super::super::taken::publish(&path, count.clone());
-        let (mut port, _) = TtyPort::open(&path, 500_000).expect("open pty slave");
-        super::super::taken::withdraw(&path);
+        let (port, _) = TtyPort::open(&path, 500_000).expect("open pty slave");
+        let mut port = port.counted_by(count);
         // The simulator's end goes away: the write fails.
         drop(pty.master);
         assert!(port.write_all(&[1, 2, 3]).is_err());

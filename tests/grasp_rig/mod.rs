@@ -42,11 +42,11 @@ pub async fn hand_on(firmware: &str, objects: &[(u8, f64, f64)]) -> SimBus {
     )
     .expect("a hand");
     let store = jointd::hands::StateStore::open(hands, None).expect("store");
-    let options = jointd::http::state::StateOptions {
+    let options = jointd::control::Options {
         hands: Some(std::sync::Arc::new(store)),
         ..Default::default()
     };
-    assert!(b.server_state.set_options(options).is_ok());
+    assert!(b.server_state.control().set_options(options).is_ok());
     b.server
         .post(
             "/api/v1/buses/sim0/control/enable",

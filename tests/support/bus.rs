@@ -8,7 +8,9 @@ use std::time::Duration;
 
 use jointd::bus::firmware::FirmwareSetting;
 use jointd::bus::handle::BusEvent;
-use jointd::bus::{spawn_bus, spawn_bus_on, BusConfig, BusHandle, BusSnapshot, Setpoint, Targets};
+use jointd::bus::{
+    spawn_bus_on, spawn_bus_with, BusConfig, BusHandle, BusSnapshot, Setpoint, Targets,
+};
 use jointd::protocol::status::fsm;
 use jointd::sim::{SimConfig, SimHandle, Simulator, WireFrame};
 
@@ -111,7 +113,8 @@ fn bus_on(sim: SimHandle, baud: u32, tune: impl FnOnce(&mut BusConfig)) -> Rig {
     cfg.timing.reply_margin_us = TEST_REPLY_MARGIN_US;
     firmware_as_configured(&mut cfg, &sim);
     tune(&mut cfg);
-    let (bus, thread) = spawn_bus(cfg).expect("spawn bus");
+    let opener = sim.pty_opener(cfg.rs485).expect("a pty simulator");
+    let (bus, thread) = spawn_bus_with(cfg, opener).expect("spawn bus");
     Rig {
         sim,
         bus,
@@ -182,7 +185,8 @@ impl Rig {
         cfg.timing.reply_margin_us = TEST_REPLY_MARGIN_US;
         firmware_as_configured(&mut cfg, &self.sim);
         tune(&mut cfg);
-        let (bus, thread) = spawn_bus(cfg).expect("spawn bus");
+        let opener = self.sim.pty_opener(cfg.rs485).expect("a pty simulator");
+        let (bus, thread) = spawn_bus_with(cfg, opener).expect("spawn bus");
         self.bus = bus;
         self.thread = Some(thread);
     }

@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use jointd::bus::{spawn_bus, BusConfig, BusHandle, BusSnapshot, BusThread};
+use jointd::bus::{spawn_bus_with, BusConfig, BusHandle, BusSnapshot, BusThread};
 use jointd::control::limits::{LimitRule, SoftLimits};
 use jointd::http::AppState;
 use jointd::sim::{SimConfig, SimHandle, Simulator};
@@ -72,7 +72,8 @@ pub async fn start_sim_with(
     // A loaded 2-core machine delays pty bytes by milliseconds: give replies
     // that much slack so a late reply is not mistaken for a silent device.
     bus_cfg.timing.reply_margin_us = REPLY_MARGIN_US;
-    let (handle, thread) = spawn_bus(bus_cfg).expect("bus");
+    let opener = sim.pty_opener(bus_cfg.rs485).expect("a pty simulator");
+    let (handle, thread) = spawn_bus_with(bus_cfg, opener).expect("bus");
     let limits = SoftLimits::new(vec![LimitRule {
         ids: vec![2],
         min_deg: Some(-45.0),
@@ -81,7 +82,10 @@ pub async fn start_sim_with(
         ..Default::default()
     }])
     .expect("limits");
-    let state = AppState::new(vec![handle.clone()], limits, token.map(str::to_owned));
+    let state = AppState::new(
+        std::sync::Arc::new(jointd::control::Control::new(vec![handle.clone()], limits)),
+        token.map(str::to_owned),
+    );
     let mut server = serve(state.clone()).await;
     if let Some(t) = token {
         server = server.with_token(t);
@@ -142,12 +146,12 @@ impl SimBus {
     /// joints 1..=n enabled and running (homing and calibration need both).
     pub async fn calibrated_and_enabled(self, n: u8) -> SimBus {
         let store = jointd::hands::StateStore::open(Vec::new(), None).expect("store");
-        let options = jointd::http::state::StateOptions {
+        let options = jointd::control::Options {
             hands: Some(std::sync::Arc::new(store)),
             ..Default::default()
         };
         assert!(
-            self.server_state.set_options(options).is_ok(),
+            self.server_state.control().set_options(options).is_ok(),
             "options set twice"
         );
         let ids: Vec<u8> = (1..=n).collect();

@@ -7,13 +7,17 @@ from __future__ import annotations
 import math
 import threading
 import time
-from typing import Dict, List, Tuple
+from collections import deque
+from typing import Deque, Dict, List, Tuple
 
 
 from conftest import JOINTS, WAIT, Daemon, lerobot
 
 FPS = 30
 EPISODE_S = 3
+# How late the replay may reach a recorded state after the one before it
+# (one step of LeRobot's loop held back on a busy host, with room).
+STEP_LATE_S = 0.5
 # How long a LeRobot tool may take to start (it imports torch: 5-30 s on a
 # loaded 2-core host).
 TOOL_START_S = 180.0
@@ -44,6 +48,7 @@ class LeaderMotion:
     def __exit__(self, *exc: object) -> None:
         self.stop.set()
         self.thread.join()
+
 
 
 def streamed_by(follower: Daemon) -> List[Dict]:
@@ -158,35 +163,39 @@ def test_record_two_episodes_load_them_and_replay_one(hands, tmp_path):
     watcher.join()
     assert rc == 0, out[-3000:]
     err = replay_rms(states, track)
-    print(f"replay RMS against the recorded follower trajectory: {err:.2f} deg")
+    print(f"replay RMS against the recorded follower path: {err:.2f} deg")
     assert err <= 2.0, err
 
 
 def replay_rms(states: List[List[float]], track: List[Tuple[float, Dict[str, float]]]) -> float:
     """RMS (degrees, over joints and frames) between the follower's recorded
-    states and where it was in the replay, the replay's start found as the
-    shift (10 ms steps) that fits best: the tool's start-up time is not
-    the follower's error."""
+    states and the path it took in the replay: each recorded state matched
+    with a point of the watched path, in order and at most `STEP_LATE_S`
+    after the previous state's point, the matching that fits best. Where
+    the follower went, not when: how late LeRobot's loop ran its steps on
+    this host is timing, measured in the benchmark (docs/lerobot.md)."""
     times = [t for t, _ in track]
+    points = [[angles[n] for n in JOINTS] for _, angles in track]
+    assert points, "the follower was not watched during the replay"
 
-    def at(t: float) -> Dict[str, float]:
-        lo, hi = 0, len(times) - 1
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if times[mid] < t:
-                lo = mid + 1
-            else:
-                hi = mid
-        return track[lo][1]
+    def dist2(p: List[float], s: List[float]) -> float:
+        return sum((a - b) ** 2 for a, b in zip(p, s)) / len(s)
 
-    best = math.inf
-    start = times[0]
-    span = len(states) / FPS
-    shift = 0.0
-    while start + shift + span <= times[-1]:
-        sq = [(at(start + shift + k / FPS)[n] - s[i]) ** 2
-              for k, s in enumerate(states) for i, n in enumerate(JOINTS)]
-        best = min(best, math.sqrt(sum(sq) / len(sq)))
-        shift += 0.01
-    assert best < math.inf, "the follower was not watched for the replay's length"
-    return best
+    # cost[j]: the least sum of squares matching the states so far, the
+    # last one at point j.
+    cost = [dist2(p, states[0]) for p in points]
+    for s in states[1:]:
+        here = [dist2(p, s) for p in points]
+        # The least cost of a previous point at j or before and no more
+        # than STEP_LATE_S earlier: a window sliding over the path.
+        window: Deque[int] = deque()
+        nxt = [math.inf] * len(points)
+        for j in range(len(points)):
+            while window and cost[window[-1]] >= cost[j]:
+                window.pop()
+            window.append(j)
+            while times[j] - times[window[0]] > STEP_LATE_S:
+                window.popleft()
+            nxt[j] = here[j] + cost[window[0]]
+        cost = nxt
+    return math.sqrt(min(cost) / len(states))

@@ -31,7 +31,7 @@ use crate::bus::poll::{ControlBudget, PollPlanner};
 use crate::bus::registry::Registry;
 use crate::bus::setpoints::SetpointStore;
 use crate::bus::state::{BusEvent, WireAck};
-use crate::bus::usb_pipeline::{Inflight, UsbPipeline};
+use crate::bus::usb::pipeline::{Inflight, UsbPipeline};
 use crate::bus::wire::{ReplyWindow, Want, WireClock};
 use crate::protocol::params::Revision;
 use crate::protocol::InfoBlock;
@@ -160,14 +160,14 @@ pub(crate) struct Scheduler {
     /// Setpoints dropped for ids nobody answers to, not yet counted.
     dropped: u64,
     /// Behind a latent (USB) adapter: the frame clock and the polls
-    /// written blind (see [`crate::bus::usb_pipeline`]).
+    /// written blind (see [`crate::bus::usb::pipeline`]).
     pipeline: Option<UsbPipeline>,
     /// Writes that came too close to a USB frame boundary, not yet counted.
     ambiguous_writes: u64,
     /// How long a backed-off USB pipeline stays clean before stepping down.
     usb_recover: Duration,
     /// Changes of the USB pipeline's mode, for the owner to log and count.
-    usb_changes: Vec<crate::bus::usb_guard::Change>,
+    usb_changes: Vec<crate::bus::usb::guard::Change>,
     /// Control-only transfers since the last poll (backed off,
     /// [`CONTROL_ONLY_PER_POLL`] go between polls, if setpoints are pending).
     control_only: u32,
@@ -222,7 +222,7 @@ impl Scheduler {
 
     /// Whether the port just opened says when the adapter took a write
     /// ([`crate::transport::Transport::unsent`]): then writes are confirmed
-    /// ([`crate::bus::usb_confirm`]).
+    /// ([`crate::bus::usb::confirm`]).
     pub(crate) fn set_port_confirms(&mut self, on: bool) {
         self.port_confirms = on;
         if let Some(pipeline) = self.pipeline.as_mut() {
@@ -540,7 +540,7 @@ impl Scheduler {
         self.usb_changed(change);
     }
 
-    fn usb_changed(&mut self, change: Option<crate::bus::usb_guard::Change>) {
+    fn usb_changed(&mut self, change: Option<crate::bus::usb::guard::Change>) {
         let Some(change) = change else {
             return;
         };
@@ -563,7 +563,7 @@ impl Scheduler {
     }
 
     /// Changes of the pipeline's mode since the last call.
-    pub(crate) fn take_usb_changes(&mut self) -> Vec<crate::bus::usb_guard::Change> {
+    pub(crate) fn take_usb_changes(&mut self) -> Vec<crate::bus::usb::guard::Change> {
         std::mem::take(&mut self.usb_changes)
     }
 
@@ -571,7 +571,7 @@ impl Scheduler {
     pub(crate) fn usb_view(
         &mut self,
         now: Instant,
-    ) -> Option<crate::bus::usb_guard::UsbPipelineView> {
+    ) -> Option<crate::bus::usb::guard::UsbPipelineView> {
         let pipeline = self.pipeline.as_mut()?;
         let period = pipeline.period();
         let confirming = pipeline.confirming();

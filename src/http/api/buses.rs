@@ -18,9 +18,6 @@ use crate::http::state::{device_id, AppState, BusPath};
 use crate::protocol::frame_json::frame_to_json;
 use crate::protocol::{BaudLevel, Frame, MAX_DEVICE_ID};
 
-/// Ids per bus scan request (16 absent ids at 19200 baud take well under
-/// the handle's request timeout).
-const SCAN_CHUNK: usize = 16;
 /// Frames the log view returns when no `limit` is given.
 const DEFAULT_FRAME_LIMIT: i64 = 50;
 
@@ -81,7 +78,7 @@ pub(crate) struct BusView {
     /// mode (`pipelined`, `guarded`, `lockstep`), its guard and the
     /// reason of its last change. It backs off when collisions leave
     /// garbled bytes or lost replies, and steps back after a clean while.
-    pub usb_pipeline: Option<crate::bus::usb_guard::UsbPipelineView>,
+    pub usb_pipeline: Option<crate::bus::usb::guard::UsbPipelineView>,
 }
 
 impl BusView {
@@ -182,7 +179,11 @@ pub(crate) struct FrameLog {
 #[utoipa::path(get, path = "/api/v1/buses", tag = TAG_BUSES,
     responses((status = 200, description = "Every configured bus", body = BusList), ErrorResponses))]
 async fn list_buses(State(state): State<AppState>) -> Json<BusList> {
-    let buses = state.buses().map(|b| BusView::new(&b.snapshot())).collect();
+    let buses = state
+        .control()
+        .readers()
+        .map(|b| BusView::new(&b.snapshot()))
+        .collect();
     Json(BusList { buses })
 }
 
@@ -196,7 +197,9 @@ async fn get_bus(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<BusPath>,
 ) -> ApiResult<Json<BusView>> {
-    Ok(Json(BusView::new(&state.bus(&p.bus)?.snapshot())))
+    Ok(Json(BusView::new(
+        &state.control().reader(&p.bus)?.snapshot(),
+    )))
 }
 
 /// Scan an id range: poll INFO_01 of each id; devices that answer join the bus.
@@ -211,7 +214,7 @@ async fn scan(
     ApiPath(p): ApiPath<BusPath>,
     ApiJson(req): ApiJson<ScanRequest>,
 ) -> ApiResult<Json<ScanResult>> {
-    let bus = state.bus(&p.bus)?;
+    state.control().reader(&p.bus)?;
     let first = device_id("first", req.first)?;
     let last = device_id("last", req.last)?;
     if first > last {
@@ -222,14 +225,7 @@ async fn scan(
             "",
         ));
     }
-    let mut found = Vec::new();
-    // In chunks: each bus request must finish within the handle's request
-    // timeout (a full-range scan at a low baud would not), and other
-    // requests get the wire between chunks.
-    for chunk_first in (first..=last).step_by(SCAN_CHUNK) {
-        let chunk_last = chunk_first.saturating_add(SCAN_CHUNK as u8 - 1).min(last);
-        found.extend(bus.scan(chunk_first, chunk_last).await?);
-    }
+    let found = state.control().scan(&p.bus, first, last).await?;
     Ok(Json(ScanResult { bus: p.bus, found }))
 }
 
@@ -247,7 +243,7 @@ async fn set_baud(
     ApiPath(p): ApiPath<BusPath>,
     ApiJson(req): ApiJson<BaudRequest>,
 ) -> ApiResult<Json<BaudRequest>> {
-    let bus = state.bus(&p.bus)?;
+    state.control().reader(&p.bus)?;
     let level = u32::try_from(req.baud)
         .ok()
         .and_then(BaudLevel::from_baud)
@@ -265,7 +261,7 @@ async fn set_baud(
                 ),
             )
         })?;
-    bus.set_baud(level.baud()).await?;
+    state.control().set_baud(&p.bus, level).await?;
     Ok(Json(BaudRequest {
         baud: i64::from(level.baud()),
     }))
@@ -283,7 +279,7 @@ async fn frames(
     ApiPath(p): ApiPath<BusPath>,
     ApiQuery(q): ApiQuery<FramesQuery>,
 ) -> ApiResult<Json<FrameLog>> {
-    let bus = state.bus(&p.bus)?;
+    let bus = state.control().reader(&p.bus)?;
     let limit = q.limit.unwrap_or(DEFAULT_FRAME_LIMIT);
     if !(1..=FRAME_LOG_LEN as i64).contains(&limit) {
         return Err(ApiError::out_of_range(

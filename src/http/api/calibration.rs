@@ -38,7 +38,7 @@ async fn get_calibration(
     ApiPath(p): ApiPath<DevicePath>,
 ) -> ApiResult<Json<CalibrationView>> {
     let (bus, id) = p.resolve(&state)?;
-    let cal = state.calibration(bus.name(), id);
+    let cal = state.control().calibration(bus.name(), id);
     Ok(Json(CalibrationView::new(bus.name(), id, &cal)))
 }
 
@@ -63,7 +63,7 @@ async fn put_calibration(
     let (bus, id) = p.resolve(&state)?;
     known_device(&bus.snapshot(), id)?;
     let cal = req.checked()?;
-    calibration::save(&state, bus.name(), id, cal)?;
+    calibration::save(state.control(), bus.name(), id, cal)?;
     Ok(Json(CalibrationView::new(bus.name(), id, &cal)))
 }
 
@@ -80,8 +80,8 @@ async fn delete_calibration(
     ApiPath(p): ApiPath<DevicePath>,
 ) -> ApiResult<Json<CalibrationView>> {
     let (bus, id) = p.resolve(&state)?;
-    let was = state.calibration(bus.name(), id);
-    calibration::save(&state, bus.name(), id, Calibration::IDENTITY)?;
+    let was = state.control().calibration(bus.name(), id);
+    calibration::save(state.control(), bus.name(), id, Calibration::IDENTITY)?;
     Ok(Json(CalibrationView::new(bus.name(), id, &was)))
 }
 
@@ -120,6 +120,7 @@ async fn hand_calibration(
     ApiPath(p): ApiPath<HandPath>,
 ) -> ApiResult<Json<HandCalibration>> {
     let hand = state
+        .control()
         .hands()
         .and_then(|store| store.hand(&p.hand))
         .ok_or_else(|| {
@@ -130,7 +131,11 @@ async fn hand_calibration(
         .iter()
         .map(|j| JointCalibration {
             joint: j.name.clone(),
-            calibration: CalibrationView::new(&j.bus, j.id, &state.calibration(&j.bus, j.id)),
+            calibration: CalibrationView::new(
+                &j.bus,
+                j.id,
+                &state.control().calibration(&j.bus, j.id),
+            ),
         })
         .collect();
     Ok(Json(HandCalibration {

@@ -17,10 +17,11 @@ use super::config_params::{
 };
 use super::config_schema::{ConfigDevice, ConfigView, ParamTable};
 use super::openapi::{ErrorResponses, TAG_CONFIG};
-use crate::bus::{BusError, BusHandle};
+use crate::bus::BusError;
+use crate::control::Control;
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
-use crate::http::state::{device_id, known_device, AppState, DevicePath};
+use crate::http::state::{known_device, AppState, DevicePath};
 use crate::http::telemetry::{hex, revision_of};
 use crate::protocol::params::{self, Revision};
 use crate::protocol::{BaudLevel, ConfigParam, Info04, InfoBlock};
@@ -76,10 +77,10 @@ pub(crate) struct IdResult {
 }
 
 /// Reads every INFO block a config read needs, in SPEC order.
-async fn read_blocks(bus: &BusHandle, id: u8) -> ApiResult<Blocks> {
+async fn read_blocks(control: &Control, bus: &str, id: u8) -> ApiResult<Blocks> {
     let mut blocks = Blocks::default();
     for block in blocks_to_read() {
-        let reply = bus.read_info(id, block).await?;
+        let reply = control.read_info(bus, id, block).await?;
         if reply.index != block.index() {
             return Err(BusError::UnexpectedReply(format!(
                 "device {id} answered a parameter read with another block"
@@ -111,10 +112,13 @@ async fn read_config(
 ) -> ApiResult<Json<ConfigView>> {
     let (bus, id) = p.resolve(&state)?;
     let revision = revision_of(known_device(&bus.snapshot(), id)?);
-    let mut blocks = read_blocks(bus, id).await?;
+    let mut blocks = read_blocks(state.control(), bus.name(), id).await?;
     // The serial number, where the firmware has one (rev 2.0.8).
     let serial = if revision == Some(Revision::V2_0_8) {
-        let reply = bus.read_info(id, InfoBlock::Info07).await?;
+        let reply = state
+            .control()
+            .read_info(bus.name(), id, InfoBlock::Info07)
+            .await?;
         blocks.0.push((InfoBlock::Info07, reply.data));
         Some(hex(&reply.data))
     } else {
@@ -179,7 +183,7 @@ async fn patch_config(
         check_offered(param, id, dev)?;
         writes.push((param, value, to_config(param, value)?));
     }
-    let (out, failed) = write_in_turn(bus, id, writes).await;
+    let (out, failed) = write_in_turn(state.control(), bus.name(), id, writes).await?;
     match patch_problem(failed, &out) {
         Some(err) => Err(err),
         None => Ok(Json(PatchResult {
@@ -193,10 +197,11 @@ async fn patch_config(
 /// Writes each parameter in turn; an unverified one does not stop the
 /// rest, any other failure does (the rest are never sent).
 async fn write_in_turn(
-    bus: &BusHandle,
+    control: &Control,
+    bus: &str,
     id: u8,
     writes: Vec<(Param, f64, ConfigParam)>,
-) -> (PatchOutcomes, Option<ApiError>) {
+) -> ApiResult<(PatchOutcomes, Option<ApiError>)> {
     let mut out = PatchOutcomes::default();
     let mut failed: Option<ApiError> = None;
     for (param, value, config) in writes {
@@ -206,7 +211,7 @@ async fn write_in_turn(
                 .push(NotWritten::new(param, value, raw, NOT_SENT.into()));
             continue;
         }
-        match bus.write_config(id, config).await {
+        match control.write_config(bus, id, config).await? {
             Ok(outcome) => out.written.push(Written::new(param, value, &outcome)),
             Err(BusError::Unverified { reason, .. }) => {
                 out.unverified
@@ -227,7 +232,7 @@ async fn write_in_turn(
             }
         }
     }
-    (out, failed)
+    Ok((out, failed))
 }
 
 /// The problem a PATCH answers unless everything was confirmed: the
@@ -264,8 +269,7 @@ async fn persist(
     ApiPath(p): ApiPath<DevicePath>,
 ) -> ApiResult<Json<PersistResult>> {
     let (bus, id) = p.resolve(&state)?;
-    known_device(&bus.snapshot(), id)?;
-    let outcome = bus.write_flash(id).await?;
+    let outcome = state.control().persist(bus.name(), id).await?;
     Ok(Json(PersistResult {
         bus: bus.name().to_owned(),
         id,
@@ -287,27 +291,10 @@ async fn change_id(
     ApiJson(req): ApiJson<IdRequest>,
 ) -> ApiResult<Json<IdResult>> {
     let (bus, id) = p.resolve(&state)?;
-    let new_id = device_id("new_id", req.new_id)?;
-    let snap = bus.snapshot();
-    known_device(&snap, id)?;
-    if new_id == id {
-        return Err(ApiError::invalid(
-            "new_id",
-            format!("device already has id {id}"),
-        ));
-    }
-    if snap.devices.contains_key(&new_id) {
-        return Err(ApiError::conflict(
-            "id-in-use",
-            "Id already in use",
-            format!(
-                "id {new_id} is taken on bus {}: two devices with one id collide",
-                snap.name
-            ),
-        )
-        .with_field("new_id"));
-    }
-    let outcome = bus.set_id(id, new_id).await?;
+    let (new_id, outcome) = state
+        .control()
+        .change_id(bus.name(), id, req.new_id)
+        .await?;
     Ok(Json(IdResult {
         bus: bus.name().to_owned(),
         old_id: id,

@@ -12,12 +12,16 @@ use utoipa::{IntoParams, ToSchema};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::config_outcome::{NotWritten, PatchOutcomes, Unverified, Written};
+use super::config_params::Param;
 use super::config_params::{check_offered, to_config, ConfigPatch};
 use super::openapi::{ErrorResponses, TAG_CONFIG};
-use crate::bus::BusError;
+use crate::bus::handle::{DeviceState, WriteOutcome};
+use crate::bus::{BusError, BusSnapshot};
+use crate::control::Control;
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath, ApiQuery};
 use crate::http::state::{AppState, BusPath};
+use crate::protocol::ConfigParam;
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new().routes(routes!(patch_bus_config))
@@ -102,7 +106,7 @@ async fn patch_bus_config(
     ApiQuery(q): ApiQuery<BusPatchQuery>,
     ApiJson(patch): ApiJson<ConfigPatch>,
 ) -> ApiResult<Json<BusPatchResult>> {
-    let bus = state.bus(&p.bus)?;
+    let bus = state.control().reader(&p.bus)?;
     let snap = bus.snapshot();
     if let crate::bus::handle::LinkState::Down { reason, .. } = &snap.link {
         return Err(BusError::Down {
@@ -111,39 +115,9 @@ async fn patch_bus_config(
         }
         .into());
     }
-    let mut skipped = Vec::new();
-    let mut targets = Vec::new();
-    for dev in snap.devices.values() {
-        let managed = state.managed(&snap.name, dev.dev_id);
-        match (dev.online, managed || q.include_unmanaged) {
-            (false, _) => skipped.push(SkippedDevice {
-                id: dev.dev_id,
-                reason: "offline",
-            }),
-            (true, false) => skipped.push(SkippedDevice {
-                id: dev.dev_id,
-                reason: "unmanaged",
-            }),
-            (true, true) => targets.push(dev),
-        }
-    }
+    let (targets, skipped) = addressed(&state, &snap, q.include_unmanaged);
     if targets.is_empty() {
-        let unmanaged = skipped.iter().filter(|s| s.reason == "unmanaged").count();
-        let hint = if unmanaged > 0 {
-            format!(
-                " ({unmanaged} online device(s) not managed: include_unmanaged=true writes them)"
-            )
-        } else {
-            String::new()
-        };
-        return Err(ApiError::conflict(
-            "no-device-online",
-            "No device online",
-            format!(
-                "no managed device of bus {} is online: nothing to configure{hint}",
-                snap.name
-            ),
-        ));
+        return Err(nothing_online(&snap.name, &skipped));
     }
     let mut writes = Vec::new();
     for (param, value) in patch.entries() {
@@ -153,62 +127,7 @@ async fn patch_bus_config(
         writes.push((param, value, to_config(param, value)?));
     }
     let ids: Vec<u8> = targets.iter().map(|d| d.dev_id).collect();
-    let mut devices: Vec<DevicePatch> = ids
-        .iter()
-        .map(|&id| DevicePatch {
-            id,
-            outcomes: PatchOutcomes::default(),
-        })
-        .collect();
-    let mut methods = Vec::new();
-    let mut failed: Option<ApiError> = None;
-    for (param, value, config) in writes {
-        let raw = config.index_value().1;
-        if failed.is_some() {
-            for d in &mut devices {
-                let why = "not sent: the bus failed an earlier parameter".to_string();
-                d.outcomes
-                    .not_written
-                    .push(NotWritten::new(param, value, raw, why));
-            }
-            continue;
-        }
-        let outcome = match bus.write_all(ids.clone(), config).await {
-            Ok(o) => o,
-            Err(e) => {
-                let err = ApiError::from(e);
-                for d in &mut devices {
-                    let why = err.problem.detail.clone();
-                    d.outcomes
-                        .not_written
-                        .push(NotWritten::new(param, value, raw, why));
-                }
-                failed = Some(err.with_field(param.key));
-                continue;
-            }
-        };
-        methods.push(outcome.one_frame);
-        for (id, result) in outcome.per_device {
-            let Some(d) = devices.iter_mut().find(|d| d.id == id) else {
-                continue;
-            };
-            match result {
-                Ok(w) => d.outcomes.written.push(Written::new(param, value, &w)),
-                Err(BusError::Unverified { reason, .. }) => d
-                    .outcomes
-                    .unverified
-                    .push(Unverified::new(param, value, raw, reason)),
-                Err(e) => {
-                    let err = ApiError::from(e);
-                    let why = err.problem.detail.clone();
-                    d.outcomes
-                        .not_written
-                        .push(NotWritten::new(param, value, raw, why));
-                    failed.get_or_insert(err.with_field(param.key));
-                }
-            }
-        }
-    }
+    let (devices, methods, failed) = write_each(state.control(), &snap.name, &ids, writes).await;
     let result = BusPatchResult {
         bus: snap.name.clone(),
         method: match (methods.is_empty(), methods.iter().all(|m| *m)) {
@@ -228,6 +147,133 @@ async fn patch_bus_config(
         Some(err) => Err(err),
         None => Ok(Json(result)),
     }
+}
+
+/// The devices the PATCH writes (online, managed unless `include_unmanaged`),
+/// and every other device known on the bus with why it is left out.
+fn addressed<'a>(
+    state: &AppState,
+    snap: &'a BusSnapshot,
+    include_unmanaged: bool,
+) -> (Vec<&'a DeviceState>, Vec<SkippedDevice>) {
+    let mut skipped = Vec::new();
+    let mut targets = Vec::new();
+    for dev in snap.devices.values() {
+        let managed = state.control().managed(&snap.name, dev.dev_id);
+        match (dev.online, managed || include_unmanaged) {
+            (false, _) => skipped.push(SkippedDevice {
+                id: dev.dev_id,
+                reason: "offline",
+            }),
+            (true, false) => skipped.push(SkippedDevice {
+                id: dev.dev_id,
+                reason: "unmanaged",
+            }),
+            (true, true) => targets.push(dev),
+        }
+    }
+    (targets, skipped)
+}
+
+/// 409 when no device is left to write, saying how to include the unmanaged.
+fn nothing_online(bus: &str, skipped: &[SkippedDevice]) -> ApiError {
+    let unmanaged = skipped.iter().filter(|s| s.reason == "unmanaged").count();
+    let hint = if unmanaged > 0 {
+        format!(" ({unmanaged} online device(s) not managed: include_unmanaged=true writes them)")
+    } else {
+        String::new()
+    };
+    ApiError::conflict(
+        "no-device-online",
+        "No device online",
+        format!("no managed device of bus {bus} is online: nothing to configure{hint}"),
+    )
+}
+
+/// Writes each parameter to every device in turn (the bus picks one frame
+/// to 0xFF or one per device); after a failure the rest are not sent.
+/// Each device's outcomes, whether each parameter went in one frame, the
+/// failure that stopped it.
+async fn write_each(
+    control: &Control,
+    bus: &str,
+    ids: &[u8],
+    writes: Vec<(Param, f64, ConfigParam)>,
+) -> (Vec<DevicePatch>, Vec<bool>, Option<ApiError>) {
+    let mut devices: Vec<DevicePatch> = ids
+        .iter()
+        .map(|&id| DevicePatch {
+            id,
+            outcomes: PatchOutcomes::default(),
+        })
+        .collect();
+    let mut methods = Vec::new();
+    let mut failed: Option<ApiError> = None;
+    for (param, value, config) in writes {
+        let raw = config.index_value().1;
+        if failed.is_some() {
+            let why = "not sent: the bus failed an earlier parameter".to_string();
+            not_written(&mut devices, param, value, raw, &why);
+            continue;
+        }
+        match control.write_all(bus, ids.to_vec(), config).await {
+            Ok(outcome) => {
+                methods.push(outcome.one_frame);
+                let stopped = record(&mut devices, param, value, raw, outcome.per_device);
+                if let Some(err) = stopped {
+                    failed.get_or_insert(err);
+                }
+            }
+            Err(e) => {
+                let err = ApiError::from(e);
+                not_written(&mut devices, param, value, raw, &err.problem.detail);
+                failed = Some(err.with_field(param.key));
+            }
+        }
+    }
+    (devices, methods, failed)
+}
+
+/// Every device: `param` not written, with why.
+fn not_written(devices: &mut [DevicePatch], param: Param, value: f64, raw: u16, why: &str) {
+    for d in devices {
+        d.outcomes
+            .not_written
+            .push(NotWritten::new(param, value, raw, why.to_string()));
+    }
+}
+
+/// Each device's answer to one parameter; the first failure (other than
+/// unverified), as the PATCH's problem.
+fn record(
+    devices: &mut [DevicePatch],
+    param: Param,
+    value: f64,
+    raw: u16,
+    per_device: Vec<(u8, Result<WriteOutcome, BusError>)>,
+) -> Option<ApiError> {
+    let mut failed = None;
+    for (id, result) in per_device {
+        let Some(d) = devices.iter_mut().find(|d| d.id == id) else {
+            continue;
+        };
+        match result {
+            Ok(w) => d.outcomes.written.push(Written::new(param, value, &w)),
+            Err(BusError::Unverified { reason, .. }) => d
+                .outcomes
+                .unverified
+                .push(Unverified::new(param, value, raw, reason)),
+            Err(e) => {
+                let err = ApiError::from(e);
+                let why = err.problem.detail.clone();
+                d.outcomes
+                    .not_written
+                    .push(NotWritten::new(param, value, raw, why));
+                failed.get_or_insert(err.with_field(param.key));
+            }
+        }
+    }
+    failed
 }
 
 /// 200 only when every device confirmed every parameter; else the first

@@ -14,8 +14,8 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use utoipa::ToSchema;
 
 use crate::bus::handle::DeviceState;
+use crate::control::revision::require_revision;
 use crate::http::error::{ApiError, ApiResult};
-use crate::http::state::require_revision;
 use crate::http::telemetry::revision_of;
 use crate::protocol::params::{self, ParamRow, Revision};
 use crate::protocol::units::UnitError;
@@ -83,7 +83,7 @@ pub(crate) fn check_offered(p: Param, id: u8, dev: &DeviceState) -> ApiResult<()
         return Ok(());
     }
     let what = format!("{} (index {})", p.key, p.index);
-    require_revision(p.key, &what, p.since, id, dev)
+    Ok(require_revision(p.key, &what, p.since, id, dev)?)
 }
 
 /// A unit error as a 422; whole-number rows say so in words.

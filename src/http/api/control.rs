@@ -9,16 +9,12 @@ use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
-use crate::bus::handle::DeviceState;
-use crate::bus::{BusHandle, BusSnapshot, Setpoint, Targets};
-use crate::control::targets::{ensure_enabled, setpoint, wait_on_wire, TargetRequest};
-use crate::http::error::{ApiError, ApiResult};
+use crate::control::actions::TargetsSet;
+use crate::control::targets::TargetRequest;
+use crate::http::error::ApiResult;
 use crate::http::extract::{ApiJson, ApiPath};
-use crate::http::state::{
-    device_id, known_device, require_revision, AppState, BusPath, DevicePath,
-};
+use crate::http::state::{AppState, BusPath, DevicePath};
 use crate::http::telemetry::{firmware_of, TargetView};
-use crate::protocol::params::Revision;
 use crate::protocol::{CtrlMode, JogDir};
 
 /// What a target request did.
@@ -103,14 +99,6 @@ impl From<ModeName> for CtrlMode {
     }
 }
 
-/// Current mode exists on rev 2.0.8 firmware only.
-fn check_mode(mode: CtrlMode, id: u8, dev: &DeviceState) -> ApiResult<()> {
-    if mode != CtrlMode::Current {
-        return Ok(());
-    }
-    require_revision("mode", "current mode", Revision::V2_0_8, id, dev)
-}
-
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct ModeRequest {
@@ -159,73 +147,39 @@ pub(crate) struct GroupTargetRequest {
     pub targets: Vec<GroupTarget>,
 }
 
-/// The ids of a group request, each known on the bus; `None` = all.
-fn group_ids(snap: &BusSnapshot, ids: Option<Vec<i64>>) -> ApiResult<Option<Vec<u8>>> {
-    let Some(ids) = ids else { return Ok(None) };
-    if ids.is_empty() {
-        return Err(ApiError::invalid(
-            "ids",
-            "ids is empty: omit it to address every device",
-        ));
-    }
-    let mut out = Vec::with_capacity(ids.len());
-    for (i, id) in ids.into_iter().enumerate() {
-        let id = device_id(&format!("ids[{i}]"), id)?;
-        if out.contains(&id) {
-            return Err(ApiError::invalid(
-                &format!("ids[{i}]"),
-                format!("joint {id} appears twice"),
-            ));
-        }
-        known_device(snap, id)?;
-        out.push(id);
-    }
-    Ok(Some(out))
-}
-
-fn targets_of(ids: &Option<Vec<u8>>) -> Targets {
-    ids.clone().map_or(Targets::All, Targets::Ids)
-}
-
 fn done(
-    bus: &BusHandle,
+    bus: &str,
     action: &'static str,
     ids: Option<Vec<u8>>,
     value: Option<&'static str>,
 ) -> Json<ActionDone> {
     Json(ActionDone {
-        bus: bus.name().to_owned(),
+        bus: bus.to_owned(),
         action,
         ids,
         value,
     })
 }
 
-/// Stores targets for several joints in one write (one coalesced frame where
-/// the bus can) and reports whether they reached the wire.
-async fn apply_targets(
-    state: &AppState,
-    bus: &BusHandle,
-    snap: &BusSnapshot,
-    targets: Vec<(u8, Setpoint)>,
-) -> (StatusCode, Json<TargetAck>) {
-    let seq = bus.set_targets(&targets);
-    let on_wire = wait_on_wire(bus, seq).await;
-    let views = targets
+/// The answer to targets stored: 200 once on the wire, 202 while stored
+/// for the next control frame; each target as the joint reads it.
+fn target_ack(state: &AppState, bus: &str, set: TargetsSet) -> (StatusCode, Json<TargetAck>) {
+    let views = set
+        .setpoints
         .into_iter()
         .map(|(id, sp)| {
-            let dev = snap.devices.get(&id);
+            let dev = set.snapshot.devices.get(&id);
             let fw = dev
                 .map(firmware_of)
                 .unwrap_or(crate::http::telemetry::ASSUMED_FIRMWARE);
-            let cal = state.calibration(bus.name(), id);
+            let cal = state.control().calibration(bus, id);
             JointTarget {
                 id,
                 target: TargetView::new(sp, fw, &cal, dev.and_then(|d| d.mode)),
             }
         })
         .collect();
-    let status = if on_wire {
+    let status = if set.on_wire {
         StatusCode::OK
     } else {
         StatusCode::ACCEPTED
@@ -233,9 +187,9 @@ async fn apply_targets(
     (
         status,
         Json(TargetAck {
-            bus: bus.name().to_owned(),
-            seq,
-            on_wire,
+            bus: bus.to_owned(),
+            seq: set.seq,
+            on_wire: set.on_wire,
             targets: views,
         }),
     )
@@ -252,10 +206,9 @@ async fn enable_one(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<DevicePath>,
 ) -> ApiResult<Json<ActionDone>> {
-    let (bus, id) = p.resolve(&state)?;
-    known_device(&bus.snapshot(), id)?;
-    bus.enable(Targets::Ids(vec![id])).await?;
-    Ok(done(bus, "enable", Some(vec![id]), None))
+    let id = state.control().joint_id(&p.bus, p.id)?;
+    state.control().enable(&p.bus, Some(vec![id])).await?;
+    Ok(done(&p.bus, "enable", Some(vec![id]), None))
 }
 
 /// Disable one device (release the motor).
@@ -268,10 +221,9 @@ async fn disable_one(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<DevicePath>,
 ) -> ApiResult<Json<ActionDone>> {
-    let (bus, id) = p.resolve(&state)?;
-    known_device(&bus.snapshot(), id)?;
-    bus.disable(Targets::Ids(vec![id])).await?;
-    Ok(done(bus, "disable", Some(vec![id]), None))
+    let id = state.control().joint_id(&p.bus, p.id)?;
+    state.control().disable(&p.bus, Some(vec![id])).await?;
+    Ok(done(&p.bus, "disable", Some(vec![id]), None))
 }
 
 /// Set one joint's target (position in degrees with a speed limit in °/s,
@@ -291,13 +243,11 @@ async fn target_one(
     ApiPath(p): ApiPath<DevicePath>,
     ApiJson(req): ApiJson<TargetRequest>,
 ) -> ApiResult<(StatusCode, Json<TargetAck>)> {
-    let (bus, id) = p.resolve(&state)?;
-    let snap = bus.snapshot();
-    let dev = known_device(&snap, id)?;
-    let cal = state.calibration(&snap.name, id);
-    let sp = setpoint(dev, &state.limits(&snap.name, id), &cal, &req, "")?;
-    ensure_enabled(bus, dev, "a target").await?;
-    Ok(apply_targets(&state, bus, &snap, vec![(id, sp)]).await)
+    let set = state
+        .control()
+        .set_targets(&p.bus, &[(p.id, req, String::new())])
+        .await?;
+    Ok(target_ack(&state, &p.bus, set))
 }
 
 /// Switch one device between position and speed mode (not saved by the device).
@@ -312,12 +262,13 @@ async fn mode_one(
     ApiPath(p): ApiPath<DevicePath>,
     ApiJson(req): ApiJson<ModeRequest>,
 ) -> ApiResult<Json<ActionDone>> {
-    let (bus, id) = p.resolve(&state)?;
-    let snap = bus.snapshot();
+    let id = state.control().joint_id(&p.bus, p.id)?;
     let mode = CtrlMode::from(req.mode);
-    check_mode(mode, id, known_device(&snap, id)?)?;
-    bus.set_mode(id, mode).await?;
-    Ok(done(bus, "mode", Some(vec![id]), Some(mode.name())))
+    state
+        .control()
+        .set_mode(&p.bus, Some(vec![id]), mode)
+        .await?;
+    Ok(done(&p.bus, "mode", Some(vec![id]), Some(mode.name())))
 }
 
 /// Jog an enabled device: `cw` +5°, `ccw` −3°; it re-zeroes afterwards. 409 while disabled.
@@ -332,15 +283,13 @@ async fn jog(
     ApiPath(p): ApiPath<DevicePath>,
     ApiJson(req): ApiJson<JogRequest>,
 ) -> ApiResult<Json<ActionDone>> {
-    let (bus, id) = p.resolve(&state)?;
-    let snap = bus.snapshot();
-    ensure_enabled(bus, known_device(&snap, id)?, "a jog").await?;
+    let id = state.control().joint_id(&p.bus, p.id)?;
     let (dir, name) = match req.direction {
         JogDirection::Cw => (JogDir::Cw, "cw"),
         JogDirection::Ccw => (JogDir::Ccw, "ccw"),
     };
-    bus.jog(id, dir).await?;
-    Ok(done(bus, "jog", Some(vec![id]), Some(name)))
+    state.control().jog(&p.bus, id, dir).await?;
+    Ok(done(&p.bus, "jog", Some(vec![id]), Some(name)))
 }
 
 /// Make the current output position the new 0°.
@@ -353,10 +302,9 @@ async fn rezero(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<DevicePath>,
 ) -> ApiResult<Json<ActionDone>> {
-    let (bus, id) = p.resolve(&state)?;
-    known_device(&bus.snapshot(), id)?;
-    bus.rezero(id).await?;
-    Ok(done(bus, "rezero", Some(vec![id]), None))
+    let id = state.control().joint_id(&p.bus, p.id)?;
+    state.control().rezero(&p.bus, id).await?;
+    Ok(done(&p.bus, "rezero", Some(vec![id]), None))
 }
 
 /// Enable a group of devices (no `ids`: every device on the bus).
@@ -371,10 +319,9 @@ async fn enable_group(
     ApiPath(p): ApiPath<BusPath>,
     ApiJson(req): ApiJson<GroupRequest>,
 ) -> ApiResult<Json<ActionDone>> {
-    let bus = state.bus(&p.bus)?;
-    let ids = group_ids(&bus.snapshot(), req.ids)?;
-    bus.enable(targets_of(&ids)).await?;
-    Ok(done(bus, "enable", ids, None))
+    let ids = state.control().group_ids(&p.bus, req.ids)?;
+    state.control().enable(&p.bus, ids.clone()).await?;
+    Ok(done(&p.bus, "enable", ids, None))
 }
 
 /// Disable a group of devices (no `ids`: every device on the bus).
@@ -389,10 +336,9 @@ async fn disable_group(
     ApiPath(p): ApiPath<BusPath>,
     ApiJson(req): ApiJson<GroupRequest>,
 ) -> ApiResult<Json<ActionDone>> {
-    let bus = state.bus(&p.bus)?;
-    let ids = group_ids(&bus.snapshot(), req.ids)?;
-    bus.disable(targets_of(&ids)).await?;
-    Ok(done(bus, "disable", ids, None))
+    let ids = state.control().group_ids(&p.bus, req.ids)?;
+    state.control().disable(&p.bus, ids.clone()).await?;
+    Ok(done(&p.bus, "disable", ids, None))
 }
 
 /// Set several joints' targets in one call: all are checked first (one bad
@@ -412,42 +358,20 @@ async fn target_group(
     ApiPath(p): ApiPath<BusPath>,
     ApiJson(req): ApiJson<GroupTargetRequest>,
 ) -> ApiResult<(StatusCode, Json<TargetAck>)> {
-    let bus = state.bus(&p.bus)?;
-    if req.targets.is_empty() {
-        return Err(ApiError::invalid("targets", "targets is empty"));
-    }
-    let snap = bus.snapshot();
-    let mut out: Vec<(u8, Setpoint)> = Vec::with_capacity(req.targets.len());
-    for (i, t) in req.targets.iter().enumerate() {
-        let id = device_id(&format!("targets[{i}].id"), t.id)?;
-        if out.iter().any(|(seen, _)| *seen == id) {
-            return Err(ApiError::invalid(
-                &format!("targets[{i}].id"),
-                format!("joint {id} appears twice"),
-            ));
-        }
-        let dev = known_device(&snap, id)?;
-        let req = TargetRequest {
-            position_deg: t.position_deg,
-            speed_dps: t.speed_dps,
-        };
-        out.push((
-            id,
-            setpoint(
-                dev,
-                &state.limits(&snap.name, id),
-                &state.calibration(&snap.name, id),
-                &req,
-                &format!("targets[{i}]."),
-            )?,
-        ));
-    }
-    for (id, _) in &out {
-        if let Some(dev) = snap.devices.get(id) {
-            ensure_enabled(bus, dev, "a target").await?;
-        }
-    }
-    Ok(apply_targets(&state, bus, &snap, out).await)
+    let targets: Vec<(i64, TargetRequest, String)> = req
+        .targets
+        .into_iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let target = TargetRequest {
+                position_deg: t.position_deg,
+                speed_dps: t.speed_dps,
+            };
+            (t.id, target, format!("targets[{i}]."))
+        })
+        .collect();
+    let set = state.control().set_targets(&p.bus, &targets).await?;
+    Ok(target_ack(&state, &p.bus, set))
 }
 
 /// Switch a group of devices between position and speed mode.
@@ -462,19 +386,8 @@ async fn mode_group(
     ApiPath(p): ApiPath<BusPath>,
     ApiJson(req): ApiJson<GroupModeRequest>,
 ) -> ApiResult<Json<ActionDone>> {
-    let bus = state.bus(&p.bus)?;
-    let snap = bus.snapshot();
-    let ids = group_ids(&snap, req.ids)?;
+    let ids = state.control().group_ids(&p.bus, req.ids)?;
     let mode = CtrlMode::from(req.mode);
-    let each: Vec<u8> = ids
-        .clone()
-        .unwrap_or_else(|| snap.devices.keys().copied().collect());
-    // Every device checked before any is switched.
-    for &id in &each {
-        check_mode(mode, id, known_device(&snap, id)?)?;
-    }
-    for id in each {
-        bus.set_mode(id, mode).await?;
-    }
-    Ok(done(bus, "mode", ids, Some(mode.name())))
+    state.control().set_mode(&p.bus, ids.clone(), mode).await?;
+    Ok(done(&p.bus, "mode", ids, Some(mode.name())))
 }

@@ -12,9 +12,10 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::openapi::{ErrorResponses, TAG_DEVICES};
 use crate::bus::handle::DeviceState;
 use crate::bus::BusError;
+use crate::control::books::streams::Driver;
 use crate::control::calibration::CalibrationView;
 use crate::control::limits::JointLimits;
-use crate::control::stream_book::Driver;
+use crate::control::Control;
 use crate::hands::Calibration;
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiPath, ApiQuery};
@@ -241,7 +242,7 @@ async fn list_devices(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<BusPath>,
 ) -> ApiResult<Json<DeviceList>> {
-    let snap = state.bus(&p.bus)?.snapshot();
+    let snap = state.control().reader(&p.bus)?.snapshot();
     let now = Instant::now();
     Ok(Json(DeviceList {
         bus: snap.name.clone(),
@@ -249,8 +250,13 @@ async fn list_devices(
             .devices
             .values()
             .map(|d| {
-                let cal = state.calibration(&snap.name, d.dev_id);
-                summary(d, state.joint_name(&snap.name, d.dev_id), &cal, now)
+                let cal = state.control().calibration(&snap.name, d.dev_id);
+                summary(
+                    d,
+                    state.control().joint_name(&snap.name, d.dev_id),
+                    &cal,
+                    now,
+                )
             })
             .collect(),
     }))
@@ -273,15 +279,18 @@ async fn get_device(
     let snap = bus.snapshot();
     let mut dev = known_device(&snap, id)?.clone();
     if q.fresh {
-        refresh(bus, &mut dev).await?;
+        refresh(state.control(), bus.name(), &mut dev).await?;
     }
     let now = Instant::now();
     let fw = firmware_of(&dev);
-    let cal = state.calibration(&snap.name, id);
+    let cal = state.control().calibration(&snap.name, id);
     Ok(Json(DeviceDetail {
         bus: snap.name.clone(),
         id,
-        name: state.joint_name(&snap.name, id).map(str::to_owned),
+        name: state
+            .control()
+            .joint_name(&snap.name, id)
+            .map(str::to_owned),
         online: dev.online,
         firmware: dev.info01.as_ref().map(|(i, _)| i.firmware().dotted()),
         mode: dev.mode.map(CtrlMode::name),
@@ -301,15 +310,18 @@ async fn get_device(
         disabled_reason: disabled_reason(&dev),
         resets: dev.resets,
         last_reset: reset_view(&dev, now),
-        limits: limits_in_joint_frame(state.limits(&snap.name, id), &cal),
+        limits: limits_in_joint_frame(state.control().limits(&snap.name, id), &cal),
         current_limit_owed_a: bus
             .owed_limits()
             .get(id)
             .map(crate::protocol::units::current_limit_a),
-        streamed_by: state.stream_book().driver_of(&crate::control::JointRef {
-            bus: snap.name.clone(),
-            id,
-        }),
+        streamed_by: state
+            .control()
+            .stream_book()
+            .driver_of(&crate::control::JointRef {
+                bus: snap.name.clone(),
+                id,
+            }),
         calibration: (!cal.is_identity()).then(|| CalibrationView::new(&snap.name, id, &cal)),
         missed_polls: dev.missed_polls,
         control_hz: dev.control_hz,
@@ -318,10 +330,10 @@ async fn get_device(
 }
 
 /// Reads INFO_01 then INFO_02 from the device into `dev`.
-async fn refresh(bus: &crate::bus::BusHandle, dev: &mut DeviceState) -> ApiResult<()> {
+async fn refresh(control: &Control, bus: &str, dev: &mut DeviceState) -> ApiResult<()> {
     let id = dev.dev_id;
-    let r1 = bus.read_info(id, InfoBlock::Info01).await?;
-    let r2 = bus.read_info(id, InfoBlock::Info02).await?;
+    let r1 = control.read_info(bus, id, InfoBlock::Info01).await?;
+    let r2 = control.read_info(bus, id, InfoBlock::Info02).await?;
     let now = Instant::now();
     match (r1.body(), r2.body()) {
         (ReplyBody::Info01(a), ReplyBody::Info02(b)) => {

@@ -8,7 +8,6 @@ use axum::Json;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_ESTOP};
-use crate::bus::BusHandle;
 use crate::control::estop::EstopResult;
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::ApiPath;
@@ -22,8 +21,7 @@ pub(crate) fn router() -> OpenApiRouter<AppState> {
 
 /// The e-stop's answer: 503 (with every bus's result in `partial`) unless
 /// every bus confirmed its stop.
-async fn stop(buses: Vec<BusHandle>) -> ApiResult<Json<EstopResult>> {
-    let result = crate::control::estop::stop(buses).await;
+fn answer(result: EstopResult) -> ApiResult<Json<EstopResult>> {
     if result.stopped {
         return Ok(Json(result));
     }
@@ -48,7 +46,7 @@ async fn stop(buses: Vec<BusHandle>) -> ApiResult<Json<EstopResult>> {
 #[utoipa::path(post, path = "/api/v1/estop", tag = TAG_ESTOP,
     responses((status = 200, description = "Every bus stopped", body = EstopResult), ErrorResponses))]
 async fn estop_all(State(state): State<AppState>) -> ApiResult<Json<EstopResult>> {
-    stop(state.buses().cloned().collect()).await
+    answer(state.control().estop_all().await)
 }
 
 /// Disable every device on one bus, ahead of anything queued.
@@ -61,6 +59,5 @@ async fn estop_bus(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<BusPath>,
 ) -> ApiResult<Json<EstopResult>> {
-    let bus = state.bus(&p.bus)?.clone();
-    stop(vec![bus]).await
+    answer(state.control().estop_buses(&[p.bus.as_str()]).await?)
 }

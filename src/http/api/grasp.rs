@@ -9,8 +9,8 @@ use utoipa::IntoParams;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
+use crate::control::books::grasps::GraspView;
 use crate::control::grasp::{self, GraspRequest, ReleaseRequest};
-use crate::control::grasp_book::GraspView;
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::state::AppState;
@@ -89,7 +89,7 @@ async fn get_grasp(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<GraspPath>,
 ) -> ApiResult<Json<GraspView>> {
-    Ok(Json(grasp::get(&state, p.id)?))
+    Ok(Json(grasp::get(state.control(), p.id)?))
 }
 
 /// Release a grasp: open every finger still in it, restore the limits.
@@ -108,7 +108,7 @@ async fn release_grasp(
     ApiPath(p): ApiPath<GraspPath>,
     ApiJson(req): ApiJson<ReleaseRequest>,
 ) -> ApiResult<Json<GraspView>> {
-    Ok(Json(grasp::release(&state, p.id, &req).await?))
+    Ok(Json(grasp::release(state.control(), p.id, &req).await?))
 }
 
 /// Stop a grasp: every finger holds where it is; limits restored.
@@ -123,5 +123,5 @@ async fn stop_grasp(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<GraspPath>,
 ) -> ApiResult<Json<GraspView>> {
-    Ok(Json(grasp::stop(&state, p.id).await?))
+    Ok(Json(grasp::stop(state.control(), p.id).await?))
 }

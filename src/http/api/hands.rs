@@ -9,7 +9,7 @@ use utoipa::ToSchema;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
-use crate::control::stream_book::{Driver, Driving};
+use crate::control::books::streams::{Driver, Driving};
 use crate::hands::{Hand, HandJoint, LoadNotes};
 use crate::http::error::ApiResult;
 use crate::http::state::AppState;
@@ -135,8 +135,9 @@ pub(crate) struct HandJointView {
 #[utoipa::path(get, path = "/api/v1/hands", tag = TAG_CONTROL,
     responses((status = 200, description = "The hands", body = HandList), ErrorResponses))]
 async fn list_hands(State(state): State<AppState>) -> ApiResult<Json<HandList>> {
-    let driving = state.stream_book().driving();
+    let driving = state.control().stream_book().driving();
     let hands = state
+        .control()
         .hands()
         .map(|store| {
             store
@@ -151,7 +152,7 @@ async fn list_hands(State(state): State<AppState>) -> ApiResult<Json<HandList>> 
                 .collect()
         })
         .unwrap_or_default();
-    let state_file = state.hands().and_then(|store| {
+    let state_file = state.control().hands().and_then(|store| {
         let path = store.state_path()?;
         Some(state_file_view(&path, store.notes()))
     });

@@ -69,7 +69,8 @@ async fn healthz(State(state): State<AppState>) -> Json<Health> {
     responses((status = 200, description = "Every bus is up", body = Readiness), ErrorResponses))]
 async fn readyz(State(state): State<AppState>) -> ApiResult<Json<Readiness>> {
     let buses: Vec<BusReadiness> = state
-        .buses()
+        .control()
+        .readers()
         .map(|b| BusReadiness {
             bus: b.name().to_owned(),
             link: b.snapshot().link.name(),

@@ -9,8 +9,8 @@ use utoipa::IntoParams;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
+use crate::control::books::homing::HomingView;
 use crate::control::homing::{self, HomingRequest};
-use crate::control::homing_book::HomingView;
 use crate::http::error::ApiResult;
 use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::state::AppState;
@@ -74,5 +74,5 @@ async fn get_homing(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<HomingPath>,
 ) -> ApiResult<Json<HomingView>> {
-    Ok(Json(homing::get(&state, p.id)?))
+    Ok(Json(homing::get(state.control(), p.id)?))
 }

@@ -46,7 +46,10 @@ async fn start_move(
     State(state): State<AppState>,
     ApiJson(req): ApiJson<MoveRequest>,
 ) -> ApiResult<(StatusCode, Json<MoveView>)> {
-    Ok((StatusCode::CREATED, Json(moves::start(&state, &req).await?)))
+    Ok((
+        StatusCode::CREATED,
+        Json(moves::start(state.control(), &req).await?),
+    ))
 }
 
 /// A move's state and progress.
@@ -59,7 +62,7 @@ async fn get_move(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<MovePath>,
 ) -> ApiResult<Json<MoveView>> {
-    Ok(Json(moves::get(&state, p.id)?))
+    Ok(Json(moves::get(state.control(), p.id)?))
 }
 
 /// Stop a move: every joint holds where the path had brought it.
@@ -72,5 +75,5 @@ async fn stop_move(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<MovePath>,
 ) -> ApiResult<Json<MoveView>> {
-    Ok(Json(moves::stop(&state, p.id)?))
+    Ok(Json(moves::stop(state.control(), p.id)?))
 }

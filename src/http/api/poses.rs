@@ -165,12 +165,13 @@ async fn go_to_pose(
         max_acceleration_dps2: req.max_acceleration_dps2,
         method: req.method,
     };
-    let started = poses::go(&state, &p.hand, &p.name, timing).await?;
+    let started = poses::go(state.control(), &p.hand, &p.name, timing).await?;
     Ok((StatusCode::CREATED, Json(started)))
 }
 
 fn hand<'a>(state: &'a AppState, name: &str) -> ApiResult<(&'a StateStore, &'a Hand)> {
     state
+        .control()
         .hands()
         .and_then(|store| store.hand(name).map(|h| (store, h)))
         .ok_or_else(|| ApiError::not_found("unknown-hand", format!("no hand named `{name}`")))
@@ -231,8 +232,9 @@ fn checked(state: &AppState, hand: &Hand, positions: BTreeMap<String, f64>) -> A
             return Err(ApiError::invalid(&field, "not a finite number"));
         }
         let who = format!("joint `{name}` ({} on bus `{}`)", joint.id, joint.bus);
-        let cal = state.calibration(&joint.bus, joint.id);
+        let cal = state.control().calibration(&joint.bus, joint.id);
         state
+            .control()
             .limits(&joint.bus, joint.id)
             .check_joint_position(&cal, &field, *deg, &who)?;
     }
@@ -243,7 +245,7 @@ fn checked(state: &AppState, hand: &Hand, positions: BTreeMap<String, f64>) -> A
 fn current(state: &AppState, hand: &Hand) -> ApiResult<Pose> {
     let mut pose = Pose::new();
     for j in &hand.joints {
-        let bus = state.bus(&j.bus)?;
+        let bus = state.control().reader(&j.bus)?;
         let snap = bus.snapshot();
         let raw = snap
             .devices
@@ -259,7 +261,7 @@ fn current(state: &AppState, hand: &Hand) -> ApiResult<Pose> {
                     ),
                 )
             })?;
-        let cal = state.calibration(&j.bus, j.id);
+        let cal = state.control().calibration(&j.bus, j.id);
         pose.insert(j.name.clone(), cal.to_joint(units::angle_deg(raw)));
     }
     Ok(pose)

@@ -70,7 +70,7 @@ pub(crate) struct Ros2View {
 #[utoipa::path(get, path = "/api/v1/ros2", tag = TAG_CONTROL,
     responses((status = 200, description = "The bridge's counters", body = Ros2View), ErrorResponses))]
 async fn ros2_status(State(state): State<AppState>) -> ApiResult<Json<Ros2View>> {
-    let stats = state.ros2();
+    let stats = state.control().ros2();
     let n = |f: fn(&crate::control::ros2_stats::Ros2Stats) -> &std::sync::atomic::AtomicU64| {
         stats.map_or(0, |s| f(s).load(Ordering::Relaxed))
     };

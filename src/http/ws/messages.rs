@@ -4,18 +4,18 @@
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
-use crate::bus::handle::BusEvent;
 use crate::control::grasp::{GraspRequest, ReleaseRequest};
-use crate::control::grasp_book::GraspView;
-use crate::control::moves::{MoveRequest, MoveView};
-use crate::control::teleop::{WatchdogEvent, WatchdogPolicy};
+use crate::control::moves::MoveRequest;
+use crate::control::teleop::WatchdogPolicy;
+
+pub(crate) use super::replies::{BusInfo, ErrorCode, EventBody, Field, Limits, ServerMessage};
 
 /// Name and version of this protocol, sent in `welcome`.
 pub(crate) const PROTOCOL: &str = "jointd.ws.v1";
 
 /// The client message types, as errors list them.
-const TYPES: &str =
-    "subscribe, unsubscribe, setpoints, watchdog, ping, move, grasp, grasp_release, grasp_stop";
+const TYPES: &str = "subscribe, unsubscribe, setpoints, watchdog, ping, move, grasp, \
+     grasp_release, grasp_stop, enable, disable, estop";
 
 /// A message from the client.
 #[derive(Debug, Clone, PartialEq)]
@@ -51,6 +51,30 @@ pub(crate) enum ClientMessage {
         seq: Option<u64>,
         id: u64,
     },
+    /// Enable joints of a bus (the body of `POST /api/v1/buses/{bus}/control/enable`).
+    Enable(JointsOfBus),
+    /// Disable joints of a bus.
+    Disable(JointsOfBus),
+    /// The e-stop of one bus, or of every bus (`POST /api/v1/estop`).
+    Estop(EstopRequest),
+}
+
+/// The joints of a bus an `enable` or `disable` addresses; `ids` left
+/// out: every joint of the bus.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct JointsOfBus {
+    pub seq: Option<u64>,
+    pub bus: String,
+    pub ids: Option<Vec<i64>>,
+}
+
+/// The bus an `estop` stops; `bus` left out: every bus.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct EstopRequest {
+    pub seq: Option<u64>,
+    pub bus: Option<String>,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
@@ -65,33 +89,6 @@ pub(crate) struct Subscribe {
     pub fields: Option<Vec<Field>>,
     /// Telemetry messages per second.
     pub rate_hz: Option<f64>,
-}
-
-/// The joint fields a telemetry message can carry.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub(crate) enum Field {
-    AngleDeg,
-    TargetDeg,
-    SpeedDps,
-    QCurrentA,
-    State,
-    Fault,
-    TempC,
-    VbusV,
-}
-
-impl Field {
-    pub(crate) const ALL: [Field; 8] = [
-        Field::AngleDeg,
-        Field::TargetDeg,
-        Field::SpeedDps,
-        Field::QCurrentA,
-        Field::State,
-        Field::Fault,
-        Field::TempC,
-        Field::VbusV,
-    ];
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -242,6 +239,9 @@ fn parse_any(text: &str) -> Result<ClientMessage, ParseError> {
             serde_json::from_value(rest).map(|request| ClientMessage::Move { seq, request })
         }
         "grasp" | "grasp_release" | "grasp_stop" => return parse_grasp(&kind, rest, seq),
+        "enable" => serde_json::from_value(rest).map(ClientMessage::Enable),
+        "disable" => serde_json::from_value(rest).map(ClientMessage::Disable),
+        "estop" => serde_json::from_value(rest).map(ClientMessage::Estop),
         other => return Err(bad(format!("unknown type `{other}` ({TYPES})"))),
     }
     .map_err(field_err)
@@ -265,133 +265,6 @@ fn json_kind_or_value(v: &Value) -> String {
         Value::Number(n) => n.to_string(),
         other => json_kind(other).to_owned(),
     }
-}
-
-/// Error codes of docs/websocket.md.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub(crate) enum ErrorCode {
-    BadJson,
-    BadMessage,
-    UnknownBus,
-    UnknownDevice,
-    OutOfRange,
-    OutOfLimit,
-    WrongState,
-    TooMany,
-    BusError,
-}
-
-/// A message to the client. (`telemetry` is written by the writer around
-/// shared JSON fragments: `{"type":"telemetry","seq","t_ms","dropped","joints"}`.)
-#[derive(Debug, Clone, Serialize)]
-#[serde(tag = "type", rename_all = "snake_case")]
-pub(crate) enum ServerMessage {
-    Welcome {
-        protocol: &'static str,
-        /// This connection's number (the `client` of `/metrics` and of
-        /// the stream book).
-        client: u64,
-        /// The name it gave (`?client=`).
-        name: Option<String>,
-        buses: Vec<BusInfo>,
-        limits: Limits,
-    },
-    Event {
-        seq: u64,
-        event: EventBody,
-        #[serde(skip_serializing_if = "is_zero")]
-        dropped_events: u64,
-    },
-    Ack {
-        ref_seq: Option<u64>,
-        joints: usize,
-        latency_us: u64,
-    },
-    Error {
-        ref_seq: Option<u64>,
-        code: ErrorCode,
-        message: String,
-        #[serde(skip_serializing_if = "Option::is_none")]
-        field: Option<String>,
-    },
-    Subscribed {
-        ref_seq: Option<u64>,
-        buses: Vec<String>,
-        devices: Option<Vec<u8>>,
-        fields: Vec<Field>,
-        rate_hz: f64,
-    },
-    Unsubscribed {
-        ref_seq: Option<u64>,
-    },
-    WatchdogSet {
-        ref_seq: Option<u64>,
-        hold_timeout_ms: u64,
-        policy: WatchdogPolicy,
-    },
-    Pong {
-        ref_seq: Option<u64>,
-    },
-    /// This connection's setpoint stream to a joint ended: its motion
-    /// epoch moved on (`reason`: `estopped`, `disabled`, `reset`, `fault`,
-    /// `mode_changed`, `reenabled`, `zero_moved`). It never resumes by itself.
-    StreamEnded {
-        bus: String,
-        id: u8,
-        reason: &'static str,
-    },
-    /// A `move` was accepted: the move as `GET /api/v1/moves/{id}` shows it.
-    MoveStarted {
-        ref_seq: Option<u64>,
-        #[serde(rename = "move")]
-        started: MoveView,
-    },
-    /// A `grasp` was accepted: the grasp as `GET /api/v1/grasps/{id}` shows it.
-    GraspStarted {
-        ref_seq: Option<u64>,
-        grasp: GraspView,
-    },
-    /// A `grasp_release` ended the grasp (or its bound passed): as it ended.
-    GraspReleased {
-        ref_seq: Option<u64>,
-        grasp: GraspView,
-    },
-    /// A `grasp_stop` ended the grasp: as it ended.
-    GraspStopped {
-        ref_seq: Option<u64>,
-        grasp: GraspView,
-    },
-    /// A grasp this connection started ended, however it ended (released,
-    /// stopped, an e-stop, a disable, ...): each finger's final state.
-    GraspDone {
-        grasp: GraspView,
-    },
-}
-
-fn is_zero(n: &u64) -> bool {
-    *n == 0
-}
-
-#[derive(Debug, Clone, Serialize)]
-pub(crate) struct BusInfo {
-    pub name: String,
-    pub baud: u32,
-    pub devices: Vec<u8>,
-}
-
-#[derive(Debug, Clone, Serialize)]
-pub(crate) struct Limits {
-    pub max_rate_hz: f64,
-    pub max_batch: usize,
-}
-
-/// An event as sent: a bus's own, or one of this layer (the teleop watchdog).
-#[derive(Debug, Clone, Serialize)]
-#[serde(untagged)]
-pub(crate) enum EventBody {
-    Bus(BusEvent),
-    Watchdog(WatchdogEvent),
 }
 
 /// Parses a `grasp`, `grasp_release` or `grasp_stop` (the message's

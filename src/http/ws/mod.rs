@@ -3,19 +3,27 @@
 //! setpoints for teleoperation, on the same bus handles as the REST API.
 //!
 //! # Layout
-//! - [`messages`]: the message types, parsed strictly.
+//! - `replies`: what the daemon sends (and the error codes), the telemetry fields.
+//! - [`messages`]: the client's messages, parsed strictly.
+//! - `subscribe`: a `subscribe` checked into a subscription.
+//! - `ticker`: when a subscription's telemetry goes out (a grid shared by the connections).
 //! - [`session`]: one connection's reader: apply messages, run its watchdog
 //!   ([`crate::control::watchdog`]) and its streams ([`crate::control::streams`]).
 //! - [`writer`]: one connection's writer: telemetry, events, acks; bounded.
 //! - [`setpoints`]: validate a batch whole, then store it.
 //! - [`grasp`]: start, release and stop grasps; tell the starter when one ended.
+//! - `actions`: enable, disable and the e-stop, each in a task of its own.
 //! - [`telemetry`]: snapshot → joint fields in physical units.
 
+mod actions;
 pub(crate) mod grasp;
 pub(crate) mod messages;
+mod replies;
 pub mod session;
 pub(crate) mod setpoints;
+mod subscribe;
 pub(crate) mod telemetry;
+mod ticker;
 pub(crate) mod writer;
 
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;

@@ -11,31 +11,26 @@ use futures_util::{Sink, Stream, StreamExt};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
+use super::actions::{spawn_estop, spawn_switch, Switch};
 use super::grasp::GraspTasks;
 use super::messages::{
-    self, BusInfo, ClientMessage, ErrorCode, Field, Limits, ServerMessage, Subscribe,
-    WatchdogRequest,
+    self, BusInfo, ClientMessage, ErrorCode, Limits, ServerMessage, Subscribe, WatchdogRequest,
 };
 use super::setpoints::{self, WsError, MAX_BATCH};
+use super::subscribe::{subscription, MAX_RATE_HZ};
 use super::telemetry::Subscription;
 use super::writer::{PendingAck, Writer};
-use crate::control::stream_book::{Driver, Via};
+use crate::control::books::streams::{Driver, Via};
 use crate::control::streams::Streams;
 use crate::control::teleop::{WatchdogEvent, MAX_HOLD, MIN_HOLD};
 use crate::control::watchdog::{fire_policy, Watchdog};
-use crate::control::ControlError;
 use crate::http::hub::WsHub;
-use crate::http::state::device_id;
 use crate::http::state::AppState;
 
 /// Replies (acks, errors) a connection may have queued; beyond, they are dropped and counted.
 const OUT_QUEUE: usize = 64;
 /// Acks waiting for the wire, per connection.
 const MAX_PENDING_ACKS: usize = 256;
-/// Telemetry rate bounds and default, messages per second.
-pub const MAX_RATE_HZ: f64 = 1000.0;
-const MIN_RATE_HZ: f64 = 1.0;
-const DEFAULT_RATE_HZ: f64 = 50.0;
 
 /// How often a connection looks whether one of its streams was ended
 /// (while it has live streams): an atomic read per joint.
@@ -71,7 +66,7 @@ where
     E: std::fmt::Display,
 {
     let client = state.ws().next_client_id();
-    let shown = state.stream_book().register(Driver {
+    let shown = state.control().stream_book().register(Driver {
         via: Via::Websocket,
         client,
         name: name.clone(),
@@ -117,6 +112,17 @@ where
             _ = tokio::time::sleep(STREAM_CHECK), if conn.streams.any_live() => conn.end_revoked_streams(),
         }
     }
+    end(&state, client, conn, writer).await;
+}
+
+/// The session's end: the watchdog fires if it is armed ("closed"), the
+/// writer finishes, the hub forgets the client.
+async fn end(
+    state: &AppState,
+    client: u64,
+    mut conn: Connection,
+    writer: tokio::task::JoinHandle<()>,
+) {
     if conn.watchdog.is_armed() {
         conn.fire_watchdog("closed").await;
     }
@@ -134,7 +140,8 @@ async fn sleep_until(deadline: Option<Instant>) {
 
 fn welcome(state: &AppState, client: u64, name: Option<String>) -> ServerMessage {
     let buses = state
-        .buses()
+        .control()
+        .readers()
         .map(|b| {
             let snap = b.snapshot();
             BusInfo {
@@ -206,7 +213,7 @@ impl Connection {
             ClientMessage::Watchdog(w) => self.arm_watchdog(w),
             ClientMessage::Ping { seq } => self.reply(ServerMessage::Pong { ref_seq: seq }),
             ClientMessage::Move { seq, request } => {
-                match crate::control::moves::start(&self.state, &request).await {
+                match crate::control::moves::start(self.state.control(), &request).await {
                     Ok(started) => self.reply(ServerMessage::MoveStarted {
                         ref_seq: seq,
                         started,
@@ -233,6 +240,11 @@ impl Connection {
                     self.reject(seq, e);
                 }
             }
+            ClientMessage::Enable(req) => spawn_switch(&self.state, &self.out, Switch::Enable, req),
+            ClientMessage::Disable(req) => {
+                spawn_switch(&self.state, &self.out, Switch::Disable, req)
+            }
+            ClientMessage::Estop(req) => spawn_estop(&self.state, &self.out, req),
         }
     }
 
@@ -255,7 +267,7 @@ impl Connection {
     /// Says at once which of this connection's streams an e-stop, a
     /// disable, a reset, a fault or a mode change ended.
     fn end_revoked_streams(&mut self) {
-        for (j, why) in self.streams.end_revoked(&self.state) {
+        for (j, why) in self.streams.end_revoked(self.state.control()) {
             self.reply(ServerMessage::StreamEnded {
                 bus: j.bus,
                 id: j.id,
@@ -309,7 +321,7 @@ impl Connection {
 
     /// The config's `[watchdog]` arms for a streaming client that declared none.
     fn arm_default_watchdog(&mut self) {
-        let d = self.state.watchdog_default();
+        let d = self.state.control().watchdog_default();
         if d.hold_timeout_ms > 0 && !self.watchdog.declared() {
             self.watchdog.arm(
                 Duration::from_millis(d.hold_timeout_ms),
@@ -331,7 +343,7 @@ impl Connection {
             joints = joints.len(),
             "teleop watchdog fired"
         );
-        fire_policy(&self.state, policy, &joints).await;
+        fire_policy(self.state.control(), policy, &joints).await;
         self.state.ws().publish(WatchdogEvent {
             event: "watchdog",
             client: self.client,
@@ -340,51 +352,4 @@ impl Connection {
             joints,
         });
     }
-}
-
-fn subscription(state: &AppState, s: &Subscribe) -> Result<Subscription, WsError> {
-    let buses = match &s.buses {
-        Some(names) => {
-            for (i, n) in names.iter().enumerate() {
-                state.bus(n)?;
-                if names[..i].contains(n) {
-                    return Err(ControlError::duplicate(
-                        &format!("buses[{i}]"),
-                        format!("bus `{n}` appears twice"),
-                    )
-                    .into());
-                }
-            }
-            names.clone()
-        }
-        None => state.buses().map(|b| b.name().to_owned()).collect(),
-    };
-    let devices = match &s.devices {
-        Some(ids) => {
-            let ids = ids
-                .iter()
-                .map(|&id| device_id("devices", id))
-                .collect::<Result<Vec<u8>, _>>()?;
-            if let Some(i) = (1..ids.len()).find(|&i| ids[..i].contains(&ids[i])) {
-                return Err(ControlError::duplicate(
-                    &format!("devices[{i}]"),
-                    format!("device {} appears twice", ids[i]),
-                )
-                .into());
-            }
-            Some(ids)
-        }
-        None => None,
-    };
-    let rate_hz = s.rate_hz.unwrap_or(DEFAULT_RATE_HZ);
-    if !(MIN_RATE_HZ..=MAX_RATE_HZ).contains(&rate_hz) {
-        let mut e = WsError::new(
-            ErrorCode::OutOfRange,
-            format!("rate_hz = {rate_hz} is out of range; allowed {MIN_RATE_HZ}..={MAX_RATE_HZ}"),
-        );
-        e.field = Some("rate_hz".into());
-        return Err(e);
-    }
-    let fields = s.fields.clone().unwrap_or_else(|| Field::ALL.to_vec());
-    Ok(Subscription::new(buses, devices, fields, rate_hz))
 }

@@ -3,14 +3,12 @@
 //! them all, one store write per bus. One bad target rejects the batch:
 //! nothing of it is applied.
 
-use std::time::Instant;
-
 use super::messages::{ErrorCode, SetpointBatch, TargetItem};
-use crate::bus::BusError;
-use crate::control::batch::{self, BatchItem, PerBus};
+use crate::bus::{BusError, Source};
+use crate::control::batch::BatchItem;
 use crate::control::error::{ControlError, InvalidKind};
 use crate::control::joints::device_id;
-use crate::control::streams::Streams;
+use crate::control::streams::{Applied, Streams};
 use crate::control::targets::TargetRequest;
 use crate::control::JointRef;
 use crate::http::state::AppState;
@@ -76,17 +74,8 @@ impl From<ControlError> for WsError {
     }
 }
 
-/// What an accepted batch did.
-#[derive(Debug, Clone)]
-pub(crate) struct Applied {
-    pub accepted: Instant,
-    /// (bus name, store sequence number) per bus the batch touched.
-    pub writes: Vec<(String, u64)>,
-    pub joints: Vec<JointRef>,
-}
-
 /// Validates and stores a batch, each joint's targets under the epoch of
-/// its stream on this connection (`streams`).
+/// its stream on this connection (`streams`): the core's one teleop step.
 pub(crate) fn apply(
     state: &AppState,
     batch: &SetpointBatch,
@@ -104,41 +93,12 @@ pub(crate) fn apply(
             ),
         ));
     }
-    let per_bus = validate(state, &batch.targets)?;
-    let joints: Vec<JointRef> = per_bus
-        .iter()
-        .flat_map(|(name, targets)| {
-            targets.iter().map(|(id, _)| JointRef {
-                bus: name.clone(),
-                id: *id,
-            })
-        })
-        .collect();
-    let mut epochs = streams.admit(state, &joints, batch.restart)?.into_iter();
-    let accepted = Instant::now();
-    let mut writes = Vec::new();
-    for (name, targets) in per_bus {
-        let bus = state.bus(&name)?;
-        let under: Vec<_> = targets
-            .iter()
-            .zip(epochs.by_ref())
-            .map(|(&(id, sp), epoch)| (id, sp, epoch))
-            .collect();
-        writes.push((
-            name,
-            bus.set_targets_under(&under, crate::bus::Source::Websocket),
-        ));
-    }
-    Ok(Applied {
-        accepted,
-        writes,
-        joints,
-    })
+    let items = named(state, &batch.targets)?;
+    Ok(streams.apply(state.control(), &items, batch.restart, Source::Websocket)?)
 }
 
-/// Names each target's joint, then checks the batch whole (the one
-/// resolver every teleop front-end uses).
-fn validate(state: &AppState, targets: &[TargetItem]) -> Result<PerBus, WsError> {
+/// Each target with the joint it names.
+fn named(state: &AppState, targets: &[TargetItem]) -> Result<Vec<BatchItem>, WsError> {
     let mut items = Vec::with_capacity(targets.len());
     for (i, t) in targets.iter().enumerate() {
         let field = format!("targets[{i}].");
@@ -152,7 +112,7 @@ fn validate(state: &AppState, targets: &[TargetItem]) -> Result<PerBus, WsError>
             field,
         });
     }
-    Ok(batch::resolve(state, &items)?)
+    Ok(items)
 }
 
 /// The bus and id a target names: by `id` (on `bus`, or the only
@@ -170,12 +130,9 @@ fn joint_of(state: &AppState, t: &TargetItem, field: &str) -> Result<(String, u8
         }
         (None, Some(hand), Some(joint)) if t.bus.is_none() => {
             let found = state
-                .hands()
-                .and_then(|store| store.hand(hand))
-                .ok_or_else(|| {
-                    WsError::new(ErrorCode::UnknownDevice, format!("no hand named `{hand}`"))
-                        .with_field(format!("{field}hand"))
-                })?
+                .control()
+                .hand(hand)
+                .map_err(|e| WsError::from(e).with_field(format!("{field}hand")))?
                 .joint(joint)
                 .ok_or_else(|| {
                     WsError::new(
@@ -197,10 +154,10 @@ fn joint_of(state: &AppState, t: &TargetItem, field: &str) -> Result<(String, u8
 /// The target's bus, or the only bus when it names none.
 fn bus_name(state: &AppState, t: &TargetItem) -> Result<String, WsError> {
     if let Some(name) = &t.bus {
-        state.bus(name)?;
+        state.control().reader(name)?;
         return Ok(name.clone());
     }
-    let mut names = state.buses().map(|b| b.name().to_owned());
+    let mut names = state.control().readers().map(|b| b.name().to_owned());
     match (names.next(), names.next()) {
         (Some(only), None) => Ok(only),
         _ => Err(WsError::new(

@@ -9,18 +9,19 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::pin::Pin;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use axum::extract::ws::{close_code, CloseFrame, Message, Utf8Bytes};
 use futures_util::stream::{select_all, SelectAll};
 use futures_util::{FutureExt, Sink, SinkExt, Stream, StreamExt};
 use tokio::sync::{mpsc, watch};
-use tokio::time::{interval, interval_at, Interval, MissedTickBehavior};
+use tokio::time::interval;
 use tokio_stream::wrappers::{errors::BroadcastStreamRecvError, BroadcastStream, WatchStream};
 
 use super::messages::{EventBody, ServerMessage};
 use super::telemetry::Subscription;
+use super::ticker::Ticker;
 use crate::bus::handle::WireAck;
 use crate::http::state::AppState;
 
@@ -143,7 +144,11 @@ where
                 break;
             }
         }
-        // Replies the client will never see: counted, not silently lost.
+        self.count_unsent(&mut out);
+    }
+
+    /// Replies the client will never see: counted, not silently lost.
+    fn count_unsent(&self, out: &mut mpsc::Receiver<ServerMessage>) {
         out.close();
         while out.try_recv().is_ok() {
             crate::http::hub::WsHub::count(&self.state.ws().unsent_replies, 1);
@@ -204,7 +209,7 @@ where
 
     fn event_streams(&self) -> Events {
         let mut all: Events = select_all(Vec::new());
-        for bus in self.state.buses() {
+        for bus in self.state.control().readers() {
             let s =
                 BroadcastStream::new(bus.events()).map(|r| r.map(EventBody::Bus).map_err(lagged));
             all.push(Box::pin(s));
@@ -217,7 +222,7 @@ where
 
     fn ack_streams(&self) -> Acks {
         let mut all: Acks = select_all(Vec::new());
-        for bus in self.state.buses() {
+        for bus in self.state.control().readers() {
             let name = bus.name().to_owned();
             all.push(Box::pin(
                 WatchStream::new(bus.wire_acks()).map(move |a| (name.clone(), a)),
@@ -262,9 +267,9 @@ where
         self.count_skipped_ticks(&sub, now);
         let mut parts: Vec<Arc<str>> = Vec::with_capacity(sub.buses.len());
         for (name, shape) in sub.buses_and_shapes() {
-            if let Ok(bus) = self.state.bus(name) {
-                let names = |id| self.state.joint_name(name, id);
-                let cals = |id| self.state.calibration(name, id);
+            if let Ok(bus) = self.state.control().reader(name) {
+                let names = |id| self.state.control().joint_name(name, id);
+                let cals = |id| self.state.control().calibration(name, id);
                 let cache = &self.state.ws().fragments;
                 let snap = bus.snapshot();
                 let part = super::telemetry::fragment(cache, &sub, shape, &snap, names, cals, now);
@@ -369,110 +374,8 @@ fn lagged(e: BroadcastStreamRecvError) -> u64 {
     }
 }
 
-/// A subscription's clock: its first tick at once, the next ones on a grid
-/// of its period shared by the connections (multiples of the period since
-/// [`epoch`], in one of [`LANES`] phases). Clients at the same rate then
-/// wake together in a few timer slots per period rather than each at its
-/// own phase (a wake-up of the runtime's threads per client per tick). The
-/// lanes keep one burst from holding a setpoint batch that arrives during
-/// it behind every client's write.
-struct Ticker {
-    first: bool,
-    interval: Interval,
-}
-
-impl Ticker {
-    /// A ticker at the subscription's rate; an idle one when unsubscribed.
-    fn new(sub: Option<&Subscription>) -> Self {
-        let period = sub.map_or(Duration::from_secs(3600), |s| {
-            Duration::from_secs_f64(1.0 / s.rate_hz)
-        });
-        static NEXT_LANE: AtomicU64 = AtomicU64::new(0);
-        let lane = NEXT_LANE.fetch_add(1, Ordering::Relaxed) % LANES;
-        let start = on_grid(tokio::time::Instant::now(), period, lane);
-        let mut interval = interval_at(start, period);
-        interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
-        Self {
-            first: sub.is_some(),
-            interval,
-        }
-    }
-
-    async fn tick(&mut self) {
-        if std::mem::take(&mut self.first) {
-            return;
-        }
-        self.interval.tick().await;
-    }
-}
-
-/// Phases of the grid that connections are dealt to in turn.
-const LANES: u64 = 4;
-
-/// The process's origin of the tick grid.
-fn epoch() -> tokio::time::Instant {
-    static EPOCH: OnceLock<tokio::time::Instant> = OnceLock::new();
-    *EPOCH.get_or_init(tokio::time::Instant::now)
-}
-
-/// The first multiple of `period` since [`epoch`], shifted by `lane` / [`LANES`]
-/// of a period, at or after `now` (`now` itself if the clock reads
-/// earlier than that, as a test's paused clock may).
-fn on_grid(now: tokio::time::Instant, period: Duration, lane: u64) -> tokio::time::Instant {
-    let epoch = epoch() + period.mul_f64(lane as f64 / LANES as f64);
-    let (Some(since), Ok(step)) = (
-        now.checked_duration_since(epoch),
-        u64::try_from(period.as_nanos()),
-    ) else {
-        return now;
-    };
-    if step == 0 {
-        return now;
-    }
-    let since = u64::try_from(since.as_nanos()).unwrap_or(u64::MAX);
-    let ticks = since.div_ceil(step);
-    epoch + Duration::from_nanos(ticks.saturating_mul(step))
-}
-
 fn unix_ms() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_millis() as u64)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn clients_at_one_rate_tick_on_one_grid() {
-        let period = Duration::from_millis(10);
-        let e = epoch();
-        let ms = |n| e + Duration::from_millis(n);
-        // Subscribed at different moments of one period: the same next tick.
-        assert_eq!(on_grid(ms(21), period, 0), ms(30));
-        assert_eq!(on_grid(ms(29), period, 0), ms(30));
-        assert_eq!(on_grid(ms(30), period, 0), ms(30));
-        // A rate that does not divide a second still lands on its multiples.
-        let third = Duration::from_nanos(3_333_333);
-        assert_eq!(on_grid(ms(5), third, 0), e + third * 2);
-        // Another lane: the same grid a quarter period later.
-        assert_eq!(
-            on_grid(ms(21), period, 1),
-            ms(22) + Duration::from_micros(500)
-        );
-        assert_eq!(
-            on_grid(ms(23), period, 1),
-            ms(32) + Duration::from_micros(500)
-        );
-    }
-
-    #[test]
-    fn a_clock_before_the_epoch_ticks_from_now() {
-        let e = epoch();
-        let Some(before) = e.checked_sub(Duration::from_millis(5)) else {
-            return;
-        };
-        assert_eq!(on_grid(before, Duration::from_millis(10), 0), before);
-    }
 }

@@ -192,7 +192,7 @@ impl Ctx {
     }
 
     /// One WARN per change of the USB pipeline's mode, never per frame.
-    fn usb_changed(&mut self, change: &crate::bus::usb_guard::Change) {
+    fn usb_changed(&mut self, change: &crate::bus::usb::guard::Change) {
         let c = &mut self.link.counters;
         if change.backed_off {
             c.usb_backoffs += 1;
@@ -563,7 +563,7 @@ impl Ctx {
     }
 
     /// Until the write before is seen taken (or its count given up on,
-    /// within [`crate::bus::usb_confirm::MAX_UNTAKEN`]): a request's frames,
+    /// within [`crate::bus::usb::confirm::MAX_UNTAKEN`]): a request's frames,
     /// and the setpoints let out between them, go one after another without
     /// the owner's turn, whose look at the port's count this stands in for.
     fn wait_confirmed(&mut self) -> Result<(), BusError> {

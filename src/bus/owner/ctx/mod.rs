@@ -106,7 +106,7 @@ impl Ctx {
     }
 
     /// While a write waits to be seen taken, reads the port's count for it
-    /// ([`crate::bus::usb_confirm`]).
+    /// ([`crate::bus::usb::confirm`]).
     pub(crate) fn look_at_count(&mut self) {
         if self.sched.awaiting_confirmation() {
             // Timed after the read: a count seen at 0 says the write was

@@ -299,7 +299,7 @@ fn guarded_bus() -> (Bus, Instant) {
     b.s.usb_watch(0, b.now);
     b.s.usb_watch(20, b.now);
     let mode = b.s.pipeline.as_ref().map(|p| p.guard().mode());
-    assert_eq!(mode, Some(crate::bus::usb_guard::PipelineMode::Guarded));
+    assert_eq!(mode, Some(crate::bus::usb::guard::PipelineMode::Guarded));
     (b, t0)
 }
 
@@ -491,7 +491,7 @@ fn guarded_a_control_only_write_late_within_the_reach_does_not_push_a_reply_into
 /// next write can leave.
 #[test]
 fn a_guard_narrowing_between_a_control_only_write_and_its_poll_does_not_double_book_the_wire() {
-    use crate::bus::usb_guard::PipelineMode;
+    use crate::bus::usb::guard::PipelineMode;
     let (mut b, t0) = guarded_bus();
     b.now += Duration::from_millis(100);
     b.s.usb_watch(40, b.now);
@@ -590,7 +590,7 @@ fn confirmed_writes_wait_to_be_seen_taken_and_a_late_one_moves_the_wire() {
     let view = b.s.usb_view(b.now).expect("a pipeline view");
     assert!(view.confirming);
     assert_eq!(view.writes_taken_late, 1);
-    assert_eq!(view.mode, crate::bus::usb_guard::PipelineMode::Pipelined);
+    assert_eq!(view.mode, crate::bus::usb::guard::PipelineMode::Pipelined);
 }
 
 /// One confirmed write, looked at as the owner does: untaken a tenth of
@@ -691,7 +691,7 @@ fn a_count_that_never_falls_holds_an_estop_no_longer_than_the_give_up_and_a_fram
     assert_eq!(slot, Slot::EStop { generation: 1 });
     let waited = b.now - first.released;
     assert!(
-        waited <= crate::bus::usb_confirm::MAX_UNTAKEN + held,
+        waited <= crate::bus::usb::confirm::MAX_UNTAKEN + held,
         "the e-stop waited {waited:?} past the write's boundary ({held:?} held)"
     );
     let view = b.s.usb_view(b.now).expect("a pipeline view");
@@ -700,7 +700,7 @@ fn a_count_that_never_falls_holds_an_estop_no_longer_than_the_give_up_and_a_fram
     // The overdue write is still waited for: nothing but the e-stop goes
     // behind it, which would follow it out of the adapter into its reply.
     assert!(b.s.awaiting_confirmation());
-    let until = first.released + crate::bus::usb_confirm::MAX_WAITED / 2;
+    let until = first.released + crate::bus::usb::confirm::MAX_WAITED / 2;
     while b.now < until {
         b.s.confirm_writes(Some(usize::MAX), b.now);
         match b.next() {
@@ -730,13 +730,13 @@ fn a_count_that_never_falls_is_not_waited_for_past_the_longest_wait() {
         }
     };
     assert!(!matches!(slot, Slot::EStop { .. }));
-    assert!(b.now - first.released >= crate::bus::usb_confirm::MAX_WAITED);
+    assert!(b.now - first.released >= crate::bus::usb::confirm::MAX_WAITED);
     assert!(!b.s.awaiting_confirmation());
     // A count that does not fall is not believed: blind writes from here.
     let view = b.s.usb_view(b.now).expect("a pipeline view");
     assert_ne!(
         view.mode,
-        crate::bus::usb_guard::PipelineMode::Pipelined,
+        crate::bus::usb::guard::PipelineMode::Pipelined,
         "{view:?}"
     );
     assert!(!view.confirming, "{view:?}");

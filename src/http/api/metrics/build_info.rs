@@ -3,7 +3,7 @@
 //! the code that was compiled; the revision and the compiler's version come
 //! from `build.rs` ("unknown" for a build without `.git`).
 
-use super::{label, Exposition};
+use super::exposition::{label, Exposition};
 
 /// Every feature of Cargo.toml's `[features]`, and whether this build has
 /// it. A test holds this list to Cargo.toml.

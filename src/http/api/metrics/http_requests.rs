@@ -4,7 +4,7 @@
 //! request has been answered (a scrape counts once its answer is ready, so
 //! it shows in the next one).
 
-use super::{label, Exposition};
+use super::exposition::{label, Exposition};
 use crate::http::state::AppState;
 
 const REQUESTS: &str = "jointd_http_requests_total";

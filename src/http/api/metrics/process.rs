@@ -7,7 +7,7 @@
 //! Parsing is pure (text in, numbers out) and tested on fixed text; only
 //! [`families`] reads files.
 
-use super::Exposition;
+use super::exposition::Exposition;
 
 /// The fields of `/proc/self/stat` used here, in its own units.
 #[derive(Debug, PartialEq)]

@@ -1,0 +1,91 @@
+//! `jointd [run]`: config file and flags → buses (serial or an in-process
+//! simulator: on a pty, or behind a USB adapter model on an in-memory line)
+//! → the HTTP API → on SIGINT/SIGTERM stop accepting, let the requests under
+//! way finish (for a bounded time), disable every joint, close the ports,
+//! close the recordings, exit 0.
+//!
+//! # Layout
+//! One-way: each file imports only from files above it.
+//! - `error`: [`DaemonError`]: what keeps the daemon from starting, with the way out.
+//! - `args`: the flags ([`RunArgs`]) and the config file's shape ([`FileConfig`]).
+//! - `plan`: flags and file checked into the daemon's [`Plan`].
+//! - `start`: the simulator of `--sim` and one owner per bus.
+//! - `shutdown`: serving until a signal, then draining, disabling, closing.
+//! - this file: the order of it all ([`run`]).
+
+mod args;
+mod error;
+mod plan;
+mod shutdown;
+mod start;
+
+use std::sync::Arc;
+
+use tokio::net::TcpListener;
+
+use crate::control::Control;
+use crate::http::AppState;
+use error::listen_error;
+use shutdown::{serve, stop_buses, stop_recordings, wait_for_ws_close};
+use start::{raise_open_files_limit, start_all, Started};
+
+pub use args::{FileConfig, JointName, RunArgs, DEFAULT_LISTEN, SIM_BUS_NAME};
+pub use error::DaemonError;
+pub use plan::{plan, Plan};
+
+/// Runs the daemon until SIGINT or SIGTERM.
+pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
+    let plan = plan(&args)?;
+    raise_open_files_limit();
+    // Bound before any bus opens: a second daemon on a taken address stops
+    // there, without touching a port (nor sending a shutdown's disable).
+    let listener = TcpListener::bind(plan.listen)
+        .await
+        .map_err(|e| listen_error(plan.listen, e))?;
+    let Started {
+        sim,
+        handles,
+        threads,
+        managed,
+    } = start_all(plan.buses, plan.sim)?;
+    let addr = listener.local_addr().map_err(|e| DaemonError::Io {
+        what: "listener address".into(),
+        source: e,
+    })?;
+    // First line on stdout: scripts and tests read the port from it.
+    println!("listening on http://{addr}");
+    tracing::info!(%addr, auth = plan.token.is_some(), "serving the API");
+    // One core, handed to HTTP and ROS 2 alike.
+    let control = Arc::new(Control::new(handles, plan.limits));
+    let mut control_options = plan.control;
+    control_options.managed = managed;
+    let ros2_stats = control_options.ros2.clone();
+    // A fresh core and a fresh state have no options yet: neither call
+    // can be refused.
+    let _ = control.set_options(control_options);
+    let state = AppState::new(control.clone(), plan.token);
+    let mut http_options = plan.http;
+    http_options.policy.listen = Some(addr);
+    let _ = state.set_options(http_options);
+    // The bridge lives until the daemon stops (dropped below: the ROS
+    // graph sees its tokens go).
+    let bridge = match (plan.ros2, ros2_stats) {
+        (Some(cfg), Some(stats)) => Some(
+            crate::ros2::start(control.clone(), cfg, stats)
+                .map_err(|e| DaemonError::Policy(e.to_string()))?,
+        ),
+        _ => None,
+    };
+    serve(listener, &state).await?;
+    wait_for_ws_close(&state).await;
+    // The joints first: a recording still closing must not hold them.
+    stop_buses(threads).await;
+    stop_recordings(&state).await;
+    // Leave the ROS graph once the buses are stopped.
+    if let Some(bridge) = bridge {
+        tracing::debug!(?bridge, "ROS 2 bridge closing");
+    }
+    drop(sim);
+    tracing::info!("stopped");
+    Ok(())
+}
