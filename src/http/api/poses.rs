@@ -13,17 +13,12 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::openapi::{ErrorResponses, TAG_CONTROL};
 use crate::control::moves::MoveView;
-use crate::control::poses::{self, PoseTiming};
-use crate::hands::{pose, Hand, Pose, StateStore};
+use crate::control::poses::{self, PoseSource, PoseTiming};
+use crate::hands::{pose, Pose};
 use crate::http::error::{ApiError, ApiResult};
 use crate::http::extract::{ApiJson, ApiPath};
 use crate::http::state::AppState;
-use crate::http::telemetry::commanded_or_measured_raw;
 use crate::motion::Method;
-use crate::protocol::units;
-
-/// Longest pose name.
-const MAX_POSE_NAME: usize = 64;
 
 pub(crate) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
@@ -87,8 +82,7 @@ async fn get_pose(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<PosePath>,
 ) -> ApiResult<Json<PoseView>> {
-    let (store, _) = hand(&state, &p.hand)?;
-    let pose = pose(store, &p)?;
+    let pose = poses::get(state.control(), &p.hand, &p.name)?;
     Ok(Json(view(&p, pose)))
 }
 
@@ -105,17 +99,15 @@ async fn put_pose(
     ApiPath(p): ApiPath<PosePath>,
     ApiJson(req): ApiJson<PoseRequest>,
 ) -> ApiResult<Json<PoseView>> {
-    let (store, hand) = hand(&state, &p.hand)?;
-    check_pose_name(&p.name)?;
-    let pose = match (req.positions_deg, req.from_current) {
+    let source = match (req.positions_deg, req.from_current) {
         (Some(_), true) => {
             return Err(ApiError::invalid(
                 "from_current",
                 "give positions_deg or from_current, not both",
             ))
         }
-        (Some(positions), false) => checked(&state, hand, positions)?,
-        (None, true) => current(&state, hand)?,
+        (Some(positions), false) => PoseSource::Angles(positions),
+        (None, true) => PoseSource::Current,
         (None, false) => {
             return Err(ApiError::invalid(
                 "positions_deg",
@@ -123,10 +115,7 @@ async fn put_pose(
             ))
         }
     };
-    store
-        .put(&p.hand, &p.name, pose.clone())
-        .map_err(|e| ApiError::state_unwritable(format!("{e}; the pose was not saved")))?;
-    tracing::info!(hand = %p.hand, pose = %p.name, joints = pose.len(), "pose saved");
+    let pose = poses::save(state.control(), &p.hand, &p.name, source)?;
     Ok(Json(view(&p, pose)))
 }
 
@@ -139,11 +128,7 @@ async fn delete_pose(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<PosePath>,
 ) -> ApiResult<Json<PoseView>> {
-    let (store, _) = hand(&state, &p.hand)?;
-    let pose = pose(store, &p)?;
-    store
-        .delete(&p.hand, &p.name)
-        .map_err(|e| ApiError::state_unwritable(format!("{e}; the pose was not deleted")))?;
+    let pose = poses::delete(state.control(), &p.hand, &p.name)?;
     Ok(Json(view(&p, pose)))
 }
 
@@ -169,100 +154,10 @@ async fn go_to_pose(
     Ok((StatusCode::CREATED, Json(started)))
 }
 
-fn hand<'a>(state: &'a AppState, name: &str) -> ApiResult<(&'a StateStore, &'a Hand)> {
-    state
-        .control()
-        .hands()
-        .and_then(|store| store.hand(name).map(|h| (store, h)))
-        .ok_or_else(|| ApiError::not_found("unknown-hand", format!("no hand named `{name}`")))
-}
-
-fn pose(store: &StateStore, p: &PosePath) -> ApiResult<Pose> {
-    store.pose(&p.hand, &p.name).ok_or_else(|| {
-        ApiError::not_found(
-            "unknown-pose",
-            format!("hand `{}` has no pose named `{}`", p.hand, p.name),
-        )
-    })
-}
-
 fn view(p: &PosePath, pose: Pose) -> PoseView {
     PoseView {
         hand: p.hand.clone(),
         name: p.name.clone(),
         positions_deg: pose,
     }
-}
-
-fn check_pose_name(name: &str) -> ApiResult<()> {
-    let ok = !name.is_empty()
-        && name.len() <= MAX_POSE_NAME
-        && name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
-    if ok {
-        return Ok(());
-    }
-    Err(ApiError::invalid(
-        "name",
-        format!("pose name `{name}`: 1..={MAX_POSE_NAME} letters, digits, `_` or `-`"),
-    ))
-}
-
-/// Angles given by joint name (calibrated frame): each joint of the hand,
-/// a finite number within its calibrated range and soft limits.
-fn checked(state: &AppState, hand: &Hand, positions: BTreeMap<String, f64>) -> ApiResult<Pose> {
-    if positions.is_empty() {
-        return Err(ApiError::invalid("positions_deg", "positions_deg is empty"));
-    }
-    for (name, deg) in &positions {
-        let field = format!("positions_deg.{name}");
-        let joint = hand.joint(name).ok_or_else(|| {
-            let names: Vec<&str> = hand.joints.iter().map(|j| j.name.as_str()).collect();
-            ApiError::invalid(
-                &field,
-                format!(
-                    "hand `{}` has no joint `{name}` (it has {})",
-                    hand.name,
-                    names.join(", ")
-                ),
-            )
-        })?;
-        if !deg.is_finite() {
-            return Err(ApiError::invalid(&field, "not a finite number"));
-        }
-        let who = format!("joint `{name}` ({} on bus `{}`)", joint.id, joint.bus);
-        let cal = state.control().calibration(&joint.bus, joint.id);
-        state
-            .control()
-            .limits(&joint.bus, joint.id)
-            .check_joint_position(&cal, &field, *deg, &who)?;
-    }
-    Ok(positions)
-}
-
-/// Where every joint of the hand is now: its last target, else its angle.
-fn current(state: &AppState, hand: &Hand) -> ApiResult<Pose> {
-    let mut pose = Pose::new();
-    for j in &hand.joints {
-        let bus = state.control().reader(&j.bus)?;
-        let snap = bus.snapshot();
-        let raw = snap
-            .devices
-            .get(&j.id)
-            .and_then(commanded_or_measured_raw)
-            .ok_or_else(|| {
-                ApiError::conflict(
-                    "no-position",
-                    "Position unknown",
-                    format!(
-                        "joint `{}` ({} on bus `{}`) has not reported its angle",
-                        j.name, j.id, j.bus
-                    ),
-                )
-            })?;
-        let cal = state.control().calibration(&j.bus, j.id);
-        pose.insert(j.name.clone(), cal.to_joint(units::angle_deg(raw)));
-    }
-    Ok(pose)
 }
