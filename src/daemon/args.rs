@@ -151,6 +151,10 @@ pub struct FileConfig {
     /// `[ros2]`: the ROS 2 bridge over Zenoh (off by default).
     #[serde(default)]
     pub ros2: crate::ros2::Ros2Config,
+    /// `[[tokens]]`: tokens with a name and a scope (read, operate,
+    /// admin), each secret from a file or the environment.
+    #[serde(default)]
+    pub tokens: Vec<super::tokens::TokenConfig>,
 }
 
 /// `[[joint]]`: a name for a joint, shown in the API, telemetry and dashboard.

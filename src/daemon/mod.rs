@@ -10,6 +10,7 @@
 //! - `args`: the flags ([`RunArgs`]) and the config file's shape ([`FileConfig`]).
 //! - `plan`: flags and file checked into the daemon's [`Plan`].
 //! - `start`: the simulator of `--sim` and one owner per bus.
+//! - `tokens`: the scoped tokens of `[[tokens]]`, each secret from a file or the environment.
 //! - `shutdown`: serving until a signal, then draining, disabling, closing.
 //! - this file: the order of it all ([`run`]).
 
@@ -18,12 +19,14 @@ mod error;
 mod plan;
 mod shutdown;
 mod start;
+pub mod tokens;
 
 use std::sync::Arc;
 
 use tokio::net::TcpListener;
 
 use crate::control::Control;
+use crate::http::tokens::Tokens;
 use crate::http::AppState;
 use error::listen_error;
 use shutdown::{serve, stop_buses, stop_recordings, wait_for_ws_close};
@@ -54,7 +57,8 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     })?;
     // First line on stdout: scripts and tests read the port from it.
     println!("listening on http://{addr}");
-    tracing::info!(%addr, auth = plan.token.is_some(), "serving the API");
+    let tokens = Tokens::single(plan.token).and(plan.tokens);
+    tracing::info!(%addr, tokens = ?tokens.names(), "serving the API (tokens by name and scope; none: the API is open)");
     // One core, handed to HTTP and ROS 2 alike.
     let control = Arc::new(Control::new(handles, plan.limits));
     let mut control_options = plan.control;
@@ -63,7 +67,7 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     // A fresh core and a fresh state have no options yet: neither call
     // can be refused.
     let _ = control.set_options(control_options);
-    let state = AppState::new(control.clone(), plan.token);
+    let state = AppState::with_tokens(control.clone(), tokens);
     let mut http_options = plan.http;
     http_options.policy.listen = Some(addr);
     let _ = state.set_options(http_options);

@@ -8,12 +8,14 @@ use std::path::PathBuf;
 
 use super::args::{FileConfig, JointName, RunArgs, DEFAULT_LISTEN, SIM_BUS_NAME};
 use super::error::DaemonError;
+use super::tokens::scoped_tokens;
 use crate::bus::BusConfig;
 use crate::config_locate::{key_in_table_array, table_array_line};
 use crate::control::limits::{LimitError, SoftLimits};
 use crate::control::teleop::{WatchdogDefault, MAX_HOLD, MIN_HOLD};
 use crate::http::policy::{RequestPolicy, DEFAULT_MAX_BODY_BYTES};
 use crate::http::state::HttpOptions;
+use crate::http::tokens::NamedToken;
 use crate::protocol::is_device_id;
 use crate::sim::{AdapterModel, Firmware, SimConfig, SimError};
 
@@ -21,7 +23,10 @@ use crate::sim::{AdapterModel, Firmware, SimConfig, SimError};
 #[derive(Debug)]
 pub struct Plan {
     pub listen: SocketAddr,
+    /// The single token (`--token`, `token`): every scope.
     pub token: Option<String>,
+    /// The scoped tokens of `[[tokens]]`.
+    pub tokens: Vec<NamedToken>,
     pub buses: Vec<BusConfig>,
     pub limits: SoftLimits,
     /// The simulated bus of `--sim`, checked.
@@ -73,8 +78,13 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     let default_listen: SocketAddr = DEFAULT_LISTEN.parse().map_err(|_| DaemonError::NoBus)?;
     let listen = args.listen.or(file.listen).unwrap_or(default_listen);
     let token = token(args, &file)?;
+    let tokens = scoped_tokens(&file.tokens, token.as_deref())?;
     let policy = request_policy(listen, args, &file)?;
-    if !listen.ip().is_loopback() && token.is_none() && !(args.insecure || file.insecure) {
+    if !listen.ip().is_loopback()
+        && token.is_none()
+        && tokens.is_empty()
+        && !(args.insecure || file.insecure)
+    {
         return Err(DaemonError::Insecure { addr: listen });
     }
     let mut buses = file.buses;
@@ -114,6 +124,7 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     Ok(Plan {
         listen,
         token,
+        tokens,
         buses,
         limits: SoftLimits::new(file.limits)?,
         sim,
@@ -220,7 +231,7 @@ fn token_from(
 /// Why a token cannot be used: an `Authorization` header cannot carry
 /// blanks at its ends or control characters, and an empty token would
 /// silently turn auth off.
-fn token_problem(token: &str) -> Option<&'static str> {
+pub(super) fn token_problem(token: &str) -> Option<&'static str> {
     if token.is_empty() {
         Some("it is empty; give a token, or leave the option out to run without one")
     } else if token.trim().is_empty() {

@@ -1,27 +1,37 @@
-//! Bearer-token auth. When a token is configured, every request but
-//! the public paths (`/healthz`, the dashboard files) must carry `Authorization: Bearer <token>`; a missing or wrong
-//! token is a 401 problem. With no token the API is open (the daemon refuses
-//! to listen beyond loopback that way unless told `--insecure`).
+//! Bearer-token auth. When tokens are configured, every request but the
+//! public paths (`/healthz`, the dashboard files) must carry
+//! `Authorization: Bearer <token>`: a missing or unknown token is a 401
+//! problem, a token whose scope does not reach the route a 403 naming the
+//! scope it needed. With no token the API is open (the daemon refuses to
+//! listen beyond loopback that way unless told `--insecure`).
 
-use axum::extract::{Request, State};
+use axum::extract::{MatchedPath, Request, State};
 use axum::http::header::AUTHORIZATION;
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
 use super::error::ApiError;
 use super::paths::{is_public, WS_PATH};
+use super::scope::needs;
 use super::state::AppState;
+use super::tokens::Caller;
 
 const BEARER: &str = "Bearer ";
 
+/// Finds the request's token, checks that its scope reaches what the
+/// route needs ([`super::scope::needs`]: 403 saying which scope it
+/// needed), and passes the request on with its [`Caller`]. With no token
+/// configured, everyone is an (open) admin.
 pub(crate) async fn require_token(
     State(state): State<AppState>,
-    req: Request,
+    mut req: Request,
     next: Next,
 ) -> Response {
-    let Some(token) = state.token() else {
+    let tokens = state.tokens();
+    if tokens.is_empty() {
+        req.extensions_mut().insert(Caller::open());
         return next.run(req).await;
-    };
+    }
     if is_public(req.uri().path()) {
         return next.run(req).await;
     }
@@ -32,11 +42,23 @@ pub(crate) async fn require_token(
         .and_then(bearer_token)
         .map(str::to_owned)
         .or_else(|| websocket_query_token(&req));
-    match presented {
-        Some(p) if constant_time_eq(p.as_bytes(), token.as_bytes()) => next.run(req).await,
-        Some(_) => ApiError::unauthorized("the bearer token is not valid").into_response(),
-        None => ApiError::unauthorized("send `Authorization: Bearer <token>`").into_response(),
+    let Some(presented) = presented else {
+        return ApiError::unauthorized("send `Authorization: Bearer <token>`").into_response();
+    };
+    let Some(token) = tokens.find(&presented) else {
+        return ApiError::unauthorized("the bearer token is not valid").into_response();
+    };
+    let route = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map(|m| m.as_str().to_owned());
+    let needs = needs(req.method(), route.as_deref());
+    if !needs.allows(token.scope) {
+        return ApiError::insufficient_scope(needs, &token.name, token.scope).into_response();
     }
+    let caller = Caller::from(token);
+    req.extensions_mut().insert(caller);
+    next.run(req).await
 }
 
 /// Browsers cannot set headers on a WebSocket upgrade, so the WebSocket
@@ -84,20 +106,6 @@ fn bearer_token(value: &str) -> Option<&str> {
         .then(|| value[BEARER.len()..].trim())
 }
 
-/// Compares without an early exit, so response time does not reveal how
-/// much of a guessed token was right: every byte of the longer input is
-/// visited and folded into one accumulator, whatever differs. (The time
-/// depends on the lengths only; the presented one is the caller's own.)
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    let len_diff = a.len() ^ b.len();
-    let longest = a.len().max(b.len());
-    let mut diff = 0u8;
-    for i in 0..longest {
-        diff |= a.get(i).copied().unwrap_or(0) ^ b.get(i).copied().unwrap_or(0xFF);
-    }
-    diff == 0 && len_diff == 0
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -122,13 +130,5 @@ mod tests {
         assert_eq!(percent_decode("%zz"), None);
         assert_eq!(percent_decode("%+1"), None);
         assert_eq!(percent_decode("%FF"), None);
-    }
-
-    #[test]
-    fn token_comparison() {
-        assert!(constant_time_eq(b"secret", b"secret"));
-        assert!(!constant_time_eq(b"secret", b"secreT"));
-        assert!(!constant_time_eq(b"secret", b"secret2"));
-        assert!(!constant_time_eq(b"", b"x"));
     }
 }

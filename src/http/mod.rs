@@ -35,9 +35,11 @@ pub(crate) mod hub;
 pub(crate) mod paths;
 pub mod policy;
 pub(crate) mod request_stats;
+pub mod scope;
 pub(crate) mod shed;
 pub mod state;
 pub(crate) mod telemetry;
+pub mod tokens;
 pub(crate) mod web;
 pub mod ws;
 

@@ -8,6 +8,7 @@ use super::error::ApiResult;
 use super::hub::WsHub;
 use super::policy::{RefusalLog, RequestPolicy};
 use super::request_stats::RequestStats;
+use super::tokens::Tokens;
 use crate::control::bus_reader::BusReader;
 use crate::control::Control;
 
@@ -32,7 +33,7 @@ pub struct AppState {
 
 struct Inner {
     control: Arc<Control>,
-    token: Option<String>,
+    tokens: Tokens,
     started: Instant,
     ws: WsHub,
     requests: Arc<RequestStats>,
@@ -41,12 +42,19 @@ struct Inner {
 }
 
 impl AppState {
-    /// Serves `control`; an empty token counts as none.
+    /// Serves `control` with one token (`--token`: every scope); an empty
+    /// token counts as none.
     pub fn new(control: Arc<Control>, token: Option<String>) -> Self {
+        Self::with_tokens(control, Tokens::single(token))
+    }
+
+    /// Serves `control` to the holders of `tokens`, each within its scope
+    /// (none: the API is open).
+    pub fn with_tokens(control: Arc<Control>, tokens: Tokens) -> Self {
         Self {
             inner: Arc::new(Inner {
                 control,
-                token: token.filter(|t| !t.is_empty()),
+                tokens,
                 started: Instant::now(),
                 ws: WsHub::default(),
                 requests: Arc::default(),
@@ -61,8 +69,9 @@ impl AppState {
         &self.inner.control
     }
 
-    pub fn token(&self) -> Option<&str> {
-        self.inner.token.as_deref()
+    /// The tokens requests are checked against.
+    pub fn tokens(&self) -> &Tokens {
+        &self.inner.tokens
     }
 
     /// HTTP's options (set once, at start; a second call is refused and

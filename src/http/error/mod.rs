@@ -36,6 +36,7 @@ use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use utoipa::ToSchema;
 
+use super::scope::{Needs, Scope};
 use crate::control::ControlError;
 use crate::protocol::units::UnitError;
 
@@ -204,6 +205,21 @@ impl ApiError {
             "unauthorized",
             "Bearer token required",
             detail,
+        )
+    }
+
+    /// A token whose scope does not reach what the route needs (403),
+    /// naming the scope it needed and the token's own (by its name: never
+    /// the token).
+    pub fn insufficient_scope(needs: Needs, name: &str, has: Scope) -> Self {
+        Self::new(
+            StatusCode::FORBIDDEN,
+            "insufficient-scope",
+            "Token's scope too narrow",
+            format!(
+                "this needs a token of scope `{}`; token `{name}` is `{has}`",
+                needs.name()
+            ),
         )
     }
 
