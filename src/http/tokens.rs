@@ -96,6 +96,14 @@ pub struct Caller {
 }
 
 impl Caller {
+    /// A caller the auth layer did not name: it may look (and stop), nothing more.
+    pub fn unknown() -> Self {
+        Self {
+            name: "unknown".into(),
+            scope: Scope::Read,
+        }
+    }
+
     /// With no token configured the API is open: every caller may do all.
     pub fn open() -> Self {
         Self {

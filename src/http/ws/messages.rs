@@ -7,6 +7,7 @@ use serde_json::{Map, Value};
 use crate::control::grasp::{GraspRequest, ReleaseRequest};
 use crate::control::moves::MoveRequest;
 use crate::control::teleop::WatchdogPolicy;
+use crate::http::scope::{Needs, Scope};
 
 pub(crate) use super::replies::{BusInfo, ErrorCode, EventBody, Field, Limits, ServerMessage};
 
@@ -57,6 +58,63 @@ pub(crate) enum ClientMessage {
     Disable(JointsOfBus),
     /// The e-stop of one bus, or of every bus (`POST /api/v1/estop`).
     Estop(EstopRequest),
+}
+
+impl ClientMessage {
+    /// Its `type`, as the client wrote it.
+    pub(crate) fn kind(&self) -> &'static str {
+        match self {
+            Self::Subscribe(_) => "subscribe",
+            Self::Unsubscribe { .. } => "unsubscribe",
+            Self::Setpoints(_) => "setpoints",
+            Self::Watchdog(_) => "watchdog",
+            Self::Ping { .. } => "ping",
+            Self::Move { .. } => "move",
+            Self::Grasp { .. } => "grasp",
+            Self::GraspRelease { .. } => "grasp_release",
+            Self::GraspStop { .. } => "grasp_stop",
+            Self::Enable(_) => "enable",
+            Self::Disable(_) => "disable",
+            Self::Estop(_) => "estop",
+        }
+    }
+
+    /// Its `seq`, quoted by the answer.
+    pub(crate) fn seq(&self) -> Option<u64> {
+        match self {
+            Self::Subscribe(s) => s.seq,
+            Self::Setpoints(b) => b.seq,
+            Self::Watchdog(w) => w.seq,
+            Self::Unsubscribe { seq }
+            | Self::Ping { seq }
+            | Self::Move { seq, .. }
+            | Self::Grasp { seq, .. }
+            | Self::GraspRelease { seq, .. }
+            | Self::GraspStop { seq, .. } => *seq,
+            Self::Enable(j) | Self::Disable(j) => j.seq,
+            Self::Estop(e) => e.seq,
+        }
+    }
+
+    /// What it needs of the connection's token, as REST's routes do: to
+    /// look, `read`; to move (and to arm a watchdog), `operate`; to stop,
+    /// any token.
+    pub(crate) fn needs(&self) -> Needs {
+        match self {
+            Self::Subscribe(_) | Self::Unsubscribe { .. } | Self::Ping { .. } => {
+                Needs::Scope(Scope::Read)
+            }
+            Self::Estop(_) => Needs::AnyToken,
+            Self::Setpoints(_)
+            | Self::Watchdog(_)
+            | Self::Move { .. }
+            | Self::Grasp { .. }
+            | Self::GraspRelease { .. }
+            | Self::GraspStop { .. }
+            | Self::Enable(_)
+            | Self::Disable(_) => Needs::Scope(Scope::Operate),
+        }
+    }
 }
 
 /// The joints of a bus an `enable` or `disable` addresses; `ids` left

@@ -30,12 +30,14 @@ use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::{Query, State, WebSocketUpgrade};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
+use axum::Extension;
 use axum::Router;
 use futures_util::StreamExt;
 
 use crate::http::error::ApiError;
 use crate::http::paths::WS_PATH;
 use crate::http::state::AppState;
+use crate::http::tokens::Caller;
 /// Largest client message accepted (a full batch is well under this).
 const MAX_MESSAGE_BYTES: usize = 256 * 1024;
 /// How much of the read buffer one read of the socket offers. The codec
@@ -81,8 +83,12 @@ fn client_name(query: UpgradeQuery) -> Result<Option<String>, ApiError> {
 async fn upgrade(
     ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
     query: Result<Query<UpgradeQuery>, axum::extract::rejection::QueryRejection>,
+    caller: Option<Extension<Caller>>,
     State(state): State<AppState>,
 ) -> Response {
+    // The auth layer names every caller; were it ever missing, the
+    // connection may look and stop, nothing more.
+    let caller = caller.map_or_else(Caller::unknown, |Extension(c)| c);
     let ws = match ws {
         Ok(ws) => ws,
         Err(rej) => return ApiError::from(rej).into_response(),
@@ -98,6 +104,6 @@ async fn upgrade(
         .read_buffer_size(READ_CHUNK_BYTES)
         .on_upgrade(move |socket| async move {
             let (sink, stream) = socket.split();
-            session::run_named(state, name, sink, stream).await;
+            session::run_as(state, caller, name, sink, stream).await;
         })
 }

@@ -49,6 +49,8 @@ pub(crate) enum ErrorCode {
     WrongState,
     TooMany,
     BusError,
+    /// The connection's token does not reach the message's scope.
+    Forbidden,
 }
 
 /// A message to the client. (`telemetry` is written by the writer around

@@ -26,6 +26,7 @@ use crate::control::teleop::{WatchdogEvent, MAX_HOLD, MIN_HOLD};
 use crate::control::watchdog::{fire_policy, Watchdog};
 use crate::http::hub::WsHub;
 use crate::http::state::AppState;
+use crate::http::tokens::Caller;
 
 /// Replies (acks, errors) a connection may have queued; beyond, they are dropped and counted.
 const OUT_QUEUE: usize = 64;
@@ -57,10 +58,28 @@ where
     run_named(state, None, sink, stream).await;
 }
 
-/// Serves one connection until the client goes away; `name` is what the
-/// client called itself (`?client=`), shown beside the joints it streams to.
-pub async fn run_named<Si, St, E>(state: AppState, name: Option<String>, sink: Si, mut stream: St)
+/// [`run_as`] an open caller (every scope), as a daemon without tokens
+/// serves every connection.
+pub async fn run_named<Si, St, E>(state: AppState, name: Option<String>, sink: Si, stream: St)
 where
+    Si: Sink<Message> + Unpin + Send + 'static,
+    St: Stream<Item = Result<Message, E>> + Unpin,
+    E: std::fmt::Display,
+{
+    run_as(state, Caller::open(), name, sink, stream).await;
+}
+
+/// Serves one connection until the client goes away: `caller`, the token
+/// it connected with (a message its scope does not reach is refused,
+/// `forbidden`); `name`, what the client called itself (`?client=`), shown
+/// beside the joints it streams to.
+pub async fn run_as<Si, St, E>(
+    state: AppState,
+    caller: Caller,
+    name: Option<String>,
+    sink: Si,
+    mut stream: St,
+) where
     Si: Sink<Message> + Unpin + Send + 'static,
     St: Stream<Item = Result<Message, E>> + Unpin,
     E: std::fmt::Display,
@@ -83,6 +102,7 @@ where
     let mut conn = Connection {
         state: state.clone(),
         client,
+        caller,
         out: out_tx,
         sub: sub_tx,
         acks: ack_tx,
@@ -166,6 +186,8 @@ fn welcome(state: &AppState, client: u64, name: Option<String>) -> ServerMessage
 struct Connection {
     state: AppState,
     client: u64,
+    /// The token it connected with.
+    caller: Caller,
     out: mpsc::Sender<ServerMessage>,
     sub: watch::Sender<Option<Arc<Subscription>>>,
     acks: mpsc::Sender<PendingAck>,
@@ -203,6 +225,17 @@ impl Connection {
             Ok(m) => m,
             Err(e) => return self.reject(e.seq, WsError::new(e.code, e.message)),
         };
+        let needs = msg.needs();
+        if !needs.allows(self.caller.scope) {
+            let why = format!(
+                "`{}` needs a token of scope `{}`; token `{}` is `{}`",
+                msg.kind(),
+                needs.name(),
+                self.caller.name,
+                self.caller.scope
+            );
+            return self.reject(msg.seq(), WsError::new(ErrorCode::Forbidden, why));
+        }
         match msg {
             ClientMessage::Subscribe(s) => self.subscribe(s),
             ClientMessage::Unsubscribe { seq } => {
