@@ -440,6 +440,22 @@ pub enum BusEvent {
         state_before: &'static str,
         state: &'static str,
     },
+    /// A motion or configuration command a front-end passed on, with who
+    /// sent it (its token's name, never the token): what a recording
+    /// keeps of who moved what. A command repeated fast is told once per
+    /// second, with how many more came in that second.
+    Command {
+        bus: String,
+        /// The token's name (`open` without tokens).
+        by: String,
+        /// What, as the front-end names it: `PUT /api/v1/buses/sim0/devices/1/target`,
+        /// `websocket setpoints`, ...
+        command: String,
+        /// How it ended: the HTTP status, or `accepted` / the WebSocket error code.
+        outcome: String,
+        /// More like it (same who and what) in the second before.
+        repeats: u64,
+    },
 }
 
 /// A frame seen on the wire, for the raw frame view.

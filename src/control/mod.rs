@@ -26,6 +26,7 @@
 //! - [`limits`]: per-joint soft limits from the config.
 //! - [`teleop`]: the watchdog policy, its default, and what firing it does.
 //! - [`targets`]: physical targets → raw setpoints, checked; admission under the authority.
+//! - `audit`: who changed what, by token name, told to the log and the buses' events.
 //! - [`books`]: what runs now, one book per kind of job (moves, homing, grasps,
 //!   recordings, teleop streams).
 //! - [`velocity`]: a velocity command as a position target toward the soft limit at that speed.
@@ -48,6 +49,7 @@
 //! - this file: the layout and what the rest of the daemon uses by a short name.
 
 pub(crate) mod actions;
+pub(crate) mod audit;
 pub(crate) mod batch;
 pub mod books;
 pub(crate) mod bus_ops;

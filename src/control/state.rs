@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
+use super::audit::{Audit, Command};
 use super::books::{grasps, homing, moves, recordings, streams};
 use super::bus_reader::BusReader;
 use super::error::{ControlError, ControlResult};
@@ -41,6 +42,7 @@ pub struct Control {
     grasps: grasps::GraspBook,
     recordings: recordings::RecordingBook,
     streams: Arc<streams::StreamBook>,
+    audit: Audit,
 }
 
 impl Control {
@@ -57,6 +59,7 @@ impl Control {
             grasps: Default::default(),
             recordings: Default::default(),
             streams: Default::default(),
+            audit: Audit::default(),
         }
     }
 
@@ -75,6 +78,15 @@ impl Control {
         self.buses
             .get(name)
             .ok_or_else(|| ControlError::unknown_bus(name))
+    }
+
+    /// Tells who sent `cmd` (to the log, and to the events of bus `bus`,
+    /// or of every bus when the command names none).
+    pub(crate) fn tell(&self, cmd: &Command<'_>, bus: Option<&str>) {
+        match bus {
+            Some(name) => self.audit.tell(cmd, self.buses.get(name).into_iter()),
+            None => self.audit.tell(cmd, self.buses.values()),
+        }
     }
 
     /// Every bus, read only, in name order.

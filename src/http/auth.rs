@@ -12,9 +12,10 @@ use axum::response::{IntoResponse, Response};
 
 use super::error::ApiError;
 use super::paths::{is_public, WS_PATH};
-use super::scope::needs;
+use super::scope::{needs, Needs, Scope};
 use super::state::AppState;
 use super::tokens::Caller;
+use crate::control::audit::Command;
 
 const BEARER: &str = "Bearer ";
 
@@ -27,38 +28,59 @@ pub(crate) async fn require_token(
     mut req: Request,
     next: Next,
 ) -> Response {
-    let tokens = state.tokens();
-    if tokens.is_empty() {
-        req.extensions_mut().insert(Caller::open());
-        return next.run(req).await;
-    }
-    if is_public(req.uri().path()) {
-        return next.run(req).await;
-    }
-    let presented = req
-        .headers()
-        .get(AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(bearer_token)
-        .map(str::to_owned)
-        .or_else(|| websocket_query_token(&req));
-    let Some(presented) = presented else {
-        return ApiError::unauthorized("send `Authorization: Bearer <token>`").into_response();
-    };
-    let Some(token) = tokens.find(&presented) else {
-        return ApiError::unauthorized("the bearer token is not valid").into_response();
-    };
     let route = req
         .extensions()
         .get::<MatchedPath>()
         .map(|m| m.as_str().to_owned());
     let needs = needs(req.method(), route.as_deref());
-    if !needs.allows(token.scope) {
-        return ApiError::insufficient_scope(needs, &token.name, token.scope).into_response();
+    let tokens = state.tokens();
+    let caller = if tokens.is_empty() {
+        Caller::open()
+    } else if is_public(req.uri().path()) {
+        return next.run(req).await;
+    } else {
+        let presented = req
+            .headers()
+            .get(AUTHORIZATION)
+            .and_then(|v| v.to_str().ok())
+            .and_then(bearer_token)
+            .map(str::to_owned)
+            .or_else(|| websocket_query_token(&req));
+        let Some(presented) = presented else {
+            return ApiError::unauthorized("send `Authorization: Bearer <token>`").into_response();
+        };
+        let Some(token) = tokens.find(&presented) else {
+            return ApiError::unauthorized("the bearer token is not valid").into_response();
+        };
+        if !needs.allows(token.scope) {
+            return ApiError::insufficient_scope(needs, &token.name, token.scope).into_response();
+        }
+        Caller::from(token)
+    };
+    // Motion, configuration and the e-stop are told with who sent them.
+    let told = (needs != Needs::Scope(Scope::Read))
+        .then(|| (req.method().to_string(), req.uri().path().to_owned()));
+    req.extensions_mut().insert(caller.clone());
+    let resp = next.run(req).await;
+    if let Some((method, path)) = told {
+        let kind = format!("{method} {}", route.as_deref().unwrap_or(&path));
+        let what = format!("{method} {path}");
+        let cmd = Command {
+            by: &caller.name,
+            kind: &kind,
+            what: &what,
+            outcome: resp.status().as_str(),
+        };
+        let bus = route.as_deref().and_then(|r| bus_of(r, &path));
+        state.control().tell(&cmd, bus);
     }
-    let caller = Caller::from(token);
-    req.extensions_mut().insert(caller);
-    next.run(req).await
+    resp
+}
+
+/// The `{bus}` of a path, found where the route's template has it.
+fn bus_of<'a>(route: &str, path: &'a str) -> Option<&'a str> {
+    let at = route.split('/').position(|s| s == "{bus}")?;
+    path.split('/').nth(at)
 }
 
 /// Browsers cannot set headers on a WebSocket upgrade, so the WebSocket
@@ -109,6 +131,16 @@ fn bearer_token(value: &str) -> Option<&str> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_bus_of_a_path_is_where_its_route_says() {
+        let route = "/api/v1/buses/{bus}/devices/{id}/target";
+        assert_eq!(
+            bus_of(route, "/api/v1/buses/left/devices/3/target"),
+            Some("left")
+        );
+        assert_eq!(bus_of("/api/v1/moves", "/api/v1/moves"), None);
+    }
 
     #[test]
     fn bearer_scheme_is_case_insensitive_and_exact() {

@@ -72,6 +72,7 @@ pub const EVENTS: &[(&str, &[&str])] = &[
     ),
     ("grasp_contact", &["bus", "grasp_id", "id", "contact_deg"]),
     ("grasp_lost", &["bus", "grasp_id", "id", "q_current_a"]),
+    ("command", &["bus", "by", "command", "outcome", "repeats"]),
 ];
 
 /// Every field an event may carry, typed.
@@ -108,6 +109,10 @@ fn event_fields() -> Map<String, Value> {
         "id": {"type": "integer", "minimum": 0, "maximum": 255, "description": "grasp_*: the joint"},
         "contact_deg": {"type": "number", "description": "grasp_contact: where contact began, degrees (calibrated)"},
         "q_current_a": {"type": "number", "description": "grasp_lost: the q current when the loss was seen, A"},
+        "by": string("command: the name of the token it came with"),
+        "command": string("command: what, as the front-end names it (`PUT /api/v1/...`, `websocket setpoints`)"),
+        "outcome": string("command: the HTTP status, or how the WebSocket answered"),
+        "repeats": int("command: more like it in the second before"),
     });
     match fields {
         Value::Object(m) => m,

@@ -20,11 +20,13 @@ use super::setpoints::{self, WsError, MAX_BATCH};
 use super::subscribe::{subscription, MAX_RATE_HZ};
 use super::telemetry::Subscription;
 use super::writer::{PendingAck, Writer};
+use crate::control::audit::Command;
 use crate::control::books::streams::{Driver, Via};
 use crate::control::streams::Streams;
 use crate::control::teleop::{WatchdogEvent, MAX_HOLD, MIN_HOLD};
 use crate::control::watchdog::{fire_policy, Watchdog};
 use crate::http::hub::WsHub;
+use crate::http::scope::{Needs, Scope};
 use crate::http::state::AppState;
 use crate::http::tokens::Caller;
 
@@ -235,6 +237,16 @@ impl Connection {
                 self.caller.scope
             );
             return self.reject(msg.seq(), WsError::new(ErrorCode::Forbidden, why));
+        }
+        if needs != Needs::Scope(Scope::Read) {
+            let what = format!("websocket {}", msg.kind());
+            let cmd = Command {
+                by: &self.caller.name,
+                kind: &what,
+                what: &what,
+                outcome: "received",
+            };
+            self.state.control().tell(&cmd, None);
         }
         match msg {
             ClientMessage::Subscribe(s) => self.subscribe(s),
