@@ -17,6 +17,7 @@
 
 pub(crate) mod buses;
 pub(crate) mod calibration;
+pub(crate) mod caller;
 pub(crate) mod config;
 pub(crate) mod config_all;
 pub(crate) mod config_outcome;
@@ -44,6 +45,7 @@ use crate::http::state::AppState;
 pub fn router() -> OpenApiRouter<AppState> {
     openapi::base()
         .merge(health::router())
+        .merge(caller::router())
         .merge(buses::router())
         .merge(devices::router())
         .merge(control::router())
