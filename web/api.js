@@ -85,6 +85,7 @@ export function el(tag, props = {}, ...children) {
   const node = document.createElement(tag);
   for (const [k, v] of Object.entries(props)) {
     if (k === "testid") node.dataset.testid = v;
+    else if (k === "needs") node.dataset.needs = v;
     else node[k] = v;
   }
   node.append(...children);

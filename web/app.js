@@ -12,6 +12,7 @@ import { initCalibration, showCalibration } from "./calibration.js";
 import { initHands } from "./hands.js";
 import { initRecordings } from "./recordings.js";
 import { initRos2 } from "./ros2.js";
+import { loadScope } from "./scope.js";
 
 const TELEMETRY_HZ = 20;
 const PLOT_SECONDS = 10;
@@ -41,6 +42,7 @@ $("#token-dialog").addEventListener("close", () => {
   localStorage.setItem("jointd-token", session.token);
   connect();
   refreshBuses();
+  loadScope();
 });
 $("#token-button").onclick = askToken;
 
@@ -452,4 +454,5 @@ initRecordings();
 initRos2();
 connect();
 refreshBuses();
+loadScope();
 setInterval(refreshBuses, 1000);

@@ -37,9 +37,9 @@ class GraspRow {
       this.body);
     this.root = el("div", { className: "grasp-box" },
       el("div", { className: "row" },
-        el("button", { textContent: "Grasp", testid: `grasp-${hand}`, onclick: () => this.start() }),
-        el("button", { textContent: "Release", testid: id("release"), onclick: () => this.end("release") }),
-        el("button", { textContent: "Stop", testid: id("stop"), onclick: () => this.end("stop") }),
+        el("button", { textContent: "Grasp", needs: "operate", testid: `grasp-${hand}`, onclick: () => this.start() }),
+        el("button", { textContent: "Release", needs: "operate", testid: id("release"), onclick: () => this.end("release") }),
+        el("button", { textContent: "Stop", needs: "operate", testid: id("stop"), onclick: () => this.end("stop") }),
         el("label", {}, "°/s ", this.speed),
         el("label", {}, "hold A ", this.hold),
         this.state),

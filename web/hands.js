@@ -73,15 +73,15 @@ function handView(h) {
 
 /** A pose: its name goes there, × deletes it. */
 function poseChip(hand, name) {
-  const go = el("button", { textContent: name, title: `Move ${hand} to ${name}`, testid: `pose-${hand}-${name}`, onclick: () => goPose(hand, name) });
-  const del = el("button", { textContent: "×", className: "quiet", title: `Delete pose ${name}`,
+  const go = el("button", { textContent: name, needs: "operate", title: `Move ${hand} to ${name}`, testid: `pose-${hand}-${name}`, onclick: () => goPose(hand, name) });
+  const del = el("button", { textContent: "×", needs: "operate", className: "quiet", title: `Delete pose ${name}`,
     testid: `pose-delete-${hand}-${name}`, onclick: () => deletePose(hand, name) });
   return el("span", { className: "chip" }, go, del);
 }
 
 function saveRow(hand) {
   const input = el("input", { placeholder: "pose name", size: 10, testid: `pose-name-${hand}` });
-  const save = el("button", { textContent: "Save current", testid: `pose-save-${hand}`, onclick: () => savePose(hand, input.value.trim()) });
+  const save = el("button", { textContent: "Save current", needs: "operate", testid: `pose-save-${hand}`, onclick: () => savePose(hand, input.value.trim()) });
   return el("div", { className: "row" }, input, save);
 }
 
@@ -90,7 +90,7 @@ function saveRow(hand) {
 function moveRow(hand) {
   if (!trackers.has(hand)) {
     const state = el("span", { className: "move-state", testid: `hand-move-state-${hand}` });
-    const stop = el("button", { textContent: "Stop", testid: `hand-move-stop-${hand}` });
+    const stop = el("button", { textContent: "Stop", needs: "operate", testid: `hand-move-stop-${hand}` });
     trackers.set(hand, new MoveTracker(state, stop));
   }
   const t = trackers.get(hand);

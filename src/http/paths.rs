@@ -14,7 +14,7 @@ pub(crate) const DOCS_PATH: &str = "/docs";
 pub(crate) const DASHBOARD_PAGE: &str = "/";
 pub(crate) const DASHBOARD_INDEX: &str = "/index.html";
 pub(crate) const DASHBOARD_STYLE: &str = "/style.css";
-pub(crate) const DASHBOARD_SCRIPTS: [&str; 9] = [
+pub(crate) const DASHBOARD_SCRIPTS: [&str; 10] = [
     "/app.js",
     "/api.js",
     "/moves.js",
@@ -24,6 +24,7 @@ pub(crate) const DASHBOARD_SCRIPTS: [&str; 9] = [
     "/grasp.js",
     "/recordings.js",
     "/ros2.js",
+    "/scope.js",
 ];
 const DASHBOARD: [&str; 3] = [DASHBOARD_PAGE, DASHBOARD_INDEX, DASHBOARD_STYLE];
 

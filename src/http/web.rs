@@ -33,7 +33,7 @@ macro_rules! script {
 }
 
 /// (URL path, file name, content type, embedded bytes).
-const ASSETS: [Asset; 12] = [
+const ASSETS: [Asset; 13] = [
     (
         DASHBOARD_PAGE,
         "index.html",
@@ -61,6 +61,7 @@ const ASSETS: [Asset; 12] = [
     script!("grasp.js"),
     script!("recordings.js"),
     script!("ros2.js"),
+    script!("scope.js"),
 ];
 
 /// One route per file; each handler knows its file, so no request can ask
