@@ -2,7 +2,6 @@
 //! under way (bounded), the WebSocket sessions, every joint disabled and
 //! every port closed, the recordings' summaries written.
 
-use std::future::IntoFuture;
 use std::time::Duration;
 
 use tokio::net::TcpListener;
@@ -28,9 +27,7 @@ pub(super) async fn serve(listener: TcpListener, state: &AppState) -> Result<(),
         ws_state.ws().shut_down();
         let _ = signalled_tx.send(true);
     };
-    let serving = axum::serve(crate::http::without_nagle(listener), app(state.clone()))
-        .with_graceful_shutdown(stopping)
-        .into_future();
+    let serving = crate::http::serve::serve(listener, app(state.clone()), stopping);
     let drained = async {
         if signalled.wait_for(|s| *s).await.is_err() {
             return std::future::pending().await;

@@ -36,6 +36,7 @@ pub(crate) mod paths;
 pub mod policy;
 pub(crate) mod request_stats;
 pub mod scope;
+pub mod serve;
 pub(crate) mod shed;
 pub mod state;
 pub(crate) mod telemetry;
