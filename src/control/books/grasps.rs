@@ -9,6 +9,7 @@
 //! write back the limit the other had reduced).
 
 use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use serde::Serialize;
@@ -189,6 +190,43 @@ pub(crate) struct Busy {
 #[derive(Default)]
 pub(crate) struct GraspBook {
     inner: Mutex<(u64, BTreeMap<u64, Arc<Job>>)>,
+    /// Release and stop calls waiting for their grasp to end.
+    waiting: AtomicUsize,
+}
+
+/// Release and stop calls that may wait at once for their grasp to end:
+/// each holds a connection for up to the end's bound, and a flood of them
+/// must leave room for every other request (the e-stop's first). Beyond,
+/// a call's command still applies; its answer does not wait.
+pub(crate) const MAX_WAITING: usize = 32;
+
+/// One waiting call's place, given back when it ends.
+#[derive(Debug)]
+pub(crate) struct WaitSlot<'a>(&'a AtomicUsize);
+
+impl Drop for WaitSlot<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::AcqRel);
+    }
+}
+
+impl GraspBook {
+    /// A place among the calls waiting for a grasp to end, if one is free.
+    pub(crate) fn wait_slot(&self) -> Option<WaitSlot<'_>> {
+        let mut n = self.waiting.load(Ordering::Acquire);
+        loop {
+            if n >= MAX_WAITING {
+                return None;
+            }
+            match self
+                .waiting
+                .compare_exchange(n, n + 1, Ordering::AcqRel, Ordering::Acquire)
+            {
+                Ok(_) => return Some(WaitSlot(&self.waiting)),
+                Err(now) => n = now,
+            }
+        }
+    }
 }
 
 fn running_in(book: &BTreeMap<u64, Arc<Job>>, bus: &str, id: u8) -> Option<u64> {

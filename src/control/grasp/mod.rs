@@ -212,9 +212,13 @@ pub(crate) async fn stop(state: &Control, id: u64) -> ControlResult<GraspView> {
     wait_done(state, id, &job).await
 }
 
+/// Waits (bounded) for the job to end, if a waiting place is free
+/// ([`crate::control::books::grasps::MAX_WAITING`]); the job as it stands.
 async fn wait_done(state: &Control, id: u64, job: &Job) -> ControlResult<GraspView> {
-    let mut done = job.done.subscribe();
-    let _ = tokio::time::timeout(END_WAIT, done.wait_for(|d| *d)).await;
+    if let Some(_place) = state.grasps().wait_slot() {
+        let mut done = job.done.subscribe();
+        let _ = tokio::time::timeout(END_WAIT, done.wait_for(|d| *d)).await;
+    }
     get(state, id)
 }
 

@@ -2,6 +2,7 @@
 //! (the routine is in [`crate::control::grasp`]).
 
 use axum::extract::State;
+use axum::http::StatusCode;
 use axum::http::{header, StatusCode};
 use axum::Json;
 use serde::Deserialize;
@@ -98,30 +99,51 @@ async fn get_grasp(
 /// it is, or (neither) back to where it started, within its limits (422
 /// otherwise; nothing moves), at `speed_dps` (default: the closing speed);
 /// then its previous current limit is written back and read back. Answers
-/// once every finger ended (`released`, with `current_limit_restored`).
-/// 409 `grasp-ended` if the grasp already ended. The body may be `{}`.
+/// once every finger ended (`released`, with `current_limit_restored`):
+/// 200. With many such calls already waiting, or after the bound, it
+/// answers at once, the release under way: 202 (`state` `running`; poll
+/// `GET /api/v1/grasps/{id}`). 409 `grasp-ended` if the grasp already
+/// ended. The body may be `{}`.
 #[utoipa::path(post, path = "/api/v1/grasps/{id}/release", tag = TAG_CONTROL, params(GraspPath),
     request_body(content = ReleaseRequest, example = json!({"open_deg": 20.0})),
-    responses((status = 200, description = "The grasp, released", body = GraspView), ErrorResponses))]
+    responses((status = 200, description = "The grasp, released", body = GraspView),
+        (status = 202, description = "The release under way; the grasp as it stands", body = GraspView),
+        ErrorResponses))]
 async fn release_grasp(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<GraspPath>,
     ApiJson(req): ApiJson<ReleaseRequest>,
-) -> ApiResult<Json<GraspView>> {
-    Ok(Json(grasp::release(state.control(), p.id, &req).await?))
+) -> ApiResult<(StatusCode, Json<GraspView>)> {
+    Ok(ended_or_under_way(
+        grasp::release(state.control(), p.id, &req).await?,
+    ))
 }
 
 /// Stop a grasp: every finger holds where it is; limits restored.
 ///
 /// Answers once every finger ended (`stopped`, with
-/// `current_limit_restored`). Stopping a grasp that already ended answers
-/// its final state.
+/// `current_limit_restored`): 200; with many such calls already waiting,
+/// or after the bound, at once, the stop under way: 202. Stopping a grasp
+/// that already ended answers its final state.
 #[utoipa::path(post, path = "/api/v1/grasps/{id}/stop", tag = TAG_CONTROL, params(GraspPath),
     responses((status = 200, description = "The grasp, stopped (or as it ended)", body = GraspView),
+        (status = 202, description = "The stop under way; the grasp as it stands", body = GraspView),
         ErrorResponses))]
 async fn stop_grasp(
     State(state): State<AppState>,
     ApiPath(p): ApiPath<GraspPath>,
-) -> ApiResult<Json<GraspView>> {
-    Ok(Json(grasp::stop(state.control(), p.id).await?))
+) -> ApiResult<(StatusCode, Json<GraspView>)> {
+    Ok(ended_or_under_way(
+        grasp::stop(state.control(), p.id).await?,
+    ))
+}
+
+/// 200 with a grasp that ended, 202 with one still under way.
+fn ended_or_under_way(view: GraspView) -> (StatusCode, Json<GraspView>) {
+    let status = if view.state == "running" {
+        StatusCode::ACCEPTED
+    } else {
+        StatusCode::OK
+    };
+    (status, Json(view))
 }
