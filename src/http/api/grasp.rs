@@ -2,7 +2,6 @@
 //! (the routine is in [`crate::control::grasp`]).
 
 use axum::extract::State;
-use axum::http::StatusCode;
 use axum::http::{header, StatusCode};
 use axum::Json;
 use serde::Deserialize;
