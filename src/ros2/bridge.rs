@@ -15,8 +15,8 @@ use tokio::sync::watch;
 use zenoh::liveliness::LivelinessToken;
 
 use super::command_stream::{self, Dropped};
-use super::config::{Distro, Ros2Config, Ros2Mode};
-use super::joint_states::{publish_joint_states, scopes};
+use super::config::{Distro, NamespaceBy, Ros2Config, Ros2Mode};
+use super::joint_states::{hand_scopes, publish_joint_states, scopes};
 use super::keys::{self, Kind, NodeIdentity};
 use super::rosout::Rosout;
 use super::services::{self, Service, ServiceQueryable};
@@ -117,6 +117,23 @@ pub(super) async fn declare(
     on.spawn(publish_logs);
     for (name, scope) in scopes(state, cfg) {
         declare_scope(&mut on, state, cfg, stats, &rosout, &closed, &name, scope).await?;
+    }
+    // A hand's grasp is the hand's, whichever way the joints' topics are
+    // named: namespaced by bus, each hand still gets its grasp topics
+    // and services under its own name.
+    if cfg.namespace_by == NamespaceBy::Bus {
+        for (hand, scope) in hand_scopes(state) {
+            let Scope::Hand { joints, .. } = &scope else {
+                continue;
+            };
+            let ns = cfg.namespace(&hand);
+            declare_grasp(
+                &mut on, state, cfg, stats, &rosout, &ns, &hand, joints, &closed,
+            )
+            .await?;
+            let services = [Service::GraspRelease, Service::GraspStop];
+            serve_services(&mut on, state, &scope, &ns, &services, &closed).await?;
+        }
     }
     let (publisher, gid) = on.publisher("/diagnostics", DIAGNOSTIC_ARRAY).await?;
     let period = Duration::from_secs_f64(1.0 / cfg.diagnostics_hz);

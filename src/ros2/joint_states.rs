@@ -29,24 +29,29 @@ pub(super) fn scopes(state: &Arc<Control>, cfg: &Ros2Config) -> Vec<(String, Sco
             .readers()
             .map(|b| (b.name().to_owned(), Scope::Bus(b.name().to_owned())))
             .collect(),
-        NamespaceBy::Hand => state
-            .hands()
-            .map(|store| {
-                store
-                    .hands()
-                    .iter()
-                    .map(|h| {
-                        let joints = h.joints.iter().map(|j| (j.bus.clone(), j.id)).collect();
-                        let scope = Scope::Hand {
-                            name: h.name.clone(),
-                            joints,
-                        };
-                        (h.name.clone(), scope)
-                    })
-                    .collect()
-            })
-            .unwrap_or_default(),
+        NamespaceBy::Hand => hand_scopes(state),
     }
+}
+
+/// Every named hand, each with its joints.
+pub(super) fn hand_scopes(state: &Control) -> Vec<(String, Scope)> {
+    state
+        .hands()
+        .map(|store| {
+            store
+                .hands()
+                .iter()
+                .map(|h| {
+                    let joints = h.joints.iter().map(|j| (j.bus.clone(), j.id)).collect();
+                    let scope = Scope::Hand {
+                        name: h.name.clone(),
+                        joints,
+                    };
+                    (h.name.clone(), scope)
+                })
+                .collect()
+        })
+        .unwrap_or_default()
 }
 
 /// The buses a scope's joints are on.
