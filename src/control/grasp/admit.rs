@@ -177,7 +177,7 @@ pub(super) fn admit(
     let field = format!("joints.{}.close_to_deg", joint.name);
     let close_to_joint_deg = match close_to {
         Some(d) => d,
-        None => default_close_to(state, hand, joint, &cal, &soft),
+        None => default_close_to(state, hand, joint, &cal, &soft, &field)?,
     };
     let who = format!("joint `{}`", joint.name);
     let close_to_deg = soft.check_joint_position(&cal, &field, close_to_joint_deg, &who)?;
@@ -249,19 +249,38 @@ fn running(dev: &crate::bus::handle::DeviceState, joint: &HandJoint) -> ControlR
 
 /// The pose `closed`'s angle for the joint, else the top of its allowed
 /// range (calibrated frame: soft limits, device range, calibration range).
+/// A joint with no range configured (neither soft limits nor a
+/// calibration range) has no top but the protocol's ±255°: a finger in free
+/// air would turn on towards it, so the grasp is refused, saying how to
+/// give it one.
 fn default_close_to(
     state: &Control,
     hand: &str,
     joint: &HandJoint,
     cal: &Calibration,
     soft: &crate::control::limits::JointLimits,
-) -> f64 {
+    field: &str,
+) -> ControlResult<f64> {
     let closed = state
         .hands()
         .and_then(|s| s.pose(hand, CLOSED_POSE))
         .and_then(|p| p.get(&joint.name).copied());
-    closed.unwrap_or_else(|| {
-        let (_, hi) = cal.range_to_joint((soft.min_deg, soft.max_deg));
-        cal.range_deg.map_or(hi, |(_, top)| hi.min(top))
-    })
+    if let Some(deg) = closed {
+        return Ok(deg);
+    }
+    let unbounded = soft.min_deg <= -units::MAX_ANGLE_DEG && soft.max_deg >= units::MAX_ANGLE_DEG;
+    if unbounded && cal.range_deg.is_none() {
+        return Err(ControlError::invalid(
+            field,
+            format!(
+                "joint `{}` has no range to close to (only the protocol's ±{}°): give \
+                 `close_to_deg`, save the hand's `{CLOSED_POSE}` pose, or give the joint a \
+                 range (soft limits in `[[limit]]`, or a calibration range)",
+                joint.name,
+                units::MAX_ANGLE_DEG
+            ),
+        ));
+    }
+    let (_, hi) = cal.range_to_joint((soft.min_deg, soft.max_deg));
+    Ok(cal.range_deg.map_or(hi, |(_, top)| hi.min(top)))
 }
