@@ -192,13 +192,25 @@ impl Control {
             })
     }
 
-    /// The configured name of a joint (`[[joint]]` in the config file).
+    /// A joint's name: what its `[[hand]]` calls it, else its `[[joint]]`
+    /// name in the config file; the same on every front-end (the device
+    /// list, telemetry, recordings, ROS 2).
     pub fn joint_name(&self, bus: &str, id: u8) -> Option<&str> {
+        let by_hand = self.hands().and_then(|store| {
+            store
+                .hands()
+                .iter()
+                .flat_map(|h| h.joints.iter())
+                .find(|j| j.bus == bus && j.id == id)
+                .map(|j| j.name.as_str())
+        });
         let names = &self.options().joint_names;
-        names
-            .get(&(Some(bus.to_owned()), id))
-            .or_else(|| names.get(&(None, id)))
-            .map(String::as_str)
+        by_hand.or_else(|| {
+            names
+                .get(&(Some(bus.to_owned()), id))
+                .or_else(|| names.get(&(None, id)))
+                .map(String::as_str)
+        })
     }
 
     /// What applies to a teleop stream that declares no watchdog of its own.
