@@ -209,6 +209,14 @@ pub(crate) const CHANGES: &[(&str, &str, Needs)] = &[
     ),
 ];
 
+/// Whether a change (`method` other than `GET`/`HEAD`) on `route` has its
+/// scope placed in the table (one not placed needs `admin`).
+pub fn placed(method: &Method, route: &str) -> bool {
+    CHANGES
+        .iter()
+        .any(|(m, r, _)| *m == method.as_str() && *r == route)
+}
+
 /// What `method` on `route` needs: `route` is the router's template (e.g.
 /// `/api/v1/moves/{id}`), `None` for a path no route matched (which then
 /// answers 404 or 405 and changes nothing).
