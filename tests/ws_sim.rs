@@ -735,3 +735,42 @@ async fn setpoints_may_name_joints_by_hand_and_joint_name() {
         (Some("bad_message"), Some("targets[0]"))
     );
 }
+
+/// `enable`, `disable` and `estop` over the WebSocket go through the calls
+/// REST makes: the same answers, and an unknown device refused in the
+/// same words as REST refuses it.
+#[tokio::test]
+async fn enable_disable_and_estop_over_the_websocket_are_rests_calls() {
+    let bus = sim_bus::start(2, None).await;
+    let mut c = connect(&bus).await;
+    c.send(json!({"type": "enable", "seq": 1, "bus": "sim0", "ids": [1]}))
+        .await;
+    let done = c.next_of("done").await;
+    assert_eq!(done["ref_seq"], 1);
+    assert_eq!(done["action"], "enable");
+    assert_eq!(done["ids"], json!([1]));
+    bus.wait_snapshot("joint 1 enabled", |s| {
+        s.devices.get(&1).is_some_and(|d| {
+            d.info01
+                .as_ref()
+                .is_some_and(|(i, _)| jointd::control::device::is_enabled(i))
+        })
+    })
+    .await;
+    // An unknown device: the core's refusal, word for word REST's.
+    c.send(json!({"type": "enable", "seq": 2, "bus": "sim0", "ids": [9]}))
+        .await;
+    let refused = c.next_of("error").await;
+    assert_eq!(refused["ref_seq"], 2);
+    let rest = bus
+        .server
+        .post("/api/v1/buses/sim0/control/enable", json!({"ids": [9]}))
+        .await;
+    assert_eq!(refused["message"], rest.body["detail"], "one check, one wording");
+    c.send(json!({"type": "disable", "seq": 3, "bus": "sim0"})).await;
+    assert_eq!(c.next_of("done").await["action"], "disable");
+    c.send(json!({"type": "estop", "seq": 4})).await;
+    let stopped = c.next_of("estopped").await;
+    assert_eq!(stopped["ref_seq"], 4);
+    assert_eq!(stopped["result"]["stopped"], true, "{stopped}");
+}
