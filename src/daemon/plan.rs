@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use super::args::{FileConfig, JointName, RunArgs, DEFAULT_LISTEN, SIM_BUS_NAME};
 use super::error::DaemonError;
-use super::tokens::scoped_tokens;
+use super::tokens::{scoped_tokens, token_problem};
 use crate::bus::BusConfig;
 use crate::config_locate::{key_in_table_array, table_array_line};
 use crate::control::limits::{LimitError, SoftLimits};
@@ -225,23 +225,6 @@ fn token_from(
             why: why.into(),
         }),
         None => Ok(Some(text)),
-    }
-}
-
-/// Why a token cannot be used: an `Authorization` header cannot carry
-/// blanks at its ends or control characters, and an empty token would
-/// silently turn auth off.
-pub(super) fn token_problem(token: &str) -> Option<&'static str> {
-    if token.is_empty() {
-        Some("it is empty; give a token, or leave the option out to run without one")
-    } else if token.trim().is_empty() {
-        Some("it is only whitespace")
-    } else if token.trim() != token {
-        Some("it starts or ends with whitespace, which an Authorization header cannot carry")
-    } else if token.chars().any(char::is_control) {
-        Some("it contains a control character")
-    } else {
-        None
     }
 }
 

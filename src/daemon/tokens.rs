@@ -62,7 +62,7 @@ pub(super) fn scoped_tokens(
             }
             _ => return Err(bad("give its secret's `file` or `env`, one of them".into())),
         };
-        if let Some(why) = super::plan::token_problem(&secret) {
+        if let Some(why) = token_problem(&secret) {
             return Err(bad(format!("its secret: {why}")));
         }
         if secrets.contains(&secret) {
@@ -92,6 +92,23 @@ fn check_name(name: &str) -> Result<(), &'static str> {
         return Err("the name `token` is the single token's (`--token`)");
     }
     Ok(())
+}
+
+/// Why a token cannot be used: an `Authorization` header cannot carry
+/// blanks at its ends or control characters, and an empty token would
+/// silently turn auth off.
+pub(super) fn token_problem(token: &str) -> Option<&'static str> {
+    if token.is_empty() {
+        Some("it is empty; give a token, or leave the option out to run without one")
+    } else if token.trim().is_empty() {
+        Some("it is only whitespace")
+    } else if token.trim() != token {
+        Some("it starts or ends with whitespace, which an Authorization header cannot carry")
+    } else if token.chars().any(char::is_control) {
+        Some("it contains a control character")
+    } else {
+        None
+    }
 }
 
 #[cfg(test)]
