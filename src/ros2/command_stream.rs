@@ -12,6 +12,7 @@ use std::time::Duration;
 
 use tokio::sync::watch;
 
+use super::audit;
 use super::commands::{self, Refused};
 use super::rosout::Rosout;
 use crate::bus::Source;
@@ -219,9 +220,20 @@ impl CommandStream {
                 }
                 self.watchdog.feed(&applied.joints, now);
                 self.stats.commands_applied.fetch_add(1, Ordering::Relaxed);
+                self.tell("applied");
             }
-            Err(why) => self.dropped(why),
+            Err(why) => {
+                self.tell("refused");
+                self.dropped(why);
+            }
         }
+    }
+
+    /// Puts the command in the audit (repeats at stream rates collapse to
+    /// one line a second there).
+    fn tell(&self, outcome: &str) {
+        let what = format!("topic {}", self.dropped.topic);
+        audit::tell(&self.state, audit::bus(&self.scope), &what, outcome);
     }
 
     /// Arms the watchdog with at most [`VELOCITY_HOLD`].

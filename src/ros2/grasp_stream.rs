@@ -14,6 +14,7 @@ use std::time::{Duration, SystemTime};
 
 use tokio::sync::watch;
 
+use super::audit;
 use super::command_stream::{next_payload, Dropped, Subscriber};
 use super::commands::Refused;
 use super::gripper::{self, FingerNow};
@@ -63,6 +64,8 @@ pub(super) async fn run(
                 format!("not a control_msgs/msg/GripperCommand in CDR: {e}"),
             )),
         };
+        let what = format!("topic {}", dropped.topic);
+        audit::tell(&state, None, &what, if outcome.is_ok() { "started a grasp" } else { "refused" });
         match outcome {
             Ok(id) => {
                 stats.commands_applied.fetch_add(1, Ordering::Relaxed);

@@ -23,7 +23,8 @@
 //!   `command_stream` (one `joint_commands` subscription as a teleop stream),
 //!   `joint_states` (published per namespace), `trajectory_stream` (`joint_trajectory` as moves), `grasp_stream`
 //!   (`gripper_command` as grasps, `grasp_state`), `services`
-//!   (`enable`, `estop`, `grasp_release`, `grasp_stop`), `rosout`, `diagnostics` (per bus and per joint).
+//!   (`enable`, `estop`, `grasp_release`, `grasp_stop`), `rosout`, `diagnostics` (per bus and per joint),
+//!   `audit` (its commands told as `ros2`: ROS 2 carries no tokens).
 //!
 //! The bridge never holds the daemon: without a router the buses and the
 //! API serve as ever, and `GET /api/v1/ros2` says `connected: false`.
@@ -46,6 +47,8 @@ pub(crate) mod throttle;
 #[cfg_attr(not(feature = "ros2"), allow(dead_code))]
 pub(crate) mod trajectory;
 
+#[cfg(feature = "ros2")]
+mod audit;
 #[cfg(feature = "ros2")]
 mod bridge;
 #[cfg(feature = "ros2")]

@@ -20,6 +20,7 @@ use tokio::sync::watch;
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::query::{Query, Queryable};
 
+use super::audit;
 use super::gripper;
 use super::keys;
 use crate::control::grasp::{self, ReleaseRequest};
@@ -92,6 +93,8 @@ pub(super) async fn serve(
             },
         };
         tracing::info!(?scope, ?service, success, %message, "ROS 2: service called");
+        let what = format!("service /{}/{}", audit::namespace(&scope), service.describe().0);
+        audit::tell(&state, audit::bus(&scope), &what, if success { "done" } else { "refused" });
         reply(&query, &key, success, &message).await;
     }
 }

@@ -12,6 +12,7 @@ use std::sync::Arc;
 
 use tokio::sync::watch;
 
+use super::audit;
 use super::command_stream::{next_payload, Dropped, Subscriber};
 use super::commands::{joints_named, Refused};
 use super::trajectory::move_request;
@@ -41,6 +42,8 @@ pub(super) async fn run(
                 format!("not a trajectory_msgs/msg/JointTrajectory in CDR: {e}"),
             )),
         };
+        let what = format!("topic {}", dropped.topic);
+        audit::tell(&state, audit::bus(&scope), &what, if started.is_ok() { "started a move" } else { "refused" });
         match started {
             Ok(id) => {
                 stats.commands_applied.fetch_add(1, Ordering::Relaxed);

@@ -7,14 +7,16 @@ CDR response and the request's sequence number and client GID. The joints'
 state is read back through REST. Needs a jointd built with `--features
 ros2` (CI's is)."""
 
+import json
 import struct
 import time
+import urllib.error
 
 import numpy as np
 from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.base import Nodetype
 
-from test_ros2 import DIAGNOSTICS, TS, call, dds_name, key, ros2, wait_for  # noqa: F401 (fixture)
+from test_ros2 import DIAGNOSTICS, TS, call, dds_name, key, on_router, ros2, wait_for  # noqa: F401 (fixture)
 
 LOG = "rcl_interfaces/msg/Log"
 TRAJECTORY = "trajectory_msgs/msg/JointTrajectory"
@@ -106,6 +108,46 @@ def test_enable_and_estop_services(ros2):
     assert ok and "e-stop: bus `sim0` stopped (4 confirmed" in message, message
     assert struct.unpack_from("<q", attachment)[0] == 10
     assert all(s != "run" for s in states(api)), states(api)
+
+
+
+def refusal(api, path, body):
+    """The problem document of a REST call that must be refused."""
+    try:
+        call(api, "POST", path, body)
+    except urllib.error.HTTPError as e:
+        return e.code, json.loads(e.read())
+    raise AssertionError(f"POST {path} {body} was not refused")
+
+
+def test_an_enable_over_ros2_is_the_cores_enable(tmp_path):
+    """ROS 2's enable service, REST's and the WebSocket's (tests/ws_sim.rs)
+    reach one core call: a hand naming a joint that is not on the bus is
+    refused by the core's device check, in the same words on each, and
+    nothing is enabled."""
+    config = tmp_path / "jointd.toml"
+
+    def args(endpoint):
+        config.write_text(f"""
+[[hand]]
+name = "left"
+joints = [{{ bus = "sim0", ids = "3-5", names = ["ring", "little", "extra"] }}]
+
+[ros2]
+enabled = true
+namespace_by = "hand"
+connect = ["{endpoint}"]
+""")
+        return ["--sim", "4", "--config", str(config)]
+
+    with on_router(4, args) as (d, client):
+        api = d.url + "/api/v1"
+        code, problem = refusal(api, "/buses/sim0/control/enable", {"ids": [3, 4, 5]})
+        assert 400 <= code < 500 and "5" in problem["detail"], problem
+        ok, message, _ = call_service(client, "/left/enable", SET_BOOL, b"\x01", 1)
+        assert not ok, message
+        assert message == f"not enabled: joints [3, 4, 5] of bus `sim0`: {problem['detail']}", message
+        assert all(s != "run" for s in states(api)), states(api)
 
 
 def trajectory(names, points):
