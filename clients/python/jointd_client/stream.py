@@ -170,3 +170,33 @@ class SetpointStream:
         self._pending[seq] = fut
         await self._ws.send(json.dumps(msg))
         return await asyncio.wait_for(fut, timeout)
+
+    async def enable(self, bus: str, ids: Optional[Iterable[int]] = None,
+                     timeout: float = 10.0) -> Dict[str, Any]:
+        """Enables the joints `ids` of `bus` (every joint without `ids`) on
+        this socket, as `Jointd.enable_all` does over REST; returns the
+        `done` reply once every joint confirmed it (a refusal raises).
+        Ends every stream to those joints, as any enable does."""
+        return await self._call(_drop_none(type="enable", bus=bus, ids=_ids(ids)), timeout)
+
+    async def disable(self, bus: str, ids: Optional[Iterable[int]] = None,
+                      timeout: float = 10.0) -> Dict[str, Any]:
+        """Disables the joints `ids` of `bus` (every joint without `ids`);
+        the `done` reply."""
+        return await self._call(_drop_none(type="disable", bus=bus, ids=_ids(ids)), timeout)
+
+    async def estop(self, bus: Optional[str] = None, timeout: float = 10.0) -> Dict[str, Any]:
+        """The e-stop of `bus` (every bus without it), as `Jointd.estop`;
+        the per-bus result (`stopped` false when a device could not be
+        confirmed stopped). Any token may send it."""
+        reply = await self._call(_drop_none(type="estop", bus=bus), timeout)
+        result: Dict[str, Any] = reply["result"]
+        return result
+
+
+def _drop_none(**fields: Any) -> Dict[str, Any]:
+    return {k: v for k, v in fields.items() if v is not None}
+
+
+def _ids(ids: Optional[Iterable[int]]) -> Optional[List[int]]:
+    return None if ids is None else list(ids)

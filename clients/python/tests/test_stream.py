@@ -51,3 +51,37 @@ def test_setpoints_are_acked_move_the_joint_and_end_without_a_watchdog_firing(da
     time.sleep(0.3)
     log = daemon.log_text()
     assert "watchdog fired" not in log, log
+
+
+def test_enable_disable_and_estop_over_the_stream_are_the_daemons(daemon):
+    j = Jointd(daemon.url)
+
+    def state(i):
+        return next(d for d in j.devices("sim0") if d.id == i).state
+
+    def wait(what, ok):
+        deadline = time.monotonic() + 20
+        while not ok():
+            assert time.monotonic() < deadline, f"timed out waiting for {what}"
+            time.sleep(0.05)
+
+    async def session():
+        async with j.setpoints(hold_timeout_ms=2000) as s:
+            done = await s.enable("sim0", [1, 2])
+            assert (done["type"], done["action"], done["ids"]) == ("done", "enable", [1, 2]), done
+            wait("joints 1 and 2 running", lambda: state(1) == "run" and state(2) == "run")
+            try:
+                await s.enable("sim0", [99])
+            except Exception as e:  # the core's refusal, as REST says it
+                refused = str(e)
+            else:
+                raise AssertionError("an unknown device was enabled")
+            assert "99" in refused, refused
+            off = await s.disable("sim0", [2])
+            assert off["action"] == "disable", off
+            wait("joint 2 disabled", lambda: state(2) != "run")
+            return await s.estop("sim0")
+
+    result = asyncio.run(session())
+    assert result["stopped"] is True, result
+    assert state(1) != "run"
