@@ -11,10 +11,12 @@
 //!
 //! Its parts are the pure pieces beside it: the [`WireClock`] (when the line
 //! frees, reply windows), the [`ControlBudget`] and [`PollPlanner`], the
-//! coalescer (through `control`) and the [`Registry`].
+//! coalescer (through `control`), the [`Registry`] and the reads whose
+//! replies may still come late (`late`).
 
 mod control;
 mod jobs;
+mod late;
 mod reopen;
 mod replies;
 #[cfg(test)]
@@ -37,6 +39,7 @@ use crate::protocol::params::Revision;
 use crate::protocol::InfoBlock;
 
 #[cfg(test)]
+use late::LateReplies;
 use reopen::{BACKOFF_FIRST, BACKOFF_MAX, LISTEN_ON_OPEN};
 
 /// Setpoint frames that may go out between two frames of a one-shot
@@ -152,9 +155,10 @@ pub(crate) struct Scheduler {
     probed_last: bool,
     /// Joints found enabled and still to be disabled (`on_start = "disable"`).
     release: std::collections::BTreeSet<u8>,
-    /// The last read that timed out and when its reply was due: the reply
-    /// may still come, late, and must not be taken for an announcement.
-    overdue: Option<(Want, Instant)>,
+    /// The reads that timed out or were given up, and when each reply was
+    /// due: a reply may still come, late, and must not be taken for an
+    /// announcement.
+    late: LateReplies,
     /// What subscribers should hear at the next publication.
     events: Vec<BusEvent>,
     /// Setpoints dropped for ids nobody answers to, not yet counted.
@@ -207,7 +211,7 @@ impl Scheduler {
             probe_attempts: 1 + cfg.timing.retries,
             probed_last: false,
             release: Default::default(),
-            overdue: None,
+            late: LateReplies::default(),
             events: Vec::new(),
             dropped: 0,
             pipeline: None,

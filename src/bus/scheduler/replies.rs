@@ -65,10 +65,8 @@ impl Scheduler {
         if !self.pipelining() {
             self.clock.line_free(at);
         }
-        let late = self
-            .overdue
-            .take_if(|(w, _)| w.dev_id == reply.dev_id && w.index == reply.index);
-        if let Some((_, due)) = late {
+        let late = self.late.take(reply.dev_id, reply.index, at);
+        if let Some(due) = late {
             self.clock.observe_reply(due, at);
         }
         self.usb_answered(reply.dev_id, at);
@@ -116,7 +114,7 @@ impl Scheduler {
     /// line is free again.
     pub(crate) fn timed_out(&mut self, want: Want, due: Instant, now: Instant) {
         self.usb_missing(want.dev_id, now);
-        self.overdue = Some((want, due));
+        self.late.expect(want, due);
         self.clock.line_free(now);
         self.reg.on_missed(want.dev_id, &mut self.events);
     }
@@ -129,7 +127,7 @@ impl Scheduler {
     /// from that look for the whole time the transaction waited, and the
     /// e-stop with it.
     pub(crate) fn given_up(&mut self, want: Want, due: Instant, now: Instant) {
-        self.overdue = Some((want, due));
+        self.late.expect(want, due);
         self.clock.line_free(now);
         self.exchange_settled();
     }
@@ -138,7 +136,7 @@ impl Scheduler {
     /// other, but the line was never held for it beyond the model.
     pub(crate) fn inflight_timed_out(&mut self, inflight: &Inflight, now: Instant) {
         self.usb_missing(inflight.want.dev_id, now);
-        self.overdue = Some((inflight.want, inflight.window.due));
+        self.late.expect(inflight.want, inflight.window.due);
         self.reg.on_missed(inflight.want.dev_id, &mut self.events);
     }
 
@@ -162,7 +160,7 @@ impl Scheduler {
     /// reply by `now`: the line is free again, and the silence says
     /// nothing against the device (it is not a missed poll).
     pub(crate) fn unanswered(&mut self, want: Want, due: Instant, now: Instant) {
-        self.overdue = Some((want, due));
+        self.late.expect(want, due);
         self.clock.line_free(now);
     }
 

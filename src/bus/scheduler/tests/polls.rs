@@ -104,6 +104,38 @@ fn an_announcement_is_no_late_reply() {
 }
 
 #[test]
+fn a_late_ready_given_up_for_an_estop_is_no_reset_though_reads_timed_out_since() {
+    // An e-stop gives up a read of device 1 (the device still ready, an
+    // enable not yet taken), then its read-back of device 2 times out; the
+    // late reply of device 1 answers the read, it is no announcement.
+    let mut bus = Bus::new(&[1, 2], &[1, 2]);
+    for id in [1, 2] {
+        bus.s
+            .registry_mut()
+            .note_disabled(id, crate::bus::state::DisabledReason::Estop);
+    }
+    let end = bus.s.sent(bus.now, 1);
+    let window = bus.s.reply_window(end);
+    let info01_of = |dev_id| Want {
+        dev_id,
+        index: InfoBlock::Info01.index(),
+    };
+    bus.s.given_up(info01_of(1), window.due, window.due);
+    bus.s.timed_out(info01_of(2), window.due, window.deadline);
+    let effect = bus.s.unsolicited(
+        &info01(1, fsm::READY),
+        window.deadline + Duration::from_millis(2),
+    );
+    assert!(!effect.reset, "{effect:?}");
+    assert!(
+        !bus.s
+            .drain_events()
+            .any(|e| matches!(e, BusEvent::DeviceReset { .. })),
+        "no reset reported"
+    );
+}
+
+#[test]
 fn a_reset_device_loses_its_pending_setpoint() {
     let mut bus = Bus::new(&[1, 2], &[1, 2]);
     bus.set([1, 2], 500);
