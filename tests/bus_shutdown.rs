@@ -3,9 +3,12 @@
 
 mod support;
 
-use jointd::bus::ShutdownState;
+use std::time::Duration;
+
+use jointd::bus::{AdapterSetting, ShutdownState};
 use jointd::protocol::status::fsm;
-use support::bus::{rig_with, sim_config, target, BAUD};
+use jointd::transport::adapter::AdapterModel;
+use support::bus::{rig_on_memory, rig_with, sim_config, target, TargetStream, BAUD};
 
 async fn stop_with(state: ShutdownState) -> Vec<u8> {
     let ids = [1u8, 2];
@@ -38,4 +41,39 @@ async fn hold_leaves_the_joints_enabled() {
         stop_with(ShutdownState::Hold).await,
         vec![fsm::RUN, fsm::RUN]
     );
+}
+
+/// Behind a USB adapter polls go out blind, their replies still coming
+/// when the owner stops: the shutdown's disable waits for the line as an
+/// e-stop does, and collides with none of them. Several stops, each with
+/// replies in flight (a stream of targets keeps the pipeline full).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_shutdown_disable_waits_for_the_line_behind_a_usb_adapter() {
+    let ids: Vec<u8> = (1..=8).collect();
+    let ftdi = AdapterModel::Ftdi { latency_ms: 16 };
+    for round in 0..5 {
+        let mut sim_cfg = sim_config(&ids, BAUD);
+        sim_cfg.adapter = ftdi;
+        let mut rig = rig_on_memory(sim_cfg, |c| {
+            c.ids = ids.clone();
+            c.adapter = AdapterSetting::Fixed(ftdi);
+            c.on_shutdown = ShutdownState::Disable;
+        });
+        rig.online(ids.len()).await;
+        rig.enable_all(ids.len()).await;
+        let stream = TargetStream::start(rig.bus.clone(), ids.clone(), Duration::from_millis(2));
+        let before = rig.bus.snapshot().counters.frames_rx;
+        rig.until("replies coming while the stream runs", |s| {
+            s.counters.frames_rx > before + 50
+        })
+        .await;
+        rig.stop();
+        stream.finish();
+        rig.sim_until("every joint disabled", |sim| {
+            ids.iter()
+                .all(|&id| sim.device(id).is_some_and(|d| !d.enabled))
+        });
+        eprintln!("round {round}");
+        rig.assert_no_collisions();
+    }
 }

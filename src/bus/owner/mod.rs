@@ -169,7 +169,12 @@ impl Owner {
             // A start that never opened the port has nothing to disable.
             tracing::debug!(bus = %ctx.name(), "shutdown: the port was never open");
         } else if disable {
-            match estop::disable_everything(ctx, DisabledReason::Shutdown) {
+            // The line as an e-stop gets it: behind a USB adapter a poll
+            // written blind may still have its reply coming.
+            let sent = ctx
+                .wait_for_line()
+                .and_then(|()| estop::disable_everything(ctx, DisabledReason::Shutdown));
+            match sent {
                 Ok(_) => {
                     // Let the disable frames leave the wire before the port closes.
                     let _ = ctx.wait_until(ctx.sched().clock().free_at());

@@ -562,6 +562,15 @@ impl Ctx {
         Ok(())
     }
 
+    /// Until a frame may go out as the scheduler lets an e-stop out: the
+    /// write before seen taken (or its count given up on) and the line
+    /// free of the replies it asked for. For a write outside the owner's
+    /// turns (the shutdown's disable), which would otherwise go at once.
+    pub(crate) fn wait_for_line(&mut self) -> Result<(), BusError> {
+        self.wait_confirmed()?;
+        self.wait_until(self.sched.write_at(Instant::now()))
+    }
+
     /// Until the write before is seen taken (or its count given up on,
     /// within [`crate::bus::usb::confirm::MAX_UNTAKEN`]): a request's frames,
     /// and the setpoints let out between them, go one after another without
