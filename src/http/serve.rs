@@ -6,7 +6,6 @@
 //! cannot take every descriptor the e-stop needs). A shutdown stops the
 //! accepting and lets every connection finish its request under way.
 
-use std::convert::Infallible;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -81,10 +80,8 @@ async fn serve_one(tcp: TcpStream, app: Router, mut stopping: watch::Receiver<bo
         // Closed, broken, or silent for too long: nothing to serve.
         _ => return,
     }
-    let service = TowerToHyperService::new(
-        app.map_request(|req: Request<Incoming>| req.map(Body::new))
-            .map_err(|e: Infallible| match e {}),
-    );
+    let service =
+        TowerToHyperService::new(app.map_request(|req: Request<Incoming>| req.map(Body::new)));
     let mut builder = Builder::new(TokioExecutor::new());
     builder
         .http1()
