@@ -11,7 +11,9 @@ use std::time::SystemTime;
 
 use serde::{Deserialize, Serialize};
 
-use super::{Calibration, Pose, StateFile, StateFileError};
+use super::calibration::Calibration;
+use super::pose::Pose;
+use super::state_file::{StateFile, StateFileError};
 use crate::protocol::is_device_id;
 
 /// What the state file holds.

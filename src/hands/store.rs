@@ -5,8 +5,11 @@
 use std::collections::BTreeMap;
 use std::sync::{Mutex, MutexGuard};
 
-use super::saved::{self, Saved};
-use super::{Calibration, Hand, LoadNotes, Pose, StateFile, StateFileError};
+use super::calibration::Calibration;
+use super::hand::Hand;
+use super::pose::Pose;
+use super::saved::{self, LoadNotes, Saved};
+use super::state_file::{StateFile, StateFileError};
 
 /// The hands, their poses and the joints' calibrations; saved to the state
 /// file on every change when there is one (a std `Mutex`: never held across an `.await`).

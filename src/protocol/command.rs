@@ -5,7 +5,7 @@
 
 use super::error::ProtocolError;
 use super::frame::{BroadcastFrame, BroadcastKind, CrcCoverage, Frame, FrameBytes, StandardFrame};
-use super::is_address;
+use super::ids::is_address;
 use super::params::{self, ParamRow, RawType, Scale};
 
 /// can_id of a jog command.

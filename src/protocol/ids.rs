@@ -1,6 +1,21 @@
-//! Device id lists as people write them: `3`, `1-8`, `1,3,5-7`.
+//! Device ids: which ids the wire can address (SPEC §8), and id lists as
+//! people write them: `3`, `1-8`, `1,3,5-7`.
 
-use super::is_device_id;
+/// Lowest and highest addressable device id (SPEC §8).
+pub const MIN_DEVICE_ID: u8 = 0x01;
+pub const MAX_DEVICE_ID: u8 = 0x9F;
+/// The address every device answers to (control, jog, config writes).
+pub const ALL_DEVICES: u8 = 0xFF;
+
+/// True for an id a single device can carry (1..=159).
+pub fn is_device_id(id: u8) -> bool {
+    (MIN_DEVICE_ID..=MAX_DEVICE_ID).contains(&id)
+}
+
+/// True for a host→device address: one device or all of them.
+pub fn is_address(id: u8) -> bool {
+    is_device_id(id) || id == ALL_DEVICES
+}
 
 /// The ids of `spec`, each 1..=159, in the order written (duplicates kept:
 /// the simulator uses them to reproduce id conflicts).

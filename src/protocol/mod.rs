@@ -12,6 +12,7 @@
 //! - [`frame_json`]: frames ↔ JSON with the field names of `vectors.json` (CLI, API, tests).
 //! - [`command`]: typed host→device commands (control, jog, config, broadcasts).
 //! - [`reply`]: typed device→host replies (INFO_01..07, RES), raw bytes always kept.
+//! - [`ids`]: which device ids the wire can address, and id lists as people write them.
 //! - [`params`]: the parameter table: one row per config/INFO index, everything else derives from it.
 //! - [`message`]: classifies a decoded standard frame as a command or a reply.
 //! - [`units`]: every raw ↔ physical conversion, range-checked.
@@ -42,23 +43,8 @@ pub use error::ProtocolError;
 pub use frame::{
     BroadcastFrame, BroadcastKind, CrcCoverage, Frame, FrameBytes, StandardFrame, FRAME_LEN,
 };
+pub use ids::{is_address, is_device_id, ALL_DEVICES, MAX_DEVICE_ID, MIN_DEVICE_ID};
 pub use message::Message;
 pub use reply::{Gains, Info01, Info02, Info04, Info05, Info06, Reply, ReplyBody};
 pub use stream::{DecoderStats, StreamDecoder};
 pub use units::FirmwareVersion;
-
-/// Lowest and highest addressable device id (SPEC §8).
-pub const MIN_DEVICE_ID: u8 = 0x01;
-pub const MAX_DEVICE_ID: u8 = 0x9F;
-/// The address every device answers to (control, jog, config writes).
-pub const ALL_DEVICES: u8 = 0xFF;
-
-/// True for an id a single device can carry (1..=159).
-pub fn is_device_id(id: u8) -> bool {
-    (MIN_DEVICE_ID..=MAX_DEVICE_ID).contains(&id)
-}
-
-/// True for a host→device address: one device or all of them.
-pub fn is_address(id: u8) -> bool {
-    is_device_id(id) || id == ALL_DEVICES
-}

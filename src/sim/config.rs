@@ -64,7 +64,7 @@ pub struct SimConfig {
     pub objects: Vec<SimObject>,
     /// Host writes reach the adapter late by this distribution (a busy
     /// host or USB hub); see [`super::write_delay`]. Only behind an adapter.
-    pub write_delay: Option<super::WriteDelay>,
+    pub write_delay: Option<super::write_delay::WriteDelay>,
 }
 
 impl SimConfig {

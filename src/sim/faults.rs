@@ -57,7 +57,7 @@ pub enum Fault {
     Replug,
     /// Host writes reach the USB adapter late by a random delay of this
     /// distribution (`None`: on time). Only behind an adapter model.
-    WriteDelay(Option<super::WriteDelay>),
+    WriteDelay(Option<super::write_delay::WriteDelay>),
     /// Every fault off, obstacles and objects removed, voltage restored, line plugged,
     /// writes on time.
     ClearAll,

@@ -476,7 +476,7 @@ impl Ctx {
             self.sched.registry_mut().forget_target(id);
             self.shared.setpoints.set_admitted(
                 &[(id, latest.setpoint, latest.epoch)],
-                crate::bus::Source::Aligned,
+                crate::bus::setpoints::Source::Aligned,
             );
         }
     }
