@@ -87,19 +87,7 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     {
         return Err(DaemonError::Insecure { addr: listen });
     }
-    let mut buses = file.buses;
-    for spec in &args.buses {
-        buses.push(BusConfig::parse_cli(spec)?);
-    }
-    let sim = args.sim.map(|n| sim_config(n, args)).transpose()?;
-    if buses.is_empty() && sim.is_none() {
-        return Err(DaemonError::NoBus);
-    }
-    let bus_names: Vec<String> = buses
-        .iter()
-        .map(|b| b.name.clone())
-        .chain(sim.as_ref().map(|_| SIM_BUS_NAME.to_string()))
-        .collect();
+    let (buses, sim, bus_names) = buses_of(file.buses, args)?;
     let hands = crate::hands::resolve(&file.hands, &bus_names)
         .map_err(|e| DaemonError::Policy(format!("[[hand]]: {e}")))?;
     let state_dir = args.state_dir.clone().or(file.state_dir);
@@ -132,6 +120,27 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
         http,
         ros2,
     })
+}
+
+/// The file's buses, then the flags', and the simulator's; their names.
+/// At least one, or there is nothing to serve.
+fn buses_of(
+    mut buses: Vec<BusConfig>,
+    args: &RunArgs,
+) -> Result<(Vec<BusConfig>, Option<SimConfig>, Vec<String>), DaemonError> {
+    for spec in &args.buses {
+        buses.push(BusConfig::parse_cli(spec)?);
+    }
+    let sim = args.sim.map(|n| sim_config(n, args)).transpose()?;
+    if buses.is_empty() && sim.is_none() {
+        return Err(DaemonError::NoBus);
+    }
+    let names = buses
+        .iter()
+        .map(|b| b.name.clone())
+        .chain(sim.as_ref().map(|_| SIM_BUS_NAME.to_string()))
+        .collect();
+    Ok((buses, sim, names))
 }
 
 /// The hands' poses and calibrations, in the state file under `state_dir`

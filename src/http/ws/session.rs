@@ -86,32 +86,8 @@ pub async fn run_as<Si, St, E>(
     St: Stream<Item = Result<Message, E>> + Unpin,
     E: std::fmt::Display,
 {
-    let client = state.ws().next_client_id();
-    let shown = state.control().stream_book().register(Driver {
-        via: Via::Websocket,
-        client,
-        name: name.clone(),
-    });
-    state.ws().join();
-    let (out_tx, out_rx) = mpsc::channel(OUT_QUEUE);
-    let (sub_tx, sub_rx) = watch::channel(None);
-    let (ack_tx, ack_rx) = mpsc::channel(MAX_PENDING_ACKS);
-    // The reader asks the writer (the only task that writes) for a close frame.
-    let (close_tx, close_rx) = mpsc::channel(1);
-    let drops = state.ws().track_client(client);
-    let writer = Writer::new(state.clone(), sink).counting_drops_in(drops);
-    let writer = tokio::spawn(writer.run(out_rx, sub_rx, ack_rx, close_rx));
-    let mut conn = Connection {
-        state: state.clone(),
-        client,
-        caller,
-        out: out_tx,
-        sub: sub_tx,
-        acks: ack_tx,
-        watchdog: Watchdog::default(),
-        streams: Streams::shown_as(shown),
-        grasps: GraspTasks::default(),
-    };
+    let (mut conn, writer, close_tx) = open(&state, caller, name.clone(), sink);
+    let client = conn.client;
     conn.reply(welcome(&state, client, name));
     loop {
         let deadline = conn.watchdog.deadline();
@@ -135,6 +111,49 @@ pub async fn run_as<Si, St, E>(
         }
     }
     end(&state, client, conn, writer).await;
+}
+
+/// The session's state and its writer (the only task that writes to the
+/// socket), with the queue the reader asks the writer for a close frame on.
+fn open<Si>(
+    state: &AppState,
+    caller: Caller,
+    name: Option<String>,
+    sink: Si,
+) -> (
+    Connection,
+    tokio::task::JoinHandle<()>,
+    mpsc::Sender<(u16, String)>,
+)
+where
+    Si: Sink<Message> + Unpin + Send + 'static,
+{
+    let client = state.ws().next_client_id();
+    let shown = state.control().stream_book().register(Driver {
+        via: Via::Websocket,
+        client,
+        name,
+    });
+    state.ws().join();
+    let (out_tx, out_rx) = mpsc::channel(OUT_QUEUE);
+    let (sub_tx, sub_rx) = watch::channel(None);
+    let (ack_tx, ack_rx) = mpsc::channel(MAX_PENDING_ACKS);
+    let (close_tx, close_rx) = mpsc::channel(1);
+    let drops = state.ws().track_client(client);
+    let writer = Writer::new(state.clone(), sink).counting_drops_in(drops);
+    let writer = tokio::spawn(writer.run(out_rx, sub_rx, ack_rx, close_rx));
+    let conn = Connection {
+        state: state.clone(),
+        client,
+        caller,
+        out: out_tx,
+        sub: sub_tx,
+        acks: ack_tx,
+        watchdog: Watchdog::default(),
+        streams: Streams::shown_as(shown),
+        grasps: GraspTasks::default(),
+    };
+    (conn, writer, close_tx)
 }
 
 /// The session's end: the watchdog fires if it is armed ("closed"), the
@@ -227,26 +246,8 @@ impl Connection {
             Ok(m) => m,
             Err(e) => return self.reject(e.seq, WsError::new(e.code, e.message)),
         };
-        let needs = msg.needs();
-        if !needs.allows(self.caller.scope) {
-            let why = format!(
-                "`{}` needs a token of scope `{}`; token `{}` is `{}`",
-                msg.kind(),
-                needs.name(),
-                self.caller.name,
-                self.caller.scope
-            );
-            return self.reject(msg.seq(), WsError::new(ErrorCode::Forbidden, why));
-        }
-        if needs != Needs::Scope(Scope::Read) {
-            let what = format!("websocket {}", msg.kind());
-            let cmd = Command {
-                by: &self.caller.name,
-                kind: &what,
-                what: &what,
-                outcome: "received",
-            };
-            self.state.control().tell(&cmd, None);
+        if !self.admitted(&msg) {
+            return;
         }
         match msg {
             ClientMessage::Subscribe(s) => self.subscribe(s),
@@ -291,6 +292,34 @@ impl Connection {
             }
             ClientMessage::Estop(req) => spawn_estop(&self.state, &self.out, req),
         }
+    }
+
+    /// Whether the caller's token reaches the message (refused with
+    /// `forbidden` when not); a command that does is told in the audit.
+    fn admitted(&mut self, msg: &ClientMessage) -> bool {
+        let needs = msg.needs();
+        if !needs.allows(self.caller.scope) {
+            let why = format!(
+                "`{}` needs a token of scope `{}`; token `{}` is `{}`",
+                msg.kind(),
+                needs.name(),
+                self.caller.name,
+                self.caller.scope
+            );
+            self.reject(msg.seq(), WsError::new(ErrorCode::Forbidden, why));
+            return false;
+        }
+        if needs != Needs::Scope(Scope::Read) {
+            let what = format!("websocket {}", msg.kind());
+            let cmd = Command {
+                by: &self.caller.name,
+                kind: &what,
+                what: &what,
+                outcome: "received",
+            };
+            self.state.control().tell(&cmd, None);
+        }
+        true
     }
 
     fn subscribe(&mut self, s: Subscribe) {
