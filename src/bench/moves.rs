@@ -120,7 +120,7 @@ impl Swing {
             .map(|(joint, id)| Follower::new(*id, mv.clone(), joint, spd_ref, bus.grant(*id).epoch))
             .collect();
         bus.follow(followers);
-        let end = mv.start + MOVE;
+        let end = mv.start() + MOVE;
         let mut errors = errors;
         while Instant::now() < end {
             std::thread::sleep(SAMPLE_EVERY);

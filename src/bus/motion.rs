@@ -250,7 +250,10 @@ fn follow_one(
             .push((f.mv.clone(), format!("joint {} {why}", f.dev_id)));
         return false;
     }
-    if wire_at < f.mv.start {
+    if wire_at < f.mv.start() {
+        if f.mv.holds_before_start {
+            push(f, f.mv.path.sample(f.joint, Duration::ZERO).position, step);
+        }
         return true;
     }
     let t = f.mv.elapsed_at(wire_at);

@@ -44,6 +44,8 @@
 //! - `batch`: one resolver of target batches for the teleop front-ends (WebSocket, ROS 2).
 //! - [`streams`]: teleop streams, each under the epoch it began with; ended streams stay ended.
 //! - [`moves`]: moves checked whole, started, stopped.
+//! - `handoff`: a move out of a holding grasp leaves once the grasp handed the
+//!   joint's current limit back (held where it stands till then).
 //! - `homing/`: homing jobs, one per joint, bounded (its own layout in `homing/mod.rs`).
 //! - `poses`: going to a hand's saved pose (a move of its joints).
 //! - this file: the layout and what the rest of the daemon uses by a short name.
@@ -60,6 +62,7 @@ pub mod device;
 pub mod error;
 pub mod estop;
 pub(crate) mod grasp;
+pub(crate) mod handoff;
 pub(crate) mod homing;
 pub mod joints;
 pub mod limits;

@@ -15,6 +15,7 @@ use crate::bus::BusHandle;
 use crate::control::books::moves::Booked;
 use crate::control::device::{firmware_of, measured_angle_raw};
 use crate::control::error::{ControlError, ControlResult};
+use crate::control::handoff;
 use crate::control::joints::known_device;
 use crate::control::joints::JointRef;
 use crate::control::lookup::resolve_joint;
@@ -134,11 +135,12 @@ pub(crate) async fn start(state: &Control, req: &MoveRequest) -> ControlResult<M
         epochs.push(on_bus);
     }
     let id = state.moves().next_id();
-    let mv = Arc::new(RunningMove::new(
-        id,
-        plan.path,
-        Instant::now() + START_DELAY,
-    ));
+    let grasped = handoff::pending(state, &plan.joints);
+    let mv = Arc::new(if grasped.is_empty() {
+        RunningMove::new(id, plan.path, Instant::now() + START_DELAY)
+    } else {
+        RunningMove::held(id, plan.path, Instant::now() + handoff::BOUND)
+    });
     let mut took_over_from = Vec::new();
     for ((bus, joints), epochs) in plan.by_bus.iter().zip(&epochs) {
         let followers = joints
@@ -155,6 +157,9 @@ pub(crate) async fn start(state: &Control, req: &MoveRequest) -> ControlResult<M
     tracing::info!(move_id = id, joints = plan.joints.len(), duration_ms = mv.path.duration().as_millis() as u64,
         method = ?mv.path.method(), ?took_over_from, "move started");
     state.moves().insert(mv.clone(), plan.joints.clone());
+    if !grasped.is_empty() {
+        handoff::start_when_handed_back(mv.clone(), grasped, START_DELAY);
+    }
     let mut view = view(&mv, &plan.joints);
     view.took_over_from = took_over_from;
     Ok(view)

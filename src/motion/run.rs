@@ -52,17 +52,34 @@ pub struct MoveStatus {
 pub struct RunningMove {
     pub id: u64,
     pub path: Path,
-    /// When every joint leaves its start (the same instant on every bus).
-    pub start: Instant,
+    /// When every joint leaves its start (the same instant on every bus);
+    /// brought forward once what the move waits for is done
+    /// ([`Self::begin_at`]).
+    start: Mutex<Instant>,
+    /// Before its start each joint is held where the path begins (where
+    /// it stood): a move that waits before it leaves (a grasp handing back
+    /// its current limit) takes the joint at once and holds it there.
+    pub holds_before_start: bool,
     status: Mutex<MoveStatus>,
 }
 
 impl RunningMove {
     pub fn new(id: u64, path: Path, start: Instant) -> Self {
+        Self::starting(id, path, start, false)
+    }
+
+    /// A move that may wait before it leaves: its joints held at the
+    /// path's start until [`Self::begin_at`] (or `start`, at the latest).
+    pub fn held(id: u64, path: Path, start: Instant) -> Self {
+        Self::starting(id, path, start, true)
+    }
+
+    fn starting(id: u64, path: Path, start: Instant, holds_before_start: bool) -> Self {
         Self {
             id,
             path,
-            start,
+            start: Mutex::new(start),
+            holds_before_start,
             status: Mutex::new(MoveStatus {
                 state: MoveState::Running,
                 reason: None,
@@ -76,6 +93,18 @@ impl RunningMove {
 
     fn lock(&self) -> MutexGuard<'_, MoveStatus> {
         self.status.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// When every joint leaves its start.
+    pub fn start(&self) -> Instant {
+        *self.start.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Brings the start forward to `at` (never later than it was: a bus
+    /// owner may already sample the path from the old start).
+    pub fn begin_at(&self, at: Instant) {
+        let mut start = self.start.lock().unwrap_or_else(|p| p.into_inner());
+        *start = (*start).min(at);
     }
 
     pub fn status(&self) -> MoveStatus {
@@ -94,12 +123,12 @@ impl RunningMove {
         if total <= 0.0 {
             return 1.0;
         }
-        (now.saturating_duration_since(self.start).as_secs_f64() / total).clamp(0.0, 1.0)
+        (now.saturating_duration_since(self.start()).as_secs_f64() / total).clamp(0.0, 1.0)
     }
 
     /// Time since the start at `t` (zero before it).
     pub fn elapsed_at(&self, t: Instant) -> Duration {
-        t.saturating_duration_since(self.start)
+        t.saturating_duration_since(self.start())
     }
 
     /// Joint `joint` reached the end; the move is done when every joint
@@ -180,6 +209,18 @@ mod tests {
         )
         .unwrap();
         RunningMove::new(7, path, Instant::now())
+    }
+
+    #[test]
+    fn a_start_is_only_ever_brought_forward() {
+        let later = Instant::now() + Duration::from_secs(2);
+        let m = RunningMove::held(1, two_joints().path, later);
+        let sooner = Instant::now() + Duration::from_millis(5);
+        m.begin_at(sooner);
+        assert_eq!(m.start(), sooner);
+        m.begin_at(later);
+        assert_eq!(m.start(), sooner, "never pushed back");
+        assert!(m.holds_before_start);
     }
 
     #[test]

@@ -271,6 +271,24 @@ impl GraspBook {
         Ok(n)
     }
 
+    /// The finger of a running grasp that holds joint `id` of `bus` with a
+    /// reduced current limit not yet handed back, if any.
+    pub(crate) fn reduced_limit(&self, bus: &str, id: u8) -> Option<Slot> {
+        let book = lock(&self.inner);
+        book.1
+            .values()
+            .filter(|job| job.running())
+            .flat_map(|job| job.slots.iter())
+            .find(|slot| {
+                let f = lock(slot);
+                f.bus == bus
+                    && f.id == id
+                    && f.previous_current_limit_a.is_some()
+                    && !f.current_limit_restored
+            })
+            .cloned()
+    }
+
     pub(crate) fn job(&self, id: u64) -> Option<Arc<Job>> {
         lock(&self.inner).1.get(&id).cloned()
     }
