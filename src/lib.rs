@@ -71,7 +71,7 @@
 //! | the teleop watchdog and streams (WebSocket, ROS 2), the one teleop step | `control::watchdog`, `control::streams` (`Streams::apply`) |
 //! | a ROS 2 message's CDR | `rosmsg` |
 //! | MCAP recordings (what `jointd record` and `POST /api/v1/recordings` write) | `record`, `control::recordings`, `http::api::recordings` |
-| the live view in Foxglove: its channels, what goes on them, a slow client's queue | `record::channels`, `record::tap`; `foxglove` |
+//! | the live view in Foxglove: its channels, what goes on them, a slow client's queue | `record::channels`, `record::tap`; `foxglove` |
 //! | what a simulated device does with a frame | `sim::device`, `sim::physics`, `sim::faults` |
 //! | collisions and timing on the simulated wire | `sim::wire`, `sim::engine` |
 //! | opening a serial port, RS-485 mode, FTDI latency | `transport::tty`, `transport::rs485` |

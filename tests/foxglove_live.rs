@@ -217,7 +217,7 @@ async fn read_with_rates(
     http: &reqwest::Client,
     d: &Daemon,
 ) -> (Vec<(u64, JointState)>, f64) {
-    joint_states(ws, sub, 2 * STRETCH).await;
+    let _warm_up = joint_states(ws, sub, 2 * STRETCH).await;
     let mut rates = vec![telemetry_hz(http, d).await];
     let mut states = Vec::new();
     for _ in 0..3 {
