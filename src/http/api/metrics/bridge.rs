@@ -2,6 +2,8 @@
 //! recordings running, and the live Foxglove view's families (zero while
 //! it does not run).
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use super::exposition::Exposition;
 use crate::control::foxglove_stats::FoxgloveStats;
 use crate::control::ros2_stats::Ros2Stats;
@@ -95,25 +97,27 @@ pub(super) fn foxglove_families(m: &mut Exposition, state: &AppState) {
         "",
         if stats.is_some() { 1.0 } else { 0.0 },
     );
-    let load = |field: fn(&FoxgloveStats) -> &std::sync::atomic::AtomicU64| {
-        stats.map_or(0, |s| field(s).load(std::sync::atomic::Ordering::Relaxed)) as f64
-    };
     m.gauge(
         "jointd_foxglove_clients",
         "Foxglove clients connected to the live view.",
         "",
-        load(|s| &s.clients),
+        load(stats, |s| &s.clients),
     );
     m.counter(
         "jointd_foxglove_messages_total",
         "Messages logged to the live view while a client was subscribed to their channel.",
         "",
-        load(|s| &s.messages),
+        load(stats, |s| &s.messages),
     );
     m.counter(
         "jointd_foxglove_lost_total",
         "Frames, setpoint writes and events the live view fell too far behind to see.",
         "",
-        load(|s| &s.lost),
+        load(stats, |s| &s.lost),
     );
+}
+
+/// One of the live view's counters, 0 while it does not run.
+fn load(stats: Option<&FoxgloveStats>, field: fn(&FoxgloveStats) -> &AtomicU64) -> f64 {
+    stats.map_or(0, |s| field(s).load(Ordering::Relaxed)) as f64
 }
