@@ -36,6 +36,9 @@
 //! - [`ros2`]: the ROS 2 bridge over Zenoh, as `rmw_zenoh` names and encodes it
 //!   (`joint_states`, `joint_commands`, `/diagnostics`); the bridge itself is compiled in
 //!   with the feature `ros2`.
+//! - [`foxglove`](crate::foxglove): the live view in Foxglove (`--foxglove`): Foxglove's SDK
+//!   serves its WebSocket protocol with the recordings' channels, fed by the recorder's encoder
+//!   of the buses' taps; read only, loopback by default.
 //! - [`cli`]: the `jointd frame …` tools for reading a serial capture by hand.
 //! - `config_locate`: the line and key of a config value refused after parsing.
 //! - [`daemon`]: `jointd [run]`: config file and flags, buses, the HTTP server, graceful shutdown.
@@ -68,6 +71,7 @@
 //! | the teleop watchdog and streams (WebSocket, ROS 2), the one teleop step | `control::watchdog`, `control::streams` (`Streams::apply`) |
 //! | a ROS 2 message's CDR | `rosmsg` |
 //! | MCAP recordings (what `jointd record` and `POST /api/v1/recordings` write) | `record`, `control::recordings`, `http::api::recordings` |
+//! | the live view in Foxglove: its channels, what goes on them, a slow client's queue | `record::channels`, `record::tap`; `foxglove` |
 //! | what a simulated device does with a frame | `sim::device`, `sim::physics`, `sim::faults` |
 //! | collisions and timing on the simulated wire | `sim::wire`, `sim::engine` |
 //! | opening a serial port, RS-485 mode, FTDI latency | `transport::tty`, `transport::rs485` |
@@ -86,6 +90,7 @@ pub mod cli;
 mod config_locate;
 pub mod control;
 pub mod daemon;
+pub mod foxglove;
 pub mod hands;
 pub mod histogram;
 pub mod http;

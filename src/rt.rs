@@ -3,6 +3,9 @@
 //! copy, so the daemon and the simulator it is measured against ask the
 //! kernel for the same thing.
 //!
+//! Also the other way: [`lower_priority`] for the threads that must give
+//! way to the wire and the API (recordings, the live Foxglove view).
+//!
 //! - [`wake`]: how late a thread wakes from a timed sleep, learnt from its
 //!   own sleeps (how early to stop sleeping and spin).
 //! - [`skewed`]: the estimate both learn with, faster one way than the other.
@@ -37,4 +40,22 @@ pub fn set_fifo(tid: libc::pid_t, priority: u8) -> std::io::Result<()> {
         return Err(std::io::Error::last_os_error());
     }
     Ok(())
+}
+
+/// Lowers the calling thread's priority to `nice` (Linux: nice applies per
+/// thread), for work that a busy host should slow before the buses and the
+/// API; a refusal is only logged.
+pub fn lower_priority(nice: libc::c_int) {
+    // SAFETY: gettid and setpriority take integers and touch no memory; a
+    // tid names the calling thread for PRIO_PROCESS on Linux.
+    let rc = unsafe {
+        let tid = libc::gettid();
+        libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, nice)
+    };
+    if rc != 0 {
+        tracing::debug!(
+            "setpriority({nice}) of this thread failed: {}",
+            std::io::Error::last_os_error()
+        );
+    }
 }

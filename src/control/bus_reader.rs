@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use tokio::sync::{broadcast, watch};
 
-use crate::bus::handle::{BusEvent, LoggedFrame, WireAck};
+use crate::bus::handle::{BusEvent, Commanded, LoggedFrame, WireAck};
 use crate::bus::owed::OwedLimits;
 use crate::bus::{BusHandle, BusSnapshot};
 
@@ -46,6 +46,12 @@ impl BusReader {
     /// Every frame on the wire from now on (a recording's, the ROS 2 bridge's tap).
     pub fn frame_tap(&self) -> broadcast::Receiver<LoggedFrame> {
         self.0.shared().frame_tap.subscribe()
+    }
+
+    /// Every setpoint write from now on, whoever wrote it (the live
+    /// Foxglove view's tap; a recording taps the handle itself).
+    pub fn setpoint_tap(&self) -> broadcast::Receiver<Commanded> {
+        self.0.shared().setpoints.subscribe()
     }
 
     /// The latest `n` frames on the wire, oldest first.

@@ -20,6 +20,7 @@
 //! - [`device`]: what a device's published state says (firmware, angle, enabled).
 //! - `current_limit`: a current limit lowered by a routine, written back, or owed until it is.
 //! - [`ros2_stats`]: the ROS 2 bridge's counters (read by `/metrics` and `/api/v1/ros2`).
+//! - [`foxglove_stats`]: the live Foxglove view's counters (read by `/metrics`).
 //! - [`estop`]: the e-stop's fan-out over buses and its report.
 //! - [`joints`]: [`JointRef`], device ids, a device known on its bus.
 //! - [`revision`]: features a firmware revision must have (422, or 409 while unknown).
@@ -61,6 +62,7 @@ pub(crate) mod current_limit;
 pub mod device;
 pub mod error;
 pub mod estop;
+pub mod foxglove_stats;
 pub(crate) mod grasp;
 pub(crate) mod handoff;
 pub(crate) mod homing;

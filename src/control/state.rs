@@ -8,6 +8,7 @@ use super::audit::{Audit, Command};
 use super::books::{grasps, homing, moves, recordings, streams};
 use super::bus_reader::BusReader;
 use super::error::{ControlError, ControlResult};
+use super::foxglove_stats::FoxgloveStats;
 use super::limits::{JointLimits, SoftLimits};
 use super::ros2_stats;
 use super::teleop::WatchdogDefault;
@@ -26,6 +27,8 @@ pub struct Options {
     pub recordings_dir: Option<std::path::PathBuf>,
     /// The ROS 2 bridge's counters, when it runs.
     pub ros2: Option<Arc<ros2_stats::Ros2Stats>>,
+    /// The live Foxglove view's counters, when it runs.
+    pub foxglove: Option<Arc<FoxgloveStats>>,
     /// The devices each bus was configured with (its `ids`): the ones the
     /// daemon manages. A bus absent here, or with no ids (it scans for its
     /// devices), manages every device it knows.
@@ -161,6 +164,11 @@ impl Control {
     /// The ROS 2 bridge's counters, when it runs.
     pub(crate) fn ros2(&self) -> Option<&ros2_stats::Ros2Stats> {
         self.options().ros2.as_deref()
+    }
+
+    /// The live Foxglove view's counters, when it runs.
+    pub(crate) fn foxglove(&self) -> Option<&FoxgloveStats> {
+        self.options().foxglove.as_deref()
     }
 
     /// Where recordings are written.

@@ -95,8 +95,8 @@ pub struct RunArgs {
     pub insecure: bool,
     /// TOML config file (see jointd.example.toml): `listen`, `token`,
     /// `token_file`, `insecure`, `allowed_hosts`, `allowed_origins`,
-    /// `max_body_bytes`, `web_dir`, `state_dir`, `[[bus]]`, `[[limit]]`, `[[joint]]`,
-    /// `[[hand]]`, `[watchdog]`, `[ros2]`.
+    /// `max_body_bytes`, `web_dir`, `state_dir`, `foxglove`, `[[bus]]`, `[[limit]]`,
+    /// `[[joint]]`, `[[hand]]`, `[watchdog]`, `[ros2]`.
     /// Flags and environment variables override it.
     #[arg(long, value_name = "FILE", env = "JOINTD_CONFIG")]
     pub config: Option<PathBuf>,
@@ -118,6 +118,13 @@ pub struct RunArgs {
     /// The ROS domain [default: ROS_DOMAIN_ID, else 0].
     #[arg(long, value_name = "ID")]
     pub ros2_domain_id: Option<u32>,
+    /// Serve the live view to the Foxglove app (ws://ADDR): a port, e.g.
+    /// `8765`, listens on loopback; IP:PORT binds as given (Foxglove's
+    /// protocol has no authentication: docs/foxglove.md); port 0 picks a
+    /// free port (the log says which). The channels of a recording. Off by
+    /// default.
+    #[arg(long, value_name = "ADDR", value_parser = crate::foxglove::parse_addr)]
+    pub foxglove: Option<SocketAddr>,
 }
 
 /// The config file. Flags override its values.
@@ -155,6 +162,9 @@ pub struct FileConfig {
     /// admin), each secret from a file or the environment.
     #[serde(default)]
     pub tokens: Vec<super::tokens::TokenConfig>,
+    /// `foxglove = "8765"` (loopback) or `"IP:PORT"`: the live Foxglove
+    /// view (off when absent).
+    pub foxglove: Option<String>,
 }
 
 /// `[[joint]]`: a name for a joint, shown in the API, telemetry and dashboard.

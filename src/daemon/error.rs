@@ -35,6 +35,8 @@ pub enum DaemonError {
         what: String,
         source: std::io::Error,
     },
+    #[error("{0}")]
+    Foxglove(#[from] crate::foxglove::LiveError),
 }
 
 /// A failed bind, with the way out when the address is taken.

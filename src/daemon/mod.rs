@@ -1,15 +1,16 @@
 //! `jointd [run]`: config file and flags → buses (serial or an in-process
 //! simulator: on a pty, or behind a USB adapter model on an in-memory line)
-//! → the HTTP API → on SIGINT/SIGTERM stop accepting, let the requests under
-//! way finish (for a bounded time), disable every joint, close the ports,
-//! close the recordings, exit 0.
+//! → the HTTP API (and the live Foxglove view, when asked) → on
+//! SIGINT/SIGTERM stop accepting, let the requests under way finish (for a
+//! bounded time), disable every joint, close the ports, close the
+//! recordings and the live view, exit 0.
 //!
 //! # Layout
 //! One-way: each file imports only from files above it.
 //! - `error`: [`DaemonError`]: what keeps the daemon from starting, with the way out.
 //! - `args`: the flags ([`RunArgs`]) and the config file's shape ([`FileConfig`]).
 //! - `plan`: flags and file checked into the daemon's [`Plan`].
-//! - `start`: the simulator of `--sim` and one owner per bus.
+//! - `start`: the simulator of `--sim`, one owner per bus, the live Foxglove view's server.
 //! - `tokens`: the scoped tokens of `[[tokens]]`, each secret from a file or the environment.
 //! - `shutdown`: serving until a signal, then draining, disabling, closing.
 //! - this file: the order of it all ([`run`]).
@@ -30,7 +31,7 @@ use crate::http::tokens::Tokens;
 use crate::http::AppState;
 use error::listen_error;
 use shutdown::{serve, stop_buses, stop_recordings, wait_for_ws_close};
-use start::{raise_open_files_limit, start_all, Started};
+use start::{bind_live, raise_open_files_limit, start_all, Started};
 
 pub use args::{FileConfig, JointName, RunArgs, DEFAULT_LISTEN, SIM_BUS_NAME};
 pub use error::DaemonError;
@@ -45,6 +46,7 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     let listener = TcpListener::bind(plan.listen)
         .await
         .map_err(|e| listen_error(plan.listen, e))?;
+    let mut live = bind_live(&plan).await?;
     let Started {
         sim,
         handles,
@@ -67,6 +69,9 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     // A fresh core and a fresh state have no options yet: neither call
     // can be refused.
     let _ = control.set_options(control_options);
+    if let Some(live) = live.as_mut() {
+        live.feed(&control)?;
+    }
     let state = AppState::with_tokens(control.clone(), tokens);
     let mut http_options = plan.http;
     http_options.policy.listen = Some(addr);
@@ -85,6 +90,9 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
     // The joints first: a recording still closing must not hold them.
     stop_buses(threads).await;
     stop_recordings(&state).await;
+    if let Some(live) = live {
+        live.stop().await;
+    }
     // Leave the ROS graph once the buses are stopped.
     if let Some(bridge) = bridge {
         tracing::debug!(?bridge, "ROS 2 bridge closing");

@@ -1,5 +1,6 @@
 //! Flags and config file checked into the daemon's plan: buses, soft
-//! limits, token, the simulator, the core's and HTTP's options, ROS 2.
+//! limits, token, the simulator, the core's and HTTP's options, ROS 2,
+//! the live Foxglove view.
 //! Everything a user can get wrong is refused here, before any port opens.
 
 use std::collections::BTreeMap;
@@ -11,6 +12,7 @@ use super::error::DaemonError;
 use super::tokens::{scoped_tokens, token_problem};
 use crate::bus::BusConfig;
 use crate::config_locate::{key_in_table_array, table_array_line};
+use crate::control::foxglove_stats::FoxgloveStats;
 use crate::control::limits::{LimitError, SoftLimits};
 use crate::control::teleop::{WatchdogDefault, MAX_HOLD, MIN_HOLD};
 use crate::http::policy::{RequestPolicy, DEFAULT_MAX_BODY_BYTES};
@@ -37,6 +39,8 @@ pub struct Plan {
     pub http: HttpOptions,
     /// The ROS 2 bridge, when enabled.
     pub ros2: Option<crate::ros2::Ros2Config>,
+    /// Where the live Foxglove view listens, when on.
+    pub foxglove: Option<SocketAddr>,
 }
 
 fn load_file(path: &PathBuf) -> Result<FileConfig, DaemonError> {
@@ -80,6 +84,7 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     let token = token(args, &file)?;
     let tokens = scoped_tokens(&file.tokens, token.as_deref())?;
     let policy = request_policy(listen, args, &file)?;
+    let foxglove = foxglove_addr(args, &file)?;
     if !listen.ip().is_loopback()
         && token.is_none()
         && tokens.is_empty()
@@ -98,6 +103,7 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
         ros2: ros2
             .as_ref()
             .map(|_| std::sync::Arc::new(crate::control::ros2_stats::Ros2Stats::default())),
+        foxglove: foxglove.map(|_| std::sync::Arc::new(FoxgloveStats::default())),
         hands: Some(std::sync::Arc::new(poses)),
         joint_names: joint_names(&file.joints, args)?,
         watchdog: checked_watchdog(file.watchdog, args)?,
@@ -119,6 +125,7 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
         control,
         http,
         ros2,
+        foxglove,
     })
 }
 
@@ -141,6 +148,19 @@ fn buses_of(
         .chain(sim.as_ref().map(|_| SIM_BUS_NAME.to_string()))
         .collect();
     Ok((buses, sim, names))
+}
+
+/// `--foxglove`, else `foxglove` of the file; `None`: the live view is off.
+fn foxglove_addr(args: &RunArgs, file: &FileConfig) -> Result<Option<SocketAddr>, DaemonError> {
+    if args.foxglove.is_some() {
+        return Ok(args.foxglove);
+    }
+    let Some(text) = file.foxglove.as_deref() else {
+        return Ok(None);
+    };
+    crate::foxglove::parse_addr(text)
+        .map(Some)
+        .map_err(|why| config_error(args, format!("foxglove = \"{text}\": {why}")))
 }
 
 /// The hands' poses and calibrations, in the state file under `state_dir`
@@ -416,6 +436,37 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("not on the bus"));
+    }
+
+    #[test]
+    fn foxglove_is_off_by_default_and_the_flag_wins_over_the_file() {
+        let dir = std::env::temp_dir().join(format!("jointd-fox-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("jointd.toml");
+        let with = |text: &str, flag: Option<&str>| {
+            std::fs::write(&path, text).unwrap();
+            plan(&RunArgs {
+                sim: Some(1),
+                config: Some(path.clone()),
+                foxglove: flag.map(|f| f.parse().unwrap()),
+                ..Default::default()
+            })
+        };
+        let off = with("", None).unwrap();
+        assert_eq!(off.foxglove, None);
+        assert!(off.control.foxglove.is_none(), "no counters when off");
+        let on = with("foxglove = \"8765\"\n", None).unwrap();
+        assert_eq!(on.foxglove.unwrap().to_string(), "127.0.0.1:8765");
+        assert!(on.control.foxglove.is_some());
+        let flag = with("foxglove = \"8765\"\n", Some("0.0.0.0:9000")).unwrap();
+        assert_eq!(flag.foxglove.unwrap().to_string(), "0.0.0.0:9000");
+        let err = with("foxglove = \"localhost\"\n", None).unwrap_err();
+        assert!(matches!(err, DaemonError::Config { .. }), "{err}");
+        assert!(
+            err.to_string().contains("foxglove = \"localhost\""),
+            "{err}"
+        );
+        let _ = std::fs::remove_dir_all(dir);
     }
 
     #[test]

@@ -1,13 +1,16 @@
 //! Starting the buses: the simulator of `--sim` and the config of the bus
-//! that reaches it, then one owner per bus; and the open-files limit the
-//! connections need.
+//! that reaches it, then one owner per bus; the live Foxglove view's
+//! server, bound before them; and the open-files limit the connections
+//! need.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use super::args::SIM_BUS_NAME;
 use super::error::DaemonError;
+use super::plan::Plan;
 use crate::bus::{spawn_bus, spawn_bus_on, spawn_bus_with, AdapterSetting, BusConfig, BusHandle};
+use crate::foxglove::LiveView;
 use crate::sim::{SimConfig, SimHandle, Simulator};
 use crate::transport::{Opener, Transport};
 
@@ -132,4 +135,32 @@ pub(super) fn start_all(
         threads,
         managed,
     })
+}
+
+/// The live Foxglove view of `--foxglove` (none when off), listening with
+/// the channels of every bus the plan starts: bound before any bus opens,
+/// as the API's listener, so a taken address stops the daemon there.
+pub(super) async fn bind_live(plan: &Plan) -> Result<Option<LiveView>, DaemonError> {
+    let (Some(addr), Some(stats)) = (plan.foxglove, plan.control.foxglove.clone()) else {
+        return Ok(None);
+    };
+    let buses: Vec<String> = plan
+        .buses
+        .iter()
+        .map(|b| b.name.clone())
+        .chain(plan.sim.as_ref().map(|_| SIM_BUS_NAME.to_owned()))
+        .collect();
+    let live = LiveView::bind(addr, &buses, stats).await?;
+    let url = format!("ws://{}", live.addr());
+    tracing::info!(%url, "Foxglove live view: in the Foxglove app, open a connection to the url");
+    if !addr.ip().is_loopback() {
+        tracing::warn!(
+            %url,
+            "the Foxglove live view listens beyond this host and Foxglove's protocol has no \
+             authentication: whoever reaches it sees every bus's joints, frames, setpoints and \
+             events (read only). For remote use, keep it on loopback and tunnel it over SSH \
+             (docs/foxglove.md)"
+        );
+    }
+    Ok(Some(live))
 }

@@ -1,6 +1,10 @@
 //! A recording's channels: per bus its joint states (CDR) and its frames,
 //! events and setpoints (JSON, or JSON text in a `std_msgs/msg/String`),
 //! their schemas, and the QoS a ROS 2 player republishes them with.
+//!
+//! One table ([`specs`]) says what each channel is: a recording declares
+//! its channels from it and the live Foxglove view advertises the same, so
+//! one Foxglove layout works on a file and live.
 
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -30,6 +34,14 @@ pub enum Topic {
 }
 
 impl Topic {
+    /// Every channel of a bus, in the order a recording declares them.
+    pub const ALL: [Topic; 4] = [
+        Topic::JointStates,
+        Topic::Frames,
+        Topic::Events,
+        Topic::Setpoints,
+    ];
+
     pub fn name(self, bus: &str) -> String {
         match self {
             Self::JointStates => format!("/{bus}/joint_states"),
@@ -85,47 +97,94 @@ impl SideEncoding {
     }
 }
 
-/// The schemas, and the four channels of each bus.
+/// One channel of a bus: its topic, its messages' encoding, its schema
+/// and its metadata, as a recording declares it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChannelSpec {
+    pub topic: Topic,
+    /// The topic's name, e.g. `/sim0/joint_states`.
+    pub name: String,
+    /// The messages' encoding: `cdr` or `json`.
+    pub encoding: &'static str,
+    pub schema_name: &'static str,
+    /// `ros2msg` or `jsonschema`.
+    pub schema_encoding: &'static str,
+    /// The schema's text (a message definition or a JSON schema).
+    pub schema: String,
+    /// `offered_qos_profiles` on a CDR channel, nothing on a JSON one.
+    pub metadata: BTreeMap<String, String>,
+}
+
+/// The four channels of `bus`, in [`Topic::ALL`]'s order.
+pub fn specs(bus: &str, side: SideEncoding) -> Vec<ChannelSpec> {
+    Topic::ALL.iter().map(|&t| spec(bus, t, side)).collect()
+}
+
+fn spec(bus: &str, topic: Topic, side: SideEncoding) -> ChannelSpec {
+    let (schema_name, schema) = match topic {
+        Topic::JointStates => {
+            return cdr(bus, topic, "sensor_msgs/msg/JointState", JOINT_STATE_MSG)
+        }
+        Topic::Frames => ("jointd/Frame", schemas::frame()),
+        Topic::Events => ("jointd/BusEvent", schemas::event()),
+        Topic::Setpoints => ("jointd/Setpoints", schemas::setpoint()),
+    };
+    match side {
+        SideEncoding::Json => ChannelSpec {
+            topic,
+            name: topic.name(bus),
+            encoding: "json",
+            schema_name,
+            schema_encoding: "jsonschema",
+            schema,
+            metadata: BTreeMap::new(),
+        },
+        SideEncoding::RosString => cdr(bus, topic, "std_msgs/msg/String", STRING_MSG),
+    }
+}
+
+/// A CDR channel with a `ros2msg` schema and the QoS it is offered with.
+fn cdr(bus: &str, topic: Topic, schema_name: &'static str, definition: &str) -> ChannelSpec {
+    ChannelSpec {
+        topic,
+        name: topic.name(bus),
+        encoding: "cdr",
+        schema_name,
+        schema_encoding: "ros2msg",
+        schema: definition.to_owned(),
+        metadata: BTreeMap::from([(
+            "offered_qos_profiles".to_owned(),
+            OFFERED_QOS_PROFILES.to_owned(),
+        )]),
+    }
+}
+
+/// The schemas, and the four channels of each bus (the writer writes a
+/// schema once, however many channels name it).
 pub(super) fn add_channels<W: Write>(
     writer: &mut Writer<Sink<W>>,
     buses: &[String],
     side: SideEncoding,
 ) -> Result<BTreeMap<String, BusChannels>, mcap::McapError> {
-    let joint_state = writer.add_schema(
-        "sensor_msgs/msg/JointState",
-        "ros2msg",
-        JOINT_STATE_MSG.as_bytes(),
-    )?;
-    let mut json_schema = |name: &str, text: &str| match side {
-        SideEncoding::Json => writer.add_schema(name, "jsonschema", text.as_bytes()),
-        SideEncoding::RosString => {
-            writer.add_schema("std_msgs/msg/String", "ros2msg", STRING_MSG.as_bytes())
-        }
-    };
-    let frame = json_schema("jointd/Frame", &schemas::frame())?;
-    let event = json_schema("jointd/BusEvent", &schemas::event())?;
-    let setpoint = json_schema("jointd/Setpoints", &schemas::setpoint())?;
-    let side_encoding = match side {
-        SideEncoding::Json => "json",
-        SideEncoding::RosString => "cdr",
-    };
-    let none = BTreeMap::new();
-    let qos = BTreeMap::from([(
-        "offered_qos_profiles".to_owned(),
-        OFFERED_QOS_PROFILES.to_owned(),
-    )]);
     let mut channels = BTreeMap::new();
     for bus in buses {
-        let mut add = |schema, topic: Topic, encoding| {
-            let metadata = if encoding == "cdr" { &qos } else { &none };
-            writer.add_channel(schema, &topic.name(bus), encoding, metadata)
+        let mut ch = BusChannels {
+            joint_states: 0,
+            frames: 0,
+            events: 0,
+            setpoints: 0,
         };
-        let ch = BusChannels {
-            joint_states: add(joint_state, Topic::JointStates, "cdr")?,
-            frames: add(frame, Topic::Frames, side_encoding)?,
-            events: add(event, Topic::Events, side_encoding)?,
-            setpoints: add(setpoint, Topic::Setpoints, side_encoding)?,
-        };
+        for s in specs(bus, side) {
+            let schema =
+                writer.add_schema(s.schema_name, s.schema_encoding, s.schema.as_bytes())?;
+            let id = writer.add_channel(schema, &s.name, s.encoding, &s.metadata)?;
+            match s.topic {
+                Topic::JointStates => ch.joint_states = id,
+                Topic::Frames => ch.frames = id,
+                Topic::Events => ch.events = id,
+                Topic::Setpoints => ch.setpoints = id,
+            }
+        }
         channels.insert(bus.clone(), ch);
     }
     Ok(channels)

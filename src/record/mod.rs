@@ -8,6 +8,8 @@
 //! - [`schemas`]: the JSON channels' schemas, every field typed;
 //! - [`sink`]: the stream under the MCAP writer, which keeps I/O errors
 //!   from it (the writer panics after one) for the file to report;
+//! - [`tap`]: a bus's taps turned into the channels' messages (topic, log
+//!   time, bytes), for the recorder and the live Foxglove view alike;
 //! - [`recorder`]: the thread that taps the buses and writes;
 //! - [`client`]: `jointd record`, which asks a running daemon for one.
 
@@ -19,5 +21,6 @@ pub mod metadata;
 pub mod recorder;
 pub mod schemas;
 pub mod sink;
+pub mod tap;
 
 pub use recorder::{RecordState, RecordStatus, Recorder};

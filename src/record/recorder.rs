@@ -1,7 +1,8 @@
 //! A recording in progress: a thread that taps every bus (its snapshots for
 //! joint states, its frame and setpoint taps, its events) and writes what
-//! it hears to an [`McapFile`], closing a chunk every second, until it is
-//! stopped, its duration is over, or a write fails.
+//! it hears ([`BusTap`] makes the messages) to an [`McapFile`], closing a
+//! chunk every second, until it is stopped, its duration is over, or a
+//! write fails.
 //!
 //! A thread of its own, not a task: encoding every frame, compressing the
 //! chunks and writing the file are CPU and disk work that would hold an
@@ -16,18 +17,14 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant, SystemTime};
 
 use serde::Serialize;
-use serde_json::json;
-use tokio::sync::{broadcast, watch};
+use tokio::sync::watch;
 
-use crate::bus::handle::{BusEvent, Commanded, LoggedFrame};
-use crate::bus::{BusHandle, BusSnapshot};
-use crate::protocol::frame_json::hex;
-use crate::protocol::units;
-use crate::protocol::CtrlMode;
+use crate::bus::BusHandle;
 
-use super::joint_states::{system_ns, JointStates, Labeler};
-use super::mcap_file::{McapFile, McapFileError, SideEncoding, Topic, CHUNK_PERIOD};
+use super::joint_states::{system_ns, Labeler};
+use super::mcap_file::{McapFile, McapFileError, SideEncoding, CHUNK_PERIOD};
 use super::metadata::{self, JointInfo};
+use super::tap::{BusTap, Taps};
 
 /// How often the taps are drained (well under a poll round).
 const DRAIN_EVERY: Duration = Duration::from_millis(5);
@@ -87,16 +84,6 @@ fn lock(m: &Mutex<RecordStatus>) -> MutexGuard<'_, RecordStatus> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
-/// One bus as the recording hears it.
-struct Tapped {
-    bus: BusHandle,
-    snapshots: watch::Receiver<Arc<crate::bus::BusSnapshot>>,
-    frames: broadcast::Receiver<LoggedFrame>,
-    setpoints: broadcast::Receiver<Commanded>,
-    events: broadcast::Receiver<BusEvent>,
-    joint_states: JointStates,
-}
-
 impl Recorder {
     /// Creates the file with its metadata record (`joints`: what the
     /// recording knows of them) and starts recording `buses` (for
@@ -118,16 +105,9 @@ impl Recorder {
             file.close_failed();
             return Err(e);
         }
-        let tapped = buses
-            .into_iter()
-            .map(|bus| Tapped {
-                snapshots: bus.watch(),
-                frames: bus.shared().frame_tap.subscribe(),
-                setpoints: bus.shared().setpoints.subscribe(),
-                events: bus.events(),
-                joint_states: JointStates::new(bus.name(), labeler.clone()),
-                bus,
-            })
+        let tapped: Vec<BusTap> = buses
+            .iter()
+            .map(|bus| BusTap::new(bus.name(), Taps::of(bus), labeler.clone()))
             .collect();
         let status = Arc::new(Mutex::new(RecordStatus {
             state: RecordState::Recording,
@@ -144,8 +124,8 @@ impl Recorder {
         let spawned = std::thread::Builder::new()
             .name("recording".into())
             .spawn(move || {
-                lower_priority();
-                run(file, tapped, labeler, duration, &task_stop, &task_status);
+                crate::rt::lower_priority(RECORDER_NICE);
+                run(file, tapped, duration, &task_stop, &task_status);
                 let _ = done_tx.send(true);
             });
         if let Err(source) = spawned {
@@ -170,38 +150,20 @@ impl Recorder {
     }
 }
 
-/// Lowers the calling thread's priority (Linux: nice applies per thread).
-fn lower_priority() {
-    // SAFETY: gettid and setpriority take integers and touch no memory; a
-    // tid names the calling thread for PRIO_PROCESS on Linux.
-    let rc = unsafe {
-        let tid = libc::gettid();
-        libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, RECORDER_NICE)
-    };
-    if rc != 0 {
-        tracing::debug!(
-            "recording thread: setpriority failed: {}",
-            std::io::Error::last_os_error()
-        );
-    }
-}
-
 /// The recording's loop: drain, chunk, until stopped, over or failed.
 fn record(
     file: &mut McapFile,
-    buses: &mut [Tapped],
-    labeler: &Labeler,
+    buses: &mut [BusTap],
     duration: Option<Duration>,
     stop: &AtomicBool,
     status: &Mutex<RecordStatus>,
-    lost: &mut u64,
 ) -> Result<(), McapFileError> {
     let started = Instant::now();
     let mut last_chunk = Instant::now();
     while !stop.load(Ordering::Acquire) {
         std::thread::sleep(DRAIN_EVERY);
         for b in buses.iter_mut() {
-            drain_bus(file, b, labeler, lost)?;
+            drain_bus(file, b)?;
         }
         if last_chunk.elapsed() >= CHUNK_PERIOD {
             last_chunk = Instant::now();
@@ -210,7 +172,7 @@ fn record(
         {
             let mut s = lock(status);
             s.messages = file.counts().clone();
-            s.lost = *lost;
+            s.lost = lost_in(buses);
         }
         if duration.is_some_and(|d| started.elapsed() >= d) {
             break;
@@ -218,23 +180,20 @@ fn record(
     }
     // What the taps still hold, then the summary.
     for b in buses.iter_mut() {
-        drain_bus(file, b, labeler, lost)?;
+        drain_bus(file, b)?;
     }
     Ok(())
 }
 
 fn run(
     mut file: McapFile,
-    mut buses: Vec<Tapped>,
-    labeler: Labeler,
+    mut buses: Vec<BusTap>,
     duration: Option<Duration>,
     stop: &AtomicBool,
     status: &Mutex<RecordStatus>,
 ) {
-    let mut lost = 0u64;
-    let result = record(
-        &mut file, &mut buses, &labeler, duration, stop, status, &mut lost,
-    );
+    let result = record(&mut file, &mut buses, duration, stop, status);
+    let lost = lost_in(&buses);
     let counts = file.counts().clone();
     let result = match result {
         Ok(()) => file.finish(),
@@ -260,78 +219,16 @@ fn run(
     }
 }
 
-/// Everything one bus's taps hold now, and a joint state if a round
-/// completed.
-fn drain_bus(
-    file: &mut McapFile,
-    b: &mut Tapped,
-    labeler: &Labeler,
-    lost: &mut u64,
-) -> Result<(), McapFileError> {
-    let bus = b.bus.name().to_owned();
-    // Which joints are online: a round is complete when each has answered.
-    let snap = b.snapshots.borrow_and_update().clone();
-    loop {
-        match b.frames.try_recv() {
-            Ok(f) => {
-                let ns = system_ns(f.at);
-                let msg = json!({"dir": if f.tx { "tx" } else { "rx" }, "wire_time_ns": ns, "hex": hex(&f.bytes)});
-                file.write(&bus, Topic::Frames, ns, msg.to_string().as_bytes())?;
-                b.joint_states.on_frame(&bus, &f);
-                if let Some(state) = b.joint_states.next(&[&snap]) {
-                    file.write(&bus, Topic::JointStates, state.stamp_ns, &state.to_cdr())?;
-                }
-            }
-            Err(broadcast::error::TryRecvError::Lagged(n)) => *lost += n,
-            Err(_) => break,
-        }
-    }
-    loop {
-        match b.setpoints.try_recv() {
-            Ok(c) => {
-                let targets: Vec<_> = c
-                    .targets
-                    .iter()
-                    .map(|(id, sp)| {
-                        let (_, cal) = labeler(&bus, *id);
-                        json!({"id": id, "position_deg": cal.to_joint(units::angle_deg(sp.pos_ref)),
-                            "speed_dps": target_speed_dps(&snap, *id, sp.spd_ref, cal.sign()),
-                            "pos_ref_raw": sp.pos_ref, "spd_ref_raw": sp.spd_ref})
-                    })
-                    .collect();
-                let mut msg = serde_json::to_value(c.source).unwrap_or_else(|_| json!({}));
-                msg["seq"] = json!(c.seq);
-                msg["targets"] = json!(targets);
-                let ns = system_ns(c.at);
-                file.write(&bus, Topic::Setpoints, ns, msg.to_string().as_bytes())?;
-            }
-            Err(broadcast::error::TryRecvError::Lagged(n)) => *lost += n,
-            Err(_) => break,
-        }
-    }
-    loop {
-        match b.events.try_recv() {
-            Ok(e) => {
-                let text = serde_json::to_string(&e).unwrap_or_default();
-                let ns = system_ns(SystemTime::now());
-                file.write(&bus, Topic::Events, ns, text.as_bytes())?;
-            }
-            Err(broadcast::error::TryRecvError::Lagged(n)) => *lost += n,
-            Err(_) => break,
-        }
-    }
-    Ok(())
+/// Everything one bus's taps hold now, written to the file.
+fn drain_bus(file: &mut McapFile, b: &mut BusTap) -> Result<(), McapFileError> {
+    let bus = b.bus().to_owned();
+    b.drain(
+        |_| true,
+        |topic, ns, data| file.write(&bus, topic, ns, data),
+    )
 }
 
-/// A target's speed as the REST and WebSocket views give it: output °/s,
-/// the limit in position mode, signed (in the joint's frame) in speed mode.
-fn target_speed_dps(snap: &BusSnapshot, id: u8, spd_ref: i16, sign: f64) -> f64 {
-    let dev = snap.devices.get(&id);
-    let fw = dev.map(|d| d.firmware_version()).unwrap_or_default();
-    let dps = (units::speed_dps(spd_ref, fw) * 1000.0).round() / 1000.0;
-    if dev.and_then(|d| d.mode) == Some(CtrlMode::Speed) {
-        sign * dps
-    } else {
-        dps
-    }
+/// What the taps of every bus fell too far behind to keep.
+fn lost_in(buses: &[BusTap]) -> u64 {
+    buses.iter().map(BusTap::lost).sum()
 }

@@ -16,7 +16,8 @@
 //! - `exposition`: the text format (families, samples, label escaping).
 //! - `build_info`, `process`: the build and the process.
 //! - `bus`, `devices`: each bus and each device, from its snapshot.
-//! - `ws`, `http_requests`, `bridge`: the WebSocket hub, requests by route, ROS 2 and recordings.
+//! - `ws`, `http_requests`, `bridge`: the WebSocket hub, requests by route, ROS 2, recordings
+//!   and the live Foxglove view.
 //! - this file: the whole exposition in order.
 
 mod bridge;
@@ -31,7 +32,7 @@ mod ws;
 use std::time::Instant;
 
 use crate::http::state::AppState;
-use bridge::bridge_families;
+use bridge::{bridge_families, foxglove_families};
 use bus::bus_families;
 use devices::device_families;
 use exposition::{label, Exposition};
@@ -67,5 +68,6 @@ pub(crate) fn render(state: &AppState) -> String {
     ws_families(&mut m, state.ws());
     http_requests::families(&mut m, state);
     bridge_families(&mut m, state);
+    foxglove_families(&mut m, state);
     m.render()
 }

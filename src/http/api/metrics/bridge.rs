@@ -1,7 +1,11 @@
-//! The ROS 2 bridge's families (zero while it does not run) and the
-//! recordings running.
+//! The ROS 2 bridge's families (zero while it does not run), the
+//! recordings running, and the live Foxglove view's families (zero while
+//! it does not run).
+
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::exposition::Exposition;
+use crate::control::foxglove_stats::FoxgloveStats;
 use crate::control::ros2_stats::Ros2Stats;
 use crate::http::state::AppState;
 
@@ -80,4 +84,40 @@ fn ros2_counters(m: &mut Exposition, stats: Option<&Ros2Stats>) {
         let v = stats.map_or(0, |s| field(s).load(std::sync::atomic::Ordering::Relaxed));
         m.counter(name, help, "", v as f64);
     }
+}
+
+/// The live Foxglove view's gauges and counters, 0 while it does not run.
+/// What the SDK drops for a client whose queue is full it does not report
+/// (it logs it, at most every 30 s): a slow client's losses are not here.
+pub(super) fn foxglove_families(m: &mut Exposition, state: &AppState) {
+    let stats = state.control().foxglove();
+    m.gauge(
+        "jointd_foxglove_enabled",
+        "1 when the live Foxglove view runs (--foxglove).",
+        "",
+        if stats.is_some() { 1.0 } else { 0.0 },
+    );
+    m.gauge(
+        "jointd_foxglove_clients",
+        "Foxglove clients connected to the live view.",
+        "",
+        load(stats, |s| &s.clients),
+    );
+    m.counter(
+        "jointd_foxglove_messages_total",
+        "Messages logged to the live view while a client was subscribed to their channel.",
+        "",
+        load(stats, |s| &s.messages),
+    );
+    m.counter(
+        "jointd_foxglove_lost_total",
+        "Frames, setpoint writes and events the live view fell too far behind to see.",
+        "",
+        load(stats, |s| &s.lost),
+    );
+}
+
+/// One of the live view's counters, 0 while it does not run.
+fn load(stats: Option<&FoxgloveStats>, field: fn(&FoxgloveStats) -> &AtomicU64) -> f64 {
+    stats.map_or(0, |s| field(s).load(Ordering::Relaxed)) as f64
 }
