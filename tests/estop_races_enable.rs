@@ -13,8 +13,6 @@
 
 mod support;
 
-use std::time::Duration;
-
 use jointd::bus::handle::{BusEvent, DisabledReason};
 use jointd::bus::{AdapterSetting, Targets};
 use jointd::protocol::params::Revision;

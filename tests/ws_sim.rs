@@ -766,8 +766,12 @@ async fn enable_disable_and_estop_over_the_websocket_are_rests_calls() {
         .server
         .post("/api/v1/buses/sim0/control/enable", json!({"ids": [9]}))
         .await;
-    assert_eq!(refused["message"], rest.body["detail"], "one check, one wording");
-    c.send(json!({"type": "disable", "seq": 3, "bus": "sim0"})).await;
+    assert_eq!(
+        refused["message"], rest.body["detail"],
+        "one check, one wording"
+    );
+    c.send(json!({"type": "disable", "seq": 3, "bus": "sim0"}))
+        .await;
     assert_eq!(c.next_of("done").await["action"], "disable");
     c.send(json!({"type": "estop", "seq": 4})).await;
     let stopped = c.next_of("estopped").await;

@@ -129,12 +129,12 @@ pub fn plan(args: &RunArgs) -> Result<Plan, DaemonError> {
     })
 }
 
+/// The configured buses, the simulator's, and every bus's name.
+type PlannedBuses = (Vec<BusConfig>, Option<SimConfig>, Vec<String>);
+
 /// The file's buses, then the flags', and the simulator's; their names.
 /// At least one, or there is nothing to serve.
-fn buses_of(
-    mut buses: Vec<BusConfig>,
-    args: &RunArgs,
-) -> Result<(Vec<BusConfig>, Option<SimConfig>, Vec<String>), DaemonError> {
+fn buses_of(mut buses: Vec<BusConfig>, args: &RunArgs) -> Result<PlannedBuses, DaemonError> {
     for spec in &args.buses {
         buses.push(BusConfig::parse_cli(spec)?);
     }

@@ -65,11 +65,12 @@ pub(crate) async fn require_token(
     if let Some((method, path)) = told {
         let kind = format!("{method} {}", route.as_deref().unwrap_or(&path));
         let what = format!("{method} {path}");
+        let status = resp.status();
         let cmd = Command {
             by: &caller.name,
             kind: &kind,
             what: &what,
-            outcome: resp.status().as_str(),
+            outcome: status.as_str(),
         };
         let bus = route.as_deref().and_then(|r| bus_of(r, &path));
         state.control().tell(&cmd, bus);

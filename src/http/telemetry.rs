@@ -17,7 +17,7 @@ use crate::protocol::CtrlMode;
 use crate::protocol::{Info01, Info02};
 
 pub(crate) use crate::control::device::{
-    commanded_or_measured_raw, firmware_of, measured_angle_raw, revision_of, ASSUMED_FIRMWARE,
+    firmware_of, measured_angle_raw, revision_of, ASSUMED_FIRMWARE,
 };
 
 /// A fault code decoded to names.

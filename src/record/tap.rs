@@ -206,7 +206,7 @@ fn setpoints_json(bus: &str, c: &Commanded, snap: &BusSnapshot, labeler: &Labele
                 "pos_ref_raw": sp.pos_ref, "spd_ref_raw": sp.spd_ref})
         })
         .collect();
-    let mut msg = serde_json::to_value(&c.source).unwrap_or_else(|_| json!({}));
+    let mut msg = serde_json::to_value(c.source).unwrap_or_else(|_| json!({}));
     msg["seq"] = json!(c.seq);
     msg["targets"] = json!(targets);
     msg.to_string()

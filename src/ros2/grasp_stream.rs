@@ -65,7 +65,16 @@ pub(super) async fn run(
             )),
         };
         let what = format!("topic {}", dropped.topic);
-        audit::tell(&state, None, &what, if outcome.is_ok() { "started a grasp" } else { "refused" });
+        audit::tell(
+            &state,
+            None,
+            &what,
+            if outcome.is_ok() {
+                "started a grasp"
+            } else {
+                "refused"
+            },
+        );
         match outcome {
             Ok(id) => {
                 stats.commands_applied.fetch_add(1, Ordering::Relaxed);

@@ -93,8 +93,17 @@ pub(super) async fn serve(
             },
         };
         tracing::info!(?scope, ?service, success, %message, "ROS 2: service called");
-        let what = format!("service /{}/{}", audit::namespace(&scope), service.describe().0);
-        audit::tell(&state, audit::bus(&scope), &what, if success { "done" } else { "refused" });
+        let what = format!(
+            "service /{}/{}",
+            audit::namespace(&scope),
+            service.describe().0
+        );
+        audit::tell(
+            &state,
+            audit::bus(&scope),
+            &what,
+            if success { "done" } else { "refused" },
+        );
         reply(&query, &key, success, &message).await;
     }
 }

@@ -43,7 +43,16 @@ pub(super) async fn run(
             )),
         };
         let what = format!("topic {}", dropped.topic);
-        audit::tell(&state, audit::bus(&scope), &what, if started.is_ok() { "started a move" } else { "refused" });
+        audit::tell(
+            &state,
+            audit::bus(&scope),
+            &what,
+            if started.is_ok() {
+                "started a move"
+            } else {
+                "refused"
+            },
+        );
         match started {
             Ok(id) => {
                 stats.commands_applied.fetch_add(1, Ordering::Relaxed);

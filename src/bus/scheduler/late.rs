@@ -68,10 +68,7 @@ mod tests {
         let at = t0 + Duration::from_millis(5);
         assert_eq!(late.take(1, 1, at), Some(t0));
         assert_eq!(late.take(1, 1, at), None, "one reply per read");
-        assert_eq!(
-            late.take(2, 2, at),
-            Some(t0 + Duration::from_millis(1))
-        );
+        assert_eq!(late.take(2, 2, at), Some(t0 + Duration::from_millis(1)));
     }
 
     #[test]
@@ -89,7 +86,10 @@ mod tests {
         let t0 = Instant::now();
         let mut late = LateReplies::default();
         late.expect(want(1, 1), t0);
-        assert_eq!(late.take(1, 1, t0 + KEPT_FOR + Duration::from_millis(1)), None);
+        assert_eq!(
+            late.take(1, 1, t0 + KEPT_FOR + Duration::from_millis(1)),
+            None
+        );
     }
 
     #[test]

@@ -38,8 +38,8 @@ use crate::bus::wire::{ReplyWindow, Want, WireClock};
 use crate::protocol::params::Revision;
 use crate::protocol::InfoBlock;
 
-#[cfg(test)]
 use late::LateReplies;
+#[cfg(test)]
 use reopen::{BACKOFF_FIRST, BACKOFF_MAX, LISTEN_ON_OPEN};
 
 /// Setpoint frames that may go out between two frames of a one-shot
