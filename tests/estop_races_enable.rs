@@ -69,8 +69,19 @@ fn any_joint(rig: &Rig, pred: impl Fn(u8) -> bool) -> bool {
 async fn race(rig: &Rig, point: RacePoint) {
     if let RacePoint::WhileStopping = point {
         rig.enable_all(IDS.len()).await;
-        rig.bus.disable(Targets::All).await.expect("disable");
+        // The disable confirms once the joints are ready again: the enable
+        // must go while one is still in `stop`.
+        let bus = rig.bus.clone();
+        let disable = tokio::spawn(async move { bus.disable(Targets::All).await });
         rig.sim_until("a joint in stop", |_| any_joint(rig, |f| f == STOP));
+        // Enabled while the disable confirms: either may finish first.
+        let bus = rig.bus.clone();
+        let enable = tokio::spawn(async move { bus.enable(Targets::All).await });
+        let report = rig.bus.estop().await.expect("e-stop");
+        assert!(report.still_enabled.is_empty(), "{report:?}");
+        let _ = disable.await.expect("disable task");
+        let _ = enable.await.expect("enable task");
+        return settled(rig);
     }
     let bus = rig.bus.clone();
     let enable = tokio::spawn(async move { bus.enable(Targets::All).await });
@@ -87,6 +98,10 @@ async fn race(rig: &Rig, point: RacePoint) {
     assert!(report.still_enabled.is_empty(), "{report:?}");
     // The enable either finished before the e-stop or was cut short by it.
     let _ = enable.await.expect("enable task");
+    settled(rig);
+}
+
+fn settled(rig: &Rig) {
     rig.sim_until("every joint disabled and settled", |sim| {
         IDS.iter()
             .all(|&id| sim.device(id).is_some_and(|d| !d.enabled && d.fsm == 0))
@@ -115,7 +130,8 @@ async fn rounds(rig: &Rig, n: usize) {
             assert_eq!(
                 (d.resets, d.disabled_reason),
                 (0, Some(DisabledReason::Estop)),
-                "round {round} ({point:?}), device {id}: {}",
+                "round {round} ({point:?}), device {id}: {:?}, {}",
+                d.last_reset,
                 summary(&seen)
             );
         }

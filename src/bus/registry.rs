@@ -49,6 +49,11 @@ pub(crate) struct Entry {
     /// reply showing it driving may have left the device before the
     /// disable reached it, and is no reason to believe it enabled.
     disable_unconfirmed: bool,
+    /// When the daemon last disabled it (just before the frames went): a
+    /// reply to a request written before then tells the state the device
+    /// was in before the disable, neither that it stopped nor that it runs
+    /// (behind a USB adapter such replies come after the disable).
+    disabled_at: Option<Instant>,
     /// The daemon has sent it an enable: a first INFO_01 showing it driving
     /// is that enable's doing, not a joint found enabled at start.
     enabled_by_daemon: bool,
@@ -71,6 +76,7 @@ impl Entry {
             last_sent: None,
             believed_enabled: false,
             disable_unconfirmed: false,
+            disabled_at: None,
             enabled_by_daemon: false,
             control_updates: 0,
             telemetry_samples: 0,
@@ -175,6 +181,19 @@ impl Registry {
         solicited: bool,
         events: &mut Vec<BusEvent>,
     ) -> ReplyEffect {
+        self.on_reply_asked(reply, now, solicited, None, events)
+    }
+
+    /// [`Self::on_reply`] of the reply to a request written before `asked`
+    /// (`None`: written after anything the daemon did to the device).
+    pub(crate) fn on_reply_asked(
+        &mut self,
+        reply: &Reply,
+        now: Instant,
+        solicited: bool,
+        asked: Option<Instant>,
+        events: &mut Vec<BusEvent>,
+    ) -> ReplyEffect {
         let Registry { bus, entries, .. } = self;
         let entry = entries
             .entry(reply.dev_id)
@@ -182,7 +201,14 @@ impl Registry {
         mark_online(bus, entry, events);
         match reply.body() {
             ReplyBody::Info01(info) => {
-                let effect = on_info01(bus, entry, &info, now, solicited, events);
+                let before_disable = asked
+                    .zip(entry.disabled_at)
+                    .is_some_and(|(asked, disabled)| asked <= disabled);
+                let effect = if before_disable {
+                    on_stale_info01(entry, &info, now)
+                } else {
+                    on_info01(bus, entry, &info, now, solicited, events)
+                };
                 entry.telemetry_samples += u32::from(solicited);
                 effect
             }
@@ -205,6 +231,7 @@ impl Registry {
             e.state.disabled_reason = Some(reason);
             e.believed_enabled = false;
             e.disable_unconfirmed = true;
+            e.disabled_at = Some(Instant::now());
         }
     }
 
@@ -380,6 +407,15 @@ fn on_info01(
     entry.state.info01 = Some((*info, now));
     entry.measured = Some((info.angle, now));
     effect
+}
+
+/// An INFO_01 asked for before the daemon's last disable of the device:
+/// what it shows is kept (the latest heard), but it says nothing of the
+/// device since the disable (no reset, no confirmed stop, not enabled).
+fn on_stale_info01(entry: &mut Entry, info: &Info01, now: Instant) -> ReplyEffect {
+    entry.state.info01 = Some((*info, now));
+    entry.measured = Some((info.angle, now));
+    ReplyEffect::default()
 }
 
 /// A device in a power-up state that announced itself again (it was heard
@@ -575,6 +611,36 @@ mod tests {
         // Not known to be a power-up: the device may still run speed mode,
         // and a position target read as a speed would spin it.
         assert_eq!(r.get(2).unwrap().state.mode, Some(CtrlMode::Speed));
+    }
+
+    #[test]
+    fn replies_asked_before_a_disable_neither_confirm_it_nor_make_a_reset() {
+        let mut r = Registry::new("b", 3);
+        let mut ev = Vec::new();
+        r.expect(2);
+        r.note_enabled(2);
+        r.on_reply(&info01(2, fsm::ALIGN, 0), Instant::now(), true, &mut ev);
+        let asked = Instant::now();
+        r.note_disabled(2, DisabledReason::Estop);
+        // Behind a USB adapter, polls written before the disable answer
+        // after it: ready from before the enable took, then align.
+        for state in [fsm::READY, fsm::ALIGN] {
+            let fx = r.on_reply_asked(
+                &info01(2, state, 0),
+                Instant::now(),
+                true,
+                Some(asked),
+                &mut ev,
+            );
+            assert!(!fx.reset, "{fx:?}");
+        }
+        let fx = r.on_reply(&info01(2, fsm::READY, 0), Instant::now(), true, &mut ev);
+        assert!(!fx.reset, "the daemon's own disable, not a reset: {fx:?}");
+        let s = &r.get(2).unwrap().state;
+        assert_eq!(
+            (s.resets, s.disabled_reason),
+            (0, Some(DisabledReason::Estop))
+        );
     }
 
     #[test]

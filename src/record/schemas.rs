@@ -296,6 +296,13 @@ mod tests {
                 id: 2,
                 q_current_a: 0.05,
             },
+            BusEvent::Command {
+                bus: bus(),
+                by: "policy".into(),
+                command: "PUT /api/v1/buses/sim0/devices/1/target".into(),
+                outcome: "200".into(),
+                repeats: 3,
+            },
         ]
     }
 

@@ -21,7 +21,7 @@ impl Scheduler {
     /// request renames the old entry itself.
     pub(crate) fn reply(&mut self, reply: &Reply, at: Instant, due: Instant) -> ReplyEffect {
         self.clock.line_free(at);
-        self.take_reply(reply, at, due)
+        self.take_reply(reply, at, due, None)
     }
 
     /// The reply to a poll written blind (see [`Scheduler::track`]) came
@@ -39,10 +39,18 @@ impl Scheduler {
             .as_mut()
             .and_then(|p| p.replied(inflight, at, packet));
         self.usb_changed(change);
-        self.take_reply(reply, at, inflight.window.due)
+        self.take_reply(reply, at, inflight.window.due, Some(inflight.handed))
     }
 
-    fn take_reply(&mut self, reply: &Reply, at: Instant, due: Instant) -> ReplyEffect {
+    /// `asked`: when the request was written, where it may be before
+    /// something the daemon did since (a poll written blind).
+    fn take_reply(
+        &mut self,
+        reply: &Reply,
+        at: Instant,
+        due: Instant,
+        asked: Option<Instant>,
+    ) -> ReplyEffect {
         self.clock.observe_reply(due, at);
         self.usb_answered(reply.dev_id, at);
         let feeds =
@@ -50,7 +58,9 @@ impl Scheduler {
         if !feeds {
             return ReplyEffect::default();
         }
-        let effect = self.reg.on_reply(reply, at, true, &mut self.events);
+        let effect = self
+            .reg
+            .on_reply_asked(reply, at, true, asked, &mut self.events);
         self.after_reply(reply.dev_id, effect);
         effect
     }
@@ -66,13 +76,17 @@ impl Scheduler {
             self.clock.line_free(at);
         }
         let late = self.late.take(reply.dev_id, reply.index, at);
-        if let Some(due) = late {
-            self.clock.observe_reply(due, at);
+        if let Some(late) = late {
+            self.clock.observe_reply(late.due, at);
         }
         self.usb_answered(reply.dev_id, at);
-        let effect = self
-            .reg
-            .on_reply(reply, at, late.is_some(), &mut self.events);
+        let effect = self.reg.on_reply_asked(
+            reply,
+            at,
+            late.is_some(),
+            late.map(|l| l.asked_before),
+            &mut self.events,
+        );
         self.after_reply(reply.dev_id, effect);
         effect
     }
@@ -114,7 +128,7 @@ impl Scheduler {
     /// line is free again.
     pub(crate) fn timed_out(&mut self, want: Want, due: Instant, now: Instant) {
         self.usb_missing(want.dev_id, now);
-        self.late.expect(want, due);
+        self.late.expect(want, due, now);
         self.clock.line_free(now);
         self.reg.on_missed(want.dev_id, &mut self.events);
     }
@@ -127,7 +141,7 @@ impl Scheduler {
     /// from that look for the whole time the transaction waited, and the
     /// e-stop with it.
     pub(crate) fn given_up(&mut self, want: Want, due: Instant, now: Instant) {
-        self.late.expect(want, due);
+        self.late.expect(want, due, now);
         self.clock.line_free(now);
         self.exchange_settled();
     }
@@ -136,7 +150,8 @@ impl Scheduler {
     /// other, but the line was never held for it beyond the model.
     pub(crate) fn inflight_timed_out(&mut self, inflight: &Inflight, now: Instant) {
         self.usb_missing(inflight.want.dev_id, now);
-        self.late.expect(inflight.want, inflight.window.due);
+        self.late
+            .expect(inflight.want, inflight.window.due, inflight.handed);
         self.reg.on_missed(inflight.want.dev_id, &mut self.events);
     }
 
@@ -160,7 +175,7 @@ impl Scheduler {
     /// reply by `now`: the line is free again, and the silence says
     /// nothing against the device (it is not a missed poll).
     pub(crate) fn unanswered(&mut self, want: Want, due: Instant, now: Instant) {
-        self.late.expect(want, due);
+        self.late.expect(want, due, now);
         self.clock.line_free(now);
     }
 
