@@ -208,6 +208,16 @@ async fn bad_grasps_are_4xx_problems_that_say_what_is_wrong() {
         "{}",
         r.body
     );
+    // Joint a has no range (no soft limits, no calibration range, no
+    // `closed` pose): without a closing limit it would turn on towards the
+    // protocol's end in free air.
+    let r = bad(json!({"speed_dps": 30, "hold_current_a": 0.2, "joints": [{"joint": "a"}]})).await;
+    let p = r.problem(422);
+    assert_eq!(p["field"], "joints.a.close_to_deg", "{p}");
+    assert!(
+        p["detail"].as_str().unwrap_or("").contains("no range"),
+        "{p}"
+    );
     bad(json!({"speed_dps": 30})).await.problem(422);
     bad(json!({"speed_dps": "fast", "hold_current_a": 0.2}))
         .await
@@ -227,14 +237,16 @@ async fn bad_grasps_are_4xx_problems_that_say_what_is_wrong() {
     s.post("/api/v1/buses/sim0/control/disable", json!({"ids": [3]}))
         .await
         .ok();
-    let r = bad(json!({"speed_dps": 30, "hold_current_a": 0.2})).await;
+    let all = json!([{"joint": "a", "close_to_deg": 30}, {"joint": "b", "close_to_deg": 30},
+        {"joint": "c", "close_to_deg": 30}]);
+    let r = bad(json!({"speed_dps": 30, "hold_current_a": 0.2, "joints": all})).await;
     r.problem(409);
     // A hold the joint cannot take fails before any finger moves, its
     // limit untouched: above the joint's own limit, or its protection.
     for (hold, why) in [(1.0, "not below"), (0.6, "protection")] {
         let id = grasp(
             &b,
-            json!({"speed_dps": 30, "hold_current_a": hold, "joints": [{"joint": "a"}]}),
+            json!({"speed_dps": 30, "hold_current_a": hold, "joints": [{"joint": "a", "close_to_deg": 30}]}),
         )
         .await;
         let view = wait_grasp(&b, id, "the grasp done", |v| v["state"] == "done").await;

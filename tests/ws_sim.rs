@@ -97,6 +97,17 @@ impl Client {
             .unwrap_or_else(|_| panic!("no `{kind}` message"))
     }
 
+    /// The next event but the audit's (`command`: who sent what, which
+    /// every REST and WebSocket command of a test makes).
+    async fn next_event(&mut self) -> Value {
+        loop {
+            let e = self.next_of("event").await;
+            if e["event"]["event"] != "command" {
+                return e;
+            }
+        }
+    }
+
     /// Sends a message expected to be rejected; returns the error.
     async fn rejected(&mut self, msg: Value) -> Value {
         self.send(msg).await;
@@ -336,7 +347,7 @@ async fn watchdog_hold_freezes_joints_and_tells_everyone() {
     assert_eq!(teleop.next_of("watchdog_set").await["policy"], "hold");
     // Stream towards far targets, then stop streaming mid-move.
     teleop.send(json!({"type":"setpoints","targets":[{"id":1,"position_deg":200,"speed_dps":30},{"id":2,"position_deg":40,"speed_dps":30}]})).await;
-    let event = observer.next_of("event").await;
+    let event = observer.next_event().await;
     assert_eq!(
         (
             event["event"]["event"].as_str(),
@@ -386,7 +397,7 @@ async fn watchdog_hold_stops_a_joint_in_speed_mode() {
         tokio::time::sleep(Duration::from_millis(5)).await;
     }
     // The stream stops: the watchdog holds the joint, at speed 0.
-    let event = teleop.next_of("event").await;
+    let event = teleop.next_event().await;
     assert_eq!(event["event"]["event"], "watchdog");
     while !spinning(false) {
         assert!(
@@ -415,7 +426,7 @@ async fn watchdog_disable_applies_when_the_socket_closes() {
         .await;
     teleop.next_of("ack").await;
     drop(teleop); // the network goes away: no close handshake
-    let event = observer.next_of("event").await;
+    let event = observer.next_event().await;
     assert_eq!(
         (
             event["event"]["policy"].as_str(),
@@ -474,7 +485,7 @@ async fn config_default_watchdog_and_joint_names() {
     teleop
         .send(json!({"type":"setpoints","targets":[{"id":1,"position_deg":3}]}))
         .await;
-    let event = observer.next_of("event").await;
+    let event = observer.next_event().await;
     assert_eq!(
         (
             event["event"]["policy"].as_str(),
@@ -498,7 +509,7 @@ async fn a_power_cut_is_an_event_a_disabled_reason_and_a_metric() {
     bus.sim.inject(jointd::sim::Fault::PowerCycle { dev_id: 2 });
     // A long boot may take it offline and back first.
     let event = loop {
-        let e = observer.next_of("event").await;
+        let e = observer.next_event().await;
         if !matches!(
             e["event"]["event"].as_str(),
             Some("device_offline" | "device_online")
@@ -679,7 +690,7 @@ async fn a_move_message_starts_a_move_and_its_events_follow() {
     let id = started["move"]["id"].clone();
     // Events reach every session (this one subscribed to nothing).
     loop {
-        let ev = c.next_of("event").await;
+        let ev = c.next_event().await;
         if ev["event"]["event"] == "move_done" {
             assert_eq!(ev["event"]["move_id"], id);
             break;

@@ -174,16 +174,16 @@ pub(super) fn admit(
     running(dev, joint)?;
     let cal = state.calibration(&joint.bus, joint.id);
     let soft = state.limits(&joint.bus, joint.id);
+    let who = format!("joint `{}`", joint.name);
+    soft.check_motion_speed(&"speed_dps", settings.speed_dps, firmware_of(dev), &who)?;
     let field = format!("joints.{}.close_to_deg", joint.name);
     let close_to_joint_deg = match close_to {
         Some(d) => d,
         None => default_close_to(state, hand, joint, &cal, &soft, &field)?,
     };
-    let who = format!("joint `{}`", joint.name);
     let close_to_deg = soft.check_joint_position(&cal, &field, close_to_joint_deg, &who)?;
     let start_deg = here_joint_deg(state, &joint.bus, joint.id, &cal)?;
     would_open(&field, &joint.name, close_to_joint_deg, start_deg)?;
-    soft.check_motion_speed(&"speed_dps", settings.speed_dps, firmware_of(dev), &who)?;
     let slot = Arc::new(Mutex::new(FingerGrasp {
         bus: joint.bus.clone(),
         id: joint.id,
