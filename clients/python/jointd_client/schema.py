@@ -148,6 +148,17 @@ class CalibrationView(_CalibrationViewRequired, total=False):
     """The usable range, joint degrees (`null`: the soft limits alone)."""
 
 
+class CallerView(TypedDict):
+    """Who a request is, to the daemon."""
+
+    auth: bool
+    """Whether the daemon takes tokens at all (false: everyone may do all)."""
+    name: str
+    """The token's name (`token` for `--token`; `open` when the daemon takes no token)."""
+    scope: str
+    """`read`, `operate` or `admin`."""
+
+
 class ConfigPatch(TypedDict, total=False):
     """Any subset of the writable parameters, in physical units. Written to RAM and verified by read-back; `POST .../config/persist` keeps them over a power cycle."""
 
@@ -1113,6 +1124,7 @@ __all__ = [
     "BusView",
     "CalibrationRequest",
     "CalibrationView",
+    "CallerView",
     "ConfigPatch",
     "ConfigView",
     "DeviceDetail",
