@@ -174,6 +174,7 @@ impl Registry {
 
     /// Takes in a reply. `solicited` is false for a frame nobody asked for:
     /// a power-up INFO_01.
+    #[cfg(test)]
     pub(crate) fn on_reply(
         &mut self,
         reply: &Reply,
