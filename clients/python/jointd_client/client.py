@@ -390,6 +390,11 @@ class Jointd(GraspCalls):
     def health(self) -> schema.Health:
         return cast(schema.Health, self.request("GET", "/healthz"))
 
+    @operation("caller")
+    def caller(self) -> schema.CallerView:
+        """The token this client uses, by its name and scope (never the token)."""
+        return cast(schema.CallerView, self.request("GET", "/api/v1/caller"))
+
     @operation("readyz")
     def ready(self) -> schema.Readiness:
         """Whether every bus is up (`Unavailable` if not: 503 carries the same body)."""

@@ -76,7 +76,12 @@ def test_a_grasp_closes_holds_and_lets_go(hand):
 
 def test_a_grasp_is_stopped_and_bad_grasps_say_why(hand):
     j = hand
-    g = j.grasp("h", 20.0, HOLD_A, joints=["a", {"joint": "b", "close_to_deg": 30.0}])
+    # Joint a has no range of its own: without a closing limit it is refused.
+    with pytest.raises(Unprocessable) as e:
+        j.grasp("h", 20.0, HOLD_A, joints=["a"])
+    assert e.value.problem.field == "joints.a.close_to_deg", e.value.problem
+    g = j.grasp("h", 20.0, HOLD_A, joints=[{"joint": "a", "close_to_deg": 30.0},
+                                           {"joint": "b", "close_to_deg": 30.0}])
     with pytest.raises(Conflict):
         j.grasp("h", 20.0, HOLD_A, joints=["a"])
     with pytest.raises(Timeout):
