@@ -117,15 +117,7 @@ impl BusTap {
         wants: &impl Fn(Topic) -> bool,
         emit: &mut impl FnMut(Topic, u64, &[u8]) -> Result<(), E>,
     ) -> Result<(), E> {
-        loop {
-            let f = match self.taps.frames.try_recv() {
-                Ok(f) => f,
-                Err(TryRecvError::Lagged(n)) => {
-                    self.lost += n;
-                    continue;
-                }
-                Err(_) => return Ok(()),
-            };
+        while let Some(f) = next(&mut self.taps.frames, &mut self.lost) {
             if wants(Topic::Frames) {
                 emit(Topic::Frames, system_ns(f.at), frame_json(&f).as_bytes())?;
             }
@@ -140,6 +132,7 @@ impl BusTap {
                 }
             }
         }
+        Ok(())
     }
 
     fn drain_setpoints<E>(
@@ -148,20 +141,13 @@ impl BusTap {
         wants: &impl Fn(Topic) -> bool,
         emit: &mut impl FnMut(Topic, u64, &[u8]) -> Result<(), E>,
     ) -> Result<(), E> {
-        loop {
-            let c = match self.taps.setpoints.try_recv() {
-                Ok(c) => c,
-                Err(TryRecvError::Lagged(n)) => {
-                    self.lost += n;
-                    continue;
-                }
-                Err(_) => return Ok(()),
-            };
+        while let Some(c) = next(&mut self.taps.setpoints, &mut self.lost) {
             if wants(Topic::Setpoints) {
                 let msg = setpoints_json(&self.bus, &c, snap, &self.labeler);
                 emit(Topic::Setpoints, system_ns(c.at), msg.as_bytes())?;
             }
         }
+        Ok(())
     }
 
     fn drain_events<E>(
@@ -169,19 +155,24 @@ impl BusTap {
         wants: &impl Fn(Topic) -> bool,
         emit: &mut impl FnMut(Topic, u64, &[u8]) -> Result<(), E>,
     ) -> Result<(), E> {
-        loop {
-            let e = match self.taps.events.try_recv() {
-                Ok(e) => e,
-                Err(TryRecvError::Lagged(n)) => {
-                    self.lost += n;
-                    continue;
-                }
-                Err(_) => return Ok(()),
-            };
+        while let Some(e) = next(&mut self.taps.events, &mut self.lost) {
             if wants(Topic::Events) {
                 let text = serde_json::to_string(&e).unwrap_or_default();
                 emit(Topic::Events, system_ns(SystemTime::now()), text.as_bytes())?;
             }
+        }
+        Ok(())
+    }
+}
+
+/// The next item a tap holds, counting in `lost` what it dropped for
+/// falling behind; `None` once it is empty (or closed).
+fn next<T: Clone>(rx: &mut broadcast::Receiver<T>, lost: &mut u64) -> Option<T> {
+    loop {
+        match rx.try_recv() {
+            Ok(item) => return Some(item),
+            Err(TryRecvError::Lagged(n)) => *lost += n,
+            Err(_) => return None,
         }
     }
 }
