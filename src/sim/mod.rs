@@ -239,7 +239,11 @@ impl SimHandle {
         let path = self.inner.device_path.clone()?;
         let taken = self.inner.taken.clone();
         Some(Box::new(move |baud| {
-            let (port, notes) = TtyPort::open_with(&path, baud, PortSetup { rs485 })?;
+            let setup = PortSetup {
+                rs485,
+                exclusive: false,
+            };
+            let (port, notes) = TtyPort::open_with(&path, baud, setup)?;
             let port = match &taken {
                 Some(count) => port.counted_by(count.clone()),
                 None => port,
