@@ -13,6 +13,7 @@
 //! One frame at a time, each reply waited for to the end of its window:
 //! the doctor measures the line, it does not race it.
 
+use std::collections::BTreeSet;
 use std::io;
 use std::time::{Duration, Instant};
 
@@ -145,6 +146,9 @@ pub(crate) struct Exchange<'a> {
     margin: Duration,
     buf: [u8; READ_BUF],
     pub(crate) tally: Tally,
+    /// Ids heard in an intact reply since [`Self::take_heard_from`] (late
+    /// ones and announcements included): devices at this baud.
+    heard_from: BTreeSet<u8>,
 }
 
 impl std::fmt::Debug for Exchange<'_> {
@@ -170,6 +174,7 @@ impl<'a> Exchange<'a> {
             margin: Duration::from_micros(timing.reply_margin_us),
             buf: [0; READ_BUF],
             tally: Tally::default(),
+            heard_from: BTreeSet::new(),
         }
     }
 
@@ -184,6 +189,11 @@ impl<'a> Exchange<'a> {
     /// One frame's time on the wire at the port's baud.
     pub(crate) fn frame(&self) -> Duration {
         self.frame
+    }
+
+    /// The ids heard in an intact reply since the last call.
+    pub(crate) fn take_heard_from(&mut self) -> BTreeSet<u8> {
+        std::mem::take(&mut self.heard_from)
     }
 
     /// Switches the port's baud, dropping what was read at the old one.
@@ -251,6 +261,11 @@ impl<'a> Exchange<'a> {
     fn sort_frames(&mut self, sent: &Sent, heard: &mut Heard, deadline: &mut Instant) {
         while let Some((frame, bytes)) = self.decoder.next_frame_with_bytes() {
             let now = Instant::now();
+            if let Frame::Standard(sf) = &frame {
+                if let Some(r) = Reply::from_standard(sf) {
+                    self.heard_from.insert(r.dev_id);
+                }
+            }
             match sort(sent, &frame, &bytes, now, self.frame) {
                 Sorted::Answer(r) => {
                     heard.replies += 1;
