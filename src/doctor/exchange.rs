@@ -13,7 +13,7 @@
 //! One frame at a time, each reply waited for to the end of its window:
 //! the doctor measures the line, it does not race it.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeSet, VecDeque};
 use std::io;
 use std::time::{Duration, Instant};
 
@@ -29,6 +29,8 @@ use crate::transport::Transport;
 
 /// Bytes read per system call: a few frames.
 const READ_BUF: usize = 256;
+/// Frames written whose echo is still recognised as the doctor's own.
+const RECENT: usize = 8;
 /// After the reply asked for, how much longer a second device with the
 /// same id may take to answer too, beyond two frame times and the adapter's
 /// hold: the spread of two firmwares' turnarounds.
@@ -115,8 +117,17 @@ enum Sorted {
 }
 
 /// Sorts `frame` (`bytes` as they came), decoded at `now`, against the
-/// read `sent`; `tf`: one frame's time at the line's baud.
-fn sort(sent: &Sent, frame: &Frame, bytes: &FrameBytes, now: Instant, tf: Duration) -> Sorted {
+/// read `sent` and the frames written just before it (`recent`: an echo
+/// late by a whole window is still the doctor's own); `tf`: one frame's
+/// time at the line's baud.
+fn sort(
+    sent: &Sent,
+    recent: &VecDeque<FrameBytes>,
+    frame: &Frame,
+    bytes: &FrameBytes,
+    now: Instant,
+    tf: Duration,
+) -> Sorted {
     match Message::from_frame(frame) {
         Ok(Message::Reply(r)) if r.dev_id == sent.id && r.index == sent.block.index() => {
             if now < sent.at + tf * 2 {
@@ -126,7 +137,7 @@ fn sort(sent: &Sent, frame: &Frame, bytes: &FrameBytes, now: Instant, tf: Durati
             }
         }
         Ok(Message::Reply(_)) => Sorted::Unasked,
-        Ok(Message::Command(_)) if *bytes == sent.bytes => Sorted::Echo,
+        Ok(Message::Command(_)) if *bytes == sent.bytes || recent.contains(bytes) => Sorted::Echo,
         Ok(Message::Command(_)) | Err(_) => Sorted::Foreign,
     }
 }
@@ -149,6 +160,8 @@ pub(crate) struct Exchange<'a> {
     /// Ids heard in an intact reply since [`Self::take_heard_from`] (late
     /// ones and announcements included): devices at this baud.
     heard_from: BTreeSet<u8>,
+    /// The last frames written, to know their echoes however late.
+    recent: VecDeque<FrameBytes>,
 }
 
 impl std::fmt::Debug for Exchange<'_> {
@@ -175,6 +188,7 @@ impl<'a> Exchange<'a> {
             buf: [0; READ_BUF],
             tally: Tally::default(),
             heard_from: BTreeSet::new(),
+            recent: VecDeque::with_capacity(RECENT),
         }
     }
 
@@ -210,6 +224,10 @@ impl<'a> Exchange<'a> {
         let bytes = read_frame(id, block);
         self.port.write_all(&bytes)?;
         self.tally.writes += 1;
+        if self.recent.len() == RECENT {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(bytes);
         Ok(Sent {
             id,
             block,
@@ -266,7 +284,7 @@ impl<'a> Exchange<'a> {
                     self.heard_from.insert(r.dev_id);
                 }
             }
-            match sort(sent, &frame, &bytes, now, self.frame) {
+            match sort(sent, &self.recent, &frame, &bytes, now, self.frame) {
                 Sorted::Answer(r) => {
                     heard.replies += 1;
                     if heard.reply.is_none() {
@@ -376,13 +394,15 @@ mod tests {
         let sent = sent_at(t0);
         let sort_at = |bytes: FrameBytes, us: u64| {
             let frame = Frame::decode(&bytes).expect("valid");
-            sort(&sent, &frame, &bytes, t0 + Duration::from_micros(us), tf)
+            let recent = VecDeque::from([read_frame(9, InfoBlock::Info02)]);
+            sort(&sent, &recent, &frame, &bytes, t0 + Duration::from_micros(us), tf)
         };
         assert!(matches!(sort_at(reply_of(2), 1_000), Sorted::Answer(r) if r.dev_id == 2));
         assert_eq!(sort_at(reply_of(2), 500), Sorted::Late, "before two frames could pass");
         assert_eq!(sort_at(reply_of(3), 1_000), Sorted::Unasked);
         assert_eq!(sort_at(sent.bytes, 450), Sorted::Echo);
         assert_eq!(sort_at(read_frame(5, InfoBlock::Info02), 450), Sorted::Foreign);
+        assert_eq!(sort_at(read_frame(9, InfoBlock::Info02), 450), Sorted::Echo, "an earlier read's");
     }
 
     /// A memory line with a scripted device end: an echo, two replies and
