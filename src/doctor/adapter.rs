@@ -225,6 +225,9 @@ pub(crate) fn count_check(c: &CountFacts, usb: bool) -> Check {
             "nothing to set (jointd guards blind writes); FTDI, CH340 and CP2102 drivers report it",
         );
     }
+    if c.writes == 0 {
+        return Check::skipped(id, "no write was watched (`--writes 0`)");
+    }
     let spread = c.fall.as_ref().map_or("-".into(), Spread::describe);
     if c.fell == 0 && c.never_fell > 0 {
         let waited = human_us(MAX_WAITED.as_secs_f64() * 1e6);

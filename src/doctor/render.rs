@@ -75,30 +75,48 @@ fn check(out: &mut String, c: &Check) {
 }
 
 fn devices(out: &mut String, devices: &[DeviceFacts]) {
-    let _ = writeln!(
+    let _ = writeln!(out);
+    row(
         out,
-        "\n  id  firmware  rev    state       fault               reads  ok  timeout  garbled  crc  round trip p50 / p99"
+        ["id", "firmware", "rev", "state", "fault", "reads", "ok", "timeouts", "garbled", "crc"],
+        "round trip p50 / p99",
     );
     for d in devices {
         let trip = d.round_trip.map_or("-".to_string(), |s| {
             format!("{} / {}", human_us(s.p50_us), human_us(s.p99_us))
         });
-        let _ = writeln!(
+        let (id, reads, ok) = (d.id.to_string(), d.asked.to_string(), d.answered.to_string());
+        let (timeouts, garbled) = (d.timeouts.to_string(), d.garbled.to_string());
+        let crc = d.crc_errors.to_string();
+        let text = |v: &Option<String>| v.clone().unwrap_or_else(|| "-".into());
+        let (firmware, rev) = (text(&d.firmware), text(&d.revision));
+        let (state, fault) = (text(&d.state), text(&d.fault));
+        row(
             out,
-            "  {:>3} {:<9} {:<6} {:<11} {:<19} {:>5} {:>3} {:>8} {:>8} {:>4}  {}",
-            d.id,
-            d.firmware.as_deref().unwrap_or("-"),
-            d.revision.as_deref().unwrap_or("-"),
-            d.state.as_deref().unwrap_or("-"),
-            d.fault.as_deref().unwrap_or("-"),
-            d.asked,
-            d.answered,
-            d.timeouts,
-            d.garbled,
-            d.crc_errors,
-            trip,
+            [
+                id.as_str(),
+                firmware.as_str(),
+                rev.as_str(),
+                state.as_str(),
+                fault.as_str(),
+                reads.as_str(),
+                ok.as_str(),
+                timeouts.as_str(),
+                garbled.as_str(),
+                crc.as_str(),
+            ],
+            &trip,
         );
     }
+}
+
+/// One line of the devices' table: ten columns, then the round trip.
+fn row(out: &mut String, c: [&str; 10], last: &str) {
+    let _ = writeln!(
+        out,
+        "  {:>3} {:<9} {:<6} {:<11} {:<19} {:>5} {:>3} {:>8} {:>8} {:>4}  {last}",
+        c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9]
+    );
 }
 
 fn proposal(out: &mut String, p: &Proposal) {
