@@ -53,18 +53,37 @@ fn fix_of(report: &Report, id: CheckId) -> String {
 fn a_clean_bus_is_ok_and_gets_a_config_the_daemon_reads() {
     let (_sim, r) = doctor(config(&[1, 2, 3, 4]), &options(BAUD));
     let text = render::text(&r);
-    for id in [CheckId::Held, CheckId::Baud, CheckId::Devices, CheckId::Echo, CheckId::DuplicateIds] {
+    for id in [
+        CheckId::Held,
+        CheckId::Baud,
+        CheckId::Devices,
+        CheckId::Echo,
+        CheckId::DuplicateIds,
+    ] {
         assert_eq!(r.verdict_of(id), Some(Verdict::Ok), "{id:?}\n{text}");
     }
     assert_eq!(r.count(Verdict::Fail), 0, "{text}");
     assert_eq!(r.exit_code(), EXIT_OK);
     let ids: Vec<u8> = r.devices.iter().map(|d| d.id).collect();
     assert_eq!(ids, vec![1, 2, 3, 4]);
-    assert!(r.devices.iter().all(|d| d.revision.as_deref() == Some("2.0.1")));
-    assert!(r.devices.iter().all(|d| d.firmware.as_deref() == Some("1.2.8")));
+    assert!(r
+        .devices
+        .iter()
+        .all(|d| d.revision.as_deref() == Some("2.0.1")));
+    assert!(r
+        .devices
+        .iter()
+        .all(|d| d.firmware.as_deref() == Some("1.2.8")));
     let p = r.proposal.as_ref().expect("a proposal");
-    assert_eq!((p.config.ids.clone(), p.config.baud), (vec![1, 2, 3, 4], BAUD));
-    assert!(p.rates.control_hz > 0.0 && p.rates.telemetry_hz > 0.0, "{:?}", p.rates);
+    assert_eq!(
+        (p.config.ids.clone(), p.config.baud),
+        (vec![1, 2, 3, 4], BAUD)
+    );
+    assert!(
+        p.rates.control_hz > 0.0 && p.rates.telemetry_hz > 0.0,
+        "{:?}",
+        p.rates
+    );
     let file: jointd::daemon::FileConfig =
         toml::from_str(&p.toml).expect("the daemon reads the proposal");
     assert_eq!(file.buses, vec![p.config.clone()]);
@@ -101,22 +120,40 @@ fn devices_at_another_baud_are_found_there_with_the_fix() {
     assert_eq!(line.scans[0].baud, 230_400);
     assert!(!line.scans[0].heard_anyone());
     assert_eq!(line.answering_scan().expect("a scan").answered, vec![1, 2]);
-    assert_eq!(r.proposal.as_ref().expect("a proposal").config.baud, 500_000);
-    assert!(sim.stats().baud_mismatches > 0, "the 230400 reads reached the devices as garbage");
+    assert_eq!(
+        r.proposal.as_ref().expect("a proposal").config.baud,
+        500_000
+    );
+    assert!(
+        sim.stats().baud_mismatches > 0,
+        "the 230400 reads reached the devices as garbage"
+    );
 }
 
 #[test]
 fn two_devices_with_one_id_are_named_with_the_fix() {
     let (_sim, r) = doctor(config(&[1, 2, 2, 3]), &options(BAUD));
-    let dup = r.check(CheckId::DuplicateIds).expect("duplicates were checked");
+    let dup = r
+        .check(CheckId::DuplicateIds)
+        .expect("duplicates were checked");
     assert_eq!(dup.verdict, Verdict::Fail, "{}", render::text(&r));
     assert!(dup.found.contains("ids 2 "), "{}", dup.found);
     assert!(fix_of(&r, CheckId::DuplicateIds).contains("one at a time"));
-    let scan = r.line.as_ref().and_then(|l| l.answering_scan()).expect("a scan");
-    assert_eq!((scan.answered.clone(), scan.garbled.clone()), (vec![1, 3], vec![2]));
+    let scan = r
+        .line
+        .as_ref()
+        .and_then(|l| l.answering_scan())
+        .expect("a scan");
+    assert_eq!(
+        (scan.answered.clone(), scan.garbled.clone()),
+        (vec![1, 3], vec![2])
+    );
     // The others are judged apart from it, and the config leaves it out.
     assert_ne!(r.verdict_of(CheckId::Replies), Some(Verdict::Fail));
-    assert_eq!(r.proposal.as_ref().expect("a proposal").config.ids, vec![1, 3]);
+    assert_eq!(
+        r.proposal.as_ref().expect("a proposal").config.ids,
+        vec![1, 3]
+    );
 }
 
 #[test]
@@ -125,14 +162,23 @@ fn an_output_count_that_never_falls_is_named_with_usb_confirm_off() {
     cfg.adapter = AdapterModel::Ch340;
     cfg.stuck_count = true;
     let (_sim, r) = doctor(cfg, &options(BAUD));
-    let count = r.check(CheckId::OutputCount).expect("the count was checked");
+    let count = r
+        .check(CheckId::OutputCount)
+        .expect("the count was checked");
     assert_eq!(count.verdict, Verdict::Fail, "{}", render::text(&r));
     assert!(fix_of(&r, CheckId::OutputCount).contains("usb_confirm = false"));
     let facts = &r.adapter.as_ref().expect("the adapter's facts").count;
-    assert!(facts.readable && facts.fell == 0 && facts.never_fell == facts.writes, "{facts:?}");
+    assert!(
+        facts.readable && facts.fell == 0 && facts.never_fell == facts.writes,
+        "{facts:?}"
+    );
     let proposal = r.proposal.as_ref().expect("a proposal");
     assert!(!proposal.config.timing.usb_confirm);
-    assert!(proposal.toml.contains("usb_confirm = false"), "{}", proposal.toml);
+    assert!(
+        proposal.toml.contains("usb_confirm = false"),
+        "{}",
+        proposal.toml
+    );
 }
 
 #[test]
@@ -140,10 +186,22 @@ fn an_output_count_that_falls_keeps_confirmed_writes() {
     let mut cfg = config(&[1]);
     cfg.adapter = AdapterModel::Ch340;
     let (_sim, r) = doctor(cfg, &options(BAUD));
-    assert_ne!(r.verdict_of(CheckId::OutputCount), Some(Verdict::Fail), "{}", render::text(&r));
+    assert_ne!(
+        r.verdict_of(CheckId::OutputCount),
+        Some(Verdict::Fail),
+        "{}",
+        render::text(&r)
+    );
     let facts = &r.adapter.as_ref().expect("the adapter's facts").count;
     assert!(facts.readable && facts.fell > 0, "{facts:?}");
-    assert!(r.proposal.as_ref().expect("a proposal").config.timing.usb_confirm);
+    assert!(
+        r.proposal
+            .as_ref()
+            .expect("a proposal")
+            .config
+            .timing
+            .usb_confirm
+    );
 }
 
 #[test]
@@ -169,10 +227,22 @@ fn a_port_a_running_daemon_holds_is_left_alone_with_a_non_zero_exit() {
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("a JSON report");
     assert_eq!(report["held"], true);
     let checks = report["checks"].as_array().expect("checks");
-    let held = checks.iter().find(|c| c["id"] == "held").expect("the held check");
+    let held = checks
+        .iter()
+        .find(|c| c["id"] == "held")
+        .expect("the held check");
     assert_eq!(held["verdict"], "fail");
-    assert!(held["found"].as_str().unwrap_or_default().contains("jointd"), "{held}");
-    assert!(report["line"].is_null() && report["adapter"].is_null(), "nothing examined");
+    assert!(
+        held["found"]
+            .as_str()
+            .unwrap_or_default()
+            .contains("jointd"),
+        "{held}"
+    );
+    assert!(
+        report["line"].is_null() && report["adapter"].is_null(),
+        "nothing examined"
+    );
     assert_eq!(sim.stats().baud_mismatches, before.baud_mismatches);
     assert!(!daemon.log().contains("bus down"), "{}", daemon.log());
 }

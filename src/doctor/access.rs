@@ -71,7 +71,8 @@ pub(crate) fn parse_status(text: &str) -> (Option<u32>, Vec<u32>) {
             .map(str::split_whitespace)
     };
     let uid = field("Uid:").and_then(|mut w| w.next()?.parse().ok());
-    let groups = field("Groups:").map_or_else(Vec::new, |w| w.filter_map(|g| g.parse().ok()).collect());
+    let groups =
+        field("Groups:").map_or_else(Vec::new, |w| w.filter_map(|g| g.parse().ok()).collect());
     (uid, groups)
 }
 
@@ -81,7 +82,11 @@ pub(crate) fn group_entry(text: &str, gid: u32) -> Option<(String, Vec<String>)>
         let mut f = line.split(':');
         let (name, _, id, members) = (f.next()?, f.next()?, f.next()?, f.next().unwrap_or(""));
         (id.parse::<u32>().ok() == Some(gid)).then(|| {
-            let members = members.split(',').filter(|m| !m.is_empty()).map(String::from).collect();
+            let members = members
+                .split(',')
+                .filter(|m| !m.is_empty())
+                .map(String::from)
+                .collect();
             (name.to_string(), members)
         })
     })
@@ -146,7 +151,10 @@ pub(crate) fn holders_check(facts: &PortFacts, access: &AccessFacts) -> Check {
     if facts.kind == PortKind::Pty {
         return Check::ok(
             id,
-            format!("open in {} (a pty's creator holds it); not locked", named(&access.holders)),
+            format!(
+                "open in {} (a pty's creator holds it); not locked",
+                named(&access.holders)
+            ),
         );
     }
     let mut fix = String::from("close it first (a running jointd: stop it, e.g. `systemctl stop jointd`); the doctor left the port untouched");
@@ -168,7 +176,10 @@ pub(crate) fn held_by_lock(facts: &PortFacts, access: &AccessFacts) -> Check {
     };
     Check::fail(
         CheckId::Held,
-        format!("{} is held by {who}: its lock is taken", facts.path.display()),
+        format!(
+            "{} is held by {who}: its lock is taken",
+            facts.path.display()
+        ),
         "stop the daemon holding it, or ask that daemon instead (`GET /api/v1/buses/{bus}`); \
          the doctor left the port untouched",
     )
@@ -208,7 +219,11 @@ fn permission_denied(facts: &PortFacts, access: &AccessFacts) -> Check {
     let group = access.group.clone().unwrap_or_else(|| "dialout".into());
     let found = format!(
         "permission denied: {} is {} group {group}, and this user ({}) is not in it",
-        facts.device.as_deref().unwrap_or(facts.path.as_path()).display(),
+        facts
+            .device
+            .as_deref()
+            .unwrap_or(facts.path.as_path())
+            .display(),
         access.mode.as_deref().unwrap_or("?"),
         access.user.as_deref().unwrap_or("?"),
     );
@@ -252,10 +267,20 @@ mod tests {
         let status = "Name:\tbash\nUid:\t1000\t1000\t1000\t1000\nGid:\t1000\t1000\t1000\t1000\nGroups:\t4 24 27 1000 \n";
         assert_eq!(parse_status(status), (Some(1000), vec![4, 24, 27, 1000]));
         let group = "root:x:0:\ndialout:x:20:alice,bob\n";
-        assert_eq!(group_entry(group, 20), Some(("dialout".into(), vec!["alice".into(), "bob".into()])));
+        assert_eq!(
+            group_entry(group, 20),
+            Some(("dialout".into(), vec!["alice".into(), "bob".into()]))
+        );
         assert_eq!(group_entry(group, 0), Some(("root".into(), vec![])));
         assert_eq!(group_entry(group, 99), None);
-        assert_eq!(user_name("root:x:0:0::/root:/bin/sh\nalice:x:1000:1000::/home/alice:/bin/bash\n", 1000).as_deref(), Some("alice"));
+        assert_eq!(
+            user_name(
+                "root:x:0:0::/root:/bin/sh\nalice:x:1000:1000::/home/alice:/bin/bash\n",
+                1000
+            )
+            .as_deref(),
+            Some("alice")
+        );
     }
 
     #[test]
@@ -263,7 +288,11 @@ mod tests {
         let root = std::env::temp_dir().join(format!("jointd-doctor-proc-{}", std::process::id()));
         let _ = fs::remove_dir_all(&root);
         let device = PathBuf::from("/dev/ttyUSB0");
-        for (pid, comm, fd_target) in [(812, "jointd", "/dev/ttyUSB0"), (90, "bash", "/dev/pts/1"), (7, "self", "/dev/ttyUSB0")] {
+        for (pid, comm, fd_target) in [
+            (812, "jointd", "/dev/ttyUSB0"),
+            (90, "bash", "/dev/pts/1"),
+            (7, "self", "/dev/ttyUSB0"),
+        ] {
             let fd = root.join(format!("{pid}/fd"));
             fs::create_dir_all(&fd).unwrap();
             std::os::unix::fs::symlink(fd_target, fd.join("3")).unwrap();
@@ -271,7 +300,13 @@ mod tests {
         }
         fs::create_dir_all(root.join("self")).unwrap();
         let found = holders(&root, &device, 7);
-        assert_eq!(found, vec![Holder { pid: 812, command: "jointd".into() }]);
+        assert_eq!(
+            found,
+            vec![Holder {
+                pid: 812,
+                command: "jointd".into()
+            }]
+        );
         let facts = PortFacts {
             path: device.clone(),
             device: Some(device),
@@ -283,12 +318,22 @@ mod tests {
             latency_timer_path: None,
             latency_timer_writable: false,
         };
-        let access = AccessFacts { holders: found, ..AccessFacts::default() };
+        let access = AccessFacts {
+            holders: found,
+            ..AccessFacts::default()
+        };
         let c = holders_check(&facts, &access);
         assert_eq!(c.verdict, Verdict::Fail);
         assert!(c.found.contains("pid 812 (jointd)"), "{}", c.found);
-        let pty = PortFacts { kind: PortKind::Pty, ..facts };
-        assert_eq!(holders_check(&pty, &access).verdict, Verdict::Ok, "a pty's creator holds it");
+        let pty = PortFacts {
+            kind: PortKind::Pty,
+            ..facts
+        };
+        assert_eq!(
+            holders_check(&pty, &access).verdict,
+            Verdict::Ok,
+            "a pty's creator holds it"
+        );
         let _ = fs::remove_dir_all(root);
     }
 
@@ -314,10 +359,22 @@ mod tests {
         let denied = io::Error::from_raw_os_error(libc::EACCES);
         let c = open_failed(&denied, &facts, &access);
         assert_eq!((c.id, c.verdict), (CheckId::Permission, Verdict::Fail));
-        assert!(c.fix.as_deref().unwrap_or_default().contains("usermod -aG dialout"), "{c:?}");
+        assert!(
+            c.fix
+                .as_deref()
+                .unwrap_or_default()
+                .contains("usermod -aG dialout"),
+            "{c:?}"
+        );
         access.in_group_file = true;
         let c = open_failed(&denied, &facts, &access);
-        assert!(c.fix.as_deref().unwrap_or_default().contains("log out and in again"), "{c:?}");
+        assert!(
+            c.fix
+                .as_deref()
+                .unwrap_or_default()
+                .contains("log out and in again"),
+            "{c:?}"
+        );
         let gone = open_failed(&io::Error::from_raw_os_error(libc::ENOENT), &facts, &access);
         assert_eq!((gone.id, gone.verdict), (CheckId::Open, Verdict::Fail));
     }

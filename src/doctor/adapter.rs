@@ -166,9 +166,10 @@ pub(crate) fn latency_check(
             format!("{ms} ms once jointd opened the port, which asks for low latency{was}"),
         );
     }
-    let file = timer_file.map_or("/sys/bus/usb-serial/devices/ttyUSB0/latency_timer".into(), |f| {
-        f.display().to_string()
-    });
+    let file = timer_file.map_or(
+        "/sys/bus/usb-serial/devices/ttyUSB0/latency_timer".into(),
+        |f| f.display().to_string(),
+    );
     let now = if writable {
         format!("this user may set it now: `echo 1 > {file}`")
     } else {
@@ -252,7 +253,10 @@ pub(crate) fn count_check(c: &CountFacts, usb: bool) -> Check {
     if c.never_fell > 0 {
         return Check::warn(
             id,
-            format!("the count stayed up {} of {} times (fell {spread} otherwise)", c.never_fell, c.writes),
+            format!(
+                "the count stayed up {} of {} times (fell {spread} otherwise)",
+                c.never_fell, c.writes
+            ),
             format!("if jointd logs `USB pipeline backed off` often, {off}"),
         );
     }
@@ -290,7 +294,10 @@ pub(crate) fn echo_check(t: &Tally) -> Check {
         return Check::ok(id, format!("none of {} frames came back", t.writes));
     }
     let found = if t.echoes * 2 >= t.writes {
-        format!("the adapter echoes what it sends: {} of {} frames came back", t.echoes, t.writes)
+        format!(
+            "the adapter echoes what it sends: {} of {} frames came back",
+            t.echoes, t.writes
+        )
     } else {
         format!(
             "{} of {} frames came back: a receiver enabled part of the time, or something repeating them",
@@ -328,7 +335,10 @@ mod tests {
         };
         let check = count_check(&c, true);
         assert_eq!(check.verdict, Verdict::Fail);
-        assert!(check.fix.unwrap_or_default().contains("usb_confirm = false"));
+        assert!(check
+            .fix
+            .unwrap_or_default()
+            .contains("usb_confirm = false"));
         let at_once = CountFacts {
             zero_at_once: 5,
             ..count(5)
@@ -340,14 +350,19 @@ mod tests {
             ..count(40)
         };
         assert_eq!(count_check(&fine, true).verdict, Verdict::Ok);
-        assert_eq!(count_check(&CountFacts::default(), false).verdict, Verdict::Skipped);
+        assert_eq!(
+            count_check(&CountFacts::default(), false).verdict,
+            Verdict::Skipped
+        );
     }
 
     #[test]
     fn falls_on_one_phase_of_the_frame_are_on_its_boundary() {
         let t0 = Instant::now();
         let ms = Duration::from_millis(1);
-        let on: Vec<Instant> = (1..=40u32).map(|k| t0 + ms * k + Duration::from_micros(30)).collect();
+        let on: Vec<Instant> = (1..=40u32)
+            .map(|k| t0 + ms * k + Duration::from_micros(30))
+            .collect();
         assert_eq!(on_frame_boundary(&on, ms), Some(true));
         let spread: Vec<Instant> = (1..=40u32)
             .map(|k| t0 + ms * k + Duration::from_micros(u64::from(k * 97 % 1000)))
@@ -366,12 +381,22 @@ mod tests {
         let e = echo_check(&t);
         assert_eq!(e.verdict, Verdict::Warn);
         assert!(e.found.contains("echoes"));
-        assert_eq!(echo_check(&Tally { writes: 10, ..Tally::default() }).verdict, Verdict::Ok);
+        assert_eq!(
+            echo_check(&Tally {
+                writes: 10,
+                ..Tally::default()
+            })
+            .verdict,
+            Verdict::Ok
+        );
         let timer = latency_check(AdapterModel::Ftdi { latency_ms: 16 }, Some(16), None, false);
         assert_eq!(timer.verdict, Verdict::Warn);
         assert!(timer.fix.unwrap_or_default().contains("sudo tee"));
         let set = latency_check(AdapterModel::Ftdi { latency_ms: 1 }, Some(16), None, false);
         assert_eq!(set.verdict, Verdict::Ok);
-        assert_eq!(latency_check(AdapterModel::Ch340, None, None, false).verdict, Verdict::Skipped);
+        assert_eq!(
+            latency_check(AdapterModel::Ch340, None, None, false).verdict,
+            Verdict::Skipped
+        );
     }
 }

@@ -116,8 +116,14 @@ mod tests {
         let o = args(None, "1-159").options().expect("options");
         assert_eq!((o.baud, o.baud_given, o.ids.len()), (230_400, false, 159));
         let o = args(Some(500_000), "3,1-2,2").options().expect("options");
-        assert_eq!((o.baud, o.baud_given, o.ids), (500_000, true, vec![1, 2, 3]));
-        assert!(args(Some(9600), "1").options().unwrap_err().contains("9600"));
+        assert_eq!(
+            (o.baud, o.baud_given, o.ids),
+            (500_000, true, vec![1, 2, 3])
+        );
+        assert!(args(Some(9600), "1")
+            .options()
+            .unwrap_err()
+            .contains("9600"));
         assert!(args(None, "0").options().is_err());
     }
 }

@@ -158,7 +158,7 @@ pub struct Spread {
 impl Spread {
     /// The spread of `samples` (`None` without any).
     pub fn of(samples: &[Duration]) -> Option<Self> {
-        let mut us: Vec<f64> = samples.iter().map(|d| d.as_secs_f64() * 1e6).collect();
+        let mut us: Vec<f64> = samples.iter().map(|d| d.as_nanos() as f64 / 1e3).collect();
         us.sort_by(f64::total_cmp);
         let (first, last) = (*us.first()?, *us.last()?);
         Some(Self {
@@ -215,7 +215,10 @@ mod tests {
     fn a_spread_has_nearest_rank_quantiles() {
         let samples: Vec<Duration> = (1..=100).map(Duration::from_micros).collect();
         let s = Spread::of(&samples).expect("samples");
-        assert_eq!((s.n, s.min_us, s.p50_us, s.p99_us, s.max_us), (100, 1.0, 50.0, 99.0, 100.0));
+        assert_eq!(
+            (s.n, s.min_us, s.p50_us, s.p99_us, s.max_us),
+            (100, 1.0, 50.0, 99.0, 100.0)
+        );
         assert_eq!(Spread::of(&[]), None);
         assert_eq!(human_us(850.0), "850 µs");
         assert_eq!(human_us(16_200.0), "16.2 ms");
@@ -224,10 +227,15 @@ mod tests {
     #[test]
     fn every_check_has_a_section_and_a_title() {
         let c = Check::warn(CheckId::Echo, "echoes", "turn it off");
-        assert_eq!((c.id.section(), c.id.title()), ("adapter", "echo of its own bytes"));
+        assert_eq!(
+            (c.id.section(), c.id.title()),
+            ("adapter", "echo of its own bytes")
+        );
         let json = serde_json::to_value(&c).expect("json");
         assert_eq!(json["id"], "echo");
         assert_eq!(json["verdict"], "warn");
-        assert!(serde_json::to_value(Check::ok(CheckId::Baud, "fine")).expect("json")["fix"].is_null());
+        assert!(
+            serde_json::to_value(Check::ok(CheckId::Baud, "fine")).expect("json")["fix"].is_null()
+        );
     }
 }

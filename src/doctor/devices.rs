@@ -13,8 +13,8 @@ use std::time::Duration;
 
 use serde::Serialize;
 
-use crate::protocol::status::{active_fault, fault_history, fault_name, fsm, fsm_name};
 use crate::protocol::params::Revision;
+use crate::protocol::status::{active_fault, fault_history, fault_name, fsm, fsm_name};
 use crate::protocol::{BaudLevel, Info01, Info04, InfoBlock, ReplyBody};
 
 use super::check::{Check, CheckId, Spread};
@@ -146,7 +146,10 @@ fn baud_of(info: &Info04) -> Option<u32> {
 
 /// The ids that look like two devices: two replies to a read, or garbage
 /// every time while the other devices answer clean.
-pub(crate) fn suspect_duplicates(devices: &[DeviceFacts], scan: &BaudScan) -> Vec<(u8, &'static str)> {
+pub(crate) fn suspect_duplicates(
+    devices: &[DeviceFacts],
+    scan: &BaudScan,
+) -> Vec<(u8, &'static str)> {
     let clean_elsewhere = |id: u8| {
         devices
             .iter()
@@ -159,7 +162,10 @@ pub(crate) fn suspect_duplicates(devices: &[DeviceFacts], scan: &BaudScan) -> Ve
         if d.double_replies > 0 {
             found.push((d.id, "two good replies to one read"));
         } else if (garbled_mostly || scan.garbled.contains(&d.id)) && clean_elsewhere(d.id) {
-            found.push((d.id, "its reads come back garbled while the others' come back clean"));
+            found.push((
+                d.id,
+                "its reads come back garbled while the others' come back clean",
+            ));
         }
     }
     found
@@ -172,11 +178,18 @@ pub(crate) fn duplicate_check(devices: &[DeviceFacts], scan: &BaudScan) -> Check
     if suspects.is_empty() {
         return Check::ok(id, "every id answers once");
     }
-    let why: Vec<String> = suspects.iter().map(|(i, w)| format!("id {i}: {w}")).collect();
+    let why: Vec<String> = suspects
+        .iter()
+        .map(|(i, w)| format!("id {i}: {w}"))
+        .collect();
     let ids: Vec<u8> = suspects.iter().map(|(i, _)| *i).collect();
     Check::fail(
         id,
-        format!("ids {} seem to be on two devices each ({})", id_list(&ids), why.join("; ")),
+        format!(
+            "ids {} seem to be on two devices each ({})",
+            id_list(&ids),
+            why.join("; ")
+        ),
         "connect the devices with that id one at a time and give each an id of its own \
          (jointd: `PUT /api/v1/buses/{bus}/devices/{id}/id`, or the vendor tool); ids must be \
          unique on a bus (SPEC §8)",
@@ -186,7 +199,10 @@ pub(crate) fn duplicate_check(devices: &[DeviceFacts], scan: &BaudScan) -> Check
 /// CRC errors and timeouts over the burst, the suspected duplicates aside.
 pub(crate) fn replies_check(devices: &[DeviceFacts], scan: &BaudScan) -> Check {
     let id = CheckId::Replies;
-    let dup: Vec<u8> = suspect_duplicates(devices, scan).iter().map(|(i, _)| *i).collect();
+    let dup: Vec<u8> = suspect_duplicates(devices, scan)
+        .iter()
+        .map(|(i, _)| *i)
+        .collect();
     let judged: Vec<&DeviceFacts> = devices.iter().filter(|d| !dup.contains(&d.id)).collect();
     if judged.is_empty() {
         return Check::skipped(id, "no device to judge (see duplicate ids)");
@@ -203,7 +219,10 @@ pub(crate) fn replies_check(devices: &[DeviceFacts], scan: &BaudScan) -> Check {
         .collect();
     let asked: u32 = judged.iter().map(|d| d.asked).sum();
     if bad.is_empty() {
-        return Check::ok(id, format!("every device answered every read ({asked} reads)"));
+        return Check::ok(
+            id,
+            format!("every device answered every read ({asked} reads)"),
+        );
     }
     let fix = "garbled replies and CRC errors: termination and biasing (see idle line); \
                timeouts: the modules' supply under load, a loose connector, or a turnaround \

@@ -340,7 +340,12 @@ impl<'a> Exchange<'a> {
             let waited = now.saturating_duration_since(sent.at);
             match self.port.unsent() {
                 None => return CountWatch::Unreadable,
-                Some(0) => return CountWatch::Fell { after: waited, at: now },
+                Some(0) => {
+                    return CountWatch::Fell {
+                        after: waited,
+                        at: now,
+                    }
+                }
                 Some(_) if waited >= MAX_WAITED => return CountWatch::NeverFell,
                 // Sub-millisecond events: a sleep would round them away.
                 Some(_) => std::thread::yield_now(),
@@ -395,14 +400,32 @@ mod tests {
         let sort_at = |bytes: FrameBytes, us: u64| {
             let frame = Frame::decode(&bytes).expect("valid");
             let recent = VecDeque::from([read_frame(9, InfoBlock::Info02)]);
-            sort(&sent, &recent, &frame, &bytes, t0 + Duration::from_micros(us), tf)
+            sort(
+                &sent,
+                &recent,
+                &frame,
+                &bytes,
+                t0 + Duration::from_micros(us),
+                tf,
+            )
         };
         assert!(matches!(sort_at(reply_of(2), 1_000), Sorted::Answer(r) if r.dev_id == 2));
-        assert_eq!(sort_at(reply_of(2), 500), Sorted::Late, "before two frames could pass");
+        assert_eq!(
+            sort_at(reply_of(2), 500),
+            Sorted::Late,
+            "before two frames could pass"
+        );
         assert_eq!(sort_at(reply_of(3), 1_000), Sorted::Unasked);
         assert_eq!(sort_at(sent.bytes, 450), Sorted::Echo);
-        assert_eq!(sort_at(read_frame(5, InfoBlock::Info02), 450), Sorted::Foreign);
-        assert_eq!(sort_at(read_frame(9, InfoBlock::Info02), 450), Sorted::Echo, "an earlier read's");
+        assert_eq!(
+            sort_at(read_frame(5, InfoBlock::Info02), 450),
+            Sorted::Foreign
+        );
+        assert_eq!(
+            sort_at(read_frame(9, InfoBlock::Info02), 450),
+            Sorted::Echo,
+            "an earlier read's"
+        );
     }
 
     /// A memory line with a scripted device end: an echo, two replies and

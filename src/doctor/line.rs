@@ -129,7 +129,10 @@ pub(crate) fn find_baud(
     first: u32,
     ids: &[u8],
 ) -> io::Result<(Vec<BaudScan>, Option<u32>)> {
-    let others = BaudLevel::ALL.into_iter().map(BaudLevel::baud).filter(|b| *b != first);
+    let others = BaudLevel::ALL
+        .into_iter()
+        .map(BaudLevel::baud)
+        .filter(|b| *b != first);
     let mut scans = Vec::new();
     for baud in std::iter::once(first).chain(others) {
         if ex.baud() != baud {
@@ -153,7 +156,10 @@ pub(crate) fn idle_check(idle: &IdleFacts) -> Check {
     if h.commands > 0 {
         return Check::fail(
             id,
-            format!("another host talks on this line: {} host frames in {ms} ms", h.commands),
+            format!(
+                "another host talks on this line: {} host frames in {ms} ms",
+                h.commands
+            ),
             "stop the other program or controller on this bus (the vendor tool, a hand's own \
              main controller): one host per bus",
         );
@@ -161,7 +167,10 @@ pub(crate) fn idle_check(idle: &IdleFacts) -> Check {
     if h.garbage > 0 {
         return Check::warn(
             id,
-            format!("{} bytes of noise in {ms} ms on a line nobody was asked to talk on", h.garbage),
+            format!(
+                "{} bytes of noise in {ms} ms on a line nobody was asked to talk on",
+                h.garbage
+            ),
             "terminate the line (120 Ω across A and B at both ends), bias it (often a jumper on \
              the adapter), share ground between the adapter and the modules, keep the pair \
              twisted and away from the motor leads",
@@ -170,7 +179,10 @@ pub(crate) fn idle_check(idle: &IdleFacts) -> Check {
     if h.replies > 0 {
         return Check::ok(
             id,
-            format!("{} device frames in {ms} ms (power-up announcements), no noise", h.replies),
+            format!(
+                "{} device frames in {ms} ms (power-up announcements), no noise",
+                h.replies
+            ),
         );
     }
     Check::ok(id, format!("silent for {ms} ms"))
@@ -216,7 +228,10 @@ pub(crate) fn devices_check(line: &LineFacts, ids: &[u8]) -> Check {
     };
     let mut found = format!("ids {} answer at {}", id_list(&scan.answered), scan.baud);
     if !scan.garbled.is_empty() {
-        found.push_str(&format!("; ids {} bring back garbled bytes", id_list(&scan.garbled)));
+        found.push_str(&format!(
+            "; ids {} bring back garbled bytes",
+            id_list(&scan.garbled)
+        ));
     }
     Check::ok(id, found)
 }
@@ -263,8 +278,14 @@ mod tests {
         let asked = baud_check(230_400, true, Some(500_000));
         assert_eq!(asked.verdict, Verdict::Fail);
         assert!(asked.fix.unwrap_or_default().contains("@500000"));
-        assert_eq!(baud_check(230_400, false, Some(500_000)).verdict, Verdict::Ok);
-        assert_eq!(baud_check(500_000, true, Some(500_000)).verdict, Verdict::Ok);
+        assert_eq!(
+            baud_check(230_400, false, Some(500_000)).verdict,
+            Verdict::Ok
+        );
+        assert_eq!(
+            baud_check(500_000, true, Some(500_000)).verdict,
+            Verdict::Ok
+        );
         assert_eq!(baud_check(500_000, true, None).verdict, Verdict::Skipped);
     }
 

@@ -164,7 +164,11 @@ fn examine_line(
         scans,
         answering_baud: answering,
     };
-    report.push(line::baud_check(options.baud, options.baud_given, answering));
+    report.push(line::baud_check(
+        options.baud,
+        options.baud_given,
+        answering,
+    ));
     report.push(line::devices_check(&line, &options.ids));
     let count = adapter::measure_count(&mut ex, absent_id(&line), options.writes)?;
     report.push(adapter::count_check(&count, info.usb));
@@ -218,7 +222,10 @@ fn absent_id(line: &LineFacts) -> u8 {
             .iter()
             .any(|s| s.answered.contains(id) || s.garbled.contains(id))
     };
-    (1..=MAX_DEVICE_ID).rev().find(|id| !heard(id)).unwrap_or(MAX_DEVICE_ID)
+    (1..=MAX_DEVICE_ID)
+        .rev()
+        .find(|id| !heard(id))
+        .unwrap_or(MAX_DEVICE_ID)
 }
 
 /// The config jointd would run with, once devices answered.
@@ -230,7 +237,11 @@ fn proposal(
     count: &adapter::CountFacts,
 ) -> Option<propose::Proposal> {
     let scan = line.answering_scan().filter(|s| !s.answered.is_empty())?;
-    let path: PathBuf = facts.by_id.first().cloned().unwrap_or_else(|| facts.path.clone());
+    let path: PathBuf = facts
+        .by_id
+        .first()
+        .cloned()
+        .unwrap_or_else(|| facts.path.clone());
     let turnaround = devices
         .iter()
         .filter_map(|d| d.turnaround)

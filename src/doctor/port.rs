@@ -55,7 +55,10 @@ pub enum PortKind {
     Pty,
     /// A UART of the board; `present: false` for a port its driver
     /// registered with no hardware behind it (an 8250 `ttyS*` of type 0).
-    Uart { driver: String, present: bool },
+    Uart {
+        driver: String,
+        present: bool,
+    },
     /// No tty sysfs knows (a missing path, not a device node).
     Unknown,
 }
@@ -101,7 +104,10 @@ pub fn inspect(path: &Path, roots: &Roots) -> PortFacts {
         path: path.to_path_buf(),
         by_id: links("by-id"),
         by_path: links("by-path"),
-        latency_timer_ms: timer.as_deref().and_then(read_trimmed).and_then(|s| s.parse().ok()),
+        latency_timer_ms: timer
+            .as_deref()
+            .and_then(read_trimmed)
+            .and_then(|s| s.parse().ok()),
         latency_timer_writable: timer.as_deref().is_some_and(writable),
         latency_timer_path: timer,
         device,
@@ -247,24 +253,37 @@ pub(crate) fn stable_path_check(facts: &PortFacts) -> Check {
     if facts.path != *device {
         return Check::ok(
             id,
-            format!("{} is a link to {}: it follows the adapter", facts.path.display(), device.display()),
+            format!(
+                "{} is a link to {}: it follows the adapter",
+                facts.path.display(),
+                device.display()
+            ),
         );
     }
     match (&facts.kind, facts.by_id.first()) {
         (_, Some(link)) => Check::warn(
             id,
-            format!("{} may be another adapter after a replug or a reboot", device.display()),
+            format!(
+                "{} may be another adapter after a replug or a reboot",
+                device.display()
+            ),
             format!("put {} in the config", link.display()),
         ),
         (PortKind::Usb(u), None) => Check::warn(
             id,
-            format!("no /dev/serial/by-id link to {} (the adapter reports no serial number)", device.display()),
+            format!(
+                "no /dev/serial/by-id link to {} (the adapter reports no serial number)",
+                device.display()
+            ),
             format!(
                 "give it a name of its own with a udev rule (deploy/99-jointd.rules):\n{}",
                 udev_rule(u)
             ),
         ),
-        _ => Check::ok(id, format!("{}: a board UART keeps its name", device.display())),
+        _ => Check::ok(
+            id,
+            format!("{}: a board UART keeps its name", device.display()),
+        ),
     }
 }
 
@@ -336,7 +355,8 @@ mod tests {
     }
 
     fn tree(name: &str) -> (PathBuf, Roots) {
-        let root = std::env::temp_dir().join(format!("jointd-doctor-{name}-{}", std::process::id()));
+        let root =
+            std::env::temp_dir().join(format!("jointd-doctor-{name}-{}", std::process::id()));
         let roots = fake(&root);
         (root, roots)
     }
@@ -348,31 +368,51 @@ mod tests {
         let PortKind::Usb(u) = &facts.kind else {
             panic!("not USB: {facts:?}")
         };
-        assert_eq!((u.vid.as_str(), u.pid.as_str(), u.driver.as_str()), ("0403", "6001", "ftdi_sio"));
+        assert_eq!(
+            (u.vid.as_str(), u.pid.as_str(), u.driver.as_str()),
+            ("0403", "6001", "ftdi_sio")
+        );
         assert_eq!(u.serial.as_deref(), Some("A10K1234"));
         assert_eq!(facts.latency_timer_ms, Some(16));
         assert_eq!(facts.by_id.len(), 1);
         let c = kind_check(&facts);
-        assert!(c.found.contains("0403:6001 FTDI FT232R USB UART (ftdi_sio), serial A10K1234"), "{}", c.found);
+        assert!(
+            c.found
+                .contains("0403:6001 FTDI FT232R USB UART (ftdi_sio), serial A10K1234"),
+            "{}",
+            c.found
+        );
         // Named by its node: the by-id link is the fix.
         let s = stable_path_check(&facts);
         assert_eq!(s.verdict, super::super::check::Verdict::Warn);
         assert!(s.fix.unwrap_or_default().contains("by-id/usb-FTDI"));
         // Named by the link: fine.
         let linked = inspect(&facts.by_id[0], &roots);
-        assert_eq!(stable_path_check(&linked).verdict, super::super::check::Verdict::Ok);
+        assert_eq!(
+            stable_path_check(&linked).verdict,
+            super::super::check::Verdict::Ok
+        );
         let _ = fs::remove_dir_all(root);
     }
 
     #[test]
     fn a_pty_a_phantom_uart_and_a_missing_path_are_told_apart() {
         let (root, roots) = tree("kinds");
-        assert_eq!(inspect(&roots.dev.join("pts/3"), &roots).kind, PortKind::Pty);
+        assert_eq!(
+            inspect(&roots.dev.join("pts/3"), &roots).kind,
+            PortKind::Pty
+        );
         let s1 = inspect(&roots.dev.join("ttyS1"), &roots);
-        assert!(matches!(&s1.kind, PortKind::Uart { present: false, .. }), "{s1:?}");
+        assert!(
+            matches!(&s1.kind, PortKind::Uart { present: false, .. }),
+            "{s1:?}"
+        );
         assert_eq!(kind_check(&s1).verdict, super::super::check::Verdict::Fail);
         let none = inspect(&roots.dev.join("ttyUSB9"), &roots);
-        assert_eq!((none.kind.clone(), none.device.clone()), (PortKind::Unknown, None));
+        assert_eq!(
+            (none.kind.clone(), none.device.clone()),
+            (PortKind::Unknown, None)
+        );
         let _ = fs::remove_dir_all(root);
     }
 
@@ -387,7 +427,10 @@ mod tests {
             product: None,
         };
         let rule = udev_rule(&u);
-        assert!(rule.contains("ATTRS{idVendor}==\"1a86\", ATTRS{idProduct}==\"7523\", SYMLINK"), "{rule}");
+        assert!(
+            rule.contains("ATTRS{idVendor}==\"1a86\", ATTRS{idProduct}==\"7523\", SYMLINK"),
+            "{rule}"
+        );
         assert!(rule.contains("GROUP=\"dialout\""), "{rule}");
     }
 }

@@ -118,7 +118,12 @@ pub fn expected_rates(
             "the adapter's cycle of {b} broadcasts and a poll in whole USB frames: {:.0} µs",
             cycle.as_secs_f64() * 1e6
         );
-        (per_s(cycle), per_s(cycle) / joints, per_s(poll_only) / joints, bound)
+        (
+            per_s(cycle),
+            per_s(cycle) / joints,
+            per_s(poll_only) / joints,
+            bound,
+        )
     } else {
         let poll = tf * 2 + ta + HOST_REACTION;
         let share = plan.control_share;
@@ -127,7 +132,12 @@ pub fn expected_rates(
             poll.as_secs_f64() * 1e6
         );
         let control = share * wire / f64::from(b);
-        (control, (1.0 - share) * per_s(poll) / joints, per_s(poll) / joints, bound)
+        (
+            control,
+            (1.0 - share) * per_s(poll) / joints,
+            per_s(poll) / joints,
+            bound,
+        )
     };
     Rates {
         adapter: adapter.to_string(),
@@ -173,9 +183,17 @@ pub(crate) fn propose(inp: &Inputs<'_>) -> Proposal {
 
 /// One revision for the bus when every device shares it, else `auto`.
 fn firmware_of(revisions: &[String], notes: &mut Vec<String>) -> FirmwareSetting {
-    let first = revisions.first().and_then(|r| FirmwareSetting::parse(r).ok());
+    let first = revisions
+        .first()
+        .and_then(|r| FirmwareSetting::parse(r).ok());
     match first {
-        Some(s) if revisions.iter().all(|r| FirmwareSetting::parse(r).ok() == Some(s)) => s,
+        Some(s)
+            if revisions
+                .iter()
+                .all(|r| FirmwareSetting::parse(r).ok() == Some(s)) =>
+        {
+            s
+        }
         Some(_) => {
             notes.push("firmware = \"auto\": the devices run different protocol revisions".into());
             FirmwareSetting::Auto
@@ -253,7 +271,13 @@ mod tests {
 
     fn rates(adapter: AdapterModel, baud: u32, joints: u8) -> Rates {
         let ids: Vec<u8> = (1..=joints).collect();
-        expected_rates(adapter, baud, &ids, &Timing::default(), &PollPlan::default())
+        expected_rates(
+            adapter,
+            baud,
+            &ids,
+            &Timing::default(),
+            &PollPlan::default(),
+        )
     }
 
     #[test]
@@ -294,7 +318,11 @@ mod tests {
             turnaround: None,
             revisions: vec!["2.0.1".into(), "2.0.1".into()],
         });
-        assert!(p.toml.contains("ids = [1, 2]") && p.toml.contains("usb_confirm = false"), "{}", p.toml);
+        assert!(
+            p.toml.contains("ids = [1, 2]") && p.toml.contains("usb_confirm = false"),
+            "{}",
+            p.toml
+        );
         // The daemon's `[[bus]]` table, read as it reads it.
         #[derive(serde::Deserialize)]
         struct File {
@@ -308,7 +336,10 @@ mod tests {
     fn a_slow_turnaround_is_proposed_and_a_fast_one_left() {
         let spread = |us: u64| Spread::of(&[Duration::from_micros(us)]);
         let t = Timing::default();
-        assert_eq!(proposed_turnaround(spread(500).as_ref(), &t), Some(Duration::from_micros(460)));
+        assert_eq!(
+            proposed_turnaround(spread(500).as_ref(), &t),
+            Some(Duration::from_micros(460))
+        );
         assert_eq!(proposed_turnaround(spread(260).as_ref(), &t), None);
     }
 }

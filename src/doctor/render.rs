@@ -48,7 +48,10 @@ pub fn text(r: &Report) -> String {
         r.count(Verdict::Skipped),
     );
     if r.held {
-        let _ = writeln!(out, "the port is held by another process: nothing else was examined");
+        let _ = writeln!(
+            out,
+            "the port is held by another process: nothing else was examined"
+        );
     }
     out
 }
@@ -78,14 +81,20 @@ fn devices(out: &mut String, devices: &[DeviceFacts]) {
     let _ = writeln!(out);
     row(
         out,
-        ["id", "firmware", "rev", "state", "fault", "reads", "ok", "timeouts", "garbled", "crc"],
+        [
+            "id", "firmware", "rev", "state", "fault", "reads", "ok", "timeouts", "garbled", "crc",
+        ],
         "round trip p50 / p99",
     );
     for d in devices {
         let trip = d.round_trip.map_or("-".to_string(), |s| {
             format!("{} / {}", human_us(s.p50_us), human_us(s.p99_us))
         });
-        let (id, reads, ok) = (d.id.to_string(), d.asked.to_string(), d.answered.to_string());
+        let (id, reads, ok) = (
+            d.id.to_string(),
+            d.asked.to_string(),
+            d.answered.to_string(),
+        );
         let (timeouts, garbled) = (d.timeouts.to_string(), d.garbled.to_string());
         let crc = d.crc_errors.to_string();
         let text = |v: &Option<String>| v.clone().unwrap_or_else(|| "-".into());
@@ -164,7 +173,13 @@ mod tests {
         assert!(t.contains("\nport\n  [ok  ] what the port is"), "{t}");
         assert!(t.contains("[warn] echo of its own bytes"), "{t}");
         assert!(t.contains("fix: line one\n"), "{t}");
-        assert!(t.contains(&format!("\n{}line two", " ".repeat(INDENT))), "{t}");
-        assert!(t.contains("verdict: warn (0 failed, 1 warnings, 1 ok, 0 skipped)"), "{t}");
+        assert!(
+            t.contains(&format!("\n{}line two", " ".repeat(INDENT))),
+            "{t}"
+        );
+        assert!(
+            t.contains("verdict: warn (0 failed, 1 warnings, 1 ok, 0 skipped)"),
+            "{t}"
+        );
     }
 }

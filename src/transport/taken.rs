@@ -174,6 +174,10 @@ mod tests {
         c.wrote(20);
         assert_eq!(c.unsent(now + Duration::from_secs(1)), 40);
         c.set_stuck(false);
-        assert_eq!(c.unsent(now + Duration::from_secs(1)), 20, "the taken 20 count");
+        assert_eq!(
+            c.unsent(now + Duration::from_secs(1)),
+            20,
+            "the taken 20 count"
+        );
     }
 }

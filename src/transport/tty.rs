@@ -467,9 +467,15 @@ mod tests {
         assert!(err.to_string().contains("held by another process"), "{err}");
         // Refused before it was touched: the baud is the first open's.
         assert_eq!(read_baud(pty.master.as_fd()).unwrap(), Some(500_000));
-        assert!(TtyPort::open(&path, 500_000).is_ok(), "a plain open ignores the lock");
+        assert!(
+            TtyPort::open(&path, 500_000).is_ok(),
+            "a plain open ignores the lock"
+        );
         drop(first);
-        assert!(TtyPort::open_with(&path, 500_000, locked).is_ok(), "free again");
+        assert!(
+            TtyPort::open_with(&path, 500_000, locked).is_ok(),
+            "free again"
+        );
     }
 
     #[test]
