@@ -355,8 +355,9 @@ mod tests {
     }
 
     fn tree(name: &str) -> (PathBuf, Roots) {
-        let root =
-            std::env::temp_dir().join(format!("jointd-doctor-{name}-{}", std::process::id()));
+        // Canonical, so that a node named by its path is its device.
+        let tmp = fs::canonicalize(std::env::temp_dir()).expect("a temp dir");
+        let root = tmp.join(format!("jointd-doctor-{name}-{}", std::process::id()));
         let roots = fake(&root);
         (root, roots)
     }
