@@ -40,6 +40,9 @@
 //!   serves its WebSocket protocol with the recordings' channels, fed by the recorder's encoder
 //!   of the buses' taps; read only, loopback by default.
 //! - [`cli`]: the `jointd frame …` tools for reading a serial capture by hand.
+//! - [`doctor`]: `jointd doctor PATH`: a real bus checked against what jointd assumes (the
+//!   port, the adapter's timer, output count and echo, the line, the baud, each device, ids on
+//!   two devices) and the bus config it proposes, with its rates; it sends only reads.
 //! - `config_locate`: the line and key of a config value refused after parsing.
 //! - [`daemon`]: `jointd [run]`: config file and flags, buses, the HTTP server, graceful shutdown.
 //! - `bench` (feature `bench`): `jointd bench`: the bus engine against the simulator, measured.
@@ -74,7 +77,8 @@
 //! | the live view in Foxglove: its channels, what goes on them, a slow client's queue | `record::channels`, `record::tap`; `foxglove` |
 //! | what a simulated device does with a frame | `sim::device`, `sim::physics`, `sim::faults` |
 //! | collisions and timing on the simulated wire | `sim::wire`, `sim::engine` |
-//! | opening a serial port, RS-485 mode, FTDI latency | `transport::tty`, `transport::rs485` |
+//! | opening a serial port (exclusive: a `flock` a second daemon or the doctor finds), RS-485 mode, FTDI latency | `transport::tty`, `transport::rs485` |
+//! | what a bus on real hardware is, checked before the daemon runs on it | `doctor` |
 //! | config file keys, command-line flags | `daemon`, `main.rs`; a refused value's line: `config_locate` |
 //! | which log lines a failing request writes (5xx: WARN, collapsed) | `http` (`log_failures`), `logcap` |
 
@@ -90,6 +94,7 @@ pub mod cli;
 mod config_locate;
 pub mod control;
 pub mod daemon;
+pub mod doctor;
 pub mod foxglove;
 pub mod hands;
 pub mod histogram;

@@ -25,6 +25,12 @@ enum Command {
     Sim(jointd::sim::cli::SimArgs),
     /// Run the daemon: buses, REST API, graceful shutdown on SIGINT/SIGTERM (the default).
     Run(jointd::daemon::RunArgs),
+    /// Check a real bus before running jointd on it: the port, the adapter
+    /// (latency timer, output count, echo), the line, the baud the devices
+    /// answer at, each device, ids on two devices; then the bus config to
+    /// use and its rates. Sends only reads. Exit status 1 when a check
+    /// failed, 3 when another process holds the port (left untouched).
+    Doctor(jointd::doctor::DoctorArgs),
     /// Print the OpenAPI document of the REST API (as checked in under openapi/).
     Openapi,
     /// Record a running daemon's buses to an MCAP file (joint states, raw
@@ -77,6 +83,7 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Some(Command::Frame(cmd)) => run_frame(cmd),
+        Some(Command::Doctor(args)) => ExitCode::from(jointd::doctor::run(&args)),
         Some(Command::Record(args)) => match jointd::record::client::run(&args) {
             Ok(status) => {
                 println!("{status}");

@@ -1,5 +1,6 @@
 //! Fault injection and the less common SPEC behaviours, mostly over the fast
-//! in-memory line (the unplug test also runs over a pty).
+//! in-memory line (the unplug test also runs over a pty), and the adapter
+//! faults `jointd doctor` tells apart (an echo, a count that never falls).
 
 mod support;
 
@@ -8,10 +9,10 @@ use std::time::Duration;
 use jointd::protocol::status::{fault, fsm};
 use jointd::protocol::units::{angle_to_raw, speed_limit_to_raw, speed_to_raw};
 use jointd::protocol::{
-    BroadcastSpd, Command, ConfigParam, Control, CtrlMode, FirmwareVersion, Group, InfoBlock,
-    ReplyBody, ALL_DEVICES,
+    BroadcastSpd, Command, Config, ConfigParam, Control, CtrlMode, FirmwareVersion, Group,
+    InfoBlock, ReplyBody, ALL_DEVICES,
 };
-use jointd::sim::{Fault, SimHandle};
+use jointd::sim::{AdapterModel, Fault, SimHandle};
 use jointd::transport::is_hangup;
 use jointd::transport::tty::TtyPort;
 use support::sim::*;
@@ -257,4 +258,44 @@ fn unplug_hangs_up_the_pty_and_replug_serves_the_same_path() {
         decoder: Default::default(),
     };
     assert!(host.read(1, InfoBlock::Info01).is_some());
+}
+
+#[test]
+fn an_echoing_adapter_hands_each_host_frame_back_as_sent() {
+    let mut cfg = config(&[1]);
+    cfg.echo = true;
+    let (sim, mut host) = memory(cfg);
+    host.recv(WAIT).expect("power-up INFO_01");
+    // A read of an id nobody has: the echo is all that comes back.
+    let read = Command::Config(Config::read(7, InfoBlock::Info01));
+    host.send(read);
+    let mut got = Vec::new();
+    wait_for("the echo", || {
+        got.extend(host.drain(Duration::from_millis(20)));
+        (got.len() >= 20).then_some(())
+    });
+    assert_eq!(got, read.encode().to_vec(), "the frame as sent, once");
+    assert_eq!(sim.stats().echoes, 1);
+    sim.inject(Fault::Echo(false));
+    // The reply comes after the echo would have: none was counted.
+    assert!(host.read(1, InfoBlock::Info01).is_some());
+    assert_eq!(sim.stats().echoes, 1);
+}
+
+#[test]
+fn a_stuck_count_never_falls_though_the_bytes_go_out() {
+    let mut cfg = config(&[1]);
+    cfg.adapter = AdapterModel::Ch340;
+    let (sim, mut host) = memory(cfg);
+    host.recv(WAIT).expect("power-up INFO_01");
+    sim.inject(Fault::StuckCount(true));
+    assert!(
+        host.read(1, InfoBlock::Info01).is_some(),
+        "the request went out and was answered"
+    );
+    assert_eq!(host.port.unsent(), Some(20), "its 20 bytes still counted");
+    sim.inject(Fault::StuckCount(false));
+    wait_for("the count to fall", || {
+        (host.port.unsent() == Some(0)).then_some(())
+    });
 }

@@ -69,6 +69,15 @@ pub struct SimArgs {
     /// `38,150,750,1000` (a busy host or USB hub). Needs `--adapter`.
     #[arg(long, value_name = "P50,P99[,P99.9],MAX")]
     pub write_delay_us: Option<String>,
+    /// The adapter echoes every host frame back to the host (its receiver
+    /// stays on while it sends), as some USB-RS485 adapters do.
+    #[arg(long)]
+    pub echo: bool,
+    /// The adapter's driver count of unsent bytes (`TIOCOUTQ`) never falls,
+    /// though the bytes go out. Needs `--adapter` (a native line has no
+    /// count); seen only by a port opened in this process.
+    #[arg(long)]
+    pub stuck_count: bool,
     /// Seed of noise and fault dice.
     #[arg(long, default_value_t = super::config::DEFAULT_SEED)]
     pub seed: u64,
@@ -93,6 +102,8 @@ impl SimArgs {
         cfg.firmware = Firmware::parse(&self.firmware)?;
         cfg.adapter = super::AdapterModel::parse(&self.adapter).map_err(SimError::BadAdapter)?;
         cfg.write_delay = parse_write_delay(self.write_delay_us.as_deref())?;
+        cfg.echo = self.echo;
+        cfg.stuck_count = self.stuck_count;
         cfg.hard_stops = self
             .hard_stop
             .iter()

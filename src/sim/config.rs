@@ -65,6 +65,15 @@ pub struct SimConfig {
     /// Host writes reach the adapter late by this distribution (a busy
     /// host or USB hub); see [`super::write_delay`]. Only behind an adapter.
     pub write_delay: Option<super::write_delay::WriteDelay>,
+    /// The adapter echoes what the host sends: its receiver stays on
+    /// while it drives the line, so every host frame comes back to the
+    /// host as it was on the wire (`--echo`, [`super::Fault::Echo`]).
+    pub echo: bool,
+    /// The adapter's driver count of bytes not yet taken (`TIOCOUTQ`)
+    /// never falls, though the bytes go out: what confirmed writes must
+    /// not believe (`--stuck-count`, [`super::Fault::StuckCount`]). Only
+    /// behind an adapter model (a native line has no count).
+    pub stuck_count: bool,
 }
 
 impl SimConfig {
@@ -86,6 +95,8 @@ impl SimConfig {
             hard_stops: Vec::new(),
             objects: Vec::new(),
             write_delay: None,
+            echo: false,
+            stuck_count: false,
         }
     }
 
@@ -104,6 +115,13 @@ impl SimConfig {
             return Err(SimError::BadWriteDelay(
                 "it needs a USB adapter model (e.g. --adapter ch340): \
                  it is the path to the adapter that is late"
+                    .into(),
+            ));
+        }
+        if self.stuck_count && !self.adapter.is_latent() {
+            return Err(SimError::BadAdapter(
+                "a stuck output count needs a USB adapter model (e.g. --adapter ch340): \
+                 a native line has no count"
                     .into(),
             ));
         }
@@ -169,5 +187,10 @@ mod tests {
         assert!(SimConfig::new(vec![1], 500_000).validate().is_ok());
         assert!(SimConfig::new(vec![1], 9600).validate().is_err());
         assert!(SimConfig::new(vec![], 500_000).validate().is_err());
+        let mut stuck = SimConfig::new(vec![1], 500_000);
+        stuck.stuck_count = true;
+        assert!(stuck.validate().is_err(), "no count on a native line");
+        stuck.adapter = AdapterModel::Ch340;
+        assert!(stuck.validate().is_ok());
     }
 }

@@ -8,6 +8,7 @@
 //! object ID DEG NM_PER_DEG | object ID off    (an elastic object; off pulls it away)
 //! drop RATE [ID]          extra-turnaround MICROS
 //! write-delay P50,P99[,P99.9],MAX | off     (µs; behind an adapter model)
+//! echo on|off             stuck-count on|off  (the adapter echoes; its count never falls)
 //! ```
 //! Answers go to stderr (stdout carries only the device path).
 
@@ -20,7 +21,7 @@ pub(crate) const HELP: &str = "commands: unplug | replug | clear | stats | devic
 power-cycle ID | under-voltage ID on|off | stall ID [DEG] | \
 object ID DEG NM_PER_DEG | object ID off | corrupt RATE | \
 drop RATE [ID] | extra-turnaround MICROS | miss-control ID COUNT | \
-write-delay P50,P99[,P99.9],MAX|off";
+write-delay P50,P99[,P99.9],MAX|off | echo on|off | stuck-count on|off";
 
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum ConsoleCmd {
@@ -83,9 +84,20 @@ pub(crate) fn parse(line: &str) -> Result<ConsoleCmd, String> {
             Some(spec) => Fault::WriteDelay(Some(super::WriteDelay::parse(spec)?)),
             None => return Err("write-delay P50,P99[,P99.9],MAX | off".into()),
         },
+        "echo" => Fault::Echo(on_off(words.next(), "echo on|off")?),
+        "stuck-count" => Fault::StuckCount(on_off(words.next(), "stuck-count on|off")?),
         other => return Err(format!("unknown command `{other}`; {HELP}")),
     };
     Ok(ConsoleCmd::Fault(fault))
+}
+
+/// `on` or `off`; otherwise the usage.
+fn on_off(word: Option<&str>, usage: &str) -> Result<bool, String> {
+    match word {
+        Some("on") => Ok(true),
+        Some("off") => Ok(false),
+        _ => Err(usage.to_string()),
+    }
 }
 
 /// `object ID DEG NM_PER_DEG` puts an object; `object ID off` removes it.
@@ -185,6 +197,12 @@ mod tests {
         );
         assert!(parse("object 2 30 0").is_err());
         assert!(parse("object 2 30").is_err());
+        assert_eq!(parse("echo on"), Ok(ConsoleCmd::Fault(Fault::Echo(true))));
+        assert_eq!(
+            parse("stuck-count off"),
+            Ok(ConsoleCmd::Fault(Fault::StuckCount(false)))
+        );
+        assert!(parse("echo").is_err());
         assert_eq!(parse("stats"), Ok(ConsoleCmd::Stats));
         assert!(parse("stall x").is_err());
         assert!(parse("explode").is_err());

@@ -52,6 +52,8 @@ pub(crate) struct Engine {
     /// collided transmissions reach the host as one garbled frame.
     garbage_until: Option<Instant>,
     last_tick: Instant,
+    /// The adapter echoes every host frame back to the host.
+    echo: bool,
 }
 
 impl Engine {
@@ -78,6 +80,7 @@ impl Engine {
             delivery_errors_ns: VecDeque::new(),
             garbage_until: None,
             last_tick: now,
+            echo: cfg.echo,
         })
     }
 
@@ -130,7 +133,7 @@ impl Engine {
                 (None, None) => break,
                 (w, Some((t, slot))) if w.map_or(true, |w| t < w) => self.announce(slot, t),
                 _ => match self.wire.pop_due(now) {
-                    Some(WireEvent::Host(h)) => self.on_host_frame(h),
+                    Some(WireEvent::Host(h)) => out.extend(self.on_host_frame(h)),
                     Some(WireEvent::Device(d)) => out.extend(self.deliver(d, host_baud)),
                     None => break,
                 },
@@ -168,9 +171,11 @@ impl Engine {
         self.stats.collisions += self.wire.schedule_device(tx, Duration::ZERO);
     }
 
-    /// A host frame has fully arrived: every device that heard it intact acts on it.
-    fn on_host_frame(&mut self, h: HostTx) {
+    /// A host frame has fully arrived: every device that heard it intact
+    /// acts on it. Returns its echo, if the adapter echoes.
+    fn on_host_frame(&mut self, h: HostTx) -> Option<Delivery> {
         self.stats.host_frames += 1;
+        let echo = self.echo_of(&h);
         let cmd = Frame::decode(&h.bytes)
             .ok()
             .and_then(|f| Command::from_frame(&f).ok());
@@ -184,19 +189,36 @@ impl Engine {
         });
         if h.collided {
             self.stats.collided_host_frames += 1;
-            return;
+            return echo;
         }
         let mut bytes = h.bytes;
         if self.faults.corrupt(&mut bytes, &mut self.rng) {
             self.corrupted_host_frames += 1;
-            return;
+            return echo;
         }
         let Some(cmd) = cmd else {
             self.stats.kinds.not_a_command += 1;
-            return;
+            return echo;
         };
         self.stats.kinds.count(&cmd);
         self.dispatch(&cmd, &h);
+        echo
+    }
+
+    /// What an echoing adapter hands back of a host frame: the frame as it
+    /// was on the wire (garbled if it collided), at the instant its last
+    /// byte left. The adapter's own receiver listens at the host's baud.
+    fn echo_of(&mut self, h: &HostTx) -> Option<Delivery> {
+        if !self.echo || self.unplugged {
+            return None;
+        }
+        self.stats.echoes += 1;
+        let bytes = if h.collided {
+            collide(&h.bytes, &noise_frame(&mut self.rng))
+        } else {
+            h.bytes
+        };
+        Some(Delivery { due: h.end, bytes })
     }
 
     fn dispatch(&mut self, cmd: &Command, h: &HostTx) {
@@ -336,15 +358,17 @@ impl Engine {
             Fault::UnderVoltage { dev_id, on } => {
                 self.each(dev_id, |d| d.set_under_voltage(on, now))
             }
+            Fault::Echo(on) => self.echo = on,
             Fault::ClearAll => {
                 self.faults = LineFaults::default();
+                self.echo = false;
                 for d in &mut self.devices {
                     d.clear_obstacle(now);
                     d.remove_object(now);
                     d.set_under_voltage(false, now);
                 }
             }
-            Fault::Unplug | Fault::Replug | Fault::WriteDelay(_) => {}
+            Fault::Unplug | Fault::Replug | Fault::WriteDelay(_) | Fault::StuckCount(_) => {}
         }
     }
 

@@ -58,8 +58,14 @@ pub enum Fault {
     /// Host writes reach the USB adapter late by a random delay of this
     /// distribution (`None`: on time). Only behind an adapter model.
     WriteDelay(Option<super::write_delay::WriteDelay>),
+    /// The adapter echoes (`true`) every host frame back to the host, as
+    /// it was on the wire, or stops echoing.
+    Echo(bool),
+    /// The adapter's driver count (`TIOCOUTQ`) never falls (`true`), or
+    /// counts again. Only behind an adapter model.
+    StuckCount(bool),
     /// Every fault off, obstacles and objects removed, voltage restored, line plugged,
-    /// writes on time.
+    /// writes on time, no echo, a count that falls.
     ClearAll,
 }
 

@@ -117,6 +117,11 @@ impl Line for MemoryLine {
         self.port.decided(bytes)
     }
 
+    /// The pipe's count, for faults (a count that never falls).
+    fn taken_count(&self) -> Option<std::sync::Arc<TakenCount>> {
+        Some(self.port.taken_count())
+    }
+
     fn took(&mut self, at: std::time::Instant, bytes: usize) {
         self.port.took(at, bytes);
     }

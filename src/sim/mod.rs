@@ -176,8 +176,9 @@ struct Inner {
     ctl: Arc<Control>,
     thread: Mutex<Option<JoinHandle<()>>>,
     device_path: Option<PathBuf>,
-    /// Behind an adapter model on a pty: its count of the host bytes it
-    /// took, for the port a bus opens ([`SimHandle::pty_opener`]).
+    /// Behind an adapter model: its count of the host bytes it took, for
+    /// the port a bus opens on a pty ([`SimHandle::pty_opener`]), and for
+    /// [`Fault::StuckCount`] (the in-memory line's count too).
     taken: Option<Arc<TakenCount>>,
     write_delay: write_delay::WriteDelayCell,
 }
@@ -201,6 +202,9 @@ impl SimHandle {
             )),
         };
         let taken = line.taken_count();
+        if let Some(count) = taken.as_ref().filter(|_| cfg.stuck_count) {
+            count.set_stuck(true);
+        }
         let engine = Arc::new(Mutex::new(Engine::new(cfg, start)?));
         let ctl = Arc::new(Control::default());
         let (e, c, rt) = (engine.clone(), ctl.clone(), cfg.realtime);
@@ -239,7 +243,11 @@ impl SimHandle {
         let path = self.inner.device_path.clone()?;
         let taken = self.inner.taken.clone();
         Some(Box::new(move |baud| {
-            let (port, notes) = TtyPort::open_with(&path, baud, PortSetup { rs485 })?;
+            let setup = PortSetup {
+                rs485,
+                exclusive: false,
+            };
+            let (port, notes) = TtyPort::open_with(&path, baud, setup)?;
             let port = match &taken {
                 Some(count) => port.counted_by(count.clone()),
                 None => port,
@@ -280,10 +288,20 @@ impl SimHandle {
             Fault::ClearAll => {
                 self.engine().inject(fault, Instant::now());
                 self.inner.write_delay.set(None);
+                self.stick_count(false);
                 self.inner.ctl.line_op(LineOp::Replug);
             }
             Fault::WriteDelay(delay) => self.inner.write_delay.set(delay),
+            Fault::StuckCount(on) => self.stick_count(on),
             other => self.engine().inject(other, Instant::now()),
+        }
+    }
+
+    /// The adapter's count never falls (`on`), or counts again; nothing
+    /// on a line without an adapter model (it has no count).
+    fn stick_count(&self, on: bool) {
+        if let Some(count) = &self.inner.taken {
+            count.set_stuck(on);
         }
     }
 

@@ -82,6 +82,8 @@ pub struct SimStats {
     /// Host writes a write delay (a fault) made miss the USB frame they
     /// would have made: each a chance of a collision.
     pub host_writes_slipped: u64,
+    /// Host frames an echoing adapter handed back to the host.
+    pub echoes: u64,
     /// The line is unplugged right now.
     pub unplugged: bool,
 }
@@ -108,6 +110,7 @@ impl SimStats {
             host_overrun_bytes: 0,
             host_reads_undated: 0,
             host_writes_slipped: 0,
+            echoes: 0,
             unplugged: false,
         }
     }

@@ -242,7 +242,7 @@ pub fn detect_in(class_tty: &Path, name: &str) -> AdapterInfo {
 
 /// The USB device directory (the one with `idVendor`) above a tty's sysfs
 /// `device` link, if the tty is behind USB.
-fn usb_device_dir(device: &Path) -> Option<PathBuf> {
+pub(crate) fn usb_device_dir(device: &Path) -> Option<PathBuf> {
     let mut dir = std::fs::canonicalize(device).ok()?;
     for _ in 0..6 {
         if dir.join("idVendor").is_file() {

@@ -48,8 +48,9 @@ struct Line {
     baud: AtomicU32,
     hung_up: AtomicBool,
     /// What the adapter model at the device end took of the host's bytes,
-    /// once it reports ([`Self`]`::reports_taken`).
-    taken: TakenCount,
+    /// once it reports ([`Self`]`::reports_taken`); shared with the
+    /// simulator, which can make it lie ([`TakenCount::set_stuck`]).
+    taken: Arc<TakenCount>,
     taken_reported: AtomicBool,
 }
 
@@ -68,7 +69,7 @@ pub fn pair(baud: u32) -> (MemoryPort, MemoryPort) {
         to_host: Channel::default(),
         baud: AtomicU32::new(baud),
         hung_up: AtomicBool::new(false),
-        taken: TakenCount::default(),
+        taken: Arc::default(),
         taken_reported: AtomicBool::new(false),
     });
     let host = MemoryPort {
@@ -150,6 +151,12 @@ impl MemoryPort {
     /// first of the next `bytes` read.
     pub fn decided(&self, bytes: usize) -> Option<Instant> {
         self.line.taken.decided(bytes)
+    }
+
+    /// The line's stand-in for a driver's output count (the same on both
+    /// ends), for a simulated fault to reach it.
+    pub fn taken_count(&self) -> Arc<TakenCount> {
+        self.line.taken.clone()
     }
 
     /// When the other end wrote the first byte of the last read: a pipe in

@@ -48,6 +48,9 @@ struct Counts {
     /// Writes decided by the rule that the model has not read yet: (the
     /// frame that takes them, bytes).
     decided: VecDeque<(Instant, usize)>,
+    /// A driver whose count never falls (a simulated fault): the total
+    /// taken when it stuck; what was written since stays unsent.
+    stuck_at: Option<u64>,
 }
 
 impl Counts {
@@ -113,6 +116,17 @@ impl TakenCount {
         c.decided.clear();
         c.done = c.written;
         c.total = c.written;
+        if c.stuck_at.is_some() {
+            c.stuck_at = Some(c.written);
+        }
+    }
+
+    /// A driver whose count never falls (`true`: a simulated fault), or
+    /// one that counts again: from now on every byte written stays
+    /// unsent, however the adapter takes it. The bytes still go out.
+    pub fn set_stuck(&self, stuck: bool) {
+        let mut c = self.lock();
+        c.stuck_at = stuck.then_some(c.written);
     }
 
     /// The host bytes not taken by `now`.
@@ -122,7 +136,8 @@ impl TakenCount {
             c.done = total;
             c.due.pop_front();
         }
-        usize::try_from(c.written.saturating_sub(c.done)).unwrap_or(usize::MAX)
+        let done = c.stuck_at.unwrap_or(c.done);
+        usize::try_from(c.written.saturating_sub(done)).unwrap_or(usize::MAX)
     }
 }
 
@@ -146,5 +161,23 @@ mod tests {
         assert_eq!(c.unsent(now), 4);
         c.settle();
         assert_eq!(c.unsent(now), 0);
+    }
+
+    #[test]
+    fn a_stuck_count_never_falls_and_counts_again_once_freed() {
+        let c = TakenCount::default();
+        let now = Instant::now();
+        c.set_stuck(true);
+        c.wrote(20);
+        c.took(now, 20);
+        assert_eq!(c.unsent(now + Duration::from_secs(1)), 20);
+        c.wrote(20);
+        assert_eq!(c.unsent(now + Duration::from_secs(1)), 40);
+        c.set_stuck(false);
+        assert_eq!(
+            c.unsent(now + Duration::from_secs(1)),
+            20,
+            "the taken 20 count"
+        );
     }
 }

@@ -3,6 +3,13 @@
 //!
 //! Reads wait with `ppoll(2)`, whose timeout has nanosecond resolution (plain
 //! `poll(2)` rounds to milliseconds, longer than two frames at 500000 baud).
+//!
+//! A bus's port is opened *exclusive*: an advisory `flock(2)` on the tty,
+//! taken before the port is touched (termios, RS-485 mode, low latency),
+//! held as long as the port is open. A second jointd on the same bus, or
+//! `jointd doctor`, then finds it held ([`PortHeld`]) and leaves it alone.
+//! `flock` rather than `TIOCEXCL`: root ignores `TIOCEXCL`, and it is what
+//! other serial tools ask for too (pyserial's `exclusive=True`).
 
 use std::fs::{File, OpenOptions};
 use std::io::{self, Read, Write};
@@ -117,6 +124,53 @@ pub use super::note::PortNote;
 pub struct PortSetup {
     /// Turn on the kernel's RS-485 direction control if the driver has it.
     pub rs485: bool,
+    /// Take the port's lock first, and refuse a port another process holds
+    /// ([`PortHeld`]) before touching it.
+    pub exclusive: bool,
+}
+
+/// The port's lock is held by another open of it (a running jointd, or a
+/// tool that locks its port): it was left as it was.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PortHeld {
+    pub path: PathBuf,
+}
+
+impl std::fmt::Display for PortHeld {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} is held by another process (a running jointd, or another program \
+             that locked it); it was left untouched",
+            self.path.display()
+        )
+    }
+}
+
+impl std::error::Error for PortHeld {}
+
+/// True when `e` says the port was held by another process ([`PortHeld`]).
+pub fn is_held(e: &io::Error) -> bool {
+    e.get_ref()
+        .is_some_and(|inner| inner.downcast_ref::<PortHeld>().is_some())
+}
+
+/// Takes the advisory lock of the open tty `file`, without waiting. Held
+/// until every descriptor of this open is closed.
+fn lock_exclusive(file: &File, path: &Path) -> io::Result<()> {
+    // SAFETY: flock on a valid, open descriptor; no pointers involved.
+    let rc = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
+    if rc == 0 {
+        return Ok(());
+    }
+    let e = io::Error::last_os_error();
+    if e.raw_os_error() == Some(libc::EWOULDBLOCK) {
+        let held = PortHeld {
+            path: path.to_path_buf(),
+        };
+        return Err(io::Error::other(held));
+    }
+    Err(e)
 }
 
 impl TtyPort {
@@ -137,6 +191,9 @@ impl TtyPort {
             .write(true)
             .custom_flags(libc::O_NOCTTY | libc::O_NONBLOCK)
             .open(path)?;
+        if setup.exclusive {
+            lock_exclusive(&file, path)?;
+        }
         make_raw(file.as_fd(), baud)?;
         let mut notes = Vec::new();
         if let Err(e) = set_low_latency(&file) {
@@ -181,10 +238,14 @@ impl TtyPort {
 }
 
 /// An opener for a tty path (USB adapter, pty, `/dev/serial/by-id` link);
-/// `rs485`: ask for the kernel's RS-485 direction control.
+/// `rs485`: ask for the kernel's RS-485 direction control. The port is
+/// opened exclusive: a bus never shares its port with another process.
 pub fn tty_opener(path: PathBuf, rs485: bool) -> Opener {
     Box::new(move |baud| {
-        let setup = PortSetup { rs485 };
+        let setup = PortSetup {
+            rs485,
+            exclusive: true,
+        };
         let (port, notes) = TtyPort::open_with(&path, baud, setup)?;
         Ok((Box::new(port) as Box<dyn Transport>, notes))
     })
@@ -390,6 +451,31 @@ mod tests {
         );
         port.write_all(&[1, 2, 3]).unwrap();
         assert!(wait_readable(master.as_fd(), Duration::from_millis(100)).unwrap());
+    }
+
+    #[test]
+    fn an_exclusive_open_refuses_a_held_port_and_a_plain_one_does_not() {
+        let pty = openpty(None, None).expect("openpty");
+        let path = slave_path(&pty.slave);
+        let locked = PortSetup {
+            rs485: false,
+            exclusive: true,
+        };
+        let (first, _) = TtyPort::open_with(&path, 500_000, locked).expect("first open");
+        let err = TtyPort::open_with(&path, 230_400, locked).expect_err("held");
+        assert!(is_held(&err), "{err}");
+        assert!(err.to_string().contains("held by another process"), "{err}");
+        // Refused before it was touched: the baud is the first open's.
+        assert_eq!(read_baud(pty.master.as_fd()).unwrap(), Some(500_000));
+        assert!(
+            TtyPort::open(&path, 500_000).is_ok(),
+            "a plain open ignores the lock"
+        );
+        drop(first);
+        assert!(
+            TtyPort::open_with(&path, 500_000, locked).is_ok(),
+            "free again"
+        );
     }
 
     #[test]

@@ -11,7 +11,7 @@
 //! - [`confirm`]: confirmed writes: the port's output count says when the adapter took each.
 //! - [`pipeline`]: the polls written ahead (replies in flight), built on the three above.
 
-pub(super) mod confirm;
-pub(super) mod frame_clock;
+pub(crate) mod confirm;
+pub(crate) mod frame_clock;
 pub mod guard;
 pub(crate) mod pipeline;
