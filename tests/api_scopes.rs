@@ -148,6 +148,55 @@ async fn each_token_reaches_what_its_scope_allows_and_every_token_stops() {
     assert_eq!(needs(&Method::POST, Some("/api/v1/estop")), Needs::AnyToken);
 }
 
+/// Who did it: a command is told in the bus's events with its token's
+/// name (never the token), and the same command again within the second
+/// is counted with the next one told, not told again.
+#[tokio::test]
+async fn a_command_is_in_the_events_with_its_tokens_name() {
+    let bus = FakeBus::new("fake", &[1]);
+    let mut events = bus.handle.events();
+    let server = serve(state_with_three_tokens(&bus))
+        .await
+        .with_token("operate-secret");
+    for _ in 0..3 {
+        server
+            .post("/api/v1/buses/fake/control/disable", json!({"ids": [1]}))
+            .await;
+    }
+    // A read is no command.
+    server.get("/api/v1/buses/fake").await;
+    let deadline = tokio::time::Instant::now() + std::time::Duration::from_secs(10);
+    let mut told = Vec::new();
+    while told.is_empty() {
+        let ev = tokio::time::timeout_at(deadline, events.recv())
+            .await
+            .expect("a command event in time")
+            .expect("the bus's events");
+        if let jointd::bus::handle::BusEvent::Command {
+            by,
+            command,
+            outcome,
+            repeats,
+            ..
+        } = ev
+        {
+            told.push((by, command, outcome, repeats));
+        }
+    }
+    let (by, command, outcome, repeats) = &told[0];
+    assert_eq!(by, "driver");
+    assert_eq!(command, "POST /api/v1/buses/fake/control/disable");
+    assert!(!outcome.is_empty() && !outcome.contains("secret"), "{outcome}");
+    assert_eq!(*repeats, 0, "the first is told at once");
+    // The two repeats are held back (told with the next one after the second).
+    while let Ok(ev) = events.try_recv() {
+        assert!(
+            !matches!(ev, jointd::bus::handle::BusEvent::Command { .. }),
+            "a repeat within the second told again: {ev:?}"
+        );
+    }
+}
+
 #[tokio::test]
 async fn the_caller_route_names_the_token_and_its_scope() {
     let bus = FakeBus::new("fake", &[1]);

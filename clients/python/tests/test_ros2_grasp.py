@@ -234,3 +234,31 @@ def test_a_grasp_started_over_rest_is_followed_and_stopped_over_ros2(hand):
     assert grasp(api, 1)["fingers"][0]["state"] == "stopped"
     wait_for("the stop on grasp_state", latest_state(
         states, lambda job, f: job["state"] == "done" and f["thumb"]["message"] == "stopped"))
+
+
+def test_a_hand_has_its_grasp_topics_with_namespaces_by_bus(tmp_path):
+    """With `namespace_by = "bus"` joint states, commands, enable and estop
+    are per bus, and a named hand still gets its grasp under its name."""
+    config = tmp_path / "jointd.toml"
+
+    def daemon_args(endpoint):
+        config.write_text(f"""
+[[hand]]
+name = "right"
+joints = [{{ bus = "sim0", ids = "1-3", names = ["thumb", "index", "middle"] }}]
+
+[ros2]
+enabled = true
+namespace_by = "bus"
+connect = ["{endpoint}"]
+""")
+        return ["--sim", "3", "--config", str(config)]
+
+    with on_router(3, daemon_args) as (d, client):
+        tokens = [str(r.ok.key_expr).split("/") for r in client.liveliness().get("@ros2_lv/**")]
+        endpoints = {(p[5], p[9]): (p[10], p[11]) for p in tokens if len(p) > 11}
+        assert ("MP", "%sim0%joint_states") in endpoints, endpoints
+        assert endpoints[("MS", "%right%gripper_command")] == (dds_name(GRIPPER), TS.hash_rihs01(GRIPPER)), endpoints
+        assert endpoints[("MP", "%right%grasp_state")] == (dds_name(DIAGNOSTICS), TS.hash_rihs01(DIAGNOSTICS))
+        for service in ("grasp_release", "grasp_stop"):
+            assert endpoints[("SS", f"%right%{service}")] == (dds_name(TRIGGER[0]), TRIGGER[1]), service
