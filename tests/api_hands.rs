@@ -87,6 +87,23 @@ max_deg = 45.0
             .filter_map(|j| j["name"].as_str())
             .collect();
         assert_eq!(names, ["thumb", "index", "sim0_3"]);
+        // The device list names a hand's joints as the hand does (the
+        // dashboard's table shows this name).
+        let (s, devices) = call(
+            reqwest::Method::GET,
+            format!("{base}/api/v1/buses/sim0/devices"),
+            None,
+        )
+        .await;
+        assert_eq!(s, 200);
+        let named: Vec<(u64, Value)> = devices["devices"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|d| (d["id"].as_u64().unwrap_or(0), d["name"].clone()))
+            .collect();
+        assert_eq!(named[0], (1, json!("thumb")), "{devices}");
+        assert_eq!(named[1], (2, json!("index")), "{devices}");
         let put = |name: &str, body: Value| {
             call(
                 reqwest::Method::PUT,
