@@ -13,6 +13,7 @@
 //! - [`setpoints`]: validate a batch whole, then store it.
 //! - [`grasp`]: start, release and stop grasps; tell the starter when one ended.
 //! - `actions`: enable, disable and the e-stop, each in a task of its own.
+//! - `welcome`: the first message, the buses and the limits.
 //! - [`telemetry`]: snapshot → joint fields in physical units.
 
 mod actions;
@@ -24,6 +25,7 @@ pub(crate) mod setpoints;
 mod subscribe;
 pub(crate) mod telemetry;
 mod ticker;
+mod welcome;
 pub(crate) mod writer;
 
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;

@@ -14,11 +14,12 @@ use tokio::time::Instant;
 use super::actions::{spawn_estop, spawn_switch, Switch};
 use super::grasp::GraspTasks;
 use super::messages::{
-    self, BusInfo, ClientMessage, ErrorCode, Limits, ServerMessage, Subscribe, WatchdogRequest,
+    self, ClientMessage, ErrorCode, ServerMessage, Subscribe, WatchdogRequest,
 };
-use super::setpoints::{self, WsError, MAX_BATCH};
-use super::subscribe::{subscription, MAX_RATE_HZ};
+use super::setpoints::{self, WsError};
+use super::subscribe::subscription;
 use super::telemetry::Subscription;
+use super::welcome::welcome;
 use super::writer::{PendingAck, Writer};
 use crate::control::audit::Command;
 use crate::control::books::streams::{Driver, Via};
@@ -176,31 +177,6 @@ async fn end(
 async fn sleep_until(deadline: Option<Instant>) {
     if let Some(d) = deadline {
         tokio::time::sleep_until(d).await;
-    }
-}
-
-fn welcome(state: &AppState, client: u64, name: Option<String>) -> ServerMessage {
-    let buses = state
-        .control()
-        .readers()
-        .map(|b| {
-            let snap = b.snapshot();
-            BusInfo {
-                name: snap.name.clone(),
-                baud: snap.baud,
-                devices: snap.devices.keys().copied().collect(),
-            }
-        })
-        .collect();
-    ServerMessage::Welcome {
-        protocol: messages::PROTOCOL,
-        client,
-        name,
-        buses,
-        limits: Limits {
-            max_rate_hz: MAX_RATE_HZ,
-            max_batch: MAX_BATCH,
-        },
     }
 }
 
