@@ -124,9 +124,10 @@ pub(crate) fn measure_count(ex: &mut Exchange<'_>, id: u8, writes: u32) -> io::R
 
 /// Whether confirmed writes may rely on the count: it falls after a
 /// write and not at once (a port without a count has nothing to rely on,
-/// and nothing to turn off).
+/// and nothing to turn off; a count not watched, `--writes 0`, is not
+/// doubted either).
 pub(crate) fn believable(c: &CountFacts) -> bool {
-    !c.readable || (c.fell > 0 && c.zero_at_once < c.writes)
+    !c.readable || c.writes == 0 || (c.fell > 0 && c.zero_at_once < c.writes)
 }
 
 /// Whether the falls cluster on one phase of a `period` grid, as the
