@@ -56,7 +56,7 @@ pub struct Tally {
 pub(crate) struct Heard {
     /// The reply asked for (the first, when more came).
     pub reply: Option<Reply>,
-    /// From the write's return to that reply's decoding.
+    /// From the write to that reply's decoding.
     pub after: Option<Duration>,
     /// Replies that matched: 2 or more, two devices answered.
     pub replies: u32,
@@ -78,7 +78,8 @@ pub struct Listened {
     pub garbage: u64,
 }
 
-/// A read written: its bytes and when the port took them.
+/// A read written: its bytes and the instant just before they were handed
+/// to the port (no byte of it can be on the wire earlier).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Sent {
     pub id: u8,
@@ -222,6 +223,10 @@ impl<'a> Exchange<'a> {
     /// Writes the read of `block` from `id`.
     pub(crate) fn send(&mut self, id: u8, block: InfoBlock) -> io::Result<Sent> {
         let bytes = read_frame(id, block);
+        // Before the write: taken after it, a thread held off its CPU
+        // between the two would date the write late, and its own reply
+        // would then look too early to be one ([`sort`]: `Late`).
+        let at = Instant::now();
         self.port.write_all(&bytes)?;
         self.tally.writes += 1;
         if self.recent.len() == RECENT {
@@ -232,7 +237,7 @@ impl<'a> Exchange<'a> {
             id,
             block,
             bytes,
-            at: Instant::now(),
+            at,
         })
     }
 
@@ -261,12 +266,16 @@ impl<'a> Exchange<'a> {
         let mut deadline = sent.at + self.reply_window();
         loop {
             self.sort_frames(sent, &mut heard, &mut deadline);
-            let now = Instant::now();
-            if now >= deadline {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let n = self.port.read_timeout(&mut self.buf, left)?;
+            self.decoder.push(&self.buf[..n]);
+            if left.is_zero() {
+                // Past the window, one look at what is already there: a
+                // reply that came in time is not lost to this thread having
+                // been held off its CPU until the window closed.
+                self.sort_frames(sent, &mut heard, &mut deadline);
                 break;
             }
-            let n = self.port.read_timeout(&mut self.buf, deadline - now)?;
-            self.decoder.push(&self.buf[..n]);
         }
         // What is left when the window closes formed no frame in time.
         self.decoder.clear();
