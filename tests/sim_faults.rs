@@ -278,7 +278,8 @@ fn an_echoing_adapter_hands_each_host_frame_back_as_sent() {
     assert_eq!(sim.stats().echoes, 1);
     sim.inject(Fault::Echo(false));
     // The reply comes after the echo would have: none was counted.
-    assert!(host.read(1, InfoBlock::Info01).is_some());
+    host.send(Command::Config(Config::read(1, InfoBlock::Info01)));
+    assert!(host.recv(WAIT).is_some(), "the reply");
     assert_eq!(sim.stats().echoes, 1);
 }
 
@@ -289,8 +290,9 @@ fn a_stuck_count_never_falls_though_the_bytes_go_out() {
     let (sim, mut host) = memory(cfg);
     host.recv(WAIT).expect("power-up INFO_01");
     sim.inject(Fault::StuckCount(true));
+    host.send(Command::Config(Config::read(1, InfoBlock::Info01)));
     assert!(
-        host.read(1, InfoBlock::Info01).is_some(),
+        host.recv(WAIT).is_some(),
         "the request went out and was answered"
     );
     assert_eq!(host.port.unsent(), Some(20), "its 20 bytes still counted");
