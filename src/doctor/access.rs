@@ -54,7 +54,7 @@ pub fn inspect(device: &Path, roots: &Roots) -> AccessFacts {
         mode: meta.as_ref().map(|m| format!("{:04o}", m.mode() & 0o7777)),
         in_group_now: gid.is_some_and(|g| groups.contains(&g)),
         in_group_file: match (&entry, &user) {
-            (Some((_, members)), Some(user)) => members.iter().any(|m| m == user),
+            (Some((_, members)), Some(user)) => members.contains(user),
             _ => false,
         },
         group: entry.map(|(name, _)| name),
