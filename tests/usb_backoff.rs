@@ -290,8 +290,12 @@ async fn backs_off_on_late_sentinels(rig: &Rig, clean: &UsbPipelineView) -> UsbP
     let backed = late.usb_pipeline.clone().expect("a pipeline view");
     assert!(
         backed.reason.contains("sentinel"),
-        "backed off on: {}",
-        backed.reason
+        "backed off on: {} | context {} | sim {:?} | counters {:?} | clean {:?}",
+        backed.reason,
+        jointd::sim::collision_context(&rig.sim.frame_log()).join("\n"),
+        rig.sim.stats(),
+        late.counters,
+        clean
     );
     assert!(backed.sentinels_late > clean.sentinels_late);
     assert!(late.counters.usb_backoffs >= 1);
