@@ -186,7 +186,10 @@ async fn a_command_is_in_the_events_with_its_tokens_name() {
     let (by, command, outcome, repeats) = &told[0];
     assert_eq!(by, "driver");
     assert_eq!(command, "POST /api/v1/buses/fake/control/disable");
-    assert!(!outcome.is_empty() && !outcome.contains("secret"), "{outcome}");
+    assert!(
+        !outcome.is_empty() && !outcome.contains("secret"),
+        "{outcome}"
+    );
     assert_eq!(*repeats, 0, "the first is told at once");
     // The two repeats are held back (told with the next one after the second).
     while let Ok(ev) = events.try_recv() {

@@ -75,16 +75,14 @@ async fn race(rig: &Rig, point: RacePoint) {
         let disable = tokio::spawn(async move { bus.disable(Targets::All).await });
         rig.sim_until("a joint in stop", |_| any_joint(rig, |f| f == STOP));
         // Enabled while the disable confirms: either may finish first.
-        let bus = rig.bus.clone();
-        let enable = tokio::spawn(async move { bus.enable(Targets::All).await });
+        let enable = enable_queued(rig).await;
         let report = rig.bus.estop().await.expect("e-stop");
         assert!(report.still_enabled.is_empty(), "{report:?}");
         let _ = disable.await.expect("disable task");
         let _ = enable.await.expect("enable task");
         return settled(rig);
     }
-    let bus = rig.bus.clone();
-    let enable = tokio::spawn(async move { bus.enable(Targets::All).await });
+    let enable = enable_queued(rig).await;
     match point {
         RacePoint::AtOnce | RacePoint::WhileStopping => {}
         RacePoint::LeavingReady => {
@@ -99,6 +97,18 @@ async fn race(rig: &Rig, point: RacePoint) {
     // The enable either finished before the e-stop or was cut short by it.
     let _ = enable.await.expect("enable task");
     settled(rig);
+}
+
+/// Asks for the enable and waits until the owner has it: an e-stop after
+/// this races the enable; an enable asked after the e-stop would rightly
+/// enable the joints.
+async fn enable_queued(rig: &Rig) -> tokio::task::JoinHandle<Result<(), jointd::bus::BusError>> {
+    let queued = rig.bus.snapshot().counters.requests_queued;
+    let bus = rig.bus.clone();
+    let enable = tokio::spawn(async move { bus.enable(Targets::All).await });
+    rig.until("the enable queued", |s| s.counters.requests_queued > queued)
+        .await;
+    enable
 }
 
 fn settled(rig: &Rig) {

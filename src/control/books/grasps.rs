@@ -315,7 +315,11 @@ mod tests {
         let mut held: Vec<WaitSlot<'_>> = (0..MAX_WAITING)
             .map(|n| book.wait_slot().unwrap_or_else(|| panic!("place {n}")))
             .collect();
-        assert!(book.wait_slot().is_none(), "call {} may not wait", MAX_WAITING + 1);
+        assert!(
+            book.wait_slot().is_none(),
+            "call {} may not wait",
+            MAX_WAITING + 1
+        );
         held.pop();
         let again = book.wait_slot();
         assert!(again.is_some(), "a place given back");

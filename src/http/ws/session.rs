@@ -13,9 +13,7 @@ use tokio::time::Instant;
 
 use super::actions::{spawn_estop, spawn_switch, Switch};
 use super::grasp::GraspTasks;
-use super::messages::{
-    self, ClientMessage, ErrorCode, ServerMessage, Subscribe, WatchdogRequest,
-};
+use super::messages::{self, ClientMessage, ErrorCode, ServerMessage, Subscribe, WatchdogRequest};
 use super::setpoints::{self, WsError};
 use super::subscribe::subscription;
 use super::telemetry::Subscription;
