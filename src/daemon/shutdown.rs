@@ -20,8 +20,9 @@ const BUS_STOP_TIMEOUT: Duration = Duration::from_secs(5);
 pub(super) async fn serve(listener: TcpListener, state: &AppState) -> Result<(), DaemonError> {
     let (signalled_tx, mut signalled) = tokio::sync::watch::channel(false);
     let ws_state = state.clone();
+    let a_signal = shutdown_signal();
     let stopping = async move {
-        shutdown_signal().await;
+        a_signal.await;
         // WebSocket sessions outlive the HTTP connections they upgraded:
         // tell them, so each client gets a close frame (1001).
         ws_state.ws().shut_down();
@@ -99,16 +100,22 @@ pub(super) async fn stop_buses(threads: Vec<crate::bus::BusThread>) {
 }
 
 /// Resolves on the first SIGINT or SIGTERM.
-async fn shutdown_signal() {
-    let (Ok(mut int), Ok(mut term)) = (
+/// Installs the SIGINT and SIGTERM handlers now, before the API answers
+/// anyone (a signal before them would end the process unannounced, the
+/// joints' disable unsent); the future resolves at the first signal.
+fn shutdown_signal() -> impl std::future::Future<Output = ()> {
+    let handlers = (
         signal(SignalKind::interrupt()),
         signal(SignalKind::terminate()),
-    ) else {
-        tracing::error!("cannot install signal handlers; stop with SIGKILL");
-        return std::future::pending().await;
-    };
-    tokio::select! {
-        _ = int.recv() => tracing::info!("SIGINT: shutting down"),
-        _ = term.recv() => tracing::info!("SIGTERM: shutting down"),
+    );
+    async move {
+        let (Ok(mut int), Ok(mut term)) = handlers else {
+            tracing::error!("cannot install signal handlers; stop with SIGKILL");
+            return std::future::pending().await;
+        };
+        tokio::select! {
+            _ = int.recv() => tracing::info!("SIGINT: shutting down"),
+            _ = term.recv() => tracing::info!("SIGTERM: shutting down"),
+        }
     }
 }
