@@ -28,11 +28,12 @@ function listeningUrl(child) {
   });
 }
 
-async function waitReady(url) {
+async function waitReady(url, token) {
+  const headers = token ? { Authorization: `Bearer ${token}` } : {};
   const deadline = Date.now() + WAIT;
   while (Date.now() < deadline) {
     try {
-      if ((await fetch(`${url}/readyz`)).ok) return;
+      if ((await fetch(`${url}/readyz`, { headers })).ok) return;
     } catch { /* not listening yet */ }
     await new Promise((r) => setTimeout(r, 100));
   }
@@ -40,8 +41,10 @@ async function waitReady(url) {
 }
 
 /** Starts `jointd` with `args` (plus a free port and, with `config`, that
- *  TOML text in a fresh directory, its `state_dir` beside it). */
-export async function startDaemon(args, config) {
+ *  TOML text in a fresh directory, its `state_dir` beside it); `token`:
+ *  one the daemon takes, for the readiness check. A daemon that does not
+ *  get ready is stopped, so the test process can end. */
+export async function startDaemon(args, config, token) {
   const all = [...args, "--listen", "127.0.0.1:0"];
   // Serves web/ from that folder instead of the embedded copy: edits show
   // without a rebuild (and an older copy can be checked against the tests).
@@ -53,8 +56,14 @@ export async function startDaemon(args, config) {
     all.push("--config", file);
   }
   const child = spawn(BIN, all, { stdio: ["ignore", "pipe", "inherit"] });
-  const base = await listeningUrl(child);
-  await waitReady(base);
+  let base;
+  try {
+    base = await listeningUrl(child);
+    await waitReady(base, token);
+  } catch (e) {
+    child.kill("SIGKILL");
+    throw e;
+  }
   const stop = async () => {
     child.kill("SIGTERM");
     await new Promise((r) => child.once("exit", r));

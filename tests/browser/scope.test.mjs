@@ -16,7 +16,8 @@ before(async () => {
   process.env.JOINTD_TEST_TOKEN_POLICY = TOKENS.policy;
   daemon = await startDaemon(["--sim", "2"],
     '[[tokens]]\nname = "watch"\nscope = "read"\nenv = "JOINTD_TEST_TOKEN_WATCH"\n\n' +
-    '[[tokens]]\nname = "policy"\nscope = "operate"\nenv = "JOINTD_TEST_TOKEN_POLICY"\n');
+    '[[tokens]]\nname = "policy"\nscope = "operate"\nenv = "JOINTD_TEST_TOKEN_POLICY"\n',
+    TOKENS.watch);
   base = daemon.base;
   browser = await launchBrowser();
 });
