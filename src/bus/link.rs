@@ -11,6 +11,8 @@ use crate::protocol::{Command, FrameBytes, Message, Reply, StreamDecoder, FRAME_
 use crate::transport::adapter::{AdapterInfo, AdapterModel};
 use crate::transport::{Opener, PortNote, Transport};
 
+use crate::rt::wake::WakeLateness;
+
 use super::config::{frame_time, Timing};
 use super::handle::{BusCounters, BusShared, LoggedFrame};
 use super::packets::{PacketEnds, PacketMark};
@@ -18,6 +20,9 @@ use super::wire::Want;
 
 /// Bytes read per system call; a few frames.
 const READ_BUF: usize = 256;
+/// Wake-ups on bytes kept for the owner to take (it takes them after
+/// every wait; more means nobody is taking them).
+const WOKE_KEPT: usize = 64;
 
 pub(super) struct Link {
     port: Option<Box<dyn Transport>>,
@@ -41,6 +46,14 @@ pub(super) struct Link {
     pub inbox: Vec<(Reply, Instant, Option<PacketMark>)>,
     /// Which bytes read ended a full packet of the adapter, and when.
     pub packets: PacketEnds,
+    /// When reads woke on bytes the port had been seen without just
+    /// before: a USB adapter's frame boundary plus this thread's wake-up,
+    /// what the frame clock learns from. Bytes found already waiting came
+    /// earlier than they were read and say nothing of where a boundary is.
+    woke_on_bytes: Vec<Instant>,
+    /// How late this thread wakes from a timed read no bytes cut short: a
+    /// measure of how late it wakes on bytes too.
+    wake: WakeLateness,
 }
 
 fn not_open() -> io::Error {
@@ -69,6 +82,8 @@ impl Link {
             shared,
             inbox: Vec::new(),
             packets: PacketEnds::default(),
+            woke_on_bytes: Vec::new(),
+            wake: WakeLateness::default(),
         }
     }
 
@@ -165,26 +180,55 @@ impl Link {
             if let Some(found) = self.take_decoded(want) {
                 return Ok(Some(found));
             }
-            let now = Instant::now();
-            if now >= deadline {
+            if Instant::now() >= deadline {
                 return Ok(None);
             }
-            let n = match (self.up, self.port.as_mut()) {
-                (true, Some(port)) => port.read_timeout(&mut self.buf, deadline - now)?,
-                _ => return Err(not_open()),
-            };
+            // A look first: bytes a blocking read wakes on date a boundary
+            // only if the port was empty as it began.
+            let n = self.read(Duration::ZERO)?;
+            if n > 0 {
+                self.pushed(n);
+                continue;
+            }
+            let wait = deadline.saturating_duration_since(Instant::now());
+            let n = self.read(wait)?;
+            let returned = Instant::now();
+            if n > 0 {
+                if self.woke_on_bytes.len() == WOKE_KEPT {
+                    self.woke_on_bytes.remove(0);
+                }
+                self.woke_on_bytes.push(returned);
+            } else if returned >= deadline && !wait.is_zero() {
+                self.wake.observe(deadline, returned);
+            }
             self.pushed(n);
         }
     }
 
+    /// The wake-ups on bytes since the last call ([`Self::woke_on_bytes`]).
+    pub(super) fn take_woke_on_bytes(&mut self) -> std::vec::Drain<'_, Instant> {
+        self.woke_on_bytes.drain(..)
+    }
+
+    /// How late this thread wakes from a timed read (a high quantile):
+    /// bytes it wakes on are seen about that late.
+    pub(super) fn wake_lateness(&self) -> Duration {
+        self.wake.lead()
+    }
+
     /// One look at the port without waiting.
     pub(super) fn poll_now(&mut self, want: Option<Want>) -> io::Result<Option<(Reply, Instant)>> {
-        let n = match (self.up, self.port.as_mut()) {
-            (true, Some(port)) => port.read_timeout(&mut self.buf, std::time::Duration::ZERO)?,
-            _ => return Err(not_open()),
-        };
+        let n = self.read(Duration::ZERO)?;
         self.pushed(n);
         Ok(self.take_decoded(want))
+    }
+
+    /// One read into the buffer, waiting up to `timeout` for bytes.
+    fn read(&mut self, timeout: Duration) -> io::Result<usize> {
+        match (self.up, self.port.as_mut()) {
+            (true, Some(port)) => port.read_timeout(&mut self.buf, timeout),
+            _ => Err(not_open()),
+        }
     }
 
     /// `n` bytes were read into the buffer: to the decoder, and counted.
@@ -300,6 +344,37 @@ mod tests {
         assert_eq!(link.inbox.len(), 1);
         assert_eq!(link.counters.frames_tx_config, 1);
         assert_eq!(link.counters.frames_rx, 2);
+    }
+
+    /// Bytes found waiting came at some earlier instant: only bytes a
+    /// read woke on date an adapter's boundary.
+    #[test]
+    fn only_bytes_a_read_woke_on_date_a_boundary() {
+        let (mut link, mut dev) = link_pair();
+        let reply = Reply::new(9, ReplyBody::Res { index: 13, code: 1 });
+        dev.write_all(&reply.encode()).unwrap();
+        link.wait(None, Instant::now() + Duration::from_millis(5))
+            .unwrap();
+        assert_eq!(link.inbox.len(), 1);
+        assert_eq!(link.take_woke_on_bytes().count(), 0);
+        // Written while the link waits (a few tries: a thread may be
+        // slower to start than the wait is long).
+        let mut woke = false;
+        for _ in 0..5 {
+            let writer = std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(20));
+                dev.write_all(&reply.encode()).unwrap();
+                dev
+            });
+            link.wait(None, Instant::now() + Duration::from_millis(200))
+                .unwrap();
+            dev = writer.join().unwrap();
+            if link.take_woke_on_bytes().count() == 1 {
+                woke = true;
+                break;
+            }
+        }
+        assert!(woke, "no read woke on the bytes");
     }
 
     #[test]

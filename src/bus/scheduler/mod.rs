@@ -593,11 +593,19 @@ impl Scheduler {
         self.pipeline.as_ref().is_some_and(UsbPipeline::active)
     }
 
-    /// A reply came out of the port at `at`: behind a USB adapter, one
-    /// more sample of the frame clock.
+    /// The port woke the owner with bytes at `at`: behind a USB adapter,
+    /// one more sample of the frame clock.
     pub(crate) fn arrival(&mut self, at: Instant) {
         if let Some(pipeline) = self.pipeline.as_mut() {
             pipeline.arrival(at);
+        }
+    }
+
+    /// How late the host sees the bytes an adapter hands over
+    /// ([`UsbPipeline::set_arrival_lag`]).
+    pub(crate) fn set_arrival_lag(&mut self, lag: Duration) {
+        if let Some(pipeline) = self.pipeline.as_mut() {
+            pipeline.set_arrival_lag(lag);
         }
     }
 

@@ -1,9 +1,12 @@
 //! The USB frame clock as the host infers it from reply arrivals: an
 //! adapter hands received bytes to the host only at its USB (micro)frame
-//! boundaries, so every reply's arrival is a boundary plus the host's own
-//! wake-up delay, never minus. [`FramePhase`] keeps the last arrivals and
+//! boundaries, so every read the bytes wake is a boundary plus the host's
+//! own wake-up delay, never minus. [`FramePhase`] keeps the last arrivals and
 //! takes as the boundary the earliest of the cluster they form, so a
-//! stalled thread's late read does not move it.
+//! stalled thread's late read does not move it. The estimate still runs
+//! behind the adapter's clock by the least of those delays (tens of µs on
+//! a busy host), which no arrival shows: the pipeline spares it before
+//! each boundary ([`super::pipeline::UsbPipeline::set_arrival_lag`]).
 //!
 //! Pure: every instant is passed in.
 

@@ -15,10 +15,13 @@
 //! the wire is held that long after each write: up to a period lost per
 //! transfer, never the adapter's hold of a reply. The boundaries are
 //! not visible to the host, but the adapter also hands received bytes to
-//! the host at boundaries, so every reply's arrival is a boundary plus the
-//! host's own wake-up delay (never minus). [`FramePhase`] keeps the last
-//! arrivals and takes as the boundary the one that makes them least late
-//! (a median, so a stalled thread's late read does not move it).
+//! the host at boundaries, so every read the bytes wake is a boundary plus
+//! the host's own wake-up delay (never minus). [`FramePhase`] keeps the
+//! last arrivals and takes as the boundary the start of the cluster they
+//! form (so a stalled thread's late read does not move it). That start is
+//! itself late by the host's least wake-up delay: a write is taken to make
+//! a boundary only with its reach and the host's measured wake-up
+//! lateness to spare.
 //!
 //! Each write is aimed early in the frame before the boundary it should
 //! leave at (0.8 of a period before it), so a write, or the adapter's
@@ -131,6 +134,11 @@ pub(crate) struct UsbPipeline {
     /// Writes in a row seen untaken just before the boundary the frame
     /// clock aimed them at (none seen taken before it).
     clock_checks: u32,
+    /// How late the host sees bytes the adapter hands over: the frame
+    /// clock, learnt from those sightings, runs up to that much behind the
+    /// adapter's, so a write is taken to make a boundary only with that
+    /// much more to spare, and a sentinel is aimed that much earlier.
+    arrival_lag: Duration,
 }
 
 impl UsbPipeline {
@@ -154,6 +162,7 @@ impl UsbPipeline {
             port_confirms: false,
             confirm: Confirm::default(),
             clock_checks: 0,
+            arrival_lag: Duration::ZERO,
         };
         pipeline.set_adapter(adapter);
         Some(pipeline)
@@ -308,7 +317,7 @@ impl UsbPipeline {
             None => {
                 let release = self.aimed_boundary(free_at, now);
                 let at = release
-                    .checked_sub(self.period().mul_f64(SENTINEL_LEAD))
+                    .checked_sub(self.period().mul_f64(SENTINEL_LEAD) + self.arrival_lag)
                     .unwrap_or(release);
                 *self.sentinel_at.insert(at)
             }
@@ -358,9 +367,14 @@ impl UsbPipeline {
         self.phase.known()
     }
 
-    /// A reply (any) came out of the adapter at `at`.
+    /// The host woke on bytes from the adapter at `at`.
     pub(crate) fn arrival(&mut self, at: Instant) {
         self.phase.arrival(at);
+    }
+
+    /// The host sees bytes the adapter hands over up to `lag` late.
+    pub(crate) fn set_arrival_lag(&mut self, lag: Duration) {
+        self.arrival_lag = lag;
     }
 
     /// When to write the next transfer so that it leaves at the first
@@ -422,7 +436,9 @@ impl UsbPipeline {
                 ambiguous: false,
             };
         }
-        let latest = self.phase.boundary_after(handed + self.reach());
+        let latest = self
+            .phase
+            .boundary_after(handed + self.reach() + self.arrival_lag);
         Released {
             at: latest,
             ambiguous: latest != first
@@ -767,6 +783,42 @@ mod tests {
         // they come shows no boundary.
         let spread: Vec<u64> = (0..PHASE_SAMPLES as u64).map(|k| k * 31 % 1000).collect();
         assert!(!learnt(t0, &spread).active());
+    }
+
+    /// Every sighting of a boundary is late by the host's wake-up, so the
+    /// learnt clock runs that much behind the adapter's: a write is taken
+    /// to make a boundary only with the reach and that lag to spare, and a
+    /// sentinel is aimed the lag earlier.
+    #[test]
+    fn the_hosts_arrival_lag_is_spared_before_a_boundary() {
+        let t0 = Instant::now();
+        let mut p = learnt(t0, &[0; PHASE_SAMPLES]);
+        // Pipelined: a 200 µs reach. Handed 230 µs before the 10.3 ms
+        // boundary, a write makes it with no lag...
+        let handed = t0 + us(10_070);
+        assert_eq!(
+            p.released(handed),
+            Released {
+                at: t0 + us(10_300),
+                ambiguous: false
+            }
+        );
+        // ... but sighted 40 µs late, the boundary may be at 10.26 ms,
+        // and a write 190 µs late would miss it: held for the next.
+        p.set_arrival_lag(us(40));
+        assert_eq!(
+            p.released(handed),
+            Released {
+                at: t0 + us(11_300),
+                ambiguous: true
+            }
+        );
+        // Early in the frame, as writes are aimed, nothing changes.
+        assert_eq!(p.released(t0 + us(9_500)).at, t0 + us(10_300));
+        // A sentinel due: a tenth of a frame and the lag before its boundary.
+        p.since_sentinel = SENTINEL_EVERY;
+        let free = t0 + us(10_100);
+        assert_eq!(p.sentinel_wait(free, t0 + us(9_000)), Some(t0 + us(10_160)));
     }
 
     #[test]

@@ -39,9 +39,9 @@ impl Ctx {
     /// Replies no transaction waited for: those of polls written blind
     /// (matched here), power-up announcements, late replies.
     pub(crate) fn absorb_inbox(&mut self) {
+        self.learn_frame_clock();
         let inbox = std::mem::take(&mut self.link.inbox);
         for (reply, at, packet) in &inbox {
-            self.sched.arrival(*at);
             let effect = match self.sched.take_inflight(reply) {
                 Some(inflight) => {
                     self.stats
@@ -57,6 +57,17 @@ impl Ctx {
         }
         self.link.inbox = inbox;
         self.link.inbox.clear();
+    }
+
+    /// Hands the scheduler the instants the port woke this thread with
+    /// bytes (a USB adapter's frame boundaries, each seen as late as the
+    /// thread wakes) and how late it wakes.
+    fn learn_frame_clock(&mut self) {
+        let lag = self.link.wake_lateness();
+        self.sched.set_arrival_lag(lag);
+        for at in self.link.take_woke_on_bytes() {
+            self.sched.arrival(at);
+        }
     }
 
     /// Hands host frames to the port; returns when the last one leaves the wire.
@@ -420,9 +431,7 @@ impl Ctx {
         // Its reply, or its deadline, settles the write: the wire model
         // follows the exchange, not the port's count read after it.
         self.sched.exchange_settled();
-        if let Some((_, at)) = &got {
-            self.sched.arrival(*at);
-        }
+        self.learn_frame_clock();
         let Some((reply, at)) = got else {
             match silence {
                 Silence::Missed => {
