@@ -32,6 +32,16 @@ fn adapter_rig(
     ids: &[u8],
     tune: impl FnOnce(&mut jointd::bus::BusConfig),
 ) -> Rig {
+    adapter_rig_waking(adapter, ids, Duration::ZERO, tune)
+}
+
+/// [`adapter_rig`] on a host that wakes `late` after each wait on the port.
+fn adapter_rig_waking(
+    adapter: AdapterModel,
+    ids: &[u8],
+    late: Duration,
+    tune: impl FnOnce(&mut jointd::bus::BusConfig),
+) -> Rig {
     let mut sim_cfg = sim_config(ids, BAUD);
     sim_cfg.adapter = adapter;
     // The adapter's timing is hardware's: a simulator thread that a busy
@@ -39,7 +49,7 @@ fn adapter_rig(
     // (rightly) for a late path. Real-time where the host allows it, as the
     // bench runs it (the bus owner is already).
     sim_cfg.realtime = true;
-    rig_on_memory(sim_cfg, |c| {
+    rig_on_memory_waking_late(sim_cfg, late, |c| {
         c.ids = ids.to_vec();
         c.adapter = AdapterSetting::Fixed(adapter);
         // The blind ladder, as on a port that cannot say when the adapter
@@ -326,6 +336,43 @@ async fn late_sentinels_behind_a_long_latency_timer_back_the_pipeline_off() {
         .await;
     let view = clean.usb_pipeline.clone().expect("a pipeline view");
     assert_eq!(view.mode, PipelineMode::Pipelined);
+
+    let backed = backs_off_on_late_sentinels(&rig, &view).await;
+    assert_eq!(backed.mode, PipelineMode::Guarded);
+}
+
+/// A host that wakes 80 µs late sees every reply that much after the
+/// adapter hands it over, and learns a frame clock that much behind the
+/// adapter's: a sentinel aimed a tenth of a frame before a boundary by
+/// that clock would miss it on a clean path, and a write 190 µs late,
+/// inside the reach, could slip a frame and collide. The owner measures
+/// how late it wakes and spares that before each boundary: the clean path
+/// stays pipelined, and the late one backs off on its sentinels before
+/// anything collides.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_host_that_wakes_late_spares_its_lateness_before_each_boundary() {
+    if !realtime_or_skip("a_host_that_wakes_late_spares_its_lateness_before_each_boundary") {
+        return;
+    }
+    let _one = ONE_AT_A_TIME.lock().await;
+    let ids: Vec<u8> = (1..=4).collect();
+    let late = Duration::from_micros(80);
+    let rig = adapter_rig_waking(AdapterModel::Ftdi { latency_ms: 16 }, &ids, late, |_| {});
+    rig.online(4).await;
+    let sentinels = |s: &BusSnapshot| s.counters.usb_sentinels;
+    let start = rig.bus.snapshot();
+    let clean = rig
+        .until("20 sentinels on a clean path, or a backoff", |s| {
+            sentinels(s) >= sentinels(&start) + 20 || s.counters.usb_backoffs > 0
+        })
+        .await;
+    let view = clean.usb_pipeline.clone().expect("a pipeline view");
+    assert_eq!(
+        (view.mode, clean.counters.usb_backoffs),
+        (PipelineMode::Pipelined, 0),
+        "the clean path backed off: {view:?}"
+    );
+    assert_eq!(rig.sim.stats().collisions, 0);
 
     let backed = backs_off_on_late_sentinels(&rig, &view).await;
     assert_eq!(backed.mode, PipelineMode::Guarded);

@@ -27,6 +27,9 @@ fn rig_behind(adapter: AdapterModel, ids: &[u8], confirm: bool) -> Rig {
 
 enum Line {
     Memory,
+    /// In memory, the host waking this late after each wait on the port
+    /// (a slow owner: it reads replies and the count that much late).
+    MemoryWakingLate(Duration),
     /// Opened by path like hardware; the simulator publishes what the
     /// driver's count would say (a pty's own says 0 at once).
     Pty,
@@ -44,6 +47,7 @@ fn rig_on(line: Line, adapter: AdapterModel, ids: &[u8], confirm: bool) -> Rig {
     };
     match line {
         Line::Memory => rig_on_memory(sim_cfg, tune),
+        Line::MemoryWakingLate(late) => rig_on_memory_waking_late(sim_cfg, late, tune),
         Line::Pty => rig_with(sim_cfg, tune),
     }
 }
@@ -135,6 +139,18 @@ async fn late_writes_never_collide_behind_a_ch340() {
     // Late by up to a whole USB frame, one in six past 0.85 ms: blind,
     // this path backs the pipeline off (tests/usb_backoff.rs).
     no_write_collides(Line::Memory, AdapterModel::Ch340, "600,1000,1000,1000").await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn late_writes_never_collide_behind_a_slow_owner() {
+    // An owner that wakes 150 µs late sees the count fall that late: the
+    // write is still held until it is seen taken.
+    no_write_collides(
+        Line::MemoryWakingLate(Duration::from_micros(150)),
+        AdapterModel::Ch340,
+        "600,1000,1000,1000",
+    )
+    .await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

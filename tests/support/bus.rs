@@ -87,6 +87,70 @@ pub fn rig_on_memory(sim_cfg: SimConfig, tune: impl FnOnce(&mut BusConfig)) -> R
     }
 }
 
+/// [`rig_on_memory`] with a host that wakes `late` after every wait on the
+/// port (a slow or busy machine, a virtual CPU woken by its hypervisor):
+/// each read that waited returns that much after the bytes came or its
+/// timeout ran out.
+pub fn rig_on_memory_waking_late(
+    sim_cfg: SimConfig,
+    late: Duration,
+    tune: impl FnOnce(&mut BusConfig),
+) -> Rig {
+    let (sim, host) = Simulator::spawn_memory(sim_cfg.clone()).expect("spawn simulator");
+    let mut cfg = BusConfig::new("test", "memory", sim_cfg.baud);
+    cfg.scan_last = sim.devices().iter().map(|d| d.id).max().unwrap_or(1);
+    cfg.timing.reply_margin_us = TEST_REPLY_MARGIN_US;
+    firmware_as_configured(&mut cfg, &sim);
+    tune(&mut cfg);
+    let port = WakesLate { inner: host, late };
+    let (bus, thread) = spawn_bus_on(cfg, Box::new(port)).expect("spawn bus");
+    Rig {
+        sim,
+        bus,
+        thread: Some(thread),
+    }
+}
+
+/// A port whose reader wakes late ([`rig_on_memory_waking_late`]).
+struct WakesLate<T> {
+    inner: T,
+    late: Duration,
+}
+
+impl<T: jointd::transport::Transport> jointd::transport::Transport for WakesLate<T> {
+    fn write_all(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        self.inner.write_all(bytes)
+    }
+
+    fn read_timeout(&mut self, buf: &mut [u8], timeout: Duration) -> std::io::Result<usize> {
+        let n = self.inner.read_timeout(buf, timeout)?;
+        if !timeout.is_zero() {
+            // Spun, not slept: a sleep would add the timer's own lateness.
+            let until = std::time::Instant::now() + self.late;
+            while std::time::Instant::now() < until {
+                std::hint::spin_loop();
+            }
+        }
+        Ok(n)
+    }
+
+    fn set_baud(&mut self, baud: u32) -> std::io::Result<()> {
+        self.inner.set_baud(baud)
+    }
+
+    fn baud(&self) -> u32 {
+        self.inner.baud()
+    }
+
+    fn discard_input(&mut self) -> std::io::Result<()> {
+        self.inner.discard_input()
+    }
+
+    fn unsent(&mut self) -> Option<usize> {
+        self.inner.unsent()
+    }
+}
+
 /// Like [`rig_with`], but the bus starts only after every device has
 /// announced itself, so it must find them by scanning.
 pub fn rig_after_boot(sim_cfg: SimConfig, tune: impl FnOnce(&mut BusConfig)) -> Rig {
