@@ -1052,6 +1052,8 @@ class Unverified(TypedDict):
 class UsbPipelineView(TypedDict):
     """What the bus view shows of the pipeline."""
 
+    arrival_lag_us: int
+    """How late the bus thread wakes (a high quantile, measured on its timed waits), µs: the frame clock learnt from reply arrivals may run this much behind the adapter's, and each write spares it before its boundary."""
     backoffs: int
     """Steps up and down since start."""
     confirming: bool

@@ -584,6 +584,7 @@ impl Scheduler {
         view.confirming = confirming;
         view.writes_taken_late = late;
         view.counts_given_up = gave_up;
+        view.arrival_lag_us = pipeline.arrival_lag().as_micros() as u64;
         Some(view)
     }
 

@@ -264,6 +264,11 @@ pub struct UsbPipelineView {
     /// Confirmed writes whose output count stayed up
     /// for 4 ms after their USB frame (evidence: the count is not trusted).
     pub counts_given_up: u64,
+    /// How late the bus thread wakes (a high quantile, measured on its
+    /// timed waits), µs: the frame clock learnt from reply arrivals may run
+    /// this much behind the adapter's, and each write spares it before
+    /// its boundary.
+    pub arrival_lag_us: u64,
 }
 
 /// The self-protection state of one latent bus.
@@ -611,6 +616,7 @@ impl UsbGuard {
             confirming: false,
             writes_taken_late: 0,
             counts_given_up: 0,
+            arrival_lag_us: 0,
         }
     }
 }

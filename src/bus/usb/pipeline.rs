@@ -380,6 +380,10 @@ impl UsbPipeline {
         self.arrival_lag = lag;
     }
 
+    pub(crate) fn arrival_lag(&self) -> Duration {
+        self.arrival_lag
+    }
+
     /// When to write the next transfer so that it leaves at the first
     /// boundary the wire allows (`free_at` plus the guard): the middle of
     /// the frame before it. A boundary the host can no longer make is

@@ -188,6 +188,12 @@ fn usb_families(m: &mut Exposition, snap: &BusSnapshot, l: &str) {
         usb.map_or(0.0, |p| p.guard_us as f64 / 1e6),
     );
     m.gauge(
+        "jointd_bus_usb_arrival_lag_seconds",
+        "Behind a USB adapter, how late the bus thread wakes (a high quantile of its timed waits): the frame clock learnt from reply arrivals may run this much behind the adapter's, and each write spares it before its boundary (0 on a native line).",
+        l,
+        usb.map_or(0.0, |p| p.arrival_lag_us as f64 / 1e6),
+    );
+    m.gauge(
         "jointd_bus_usb_confirming",
         "Behind a USB adapter, 1 while each write is seen taken by the adapter (the port's output count) before the next: late writes then cost time, never a collision.",
         l,
