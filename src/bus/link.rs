@@ -8,10 +8,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
 use crate::protocol::{Command, FrameBytes, Message, Reply, StreamDecoder, FRAME_LEN};
+use crate::rt::wake::WakeLateness;
 use crate::transport::adapter::{AdapterInfo, AdapterModel};
 use crate::transport::{Opener, PortNote, Transport};
-
-use crate::rt::wake::WakeLateness;
 
 use super::config::{frame_time, Timing};
 use super::handle::{BusCounters, BusShared, LoggedFrame};
