@@ -372,10 +372,19 @@ async fn a_host_that_wakes_late_spares_its_lateness_before_each_boundary() {
         (PipelineMode::Pipelined, 0),
         "the clean path backed off: {view:?}"
     );
+    assert!(
+        view.arrival_lag_us >= late.as_micros() as u64,
+        "the lateness measured: {view:?}"
+    );
     assert_eq!(rig.sim.stats().collisions, 0);
 
     let backed = backs_off_on_late_sentinels(&rig, &view).await;
     assert_eq!(backed.mode, PipelineMode::Guarded);
+    assert_eq!(
+        rig.sim.stats().collisions,
+        0,
+        "a collision before the backoff"
+    );
 }
 
 /// Behind a latency timer a path whose writes all come 1.95-2.05 ms late

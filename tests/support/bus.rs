@@ -74,12 +74,22 @@ pub fn rig_with(sim_cfg: SimConfig, tune: impl FnOnce(&mut BusConfig)) -> Rig {
 /// For tests that judge the timing of writes on the true wire.
 pub fn rig_on_memory(sim_cfg: SimConfig, tune: impl FnOnce(&mut BusConfig)) -> Rig {
     let (sim, host) = Simulator::spawn_memory(sim_cfg.clone()).expect("spawn simulator");
-    let mut cfg = BusConfig::new("test", "memory", sim_cfg.baud);
+    bus_on_memory(sim, Box::new(host), sim_cfg.baud, tune)
+}
+
+/// A bus owner on the host end `host` of `sim`'s in-memory line.
+fn bus_on_memory(
+    sim: SimHandle,
+    host: Box<dyn jointd::transport::Transport>,
+    baud: u32,
+    tune: impl FnOnce(&mut BusConfig),
+) -> Rig {
+    let mut cfg = BusConfig::new("test", "memory", baud);
     cfg.scan_last = sim.devices().iter().map(|d| d.id).max().unwrap_or(1);
     cfg.timing.reply_margin_us = TEST_REPLY_MARGIN_US;
     firmware_as_configured(&mut cfg, &sim);
     tune(&mut cfg);
-    let (bus, thread) = spawn_bus_on(cfg, Box::new(host)).expect("spawn bus");
+    let (bus, thread) = spawn_bus_on(cfg, host).expect("spawn bus");
     Rig {
         sim,
         bus,
@@ -97,18 +107,8 @@ pub fn rig_on_memory_waking_late(
     tune: impl FnOnce(&mut BusConfig),
 ) -> Rig {
     let (sim, host) = Simulator::spawn_memory(sim_cfg.clone()).expect("spawn simulator");
-    let mut cfg = BusConfig::new("test", "memory", sim_cfg.baud);
-    cfg.scan_last = sim.devices().iter().map(|d| d.id).max().unwrap_or(1);
-    cfg.timing.reply_margin_us = TEST_REPLY_MARGIN_US;
-    firmware_as_configured(&mut cfg, &sim);
-    tune(&mut cfg);
     let port = WakesLate { inner: host, late };
-    let (bus, thread) = spawn_bus_on(cfg, Box::new(port)).expect("spawn bus");
-    Rig {
-        sim,
-        bus,
-        thread: Some(thread),
-    }
+    bus_on_memory(sim, Box::new(port), sim_cfg.baud, tune)
 }
 
 /// A port whose reader wakes late ([`rig_on_memory_waking_late`]).
