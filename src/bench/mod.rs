@@ -108,25 +108,7 @@ fn several_buses(args: &BenchArgs) -> Result<bool, BenchError> {
         };
         let single = workload(&one, baud)?;
         println!("== one bus of {total} joints\n{single}");
-        let reports: Vec<Result<Report, BenchError>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = (0..n)
-                .map(|_| scope.spawn(|| workload(args, baud)))
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| {
-                    h.join().unwrap_or_else(|_| {
-                        Err(BenchError::Setup("a bus's bench thread panicked".into()))
-                    })
-                })
-                .collect()
-        });
-        let reports = reports.into_iter().collect::<Result<Vec<_>, _>>()?;
-        let mean = |r: &Report, f: fn(&Analysis) -> &std::collections::BTreeMap<u8, f64>| {
-            Analysis::mean_rate(f(&r.analysis))
-        };
-        let control = |r: &Report| mean(r, |a| &a.control_hz);
-        let telemetry = |r: &Report| mean(r, |a| &a.telemetry_hz);
+        let reports = at_once(args, n, baud)?;
         for (i, r) in reports.iter().enumerate() {
             println!(
                 "== bus {} of {n}, {} joints, at the same time\n{r}",
@@ -134,32 +116,66 @@ fn several_buses(args: &BenchArgs) -> Result<bool, BenchError> {
                 args.joints
             );
         }
-        let worst =
-            |f: &dyn Fn(&Report) -> f64| reports.iter().map(f).fold(f64::INFINITY, f64::min);
-        let (c_gain, t_gain) = (
-            worst(&control) / control(&single).max(f64::EPSILON),
-            worst(&telemetry) / telemetry(&single).max(f64::EPSILON),
-        );
-        // The owners' threads share one name prefix: each report's owner
-        // CPU is every owner's together.
-        println!(
-            "== {n} buses of {} vs one of {total} at {baud} baud: control per joint x{c_gain:.2}, \
-             telemetry per joint x{t_gain:.2} (goal x{MIN_SPLIT_GAIN}); all bus owners {:.1} % of a core, \
-             all simulators {:.1} %",
-            args.joints,
-            reports[0].cpu_owner * 100.0,
-            reports[0].cpu_sim * 100.0,
-        );
-        let ok = c_gain >= MIN_SPLIT_GAIN
-            && t_gain >= MIN_SPLIT_GAIN
-            && reports.iter().all(|r| r.collisions == 0);
-        println!(
-            "  [{}] per-joint rates >= {MIN_SPLIT_GAIN}x one bus's, zero collisions",
-            if ok { "ok" } else { "FAIL" }
-        );
-        all &= ok;
+        all &= split_gain(args, baud, &single, &reports);
     }
     Ok(all)
+}
+
+/// `n` buses of `args.joints` joints each, run at the same time.
+fn at_once(args: &BenchArgs, n: usize, baud: u32) -> Result<Vec<Report>, BenchError> {
+    let reports: Vec<Result<Report, BenchError>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..n)
+            .map(|_| scope.spawn(|| workload(args, baud)))
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join().unwrap_or_else(|_| {
+                    Err(BenchError::Setup("a bus's bench thread panicked".into()))
+                })
+            })
+            .collect()
+    });
+    reports.into_iter().collect()
+}
+
+/// Prints what the buses run at once (`reports`) bought per joint against
+/// one bus of all their joints (`single`); true when each rate gained the
+/// goal and no bus collided.
+fn split_gain(args: &BenchArgs, baud: u32, single: &Report, reports: &[Report]) -> bool {
+    let n = reports.len();
+    let total = u16::from(args.joints) * n as u16;
+    let mean = |r: &Report, f: fn(&Analysis) -> &std::collections::BTreeMap<u8, f64>| {
+        Analysis::mean_rate(f(&r.analysis))
+    };
+    let control = |r: &Report| mean(r, |a| &a.control_hz);
+    let telemetry = |r: &Report| mean(r, |a| &a.telemetry_hz);
+    let worst = |f: &dyn Fn(&Report) -> f64| reports.iter().map(f).fold(f64::INFINITY, f64::min);
+    let (c_gain, t_gain) = (
+        worst(&control) / control(single).max(f64::EPSILON),
+        worst(&telemetry) / telemetry(single).max(f64::EPSILON),
+    );
+    let (cpu_owner, cpu_sim) = reports
+        .first()
+        .map_or((0.0, 0.0), |r| (r.cpu_owner, r.cpu_sim));
+    // The owners' threads share one name prefix: each report's owner
+    // CPU is every owner's together.
+    println!(
+        "== {n} buses of {} vs one of {total} at {baud} baud: control per joint x{c_gain:.2}, \
+         telemetry per joint x{t_gain:.2} (goal x{MIN_SPLIT_GAIN}); all bus owners {:.1} % of a core, \
+         all simulators {:.1} %",
+        args.joints,
+        cpu_owner * 100.0,
+        cpu_sim * 100.0,
+    );
+    let ok = c_gain >= MIN_SPLIT_GAIN
+        && t_gain >= MIN_SPLIT_GAIN
+        && reports.iter().all(|r| r.collisions == 0);
+    println!(
+        "  [{}] per-joint rates >= {MIN_SPLIT_GAIN}x one bus's, zero collisions",
+        if ok { "ok" } else { "FAIL" }
+    );
+    ok
 }
 
 /// What splitting the joints over two adapters must at least buy per joint.

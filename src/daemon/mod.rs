@@ -30,7 +30,7 @@ use crate::control::Control;
 use crate::http::tokens::Tokens;
 use crate::http::AppState;
 use error::listen_error;
-use shutdown::{serve, stop_buses, stop_recordings, wait_for_ws_close};
+use shutdown::{serve, stop_all};
 use start::{bind_live, raise_open_files_limit, start_all, Started};
 
 pub use args::{FileConfig, JointName, RunArgs, DEFAULT_LISTEN, SIM_BUS_NAME};
@@ -86,17 +86,7 @@ pub async fn run(args: RunArgs) -> Result<(), DaemonError> {
         _ => None,
     };
     serve(listener, &state).await?;
-    wait_for_ws_close(&state).await;
-    // The joints first: a recording still closing must not hold them.
-    stop_buses(threads).await;
-    stop_recordings(&state).await;
-    if let Some(live) = live {
-        live.stop().await;
-    }
-    // Leave the ROS graph once the buses are stopped.
-    if let Some(bridge) = bridge {
-        tracing::debug!(?bridge, "ROS 2 bridge closing");
-    }
+    stop_all(&state, threads, live, bridge).await;
     drop(sim);
     tracing::info!("stopped");
     Ok(())

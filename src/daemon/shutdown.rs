@@ -8,6 +8,7 @@ use tokio::net::TcpListener;
 use tokio::signal::unix::{signal, SignalKind};
 
 use super::error::DaemonError;
+use crate::foxglove::LiveView;
 use crate::http::{app, AppState};
 
 /// How long shutdown waits for each bus to disable its joints and close.
@@ -53,9 +54,30 @@ const HTTP_DRAIN_TIMEOUT: Duration = Duration::from_secs(2);
 /// How long shutdown waits for the recordings to write their summaries.
 const RECORDINGS_CLOSE_TIMEOUT: Duration = Duration::from_secs(3);
 
+/// Stops what the daemon started, in order, once it no longer serves: the
+/// WebSocket sessions are closed, then the joints (a recording still
+/// closing must not hold them), the recordings and the live view; the ROS
+/// graph is left once the buses are stopped.
+pub(super) async fn stop_all(
+    state: &AppState,
+    threads: Vec<crate::bus::BusThread>,
+    live: Option<LiveView>,
+    bridge: Option<impl std::fmt::Debug>,
+) {
+    wait_for_ws_close(state).await;
+    stop_buses(threads).await;
+    stop_recordings(state).await;
+    if let Some(live) = live {
+        live.stop().await;
+    }
+    if let Some(bridge) = bridge {
+        tracing::debug!(?bridge, "ROS 2 bridge closing");
+    }
+}
+
 /// Closes the recordings still running (bounded: a slow disk cannot hold
 /// the exit); one not closed in time keeps its chunks, not its summary.
-pub(super) async fn stop_recordings(state: &AppState) {
+async fn stop_recordings(state: &AppState) {
     let closing = crate::control::recordings::stop_all(state.control());
     if tokio::time::timeout(RECORDINGS_CLOSE_TIMEOUT, closing)
         .await
@@ -71,7 +93,7 @@ pub(super) async fn stop_recordings(state: &AppState) {
 const WS_CLOSE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// Waits (bounded) until every WebSocket session has closed.
-pub(super) async fn wait_for_ws_close(state: &AppState) {
+async fn wait_for_ws_close(state: &AppState) {
     let deadline = tokio::time::Instant::now() + WS_CLOSE_TIMEOUT;
     while state
         .ws()
@@ -86,7 +108,7 @@ pub(super) async fn wait_for_ws_close(state: &AppState) {
 
 /// Disables every joint and closes each port (the owner does both on
 /// stop), every bus at once.
-pub(super) async fn stop_buses(threads: Vec<crate::bus::BusThread>) {
+async fn stop_buses(threads: Vec<crate::bus::BusThread>) {
     let stops = threads.into_iter().map(|thread| async move {
         let stopping = tokio::task::spawn_blocking(move || thread.stop());
         if tokio::time::timeout(BUS_STOP_TIMEOUT, stopping)

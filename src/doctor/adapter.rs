@@ -215,7 +215,6 @@ pub(crate) fn rs485_check(kind: &PortKind, notes: &[String]) -> Check {
 /// The output count: what confirmed writes can make of it.
 pub(crate) fn count_check(c: &CountFacts, usb: bool) -> Check {
     let id = CheckId::OutputCount;
-    let off = "set `timing.usb_confirm = false` for this bus (the proposal below does)";
     if !c.readable && !usb {
         return Check::skipped(id, "no USB adapter: a write reaches the line when written");
     }
@@ -230,6 +229,13 @@ pub(crate) fn count_check(c: &CountFacts, usb: bool) -> Check {
     if c.writes == 0 {
         return Check::skipped(id, "no write was watched (`--writes 0`)");
     }
+    fall_check(c)
+}
+
+/// The count was read over `c.writes` writes: how it fell after them.
+fn fall_check(c: &CountFacts) -> Check {
+    let id = CheckId::OutputCount;
+    let off = "set `timing.usb_confirm = false` for this bus (the proposal below does)";
     let spread = c.fall.as_ref().map_or("-".into(), Spread::describe);
     if c.fell == 0 && c.never_fell > 0 {
         let waited = human_us(MAX_WAITED.as_secs_f64() * 1e6);

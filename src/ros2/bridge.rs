@@ -86,28 +86,10 @@ pub(super) async fn declare(
     cfg: &Ros2Config,
     stats: &Arc<Ros2Stats>,
 ) -> zenoh::Result<Declared> {
-    let zid = session.zid();
     let (closing, closed) = watch::channel(false);
     // Built as it goes: a declaration refused half-way drops (and so stops)
     // what was started before it.
-    let mut on = On {
-        session,
-        node: NodeIdentity {
-            domain: cfg.domain(),
-            session: zid.to_string(),
-            node_id: 0,
-            namespace: String::new(),
-            name: cfg.node_name.clone(),
-        },
-        session_gid: zid.to_le_bytes(),
-        entity_id: 0,
-        distro: cfg.distro,
-        declared: Declared {
-            tokens: Vec::new(),
-            tasks: Vec::new(),
-            closing,
-        },
-    };
+    let mut on = On::new(session, cfg, closing);
     let token = on.node.node_token();
     on.declared
         .tokens
@@ -291,6 +273,32 @@ struct On<'a> {
     /// Whose key form: Humble's has no type hashes.
     distro: Distro,
     declared: Declared,
+}
+
+impl<'a> On<'a> {
+    /// Nothing declared yet on `session` for the node `cfg` names;
+    /// `closing` tells its tasks when to stop.
+    fn new(session: &'a zenoh::Session, cfg: &Ros2Config, closing: watch::Sender<bool>) -> Self {
+        let zid = session.zid();
+        Self {
+            session,
+            node: NodeIdentity {
+                domain: cfg.domain(),
+                session: zid.to_string(),
+                node_id: 0,
+                namespace: String::new(),
+                name: cfg.node_name.clone(),
+            },
+            session_gid: zid.to_le_bytes(),
+            entity_id: 0,
+            distro: cfg.distro,
+            declared: Declared {
+                tokens: Vec::new(),
+                tasks: Vec::new(),
+                closing,
+            },
+        }
+    }
 }
 
 impl On<'_> {

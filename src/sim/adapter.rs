@@ -201,6 +201,30 @@ impl AdapterLine {
         empty
     }
 
+    /// The `n` host bytes in `scratch`, read by a call made at `called`
+    /// that returned at `returned`, wait for the USB frame that takes them.
+    fn queue_for_wire(&mut self, n: usize, called: Instant, returned: Instant) {
+        let written = self.inner.take_written_at();
+        // Decided at the host's write where the line can (as the count the
+        // host reads was), else now.
+        let release = match self.inner.taken_at(n) {
+            Some(release) => release,
+            None => {
+                let at = written.unwrap_or_else(|| self.written_at(called, returned));
+                let release = self.taking.release_of(at);
+                self.inner.took(release, n);
+                release
+            }
+        };
+        match self.to_wire.back_mut() {
+            // Written before that frame began: it takes them too.
+            Some((r, bytes)) if *r == release => bytes.extend_from_slice(&self.scratch[..n]),
+            _ => self
+                .to_wire
+                .push_back((release, self.scratch[..n].to_vec())),
+        }
+    }
+
     /// Hands the chip's held bytes to the host, a packet at a time, as
     /// their time comes.
     fn flush_to_host(&mut self, now: Instant) -> io::Result<()> {
@@ -259,28 +283,7 @@ impl Line for AdapterLine {
                 .read_timeout(&mut self.scratch, wake.saturating_duration_since(now))?;
             let returned = Instant::now();
             if n > 0 {
-                let written = self.inner.take_written_at();
-                // Decided at the host's write where the line can (as the
-                // count the host reads was), else now.
-                let release = match self.inner.taken_at(n) {
-                    Some(release) => release,
-                    None => {
-                        let at = written.unwrap_or_else(|| self.written_at(called, returned));
-                        let release = self.taking.release_of(at);
-                        self.inner.took(release, n);
-                        release
-                    }
-                };
-                match self.to_wire.back_mut() {
-                    // Written before that frame began: it takes them too.
-                    Some((r, bytes)) if *r == release => {
-                        bytes.extend_from_slice(&self.scratch[..n]);
-                    }
-                    _ => {
-                        self.to_wire
-                            .push_back((release, self.scratch[..n].to_vec()));
-                    }
-                }
+                self.queue_for_wire(n, called, returned);
                 continue;
             }
             self.seen_empty = Some(returned);

@@ -5,7 +5,6 @@
 //! time and moves the bytes; tests can drive this directly with made-up
 //! instants.
 
-use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use crate::protocol::{BaudLevel, Command, Frame, FrameBytes, StreamDecoder, ALL_DEVICES};
@@ -13,6 +12,7 @@ use crate::protocol::{BaudLevel, Command, Frame, FrameBytes, StreamDecoder, ALL_
 use super::config::{SimConfig, SimError};
 use super::device::Device;
 use super::faults::{collide, misframed, noise_frame, Fault, LineFaults};
+use super::host_side::HostSide;
 use super::log::{addressed_id, FrameLog, WireFrame};
 use super::params::{FlashImage, FlashStore, Params};
 use super::rng::Rng;
@@ -20,8 +20,6 @@ use super::stats::SimStats;
 use super::view::DeviceView;
 use super::wire::{frame_time, DeviceTx, HostTx, Wire, WireEvent};
 
-/// Delivery-error samples kept for measurement.
-const DELIVERY_SAMPLES: usize = 100_000;
 /// Devices' physics is run at least this often, so no observer or frame
 /// ever has to integrate a long idle stretch while holding the lock.
 const TICK: Duration = Duration::from_millis(20);
@@ -47,7 +45,8 @@ pub(crate) struct Engine {
     flash: FlashStore,
     rng: Rng,
     unplugged: bool,
-    delivery_errors_ns: VecDeque<i64>,
+    /// The host's side of the line, as the runner saw it.
+    pub(crate) host: HostSide,
     /// End of the last garbled transmission handed to the host: overlapping
     /// collided transmissions reach the host as one garbled frame.
     garbage_until: Option<Instant>,
@@ -77,7 +76,7 @@ impl Engine {
             flash,
             rng: Rng::new(cfg.seed),
             unplugged: false,
-            delivery_errors_ns: VecDeque::new(),
+            host: HostSide::default(),
             garbage_until: None,
             last_tick: now,
             echo: cfg.echo,
@@ -309,14 +308,14 @@ impl Engine {
     /// Counters and line busy time as of `now`.
     pub(crate) fn stats(&self, now: Instant) -> SimStats {
         let dec = self.decoder.stats();
-        SimStats {
+        self.host.fill(SimStats {
             at: now,
             busy: self.wire.busy_until(now),
             crc_errors: dec.crc_errors + self.corrupted_host_frames,
             skipped_bytes: dec.skipped_bytes,
             unplugged: self.unplugged,
             ..self.stats
-        }
+        })
     }
 
     /// Every device's state, physics run up to `now`.
@@ -383,34 +382,6 @@ impl Engine {
             self.wire.clear_in_flight();
         }
         self.decoder.clear();
-    }
-
-    pub(crate) fn record_delivery(&mut self, due: Instant, written: Instant) {
-        let err = if written >= due {
-            i64::try_from((written - due).as_nanos()).unwrap_or(i64::MAX)
-        } else {
-            -i64::try_from((due - written).as_nanos()).unwrap_or(i64::MAX)
-        };
-        if self.delivery_errors_ns.len() == DELIVERY_SAMPLES {
-            self.delivery_errors_ns.pop_front();
-        }
-        self.delivery_errors_ns.push_back(err);
-    }
-
-    pub(crate) fn delivery_errors_ns(&self) -> Vec<i64> {
-        self.delivery_errors_ns.iter().copied().collect()
-    }
-
-    pub(crate) fn count_undated_reads(&mut self, reads: u64) {
-        self.stats.host_reads_undated += reads;
-    }
-
-    pub(crate) fn count_slipped_writes(&mut self, writes: u64) {
-        self.stats.host_writes_slipped += writes;
-    }
-
-    pub(crate) fn count_overrun(&mut self, bytes: usize) {
-        self.stats.host_overrun_bytes += bytes as u64;
     }
 }
 

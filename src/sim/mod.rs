@@ -19,6 +19,8 @@
 //! - [`faults`]: run-time fault injection ([`Fault`]).
 //! - [`line`], [`pty`]: the device end of an in-memory pipe or a pseudo-terminal.
 //! - [`runner`]: the dedicated thread that moves bytes at their modelled instants.
+//! - [`host_side`]: what the runner saw of the host's side: delivery errors,
+//!   writes it could not date or that slipped a frame, bytes not taken.
 //! - [`stats`], [`log`], [`view`]: what observers see.
 //! - [`measure`]: real delivery times against the model (`jointd sim --measure N`).
 //! - [`cli`], [`console`]: `jointd sim` and its stdin fault commands.
@@ -81,6 +83,7 @@ pub(crate) mod engine;
 mod error;
 pub(crate) mod faults;
 pub mod firmware;
+pub(crate) mod host_side;
 pub(crate) mod line;
 pub(crate) mod log;
 pub(crate) mod measure;
@@ -307,7 +310,7 @@ impl SimHandle {
 
     /// Real delivery instant minus modelled instant of each reply (ns, late > 0).
     pub fn delivery_errors_ns(&self) -> Vec<i64> {
-        self.engine().delivery_errors_ns()
+        self.engine().host.delivery_errors_ns()
     }
 
     /// Stops the thread (idempotent; also done when the last handle drops).

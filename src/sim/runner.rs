@@ -195,8 +195,7 @@ impl Runner {
                 let undated = self.line.take_undated_reads();
                 let slipped = self.line.take_slipped_writes();
                 let mut engine = lock_engine(&self.engine);
-                engine.count_undated_reads(undated);
-                engine.count_slipped_writes(slipped);
+                engine.host.read(undated, slipped);
                 engine.on_host_bytes(&self.buf[..n], at, baud);
                 Some(n)
             }
@@ -217,9 +216,9 @@ impl Runner {
         let out: Vec<Delivery> = engine.advance(Instant::now(), baud);
         for d in out {
             let taken = self.line.write(&d.bytes).unwrap_or(0);
-            engine.record_delivery(d.due, Instant::now());
+            engine.host.delivered(d.due, Instant::now());
             if taken < d.bytes.len() {
-                engine.count_overrun(d.bytes.len() - taken);
+                engine.host.overrun(d.bytes.len() - taken);
             }
         }
     }

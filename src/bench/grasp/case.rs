@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use super::setup::{FINGERS, HOLD_A, MAX_HOLD_ERROR_PCT, MAX_OVERSHOOT_PCT};
 use crate::bus::BusHandle;
+use crate::control::books::grasps::{FingerGrasp, FingerState};
 use crate::protocol::units;
 use crate::sim::physics::HOLD_CURRENT_A;
 use crate::sim::SimHandle;
@@ -23,6 +24,39 @@ pub(super) struct Case {
     /// Mean object push against the set force, %.
     pub(super) force_error_pct: Vec<f64>,
     pub(super) missed: usize,
+}
+
+impl Case {
+    /// One grasp's fingers as it ended, with their `traces`: the figures
+    /// of each that holds, a miss for each that does not.
+    pub(super) fn tally(&mut self, fingers: &[FingerGrasp], traces: &[Trace; 3]) {
+        for (k, (f, t)) in fingers.iter().zip(traces).enumerate() {
+            match (f.state, f.contact_after_ms) {
+                (FingerState::Holding, Some(ms)) => {
+                    self.contact_ms[k].push(ms);
+                    self.measured_over_pct
+                        .push(((t.peak_measured - HOLD_A) / HOLD_A * 100.0).max(0.0));
+                    self.force_over_pct
+                        .push(((t.peak_push - set_force_a()) / set_force_a() * 100.0).max(0.0));
+                    let mean = |(sum, n): (f64, u32)| sum / f64::from(n.max(1));
+                    self.hold_error_pct
+                        .push((mean(t.measured) - HOLD_A).abs() / HOLD_A * 100.0);
+                    self.force_error_pct
+                        .push((mean(t.push) - set_force_a()).abs() / set_force_a() * 100.0);
+                }
+                (state, _) => {
+                    println!(
+                        "  missed: finger {} {state:?} ({}) peak measured {:.3} A, peak push {:.3} A",
+                        f.joint,
+                        f.reason.as_deref().unwrap_or("-"),
+                        t.peak_measured,
+                        t.peak_push
+                    );
+                    self.missed += 1;
+                }
+            }
+        }
+    }
 }
 
 /// The force the hold setting makes at rest, as the q current that

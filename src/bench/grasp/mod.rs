@@ -23,7 +23,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use calls::{release, view_of};
-use case::{print_case, sample, set_force_a, Case, Trace};
+use case::{print_case, sample, Case, Trace};
 use setup::{
     CLOSE_TO_DEG, FAST_DPS, FINGERS, FREE_AIR_CLOSE_DEG, FREE_AIR_RUNS, HAND, HOLD_A,
     RUNS_PER_CASE, RUN_WAIT, SAMPLE, SETTLE, SPEED_DPS, STIFFNESS, WINDOW,
@@ -199,33 +199,7 @@ async fn one_grasp(
         tokio::time::sleep(SAMPLE).await;
     }
     let v = view_of(control, id)?;
-    for (k, f) in v.fingers.iter().enumerate() {
-        let t = traces[k];
-        match (f.state, f.contact_after_ms) {
-            (FingerState::Holding, Some(ms)) => {
-                case.contact_ms[k].push(ms);
-                case.measured_over_pct
-                    .push(((t.peak_measured - HOLD_A) / HOLD_A * 100.0).max(0.0));
-                case.force_over_pct
-                    .push(((t.peak_push - set_force_a()) / set_force_a() * 100.0).max(0.0));
-                let mean = |(sum, n): (f64, u32)| sum / f64::from(n.max(1));
-                case.hold_error_pct
-                    .push((mean(t.measured) - HOLD_A).abs() / HOLD_A * 100.0);
-                case.force_error_pct
-                    .push((mean(t.push) - set_force_a()).abs() / set_force_a() * 100.0);
-            }
-            (state, _) => {
-                println!(
-                    "  missed: finger {} {state:?} ({}) peak measured {:.3} A, peak push {:.3} A",
-                    f.joint,
-                    f.reason.as_deref().unwrap_or("-"),
-                    t.peak_measured,
-                    t.peak_push
-                );
-                case.missed += 1;
-            }
-        }
-    }
+    case.tally(&v.fingers, &traces);
     release(control, sim, id).await
 }
 

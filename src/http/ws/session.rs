@@ -37,18 +37,6 @@ const MAX_PENDING_ACKS: usize = 256;
 /// How often a connection looks whether one of its streams was ended
 /// (while it has live streams): an atomic read per joint.
 const STREAM_CHECK: Duration = Duration::from_millis(10);
-/// A close frame's reason holds at most 123 bytes (RFC 6455 §5.5).
-const MAX_CLOSE_REASON: usize = 123;
-
-/// Why the session ended on a read error, cut to fit a close frame.
-fn refusal_reason(e: &impl std::fmt::Display) -> String {
-    let mut reason = format!("message refused: {e}");
-    while reason.len() > MAX_CLOSE_REASON {
-        reason.pop();
-    }
-    reason
-}
-
 /// Serves one connection of a client that gave no name until it goes away.
 pub async fn run<Si, St, E>(state: AppState, sink: Si, stream: St)
 where
@@ -98,7 +86,7 @@ pub async fn run_as<Si, St, E>(
                 // An oversized message or a broken frame ends the session:
                 // the client is told why instead of seeing the socket drop.
                 Some(Err(e)) => {
-                    let _ = close_tx.try_send((close_code::POLICY, refusal_reason(&e)));
+                    let _ = close_tx.try_send((close_code::POLICY, format!("message refused: {e}")));
                     break;
                 }
                 Some(Ok(_)) => {} // ping/pong: the library answers

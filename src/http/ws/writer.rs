@@ -40,6 +40,18 @@ const ACK_TIMEOUT: Duration = Duration::from_secs(1);
 /// (1008 "too slow"): longer than any pause a live client takes, short
 /// enough that a dead one does not hold its writer for minutes.
 pub(crate) const SLOW_CLIENT: Duration = Duration::from_secs(8);
+/// A close frame's reason holds at most 123 bytes (RFC 6455 §5.5).
+const MAX_CLOSE_REASON: usize = 123;
+
+/// `reason` cut (on a character boundary) to fit a close frame.
+fn fit_close_reason(reason: &str) -> &str {
+    let mut end = reason.len().min(MAX_CLOSE_REASON);
+    while !reason.is_char_boundary(end) {
+        end -= 1;
+    }
+    &reason[..end]
+}
+
 /// How long a close frame may take to go out before the socket is dropped.
 const CLOSE_TIMEOUT: Duration = Duration::from_secs(1);
 /// How often pending acks are checked for that timeout.
@@ -201,7 +213,7 @@ where
     async fn close(&mut self, code: u16, reason: &str) {
         let frame = CloseFrame {
             code,
-            reason: Utf8Bytes::from(reason),
+            reason: Utf8Bytes::from(fit_close_reason(reason)),
         };
         let _ =
             tokio::time::timeout(CLOSE_TIMEOUT, self.sink.send(Message::Close(Some(frame)))).await;
@@ -378,4 +390,20 @@ fn unix_ms() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_millis() as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_close_reason_is_cut_to_fit_on_a_character_boundary() {
+        assert_eq!(fit_close_reason("too slow"), "too slow");
+        // 62 two-byte characters, 124 bytes: cut to 61 of them.
+        let long = "é".repeat(62);
+        let cut = fit_close_reason(&long);
+        assert_eq!(cut.len(), 122);
+        assert!(long.starts_with(cut));
+        assert_eq!(fit_close_reason(&"a".repeat(200)).len(), MAX_CLOSE_REASON);
+    }
 }
