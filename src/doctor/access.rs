@@ -308,15 +308,9 @@ mod tests {
             }]
         );
         let facts = PortFacts {
-            path: device.clone(),
-            device: Some(device),
+            device: Some(device.clone()),
             tty: Some("ttyUSB0".into()),
-            kind: PortKind::Unknown,
-            by_id: vec![],
-            by_path: vec![],
-            latency_timer_ms: None,
-            latency_timer_path: None,
-            latency_timer_writable: false,
+            ..PortFacts::unknown(device)
         };
         let access = AccessFacts {
             holders: found,
@@ -340,15 +334,9 @@ mod tests {
     #[test]
     fn a_refused_open_names_the_group_or_the_login_to_renew() {
         let facts = PortFacts {
-            path: "/dev/ttyUSB0".into(),
             device: Some("/dev/ttyUSB0".into()),
             tty: Some("ttyUSB0".into()),
-            kind: PortKind::Unknown,
-            by_id: vec![],
-            by_path: vec![],
-            latency_timer_ms: None,
-            latency_timer_path: None,
-            latency_timer_writable: false,
+            ..PortFacts::unknown("/dev/ttyUSB0")
         };
         let mut access = AccessFacts {
             group: Some("dialout".into()),

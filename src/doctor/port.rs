@@ -84,6 +84,23 @@ pub struct PortFacts {
     pub latency_timer_writable: bool,
 }
 
+impl PortFacts {
+    /// A port known by its path alone: nothing found of it yet.
+    pub fn unknown(path: impl Into<PathBuf>) -> Self {
+        Self {
+            path: path.into(),
+            device: None,
+            tty: None,
+            kind: PortKind::Unknown,
+            by_id: Vec::new(),
+            by_path: Vec::new(),
+            latency_timer_ms: None,
+            latency_timer_path: None,
+            latency_timer_writable: false,
+        }
+    }
+}
+
 /// Reads what the filesystem says of `path`.
 pub fn inspect(path: &Path, roots: &Roots) -> PortFacts {
     let device = fs::canonicalize(path).ok();

@@ -151,21 +151,11 @@ mod tests {
     use super::*;
     use crate::doctor::access::AccessFacts;
     use crate::doctor::check::CheckId;
-    use crate::doctor::port::{PortFacts, PortKind};
+    use crate::doctor::port::PortFacts;
 
     #[test]
     fn each_check_has_its_line_and_its_fix_under_it() {
-        let port = PortFacts {
-            path: "/dev/ttyUSB0".into(),
-            device: None,
-            tty: None,
-            kind: PortKind::Unknown,
-            by_id: vec![],
-            by_path: vec![],
-            latency_timer_ms: None,
-            latency_timer_path: None,
-            latency_timer_writable: false,
-        };
+        let port = PortFacts::unknown("/dev/ttyUSB0");
         let mut r = Report::new(500_000, port, AccessFacts::default());
         r.push(Check::ok(CheckId::PortKind, "a pty"));
         r.push(Check::warn(CheckId::Echo, "echoes", "line one\nline two"));

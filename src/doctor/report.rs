@@ -106,20 +106,9 @@ impl Report {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::doctor::port::PortKind;
 
     fn empty() -> Report {
-        let port = PortFacts {
-            path: "/dev/ttyUSB0".into(),
-            device: None,
-            tty: None,
-            kind: PortKind::Unknown,
-            by_id: vec![],
-            by_path: vec![],
-            latency_timer_ms: None,
-            latency_timer_path: None,
-            latency_timer_writable: false,
-        };
+        let port = PortFacts::unknown("/dev/ttyUSB0");
         Report::new(230_400, port, AccessFacts::default())
     }
 
