@@ -103,7 +103,7 @@ async fn wire_acks_follow_setpoints_onto_the_wire() {
 
 #[tokio::test]
 async fn estop_disables_everything_ahead_of_queued_requests() {
-    let rig = rig(&[1, 2, 3, 4]);
+    let rig = rig_in_memory(&[1, 2, 3, 4]);
     rig.online(4).await;
     rig.enable_all(4).await;
     rig.bus.set_targets(&[(1, target(10.0)), (2, target(10.0))]);
@@ -201,7 +201,7 @@ fn disables_of(rig: &Rig, id: u8) -> usize {
 
 #[tokio::test]
 async fn estop_reads_every_device_back_and_disables_again_one_that_missed_it() {
-    let rig = rig(&[1, 2, 3, 4]);
+    let rig = rig_in_memory(&[1, 2, 3, 4]);
     rig.online(4).await;
     rig.enable_all(4).await;
     // Device 3 misses the e-stop's three disable frames (0xFF, its own, 0xFF).

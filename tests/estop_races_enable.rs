@@ -57,7 +57,8 @@ fn rev_2_0_8_rig(adapter: Option<AdapterModel>) -> Rig {
                 c.adapter = AdapterSetting::Fixed(model);
             })
         }
-        None => rig_with(sim_cfg, |c| c.ids = IDS.to_vec()),
+        // In memory: see `rig_in_memory`.
+        None => rig_on_memory(sim_cfg, |c| c.ids = IDS.to_vec()),
     }
 }
 

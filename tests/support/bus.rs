@@ -200,6 +200,15 @@ pub fn rig(ids: &[u8]) -> Rig {
     rig_with(sim_config(ids, BAUD), |_| {})
 }
 
+/// [`rig`] on the in-memory line, which dates each host write when it was
+/// made. For an e-stop's collisions: it may take the wire a frame after a
+/// reply was due, and over a pty a loaded host's kernel worker can pass the
+/// poll before it on so late that the two meet on the simulated wire, a
+/// collision no UART would make.
+pub fn rig_in_memory(ids: &[u8]) -> Rig {
+    rig_on_memory(sim_config(ids, BAUD), |_| {})
+}
+
 impl Rig {
     /// Waits until the bus snapshot satisfies `pred`; panics with the last
     /// snapshot after [`WAIT`].
