@@ -9,7 +9,8 @@
 //! - [`frame_clock`]: the adapter's USB frame boundaries, inferred from reply arrivals.
 //! - [`guard`]: how far blind writes are trusted, learnt from collisions' aftermath.
 //! - [`confirm`]: confirmed writes: the port's output count says when the adapter took each.
-//! - [`pipeline`]: the polls written ahead (replies in flight), built on the three above.
+//! - [`pipeline`]: the polls written ahead (replies in flight), built on the three above;
+//!   its side of confirmed writes in `pipeline_confirmed.rs`.
 
 pub(crate) mod confirm;
 pub(crate) mod frame_clock;
