@@ -24,10 +24,11 @@ use super::authority::Revoked;
 use super::error::BusError;
 // The published state and the setpoint store live in their own files; they
 // are part of this contract and reachable under `bus::handle::` too.
+pub use super::events::BusEvent;
 pub use super::setpoints::{Commanded, Setpoint, SetpointStore, Source, StoredSetpoint};
 pub use super::state::{
-    BusCounters, BusEvent, BusLatency, BusRates, BusSnapshot, DeviceState, DisabledReason,
-    LinkState, LoggedFrame, ResetRecord, ResetSignal, WireAck,
+    BusCounters, BusLatency, BusRates, BusSnapshot, DeviceState, DisabledReason, LinkState,
+    LoggedFrame, ResetRecord, ResetSignal, WireAck,
 };
 
 /// Which devices a control request addresses.

@@ -18,7 +18,8 @@
 //! - [`authority`]: who may move a joint: the motion epoch per joint, advanced by
 //!   e-stop, disable, reset, fault, mode change and enable; stale commands are dropped.
 //! - [`setpoints`]: the latest-value store of joint targets, each with its epoch.
-//! - [`state`]: what the owner publishes: snapshot, events, frame log, wire acks.
+//! - [`state`]: what the owner publishes: snapshot, counters, frame log, wire acks.
+//! - [`events`]: what subscribers hear as it happens ([`events::BusEvent`]).
 //! - [`handle`]: the cloneable handle and the requests it sends (the API's contract).
 //! - [`motion`]: the joints following a move, sampled by the owner every control cycle.
 //! - [`owed`]: current limits a routine could not give back yet; nothing new moves those joints.
@@ -46,6 +47,7 @@ pub mod authority;
 pub(crate) mod coalesce;
 pub(crate) mod config;
 pub mod error;
+pub(crate) mod events;
 pub mod firmware;
 pub mod handle;
 mod link;

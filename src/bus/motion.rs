@@ -30,9 +30,9 @@ use crate::motion::{MoveState, RunningMove};
 use crate::protocol::units;
 
 use super::authority::Epoch;
+use super::events::BusEvent;
 use super::registry::Registry;
 use super::setpoints::{Setpoint, SetpointStore, Source};
-use super::state::BusEvent;
 
 /// One joint of this bus following a move.
 #[derive(Debug, Clone)]

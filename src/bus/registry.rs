@@ -11,10 +11,11 @@ use crate::protocol::status::{active_fault, fault_name, fsm, fsm_name};
 use crate::protocol::{CtrlMode, Info01, Reply, ReplyBody};
 
 use super::coalesce::SlotInfo;
+use super::events::BusEvent;
 use super::firmware::DeviceFirmware;
 use super::poll::PollState;
 use super::setpoints::Setpoint;
-use super::state::{BusEvent, DeviceState, DisabledReason, ResetRecord, ResetSignal};
+use super::state::{DeviceState, DisabledReason, ResetRecord, ResetSignal};
 
 /// States in which a joint module powers its motor (SPEC §5 fsm; rev
 /// 2.0.8's `6 start` included).

@@ -294,7 +294,7 @@ fn mode_settled(ctx: &mut Ctx, dev_id: u8, written: Option<CtrlMode>) {
 fn note_written(ctx: &mut Ctx, outcome: Option<&crate::bus::handle::WriteOutcome>) {
     let Some(o) = outcome else { return };
     let name = crate::protocol::params::by_index(o.index).map_or("unknown", |r| r.name);
-    ctx.push_event(crate::bus::state::BusEvent::ConfigWritten {
+    ctx.push_event(crate::bus::events::BusEvent::ConfigWritten {
         bus: ctx.cfg().name.clone(),
         dev_id: o.dev_id,
         index: o.index,

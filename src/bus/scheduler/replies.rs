@@ -6,9 +6,9 @@
 use std::time::{Duration, Instant};
 
 use crate::bus::config::StartPolicy;
+use crate::bus::events::BusEvent;
 use crate::bus::packets::PacketMark;
 use crate::bus::registry::ReplyEffect;
-use crate::bus::state::BusEvent;
 use crate::bus::wire::Want;
 use crate::protocol::status::fsm_name;
 use crate::protocol::{Reply, ReplyBody};
