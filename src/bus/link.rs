@@ -252,8 +252,13 @@ impl Link {
             self.counters.wire_busy_us += (self.turnaround + self.frame).as_micros() as u64;
             let mark = self.packets.reply(self.decoder.pending());
             let wanted = want.is_some_and(|w| w.dev_id == reply.dev_id && w.index == reply.index);
-            if wanted && found.is_none() {
-                found = Some((reply, at));
+            if wanted {
+                // The last of the wanted block read together answers: one
+                // before it was on the wire before the request (see
+                // `UsbPipeline::take`), and goes to the inbox.
+                if let Some(earlier) = found.replace((reply, at, mark)) {
+                    self.inbox.push(earlier);
+                }
             } else {
                 self.inbox.push((reply, at, mark));
             }
@@ -261,7 +266,7 @@ impl Link {
         let stats = self.decoder.stats();
         self.counters.crc_errors = stats.crc_errors;
         self.counters.skipped_bytes = stats.skipped_bytes;
-        found
+        found.map(|(reply, at, _)| (reply, at))
     }
 
     /// Changes the port's speed (after the devices switched), dropping what
@@ -343,6 +348,38 @@ mod tests {
         assert_eq!(link.inbox.len(), 1);
         assert_eq!(link.counters.frames_tx_config, 1);
         assert_eq!(link.counters.frames_rx, 2);
+    }
+
+    /// An announcement an adapter held and passed on with the reply
+    /// precedes it: the later of the two answers the read.
+    #[test]
+    fn of_two_wanted_replies_read_together_the_later_answers() {
+        let (mut link, mut dev) = link_pair();
+        link.send(&[Command::Config(Config::read(3, InfoBlock::Info01))])
+            .unwrap();
+        let state = |fsm| {
+            Reply::new(
+                3,
+                ReplyBody::Info01(crate::protocol::Info01 {
+                    fsm,
+                    ..Default::default()
+                }),
+            )
+        };
+        let (announced, reply) = (state(0), state(7));
+        let mut bytes = announced.encode().to_vec();
+        bytes.extend_from_slice(&reply.encode());
+        dev.write_all(&bytes).unwrap();
+        let want = Want {
+            dev_id: 3,
+            index: 1,
+        };
+        let got = link
+            .wait(Some(want), Instant::now() + Duration::from_millis(50))
+            .unwrap();
+        assert_eq!(got.map(|(r, _)| r), Some(reply));
+        let kept: Vec<Reply> = link.inbox.iter().map(|(r, _, _)| *r).collect();
+        assert_eq!(kept, vec![announced]);
     }
 
     /// Bytes found waiting came at some earlier instant: only bytes a

@@ -644,13 +644,19 @@ impl Scheduler {
         }
     }
 
-    /// The poll in flight `reply` answers, taken out.
-    pub(crate) fn take_inflight(&mut self, reply: &crate::protocol::Reply) -> Option<Inflight> {
+    /// The poll in flight `reply` answers, taken out; `followed_by`
+    /// replies of the same device and block were read after it in the same
+    /// batch ([`UsbPipeline::take`]).
+    pub(crate) fn take_inflight(
+        &mut self,
+        reply: &crate::protocol::Reply,
+        followed_by: usize,
+    ) -> Option<Inflight> {
         let want = Want {
             dev_id: reply.dev_id,
             index: reply.index,
         };
-        self.pipeline.as_mut()?.take(want)
+        self.pipeline.as_mut()?.take(want, followed_by)
     }
 
     /// Polls in flight whose deadline passed by `now`, taken out.

@@ -560,8 +560,18 @@ impl UsbPipeline {
         None
     }
 
-    /// The oldest poll in flight that `want` answers, taken out.
-    pub(crate) fn take(&mut self, want: Want) -> Option<Inflight> {
+    /// The oldest poll in flight that a reply to `want` answers, taken
+    /// out; `followed_by` replies to `want` were read after it in the same
+    /// batch. A device answers a read once and in order, so of the replies
+    /// to one block in hand only the last ones answer the polls in flight:
+    /// one before them was on the wire before those polls were written (a
+    /// power-up announcement, a reply given up on), and the adapter held it
+    /// until it passed them on together.
+    pub(crate) fn take(&mut self, want: Want, followed_by: usize) -> Option<Inflight> {
+        let waiting = self.inflight.iter().filter(|i| i.want == want).count();
+        if followed_by >= waiting {
+            return None;
+        }
         let pos = self.inflight.iter().position(|i| i.want == want)?;
         self.inflight.remove(pos)
     }

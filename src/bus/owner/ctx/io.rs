@@ -41,8 +41,12 @@ impl Ctx {
     pub(crate) fn absorb_inbox(&mut self) {
         self.learn_frame_clock();
         let inbox = std::mem::take(&mut self.link.inbox);
-        for (reply, at, packet) in &inbox {
-            let effect = match self.sched.take_inflight(reply) {
+        for (i, (reply, at, packet)) in inbox.iter().enumerate() {
+            let followed_by = inbox[i + 1..]
+                .iter()
+                .filter(|(r, _, _)| r.dev_id == reply.dev_id && r.index == reply.index)
+                .count();
+            let effect = match self.sched.take_inflight(reply, followed_by) {
                 Some(inflight) => {
                     self.stats
                         .round_trip(at.saturating_duration_since(inflight.handed));

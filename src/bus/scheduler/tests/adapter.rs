@@ -264,7 +264,7 @@ fn a_request_waits_for_the_polls_in_flight_and_a_missing_reply_counts_at_its_dea
         })
         .collect();
     for reply in &replies {
-        let inflight = b.s.take_inflight(reply).expect("a poll in flight");
+        let inflight = b.s.take_inflight(reply, 0).expect("a poll in flight");
         b.s.inflight_reply(reply, b.now, &inflight, None);
     }
     assert_eq!(b.s.in_flight(), 1);
