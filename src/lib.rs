@@ -23,6 +23,10 @@
 //! - [`sim`]: the wire-accurate simulated bus of joint modules (pty or in-memory), behaviour from the SPEC.
 //! - [`bus`]: one owner thread per bus: the pure scheduler decides, the owner does the I/O;
 //!   the [`bus::BusHandle`] is what the control core acts through.
+//! - [`doctor`]: `jointd doctor PATH`: a real bus checked against what jointd assumes (the
+//!   port, the adapter's timer, output count and echo, the line, the baud, each device, ids on
+//!   two devices) and the bus config it proposes, with its rates; it sends only reads, on
+//!   a port it opens or one a running bus lends it ([`bus::loan`]).
 //! - [`record`]: MCAP recordings of the buses (joint states in CDR, frames, events,
 //!   setpoints) and the `jointd record` client.
 //! - [`control`]: the control core, the one way in: REST, WebSocket and ROS 2 only
@@ -40,9 +44,6 @@
 //!   serves its WebSocket protocol with the recordings' channels, fed by the recorder's encoder
 //!   of the buses' taps; read only, loopback by default.
 //! - [`cli`]: the `jointd frame …` tools for reading a serial capture by hand.
-//! - [`doctor`]: `jointd doctor PATH`: a real bus checked against what jointd assumes (the
-//!   port, the adapter's timer, output count and echo, the line, the baud, each device, ids on
-//!   two devices) and the bus config it proposes, with its rates; it sends only reads.
 //! - `config_locate`: the line and key of a config value refused after parsing.
 //! - [`daemon`]: `jointd [run]`: config file and flags, buses, the HTTP server, graceful shutdown.
 //! - `bench` (feature `bench`): `jointd bench`: the bus engine against the simulator, measured.

@@ -12,6 +12,7 @@ import { initCalibration, showCalibration } from "./calibration.js";
 import { initHands } from "./hands.js";
 import { initRecordings } from "./recordings.js";
 import { initRos2 } from "./ros2.js";
+import { initDoctor } from "./doctor.js";
 import { loadScope } from "./scope.js";
 
 const TELEMETRY_HZ = 20;
@@ -451,6 +452,7 @@ initHoming({ onHomed: (joint) => { if (sameJoint(joint, state.selected)) showCal
 initCalibration({ onChanged: (joint) => { if (sameJoint(joint, state.selected)) select(joint.bus, joint.id); } });
 initHands();
 initRecordings();
+initDoctor();
 initRos2();
 connect();
 refreshBuses();

@@ -146,6 +146,11 @@ pub enum Request {
         last: u8,
         reply: Reply1<Vec<u8>>,
     },
+    /// The port lent to `job` ([`crate::bus::loan`]).
+    LendPort {
+        job: crate::bus::loan::PortJob,
+        reply: Reply1<()>,
+    },
 }
 
 impl Request {
@@ -164,6 +169,7 @@ impl Request {
             | Request::WriteFlash { reply, .. }
             | Request::SetId { reply, .. } => drop(reply.send(Err(err))),
             Request::Scan { reply, .. } => drop(reply.send(Err(err))),
+            Request::LendPort { reply, .. } => drop(reply.send(Err(err))),
             Request::WriteAll { reply, .. } => drop(reply.send(Err(err))),
         }
     }
@@ -426,6 +432,14 @@ impl BusHandle {
     }
 
     async fn call<T>(&self, make: impl FnOnce(Reply1<T>) -> Request) -> Result<T, BusError> {
+        self.call_within(REQUEST_TIMEOUT, make).await
+    }
+
+    async fn call_within<T>(
+        &self,
+        timeout: Duration,
+        make: impl FnOnce(Reply1<T>) -> Request,
+    ) -> Result<T, BusError> {
         let (tx, rx) = oneshot::channel();
         // Counted before sending so the owner never takes one not yet counted.
         self.shared.queued.fetch_add(1, Ordering::Relaxed);
@@ -438,11 +452,30 @@ impl BusHandle {
                 std::sync::mpsc::TrySendError::Disconnected(_) => BusError::Stopped,
             }
         })?;
-        match tokio::time::timeout(REQUEST_TIMEOUT, rx).await {
+        match tokio::time::timeout(timeout, rx).await {
             Ok(Ok(result)) => result,
             Ok(Err(_)) => Err(BusError::Stopped),
             Err(_) => Err(BusError::OwnerTimeout),
         }
+    }
+
+    /// Lends the port to `job` on the owner's thread, with every joint
+    /// disabled (refused otherwise: `WrongState`); its answer once the port
+    /// is back. `within` bounds the wait for the owner and the job.
+    pub async fn lend_port<T: Send + 'static>(
+        &self,
+        within: Duration,
+        job: impl FnOnce(&mut dyn crate::transport::Transport, &crate::bus::loan::PortLoan) -> T
+            + Send
+            + 'static,
+    ) -> Result<T, BusError> {
+        let (tx, rx) = oneshot::channel();
+        let job = crate::bus::loan::PortJob::new(move |port, loan| {
+            drop(tx.send(job(port, loan)));
+        });
+        self.call_within(within, |reply| Request::LendPort { job, reply })
+            .await?;
+        rx.await.map_err(|_| BusError::Stopped)
     }
 
     pub async fn enable(&self, targets: Targets) -> Result<(), BusError> {

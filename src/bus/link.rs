@@ -133,6 +133,13 @@ impl Link {
         }
     }
 
+    /// Runs `f` on the open port; nothing when it is not open.
+    pub(super) fn with_port(&mut self, f: impl FnOnce(&mut dyn Transport)) {
+        if let Ok(port) = self.port() {
+            f(port.as_mut());
+        }
+    }
+
     fn port(&mut self) -> io::Result<&mut Box<dyn Transport>> {
         match (self.up, self.port.as_mut()) {
             (true, Some(port)) => Ok(port),

@@ -20,6 +20,7 @@
 //! - [`setpoints`]: the latest-value store of joint targets, each with its epoch.
 //! - [`state`]: what the owner publishes: snapshot, counters, frame log, wire acks.
 //! - [`events`]: what subscribers hear as it happens ([`events::BusEvent`]).
+//! - [`loan`]: the port lent to a one-shot job (the doctor's checks of a running bus).
 //! - [`handle`]: the cloneable handle and the requests it sends (the API's contract).
 //! - [`motion`]: the joints following a move, sampled by the owner every control cycle.
 //! - [`owed`]: current limits a routine could not give back yet; nothing new moves those joints.
@@ -51,6 +52,7 @@ pub(crate) mod events;
 pub mod firmware;
 pub mod handle;
 mod link;
+pub mod loan;
 pub mod motion;
 pub mod owed;
 mod owner;

@@ -35,6 +35,7 @@
 //! - `lookup`: a hand by name, a joint by bus and id or by hand and joint name.
 //! - [`bus_reader`]: a bus as a front-end sees it, read only.
 //! - `bus_ops`: scan, baud, blocks read now, parameters written, flash, a new id.
+//! - `doctor`: the doctor's checks of a running bus, on the port its owner lends.
 //! - `actions`: enable, disable, mode, jog, re-zero, targets and e-stop, as every
 //!   front-end offers them, checked here.
 //! - `calibration`: saving a joint's calibration (REST and homing).
@@ -60,6 +61,7 @@ pub mod bus_reader;
 pub(crate) mod calibration;
 pub(crate) mod current_limit;
 pub mod device;
+pub(crate) mod doctor;
 pub mod error;
 pub mod estop;
 pub mod foxglove_stats;

@@ -31,6 +31,8 @@ use crate::transport::Transport;
 const READ_BUF: usize = 256;
 /// Frames written whose echo is still recognised as the doctor's own.
 const RECENT: usize = 8;
+/// How long a listen that can be stopped reads before it looks again.
+const LISTEN_SLICE: Duration = Duration::from_millis(10);
 /// After the reply asked for, how much longer a second device with the
 /// same id may take to answer too, beyond two frame times and the adapter's
 /// hold: the spread of two firmwares' turnarounds.
@@ -163,6 +165,9 @@ pub(crate) struct Exchange<'a> {
     heard_from: BTreeSet<u8>,
     /// The last frames written, to know their echoes however late.
     recent: VecDeque<FrameBytes>,
+    /// True when the run must stop (an e-stop on the bus that lent the
+    /// port): checked before each write and while listening.
+    stop: Option<&'a (dyn Fn() -> bool + Sync)>,
 }
 
 impl std::fmt::Debug for Exchange<'_> {
@@ -190,6 +195,22 @@ impl<'a> Exchange<'a> {
             tally: Tally::default(),
             heard_from: BTreeSet::new(),
             recent: VecDeque::with_capacity(RECENT),
+            stop: None,
+        }
+    }
+
+    /// The run stops with `Interrupted` once `stop` says so.
+    pub(crate) fn stop_when(&mut self, stop: &'a (dyn Fn() -> bool + Sync)) {
+        self.stop = Some(stop);
+    }
+
+    fn stopped(&self) -> io::Result<()> {
+        match self.stop {
+            Some(stop) if stop() => Err(io::Error::new(
+                io::ErrorKind::Interrupted,
+                "an e-stop was asked on the bus",
+            )),
+            _ => Ok(()),
         }
     }
 
@@ -222,6 +243,7 @@ impl<'a> Exchange<'a> {
 
     /// Writes the read of `block` from `id`.
     pub(crate) fn send(&mut self, id: u8, block: InfoBlock) -> io::Result<Sent> {
+        self.stopped()?;
         let bytes = read_frame(id, block);
         // Before the write: taken after it, a thread held off its CPU
         // between the two would date the write late, and its own reply
@@ -318,7 +340,13 @@ impl<'a> Exchange<'a> {
         let mut heard = Listened::default();
         let until = Instant::now() + span;
         while let Some(left) = until.checked_duration_since(Instant::now()) {
-            let n = self.port.read_timeout(&mut self.buf, left)?;
+            self.stopped()?;
+            let slice = if self.stop.is_some() {
+                left.min(LISTEN_SLICE)
+            } else {
+                left
+            };
+            let n = self.port.read_timeout(&mut self.buf, slice)?;
             heard.bytes += n as u64;
             self.decoder.push(&self.buf[..n]);
             while let Some(frame) = self.decoder.next_frame() {
@@ -327,7 +355,7 @@ impl<'a> Exchange<'a> {
                     _ => heard.commands += 1,
                 }
             }
-            if n == 0 {
+            if n == 0 && slice == left {
                 break;
             }
         }

@@ -52,6 +52,7 @@ use std::io;
 use std::path::{Path, PathBuf};
 
 use crate::bus::config::Timing;
+use crate::bus::loan::PortLoan;
 use crate::protocol::MAX_DEVICE_ID;
 use crate::transport::adapter::AdapterInfo;
 use crate::transport::tty::{is_held, tty_opener};
@@ -135,14 +136,68 @@ pub fn examine(path: &Path, mut open: Opener, options: &Options) -> Report {
         facts.latency_timer_path.as_deref(),
         facts.latency_timer_writable,
     ));
-    if let Err(e) = examine_line(transport.as_mut(), &info, notes, options, &mut report) {
-        report.push(Check::fail(
-            CheckId::Open,
-            format!("the port failed during the run: {e}"),
-            "replug the adapter and run the doctor again; `dmesg | tail` says what the kernel saw",
-        ));
+    let ran = examine_line(transport.as_mut(), &info, notes, options, None, &mut report);
+    if let Err(e) = ran {
+        report.push(run_failed(&e));
     }
     report
+}
+
+/// Examines the port of a configured bus, lent by its owner between its
+/// own frames with every joint disabled ([`crate::bus::loan`]): the checks
+/// from the adapter on. The port is the daemon's by design: who holds it
+/// and whether it opens are not asked. An e-stop on the bus stops the run.
+pub fn examine_lent(port: &mut dyn Transport, loan: &PortLoan, options: &Options) -> Report {
+    let facts = port::inspect(&loan.path, &options.roots);
+    let access = facts
+        .device
+        .as_deref()
+        .map_or_else(AccessFacts::default, |d| access::inspect(d, &options.roots));
+    let mut report = Report::new(options.baud, facts.clone(), access);
+    report.push(port::kind_check(&facts));
+    report.push(port::stable_path_check(&facts));
+    report.push(Check::ok(
+        CheckId::Open,
+        format!(
+            "lent by bus {} at {} baud; its polling paused for the run",
+            loan.bus, loan.baud
+        ),
+    ));
+    report.push(adapter::rs485_check(&facts.kind, &loan.notes));
+    report.push(adapter::latency_check(
+        loan.adapter.model,
+        facts.latency_timer_ms,
+        facts.latency_timer_path.as_deref(),
+        facts.latency_timer_writable,
+    ));
+    let ran = examine_line(
+        port,
+        &loan.adapter,
+        loan.notes.clone(),
+        options,
+        Some(&*loan.estop_asked),
+        &mut report,
+    );
+    if let Err(e) = ran {
+        report.push(run_failed(&e));
+    }
+    report
+}
+
+/// The run ended early: the port failed, or an e-stop stopped it.
+fn run_failed(e: &io::Error) -> Check {
+    if e.kind() == io::ErrorKind::Interrupted {
+        return Check::fail(
+            CheckId::Open,
+            format!("stopped before its end: {e}"),
+            "run the check again once the e-stop is dealt with",
+        );
+    }
+    Check::fail(
+        CheckId::Open,
+        format!("the port failed during the run: {e}"),
+        "replug the adapter and run the doctor again; `dmesg | tail` says what the kernel saw",
+    )
 }
 
 /// Steps 4 to 8 of the run order, on the open port.
@@ -151,11 +206,15 @@ fn examine_line(
     info: &AdapterInfo,
     notes: Vec<String>,
     options: &Options,
+    stop: Option<&(dyn Fn() -> bool + Sync)>,
     report: &mut Report,
 ) -> io::Result<()> {
     // What a previous program or the open left in the buffer is not ours.
     port.discard_input()?;
     let mut ex = Exchange::new(port, info.model, &Timing::default());
+    if let Some(stop) = stop {
+        ex.stop_when(stop);
+    }
     let idle = line::listen_idle(&mut ex, options.listen)?;
     report.push(line::idle_check(&idle));
     let (scans, answering) = line::find_baud(&mut ex, options.baud, &options.ids)?;

@@ -130,6 +130,11 @@ pub(crate) const CHANGES: &[(&str, &str, Needs)] = &[
     ),
     (
         "POST",
+        "/api/v1/buses/{bus}/doctor",
+        Needs::Scope(Scope::Operate),
+    ),
+    (
+        "POST",
         "/api/v1/grasps/{id}/release",
         Needs::Scope(Scope::Operate),
     ),

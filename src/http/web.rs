@@ -33,7 +33,7 @@ macro_rules! script {
 }
 
 /// (URL path, file name, content type, embedded bytes).
-const ASSETS: [Asset; 13] = [
+const ASSETS: [Asset; 14] = [
     (
         DASHBOARD_PAGE,
         "index.html",
@@ -61,6 +61,7 @@ const ASSETS: [Asset; 13] = [
     script!("grasp.js"),
     script!("recordings.js"),
     script!("ros2.js"),
+    script!("doctor.js"),
     script!("scope.js"),
 ];
 

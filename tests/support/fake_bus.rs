@@ -391,6 +391,12 @@ impl Owner {
                 });
                 let _ = reply.send(r);
             }
+            // A scripted bus has no port to lend.
+            Request::LendPort { reply, .. } => {
+                let _ = reply.send(Err(BusError::WrongState(
+                    "a scripted bus has no port".into(),
+                )));
+            }
         }
     }
 
@@ -454,6 +460,7 @@ fn kind(req: &Request) -> &'static str {
         Request::SetId { .. } => "set_id",
         Request::SetBaud { .. } => "set_baud",
         Request::Scan { .. } => "scan",
+        Request::LendPort { .. } => "lend_port",
     }
 }
 
@@ -472,6 +479,7 @@ fn fail(req: Request, err: BusError) {
         | Request::SetId { reply, .. } => drop(reply.send(Err(err))),
         Request::Scan { reply, .. } => drop(reply.send(Err(err))),
         Request::WriteAll { reply, .. } => drop(reply.send(Err(err))),
+        Request::LendPort { reply, .. } => drop(reply.send(Err(err))),
     }
 }
 

@@ -115,6 +115,15 @@ class Jointd(GraspCalls):
         found = self.request("POST", self._bus(bus) + "/scan", {"first": first, "last": last})
         return cast(List[int], found["found"])
 
+    @operation("doctor")
+    def doctor(self, bus: str, timeout: float = 70.0) -> Dict[str, Any]:
+        """The doctor's report on the bus (`jointd doctor --json`, docs/hardware.md):
+        its port, adapter, line and devices checked, and the config it proposes.
+        The bus lends its port for the run (seconds; polling pauses); refused
+        with a 409 while a joint of the bus is enabled."""
+        return cast(Dict[str, Any], self.request("POST", self._bus(bus) + "/doctor",
+                                                 timeout=timeout))
+
     @operation("frames")
     def frames(self, bus: str, limit: Optional[int] = None) -> schema.FrameLog:
         """The last frames on the wire, both ways (decoded)."""

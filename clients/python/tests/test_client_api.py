@@ -101,3 +101,15 @@ def test_calibration_frames_recordings_and_the_daemon(daemon):
     assert j.hands()["hands"] == []
     with pytest.raises(NotFound):
         j.pose("left", "open")
+
+
+def test_the_doctor_reports_on_a_bus_and_is_refused_while_a_joint_is_enabled(daemon):
+    j = Jointd(daemon.url)
+    j.disable_all("sim0")
+    report = j.doctor("sim0")
+    assert {d["id"] for d in report["devices"]} >= {1, 2, 3}
+    assert "[[bus]]" in report["proposal"]["toml"]
+    j.enable("sim0", 1, wait=True)
+    with pytest.raises(Conflict):
+        j.doctor("sim0")
+    j.disable_all("sim0")

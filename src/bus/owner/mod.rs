@@ -20,6 +20,7 @@ mod confirm;
 mod ctx;
 mod estop;
 mod jobs;
+mod lend;
 mod probe;
 mod scan;
 mod start;
@@ -266,6 +267,7 @@ fn run_request(ctx: &mut Ctx, req: Request) {
         } => answer(reply, write::set_id(ctx, dev_id, new_id), ctx),
         Request::SetBaud { baud, reply } => answer(reply, baud::set_baud(ctx, baud), ctx),
         Request::Scan { first, last, reply } => answer(reply, scan::scan(ctx, first, last), ctx),
+        Request::LendPort { job, reply } => answer(reply, lend::lend(ctx, job), ctx),
     }
 }
 

@@ -10,7 +10,7 @@
 //!   [`estop`], [`health`], [`moves`] (paths generated in the daemon),
 //!   [`hands`] (named hands), [`poses`] (their poses), [`calibration`] (joint
 //!   offsets, directions, ranges), [`homing`] (finding hard stops),
-//!   [`grasp`] (closing a hand on an object),
+//!   [`grasp`] (closing a hand on an object), [`doctor`] (a bus's port checked),
 //!   [`recordings`] (MCAP files), [`ros2`] (the bridge's counters): one
 //!   router per area.
 //! - [`openapi`]: the document's head, the shared failure responses, the docs page.
@@ -25,6 +25,7 @@ pub(crate) mod config_params;
 pub(crate) mod config_schema;
 pub(crate) mod control;
 pub(crate) mod devices;
+pub(crate) mod doctor;
 pub(crate) mod estop;
 pub(crate) mod grasp;
 pub(crate) mod hands;
@@ -47,6 +48,7 @@ pub fn router() -> OpenApiRouter<AppState> {
         .merge(health::router())
         .merge(caller::router())
         .merge(buses::router())
+        .merge(doctor::router())
         .merge(devices::router())
         .merge(control::router())
         .merge(config::router())

@@ -37,6 +37,9 @@ pub(crate) struct Ctx {
     /// The port was open at least once: something on it may be enabled.
     ever_up: bool,
     port_notes: Vec<String>,
+    /// The adapter the bus plans for and how it was found, once the port
+    /// reported one.
+    adapter_info: Option<crate::transport::adapter::AdapterInfo>,
     /// What starting the thread found worth telling (no real-time priority).
     thread_notes: Vec<String>,
     /// A request taken from the queue, waiting for its slot.
@@ -69,6 +72,7 @@ impl Ctx {
             link_state: LinkState::Opening,
             ever_up: false,
             port_notes: Vec::new(),
+            adapter_info: None,
             thread_notes: Vec::new(),
             held: None,
             next_motion_sample: now,

@@ -136,6 +136,11 @@ impl Ctx {
         };
         self.sched.set_adapter(model);
         self.link.packets.set_payload(model.packet_payload());
+        self.adapter_info = Some(AdapterInfo {
+            model,
+            found_by: why.clone(),
+            ..info.clone()
+        });
         let mut text = format!("adapter {model} ({why})");
         let mut warn = false;
         if let Some(timer) = model
@@ -197,6 +202,32 @@ impl Ctx {
 
     /// Switches the port to `baud` once every host frame queued has left
     /// (it would go out at the wrong speed); frames take another time from now.
+    /// The port's path as configured.
+    pub(crate) fn path(&self) -> &std::path::Path {
+        &self.cfg.path
+    }
+
+    /// The adapter the bus plans for, once the port reported one.
+    pub(crate) fn adapter_info(&self) -> Option<&AdapterInfo> {
+        self.adapter_info.as_ref()
+    }
+
+    /// What opening the port reported.
+    pub(crate) fn port_notes(&self) -> &[String] {
+        &self.port_notes
+    }
+
+    /// Runs `f` on the open port (a lent port: [`crate::bus::loan`]).
+    pub(crate) fn with_port(&mut self, f: impl FnOnce(&mut dyn crate::transport::Transport)) {
+        self.link.with_port(f);
+    }
+
+    /// The line was used by someone else: it is modelled free from `now`,
+    /// the frame clock learnt again, and the scheduler listens before writing.
+    pub(crate) fn relisten(&mut self, now: Instant) {
+        self.sched.link_up(now);
+    }
+
     pub(crate) fn switch_port(&mut self, baud: u32) -> Result<(), BusError> {
         self.wait_until(self.sched.clock().free_at())?;
         self.link.set_baud(baud).map_err(|e| self.lost(e))?;
