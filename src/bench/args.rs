@@ -105,6 +105,11 @@ pub struct BenchArgs {
     /// its guard ladder.
     #[arg(long)]
     pub no_confirm: bool,
+    /// Hold the doctor to its word: `jointd doctor` examines the simulated
+    /// bus, the bus then runs the config it proposed under the load, and
+    /// the rates measured must be within 5 % of the ones it predicted.
+    #[arg(long)]
+    pub doctor: bool,
 }
 
 #[derive(Debug, Error)]

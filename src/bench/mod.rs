@@ -15,6 +15,7 @@
 //! - `report_rows`: the printout's rows (results, the adapter's bound, where the wire time went).
 //! - `moves`: `--moves`: back-to-back moves generated in the daemon.
 //! - `grasp`: `--grasp`: grasps on the simulator's objects and in free air.
+//! - `doctor`: `--doctor`: the doctor's proposed config run, its rates held to its prediction.
 //! - `grasp_modes`: `--grasp-modes` (and after `--grasp`): position mode
 //!   against current mode on the joint physics.
 
@@ -22,6 +23,7 @@ pub mod analysis;
 mod args;
 pub mod client;
 pub mod cpu;
+mod doctor;
 mod grasp;
 mod grasp_modes;
 mod moves;
@@ -68,6 +70,9 @@ pub fn run(args: &BenchArgs) -> Result<bool, BenchError> {
     }
     if args.ws {
         return ws::run(args);
+    }
+    if args.doctor {
+        return doctor::run(args);
     }
     if args.moves {
         return moves::run(args);
@@ -184,6 +189,19 @@ const MIN_SPLIT_GAIN: f64 = 1.95;
 fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
     let ids: Vec<u8> = (1..=args.joints).collect();
     let (sim, bus, thread) = setup(args, baud, &ids)?;
+    measured(args, baud, &ids, sim, bus, thread)
+}
+
+/// The load run on a rig already up (every joint running), measured; the
+/// rig stopped after.
+fn measured(
+    args: &BenchArgs,
+    baud: u32,
+    ids: &[u8],
+    sim: SimHandle,
+    bus: BusHandle,
+    thread: crate::bus::BusThread,
+) -> Result<Report, BenchError> {
     let probe = match args.pty_lag {
         true if args.no_rt => Some(pty_lag::PtyLagProbe::start((0, 0))?),
         true => Some(pty_lag::PtyLagProbe::start((

@@ -2,6 +2,7 @@
 //! would be (every joint online, enabled, aligned), the referee at
 //! real-time priority, and the CPU the threads used.
 
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use super::args::{BenchArgs, BenchError, SIM_THREAD};
@@ -13,6 +14,7 @@ use crate::bus::{
 };
 use crate::protocol::status::fsm;
 use crate::sim::{AdapterModel, SimConfig, SimHandle, SimStats, Simulator, WriteDelay};
+use crate::transport::memory::MemoryPort;
 
 /// Real-time priorities of the bench's threads (the owner's is its config default).
 pub(crate) const SIM_PRIORITY: u8 = 30;
@@ -65,13 +67,34 @@ pub(crate) fn setup_with(
     ids: &[u8],
     tweak: impl FnOnce(&mut SimConfig),
 ) -> Result<(SimHandle, BusHandle, BusThread), BenchError> {
+    let line = spawn_sim(args, baud, ids, tweak)?;
+    let cfg = bench_config(args, baud, ids, &line)?;
+    start_bus(args, line, cfg, ids)
+}
+
+/// The simulated bus and how the owner reaches it.
+pub(crate) struct SimLine {
+    pub sim: SimHandle,
+    /// The in-memory pipe's host end; `None` on a pty.
+    pub host: Option<MemoryPort>,
+    /// The pty's path, or the memory line's name.
+    pub path: PathBuf,
+}
+
+/// The simulator for `args` (its adapter model, turnaround, line), the
+/// referee at real-time priority unless `--no-rt`.
+pub(crate) fn spawn_sim(
+    args: &BenchArgs,
+    baud: u32,
+    ids: &[u8],
+    tweak: impl FnOnce(&mut SimConfig),
+) -> Result<SimLine, BenchError> {
     let mut sim_cfg = SimConfig::new(ids.to_vec(), baud);
     tweak(&mut sim_cfg);
     sim_cfg.align_time = ALIGN;
     sim_cfg.turnaround = Duration::from_micros(args.turnaround_us);
-    let adapter = adapter_of(args)?;
-    sim_cfg.adapter = adapter;
-    let (sim, memory) = match args.line.as_deref() {
+    sim_cfg.adapter = adapter_of(args)?;
+    let (sim, host) = match args.line.as_deref() {
         Some("memory") => {
             let (sim, host) = Simulator::spawn_memory(sim_cfg)?;
             (sim, Some(host))
@@ -82,19 +105,26 @@ pub(crate) fn setup_with(
     if !args.no_rt {
         referee_realtime()?;
     }
-    let path = match &memory {
-        Some(_) => std::path::PathBuf::from(crate::sim::MEMORY_LINE_PATH),
+    let path = match &host {
+        Some(_) => PathBuf::from(crate::sim::MEMORY_LINE_PATH),
         None => sim
             .device_path()
             .ok_or_else(|| BenchError::Setup("the simulator has no pty path".into()))?,
     };
-    let mut cfg = BusConfig::new("bench", path, baud);
+    Ok(SimLine { sim, host, path })
+}
+
+/// The bench's bus config: the flags' adapter, timing and poll plan.
+fn bench_config(
+    args: &BenchArgs,
+    baud: u32,
+    ids: &[u8],
+    line: &SimLine,
+) -> Result<BusConfig, BenchError> {
+    let mut cfg = BusConfig::new("bench", line.path.clone(), baud);
     cfg.ids = ids.to_vec();
-    cfg.adapter = AdapterSetting::Fixed(adapter);
+    cfg.adapter = AdapterSetting::Fixed(adapter_of(args)?);
     cfg.timing.turnaround_us = args.turnaround_us;
-    if args.no_rt {
-        cfg.timing.rt_priority = 0;
-    }
     if args.no_confirm {
         cfg.timing.usb_confirm = false;
     }
@@ -104,7 +134,22 @@ pub(crate) fn setup_with(
     if let Some(share) = args.control_share {
         cfg.poll.control_share = share;
     }
-    let (bus, thread) = match (memory, sim.pty_opener(cfg.rs485)) {
+    Ok(cfg)
+}
+
+/// The bus owner with `cfg` on `line`; every joint online, enabled and
+/// aligned.
+pub(crate) fn start_bus(
+    args: &BenchArgs,
+    line: SimLine,
+    mut cfg: BusConfig,
+    ids: &[u8],
+) -> Result<(SimHandle, BusHandle, BusThread), BenchError> {
+    if args.no_rt {
+        cfg.timing.rt_priority = 0;
+    }
+    let SimLine { sim, host, .. } = line;
+    let (bus, thread) = match (host, sim.pty_opener(cfg.rs485)) {
         (Some(host), _) => spawn_bus_on(cfg, Box::new(host))?,
         (None, Some(opener)) => spawn_bus_with(cfg, opener)?,
         (None, None) => return Err(BenchError::Setup("the simulator has no pty".into())),
