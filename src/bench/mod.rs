@@ -210,7 +210,7 @@ fn measured(
         ))?),
         false => None,
     };
-    let run = measure(args, &sim, &bus, &ids)?;
+    let run = measure(args, &sim, &bus, ids)?;
     let pty_lag = probe.map(pty_lag::PtyLagProbe::finish).transpose()?;
     if args.show_collisions {
         crate::sim::collision_context(&run.log)
@@ -243,7 +243,7 @@ fn measured(
             .host_writes_slipped
             .saturating_sub(s0.host_writes_slipped),
         pipeline: snapshot.usb_pipeline.clone(),
-        analysis: analysis::analyse(&run.log, &run.writes, &ids, s0.at, s1.at),
+        analysis: analysis::analyse(&run.log, &run.writes, ids, s0.at, s1.at),
         cpu_owner: share(0),
         cpu_sim: share(1),
         cpu_client: share(2),
