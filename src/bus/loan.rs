@@ -22,6 +22,9 @@ pub struct PortLoan {
     pub notes: Vec<String>,
     /// The ids the bus knows.
     pub ids: Vec<u8>,
+    /// How long past its modelled time the bus waits for a reply
+    /// (`timing.reply_margin_us`).
+    pub reply_margin: std::time::Duration,
     /// True once an e-stop is asked on the bus: the job stops before its
     /// next frame and gives the port back, and the owner runs the e-stop.
     pub estop_asked: Box<dyn Fn() -> bool + Send + Sync>,

@@ -16,13 +16,14 @@ const DOCTOR_WITHIN: Duration = Duration::from_secs(60);
 
 impl Control {
     /// Runs the doctor on bus `bus`'s port: the same report as
-    /// `jointd doctor PATH`, its first baud the bus's.
+    /// `jointd doctor PATH`, its first baud and reply margin the bus's.
     pub(crate) async fn doctor(&self, bus: &str) -> ControlResult<Report> {
         let handle = self.bus(bus)?;
         let report = handle
             .lend_port(DOCTOR_WITHIN, |port, loan| {
                 let options = Options {
                     baud_given: false,
+                    reply_margin: loan.reply_margin,
                     ..Options::new(Some(loan.baud))
                 };
                 doctor::examine_lent(port, loan, &options)

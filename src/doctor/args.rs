@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use clap::Args;
 
-use crate::bus::config::FACTORY_BAUD;
+use crate::bus::config::{Timing, FACTORY_BAUD};
 use crate::protocol::ids::parse_id_list;
 use crate::protocol::BaudLevel;
 
@@ -53,6 +53,10 @@ pub struct Options {
     pub burst: u32,
     pub writes: u32,
     pub listen: Duration,
+    /// How long past its modelled time a reply is waited for: the
+    /// daemon's default (`timing.reply_margin_us`); tests on a loaded
+    /// machine's pty give more.
+    pub reply_margin: Duration,
     /// Where `/sys`, `/dev`, `/proc` and `/etc` are.
     pub roots: Roots,
 }
@@ -68,6 +72,7 @@ impl Options {
             burst: 50,
             writes: 64,
             listen: Duration::from_millis(500),
+            reply_margin: Duration::from_micros(Timing::default().reply_margin_us),
             roots: Roots::default(),
         }
     }

@@ -211,7 +211,11 @@ fn examine_line(
 ) -> io::Result<()> {
     // What a previous program or the open left in the buffer is not ours.
     port.discard_input()?;
-    let mut ex = Exchange::new(port, info.model, &Timing::default());
+    let timing = Timing {
+        reply_margin_us: options.reply_margin.as_micros() as u64,
+        ..Timing::default()
+    };
+    let mut ex = Exchange::new(port, info.model, &timing);
     if let Some(stop) = stop {
         ex.stop_when(stop);
     }

@@ -9,6 +9,7 @@
 //! drop RATE [ID]          extra-turnaround MICROS
 //! write-delay P50,P99[,P99.9],MAX | off     (µs; behind an adapter model)
 //! echo on|off             stuck-count on|off  (the adapter echoes; its count never falls)
+//! noise MILLIS | noise off  (a frame of random bytes to the host every MILLIS ms)
 //! ```
 //! Answers go to stderr (stdout carries only the device path).
 
@@ -21,7 +22,7 @@ pub(crate) const HELP: &str = "commands: unplug | replug | clear | stats | devic
 power-cycle ID | under-voltage ID on|off | stall ID [DEG] | \
 object ID DEG NM_PER_DEG | object ID off | corrupt RATE | \
 drop RATE [ID] | extra-turnaround MICROS | miss-control ID COUNT | \
-write-delay P50,P99[,P99.9],MAX|off | echo on|off | stuck-count on|off";
+write-delay P50,P99[,P99.9],MAX|off | echo on|off | stuck-count on|off | noise MILLIS|off";
 
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum ConsoleCmd {
@@ -85,6 +86,10 @@ pub(crate) fn parse(line: &str) -> Result<ConsoleCmd, String> {
             None => return Err("write-delay P50,P99[,P99.9],MAX | off".into()),
         },
         "echo" => Fault::Echo(on_off(words.next(), "echo on|off")?),
+        "noise" => Fault::Noise(match words.next() {
+            Some("off") => None,
+            w => Some(Duration::from_millis(num(w, "period in ms (or off)")?)),
+        }),
         "stuck-count" => Fault::StuckCount(on_off(words.next(), "stuck-count on|off")?),
         other => return Err(format!("unknown command `{other}`; {HELP}")),
     };
@@ -203,6 +208,17 @@ mod tests {
             Ok(ConsoleCmd::Fault(Fault::StuckCount(false)))
         );
         assert!(parse("echo").is_err());
+        assert_eq!(
+            parse("noise 20"),
+            Ok(ConsoleCmd::Fault(Fault::Noise(Some(
+                Duration::from_millis(20)
+            ))))
+        );
+        assert_eq!(
+            parse("noise off"),
+            Ok(ConsoleCmd::Fault(Fault::Noise(None)))
+        );
+        assert!(parse("noise").is_err());
         assert_eq!(parse("stats"), Ok(ConsoleCmd::Stats));
         assert!(parse("stall x").is_err());
         assert!(parse("explode").is_err());

@@ -97,10 +97,11 @@ impl Engine {
     /// When something next happens on the line.
     pub(crate) fn next_event(&self) -> Option<Instant> {
         let announce = self.devices.iter().filter_map(Device::announce_at).min();
-        match (self.wire.next_event(), announce) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        let noise = self.faults.noise.map(|(_, next)| next);
+        [self.wire.next_event(), announce, noise]
+            .into_iter()
+            .flatten()
+            .min()
     }
 
     /// When bytes are next due at the host (the instant that needs precision).
@@ -139,7 +140,29 @@ impl Engine {
             }
         }
         self.wire.fold(now);
+        if self.noise_due(now, &mut out) {
+            out.sort_by_key(|d| d.due);
+        }
         out
+    }
+
+    /// The noise bursts due by `now` ([`Fault::Noise`]); true if any.
+    fn noise_due(&mut self, now: Instant, out: &mut Vec<Delivery>) -> bool {
+        let Some((every, mut next)) = self.faults.noise else {
+            return false;
+        };
+        let mut any = false;
+        while next <= now {
+            out.push(Delivery {
+                due: next,
+                bytes: noise_frame(&mut self.rng),
+            });
+            self.stats.noise_bursts += 1;
+            next += every;
+            any = true;
+        }
+        self.faults.noise = Some((every, next));
+        any
     }
 
     fn next_announcement(&self, now: Instant) -> Option<(Instant, usize)> {
@@ -358,6 +381,9 @@ impl Engine {
                 self.each(dev_id, |d| d.set_under_voltage(on, now))
             }
             Fault::Echo(on) => self.echo = on,
+            Fault::Noise(every) => {
+                self.faults.noise = every.filter(|e| !e.is_zero()).map(|e| (e, now + e));
+            }
             Fault::ClearAll => {
                 self.faults = LineFaults::default();
                 self.echo = false;

@@ -191,3 +191,22 @@ fn reads_to_all_get_no_answer_and_writes_to_all_answer_together() {
     assert!(reply_of(&out[0]).is_none(), "two RES at once collide");
     assert_eq!(e.stats(t2).collisions, 1);
 }
+
+#[test]
+fn noise_reaches_the_host_every_period_in_time_order_until_stopped() {
+    let (mut e, t) = booted(&[1]);
+    let every = Duration::from_millis(2);
+    e.inject(Fault::Noise(Some(every)), t);
+    assert_eq!(e.next_event(), Some(t + every));
+    send(&mut e, t + Duration::from_micros(2500), &[read(1)]);
+    let out = e.advance(t + Duration::from_millis(5), Some(BAUD));
+    let dues: Vec<Instant> = out.iter().map(|d| d.due).collect();
+    let reply_at = t + Duration::from_micros(2500) + 2 * F + T;
+    assert_eq!(dues, vec![t + every, reply_at, t + 2 * every]);
+    assert!(reply_of(&out[0]).is_none() && reply_of(&out[1]).is_some());
+    assert_eq!(e.stats(t).noise_bursts, 2);
+    e.inject(Fault::Noise(None), t + Duration::from_millis(5));
+    assert!(e
+        .advance(t + Duration::from_millis(50), Some(BAUD))
+        .is_empty());
+}

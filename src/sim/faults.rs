@@ -2,7 +2,7 @@
 //! line-level ones' state (corruption, dropped replies, extra turnaround).
 
 use std::collections::BTreeMap;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use crate::protocol::FrameBytes;
 
@@ -64,6 +64,10 @@ pub enum Fault {
     /// The adapter's driver count (`TIOCOUTQ`) never falls (`true`), or
     /// counts again. Only behind an adapter model.
     StuckCount(bool),
+    /// Noise on the line (a motor lead beside an unshielded pair, a
+    /// missing termination): a frame's worth of random bytes reaches the
+    /// host every period, whether or not anyone was asked; `None` stops it.
+    Noise(Option<Duration>),
     /// Every fault off, obstacles and objects removed, voltage restored, line plugged,
     /// writes on time, no echo, a count that falls.
     ClearAll,
@@ -72,6 +76,8 @@ pub enum Fault {
 /// Line-level fault settings.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct LineFaults {
+    /// [`Fault::Noise`]: its period and when its next burst is due.
+    pub noise: Option<(Duration, Instant)>,
     pub corrupt_rate: f64,
     /// Drop rate per device id; `None` is every device.
     pub drop_rates: BTreeMap<Option<u8>, f64>,

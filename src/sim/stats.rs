@@ -53,6 +53,8 @@ pub struct SimStats {
     /// Replies and announcements delivered intact.
     pub replies: u64,
     pub announcements: u64,
+    /// Noise bursts handed to the host ([`super::Fault::Noise`]).
+    pub noise_bursts: u64,
     /// Bad-CRC candidates in the host's byte stream, plus host frames the
     /// corruption fault garbled on the line.
     pub crc_errors: u64,
@@ -97,6 +99,7 @@ impl SimStats {
             kinds: FrameKinds::default(),
             replies: 0,
             announcements: 0,
+            noise_bursts: 0,
             crc_errors: 0,
             skipped_bytes: 0,
             collisions: 0,

@@ -50,6 +50,7 @@ fn loan_of(ctx: &Ctx) -> PortLoan {
             .unwrap_or_else(|| configured(ctx.sched().clock().adapter())),
         notes: ctx.port_notes().to_vec(),
         ids: ctx.sched().registry().ids(),
+        reply_margin: std::time::Duration::from_micros(ctx.reply_margin_us()),
         estop_asked: Box::new(move || {
             shared
                 .estop_generation

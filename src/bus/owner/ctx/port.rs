@@ -202,6 +202,11 @@ impl Ctx {
 
     /// Switches the port to `baud` once every host frame queued has left
     /// (it would go out at the wrong speed); frames take another time from now.
+    /// How long past its modelled time a reply is waited for, as configured.
+    pub(crate) fn reply_margin_us(&self) -> u64 {
+        self.cfg.timing.reply_margin_us
+    }
+
     /// The port's path as configured.
     pub(crate) fn path(&self) -> &std::path::Path {
         &self.cfg.path
