@@ -127,3 +127,73 @@ async fn an_estop_stops_the_doctor_at_its_next_frame() {
     assert_eq!(r.body["devices"].as_array().map(Vec::len), Some(0));
     only_reads(&b, true);
 }
+
+/// Waits until the doctor's scan reached an id above `known` (ids the bus
+/// itself never polls): the port is lent.
+async fn lent(b: &SimBus, known: u8) {
+    let deadline = std::time::Instant::now() + WAIT;
+    while !b
+        .sim
+        .frame_log()
+        .iter()
+        .any(|f| f.from_host && f.dev_id.is_some_and(|id| id > known))
+    {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the doctor never scanned"
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(2)).await;
+    }
+}
+
+fn client_of(b: &SimBus) -> support::http::Server {
+    support::http::Server {
+        base: b.server.base.clone(),
+        client: b.server.client.clone(),
+        token: b.server.token.clone(),
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_second_check_while_one_runs_is_refused() {
+    let b = start(2, None).await;
+    b.sim.clear_frame_log();
+    let server = client_of(&b);
+    let first = tokio::spawn(async move { server.post_empty(DOCTOR).await });
+    lent(&b, 2).await;
+    let second = b.server.post_empty(DOCTOR).await;
+    assert_eq!(second.status, 409, "{}", second.body);
+    assert!(
+        second.body["detail"]
+            .as_str()
+            .is_some_and(|d| d.contains("being checked already")),
+        "{}",
+        second.body
+    );
+    let first = first.await.expect("the first call");
+    assert_eq!(first.status, 200, "{}", first.body);
+    // Once it ended, another may run.
+    let again = b.server.post_empty(DOCTOR).await;
+    assert_eq!(again.status, 200, "{}", again.body);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stopping_the_bus_stops_the_check_and_the_owner_ends() {
+    let mut b = start(2, None).await;
+    b.sim.clear_frame_log();
+    let server = client_of(&b);
+    let run = tokio::spawn(async move { server.post_empty(DOCTOR).await });
+    lent(&b, 2).await;
+    let thread = b.thread.take().expect("the bus thread");
+    tokio::task::spawn_blocking(move || thread.stop())
+        .await
+        .expect("the owner stopped");
+    let r = run.await.expect("the doctor's call");
+    assert_eq!(r.status, 200, "{}", r.body);
+    let stopped = r.body["checks"].as_array().and_then(|checks| {
+        checks.iter().find(|c| {
+            c["verdict"] == "fail" && c["found"].as_str().is_some_and(|s| s.contains("stopping"))
+        })
+    });
+    assert!(stopped.is_some(), "{}", r.body);
+}

@@ -120,7 +120,7 @@ fn examine(args: &BenchArgs, line: &mut SimLine, baud: u32) -> Result<doctor::Re
                 notes: Vec::new(),
                 ids: Vec::new(),
                 reply_margin: options.reply_margin,
-                estop_asked: Box::new(|| false),
+                stop_asked: Box::new(|| false),
             };
             Ok(doctor::examine_lent(host, &loan, &options))
         }

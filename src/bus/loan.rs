@@ -25,9 +25,10 @@ pub struct PortLoan {
     /// How long past its modelled time the bus waits for a reply
     /// (`timing.reply_margin_us`).
     pub reply_margin: std::time::Duration,
-    /// True once an e-stop is asked on the bus: the job stops before its
-    /// next frame and gives the port back, and the owner runs the e-stop.
-    pub estop_asked: Box<dyn Fn() -> bool + Send + Sync>,
+    /// True once an e-stop is asked on the bus or the bus is stopping:
+    /// the job stops before its next frame and gives the port back, and
+    /// the owner runs the e-stop or its shutdown.
+    pub stop_asked: Box<dyn Fn() -> bool + Send + Sync>,
 }
 
 impl fmt::Debug for PortLoan {

@@ -46,6 +46,8 @@ pub struct Control {
     recordings: recordings::RecordingBook,
     streams: Arc<streams::StreamBook>,
     audit: Audit,
+    /// Buses whose port is lent to the doctor now: one check at a time.
+    pub(in crate::control) doctoring: std::sync::Mutex<std::collections::BTreeSet<String>>,
 }
 
 impl Control {
@@ -63,6 +65,7 @@ impl Control {
             recordings: Default::default(),
             streams: Default::default(),
             audit: Audit::default(),
+            doctoring: Default::default(),
         }
     }
 

@@ -166,7 +166,8 @@ pub(crate) struct Exchange<'a> {
     /// The last frames written, to know their echoes however late.
     recent: VecDeque<FrameBytes>,
     /// True when the run must stop (an e-stop on the bus that lent the
-    /// port): checked before each write and while listening.
+    /// port, or that bus stopping): checked before each write and while
+    /// listening.
     stop: Option<&'a (dyn Fn() -> bool + Sync)>,
 }
 
@@ -208,7 +209,7 @@ impl<'a> Exchange<'a> {
         match self.stop {
             Some(stop) if stop() => Err(io::Error::new(
                 io::ErrorKind::Interrupted,
-                "an e-stop was asked on the bus",
+                "an e-stop was asked on the bus, or it is stopping",
             )),
             _ => Ok(()),
         }

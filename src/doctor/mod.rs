@@ -146,7 +146,8 @@ pub fn examine(path: &Path, mut open: Opener, options: &Options) -> Report {
 /// Examines the port of a configured bus, lent by its owner between its
 /// own frames with every joint disabled ([`crate::bus::loan`]): the checks
 /// from the adapter on. The port is the daemon's by design: who holds it
-/// and whether it opens are not asked. An e-stop on the bus stops the run.
+/// and whether it opens are not asked. An e-stop on the bus (or the bus
+/// stopping) stops the run.
 pub fn examine_lent(port: &mut dyn Transport, loan: &PortLoan, options: &Options) -> Report {
     let facts = port::inspect(&loan.path, &options.roots);
     let access = facts
@@ -175,7 +176,7 @@ pub fn examine_lent(port: &mut dyn Transport, loan: &PortLoan, options: &Options
         &loan.adapter,
         loan.notes.clone(),
         options,
-        Some(&*loan.estop_asked),
+        Some(&*loan.stop_asked),
         &mut report,
     );
     if let Err(e) = ran {
@@ -190,7 +191,7 @@ fn run_failed(e: &io::Error) -> Check {
         return Check::fail(
             CheckId::Open,
             format!("stopped before its end: {e}"),
-            "run the check again once the e-stop is dealt with",
+            "run the check again once the e-stop is dealt with (or the daemon is back)",
         );
     }
     Check::fail(

@@ -2,9 +2,11 @@
 //! joint drives its motor (a check of the line must not leave an enabled
 //! joint unwatched); lent with the wire free and every poll answered; taken
 //! back at the bus's baud with its input dropped, the line model listening
-//! again before the next frame. An e-stop asked meanwhile stops the job at
-//! its next frame and runs as soon as the port is back.
+//! again before the next frame. An e-stop asked meanwhile, or the bus
+//! stopping, stops the job at its next frame; the e-stop or the shutdown
+//! runs as soon as the port is back.
 
+use std::sync::atomic::Ordering;
 use std::time::Instant;
 
 use crate::bus::error::BusError;
@@ -39,6 +41,7 @@ pub(super) fn lend(ctx: &mut Ctx, job: PortJob) -> Result<(), BusError> {
 
 fn loan_of(ctx: &Ctx) -> PortLoan {
     let shared = ctx.shared().clone();
+    let stopping = ctx.stopping();
     let at_loan = ctx.estop_generation();
     PortLoan {
         bus: ctx.name().to_string(),
@@ -51,11 +54,9 @@ fn loan_of(ctx: &Ctx) -> PortLoan {
         notes: ctx.port_notes().to_vec(),
         ids: ctx.sched().registry().ids(),
         reply_margin: std::time::Duration::from_micros(ctx.reply_margin_us()),
-        estop_asked: Box::new(move || {
-            shared
-                .estop_generation
-                .load(std::sync::atomic::Ordering::SeqCst)
-                > at_loan
+        stop_asked: Box::new(move || {
+            stopping.load(Ordering::Acquire)
+                || shared.estop_generation.load(Ordering::SeqCst) > at_loan
         }),
     }
 }

@@ -59,7 +59,7 @@ impl Owner {
         link: Link,
     ) -> Self {
         Self {
-            ctx: Ctx::new(cfg, shared, requests, link),
+            ctx: Ctx::new(cfg, shared, requests, link, stop.clone()),
             stop,
         }
     }

@@ -40,6 +40,8 @@ pub(crate) struct Ctx {
     /// The adapter the bus plans for and how it was found, once the port
     /// reported one.
     adapter_info: Option<crate::transport::adapter::AdapterInfo>,
+    /// Set when the owner is to stop ([`crate::bus::BusThread::stop`]).
+    stopping: Arc<std::sync::atomic::AtomicBool>,
     /// What starting the thread found worth telling (no real-time priority).
     thread_notes: Vec<String>,
     /// A request taken from the queue, waiting for its slot.
@@ -60,6 +62,7 @@ impl Ctx {
         shared: Arc<BusShared>,
         requests: Receiver<Request>,
         link: Link,
+        stopping: Arc<std::sync::atomic::AtomicBool>,
     ) -> Self {
         let now = Instant::now();
         Self {
@@ -73,6 +76,7 @@ impl Ctx {
             ever_up: false,
             port_notes: Vec::new(),
             adapter_info: None,
+            stopping,
             thread_notes: Vec::new(),
             held: None,
             next_motion_sample: now,
@@ -102,6 +106,11 @@ impl Ctx {
             self.housekeeping(now);
         }
         slot
+    }
+
+    /// The flag that stops the owner.
+    pub(crate) fn stopping(&self) -> Arc<std::sync::atomic::AtomicBool> {
+        self.stopping.clone()
     }
 
     /// The port was open at least once since the owner started.

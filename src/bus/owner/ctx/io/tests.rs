@@ -36,7 +36,10 @@ fn ctx(tweak: impl FnOnce(&mut BusConfig)) -> (Ctx, MemoryPort) {
     );
     link.open().expect("a memory line opens");
     let (_tx, requests) = std::sync::mpsc::channel();
-    (Ctx::new(cfg, shared, requests, link), dev)
+    (
+        Ctx::new(cfg, shared, requests, link, Default::default()),
+        dev,
+    )
 }
 
 fn read_info02(id: u8) -> (Config, Want) {
