@@ -14,7 +14,7 @@ pub(crate) const DOCS_PATH: &str = "/docs";
 pub(crate) const DASHBOARD_PAGE: &str = "/";
 pub(crate) const DASHBOARD_INDEX: &str = "/index.html";
 pub(crate) const DASHBOARD_STYLE: &str = "/style.css";
-pub(crate) const DASHBOARD_SCRIPTS: [&str; 10] = [
+pub(crate) const DASHBOARD_SCRIPTS: [&str; 11] = [
     "/app.js",
     "/api.js",
     "/moves.js",
@@ -25,6 +25,7 @@ pub(crate) const DASHBOARD_SCRIPTS: [&str; 10] = [
     "/recordings.js",
     "/ros2.js",
     "/scope.js",
+    "/doctor.js",
 ];
 const DASHBOARD: [&str; 3] = [DASHBOARD_PAGE, DASHBOARD_INDEX, DASHBOARD_STYLE];
 
