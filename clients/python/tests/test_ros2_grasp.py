@@ -119,8 +119,13 @@ def enable(api, client):
 def test_a_gripper_command_grasps_and_the_services_end_it(hand):
     d, client = hand
     api = d.url + "/api/v1"
-    tokens = [str(r.ok.key_expr).split("/") for r in client.liveliness().get("@ros2_lv/**")]
-    endpoints = {(p[5], p[9]): (p[10], p[11]) for p in tokens if len(p) > 11}
+    def endpoints():
+        tokens = [str(r.ok.key_expr).split("/") for r in client.liveliness().get("@ros2_lv/**")]
+        return {(p[5], p[9]): (p[10], p[11]) for p in tokens if len(p) > 11}
+
+    # Declared once the bridge is connected: on a loaded host, after the API answers.
+    endpoints = wait_for("the hand's grasp endpoints declared",
+                         lambda: (lambda e: e if ("MP", "%right%grasp_state") in e else None)(endpoints()))
     assert endpoints[("MS", "%right%gripper_command")] == (dds_name(GRIPPER), TS.hash_rihs01(GRIPPER)), endpoints
     assert endpoints[("MP", "%right%grasp_state")] == (dds_name(DIAGNOSTICS), TS.hash_rihs01(DIAGNOSTICS))
     for service in ("grasp_release", "grasp_stop", "estop"):

@@ -85,10 +85,17 @@ def states(api):
 def test_enable_and_estop_services(ros2):
     d, client = ros2
     api = d.url + "/api/v1"
-    tokens = [str(r.ok.key_expr).split("/") for r in client.liveliness().get("@ros2_lv/**")]
-    servers = {(p[9], p[10], p[11]) for p in tokens if p[5] == "SS"}
-    assert servers == {("%sim0%enable", dds_name(SET_BOOL[0]), SET_BOOL[1]),
-                       ("%sim0%estop", dds_name(TRIGGER[0]), TRIGGER[1])}, tokens
+    expected = {("%sim0%enable", dds_name(SET_BOOL[0]), SET_BOOL[1]),
+                ("%sim0%estop", dds_name(TRIGGER[0]), TRIGGER[1])}
+
+    def servers():
+        tokens = [str(r.ok.key_expr).split("/") for r in client.liveliness().get("@ros2_lv/**")]
+        return {(p[9], p[10], p[11]) for p in tokens if p[5] == "SS"}
+
+    # The bridge declares its services once it is connected: on a loaded
+    # host, after the daemon answers its API.
+    wait_for("the bridge's services declared", lambda: servers() == expected or None)
+    assert servers() == expected
     assert states(api) != ["run"] * 4
 
     ok, message, attachment = call_service(client, "/sim0/enable", SET_BOOL, b"\x01", 7)
