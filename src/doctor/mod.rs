@@ -95,14 +95,7 @@ pub fn run(args: &DoctorArgs) -> u8 {
 /// Examines the port at `path`, opened with `open` (a simulator's pty
 /// opener in tests), and reports.
 pub fn examine(path: &Path, mut open: Opener, options: &Options) -> Report {
-    let facts = port::inspect(path, &options.roots);
-    let access = facts
-        .device
-        .as_deref()
-        .map_or_else(AccessFacts::default, |d| access::inspect(d, &options.roots));
-    let mut report = Report::new(options.baud, facts.clone(), access.clone());
-    report.push(port::kind_check(&facts));
-    report.push(port::stable_path_check(&facts));
+    let (mut report, facts, access) = port_report(path, options);
     let holders = access::holders_check(&facts, &access);
     if holders.verdict == Verdict::Fail {
         report.push(holders);
@@ -149,14 +142,7 @@ pub fn examine(path: &Path, mut open: Opener, options: &Options) -> Report {
 /// and whether it opens are not asked. An e-stop on the bus (or the bus
 /// stopping) stops the run.
 pub fn examine_lent(port: &mut dyn Transport, loan: &PortLoan, options: &Options) -> Report {
-    let facts = port::inspect(&loan.path, &options.roots);
-    let access = facts
-        .device
-        .as_deref()
-        .map_or_else(AccessFacts::default, |d| access::inspect(d, &options.roots));
-    let mut report = Report::new(options.baud, facts.clone(), access);
-    report.push(port::kind_check(&facts));
-    report.push(port::stable_path_check(&facts));
+    let (mut report, facts, _) = port_report(&loan.path, options);
     report.push(Check::ok(
         CheckId::Open,
         format!(
@@ -183,6 +169,20 @@ pub fn examine_lent(port: &mut dyn Transport, loan: &PortLoan, options: &Options
         report.push(run_failed(&e));
     }
     report
+}
+
+/// Step 1 of the run order, shared by both runs: what the port is, who
+/// may open it, and the report begun with their checks.
+fn port_report(path: &Path, options: &Options) -> (Report, PortFacts, AccessFacts) {
+    let facts = port::inspect(path, &options.roots);
+    let access = facts
+        .device
+        .as_deref()
+        .map_or_else(AccessFacts::default, |d| access::inspect(d, &options.roots));
+    let mut report = Report::new(options.baud, facts.clone(), access.clone());
+    report.push(port::kind_check(&facts));
+    report.push(port::stable_path_check(&facts));
+    (report, facts, access)
 }
 
 /// The run ended early: the port failed, or an e-stop stopped it.
