@@ -192,6 +192,19 @@ fn workload(args: &BenchArgs, baud: u32) -> Result<Report, BenchError> {
     measured(args, baud, &ids, sim, bus, thread)
 }
 
+/// The pty's own read lag, probed beside the run when asked, at the
+/// client's and simulator's priorities (none with `--no-rt`).
+fn pty_lag_probe(args: &BenchArgs) -> Result<Option<pty_lag::PtyLagProbe>, BenchError> {
+    if !args.pty_lag {
+        return Ok(None);
+    }
+    let priorities = match args.no_rt {
+        true => (0, 0),
+        false => (CLIENT_PRIORITY, SIM_PRIORITY),
+    };
+    Ok(Some(pty_lag::PtyLagProbe::start(priorities)?))
+}
+
 /// The load run on a rig already up (every joint running), measured; the
 /// rig stopped after.
 fn measured(
@@ -202,14 +215,7 @@ fn measured(
     bus: BusHandle,
     thread: crate::bus::BusThread,
 ) -> Result<Report, BenchError> {
-    let probe = match args.pty_lag {
-        true if args.no_rt => Some(pty_lag::PtyLagProbe::start((0, 0))?),
-        true => Some(pty_lag::PtyLagProbe::start((
-            CLIENT_PRIORITY,
-            SIM_PRIORITY,
-        ))?),
-        false => None,
-    };
+    let probe = pty_lag_probe(args)?;
     let run = measure(args, &sim, &bus, ids)?;
     let pty_lag = probe.map(pty_lag::PtyLagProbe::finish).transpose()?;
     if args.show_collisions {

@@ -11,7 +11,7 @@ use crate::protocol::{BaudLevel, Command, Frame, FrameBytes, StreamDecoder, ALL_
 
 use super::config::{SimConfig, SimError};
 use super::device::Device;
-use super::faults::{collide, misframed, noise_frame, Fault, LineFaults};
+use super::faults::{collide, misframed, noise_frame, LineFaults};
 use super::host_side::HostSide;
 use super::log::{addressed_id, FrameLog, WireFrame};
 use super::params::{FlashImage, FlashStore, Params};
@@ -19,6 +19,8 @@ use super::rng::Rng;
 use super::stats::SimStats;
 use super::view::DeviceView;
 use super::wire::{frame_time, DeviceTx, HostTx, Wire, WireEvent};
+
+mod inject;
 
 /// Devices' physics is run at least this often, so no observer or frame
 /// ever has to integrate a long idle stretch while holding the lock.
@@ -146,7 +148,7 @@ impl Engine {
         out
     }
 
-    /// The noise bursts due by `now` ([`Fault::Noise`]); true if any.
+    /// The noise bursts due by `now` ([`Fault::Noise`](super::faults::Fault::Noise)); true if any.
     fn noise_due(&mut self, now: Instant, out: &mut Vec<Delivery>) -> bool {
         let Some((every, mut next)) = self.faults.noise else {
             return false;
@@ -358,47 +360,6 @@ impl Engine {
 
     pub(crate) fn clear_frame_log(&mut self) {
         self.log.clear();
-    }
-
-    /// Applies a device or line fault (unplugging itself is the runner's job).
-    pub(crate) fn inject(&mut self, fault: Fault, now: Instant) {
-        match fault {
-            Fault::CorruptRate(r) => self.faults.corrupt_rate = r.clamp(0.0, 1.0),
-            Fault::DropReplies { dev_id, rate } => self.faults.set_drop(dev_id, rate),
-            Fault::ExtraTurnaround(d) => self.faults.extra_turnaround = d,
-            Fault::MissControl { dev_id, count } => {
-                self.faults.miss_control.insert(dev_id, count);
-            }
-            Fault::Stall { dev_id, at_deg } => self.each(dev_id, |d| d.set_obstacle(at_deg, now)),
-            Fault::Object {
-                dev_id,
-                at_deg,
-                nm_per_deg,
-            } => self.each(dev_id, |d| d.set_object(at_deg, nm_per_deg, now)),
-            Fault::RemoveObject { dev_id } => self.each(dev_id, |d| d.remove_object(now)),
-            Fault::PowerCycle { dev_id } => self.each(dev_id, |d| d.power_up(now, Duration::ZERO)),
-            Fault::UnderVoltage { dev_id, on } => {
-                self.each(dev_id, |d| d.set_under_voltage(on, now))
-            }
-            Fault::Echo(on) => self.echo = on,
-            Fault::Noise(every) => {
-                self.faults.noise = every.filter(|e| !e.is_zero()).map(|e| (e, now + e));
-            }
-            Fault::ClearAll => {
-                self.faults = LineFaults::default();
-                self.echo = false;
-                for d in &mut self.devices {
-                    d.clear_obstacle(now);
-                    d.remove_object(now);
-                    d.set_under_voltage(false, now);
-                }
-            }
-            Fault::Unplug | Fault::Replug | Fault::WriteDelay(_) | Fault::StuckCount(_) => {}
-        }
-    }
-
-    fn each(&mut self, id: u8, f: impl FnMut(&mut Device)) {
-        self.devices.iter_mut().filter(|d| d.id == id).for_each(f);
     }
 
     /// The line was unplugged (in-flight frames are lost) or plugged back.

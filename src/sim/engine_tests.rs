@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 use super::*;
 use crate::protocol::status::fsm;
 use crate::protocol::{BroadcastPos, Config, Control, Group, InfoBlock, Message, Reply};
+use crate::sim::faults::Fault;
 
 const BAUD: u32 = 500_000;
 const F: Duration = Duration::from_micros(400);

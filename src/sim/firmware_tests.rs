@@ -12,6 +12,7 @@ use crate::protocol::{
     BroadcastEnable, Config, ConfigParam, Control, ControlOp, CrcCoverage, CtrlMode, InfoBlock,
     Message, Reply, ReplyBody, VendorCommand, ALL_DEVICES,
 };
+use crate::sim::faults::Fault;
 use crate::sim::firmware::{default_serial, Firmware, START_TIME, STOP_TIME};
 
 const BAUD: u32 = 500_000;

@@ -147,29 +147,7 @@ impl Ctx {
             .latency_timer()
             .filter(|t| *t > Duration::from_millis(1))
         {
-            let with_1ms = match model {
-                AdapterModel::Ft232h { .. } => AdapterModel::Ft232h { latency_ms: 1 },
-                _ => AdapterModel::Ftdi { latency_ms: 1 },
-            };
-            let now = self.sched.clock().transaction_time();
-            let fast = self.sched.clock().transaction_time_with(with_1ms);
-            let speedup = now.as_secs_f64() / fast.as_secs_f64().max(1e-6);
-            let name = self
-                .cfg
-                .path
-                .file_name()
-                .map_or_else(|| "ttyUSB0".into(), |n| n.to_string_lossy().into_owned());
-            text = format!(
-                "{text}: its latency timer holds every reply {} ms. Polls keep their rate once \
-                 they are pipelined (after the first replies show the USB frame clock), but each \
-                 telemetry sample reaches the host that much older, and each one-shot transaction \
-                 (enable, a config read or write) takes {:.1} ms; at 1 ms it would take {:.1} ms \
-                 ({speedup:.1}x faster). Fix: echo 1 | sudo tee \
-                 /sys/bus/usb-serial/devices/{name}/latency_timer (or the udev rule in deploy/)",
-                timer.as_millis(),
-                now.as_secs_f64() * 1e3,
-                fast.as_secs_f64() * 1e3,
-            );
+            text = format!("{text}: {}", self.timer_cost(model, timer));
             warn = true;
         }
         // A simulator behind the pty that says when its adapter model took
@@ -192,6 +170,34 @@ impl Ctx {
         }
         text
     }
+
+    /// What a latency timer above 1 ms costs each transaction on this bus,
+    /// against the same adapter at 1 ms, and how to set it.
+    fn timer_cost(&self, model: AdapterModel, timer: Duration) -> String {
+        let with_1ms = match model {
+            AdapterModel::Ft232h { .. } => AdapterModel::Ft232h { latency_ms: 1 },
+            _ => AdapterModel::Ftdi { latency_ms: 1 },
+        };
+        let now = self.sched.clock().transaction_time();
+        let fast = self.sched.clock().transaction_time_with(with_1ms);
+        let speedup = now.as_secs_f64() / fast.as_secs_f64().max(1e-6);
+        let name = self
+            .cfg
+            .path
+            .file_name()
+            .map_or_else(|| "ttyUSB0".into(), |n| n.to_string_lossy().into_owned());
+        format!(
+            "its latency timer holds every reply {} ms. Polls keep their rate once they are \
+             pipelined (after the first replies show the USB frame clock), but each telemetry \
+             sample reaches the host that much older, and each one-shot transaction (enable, a \
+             config read or write) takes {:.1} ms; at 1 ms it would take {:.1} ms ({speedup:.1}x \
+             faster). Fix: echo 1 | sudo tee /sys/bus/usb-serial/devices/{name}/latency_timer \
+             (or the udev rule in deploy/)",
+            timer.as_millis(),
+            now.as_secs_f64() * 1e3,
+            fast.as_secs_f64() * 1e3,
+        )
+    }
 }
 
 impl Ctx {
@@ -200,8 +206,6 @@ impl Ctx {
         self.link.baud()
     }
 
-    /// Switches the port to `baud` once every host frame queued has left
-    /// (it would go out at the wrong speed); frames take another time from now.
     /// How long past its modelled time a reply is waited for, as configured.
     pub(crate) fn reply_margin_us(&self) -> u64 {
         self.cfg.timing.reply_margin_us
