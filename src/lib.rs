@@ -113,3 +113,5 @@ pub mod transport;
 
 #[cfg(test)]
 mod params_reach;
+#[cfg(test)]
+mod test_dir;

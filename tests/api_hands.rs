@@ -11,6 +11,7 @@ use serde_json::{json, Value};
 
 mod support;
 use support::daemon::{Daemon, WAIT};
+use support::tmp::TestDir;
 
 /// `jointd --sim 4` with `config`.
 fn start(config: &std::path::Path) -> Daemon {
@@ -344,9 +345,7 @@ fn a_streaming_client_is_shown_on_its_hand_until_its_streams_end() {
     use futures_util::{SinkExt, StreamExt};
     use tokio_tungstenite::tungstenite::Message;
 
-    let dir = std::env::temp_dir().join(format!("jointd-hands-stream-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = TestDir::new("hands-stream");
     let config = dir.join("jointd.toml");
     std::fs::write(
         &config,

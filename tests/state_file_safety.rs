@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::{json, Value};
 use support::http::Server;
+use support::tmp::TestDir;
 
 const BIN: &str = env!("CARGO_BIN_EXE_jointd");
 const WAIT: Duration = Duration::from_secs(20);
@@ -34,6 +35,8 @@ impl Daemon {
             .arg("--config")
             .arg(config)
             .env("RUST_LOG", "info")
+            // The simulator's pty link goes in the test's dir, removed with it.
+            .env("TMPDIR", config.parent().expect("the config's dir"))
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
@@ -112,10 +115,9 @@ impl Drop for Daemon {
 }
 
 /// A fresh directory with a config of one hand on the simulated bus and its
-/// state directory; returns (config path, state directory).
-fn setup(name: &str) -> (PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("jointd-safety-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+/// state directory; returns (the directory, config path, state directory).
+fn setup(name: &str) -> (TestDir, PathBuf, PathBuf) {
+    let dir = TestDir::new(&format!("safety-{name}"));
     let state = dir.join("state");
     std::fs::create_dir_all(&state).unwrap();
     let config = dir.join("jointd.toml");
@@ -132,7 +134,7 @@ joints = [{{ bus = "sim0", ids = "1-3", names = ["thumb", "index", "middle"] }}]
         ),
     )
     .unwrap();
-    (config, state)
+    (dir, config, state)
 }
 
 /// The files of `dir` whose names start with `prefix`.
@@ -160,7 +162,7 @@ const GOOD_STATE: &str = r#"{
 /// beside as state.json.bad-* with its content, the ERROR names both paths,
 /// the hands view says so, and the next save writes a whole new file.
 fn a_bad_state_file_is_set_aside(name: &str, content: &str) {
-    let (config, state) = setup(name);
+    let (_dir, config, state) = setup(name);
     let path = state.join("state.json");
     std::fs::write(&path, content).unwrap();
     let d = Daemon::start(&config);
@@ -225,7 +227,7 @@ fn a_mistyped_state_file_is_set_aside_and_the_daemon_serves() {
 
 #[test]
 fn bad_calibrations_in_the_file_are_dropped_and_the_rest_kept() {
-    let (config, state) = setup("calibrations");
+    let (_dir, config, state) = setup("calibrations");
     let content = r#"{
   "version": 1,
   "poses": { "left": { "fist": { "thumb": 40.0, "index": 35.5 } } },
@@ -281,7 +283,7 @@ fn bad_calibrations_in_the_file_are_dropped_and_the_rest_kept() {
 
 /// A daemon on a fresh state directory, online; the runtime to call it.
 fn online(name: &str) -> (Daemon, PathBuf, tokio::runtime::Runtime) {
-    let (config, state) = setup(name);
+    let (_dir, config, state) = setup(name);
     let d = Daemon::start(&config);
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(d.online());

@@ -150,18 +150,16 @@ fn calibration_of(id: &str, value: serde_json::Value) -> Result<(u8, Calibration
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_dir::TestDir;
 
-    fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("jointd-saved-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+    fn dir(name: &str) -> TestDir {
+        TestDir::new(&format!("saved-{name}"))
     }
 
     #[test]
     fn a_file_that_does_not_parse_is_set_aside_whole() {
         let d = dir("bad");
-        let file = StateFile::new(&d);
+        let file = StateFile::new(d.path());
         std::fs::write(file.path(), r#"{"version": 1, "poses": ["#).unwrap();
         let (saved, notes) = load(&file, SystemTime::now());
         assert_eq!(saved, Saved::default());
@@ -182,7 +180,7 @@ mod tests {
     #[test]
     fn each_bad_calibration_is_dropped_with_its_reason() {
         let d = dir("cal");
-        let file = StateFile::new(&d);
+        let file = StateFile::new(d.path());
         let text = r#"{"version": 1, "poses": {"left": {"fist": {"thumb": 4.0}}},
             "calibration": {"l": {
                 "1": {"offset_deg": 12.0},
@@ -212,7 +210,7 @@ mod tests {
     #[test]
     fn a_file_that_cannot_be_read_is_set_aside_too() {
         let d = dir("unreadable");
-        let file = StateFile::new(&d);
+        let file = StateFile::new(d.path());
         std::fs::create_dir_all(file.path().join("inside")).unwrap();
         let (saved, notes) = load(&file, SystemTime::now());
         assert_eq!(saved, Saved::default());

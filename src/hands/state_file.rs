@@ -159,11 +159,10 @@ mod tests {
     use std::collections::BTreeMap;
 
     use super::*;
+    use crate::test_dir::TestDir;
 
-    fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("jointd-state-{name}-{}", std::process::id()));
-        let _ = fs::remove_dir_all(&d);
-        d
+    fn dir(name: &str) -> TestDir {
+        TestDir::new(&format!("state-{name}"))
     }
 
     fn state(v: f64) -> BTreeMap<String, f64> {
@@ -172,7 +171,8 @@ mod tests {
 
     #[test]
     fn a_saved_state_is_loaded_back_and_no_file_is_none() {
-        let f = StateFile::new(dir("roundtrip"));
+        let d = dir("roundtrip");
+        let f = StateFile::new(d.path());
         assert_eq!(f.load::<BTreeMap<String, f64>>().unwrap(), None);
         f.save(&state(1.5)).unwrap();
         assert_eq!(f.load().unwrap(), Some(state(1.5)));
@@ -183,7 +183,8 @@ mod tests {
     #[test]
     fn a_write_cut_short_at_any_stage_leaves_the_old_file_whole() {
         for stage in [Stage::HalfWritten, Stage::BeforeRename] {
-            let f = StateFile::new(dir(&format!("{stage:?}")));
+            let d = dir(&format!("{stage:?}"));
+            let f = StateFile::new(d.path());
             f.save(&state(1.0)).unwrap();
             f.save_until(&state(9.0), stage).unwrap();
             assert_eq!(f.load().unwrap(), Some(state(1.0)), "{stage:?}");
@@ -196,9 +197,8 @@ mod tests {
     #[test]
     fn a_file_that_is_not_the_state_says_so_with_its_path() {
         let d = dir("garbage");
-        fs::create_dir_all(&d).unwrap();
         fs::write(d.join(FILE_NAME), "{not json").unwrap();
-        let err = StateFile::new(&d)
+        let err = StateFile::new(d.path())
             .load::<BTreeMap<String, f64>>()
             .unwrap_err();
         assert!(err.to_string().contains("state.json"), "{err}");
@@ -207,8 +207,7 @@ mod tests {
     #[test]
     fn a_file_set_aside_keeps_its_content_under_a_free_dated_name() {
         let d = dir("aside");
-        fs::create_dir_all(&d).unwrap();
-        let f = StateFile::new(&d);
+        let f = StateFile::new(d.path());
         let at = UNIX_EPOCH + std::time::Duration::from_secs(1_735_787_045);
         fs::write(f.path(), "first").unwrap();
         let first = f.set_aside(at).unwrap();

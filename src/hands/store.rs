@@ -163,6 +163,7 @@ impl StateStore {
 mod tests {
     use super::*;
     use crate::hands::{resolve, HandConfig};
+    use crate::test_dir::TestDir;
 
     fn config(text: &str) -> Vec<HandConfig> {
         #[derive(serde::Deserialize)]
@@ -174,8 +175,7 @@ mod tests {
 
     #[test]
     fn poses_survive_a_new_store_on_the_same_state_dir() {
-        let dir = std::env::temp_dir().join(format!("jointd-poses-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = TestDir::new("poses");
         let hands = resolve(
             &config(
                 r#"[[hand]]
@@ -200,8 +200,7 @@ joints = [{ bus = "l", ids = "1-2", names = ["thumb", "index"] }]"#,
 
     #[test]
     fn calibrations_survive_a_new_store_and_the_identity_removes_one() {
-        let dir = std::env::temp_dir().join(format!("jointd-cal-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = TestDir::new("cal");
         let store = StateStore::open(Vec::new(), Some(&dir)).unwrap();
         let cal = Calibration {
             offset_deg: 12.0,
@@ -222,9 +221,7 @@ joints = [{ bus = "l", ids = "1-2", names = ["thumb", "index"] }]"#,
 
     #[test]
     fn a_state_file_that_cannot_be_set_aside_is_never_written_over() {
-        let dir = std::env::temp_dir().join(format!("jointd-stuck-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = TestDir::new("stuck");
         // A state_dir that is a file: unreadable, and no rename can move it.
         let not_a_dir = dir.join("file");
         std::fs::write(&not_a_dir, "keep").unwrap();

@@ -4,7 +4,7 @@
 
 import assert from "node:assert/strict";
 import { spawn } from "node:child_process";
-import { mkdtempSync, writeFileSync } from "node:fs";
+import { mkdtempSync, rmSync, writeFileSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { chromium } from "playwright-core";
@@ -43,30 +43,40 @@ async function waitReady(url, token) {
 /** Starts `jointd` with `args` (plus a free port and, with `config`, that
  *  TOML text in a fresh directory, its `state_dir` beside it); `token`:
  *  one the daemon takes, for the readiness check. A daemon that does not
- *  get ready is stopped, so the test process can end. */
+ *  get ready is stopped, so the test process can end. The directory is
+ *  also its TMPDIR (the simulator's pty link, default recordings), and is
+ *  removed once the daemon has exited. */
 export async function startDaemon(args, config, token) {
   const all = [...args, "--listen", "127.0.0.1:0"];
   // Serves web/ from that folder instead of the embedded copy: edits show
   // without a rebuild (and an older copy can be checked against the tests).
   if (process.env.JOINTD_WEB_DIR) all.push("--web-dir", process.env.JOINTD_WEB_DIR);
+  const dir = mkdtempSync(join(tmpdir(), "jointd-browser-"));
   if (config !== undefined) {
-    const dir = mkdtempSync(join(tmpdir(), "jointd-browser-"));
     const file = join(dir, "jointd.toml");
     writeFileSync(file, `state_dir = "${join(dir, "state")}"\n\n${config}`);
     all.push("--config", file);
   }
-  const child = spawn(BIN, all, { stdio: ["ignore", "pipe", "inherit"] });
+  const child = spawn(BIN, all, {
+    stdio: ["ignore", "pipe", "inherit"],
+    env: { ...process.env, TMPDIR: dir },
+  });
+  const exited = new Promise((r) => child.once("exit", r));
+  const removeDir = () => rmSync(dir, { recursive: true, force: true });
   let base;
   try {
     base = await listeningUrl(child);
     await waitReady(base, token);
   } catch (e) {
     child.kill("SIGKILL");
+    await exited;
+    removeDir();
     throw e;
   }
   const stop = async () => {
     child.kill("SIGTERM");
-    await new Promise((r) => child.once("exit", r));
+    await exited;
+    removeDir();
   };
   return { base, stop };
 }

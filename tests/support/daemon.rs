@@ -1,10 +1,15 @@
 //! The `jointd` binary run as a daemon: spawned with arguments, its address
 //! learnt from the first line it prints (`listening on http://…`), its log
 //! (stderr) read line by line as it comes, killed when the test drops it.
+//! Each daemon gets a temp dir of its own (`TMPDIR`), removed with it: a
+//! killed daemon cannot remove its simulator's pty link or its default
+//! recordings dir itself.
 #![allow(dead_code)]
 
 use std::io::{BufRead, BufReader, Read};
+use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::mpsc::{channel, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
@@ -22,6 +27,18 @@ pub struct Daemon {
     pub base: String,
     log: Receiver<String>,
     seen: Vec<String>,
+    /// Its `TMPDIR`, when this rig made one.
+    tmp: Option<PathBuf>,
+}
+
+/// A fresh directory for one daemon's `TMPDIR`.
+fn private_tmp() -> PathBuf {
+    static NEXT: AtomicU32 = AtomicU32::new(0);
+    let n = NEXT.fetch_add(1, Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("jointd-test-{}-{n}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("a temp dir for the daemon");
+    dir
 }
 
 impl Daemon {
@@ -45,6 +62,11 @@ impl Daemon {
     /// Starts `cmd` and waits for its address line; panics with the log
     /// when the daemon exits without one.
     pub fn start(mut cmd: Command) -> Self {
+        let given = cmd.get_envs().any(|(k, _)| k == "TMPDIR");
+        let tmp = (!given).then(private_tmp);
+        if let Some(dir) = &tmp {
+            cmd.env("TMPDIR", dir);
+        }
         let mut child = cmd
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -72,6 +94,7 @@ impl Daemon {
             base: String::new(),
             log,
             seen: Vec::new(),
+            tmp,
         };
         match first.trim().strip_prefix("listening on ") {
             Some(base) => daemon.base = base.to_owned(),
@@ -195,6 +218,9 @@ impl Daemon {
 impl Drop for Daemon {
     fn drop(&mut self) {
         self.kill();
+        if let Some(dir) = &self.tmp {
+            let _ = std::fs::remove_dir_all(dir);
+        }
     }
 }
 

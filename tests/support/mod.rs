@@ -8,6 +8,7 @@
 //! - [`sim_bus`]: the API in front of the real bus engine and the simulator, as `--sim` runs it.
 //! - [`fake_bus`]: a scripted bus owner for exact control of what the bus answers.
 //! - [`daemon`]: the `jointd` binary as a daemon: spawned, its address and log, killed on drop.
+//! - [`tmp`]: a temp directory removed when the test drops it.
 #![allow(dead_code)]
 
 pub mod bus;
@@ -16,3 +17,4 @@ pub mod fake_bus;
 pub mod http;
 pub mod sim;
 pub mod sim_bus;
+pub mod tmp;

@@ -46,7 +46,7 @@ class Daemon:
         self.log = tempfile.NamedTemporaryFile("w+", prefix=f"jointd-{name}-", suffix=".log")
         self.proc = subprocess.Popen([BIN, "--sim", "6", "--config", str(config), "--listen", "127.0.0.1:0"],
                                      stdout=subprocess.PIPE, stderr=self.log, text=True,
-                                     env={**os.environ, "NO_COLOR": "1"})
+                                     env={**os.environ, "NO_COLOR": "1", "TMPDIR": str(tmp)})
         first = self.proc.stdout.readline() if self.proc.stdout else ""
         assert first.startswith("listening on "), f"no address line: {first!r}"
         self.url = first.split()[-1]

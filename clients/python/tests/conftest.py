@@ -1,8 +1,11 @@
 """A real daemon on the simulator for every test: `target/debug/jointd`
-(or $JOINTD_BIN), on a free port, killed at the end."""
+(or $JOINTD_BIN), on a free port, killed at the end. Each daemon has a
+TMPDIR of its own (the simulator's pty link, default recordings), removed
+when it stops."""
 
 import os
 import pathlib
+import shutil
 import subprocess
 import tempfile
 import time
@@ -17,8 +20,10 @@ BIN = os.environ.get("JOINTD_BIN", str(ROOT / "target" / "debug" / "jointd"))
 class Daemon:
     def __init__(self, *args):
         self.log = tempfile.NamedTemporaryFile("w+", prefix="jointd-", suffix=".log")
+        self.tmp = tempfile.mkdtemp(prefix="jointd-test-")
         self.proc = subprocess.Popen([BIN, *args, "--listen", "127.0.0.1:0"], stdout=subprocess.PIPE,
-                                     stderr=self.log, text=True, env={**os.environ, "NO_COLOR": "1"})
+                                     stderr=self.log, text=True,
+                                     env={**os.environ, "NO_COLOR": "1", "TMPDIR": self.tmp})
         first = self.proc.stdout.readline()
         assert first.startswith("listening on "), f"no address line: {first!r}"
         self.url = first.split()[-1]
@@ -46,7 +51,9 @@ class Daemon:
             self.proc.wait(10)
         except subprocess.TimeoutExpired:
             self.proc.kill()
+            self.proc.wait()
         self.log.close()
+        shutil.rmtree(self.tmp, ignore_errors=True)
 
 
 @pytest.fixture()
