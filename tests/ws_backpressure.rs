@@ -250,3 +250,167 @@ async fn a_client_that_takes_nothing_is_closed_too_slow_and_counted() {
     );
     drop(incoming_tx);
 }
+
+/// A client whose reply queue is full still hears that its stream ended:
+/// the `stream_ended` is held, in order, until it takes its replies again;
+/// the other replies beyond the queue are dropped and counted.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stream_end_reaches_a_client_whose_reply_queue_was_full() {
+    let bus = sim_bus::start(1, None).await;
+    enable(&bus, 1).await;
+    // Passes what it is given while open; closed, it takes nothing, and
+    // says when a message waits in it.
+    let (open, open_rx) = tokio::sync::watch::channel(true);
+    let waiting = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (delivered_tx, mut delivered) = mpsc::unbounded_channel::<Value>();
+    let sink_waiting = waiting.clone();
+    let sink = futures_util::sink::unfold(delivered_tx, move |tx, msg: Message| {
+        let mut open = open_rx.clone();
+        let waiting = sink_waiting.clone();
+        async move {
+            if !*open.borrow() {
+                waiting.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
+            let _ = open.wait_for(|o| *o).await;
+            if let Message::Text(t) = msg {
+                let _ = tx.send(serde_json::from_str(t.as_str()).expect("JSON"));
+            }
+            Ok::<_, Infallible>(tx)
+        }
+    });
+    let (incoming_tx, incoming_rx) = mpsc::unbounded_channel::<Result<Message, Infallible>>();
+    tokio::spawn(jointd::http::ws::session::run(
+        bus.server_state.clone(),
+        Box::pin(sink),
+        UnboundedReceiverStream::new(incoming_rx),
+    ));
+    let send = |m: Value| {
+        incoming_tx
+            .send(Ok(Message::Text(m.to_string().into())))
+            .expect("send");
+    };
+    let target = |seq: u64| {
+        json!({"type": "setpoints", "seq": seq,
+               "targets": [{"bus": "sim0", "id": 1, "position_deg": 5.0}]})
+    };
+    assert_eq!(next(&mut delivered).await["type"], "welcome");
+    // A stream to joint 1, live once the ping behind it is answered.
+    send(target(1));
+    send(json!({"type": "ping", "seq": 2}));
+    loop {
+        let m = next(&mut delivered).await;
+        assert_ne!(m["type"], "error", "target 1 refused: {m}");
+        if m["type"] == "pong" {
+            assert_eq!(m["ref_seq"], 2, "{m}");
+            break;
+        }
+    }
+
+    // The sink now takes nothing: a first ping's pong waits in it (the
+    // writer stuck), then 100 pings fill the queue, and the rest are dropped.
+    open.send_replace(false);
+    send(json!({"type": "ping", "seq": 99}));
+    wait_for("the writer stuck in the sink", || {
+        waiting.load(std::sync::atomic::Ordering::Relaxed)
+    })
+    .await;
+    let dropped = || {
+        bus.server_state
+            .ws()
+            .dropped_replies
+            .load(std::sync::atomic::Ordering::Relaxed)
+    };
+    let before = dropped();
+    for seq in 100..200 {
+        send(json!({"type": "ping", "seq": seq}));
+    }
+    wait_for("pings dropped from the full queue", || dropped() > before).await;
+    // The stream ends while the queue is full; the next target for it is
+    // refused (that refusal dropped, as a reply beyond the queue is).
+    bus.handle.estop().await.expect("e-stop");
+    let before = dropped();
+    send(target(3));
+    wait_for("the refusal of target 3 dropped", || dropped() > before).await;
+
+    open.send_replace(true);
+    // The queued pongs, then the stream's end (to old code, never).
+    let mut pongs = Vec::new();
+    let ended = loop {
+        let m = tokio::time::timeout(WAIT, delivered.recv())
+            .await
+            .unwrap_or_else(|_| panic!("no stream_ended after the pongs {pongs:?}"))
+            .expect("open");
+        match m["type"].as_str() {
+            Some("pong") => pongs.push(m["ref_seq"].as_u64().expect("a seq")),
+            Some("stream_ended") => break m,
+            _ => {}
+        }
+    };
+    assert_eq!(
+        (ended["id"].as_u64(), ended["reason"].as_str()),
+        (Some(1), Some("estopped")),
+        "{ended}"
+    );
+    // Before it, in order and none missing, the pongs the sink and the
+    // queue held (64 or 65: an event may have been the message stuck in
+    // the sink); the rest were dropped.
+    let held_pongs = pongs.len() as u64;
+    assert!(
+        (64..=65).contains(&held_pongs) && pongs == (99..99 + held_pongs).collect::<Vec<_>>(),
+        "the pongs before it: {pongs:?}"
+    );
+    // Once taken, nothing more is held: the next ping is answered, and the
+    // end is not told twice.
+    send(json!({"type": "ping", "seq": 4}));
+    loop {
+        let m = next(&mut delivered).await;
+        assert_ne!(m["type"], "stream_ended", "told twice: {m}");
+        if m["type"] == "pong" && m["ref_seq"] == 4 {
+            break;
+        }
+    }
+    drop(incoming_tx);
+}
+
+/// Enables joint `id` over REST (again on a 504 from a loaded host) and
+/// waits until it runs.
+async fn enable(bus: &sim_bus::SimBus, id: u8) {
+    for attempt in 1..=3 {
+        let r = bus
+            .server
+            .post(
+                &format!("/api/v1/buses/sim0/devices/{id}/enable"),
+                json!({}),
+            )
+            .await;
+        if r.status.is_success() {
+            bus.wait_fsm(id, jointd::protocol::status::fsm::RUN).await;
+            return;
+        }
+        assert!(
+            r.status.as_u16() == 504 && attempt < 3,
+            "enable {id}: {} {}",
+            r.status,
+            r.body
+        );
+    }
+}
+
+/// The next message the sink passed.
+async fn next(delivered: &mut mpsc::UnboundedReceiver<Value>) -> Value {
+    tokio::time::timeout(WAIT, delivered.recv())
+        .await
+        .expect("a message")
+        .expect("open")
+}
+
+/// Waits (polling) until `done` holds.
+async fn wait_for(what: &str, done: impl Fn() -> bool) {
+    let waited = tokio::time::timeout(WAIT, async {
+        while !done() {
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+    })
+    .await;
+    assert!(waited.is_ok(), "timed out waiting for {what}");
+}

@@ -3,6 +3,7 @@
 //! writes to the socket. Generic over `Sink`/`Stream` so tests can drive it
 //! without a network.
 
+use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -33,6 +34,9 @@ use crate::http::tokens::Caller;
 const OUT_QUEUE: usize = 64;
 /// Acks waiting for the wire, per connection.
 const MAX_PENDING_ACKS: usize = 256;
+/// Stream ends a connection may hold while its reply queue is full; a
+/// client that leaves more untaken reads nothing, and is closed.
+const MAX_HELD: usize = 1024;
 
 /// How often a connection looks whether one of its streams was ended
 /// (while it has live streams): an atomic read per joint.
@@ -77,6 +81,11 @@ pub async fn run_as<Si, St, E>(
     let client = conn.client;
     conn.reply(welcome(&state, client, name));
     loop {
+        if conn.held.len() > MAX_HELD {
+            let why = format!("more than {MAX_HELD} stream ends not taken");
+            let _ = close_tx.try_send((close_code::POLICY, why));
+            break;
+        }
         let deadline = conn.watchdog.deadline();
         tokio::select! {
             msg = stream.next() => match msg {
@@ -93,6 +102,15 @@ pub async fn run_as<Si, St, E>(
             },
             // The writer closed the connection (slow client, shutdown, socket error).
             _ = conn.out.closed() => break,
+            // Room in the queue for a held reply (an owned permit: the
+            // handlers borrow the connection).
+            room = conn.out.clone().reserve_owned(), if !conn.held.is_empty() => match (room, conn.held.pop_front()) {
+                (Ok(room), Some(msg)) => {
+                    room.send(msg);
+                    conn.send_held();
+                }
+                _ => break,
+            },
             _ = sleep_until(deadline), if deadline.is_some() => conn.fire_watchdog("timeout").await,
             _ = tokio::time::sleep(STREAM_CHECK), if conn.streams.any_live() => conn.end_revoked_streams(),
         }
@@ -139,6 +157,7 @@ where
         watchdog: Watchdog::default(),
         streams: Streams::shown_as(shown),
         grasps: GraspTasks::default(),
+        held: VecDeque::new(),
     };
     (conn, writer, close_tx)
 }
@@ -178,23 +197,58 @@ struct Connection {
     streams: Streams,
     /// Its grasp followers and the grasp releases and stops it waits on.
     grasps: GraspTasks,
+    /// Replies that must reach the client, in order, waiting for room in
+    /// its full queue: a stream's end says the targets it sends now go
+    /// nowhere, and a client that never hears it streams on blind.
+    held: VecDeque<ServerMessage>,
 }
 
 impl Connection {
-    /// Queues a reply; a client too slow to take its replies loses them (counted).
-    fn reply(&self, msg: ServerMessage) {
+    /// Queues a reply; a client too slow to take its replies loses them
+    /// (counted), except a stream's end, held until there is room.
+    fn reply(&mut self, msg: ServerMessage) {
+        self.send_held();
+        if !self.held.is_empty() {
+            // Behind the held ones, so that the client hears them in order.
+            return self.hold_or_drop(msg);
+        }
         match self.out.try_send(msg) {
             Ok(()) => {}
-            Err(mpsc::error::TrySendError::Full(_)) => {
-                WsHub::count(&self.state.ws().dropped_replies, 1)
-            }
+            Err(mpsc::error::TrySendError::Full(msg)) => self.hold_or_drop(msg),
             Err(mpsc::error::TrySendError::Closed(_)) => {
                 WsHub::count(&self.state.ws().unsent_replies, 1)
             }
         }
     }
 
-    fn reject(&self, ref_seq: Option<u64>, e: WsError) {
+    fn hold_or_drop(&mut self, msg: ServerMessage) {
+        if matches!(msg, ServerMessage::StreamEnded { .. }) {
+            self.held.push_back(msg);
+        } else {
+            WsHub::count(&self.state.ws().dropped_replies, 1);
+        }
+    }
+
+    /// Moves held replies into the queue while it has room.
+    fn send_held(&mut self) {
+        while let Some(msg) = self.held.pop_front() {
+            match self.out.try_send(msg) {
+                Ok(()) => {}
+                Err(mpsc::error::TrySendError::Full(msg)) => {
+                    self.held.push_front(msg);
+                    return;
+                }
+                Err(mpsc::error::TrySendError::Closed(_)) => {
+                    let lost = 1 + self.held.len() as u64;
+                    WsHub::count(&self.state.ws().unsent_replies, lost);
+                    self.held.clear();
+                    return;
+                }
+            }
+        }
+    }
+
+    fn reject(&mut self, ref_seq: Option<u64>, e: WsError) {
         self.reply(ServerMessage::Error {
             ref_seq,
             code: e.code,
