@@ -12,34 +12,9 @@ mod support;
 
 use std::time::Duration;
 
-use jointd::protocol::status::fsm;
 use jointd::sim::Fault;
 use serde_json::{json, Value};
 use support::sim_bus::{start, SimBus, WAIT};
-
-/// Enables `id` and waits until it runs. A loaded host can lose the
-/// enable's read-back (504 device-timeout) over the pty: asked again then.
-async fn enable(b: &SimBus, id: u8) {
-    for attempt in 1..=3 {
-        let r = b
-            .server
-            .post(
-                &format!("/api/v1/buses/sim0/devices/{id}/enable"),
-                json!({}),
-            )
-            .await;
-        if r.status.is_success() {
-            b.wait_fsm(id, fsm::RUN).await;
-            return;
-        }
-        assert!(
-            r.status.as_u16() == 504 && attempt < 3,
-            "enable {id}: {} {}",
-            r.status,
-            r.body
-        );
-    }
-}
 
 /// Puts joint `id` in `mode` over REST.
 async fn set_mode(b: &SimBus, id: u8, mode: &str) {
@@ -119,9 +94,9 @@ fn is_running(view: &Value) -> bool {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_move_racing_an_estop_never_drives_the_joint_after_the_next_enable() {
     let b = start(2, None).await;
-    enable(&b, 2).await;
+    b.enable_running(2).await;
     for attempt in 0..8u64 {
-        enable(&b, 1).await;
+        b.enable_running(1).await;
         let held = b.sim.device(1).expect("device 1").angle_deg;
         let handle = b.handle.clone();
         let estop = tokio::spawn(async move { handle.estop().await });
@@ -136,8 +111,8 @@ async fn a_move_racing_an_estop_never_drives_the_joint_after_the_next_enable() {
         } else {
             assert_eq!(status, 409, "attempt {attempt}: {body}");
         }
-        enable(&b, 1).await;
-        enable(&b, 2).await;
+        b.enable_running(1).await;
+        b.enable_running(2).await;
         fence(&b, 2, 10.0 + attempt as f64).await;
         let target = device_target(&b, 1);
         assert!(
@@ -151,8 +126,8 @@ async fn a_move_racing_an_estop_never_drives_the_joint_after_the_next_enable() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_disable_mid_move_ends_it_and_an_enable_does_not_resume_it() {
     let b = start(2, None).await;
-    enable(&b, 1).await;
-    enable(&b, 2).await;
+    b.enable_running(1).await;
+    b.enable_running(2).await;
     let (status, body) = post_move(&b, 1, 80.0, 3000).await;
     assert_eq!(status, 201, "{body}");
     let id = body["id"].as_u64().expect("move id");
@@ -166,7 +141,7 @@ async fn a_disable_mid_move_ends_it_and_an_enable_does_not_resume_it() {
     assert_eq!(view["state"], "aborted", "{view}");
     assert_eq!(view["reason"], "disabled", "{view}");
     let progress = view["progress"].as_f64().expect("progress");
-    enable(&b, 1).await;
+    b.enable_running(1).await;
     let held = b.sim.device(1).expect("device 1").angle_deg;
     fence(&b, 2, 12.0).await;
     let target = device_target(&b, 1);
@@ -182,8 +157,8 @@ async fn a_disable_mid_move_ends_it_and_an_enable_does_not_resume_it() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_mode_change_mid_move_ends_it_and_the_joint_does_not_spin() {
     let b = start(2, None).await;
-    enable(&b, 1).await;
-    enable(&b, 2).await;
+    b.enable_running(1).await;
+    b.enable_running(2).await;
     let (status, body) = post_move(&b, 1, 80.0, 3000).await;
     assert_eq!(status, 201, "{body}");
     let id = body["id"].as_u64().expect("move id");
@@ -204,8 +179,8 @@ async fn a_mode_change_mid_move_ends_it_and_the_joint_does_not_spin() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_enable_in_speed_mode_after_an_estop_does_not_spin() {
     let b = start(2, None).await;
-    enable(&b, 1).await;
-    enable(&b, 2).await;
+    b.enable_running(1).await;
+    b.enable_running(2).await;
     set_mode(&b, 1, "speed").await;
     let r = b
         .server
@@ -217,8 +192,8 @@ async fn an_enable_in_speed_mode_after_an_estop_does_not_spin() {
     assert!(r.status.is_success(), "{}", r.body);
     sim_until(&b, "joint 1 spinning", |d| d.velocity_deg_s.abs() > 1.0, 1);
     b.handle.estop().await.expect("e-stop");
-    enable(&b, 1).await;
-    enable(&b, 2).await;
+    b.enable_running(1).await;
+    b.enable_running(2).await;
     fence(&b, 2, 16.0).await;
     let d = b.sim.device(1).expect("device 1");
     assert_eq!(
@@ -238,7 +213,7 @@ async fn an_enable_in_speed_mode_after_an_estop_does_not_spin() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_blocked_joint_stalls_its_move_instead_of_arriving() {
     let b = start(2, None).await;
-    enable(&b, 1).await;
+    b.enable_running(1).await;
     let (status, body) = post_move(&b, 1, 60.0, 1500).await;
     assert_eq!(status, 201, "{body}");
     let id = body["id"].as_u64().expect("move id");
@@ -263,7 +238,7 @@ async fn a_blocked_joint_stalls_its_move_instead_of_arriving() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_move_says_what_it_cannot_apply_and_never_exceeds_a_speed_cap() {
     let b = start(2, None).await;
-    enable(&b, 2).await;
+    b.enable_running(2).await;
     // Waypoints time themselves: a duration beside them would be ignored.
     let r = b
         .server
@@ -333,7 +308,7 @@ async fn a_teleop_stream_ended_by_an_estop_never_resumes_by_itself() {
     use futures_util::SinkExt;
     use tokio_tungstenite::tungstenite::Message;
     let b = start(2, None).await;
-    enable(&b, 1).await;
+    b.enable_running(1).await;
     let url = format!("{}/api/v1/ws", b.server.base.replace("http://", "ws://"));
     let (mut ws, _) = tokio_tungstenite::connect_async(url)
         .await
@@ -354,8 +329,8 @@ async fn a_teleop_stream_ended_by_an_estop_never_resumes_by_itself() {
         (Some(1), Some("estopped")),
         "{ended}"
     );
-    enable(&b, 1).await;
-    enable(&b, 2).await;
+    b.enable_running(1).await;
+    b.enable_running(2).await;
     // The client streams on as if nothing happened: refused.
     ws.send(batch(2, 30.0, false)).await.expect("send");
     let refused = next_of(&mut ws, "error").await;
@@ -391,10 +366,10 @@ async fn a_websocket_move_racing_an_estop_never_drives_the_joint_after_the_next_
     use futures_util::SinkExt;
     use tokio_tungstenite::tungstenite::Message;
     let b = start(2, None).await;
-    enable(&b, 2).await;
+    b.enable_running(2).await;
     let mut ws = ws_connect(&b).await;
     for attempt in 0..6u64 {
-        enable(&b, 1).await;
+        b.enable_running(1).await;
         let held = b.sim.device(1).expect("device 1").angle_deg;
         let handle = b.handle.clone();
         let estop = tokio::spawn(async move { handle.estop().await });
@@ -418,8 +393,8 @@ async fn a_websocket_move_racing_an_estop_never_drives_the_joint_after_the_next_
         } else {
             assert_eq!(answer["code"], "wrong_state", "attempt {attempt}: {answer}");
         }
-        enable(&b, 1).await;
-        enable(&b, 2).await;
+        b.enable_running(1).await;
+        b.enable_running(2).await;
         fence(&b, 2, 20.0 + attempt as f64).await;
         let target = device_target(&b, 1);
         assert!(
@@ -434,8 +409,8 @@ async fn a_websocket_speed_stream_does_not_spin_after_an_estop_and_enable() {
     use futures_util::SinkExt;
     use tokio_tungstenite::tungstenite::Message;
     let b = start(2, None).await;
-    enable(&b, 1).await;
-    enable(&b, 2).await;
+    b.enable_running(1).await;
+    b.enable_running(2).await;
     set_mode(&b, 1, "speed").await;
     let mut ws = ws_connect(&b).await;
     let batch = json!({"type": "setpoints", "seq": 1, "ack": true,
@@ -446,8 +421,8 @@ async fn a_websocket_speed_stream_does_not_spin_after_an_estop_and_enable() {
     assert_eq!(next_of(&mut ws, "ack").await["ref_seq"], 1);
     sim_until(&b, "joint 1 spinning", |d| d.velocity_deg_s.abs() > 1.0, 1);
     b.handle.estop().await.expect("e-stop");
-    enable(&b, 1).await;
-    enable(&b, 2).await;
+    b.enable_running(1).await;
+    b.enable_running(2).await;
     fence(&b, 2, 13.0).await;
     let d = b.sim.device(1).expect("device 1");
     assert_eq!(
@@ -481,8 +456,8 @@ where
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_enable_of_a_running_joint_holds_it_where_it_stands() {
     let b = start(2, None).await;
-    enable(&b, 1).await;
-    enable(&b, 2).await;
+    b.enable_running(1).await;
+    b.enable_running(2).await;
     let r = b
         .server
         .put(
@@ -493,7 +468,7 @@ async fn an_enable_of_a_running_joint_holds_it_where_it_stands() {
     assert!(r.status.is_success(), "{}", r.body);
     sim_until(&b, "joint 1 on its way", |d| d.angle_deg > 5.0, 1);
     // Enabled again while it runs: nothing from before this enable applies.
-    enable(&b, 1).await;
+    b.enable_running(1).await;
     fence(&b, 2, 17.0).await;
     let d = b.sim.device(1).expect("device 1");
     assert!(
@@ -507,7 +482,7 @@ async fn an_enable_of_a_running_joint_holds_it_where_it_stands() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_rezero_mid_move_ends_the_move_and_the_joint_stays_enabled() {
     let b = start(2, None).await;
-    enable(&b, 1).await;
+    b.enable_running(1).await;
     let (status, body) = post_move(&b, 1, 60.0, 2000).await;
     assert_eq!(status, 201, "{body}");
     let id = body["id"].as_u64().expect("move id");
@@ -563,8 +538,8 @@ where
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_websocket_move_ends_at_a_disable_and_an_enable_does_not_resume_it() {
     let b = start(2, None).await;
-    enable(&b, 1).await;
-    enable(&b, 2).await;
+    b.enable_running(1).await;
+    b.enable_running(2).await;
     let mut ws = ws_connect(&b).await;
     let id = ws_move(&mut ws, 1, 80.0, 3000).await;
     sim_until(&b, "joint 1 under way", |d| d.angle_deg > 5.0, 1);
@@ -579,7 +554,7 @@ async fn a_websocket_move_ends_at_a_disable_and_an_enable_does_not_resume_it() {
         (Some("aborted"), Some("disabled")),
         "{view}"
     );
-    enable(&b, 1).await;
+    b.enable_running(1).await;
     let held = b.sim.device(1).expect("device 1").angle_deg;
     fence(&b, 2, 12.0).await;
     let target = device_target(&b, 1);
@@ -592,7 +567,7 @@ async fn a_websocket_move_ends_at_a_disable_and_an_enable_does_not_resume_it() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_websocket_move_of_a_blocked_joint_stalls() {
     let b = start(2, None).await;
-    enable(&b, 1).await;
+    b.enable_running(1).await;
     let mut ws = ws_connect(&b).await;
     let id = ws_move(&mut ws, 1, 60.0, 1500).await;
     sim_until(&b, "joint 1 past 10°", |d| d.angle_deg > 10.0, 1);

@@ -257,7 +257,7 @@ async fn a_client_that_takes_nothing_is_closed_too_slow_and_counted() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_stream_end_reaches_a_client_whose_reply_queue_was_full() {
     let bus = sim_bus::start(1, None).await;
-    enable(&bus, 1).await;
+    bus.enable_running(1).await;
     // Passes what it is given while open; closed, it takes nothing, and
     // says when a message waits in it.
     let (open, open_rx) = tokio::sync::watch::channel(true);
@@ -370,30 +370,6 @@ async fn a_stream_end_reaches_a_client_whose_reply_queue_was_full() {
         }
     }
     drop(incoming_tx);
-}
-
-/// Enables joint `id` over REST (again on a 504 from a loaded host) and
-/// waits until it runs.
-async fn enable(bus: &sim_bus::SimBus, id: u8) {
-    for attempt in 1..=3 {
-        let r = bus
-            .server
-            .post(
-                &format!("/api/v1/buses/sim0/devices/{id}/enable"),
-                json!({}),
-            )
-            .await;
-        if r.status.is_success() {
-            bus.wait_fsm(id, jointd::protocol::status::fsm::RUN).await;
-            return;
-        }
-        assert!(
-            r.status.as_u16() == 504 && attempt < 3,
-            "enable {id}: {} {}",
-            r.status,
-            r.body
-        );
-    }
 }
 
 /// The next message the sink passed.

@@ -17,4 +17,6 @@ pub mod fake_bus;
 pub mod http;
 pub mod sim;
 pub mod sim_bus;
+// The library's own test dir, one source for both kinds of test.
+#[path = "../../src/test_dir.rs"]
 pub mod tmp;

@@ -168,6 +168,31 @@ impl SimBus {
         self
     }
 
+    /// Enables `id` over REST and waits until it runs. A loaded host can
+    /// lose the enable's read-back (504 device-timeout) over the pty: asked
+    /// again then.
+    pub async fn enable_running(&self, id: u8) {
+        for attempt in 1..=3 {
+            let r = self
+                .server
+                .post(
+                    &format!("/api/v1/buses/sim0/devices/{id}/enable"),
+                    serde_json::json!({}),
+                )
+                .await;
+            if r.status.is_success() {
+                self.wait_fsm(id, jointd::protocol::status::fsm::RUN).await;
+                return;
+            }
+            assert!(
+                r.status.as_u16() == 504 && attempt < 3,
+                "enable {id}: {} {}",
+                r.status,
+                r.body
+            );
+        }
+    }
+
     /// Waits until a published snapshot satisfies `pred`.
     pub async fn wait_snapshot(&self, what: &str, pred: impl Fn(&BusSnapshot) -> bool) {
         let mut rx = self.handle.watch();
