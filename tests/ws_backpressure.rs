@@ -122,9 +122,11 @@ async fn stalled_client_does_not_delay_another() {
     let dropped = tokio::time::timeout(WAIT, dropped)
         .await
         .expect("telemetry after release");
+    // How many depends on how often a loaded host ran the ticker meanwhile;
+    // that they are counted and said does not.
     assert!(
-        dropped > 10,
-        "a client stalled ~0.5 s at 200 Hz skipped {dropped} samples"
+        dropped > 0,
+        "a client stalled ~0.5 s at 200 Hz was told of no skipped sample"
     );
     assert!(
         bus.server_state

@@ -9,6 +9,7 @@
 //! - `ticker`: when a subscription's telemetry goes out (a grid shared by the connections).
 //! - [`session`]: one connection's reader: apply messages, run its watchdog
 //!   ([`crate::control::watchdog`]) and its streams ([`crate::control::streams`]).
+//! - `outbox`: a session's replies to its writer: bounded, a stream's end held.
 //! - [`writer`]: one connection's writer: telemetry, events, acks; bounded.
 //! - [`setpoints`]: validate a batch whole, then store it.
 //! - [`grasp`]: start, release and stop grasps; tell the starter when one ended.
@@ -19,6 +20,7 @@
 mod actions;
 pub(crate) mod grasp;
 pub(crate) mod messages;
+mod outbox;
 mod replies;
 pub mod session;
 pub(crate) mod setpoints;

@@ -3,7 +3,6 @@
 //! writes to the socket. Generic over `Sink`/`Stream` so tests can drive it
 //! without a network.
 
-use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -15,6 +14,7 @@ use tokio::time::Instant;
 use super::actions::{spawn_estop, spawn_switch, Switch};
 use super::grasp::GraspTasks;
 use super::messages::{self, ClientMessage, ErrorCode, ServerMessage, Subscribe, WatchdogRequest};
+use super::outbox::{Outbox, MAX_HELD, OUT_QUEUE};
 use super::setpoints::{self, WsError};
 use super::subscribe::subscription;
 use super::telemetry::Subscription;
@@ -25,18 +25,12 @@ use crate::control::books::streams::{Driver, Via};
 use crate::control::streams::Streams;
 use crate::control::teleop::{WatchdogEvent, MAX_HOLD, MIN_HOLD};
 use crate::control::watchdog::{fire_policy, Watchdog};
-use crate::http::hub::WsHub;
 use crate::http::scope::{Needs, Scope};
 use crate::http::state::AppState;
 use crate::http::tokens::Caller;
 
-/// Replies (acks, errors) a connection may have queued; beyond, they are dropped and counted.
-const OUT_QUEUE: usize = 64;
 /// Acks waiting for the wire, per connection.
 const MAX_PENDING_ACKS: usize = 256;
-/// Stream ends a connection may hold while its reply queue is full; a
-/// client that leaves more untaken reads nothing, and is closed.
-const MAX_HELD: usize = 1024;
 
 /// How often a connection looks whether one of its streams was ended
 /// (while it has live streams): an atomic read per joint.
@@ -81,7 +75,7 @@ pub async fn run_as<Si, St, E>(
     let client = conn.client;
     conn.reply(welcome(&state, client, name));
     loop {
-        if conn.held.len() > MAX_HELD {
+        if conn.out.overfull() {
             let why = format!("more than {MAX_HELD} stream ends not taken");
             let _ = close_tx.try_send((close_code::POLICY, why));
             break;
@@ -101,13 +95,12 @@ pub async fn run_as<Si, St, E>(
                 Some(Ok(_)) => {} // ping/pong: the library answers
             },
             // The writer closed the connection (slow client, shutdown, socket error).
-            _ = conn.out.closed() => break,
-            // Room in the queue for a held reply (an owned permit: the
-            // handlers borrow the connection).
-            room = conn.out.clone().reserve_owned(), if !conn.held.is_empty() => match (room, conn.held.pop_front()) {
+            _ = conn.out.sender().closed() => break,
+            // Room for a held reply (owned: the handlers borrow `conn`).
+            room = conn.out.sender().clone().reserve_owned(), if conn.out.holds() => match (room, conn.out.pop_held()) {
                 (Ok(room), Some(msg)) => {
                     room.send(msg);
-                    conn.send_held();
+                    conn.out.send_held();
                 }
                 _ => break,
             },
@@ -151,13 +144,12 @@ where
         state: state.clone(),
         client,
         caller,
-        out: out_tx,
+        out: Outbox::new(out_tx, state.clone()),
         sub: sub_tx,
         acks: ack_tx,
         watchdog: Watchdog::default(),
         streams: Streams::shown_as(shown),
         grasps: GraspTasks::default(),
-        held: VecDeque::new(),
     };
     (conn, writer, close_tx)
 }
@@ -190,62 +182,19 @@ struct Connection {
     client: u64,
     /// The token it connected with.
     caller: Caller,
-    out: mpsc::Sender<ServerMessage>,
+    out: Outbox,
     sub: watch::Sender<Option<Arc<Subscription>>>,
     acks: mpsc::Sender<PendingAck>,
     watchdog: Watchdog,
     streams: Streams,
     /// Its grasp followers and the grasp releases and stops it waits on.
     grasps: GraspTasks,
-    /// Replies that must reach the client, in order, waiting for room in
-    /// its full queue: a stream's end says the targets it sends now go
-    /// nowhere, and a client that never hears it streams on blind.
-    held: VecDeque<ServerMessage>,
 }
 
 impl Connection {
-    /// Queues a reply; a client too slow to take its replies loses them
-    /// (counted), except a stream's end, held until there is room.
+    /// Queues a reply ([`Outbox::reply`]).
     fn reply(&mut self, msg: ServerMessage) {
-        self.send_held();
-        if !self.held.is_empty() {
-            // Behind the held ones, so that the client hears them in order.
-            return self.hold_or_drop(msg);
-        }
-        match self.out.try_send(msg) {
-            Ok(()) => {}
-            Err(mpsc::error::TrySendError::Full(msg)) => self.hold_or_drop(msg),
-            Err(mpsc::error::TrySendError::Closed(_)) => {
-                WsHub::count(&self.state.ws().unsent_replies, 1)
-            }
-        }
-    }
-
-    fn hold_or_drop(&mut self, msg: ServerMessage) {
-        if matches!(msg, ServerMessage::StreamEnded { .. }) {
-            self.held.push_back(msg);
-        } else {
-            WsHub::count(&self.state.ws().dropped_replies, 1);
-        }
-    }
-
-    /// Moves held replies into the queue while it has room.
-    fn send_held(&mut self) {
-        while let Some(msg) = self.held.pop_front() {
-            match self.out.try_send(msg) {
-                Ok(()) => {}
-                Err(mpsc::error::TrySendError::Full(msg)) => {
-                    self.held.push_front(msg);
-                    return;
-                }
-                Err(mpsc::error::TrySendError::Closed(_)) => {
-                    let lost = 1 + self.held.len() as u64;
-                    WsHub::count(&self.state.ws().unsent_replies, lost);
-                    self.held.clear();
-                    return;
-                }
-            }
-        }
+        self.out.reply(msg);
     }
 
     fn reject(&mut self, ref_seq: Option<u64>, e: WsError) {
@@ -284,29 +233,34 @@ impl Connection {
                 }
             }
             ClientMessage::Grasp { seq, hand, request } => {
-                let (state, out) = (self.state.clone(), self.out.clone());
+                let (state, out) = (self.state.clone(), self.out.sender().clone());
                 if let Err(e) = self.grasps.start(&state, &out, seq, &hand, &request).await {
                     self.reject(seq, e);
                 }
             }
             ClientMessage::GraspRelease { seq, id, request } => {
-                if let Err(e) = self
-                    .grasps
-                    .end(&self.state, &self.out, seq, id, Some(request))
+                if let Err(e) =
+                    self.grasps
+                        .end(&self.state, self.out.sender(), seq, id, Some(request))
                 {
                     self.reject(seq, e);
                 }
             }
             ClientMessage::GraspStop { seq, id } => {
-                if let Err(e) = self.grasps.end(&self.state, &self.out, seq, id, None) {
+                if let Err(e) = self
+                    .grasps
+                    .end(&self.state, self.out.sender(), seq, id, None)
+                {
                     self.reject(seq, e);
                 }
             }
-            ClientMessage::Enable(req) => spawn_switch(&self.state, &self.out, Switch::Enable, req),
-            ClientMessage::Disable(req) => {
-                spawn_switch(&self.state, &self.out, Switch::Disable, req)
+            ClientMessage::Enable(req) => {
+                spawn_switch(&self.state, self.out.sender(), Switch::Enable, req)
             }
-            ClientMessage::Estop(req) => spawn_estop(&self.state, &self.out, req),
+            ClientMessage::Disable(req) => {
+                spawn_switch(&self.state, self.out.sender(), Switch::Disable, req)
+            }
+            ClientMessage::Estop(req) => spawn_estop(&self.state, self.out.sender(), req),
         }
     }
 
