@@ -40,9 +40,11 @@ pub(super) struct Link {
     pub counters: BusCounters,
     shared: Arc<BusShared>,
     /// Replies nobody was waiting for (power-up announcements, late
-    /// replies, polls written blind), each with the full packet of the
-    /// adapter its byte ended, if one did.
-    pub inbox: Vec<(Reply, Instant, Option<PacketMark>)>,
+    /// replies, polls written blind).
+    pub inbox: Vec<Heard>,
+    /// Bytes read when the last write began: a reply whose first byte came
+    /// before is no answer to it.
+    read_before_write: u64,
     /// Which bytes read ended a full packet of the adapter, and when.
     pub packets: PacketEnds,
     /// When reads woke on bytes the port had been seen without just
@@ -53,6 +55,22 @@ pub(super) struct Link {
     /// How late this thread wakes from a timed read no bytes cut short: a
     /// measure of how late it wakes on bytes too.
     wake: WakeLateness,
+}
+
+/// A reply read, with what says which request it can answer.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Heard {
+    pub reply: Reply,
+    /// When it was decoded.
+    pub at: Instant,
+    /// The adapter's full packet its byte ended, if one did.
+    pub packet: Option<PacketMark>,
+    /// Its first byte's place in the stream read since the port opened
+    /// ([`PacketEnds::bytes_read`]): a write begun after that byte was read
+    /// cannot be what it answers, however alike the reply and the answer
+    /// look (a power-up announcement held by an adapter's latency timer
+    /// until after a poll of the same device was written).
+    pub first_byte: u64,
 }
 
 fn not_open() -> io::Error {
@@ -80,6 +98,7 @@ impl Link {
             counters: BusCounters::default(),
             shared,
             inbox: Vec::new(),
+            read_before_write: 0,
             packets: PacketEnds::default(),
             woke_on_bytes: Vec::new(),
             wake: WakeLateness::default(),
@@ -159,6 +178,7 @@ impl Link {
         for cmd in cmds {
             self.tx.extend_from_slice(&cmd.encode());
         }
+        self.read_before_write = self.packets.bytes_read();
         match (self.up, self.port.as_mut()) {
             (true, Some(port)) => port.write_all(&self.tx)?,
             _ => return Err(not_open()),
@@ -257,23 +277,43 @@ impl Link {
                 continue;
             };
             self.counters.wire_busy_us += (self.turnaround + self.frame).as_micros() as u64;
-            let mark = self.packets.reply(self.decoder.pending());
-            let wanted = want.is_some_and(|w| w.dev_id == reply.dev_id && w.index == reply.index);
+            let pending = self.decoder.pending();
+            let heard = Heard {
+                reply,
+                at,
+                packet: self.packets.reply(pending),
+                first_byte: self.first_byte(pending),
+            };
+            let wanted = want.is_some_and(|w| w.dev_id == reply.dev_id && w.index == reply.index)
+                && heard.first_byte >= self.read_before_write;
             if wanted {
                 // The last of the wanted block read together answers: one
                 // before it was on the wire before the request (see
                 // `UsbPipeline::take`), and goes to the inbox.
-                if let Some(earlier) = found.replace((reply, at, mark)) {
+                if let Some(earlier) = found.replace(heard) {
                     self.inbox.push(earlier);
                 }
             } else {
-                self.inbox.push((reply, at, mark));
+                self.inbox.push(heard);
             }
         }
         let stats = self.decoder.stats();
         self.counters.crc_errors = stats.crc_errors;
         self.counters.skipped_bytes = stats.skipped_bytes;
-        found.map(|(reply, at, _)| (reply, at))
+        found.map(|h| (h.reply, h.at))
+    }
+
+    /// Where the first byte of a frame just decoded, `pending` bytes before
+    /// the end of what was read, sits in the stream.
+    fn first_byte(&self, pending: usize) -> u64 {
+        self.packets
+            .bytes_read()
+            .saturating_sub((pending + FRAME_LEN) as u64)
+    }
+
+    /// Bytes read since the port opened ([`Heard::first_byte`]).
+    pub(super) fn bytes_read(&self) -> u64 {
+        self.packets.bytes_read()
     }
 
     /// Changes the port's speed (after the devices switched), dropping what

@@ -71,8 +71,50 @@ fn of_two_wanted_replies_read_together_the_later_answers() {
         .wait(Some(want), Instant::now() + Duration::from_millis(50))
         .unwrap();
     assert_eq!(got.map(|(r, _)| r), Some(reply));
-    let kept: Vec<Reply> = link.inbox.iter().map(|(r, _, _)| *r).collect();
+    let kept: Vec<Reply> = link.inbox.iter().map(|h| h.reply).collect();
     assert_eq!(kept, vec![announced]);
+}
+
+/// An announcement whose first bytes were read before the request was
+/// written, its end held by an adapter until after: it was on the wire
+/// before the request, so it answers nothing, whatever read its end came in.
+#[test]
+fn a_reply_begun_before_the_request_was_written_does_not_answer_it() {
+    let (mut link, mut dev) = link_pair();
+    let state = |fsm| {
+        Reply::new(
+            3,
+            ReplyBody::Info01(crate::protocol::Info01 {
+                fsm,
+                ..Default::default()
+            }),
+        )
+    };
+    let (announced, reply) = (state(0), state(7));
+    let bytes = announced.encode();
+    let (head, tail) = bytes.split_at(2);
+    dev.write_all(head).unwrap();
+    link.wait(None, Instant::now() + Duration::from_millis(5))
+        .unwrap();
+    assert_eq!(link.decoder.pending(), 2, "the announcement's head is in");
+    link.send(&[Command::Config(Config::read(3, InfoBlock::Info01))])
+        .unwrap();
+    dev.write_all(tail).unwrap();
+    let want = Want {
+        dev_id: 3,
+        index: 1,
+    };
+    let got = link
+        .wait(Some(want), Instant::now() + Duration::from_millis(20))
+        .unwrap();
+    assert_eq!(got, None, "the announcement's end is no answer");
+    let kept: Vec<Reply> = link.inbox.iter().map(|h| h.reply).collect();
+    assert_eq!(kept, vec![announced]);
+    dev.write_all(&reply.encode()).unwrap();
+    let got = link
+        .wait(Some(want), Instant::now() + Duration::from_millis(50))
+        .unwrap();
+    assert_eq!(got.map(|(r, _)| r), Some(reply));
 }
 
 /// Bytes found waiting came at some earlier instant: only bytes a

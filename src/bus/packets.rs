@@ -60,6 +60,12 @@ impl PacketEnds {
         self.ends.clear();
     }
 
+    /// Bytes read since the port opened: where the next byte read sits in
+    /// the stream.
+    pub(crate) fn bytes_read(&self) -> u64 {
+        self.total
+    }
+
     /// `n` bytes were read just now (`now` is asked only of a read that
     /// was one packet: the link reads on the bus's hot path).
     pub(crate) fn read(&mut self, n: usize, now: impl FnOnce() -> Instant) {

@@ -613,14 +613,20 @@ impl Scheduler {
 
     /// A poll written blind (its request's last byte due on the wire at
     /// `end`): its reply is matched when it comes; the line is held for it.
-    /// `handed` is when the write was handed to the port.
-    pub(crate) fn track(&mut self, want: Want, end: Instant, handed: Instant) {
+    /// `handed` is when the write was handed to the port, `read_before`
+    /// how many bytes had been read when it began ([`Inflight::read_before`]).
+    pub(crate) fn track(
+        &mut self,
+        want: Want,
+        end: Instant,
+        (handed, read_before): (Instant, u64),
+    ) {
         let window = self.clock.reply_window(end);
         let (wire_end, out) = self.reply_out(end);
         let frame = self.clock.frame_time();
         self.clock.reply_on_wire(end);
         if let Some(pipeline) = self.pipeline.as_mut() {
-            pipeline.track(want, window, handed, out, (wire_end, frame));
+            pipeline.track(want, window, (handed, read_before), out, (wire_end, frame));
         }
     }
 
@@ -646,17 +652,19 @@ impl Scheduler {
 
     /// The poll in flight `reply` answers, taken out; `followed_by`
     /// replies of the same device and block were read after it in the same
-    /// batch ([`UsbPipeline::take`]).
+    /// batch, and its first byte was byte `first_byte` read since the port
+    /// opened ([`UsbPipeline::take`]).
     pub(crate) fn take_inflight(
         &mut self,
         reply: &crate::protocol::Reply,
         followed_by: usize,
+        first_byte: u64,
     ) -> Option<Inflight> {
         let want = Want {
             dev_id: reply.dev_id,
             index: reply.index,
         };
-        self.pipeline.as_mut()?.take(want, followed_by)
+        self.pipeline.as_mut()?.take(want, followed_by, first_byte)
     }
 
     /// Polls in flight whose deadline passed by `now`, taken out.

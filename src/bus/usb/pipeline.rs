@@ -74,6 +74,9 @@ pub(crate) struct Inflight {
     pub window: ReplyWindow,
     /// When its write was handed to the port (for the round-trip histogram).
     pub handed: Instant,
+    /// Bytes read when its write began: a reply whose first byte was among
+    /// them was on its way before the poll and answers none.
+    pub read_before: u64,
     /// When its reply reaches the host if the write made the first
     /// boundary after it (the frame clock known): a reply a frame later
     /// shows a write that reached the adapter late.
@@ -403,7 +406,7 @@ impl UsbPipeline {
         &mut self,
         want: Want,
         window: ReplyWindow,
-        handed: Instant,
+        (handed, read_before): (Instant, u64),
         reply_end: Instant,
         (wire_end, frame): (Instant, Duration),
     ) {
@@ -439,6 +442,7 @@ impl UsbPipeline {
             want,
             window,
             handed,
+            read_before,
             on_time,
             sentinel,
             packet_ref,
@@ -562,17 +566,28 @@ impl UsbPipeline {
 
     /// The oldest poll in flight that a reply to `want` answers, taken
     /// out; `followed_by` replies to `want` were read after it in the same
-    /// batch. A device answers a read once and in order, so of the replies
-    /// to one block in hand only the last ones answer the polls in flight:
-    /// one before them was on the wire before those polls were written (a
+    /// batch, and its first byte was byte `first_byte` of the stream. A
+    /// device answers a read once and in order, so of the replies to one
+    /// block in hand only the last ones answer the polls in flight: one
+    /// before them was on the wire before those polls were written (a
     /// power-up announcement, a reply given up on), and the adapter held it
-    /// until it passed them on together.
-    pub(crate) fn take(&mut self, want: Want, followed_by: usize) -> Option<Inflight> {
+    /// until it passed them on together. A reply begun before the oldest
+    /// poll's write was even started answers none of them, whichever batch
+    /// its end came in.
+    pub(crate) fn take(
+        &mut self,
+        want: Want,
+        followed_by: usize,
+        first_byte: u64,
+    ) -> Option<Inflight> {
         let waiting = self.inflight.iter().filter(|i| i.want == want).count();
         if followed_by >= waiting {
             return None;
         }
         let pos = self.inflight.iter().position(|i| i.want == want)?;
+        if self.inflight[pos].read_before > first_byte {
+            return None;
+        }
         self.inflight.remove(pos)
     }
 

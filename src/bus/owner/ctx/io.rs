@@ -41,20 +41,25 @@ impl Ctx {
     pub(crate) fn absorb_inbox(&mut self) {
         self.learn_frame_clock();
         let inbox = std::mem::take(&mut self.link.inbox);
-        for (i, (reply, at, packet)) in inbox.iter().enumerate() {
+        for (i, heard) in inbox.iter().enumerate() {
+            let reply = &heard.reply;
             let followed_by = inbox[i + 1..]
                 .iter()
-                .filter(|(r, _, _)| r.dev_id == reply.dev_id && r.index == reply.index)
+                .filter(|h| h.reply.dev_id == reply.dev_id && h.reply.index == reply.index)
                 .count();
-            let effect = match self.sched.take_inflight(reply, followed_by) {
+            let effect = match self
+                .sched
+                .take_inflight(reply, followed_by, heard.first_byte)
+            {
                 Some(inflight) => {
                     self.stats
-                        .round_trip(at.saturating_duration_since(inflight.handed));
-                    self.sched.inflight_reply(reply, *at, &inflight, *packet)
+                        .round_trip(heard.at.saturating_duration_since(inflight.handed));
+                    self.sched
+                        .inflight_reply(reply, heard.at, &inflight, heard.packet)
                 }
                 None => {
                     self.link.counters.unsolicited += 1;
-                    self.sched.unsolicited(reply, *at)
+                    self.sched.unsolicited(reply, heard.at)
                 }
             };
             self.after_reply(reply.dev_id, effect);
@@ -176,12 +181,13 @@ impl Ctx {
     /// or counted missing at its deadline (`expire_inflight`).
     fn poll_blind(&mut self, control: &[Planned], cmd: Config, want: Want) -> Result<(), BusError> {
         let clocked = self.sched.usb_clock_known();
+        let read_before = self.link.bytes_read();
         let (handed, end) = self.write(&behind(control, cmd), true)?;
         self.link.counters.frames_tx_batched += control.len() as u64;
         self.link.counters.polls_pipelined += 1;
         self.link.counters.usb_writes_unclocked += u64::from(!clocked);
         self.control_frames_sent(control, end);
-        self.sched.track(want, end, handed);
+        self.sched.track(want, end, (handed, read_before));
         Ok(())
     }
 

@@ -135,7 +135,7 @@ fn account_batch(b: &mut Bus, control: &[Planned], dev_id: u8, block: InfoBlock)
         dev_id,
         index: block.index(),
     };
-    b.s.track(want, end, b.now);
+    b.s.track(want, end, (b.now, 0));
     Written {
         at: b.now,
         released: end - FRAME * n,
@@ -264,7 +264,7 @@ fn a_request_waits_for_the_polls_in_flight_and_a_missing_reply_counts_at_its_dea
         })
         .collect();
     for reply in &replies {
-        let inflight = b.s.take_inflight(reply, 0).expect("a poll in flight");
+        let inflight = b.s.take_inflight(reply, 0, 0).expect("a poll in flight");
         b.s.inflight_reply(reply, b.now, &inflight, None);
     }
     assert_eq!(b.s.in_flight(), 1);
@@ -399,7 +399,7 @@ fn write_now(b: &mut Bus, slot: &Slot) -> (Instant, u32) {
                 dev_id: *dev_id,
                 index: block.index(),
             };
-            b.s.track(want, end, b.now);
+            b.s.track(want, end, (b.now, 0));
             (end, n)
         }
         other => panic!("not a write: {other:?}"),
