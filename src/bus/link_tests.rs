@@ -43,6 +43,22 @@ fn the_wanted_reply_is_returned_and_others_kept() {
     assert_eq!(link.counters.frames_rx, 2);
 }
 
+/// Device 3's INFO_01 in state `fsm`.
+fn info01_of_3(fsm: u8) -> Reply {
+    Reply::new(
+        3,
+        ReplyBody::Info01(crate::protocol::Info01 {
+            fsm,
+            ..Default::default()
+        }),
+    )
+}
+
+const INFO01_OF_3: Want = Want {
+    dev_id: 3,
+    index: 1,
+};
+
 /// An announcement an adapter held and passed on with the reply
 /// precedes it: the later of the two answers the read.
 #[test]
@@ -50,23 +66,11 @@ fn of_two_wanted_replies_read_together_the_later_answers() {
     let (mut link, mut dev) = link_pair();
     link.send(&[Command::Config(Config::read(3, InfoBlock::Info01))])
         .unwrap();
-    let state = |fsm| {
-        Reply::new(
-            3,
-            ReplyBody::Info01(crate::protocol::Info01 {
-                fsm,
-                ..Default::default()
-            }),
-        )
-    };
-    let (announced, reply) = (state(0), state(7));
+    let (announced, reply) = (info01_of_3(0), info01_of_3(7));
     let mut bytes = announced.encode().to_vec();
     bytes.extend_from_slice(&reply.encode());
     dev.write_all(&bytes).unwrap();
-    let want = Want {
-        dev_id: 3,
-        index: 1,
-    };
+    let want = INFO01_OF_3;
     let got = link
         .wait(Some(want), Instant::now() + Duration::from_millis(50))
         .unwrap();
@@ -81,16 +85,7 @@ fn of_two_wanted_replies_read_together_the_later_answers() {
 #[test]
 fn a_reply_begun_before_the_request_was_written_does_not_answer_it() {
     let (mut link, mut dev) = link_pair();
-    let state = |fsm| {
-        Reply::new(
-            3,
-            ReplyBody::Info01(crate::protocol::Info01 {
-                fsm,
-                ..Default::default()
-            }),
-        )
-    };
-    let (announced, reply) = (state(0), state(7));
+    let (announced, reply) = (info01_of_3(0), info01_of_3(7));
     let bytes = announced.encode();
     let (head, tail) = bytes.split_at(2);
     dev.write_all(head).unwrap();
@@ -100,10 +95,7 @@ fn a_reply_begun_before_the_request_was_written_does_not_answer_it() {
     link.send(&[Command::Config(Config::read(3, InfoBlock::Info01))])
         .unwrap();
     dev.write_all(tail).unwrap();
-    let want = Want {
-        dev_id: 3,
-        index: 1,
-    };
+    let want = INFO01_OF_3;
     let got = link
         .wait(Some(want), Instant::now() + Duration::from_millis(20))
         .unwrap();

@@ -301,10 +301,8 @@ fn without_a_known_clock_a_write_may_leave_a_period_and_its_reach_later() {
     assert_eq!(hs.latest_release(t0).at, t0 + us(250));
 }
 
-#[test]
-fn of_replies_read_together_only_the_last_answer_the_polls_in_flight() {
-    let t0 = Instant::now();
-    let mut p = pipeline(FTDI_1);
+/// What a poll of device 4's INFO_01 written at `t0` wants, and when.
+fn info01_poll_of_device_4(t0: Instant) -> (Want, ReplyWindow) {
     let want = Want {
         dev_id: 4,
         index: 1,
@@ -313,6 +311,14 @@ fn of_replies_read_together_only_the_last_answer_the_polls_in_flight() {
         due: t0,
         deadline: t0 + Duration::from_millis(5),
     };
+    (want, window)
+}
+
+#[test]
+fn of_replies_read_together_only_the_last_answer_the_polls_in_flight() {
+    let t0 = Instant::now();
+    let mut p = pipeline(FTDI_1);
+    let (want, window) = info01_poll_of_device_4(t0);
     p.track(want, window, (t0, 0), t0, (t0, us(400)));
     // An announcement held with the reply: the earlier of the two is none.
     assert_eq!(p.take(want, 1, 0), None);
@@ -333,14 +339,7 @@ fn of_replies_read_together_only_the_last_answer_the_polls_in_flight() {
 fn a_reply_begun_before_the_polls_write_answers_none() {
     let t0 = Instant::now();
     let mut p = pipeline(FTDI_1);
-    let want = Want {
-        dev_id: 4,
-        index: 1,
-    };
-    let window = ReplyWindow {
-        due: t0,
-        deadline: t0 + Duration::from_millis(5),
-    };
+    let (want, window) = info01_poll_of_device_4(t0);
     // 62 bytes read before the write: the announcement began at byte 60.
     p.track(want, window, (t0, 62), t0, (t0, us(400)));
     assert_eq!(p.take(want, 0, 60), None);
