@@ -89,7 +89,9 @@ test("a program streaming to the hand is shown on its card until its stream ends
     await new Promise((r) => ws.addEventListener("open", r));
     ws.send(JSON.stringify({ type: "setpoints", targets: [{ hand: "left", joint: "index", position_deg: 3 }] }));
   });
-  await page.waitForFunction(() => /Driven by lerobot-test \(WebSocket client \d+\): index$/.test(
+  // One setpoint, then none: the card reads the streams every second and
+  // adds how long the stream has been idle once that passes a second.
+  await page.waitForFunction(() => /Driven by lerobot-test \(WebSocket client \d+(, idle \d+ s)?\): index$/.test(
     document.querySelector('[data-testid="hand-streams-left"]')?.textContent || ""), null, { timeout: WAIT });
   assert.equal(await line.isVisible(), true);
   await page.evaluate(() => window.__teleop.close());
