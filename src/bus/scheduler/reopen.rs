@@ -11,7 +11,8 @@ pub(super) const BACKOFF_FIRST: Duration = Duration::from_millis(20);
 pub(super) const BACKOFF_MAX: Duration = Duration::from_secs(1);
 /// How long a freshly opened port is only listened to: devices powered up
 /// with the daemon announce themselves (INFO_01) within a few ms, and a
-/// frame written meanwhile would collide with their announcements.
+/// frame written meanwhile would collide with their announcements. An
+/// adapter holds them a while longer ([`Reopen::opened`]).
 pub(super) const LISTEN_ON_OPEN: Duration = Duration::from_millis(20);
 
 #[derive(Debug, Clone)]
@@ -48,13 +49,18 @@ impl Reopen {
         self.quiet_until
     }
 
-    /// The port opened at `now`; true when it had been up before (a reconnect).
-    pub(super) fn opened(&mut self, now: Instant) -> bool {
+    /// The port opened at `now`, behind an adapter that may hold a reply
+    /// for `hold` before the host reads it; true when it had been up before
+    /// (a reconnect). The quiet spell lasts until the announcements are
+    /// read: a device polled while its announcement is still in the
+    /// adapter answers with a frame just like it, read after it, and only
+    /// the order of the bytes tells them apart.
+    pub(super) fn opened(&mut self, now: Instant, hold: Duration) -> bool {
         let again = self.ever_up;
         self.up = true;
         self.ever_up = true;
         self.backoff = BACKOFF_FIRST;
-        self.quiet_until = now + LISTEN_ON_OPEN;
+        self.quiet_until = now + LISTEN_ON_OPEN + hold;
         again
     }
 

@@ -179,14 +179,16 @@ impl Scheduler {
         self.clock.line_free(now);
     }
 
-    /// The port opened at `now`; true when it had been up before (a reconnect).
+    /// The port opened at `now` (its adapter already set: the quiet spell
+    /// waits out what it holds); true when it had been up before (a
+    /// reconnect).
     pub(crate) fn link_up(&mut self, now: Instant) -> bool {
         self.clock.line_free(now);
         if let Some(pipeline) = self.pipeline.as_mut() {
             pipeline.reset();
             pipeline.guard_mut().link_up(now);
         }
-        self.reopen.opened(now)
+        self.reopen.opened(now, self.clock.adapter().reply_hold())
     }
 
     /// Opening the port failed at `now`; returns the wait before the next try.

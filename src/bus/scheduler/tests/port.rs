@@ -1,6 +1,7 @@
 //! Scheduler tests: the port: opening, quiet spell, loss, backoff.
 
 use super::*;
+use crate::transport::adapter::AdapterModel;
 
 #[test]
 fn a_new_bus_opens_its_port_at_once() {
@@ -25,6 +26,30 @@ fn a_freshly_opened_port_is_only_listened_to() {
         bus.next(),
         Slot::Listen {
             until: opened + LISTEN_ON_OPEN
+        }
+    );
+}
+
+/// Behind an FTDI chip with a 16 ms timer, announcements reach the host up
+/// to 17 ms after they left the wire: the port is listened to that much
+/// longer before a device is polled.
+#[test]
+fn behind_an_adapter_the_quiet_spell_waits_out_its_hold() {
+    let t0 = Instant::now();
+    let mut s = Scheduler::new(&config(&[1]), t0);
+    s.set_adapter(AdapterModel::Ftdi { latency_ms: 16 });
+    s.link_up(t0);
+    let store = SetpointStore::default();
+    let work = Work {
+        estop_generation: 0,
+        request_queued: true,
+        setpoints: &store,
+    };
+    let hold = Duration::from_millis(17);
+    assert_eq!(
+        s.next(t0 + LISTEN_ON_OPEN, &work),
+        Slot::Listen {
+            until: t0 + LISTEN_ON_OPEN + hold
         }
     );
 }
