@@ -16,7 +16,8 @@ fi
 promtool --version | head -n1
 
 cargo build --quiet --features bench,ros2 --bin jointd
-target/debug/jointd --sim 4 --listen 127.0.0.1:0 >"$WORK/stdout" 2>"$WORK/stderr" &
+# Its TMPDIR (the simulator's pty link, default recordings) goes with $WORK.
+TMPDIR="$WORK" target/debug/jointd --sim 4 --listen 127.0.0.1:0 >"$WORK/stdout" 2>"$WORK/stderr" &
 PID=$!
 cleanup() {
   if kill -0 "$PID" 2>/dev/null; then kill -TERM "$PID" 2>/dev/null || true; wait "$PID" 2>/dev/null || true; fi

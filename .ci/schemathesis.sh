@@ -25,7 +25,8 @@ fi
 PATH="$PWD/$VENV/bin:$PATH"
 
 cargo build --quiet --features bench,ros2 --bin jointd
-JOINTD_TOKEN="$TOKEN" target/debug/jointd --sim 16 --listen 127.0.0.1:0 \
+# Its TMPDIR (the simulator's pty link, default recordings) goes with $WORK.
+JOINTD_TOKEN="$TOKEN" TMPDIR="$WORK" target/debug/jointd --sim 16 --listen 127.0.0.1:0 \
   >"$WORK/stdout" 2>"$WORK/stderr" &
 PID=$!
 cleanup() {
