@@ -372,7 +372,8 @@ impl Ctx {
     }
 
     /// Blocks until shortly before `due`, where the reply is expected: by
-    /// as much as this thread is seen to wake late, when it spins for the reply next
+    /// as much as this thread is seen to wake late (learnt by the link from
+    /// every timed read), when it spins for the reply next
     /// ([`Self::spin_for_reply`]); by [`PREPARE_LEAD`] when it does not.
     /// Past `sliced_from` (see [`Self::sliced_from`]) it sleeps in short
     /// slices and gives way to an e-stop.
@@ -382,22 +383,13 @@ impl Ctx {
         due: Instant,
         sliced_from: Instant,
     ) -> std::io::Result<Option<(Reply, Instant)>> {
-        let spinning = self.cfg.timing.reply_spin_us > 0;
-        let until = if spinning {
-            self.wake.wake_at(due)
-        } else {
-            due.checked_sub(PREPARE_LEAD).unwrap_or(due)
+        let lead = match self.cfg.timing.reply_spin_us > 0 {
+            true => self.link.wake_lateness(),
+            false => PREPARE_LEAD,
         };
-        let slept = Instant::now() < until;
+        let until = due.checked_sub(lead).unwrap_or(due);
         let got = self.link.wait(Some(want), sliced_from.min(until));
-        let got = self.wait_sliced(want, got, until, false);
-        // A wake-up at `until`, not one an e-stop cut short, says how late
-        // this thread wakes.
-        let woke = Instant::now();
-        if spinning && slept && matches!(got, Ok(None)) && woke >= until {
-            self.wake.observe(until, woke);
-        }
-        got
+        self.wait_sliced(want, got, until, false)
     }
 
     /// Looks at the port without sleeping until `reply_spin_us` past `aim`

@@ -48,9 +48,6 @@ pub(crate) struct Ctx {
     held: Option<Request>,
     /// When moves are sampled next.
     next_motion_sample: Instant,
-    /// How late this thread wakes: it stops sleeping that much before a
-    /// reply is due.
-    wake: crate::rt::wake::WakeLateness,
     /// How long after the model replies reach this thread: it aims its
     /// wake-up and its watch of the port there.
     reply_lag: crate::bus::reply_lag::ReplyLag,
@@ -80,7 +77,6 @@ impl Ctx {
             thread_notes: Vec::new(),
             held: None,
             next_motion_sample: now,
-            wake: crate::rt::wake::WakeLateness::default(),
             reply_lag: crate::bus::reply_lag::ReplyLag::default(),
         }
     }

@@ -17,7 +17,7 @@ impl Ctx {
             self.sched.registry_mut().roll_rates(window);
             let timeout = self.sched.clock().reply_timeout(now);
             self.stats.set_reply_timeout(timeout);
-            self.stats.set_wake_lead(self.wake.lead());
+            self.stats.set_wake_lead(self.link.wake_lateness());
             self.stats.set_reply_lag(self.reply_lag.lag());
         }
         if self.stats.due(now) || self.sched.has_events() {
