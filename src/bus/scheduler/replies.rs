@@ -13,7 +13,8 @@ use crate::bus::wire::Want;
 use crate::protocol::status::fsm_name;
 use crate::protocol::{Reply, ReplyBody};
 
-use super::{Inflight, Scheduler};
+use super::Scheduler;
+use crate::bus::usb::pipeline::Inflight;
 
 impl Scheduler {
     /// The reply a transaction waited for arrived at `at` (it was due at

@@ -42,13 +42,9 @@ use std::time::{Duration, Instant};
 
 use super::confirm::Confirm;
 use super::frame_clock::FramePhase;
-use super::guard::{
-    Change, PipelineMode, UsbGuard, SENTINEL_EVERY, SENTINEL_LEAD, SENTINEL_MIN_MARGIN,
-};
-use crate::bus::packets::PacketMark;
-use crate::bus::wire::{ReplyWindow, Want};
-use crate::protocol::FRAME_LEN;
+use super::guard::{PipelineMode, UsbGuard, SENTINEL_EVERY, SENTINEL_LEAD};
 use crate::transport::adapter::AdapterModel;
+pub(crate) use inflight::Inflight;
 
 /// A write is still aimed at a boundary this close: whether it makes it
 /// or the next is then not known, and the wire is held for the later one
@@ -66,36 +62,6 @@ const UNCLOCKED_LOOKS_PER_FRAME: u32 = 4;
 /// Confirmed writes are made early in the frame before their boundary
 /// only once this many in a row were seen untaken just before it.
 const CLOCK_CHECKS_TRUSTED: u32 = 8;
-
-/// A poll written blind: its reply is matched when the adapter hands it over.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct Inflight {
-    pub want: Want,
-    pub window: ReplyWindow,
-    /// When its write was handed to the port (for the round-trip histogram).
-    pub handed: Instant,
-    /// Bytes read when its write began: a reply whose first byte was among
-    /// them was on its way before the poll and answers none.
-    pub read_before: u64,
-    /// When its reply reaches the host if the write made the first
-    /// boundary after it (the frame clock known): a reply a frame later
-    /// shows a write that reached the adapter late.
-    pub on_time: Option<Instant>,
-    /// A sentinel ([`super::guard`]) handed over early enough for its
-    /// lateness to say something of the path.
-    pub sentinel: bool,
-    /// Behind a latency timer longer than a frame: when its reply's last
-    /// byte leaves the wire if the write made the first boundary after it,
-    /// and a byte's time, to date a full packet that a byte of it ends.
-    pub packet_ref: Option<PacketRef>,
-}
-
-/// When a reply's bytes leave the wire on time (see [`Inflight`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct PacketRef {
-    pub reply_end: Instant,
-    pub byte: Duration,
-}
 
 /// Where a transfer of host frames went on the wire.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -395,224 +361,6 @@ impl UsbPipeline {
         self.latest_release(handed)
     }
 
-    /// A poll written blind, its reply expected in `window`.
-    /// (Tracked only while writes are blind.)
-    /// `reply_end`: when the reply leaves the adapter's hold (the latency
-    /// timer's end, if it has one), the write leaving as late as the reach
-    /// allows. Ends an armed sentinel.
-    /// `wire_end`: when the reply's last byte leaves the wire, the write
-    /// leaving as late as the reach allows; `frame`: a frame's wire time.
-    pub(crate) fn track(
-        &mut self,
-        want: Want,
-        window: ReplyWindow,
-        (handed, read_before): (Instant, u64),
-        reply_end: Instant,
-        (wire_end, frame): (Instant, Duration),
-    ) {
-        let (on_time, packet_ref) = if self.packets {
-            let held = self.held(handed);
-            let packet_ref = self.active().then(|| PacketRef {
-                reply_end: wire_end.checked_sub(held).unwrap_or(wire_end),
-                byte: frame / FRAME_LEN as u32,
-            });
-            (None, packet_ref)
-        } else {
-            (self.on_time_read(handed, reply_end), None)
-        };
-        self.confirm.carried_poll();
-        let armed = std::mem::take(&mut self.armed);
-        // An attempt counts as one whether or not it can be judged: each
-        // holds the wire a frame.
-        self.since_sentinel = if armed {
-            0
-        } else {
-            self.since_sentinel.saturating_add(1)
-        };
-        let margin = self
-            .phase
-            .boundary_after(handed)
-            .saturating_duration_since(handed)
-            .saturating_sub(self.arrival_lag);
-        // Handed over too close to its boundary (the host woke late), its
-        // lateness would be the host's as much as the path's: not judged.
-        let judged = on_time.is_some() || packet_ref.is_some();
-        let sentinel = armed && judged && margin >= SENTINEL_MIN_MARGIN;
-        self.inflight.push_back(Inflight {
-            want,
-            window,
-            handed,
-            read_before,
-            on_time,
-            sentinel,
-            packet_ref,
-        });
-    }
-
-    /// When the reply to a write handed over at `handed` reaches the host
-    /// if the write made the first boundary after it; `reply_end` is when
-    /// the reply leaves the adapter's hold, the write leaving as late as
-    /// the reach allows. `None` while the frame clock is unknown.
-    /// How much later than the first boundary after it a write handed
-    /// over at `handed` is held for.
-    fn held(&self, handed: Instant) -> Duration {
-        self.released(handed)
-            .at
-            .saturating_duration_since(self.phase.boundary_after(handed))
-    }
-
-    fn on_time_read(&self, handed: Instant, reply_end: Instant) -> Option<Instant> {
-        self.active().then(|| {
-            let held = self.held(handed);
-            // The latest the reply may end (the device's turnaround
-            // varies): a reply ending just before a boundary is not taken
-            // for late when it ends just after.
-            let end = reply_end.checked_sub(held).unwrap_or(reply_end) + GUARD;
-            self.phase.boundary_after(end)
-        })
-    }
-
-    /// True when a reply read at `at`, due at `on_time`, says its write
-    /// slipped a frame, or two where the widened guard holds the wire for
-    /// that (see [`Self::answered`]).
-    fn slipped(&self, on_time: Instant, at: Instant) -> bool {
-        let after = at.saturating_duration_since(on_time);
-        let period = self.period();
-        (1..=self.guard.frames_of_slack()).any(|frames| {
-            let frames = f64::from(frames);
-            after >= period.mul_f64(frames - 0.1) && after <= period.mul_f64(frames + 0.25)
-        })
-    }
-
-    /// A reply waited for (lockstep, or a one-shot request) to a write
-    /// handed over at `handed` (the reply leaving the adapter's hold at
-    /// `reply_end`, see [`Self::track`]) was read at `at`. A write seen a
-    /// frame late keeps a backed-off mode from stepping down, as a blind
-    /// poll's does.
-    pub(crate) fn waited_reply(&mut self, handed: Instant, reply_end: Instant, at: Instant) {
-        if let Some(on_time) = self.on_time_read(handed, reply_end) {
-            if self.slipped(on_time, at) {
-                self.guard.write_seen_late(at);
-            }
-        }
-    }
-
-    /// The reply of `inflight` was read at `at`, `packet` the full packet a
-    /// byte of it ended, if one did: dated by that packet where its poll
-    /// was tracked for packets, else by its arrival.
-    pub(crate) fn replied(
-        &mut self,
-        inflight: &Inflight,
-        at: Instant,
-        packet: Option<PacketMark>,
-    ) -> Option<Change> {
-        match packet {
-            Some(mark) if inflight.packet_ref.is_some() => self.answered_packet(inflight, mark),
-            _ => self.answered(inflight, at),
-        }
-    }
-
-    /// The reply of `inflight` reached the host at `at`: a frame or more
-    /// after it would have if its write had made its boundary, the write
-    /// reached the adapter late. A backed-off pipeline does not step down
-    /// while it sees that; sentinels late often enough back it off.
-    fn answered(&mut self, inflight: &Inflight, at: Instant) -> Option<Change> {
-        let on_time = inflight.on_time?;
-        // Later than the frames the wire is held for is not a write that
-        // slipped (that collides, or shows as garbage): it is the reply of
-        // a newer poll of the same block matched to an older one whose
-        // reply was lost.
-        // Under three quarters of a frame is the host reading late.
-        // A write that slipped a frame makes its reply reach the host at the
-        // next boundary, read promptly: a frame after on time, give or take
-        // the estimate's error and the host's usual wake-up. A read later
-        // than that is the host's, not the path's, and says nothing.
-        self.verdict(inflight.sentinel, on_time, at)
-    }
-
-    /// Behind a latency timer: byte `mark.byte` of `inflight`'s reply ended
-    /// a full packet, which the host read at `mark.read_at`. The packet
-    /// leaves the adapter at the frame after that byte came in: read a
-    /// frame later than on time, the poll's write slipped a frame.
-    fn answered_packet(&mut self, inflight: &Inflight, mark: PacketMark) -> Option<Change> {
-        let r = inflight.packet_ref?;
-        let after_it = FRAME_LEN.saturating_sub(usize::from(mark.byte)) as u32;
-        let byte_in = r.reply_end.checked_sub(r.byte * after_it)?;
-        // As for a reply's end: the device's turnaround varies.
-        let on_time = self.phase.boundary_after(byte_in + GUARD);
-        self.verdict(inflight.sentinel, on_time, mark.read_at)
-    }
-
-    /// What a read at `at` of what was due at `on_time` says: a sentinel
-    /// late or on time (or nothing, read too late to tell), another write
-    /// seen a frame late.
-    fn verdict(&mut self, sentinel: bool, on_time: Instant, at: Instant) -> Option<Change> {
-        let after = at.saturating_duration_since(on_time);
-        let period = self.period();
-        let slipped = self.slipped(on_time, at);
-        if sentinel {
-            let on_time_read = after < period.mul_f64(0.75);
-            return match (slipped, on_time_read) {
-                (true, _) => self.guard.sentinel(true, at),
-                (false, true) => self.guard.sentinel(false, at),
-                (false, false) => None,
-            };
-        }
-        if slipped {
-            self.guard.write_seen_late(at);
-        }
-        None
-    }
-
-    /// The oldest poll in flight that a reply to `want` answers, taken
-    /// out; `followed_by` replies to `want` were read after it in the same
-    /// batch, and its first byte was byte `first_byte` of the stream. A
-    /// device answers a read once and in order, so of the replies to one
-    /// block in hand only the last ones answer the polls in flight: one
-    /// before them was on the wire before those polls were written (a
-    /// power-up announcement, a reply given up on), and the adapter held it
-    /// until it passed them on together. A reply begun before the oldest
-    /// poll's write was even started answers none of them, whichever batch
-    /// its end came in.
-    pub(crate) fn take(
-        &mut self,
-        want: Want,
-        followed_by: usize,
-        first_byte: u64,
-    ) -> Option<Inflight> {
-        let waiting = self.inflight.iter().filter(|i| i.want == want).count();
-        if followed_by >= waiting {
-            return None;
-        }
-        let pos = self.inflight.iter().position(|i| i.want == want)?;
-        if self.inflight[pos].read_before > first_byte {
-            return None;
-        }
-        self.inflight.remove(pos)
-    }
-
-    /// Polls whose deadline passed by `now`, taken out, oldest first.
-    pub(crate) fn expired(&mut self, now: Instant) -> Vec<Inflight> {
-        let mut gone = Vec::new();
-        self.inflight.retain(|i| {
-            let late = i.window.deadline <= now;
-            if late {
-                gone.push(*i);
-            }
-            !late
-        });
-        gone
-    }
-
-    /// The earliest deadline in flight.
-    pub(crate) fn next_deadline(&self) -> Option<Instant> {
-        self.inflight.iter().map(|i| i.window.deadline).min()
-    }
-
-    pub(crate) fn in_flight(&self) -> usize {
-        self.inflight.len()
-    }
-
     /// The port was lost or reopened: nothing is in flight, and the frame
     /// clock is learnt again.
     pub(crate) fn reset(&mut self) {
@@ -627,6 +375,10 @@ impl UsbPipeline {
 
 #[path = "pipeline_confirmed.rs"]
 mod confirmed;
+#[path = "pipeline_inflight.rs"]
+mod inflight;
+#[path = "pipeline_verdicts.rs"]
+mod verdicts;
 
 #[cfg(test)]
 #[path = "pipeline_tests.rs"]

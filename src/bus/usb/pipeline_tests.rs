@@ -1,5 +1,7 @@
 use super::*;
+use crate::bus::packets::PacketMark;
 use crate::bus::usb::frame_clock::PHASE_SAMPLES;
+use crate::bus::wire::{ReplyWindow, Want};
 
 fn us(n: u64) -> Duration {
     Duration::from_micros(n)

@@ -5,28 +5,21 @@
 //!
 //! Every frame is handed to the port when the scheduler's line model says
 //! the line is about to free; after a request that expects a reply,
-//! nothing is written until the reply arrives or its deadline passes.
+//! nothing is written until the reply arrives or its deadline passes
+//! (`reply_wait`). A one-shot request's frames go through `job`.
 
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use crate::bus::authority::Revoked;
 use crate::bus::coalesce::Planned;
 use crate::bus::config::StartPolicy;
 use crate::bus::error::BusError;
-use crate::bus::owner::confirm::describe;
 use crate::bus::registry::ReplyEffect;
 use crate::bus::reply_lag::Seen;
-use crate::bus::wire::{ReplyWindow, Want};
-use crate::protocol::{Command, Config, ConfigParam, InfoBlock, Reply};
+use crate::bus::wire::Want;
+use crate::protocol::{Command, Config, InfoBlock, Reply};
 
 use super::Ctx;
-
-/// With `reply_spin_us = 0` (no spinning): how long before a reply is due
-/// the owner wakes to plan the next control frame: ample for planning,
-/// short enough that the setpoints it samples are fresh.
-const PREPARE_LEAD: Duration = Duration::from_micros(100);
-/// How often a reply wait past its modelled time looks for an e-stop.
-const LATE_WAIT_SLICE: Duration = Duration::from_millis(1);
 
 impl Ctx {
     /// Listens until `at`; replies nobody waited for are taken in.
@@ -312,116 +305,6 @@ impl Ctx {
         Ok(self.settle_exchange(got, want, window.due, silence))
     }
 
-    /// From when a wait for the reply to a request ending at `end` goes in
-    /// short slices that give way to an e-stop: a frame after the modelled
-    /// reply, or from the e-stop cut-in (the reply off the wire, held by a
-    /// latency timer) if that is sooner. A late, missing or held reply must
-    /// not hold an e-stop back, nor the snapshot; nor may the owner's aim
-    /// at where replies have been coming (up to
-    /// [`crate::bus::reply_lag::MAX_LAG`] past the model).
-    fn sliced_from(&self, window: ReplyWindow, end: Instant) -> Instant {
-        let grace = window.due + self.sched.clock().frame_time();
-        self.sched.estop_cut_in(end).map_or(grace, |c| c.min(grace))
-    }
-
-    /// Waits for `want` until the window's deadline, watching the port from
-    /// `aim` (the modelled time plus the lag replies have shown); in
-    /// slices from `sliced_from` (see [`Self::sliced_from`]). Says whether
-    /// the reply came while the port was watched.
-    fn wait_reply(
-        &mut self,
-        want: Want,
-        window: ReplyWindow,
-        aim: Instant,
-        sliced_from: Instant,
-    ) -> (std::io::Result<Option<(Reply, Instant)>>, Seen) {
-        if self.estop_pending() && Instant::now() >= sliced_from {
-            return (Ok(None), Seen::Bound);
-        }
-        let (mut got, mut seen) = self.spin_for_reply(want, aim, sliced_from);
-        if matches!(got, Ok(None)) {
-            // A reply from here on wakes the thread: it may have come
-            // before it was read.
-            seen = Seen::Bound;
-            got = self.link.wait(Some(want), sliced_from.min(window.deadline));
-        }
-        (self.wait_sliced(want, got, window.deadline, true), seen)
-    }
-
-    /// Goes on waiting for `want` until `until` while `got` is empty, in
-    /// slices of [`LATE_WAIT_SLICE`] that give way to an e-stop; with
-    /// `housekeeping`, the snapshot and expiries are kept up between them.
-    fn wait_sliced(
-        &mut self,
-        want: Want,
-        mut got: std::io::Result<Option<(Reply, Instant)>>,
-        until: Instant,
-        housekeeping: bool,
-    ) -> std::io::Result<Option<(Reply, Instant)>> {
-        while matches!(got, Ok(None)) && !self.estop_pending() {
-            let now = Instant::now();
-            if now >= until {
-                break;
-            }
-            if housekeeping {
-                self.housekeeping(now);
-            }
-            got = self.link.wait(Some(want), until.min(now + LATE_WAIT_SLICE));
-        }
-        got
-    }
-
-    /// Blocks until shortly before `due`, where the reply is expected: by
-    /// as much as this thread is seen to wake late (learnt by the link from
-    /// every timed read), when it spins for the reply next
-    /// ([`Self::spin_for_reply`]); by [`PREPARE_LEAD`] when it does not.
-    /// Past `sliced_from` (see [`Self::sliced_from`]) it sleeps in short
-    /// slices and gives way to an e-stop.
-    fn sleep_before_reply(
-        &mut self,
-        want: Want,
-        due: Instant,
-        sliced_from: Instant,
-    ) -> std::io::Result<Option<(Reply, Instant)>> {
-        let lead = match self.cfg.timing.reply_spin_us > 0 {
-            true => self.link.wake_lateness(),
-            false => PREPARE_LEAD,
-        };
-        let until = due.checked_sub(lead).unwrap_or(due);
-        let got = self.link.wait(Some(want), sliced_from.min(until));
-        self.wait_sliced(want, got, until, false)
-    }
-
-    /// Looks at the port without sleeping until `reply_spin_us` past `aim`
-    /// (where the reply is expected): a thread woken from sleep (on a VM, a
-    /// halted virtual CPU woken too) reacts tens of µs later, and every
-    /// poll's reply would be followed by such a gap on the line. A reply
-    /// found after an empty look arrived when it was found. Past
-    /// `sliced_from` it gives way to an e-stop.
-    fn spin_for_reply(
-        &mut self,
-        want: Want,
-        aim: Instant,
-        sliced_from: Instant,
-    ) -> (std::io::Result<Option<(Reply, Instant)>>, Seen) {
-        let spin = Duration::from_micros(self.cfg.timing.reply_spin_us);
-        if spin.is_zero() {
-            return (Ok(None), Seen::Bound);
-        }
-        let mut got = self.link.poll_now(Some(want));
-        let mut seen = Seen::Bound;
-        while matches!(got, Ok(None)) {
-            let now = Instant::now();
-            if now >= aim + spin || (now >= sliced_from && self.estop_pending()) {
-                break;
-            }
-            std::hint::spin_loop();
-            seen = Seen::Watching;
-            got = self.link.poll_now(Some(want));
-        }
-        (got, seen)
-    }
-
     /// Takes in the reply of an exchange, or counts it missing.
     fn settle_exchange(
         &mut self,
@@ -491,110 +374,6 @@ impl Ctx {
             );
         }
     }
-
-    /// A request/response transaction of a one-shot request, retried
-    /// `attempts` times in all. `None` after the last timeout.
-    pub(crate) fn try_transact(
-        &mut self,
-        cmd: Config,
-        want: Want,
-        attempts: u32,
-    ) -> Result<Option<Reply>, BusError> {
-        for attempt in 0..attempts.max(1) {
-            if attempt > 0 {
-                self.link.counters.retries += 1;
-            }
-            self.before_job_frame()?;
-            if let Some(reply) = self.exchange(cmd, want, false)? {
-                return Ok(Some(reply));
-            }
-        }
-        Ok(None)
-    }
-
-    /// A firmware probe: one read whose silence is an answer (V2.0.1
-    /// firmware does not know the index), so it counts as an unanswered
-    /// probe, not as a timeout or a missed poll.
-    pub(crate) fn probe(&mut self, cmd: Config, want: Want) -> Result<Option<Reply>, BusError> {
-        self.link.counters.firmware_probes += 1;
-        self.before_job_frame()?;
-        self.exchange_as(cmd, want, false, Silence::Answer)
-    }
-
-    /// [`Self::try_transact`] with the configured retries; a timeout is an error.
-    pub(crate) fn transact(&mut self, cmd: Config, want: Want) -> Result<Reply, BusError> {
-        let attempts = 1 + self.cfg.timing.retries;
-        self.try_transact(cmd, want, attempts)?
-            .ok_or_else(|| self.timeout_error(want.dev_id, &cmd.param, attempts))
-    }
-
-    pub(crate) fn timeout_error(&self, dev_id: u8, param: &ConfigParam, attempts: u32) -> BusError {
-        let timeout = self.sched.clock().reply_timeout(Instant::now());
-        BusError::Timeout {
-            dev_id,
-            what: describe(param),
-            attempts,
-            timeout_us: timeout.as_micros() as u64,
-        }
-    }
-
-    /// Writes frames of a one-shot request that expect no reply.
-    pub(crate) fn job_send(&mut self, cmds: &[Command]) -> Result<(), BusError> {
-        self.before_job_frame()?;
-        self.send(cmds)?;
-        Ok(())
-    }
-
-    /// Before each frame of a one-shot request: wait for the line, let
-    /// waiting setpoints out if the scheduler allows, and give way to an
-    /// e-stop.
-    fn before_job_frame(&mut self) -> Result<(), BusError> {
-        loop {
-            self.wait_confirmed()?;
-            self.wait_until(self.sched.write_at(Instant::now()))?;
-            let generation = self.estop_generation();
-            let now = Instant::now();
-            let interleave = self
-                .sched
-                .interleave(now, &self.shared.setpoints, generation);
-            self.after_decision();
-            match interleave {
-                Some(frame) => self.send_planned(frame)?,
-                None => break,
-            }
-        }
-        self.housekeeping(Instant::now());
-        if self.sched.job_frame(self.estop_generation()).is_err() {
-            return Err(BusError::Preempted);
-        }
-        if !self.link.is_up() {
-            return Err(self.down_error());
-        }
-        Ok(())
-    }
-
-    /// Until a frame may go out as the scheduler lets an e-stop out: the
-    /// write before seen taken (or its count given up on) and the line
-    /// free of the replies it asked for. For a write outside the owner's
-    /// turns (the shutdown's disable), which would otherwise go at once.
-    pub(crate) fn wait_for_line(&mut self) -> Result<(), BusError> {
-        self.wait_confirmed()?;
-        self.wait_until(self.sched.write_at(Instant::now()))
-    }
-
-    /// Until the write before is seen taken (or its count given up on,
-    /// within [`crate::bus::usb::confirm::MAX_UNTAKEN`]): a request's frames,
-    /// and the setpoints let out between them, go one after another without
-    /// the owner's turn, whose look at the port's count this stands in for.
-    fn wait_confirmed(&mut self) -> Result<(), BusError> {
-        loop {
-            self.look_at_count();
-            if !self.sched.awaiting_confirmation() {
-                return Ok(());
-            }
-            self.wait_until(self.sched.write_at(Instant::now()))?;
-        }
-    }
 }
 
 /// What a missing reply means.
@@ -615,5 +394,7 @@ fn behind(control: &[Planned], cmd: Config) -> Vec<Command> {
         .collect()
 }
 
+mod job;
+mod reply_wait;
 #[cfg(test)]
 mod tests;

@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use super::*;
 use crate::bus::config::BusConfig;
 use crate::bus::setpoints::Setpoint;
+use crate::bus::wire::Want;
 use crate::protocol::status::fsm;
 use crate::protocol::{Command, Info01, Info02, Reply, ReplyBody};
 
