@@ -311,9 +311,10 @@ impl Link {
             .saturating_sub((pending + FRAME_LEN) as u64)
     }
 
-    /// Bytes read since the port opened ([`Heard::first_byte`]).
-    pub(super) fn bytes_read(&self) -> u64 {
-        self.packets.bytes_read()
+    /// Bytes read since the port opened when the last write began: a
+    /// reply whose [`Heard::first_byte`] comes before is no answer to it.
+    pub(super) fn read_before_write(&self) -> u64 {
+        self.read_before_write
     }
 
     /// Changes the port's speed (after the devices switched), dropping what

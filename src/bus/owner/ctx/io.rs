@@ -174,8 +174,8 @@ impl Ctx {
     /// or counted missing at its deadline (`expire_inflight`).
     fn poll_blind(&mut self, control: &[Planned], cmd: Config, want: Want) -> Result<(), BusError> {
         let clocked = self.sched.usb_clock_known();
-        let read_before = self.link.bytes_read();
         let (handed, end) = self.write(&behind(control, cmd), true)?;
+        let read_before = self.link.read_before_write();
         self.link.counters.frames_tx_batched += control.len() as u64;
         self.link.counters.polls_pipelined += 1;
         self.link.counters.usb_writes_unclocked += u64::from(!clocked);
