@@ -9,7 +9,7 @@ import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
 import { createServer } from "node:http";
 import { mkdirSync } from "node:fs";
-import { ROOT, WAIT, launchBrowser, rest as restAt, startDaemon } from "./harness.mjs";
+import { ROOT, WAIT, launchBrowser, rest as restAt, startDaemon, waitConfig } from "./harness.mjs";
 
 const SHOTS = process.env.SCREENSHOT_DIR || `${ROOT}target/screenshots`;
 /** A common laptop screen: the joint panel must be usable without scrolling. */
@@ -202,7 +202,7 @@ test("the panel shows each joint's firmware revision and offers what it has", as
   assert.equal(await page.locator('[data-testid="param-spd_limit_rpm"]').count(), 0, "joint 9's rows are gone at once");
   await page.waitForFunction(() => /protocol rev 2\.0\.1 \(detected\)$/.test(document.querySelector('[data-testid="panel-firmware"]')?.textContent || ""), null, { timeout: WAIT });
   assert.equal(await page.locator('[data-testid="mode-current"]').isDisabled(), true, "no current mode on 2.0.1");
-  await page.locator('[data-testid="param-pos_kp"]').waitFor({ state: "visible", timeout: WAIT });
+  await waitConfig(page, daemon.base);
   assert.equal(await page.locator('[data-testid="param-spd_limit_rpm"]').count(), 0, "no rev 2.0.8 rows on 2.0.1");
 });
 

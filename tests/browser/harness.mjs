@@ -125,6 +125,21 @@ export function waitAngle(page, id, deg, tol = 1) {
   }, [id, deg, tol], { timeout: WAIT });
 }
 
+/** Waits until the selected joint's parameter form shows; on a timeout the
+ *  error says what the bus counted (a config read the device did not
+ *  answer shows as timeouts and retries; the page's own message is gone
+ *  by then). */
+export async function waitConfig(page, base) {
+  try {
+    await page.locator('[data-testid="param-pos_kp"]').waitFor({ state: "visible", timeout: WAIT });
+  } catch (e) {
+    const bus = await fetch(`${base}/api/v1/buses/sim0`).then((r) => r.json()).catch(() => ({}));
+    const c = bus.counters ?? {};
+    const counted = ["timeouts", "retries", "crc_errors", "skipped_bytes", "unsolicited"].map((k) => `${k} ${c[k]}`).join(", ");
+    throw new Error(`${e.message}\nbus sim0: ${counted}`);
+  }
+}
+
 /** Selects joint `id` of sim0 in the device table; its panel shows. */
 export async function selectJoint(page, id) {
   await page.locator(`[data-testid="device-row-sim0-${id}"]`).click({ timeout: WAIT });

@@ -6,7 +6,7 @@
 
 import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
-import { startDaemon, launchBrowser, openDashboard, selectJoint, WAIT } from "./harness.mjs";
+import { startDaemon, launchBrowser, openDashboard, selectJoint, waitConfig, WAIT } from "./harness.mjs";
 
 const VIEWPORTS = [{ width: 1400, height: 900 }, { width: 1920, height: 1080 }, { width: 800, height: 900 }];
 let daemon, browser;
@@ -55,7 +55,7 @@ for (const viewport of VIEWPORTS) {
       for (const selected of [false, true]) {
         if (selected) {
           await selectJoint(page, 1);
-          await page.locator('[data-testid="param-pos_kp"]').waitFor({ timeout: WAIT });
+          await waitConfig(page, daemon.base);
         }
         const m = await page.evaluate(measure);
         const when = `${viewport.width} px, ${selected ? "joint 1 selected" : "no joint selected"}`;

@@ -45,8 +45,20 @@ impl Ctx {
     /// [`Self::try_transact`] with the configured retries; a timeout is an error.
     pub(crate) fn transact(&mut self, cmd: Config, want: Want) -> Result<Reply, BusError> {
         let attempts = 1 + self.cfg.timing.retries;
-        self.try_transact(cmd, want, attempts)?
-            .ok_or_else(|| self.timeout_error(want.dev_id, &cmd.param, attempts))
+        self.try_transact(cmd, want, attempts)?.ok_or_else(|| {
+            let error = self.timeout_error(want.dev_id, &cmd.param, attempts);
+            // The client sees the timeout; the bus's log says what the line
+            // showed meanwhile (garbage, replies taken in late).
+            let c = &self.link.counters;
+            tracing::warn!(
+                bus = %self.cfg.name,
+                crc_errors = c.crc_errors,
+                unsolicited = c.unsolicited,
+                timeouts = c.timeouts,
+                "{error}"
+            );
+            error
+        })
     }
 
     pub(crate) fn timeout_error(&self, dev_id: u8, param: &ConfigParam, attempts: u32) -> BusError {
