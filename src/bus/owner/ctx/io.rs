@@ -1,12 +1,11 @@
 //! The owner's wire primitives: listening, writing the frames the
-//! scheduler planned, telemetry polls, and the request/response
-//! transactions one-shot requests are made of. Each feeds the scheduler
-//! what happened (frames sent, replies, timeouts, the port lost).
-//!
-//! Every frame is handed to the port when the scheduler's line model says
-//! the line is about to free; after a request that expects a reply,
-//! nothing is written until the reply arrives or its deadline passes
-//! (`reply_wait`). A one-shot request's frames go through `job`.
+//! scheduler planned, telemetry polls and request/response exchanges,
+//! each feeding the scheduler what happened (frames sent, replies,
+//! timeouts, the port lost). A frame is handed to the port when the
+//! scheduler's line model says the line is about to free; after a request
+//! that expects a reply, nothing is written until the reply arrives or its
+//! deadline passes (`reply_wait`). A one-shot request's frames go through
+//! `job`.
 
 use std::time::Instant;
 
