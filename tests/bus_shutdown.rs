@@ -8,20 +8,26 @@ use std::time::Duration;
 use jointd::bus::{AdapterSetting, ShutdownState};
 use jointd::protocol::status::fsm;
 use jointd::transport::adapter::AdapterModel;
-use support::bus::{rig_on_memory, rig_with, sim_config, target, TargetStream, BAUD};
+use support::bus::{rig_on_memory, rig_with, sim_config, target, Rig, TargetStream, BAUD};
 
-async fn stop_with(state: ShutdownState) -> Vec<u8> {
-    let ids = [1u8, 2];
-    let mut rig = rig_with(sim_config(&ids, BAUD), |c| {
-        c.ids = ids.to_vec();
+const IDS: [u8; 2] = [1, 2];
+
+/// Two joints enabled and moving, then the bus stopped.
+async fn stopped_with(state: ShutdownState) -> Rig {
+    let mut rig = rig_with(sim_config(&IDS, BAUD), |c| {
+        c.ids = IDS.to_vec();
         c.on_shutdown = state;
     });
-    rig.online(ids.len()).await;
-    rig.enable_all(ids.len()).await;
+    rig.online(IDS.len()).await;
+    rig.enable_all(IDS.len()).await;
     rig.bus.set_targets(&[(1, target(10.0)), (2, target(-5.0))]);
     rig.reaches(1, 10.0).await;
     rig.stop();
-    ids.iter()
+    rig
+}
+
+fn states(rig: &Rig) -> Vec<u8> {
+    IDS.iter()
         .filter_map(|id| rig.sim.device(*id))
         .map(|d| d.fsm)
         .collect()
@@ -29,18 +35,20 @@ async fn stop_with(state: ShutdownState) -> Vec<u8> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn stopping_disables_every_joint_by_default() {
-    assert_eq!(
-        stop_with(ShutdownState::Disable).await,
-        vec![fsm::READY, fsm::READY]
-    );
+    let rig = stopped_with(ShutdownState::Disable).await;
+    // The owner has written the disable when it stops; the simulator takes
+    // it in on its own thread, later on a busy host.
+    rig.sim_until("the shutdown's disable taken in", |sim| {
+        IDS.iter()
+            .all(|&id| sim.device(id).is_some_and(|d| !d.enabled))
+    });
+    assert_eq!(states(&rig), vec![fsm::READY, fsm::READY]);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn hold_leaves_the_joints_enabled() {
-    assert_eq!(
-        stop_with(ShutdownState::Hold).await,
-        vec![fsm::RUN, fsm::RUN]
-    );
+    let rig = stopped_with(ShutdownState::Hold).await;
+    assert_eq!(states(&rig), vec![fsm::RUN, fsm::RUN]);
 }
 
 /// Behind a USB adapter polls go out blind, their replies still coming
