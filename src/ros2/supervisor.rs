@@ -28,13 +28,15 @@ pub(super) async fn supervise(
     loop {
         match open(&state, &cfg, &zenoh_cfg, &stats).await {
             Ok((session, declared)) => {
+                // Said before it is shown: whoever sees the change through
+                // the API finds its line in the log.
+                say(link.connected(), &cfg, &stats);
                 stats.connects.fetch_add(1, Ordering::Relaxed);
                 stats.connected.store(true, Ordering::Relaxed);
-                say(link.connected(), &cfg, &stats);
                 until_lost(&session, cfg.mode).await;
-                stats.connected.store(false, Ordering::Relaxed);
-                set_error(&stats, "the router went away".into());
                 say(link.lost(), &cfg, &stats);
+                set_error(&stats, "the router went away".into());
+                stats.connected.store(false, Ordering::Relaxed);
                 declared.close().await;
                 // Dropped either way: an error closing it changes nothing.
                 let _ = session.close().await;
