@@ -12,10 +12,15 @@
 //! Its parts are the pure pieces beside it: the [`WireClock`] (when the line
 //! frees, reply windows), the [`ControlBudget`] and [`PollPlanner`], the
 //! coalescer (through `control`), the [`Registry`] and the reads whose
-//! replies may still come late (`late`); what it hands a USB adapter's
-//! pipeline and takes back is in `usb`.
+//! replies may still come late (`late`). This file chooses the slot; how a
+//! free wire is filled is in `fill`, the e-stop's slot in `estop`, the
+//! firmware probes in `firmware`, and what it hands a USB adapter's
+//! pipeline and takes back in `usb`.
 
 mod control;
+mod estop;
+mod fill;
+mod firmware;
 mod jobs;
 mod late;
 mod reopen;
@@ -31,14 +36,13 @@ use crate::bus::coalesce::Pending;
 use crate::bus::coalesce::Planned;
 use crate::bus::config::{BusConfig, StartPolicy};
 use crate::bus::events::BusEvent;
-use crate::bus::firmware::{DeviceFirmware, FirmwarePolicy, FirmwareSetting, FirmwareSource};
+use crate::bus::firmware::FirmwarePolicy;
 use crate::bus::poll::{ControlBudget, PollPlanner};
 use crate::bus::registry::Registry;
 use crate::bus::setpoints::SetpointStore;
 use crate::bus::state::WireAck;
 use crate::bus::usb::pipeline::UsbPipeline;
 use crate::bus::wire::{ReplyWindow, WireClock};
-use crate::protocol::params::Revision;
 use crate::protocol::InfoBlock;
 
 use late::LateReplies;
@@ -295,260 +299,9 @@ impl Scheduler {
         }
     }
 
-    /// With polls in flight, a one-shot request, a scan, a release or a
-    /// probe waits for them (their replies, or their deadlines): those
-    /// transactions wait for each reply, and a reply still in the adapter
-    /// must not be taken for theirs. An e-stop does not wait.
-    fn drain_first(&self, now: Instant, work: &Work<'_>) -> Option<Slot> {
-        let deadline = self.pipeline.as_ref()?.next_deadline()?;
-        let other_work = work.request_queued
-            || self.needs_scan
-            || !self.release.is_empty()
-            || (!self.probed_last && self.probe_wanted());
-        other_work.then(|| Slot::Listen {
-            until: deadline.min(now + IDLE_TICK),
-        })
-    }
-
-    /// True when an online device's revision is still to be asked.
-    fn probe_wanted(&self) -> bool {
-        self.reg
-            .firmware_unknown()
-            .into_iter()
-            .any(|id| self.firmware.for_id(id) == FirmwareSetting::Auto)
-    }
-
-    /// Records the configured revision of devices the config names, and
-    /// returns the first online device whose revision must be asked.
-    fn firmware_to_ask(&mut self) -> Option<u8> {
-        for id in self.reg.firmware_unknown() {
-            match self.firmware.for_id(id) {
-                FirmwareSetting::Auto => return Some(id),
-                FirmwareSetting::Fixed(revision) => self.reg.set_firmware(
-                    id,
-                    DeviceFirmware {
-                        revision,
-                        source: FirmwareSource::Config,
-                        serial: None,
-                    },
-                ),
-            }
-        }
-        None
-    }
-
-    fn estop_slot(&mut self, work: &Work<'_>) -> Option<Slot> {
-        if !self.estop_pending(work.estop_generation) {
-            return None;
-        }
-        self.estop_seen = work.estop_generation;
-        self.control.clear_prepared();
-        Some(Slot::EStop {
-            generation: work.estop_generation,
-        })
-    }
-
-    /// Setpoints within budget, else a poll, else setpoints, else listen.
-    /// A prepared frame is good for this decision only, and only if no
-    /// setpoint came in since it was planned.
-    fn wire_slot(&mut self, now: Instant, store: &SetpointStore) -> Slot {
-        // Behind a USB adapter a write carries a poll (with the control
-        // frames in front), whether it is timed by the frame clock or waits
-        // for its reply: without replies the frame clock is never learnt.
-        // Only a backed-off pipeline adds control-only transfers between
-        // polls, and setpoints go alone when there is nothing to poll.
-        if self.pipeline.is_some() {
-            return self.pipelined_slot(now, store);
-        }
-        if let Some((frame, seq)) = self.control.take_prepared(store) {
-            if self.budget.allows(now) {
-                if seq == store.latest_seq() {
-                    return self.control_slot(now, frame);
-                }
-                if let Some(frame) = self.plan_control(now, store) {
-                    return self.control_slot(now, frame);
-                }
-            }
-        }
-        self.control.collect(store);
-        if self.control.has_pending() && self.budget.allows(now) {
-            if let Some(frame) = self.plan_control(now, store) {
-                return self.control_slot(now, frame);
-            }
-        }
-        let timeout = self.clock.reply_timeout(now);
-        if let Some(poll) = self.planner.next(self.reg.poll_states(), now, timeout) {
-            let control = self.batch_control(store);
-            if !control.is_empty() {
-                return Slot::Batch {
-                    control,
-                    dev_id: poll.dev_id,
-                    block: poll.block,
-                };
-            }
-            return Slot::Poll {
-                dev_id: poll.dev_id,
-                block: poll.block,
-            };
-        }
-        self.control_or_listen(now, store)
-    }
-
-    /// A control frame on a native line, and in the same write the poll
-    /// that must follow it when the budget will not allow another control
-    /// frame once this one has left the line: the owner then sleeps once
-    /// per control frame and poll, not twice (on a VM a wake-up costs more
-    /// of a core than everything else the owner does for a frame). The
-    /// frames are on the wire in the same order and at the same times as
-    /// written one by one. A setpoint arriving while the control frame is
-    /// on the wire would have waited for the poll anyway (the budget chose
-    /// it); a request or an e-stop arriving then waits for the poll's
-    /// reply too: up to one transaction (0.9 ms at 500000 baud) later.
-    fn control_slot(&mut self, now: Instant, frame: Planned) -> Slot {
-        if self.budget.allows_another(now, self.clock.frame_time()) {
-            return Slot::Control(frame);
-        }
-        let timeout = self.clock.reply_timeout(now);
-        match self.planner.next(self.reg.poll_states(), now, timeout) {
-            Some(poll) => Slot::Batch {
-                control: vec![frame],
-                dev_id: poll.dev_id,
-                block: poll.block,
-            },
-            None => Slot::Control(frame),
-        }
-    }
-
-    /// Behind a USB adapter (the write time was waited for in
-    /// [`Self::next`]): one transfer a cycle, the pending control frames and
-    /// the next poll; its reply is left in flight, matched when the adapter
-    /// hands it over.
-    /// Guarded (a transfer with a poll holds the wire a frame longer), a
-    /// transfer of control frames only goes before each poll when any are
-    /// pending: control keeps its rate, telemetry gives way.
-    fn pipelined_slot(&mut self, now: Instant, store: &SetpointStore) -> Slot {
-        let guarded = self
-            .pipeline
-            .as_ref()
-            .is_some_and(|p| p.guard().control_between_polls());
-        if guarded && self.control_only < CONTROL_ONLY_PER_POLL {
-            let control = self.batch_control(store);
-            if !control.is_empty() {
-                self.control_only += 1;
-                return Slot::ControlBatch(control);
-            }
-        }
-        let free_at = self.clock.free_at();
-        let sentinel = match self.pipeline.as_mut() {
-            Some(pipeline) if pipeline.sentinel_due() => {
-                // A sentinel is handed over late in its frame: until then
-                // the bus listens (an e-stop or a request still goes first).
-                if let Some(until) = pipeline.sentinel_wait(free_at, now) {
-                    return Slot::Listen { until };
-                }
-                true
-            }
-            _ => false,
-        };
-        let timeout = self.clock.reply_timeout(now);
-        if let Some(poll) = self.planner.next(self.reg.poll_states(), now, timeout) {
-            self.control_only = 0;
-            if let Some(pipeline) = self.pipeline.as_mut().filter(|_| sentinel) {
-                pipeline.arm_sentinel();
-            }
-            return Slot::Batch {
-                control: self.batch_control(store),
-                dev_id: poll.dev_id,
-                block: poll.block,
-            };
-        }
-        self.control_or_listen(now, store)
-    }
-
-    /// Nothing to poll: setpoints if any are pending, else listen a tick.
-    fn control_or_listen(&mut self, now: Instant, store: &SetpointStore) -> Slot {
-        match self.plan_control(now, store) {
-            Some(frame) => Slot::Control(frame),
-            None => Slot::Listen {
-                until: now + IDLE_TICK,
-            },
-        }
-    }
-
-    /// On a latent adapter, the control frames (at most [`MAX_BATCHED`])
-    /// that ride in front of a poll: a USB round trip costs a millisecond or
-    /// more, a frame on the wire 0.4 ms. None on a native line, where the
-    /// round trip is the wire's.
-    fn batch_control(&mut self, store: &SetpointStore) -> Vec<Planned> {
-        // Not held to the control budget: frames in front of a poll cost it
-        // 0.4 ms each against a round trip of a millisecond or more.
-        if !self.clock.adapter().is_latent() {
-            return Vec::new();
-        }
-        self.control.collect(store);
-        let (frames, dropped) = self.control.plan_up_to(&self.reg, store, MAX_BATCHED);
-        self.dropped += u64::from(dropped);
-        frames
-    }
-
-    /// Collects and plans the frame carrying the oldest pending setpoint.
-    fn plan_control(&mut self, now: Instant, store: &SetpointStore) -> Option<Planned> {
-        self.control.collect(store);
-        let (frame, dropped) = self.control.plan(&self.reg, store, now);
-        self.dropped += u64::from(dropped);
-        frame
-    }
-
-    /// While a reply is on the wire (due at `due`): plan the control frame
-    /// that follows it, so the line idles no longer than needed after the
-    /// reply. The next decision uses it if no setpoint came in meanwhile.
-    pub(crate) fn prepare(&mut self, due: Instant, store: &SetpointStore) {
-        self.control.collect(store);
-        let latest = store.latest_seq();
-        let frame = if self.control.has_pending() && self.budget.allows(due) {
-            self.plan_control(due, store).map(|frame| (frame, latest))
-        } else {
-            None
-        };
-        self.control.set_prepared(frame);
-    }
-
-    /// A control frame from [`Slot::Control`] (or an interleave) left for
-    /// the wire, its last byte due at `end`: charged to the budget, its
-    /// setpoints settled.
-    pub(crate) fn control_sent(&mut self, frame: &Planned, end: Instant) {
-        self.budget.spend(self.clock.frame_time());
-        self.control.sent(frame, &mut self.reg, end);
-    }
-
     /// When the reply to a request ending at `end` is due and given up on.
     pub(crate) fn reply_window(&self, end: Instant) -> ReplyWindow {
         self.clock.reply_window(end)
-    }
-
-    /// Behind a latency timer, from when an e-stop may take the wire from
-    /// a transaction whose request ended at `end`: its reply has left the
-    /// wire (the write late by up to the pipeline's reach) and only waits
-    /// in the adapter, for as long as the timer. `None` elsewhere: there
-    /// the reply reaches the host as it leaves the wire.
-    pub(crate) fn estop_cut_in(&self, end: Instant) -> Option<Instant> {
-        self.clock.adapter().latency_timer()?;
-        let reach = self
-            .pipeline
-            .as_ref()
-            .map_or(Duration::ZERO, |p| p.guard().reach());
-        let (wire_end, _) = self.reply_out(end);
-        Some(wire_end + reach)
-    }
-
-    /// True while an e-stop press above the last one served waits.
-    pub(crate) fn estop_pending(&self, generation: u64) -> bool {
-        generation > self.estop_seen
-    }
-
-    /// The e-stop generation served last.
-    pub(crate) fn estop_seen(&self) -> u64 {
-        self.estop_seen
     }
 
     /// The startup scan found what there is: no need to scan again.
@@ -575,29 +328,6 @@ impl Scheduler {
     }
 
     /// The wire ack to publish, if one came up since the last call.
-    /// The revision `id` told (it answered a probe).
-    pub(crate) fn firmware_known(&mut self, id: u8, firmware: DeviceFirmware) {
-        self.reg.set_firmware(id, firmware);
-    }
-
-    /// A probe of `id` went unanswered. After `probe_attempts` in a row (and
-    /// no missed poll meanwhile, which resets the count) the silence is the
-    /// answer: V2.0.1 does not know index 32. Returns the revision then.
-    pub(crate) fn probe_unanswered(&mut self, id: u8) -> Option<Revision> {
-        if self.reg.probe_silence(id) < self.probe_attempts {
-            return None;
-        }
-        self.reg.set_firmware(
-            id,
-            DeviceFirmware {
-                revision: Revision::V2_0_1,
-                source: FirmwareSource::Detected,
-                serial: None,
-            },
-        );
-        Some(Revision::V2_0_1)
-    }
-
     pub(crate) fn take_ack(&mut self) -> Option<WireAck> {
         self.control.take_ack()
     }

@@ -5,7 +5,7 @@
 
 use std::time::{Duration, Instant};
 
-use super::Scheduler;
+use super::{Scheduler, Slot, Work, IDLE_TICK};
 use crate::bus::events::BusEvent;
 use crate::bus::usb::pipeline::{Inflight, UsbPipeline};
 use crate::bus::wire::Want;
@@ -260,5 +260,20 @@ impl Scheduler {
     /// frame took them, since the last call.
     pub(crate) fn take_ambiguous_writes(&mut self) -> u64 {
         std::mem::take(&mut self.ambiguous_writes)
+    }
+
+    /// With polls in flight, a one-shot request, a scan, a release or a
+    /// probe waits for them (their replies, or their deadlines): those
+    /// transactions wait for each reply, and a reply still in the adapter
+    /// must not be taken for theirs. An e-stop does not wait.
+    pub(super) fn drain_first(&self, now: Instant, work: &Work<'_>) -> Option<Slot> {
+        let deadline = self.pipeline.as_ref()?.next_deadline()?;
+        let other_work = work.request_queued
+            || self.needs_scan
+            || !self.release.is_empty()
+            || (!self.probed_last && self.probe_wanted());
+        other_work.then(|| Slot::Listen {
+            until: deadline.min(now + IDLE_TICK),
+        })
     }
 }

@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 
 use super::*;
 use crate::bus::config::BusConfig;
+use crate::bus::firmware::FirmwareSetting;
 use crate::bus::setpoints::Setpoint;
 use crate::bus::wire::Want;
 use crate::protocol::status::fsm;
