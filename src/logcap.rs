@@ -38,9 +38,16 @@ impl Collapse {
         }
     }
 
-    /// The window length, for the "in the last N s" of a message.
-    pub(crate) fn window(&self) -> Duration {
-        self.window
+    /// The end of a line that went out after `held` were held back:
+    /// empty when none were.
+    pub(crate) fn held_note(&self, held: u64) -> String {
+        match held {
+            0 => String::new(),
+            n => format!(
+                " (and {n} more like it in the last {} s)",
+                self.window.as_secs()
+            ),
+        }
     }
 
     /// `Some(held)` when a line for `key` should be logged now, `held` being
@@ -91,6 +98,8 @@ mod tests {
             Some(999)
         );
         assert_eq!(c.admit("503 bus-down", t0 + Duration::from_secs(11)), None);
+        assert_eq!(c.held_note(0), "");
+        assert_eq!(c.held_note(999), " (and 999 more like it in the last 10 s)");
     }
 
     #[test]

@@ -145,13 +145,7 @@ fn log_failure(resp: &axum::response::Response, path: &str) {
     let Some(held) = FAILURES.admit(&key, std::time::Instant::now()) else {
         return;
     };
-    let again = match held {
-        0 => String::new(),
-        n => format!(
-            " (and {n} more like it in the last {} s)",
-            FAILURES.window().as_secs()
-        ),
-    };
+    let again = FAILURES.held_note(held);
     if status == 500 {
         tracing::error!(status, problem, path, "answered a server error{again}");
     } else {

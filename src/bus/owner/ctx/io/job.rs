@@ -2,15 +2,23 @@
 //! setpoints waiting out first where the scheduler allows, and gives way
 //! to an e-stop; a request that wants an answer is retried on silence.
 
-use std::time::Instant;
+use std::sync::LazyLock;
+use std::time::{Duration, Instant};
 
 use crate::bus::error::BusError;
 use crate::bus::owner::confirm::describe;
 use crate::bus::wire::Want;
+use crate::logcap::Collapse;
 use crate::protocol::{Command, Config, ConfigParam, Reply};
 
 use super::super::Ctx;
 use super::Silence;
+
+/// How often an unanswered read of the same device is logged.
+const UNANSWERED_LOG_WINDOW: Duration = Duration::from_secs(10);
+
+/// Reads no attempt of which was answered, collapsed per bus and device.
+static UNANSWERED: LazyLock<Collapse> = LazyLock::new(|| Collapse::new(UNANSWERED_LOG_WINDOW));
 
 impl Ctx {
     /// A request/response transaction of a one-shot request, retried
@@ -47,18 +55,29 @@ impl Ctx {
         let attempts = 1 + self.cfg.timing.retries;
         self.try_transact(cmd, want, attempts)?.ok_or_else(|| {
             let error = self.timeout_error(want.dev_id, &cmd.param, attempts);
-            // The client sees the timeout; the bus's log says what the line
-            // showed meanwhile (garbage, replies taken in late).
-            let c = &self.link.counters;
-            tracing::warn!(
-                bus = %self.cfg.name,
-                crc_errors = c.crc_errors,
-                unsolicited = c.unsolicited,
-                timeouts = c.timeouts,
-                "{error}"
-            );
+            self.log_unanswered(want.dev_id, &error);
             error
         })
+    }
+
+    /// The client sees the timeout; the bus's log says what the line showed
+    /// meanwhile (garbage, replies taken in late). One line per bus and
+    /// device per window, so a client looping reads of a silent device does
+    /// not flood the log.
+    fn log_unanswered(&self, dev_id: u8, error: &BusError) {
+        let key = format!("{} {dev_id}", self.cfg.name);
+        let Some(held) = UNANSWERED.admit(&key, Instant::now()) else {
+            return;
+        };
+        let c = &self.link.counters;
+        tracing::warn!(
+            bus = %self.cfg.name,
+            crc_errors = c.crc_errors,
+            unsolicited = c.unsolicited,
+            timeouts = c.timeouts,
+            "{error}{}",
+            UNANSWERED.held_note(held)
+        );
     }
 
     pub(crate) fn timeout_error(&self, dev_id: u8, param: &ConfigParam, attempts: u32) -> BusError {
