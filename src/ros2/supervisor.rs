@@ -30,11 +30,11 @@ pub(super) async fn supervise(
             Ok((session, declared)) => {
                 // Said before it is shown: whoever sees the change through
                 // the API finds its line in the log.
-                say(link.connected(), &cfg, &stats);
+                say(link.connected(), &cfg, "");
                 stats.connects.fetch_add(1, Ordering::Relaxed);
                 stats.connected.store(true, Ordering::Relaxed);
                 until_lost(&session, cfg.mode).await;
-                say(link.lost(), &cfg, &stats);
+                say(link.lost(), &cfg, "");
                 set_error(&stats, "the router went away".into());
                 stats.connected.store(false, Ordering::Relaxed);
                 declared.close().await;
@@ -42,9 +42,10 @@ pub(super) async fn supervise(
                 let _ = session.close().await;
             }
             Err(e) => {
-                set_error(&stats, e.to_string());
+                let why = e.to_string();
                 let (what, wait) = link.failed();
-                say(what, &cfg, &stats);
+                say(what, &cfg, &why);
+                set_error(&stats, why);
                 tokio::time::sleep(wait).await;
             }
         }
@@ -83,14 +84,10 @@ fn set_error(stats: &Ros2Stats, why: String) {
     *stats.last_error.lock().unwrap_or_else(|p| p.into_inner()) = Some(why);
 }
 
-fn say(what: Say, cfg: &Ros2Config, stats: &Ros2Stats) {
+/// Logs a change of the link (`error`: why a connect failed). Called before
+/// the change is published in `stats`.
+fn say(what: Say, cfg: &Ros2Config, error: &str) {
     let endpoints = cfg.endpoints();
-    let error = stats
-        .last_error
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .clone()
-        .unwrap_or_default();
     match what {
         Say::Nothing => {}
         Say::Unreachable => tracing::warn!(?endpoints, %error,
