@@ -15,12 +15,12 @@
 //! and its samples could not reach the joint anyway (the owner drops them).
 //! A joint going offline aborts the move too.
 //!
-//! A joint that cannot follow (blocked by an object or a stop) stalls: its
-//! measured angle stays more than [`stall_bound_deg`] from the path for
-//! [`STALL_AFTER`], during the path or after its end. It leaves the move
-//! `stalled` and holds where it stands (its target becomes its measured
-//! angle). A joint arrives when the path has ended and its measured angle
-//! is within [`ARRIVED_DEG`] of the goal.
+//! A joint that cannot follow (blocked by an object or a stop) stalls
+//! ([`stall`]: its samples stay off the path and it barely moves), during
+//! the path or after its end. It leaves the move `stalled` and holds where
+//! it stands (its target becomes its measured angle). A joint arrives when
+//! the path has ended and its measured angle is within [`ARRIVED_DEG`] of
+//! the goal.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -34,6 +34,13 @@ use super::events::BusEvent;
 use super::registry::Registry;
 use super::setpoints::{Setpoint, SetpointStore, Source};
 
+mod stall;
+
+use stall::{Sampled, StallWatch, Verdict};
+
+/// A joint this far from its goal after the path's end has arrived.
+pub(crate) const ARRIVED_DEG: f64 = 1.0;
+
 /// One joint of this bus following a move.
 #[derive(Debug, Clone)]
 pub struct Follower {
@@ -45,8 +52,8 @@ pub struct Follower {
     pub spd_ref: i16,
     /// The motion epoch the move was admitted under on this joint.
     pub epoch: Epoch,
-    /// Since when the joint has been off its path by more than the stall bound.
-    pub off_path_since: Option<Instant>,
+    /// Whether the joint keeps up with its path.
+    stall: StallWatch,
     /// The path's goal has been written (once, after the path's end).
     goal_written: bool,
 }
@@ -59,21 +66,10 @@ impl Follower {
             joint,
             spd_ref,
             epoch,
-            off_path_since: None,
+            stall: StallWatch::default(),
             goal_written: false,
         }
     }
-}
-
-/// A joint this far from its goal after the path's end has arrived.
-pub(crate) const ARRIVED_DEG: f64 = 1.0;
-/// A joint off its path by more than the stall bound this long has stalled.
-pub(crate) const STALL_AFTER: Duration = Duration::from_millis(300);
-/// Off-path distance that counts towards a stall, degrees: a floor for
-/// measurement and tracking lag, plus what the path covers in 50 ms at the
-/// speed it asks now (the telemetry sample the check reads may be that old).
-pub(crate) fn stall_bound_deg(path_speed_dps: f64) -> f64 {
-    5.0 + path_speed_dps.abs() * 0.05
 }
 
 /// What taking joints out of their moves did.
@@ -258,32 +254,29 @@ fn follow_one(
     }
     let t = f.mv.elapsed_at(wire_at);
     let sample = f.mv.path.sample(f.joint, t);
-    let measured = reg.slot_info(f.dev_id).and_then(|i| i.measured);
+    let measured = reg.get(f.dev_id).and_then(|e| e.measured);
     let ended = t >= f.mv.path.duration();
     if ended && !f.goal_written {
         f.goal_written = true;
         push(f, sample.position, step);
     }
-    let off = measured.map(|m| (units::angle_deg(m) - sample.position).abs());
+    let off = measured.map(|(m, _)| (units::angle_deg(m) - sample.position).abs());
     if ended && off.is_some_and(|d| d <= ARRIVED_DEG) {
         if f.mv.arrived(f.joint) {
             step.done.push(f.mv.id);
         }
         return false;
     }
-    let bound = if ended {
-        ARRIVED_DEG.max(stall_bound_deg(0.0))
-    } else {
-        stall_bound_deg(sample.velocity)
-    };
-    match off {
-        Some(d) if d > bound && running(reg, f.dev_id) => {
-            let since = *f.off_path_since.get_or_insert(wire_at);
-            if wire_at.saturating_duration_since(since) >= STALL_AFTER {
-                return stall(f, measured, step);
-            }
+    if !running(reg, f.dev_id) {
+        f.stall.pause();
+    } else if let Some((raw, at)) = measured {
+        let seen = Sampled {
+            deg: units::angle_deg(raw),
+            at,
+        };
+        if f.stall.look(&f.mv, f.joint, seen) == Verdict::Stalled {
+            return stall(f, Some(raw), step);
         }
-        _ => f.off_path_since = None,
     }
     if !ended {
         push(f, sample.position, step);
