@@ -12,7 +12,7 @@ use support::bus::*;
 
 #[tokio::test]
 async fn writes_are_verified_by_read_back_and_res() {
-    let rig = rig(&[1, 2]);
+    let rig = rig_in_memory(&[1, 2]);
     rig.online(2).await;
     let out = rig
         .bus
@@ -93,7 +93,7 @@ async fn a_write_that_did_not_take_effect_is_a_verification_error() {
 
 #[tokio::test]
 async fn id_change_moves_the_device_and_its_registry_entry() {
-    let rig = rig(&[1, 2, 3]);
+    let rig = rig_in_memory(&[1, 2, 3]);
     rig.online(3).await;
     let mut events = rig.bus.events();
     let taken = rig.bus.set_id(3, 2).await;
@@ -136,7 +136,7 @@ async fn id_change_moves_the_device_and_its_registry_entry() {
 
 #[tokio::test]
 async fn baud_change_switches_every_device_then_the_port() {
-    let rig = rig(&[1, 2]);
+    let rig = rig_in_memory(&[1, 2]);
     rig.online(2).await;
     let mut events = rig.bus.events();
     rig.bus.set_baud(230_400).await.unwrap();

@@ -17,7 +17,7 @@ fn command(f: &WireFrame) -> Option<Command> {
 
 #[tokio::test]
 async fn broadcasts_coalesce_and_fill_other_slots_with_target_or_measured_angle() {
-    let rig = rig(&[1, 2, 3, 4, 5, 6, 7, 8]);
+    let rig = rig_in_memory(&[1, 2, 3, 4, 5, 6, 7, 8]);
     rig.online(8).await;
     rig.enable_all(8).await;
     // Joint 3 to 20°, joint 4 to -10°: one control frame each (new speed limit).

@@ -22,7 +22,7 @@ async fn announcements_register_devices_powered_up_with_the_daemon() {
 
 #[tokio::test]
 async fn scan_discovers_sixteen_devices_already_running_and_polls_them() {
-    let rig = rig_after_boot(sim_config(&sixteen(), BAUD), |cfg| {
+    let rig = rig_on_memory_after_boot(sim_config(&sixteen(), BAUD), |cfg| {
         cfg.scan_last = 18;
         // Ids 17 and 18 are absent: each costs a full reply timeout.
         cfg.timing.reply_margin_us = 100_000;
@@ -90,18 +90,18 @@ async fn a_scan_counts_a_device_whose_reply_came_after_its_deadline() {
     // next one goes out.
     const MARGIN_US: u64 = 5_000;
     // The bus knows only id 5 (absent): device 1 announced itself before.
-    let rig = rig_after_boot(sim_config(&[1], BAUD), |cfg| {
+    // On the in-memory line each probe is dated when it was written, so a
+    // held-back simulator cannot land one on the reply (see `rig_in_memory`).
+    let rig = rig_on_memory_after_boot(sim_config(&[1], BAUD), |cfg| {
         cfg.ids = vec![5];
         cfg.timing.reply_margin_us = MARGIN_US;
     });
     // Device 1 now answers 8.4 ms late: past the deadline of the probe of 1
     // and in the middle of the quiet between the probes of 2 and 3, which
-    // end 5.9 and 11.8 ms after it. The 2.5 ms either side of the reply
-    // absorb the pty's lag on a loaded host (a 1 ms margin would leave
-    // 0.4 ms, and a probe could land on the reply). Ids 4 to 32 give a
-    // loaded machine time to deliver it before the scan ends; a busy
-    // 2-core host can hold the simulator's thread for more than the few
-    // milliseconds a shorter scan leaves.
+    // end 5.9 and 11.8 ms after it. Ids 4 to 32 give a loaded machine time
+    // to deliver it before the scan ends; a busy 2-core host can hold the
+    // simulator's thread for more than the few milliseconds a shorter scan
+    // leaves.
     rig.sim
         .inject(Fault::ExtraTurnaround(Duration::from_micros(8_400)));
     let found = rig.bus.scan(1, 32).await.expect("scan");

@@ -411,30 +411,64 @@ async fn watchdog_hold_stops_a_joint_in_speed_mode() {
     assert_eq!(held.setpoint.spd_ref, 0);
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn watchdog_disable_applies_when_the_socket_closes() {
-    let bus = sim_bus::start(4, None).await;
-    enable(&bus, &[3]).await;
-    let mut observer = connect(&bus).await;
-    let mut teleop = connect(&bus).await;
+/// An observer, and a client that armed its watchdog with `policy` and
+/// `hold_ms` and had a target for joint 3 acknowledged.
+async fn observer_and_watched_teleop(bus: &SimBus, hold_ms: u64, policy: &str) -> (Client, Client) {
+    enable(bus, &[3]).await;
+    let observer = connect(bus).await;
+    let mut teleop = connect(bus).await;
     teleop
-        .send(json!({"type":"watchdog","hold_timeout_ms":5000,"policy":"disable"}))
+        .send(json!({"type":"watchdog","hold_timeout_ms":hold_ms,"policy":policy}))
         .await;
     teleop.next_of("watchdog_set").await;
     teleop
         .send(json!({"type":"setpoints","seq":5,"ack":true,"targets":[{"id":3,"position_deg":5}]}))
         .await;
     teleop.next_of("ack").await;
+    (observer, teleop)
+}
+
+/// A watchdog event's kind, policy and cause.
+fn fired(event: &Value) -> (Option<&str>, Option<&str>, Option<&str>) {
+    let e = &event["event"];
+    (e["event"].as_str(), e["policy"].as_str(), e["why"].as_str())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn watchdog_disable_applies_when_the_socket_closes() {
+    let bus = sim_bus::start(4, None).await;
+    let (mut observer, teleop) = observer_and_watched_teleop(&bus, 5000, "disable").await;
     drop(teleop); // the network goes away: no close handshake
     let event = observer.next_event().await;
     assert_eq!(
-        (
-            event["event"]["policy"].as_str(),
-            event["event"]["why"].as_str()
-        ),
-        (Some("disable"), Some("closed"))
+        fired(&event),
+        (Some("watchdog"), Some("disable"), Some("closed"))
     );
     bus.wait_fsm(3, fsm::READY).await;
+}
+
+/// A client held back past its hold timeout, then gone: the timeout holds the
+/// joint, and the close applies the policy again, so every client hears the
+/// close even after a timeout.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_watchdog_fired_on_a_timeout_fires_again_when_the_socket_closes() {
+    let bus = sim_bus::start(4, None).await;
+    let (mut observer, teleop) = observer_and_watched_teleop(&bus, 100, "hold").await;
+    let event = observer.next_event().await;
+    assert_eq!(
+        fired(&event),
+        (Some("watchdog"), Some("hold"), Some("timeout")),
+        "{event}"
+    );
+    drop(teleop);
+    let event = observer.next_event().await;
+    assert_eq!(
+        fired(&event),
+        (Some("watchdog"), Some("hold"), Some("closed")),
+        "{event}"
+    );
+    assert_eq!(event["event"]["joints"], json!([{"bus":"sim0","id":3}]));
+    assert_eq!(bus.sim.device(3).map(|d| d.fsm), Some(fsm::RUN));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

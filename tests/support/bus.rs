@@ -154,15 +154,25 @@ impl<T: jointd::transport::Transport> jointd::transport::Transport for WakesLate
 /// Like [`rig_with`], but the bus starts only after every device has
 /// announced itself, so it must find them by scanning.
 pub fn rig_after_boot(sim_cfg: SimConfig, tune: impl FnOnce(&mut BusConfig)) -> Rig {
-    let n = sim_cfg.ids.len() as u64;
     let sim = Simulator::spawn_pty(sim_cfg.clone()).expect("spawn simulator");
+    wait_until_booted(&sim, sim_cfg.ids.len());
+    bus_on(sim, sim_cfg.baud, tune)
+}
+
+/// [`rig_after_boot`] on the in-memory line (see [`rig_in_memory`]).
+pub fn rig_on_memory_after_boot(sim_cfg: SimConfig, tune: impl FnOnce(&mut BusConfig)) -> Rig {
+    let (sim, host) = Simulator::spawn_memory(sim_cfg.clone()).expect("spawn simulator");
+    wait_until_booted(&sim, sim_cfg.ids.len());
+    bus_on_memory(sim, Box::new(host), sim_cfg.baud, tune)
+}
+
+fn wait_until_booted(sim: &SimHandle, devices: usize) {
     let deadline = std::time::Instant::now() + WAIT;
     // Polls simulator state (there is no event to wait on); bounded by WAIT.
-    while sim.stats().announcements < n {
+    while sim.stats().announcements < devices as u64 {
         assert!(std::time::Instant::now() < deadline, "devices never booted");
         std::thread::sleep(Duration::from_millis(1));
     }
-    bus_on(sim, sim_cfg.baud, tune)
 }
 
 fn bus_on(sim: SimHandle, baud: u32, tune: impl FnOnce(&mut BusConfig)) -> Rig {
@@ -201,10 +211,12 @@ pub fn rig(ids: &[u8]) -> Rig {
 }
 
 /// [`rig`] on the in-memory line, which dates each host write when it was
-/// made. For an e-stop's collisions: it may take the wire a frame after a
-/// reply was due, and over a pty a loaded host's kernel worker can pass the
-/// poll before it on so late that the two meet on the simulated wire, a
-/// collision no UART would make.
+/// made: the referee for tests that count collisions on a loaded host. Over
+/// a pty the simulator sees a write only when the kernel's worker and its
+/// own thread get the CPU. Held back, it reads writes made far apart as one
+/// burst (requests sent half a second apart, each after the last reply was
+/// given up on; an e-stop a frame after a reply was due, behind the poll) and
+/// puts them on the simulated wire together, a collision no UART would make.
 pub fn rig_in_memory(ids: &[u8]) -> Rig {
     rig_on_memory(sim_config(ids, BAUD), |_| {})
 }
