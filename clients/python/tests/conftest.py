@@ -30,15 +30,17 @@ class Daemon:
 
     def wait(self, path, ok, what, timeout=20.0):
         deadline = time.monotonic() + timeout
+        last = b"(no answer)"
         while time.monotonic() < deadline:
             try:
                 with urllib.request.urlopen(self.url + path, timeout=2) as r:
-                    if ok(r.read()):
+                    last = r.read()
+                    if ok(last):
                         return
-            except OSError:
-                pass
+            except OSError as e:
+                last = str(e).encode()
             time.sleep(0.05)
-        raise AssertionError(f"timed out waiting for {what}")
+        raise AssertionError(f"timed out waiting for {what}; {path} last said: {last[:600]!r}")
 
     def log_text(self):
         self.log.flush()

@@ -47,10 +47,9 @@ def test_a_recording_of_a_moving_joint_reads_back(daemon, tmp_path):
     api = daemon.url + "/api/v1"
     call(api, "POST", "/buses/sim0/control/enable", {"ids": [1, 2, 3, 4]})
     # The first enable aligns for about a second; targets wait for `run`.
-    deadline = time.monotonic() + 20
-    while any(d["state"] != "run" for d in call(api, "GET", "/buses/sim0/devices")["devices"]):
-        assert time.monotonic() < deadline, "the joints never finished aligning"
-        time.sleep(0.05)
+    daemon.wait("/api/v1/buses/sim0/devices",
+                lambda b: all(d["state"] == "run" for d in json.loads(b)["devices"]),
+                "the joints to finish aligning")
     out = tmp_path / "run.mcap"
     rec = subprocess.Popen([BIN, "record", "--out", str(out), "--duration", str(SECONDS),
                             "--url", daemon.url], stdout=subprocess.PIPE, stderr=subprocess.PIPE,

@@ -1,9 +1,16 @@
 """Telemetry and setpoints over the WebSocket against the simulator."""
 
 import asyncio
+import json
 import time
 
 from jointd_client import Jointd
+
+JOINTS = "/api/v1/buses/sim0/devices"
+
+
+def joint_1(body):
+    return next(d for d in json.loads(body)["devices"] if d["id"] == 1)
 
 
 def test_telemetry_yields_samples_of_the_asked_devices(daemon):
@@ -26,10 +33,7 @@ def test_telemetry_yields_samples_of_the_asked_devices(daemon):
 def test_setpoints_are_acked_move_the_joint_and_end_without_a_watchdog_firing(daemon):
     j = Jointd(daemon.url)
     j.enable("sim0", 1)
-    deadline = time.monotonic() + 20
-    while next(d for d in j.devices("sim0") if d.id == 1).state != "run":
-        assert time.monotonic() < deadline
-        time.sleep(0.05)
+    daemon.wait(JOINTS, lambda b: joint_1(b)["state"] == "run", "joint 1 to finish aligning")
 
     async def stream():
         acks = []
@@ -43,12 +47,7 @@ def test_setpoints_are_acked_move_the_joint_and_end_without_a_watchdog_firing(da
 
     acks = asyncio.run(stream())
     assert len(acks) == 20 and all(a["type"] == "ack" and a["latency_us"] >= 0 for a in acks)
-    deadline = time.monotonic() + 20
-    angle = next(d for d in j.devices("sim0") if d.id == 1).angle_deg
-    while abs(angle - 19) >= 2:
-        assert time.monotonic() < deadline, f"joint 1 at {angle}, not at the last target 19"
-        time.sleep(0.05)
-        angle = next(d for d in j.devices("sim0") if d.id == 1).angle_deg
+    daemon.wait(JOINTS, lambda b: abs(joint_1(b)["angle_deg"] - 19) < 2, "joint 1 at the last target, 19°")
     # Disarmed, then closed: the daemon saw a client that finished, not one
     # that vanished mid-stream.
     time.sleep(0.3)
